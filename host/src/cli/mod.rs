@@ -1,0 +1,4 @@
+//! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
+
+pub mod model;
+pub mod polar;

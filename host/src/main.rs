@@ -1,0 +1,43 @@
+//! `ellipso`: capture a polarimetric SVBRDF with a hand-held flash rig, or with its simulator.
+
+use clap::{Parser, Subcommand};
+use ellipso_host::cli;
+
+/// ellipso: Sparse Ellipsometry on a hand-held polarisation camera and flash.
+#[derive(Debug, Parser)]
+#[command(name = "ellipso", version, about, long_about = None)]
+struct Cli {
+    /// Print tracing logs (debug level) to stderr.
+    #[arg(long, global = true)]
+    verbose: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run the main job on the simulated rig: capture a shipped scene, then every later stage.
+    Demo,
+    /// Inspect the polarimetric model: Fresnel terms, diffuse DoP, Mueller matrices.
+    Model(cli::model::Args),
+    /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
+    Polar(cli::polar::Args),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let _ = cli.verbose;
+    match cli.command {
+        Command::Demo => {
+            println!(
+                "ellipso demo: the simulated rig is not built yet; available subcommands:\n  \
+                 model   inspect the polarimetric model\n  \
+                 polar   process one raw polarisation-mosaic frame\n\
+                 Run `ellipso --help` for details."
+            );
+            Ok(())
+        }
+        Command::Model(args) => cli::model::run(args),
+        Command::Polar(args) => cli::polar::run(args),
+    }
+}

@@ -1,0 +1,1 @@
+//! Polarisation-mosaic processing for Sony IMX250MZR/MYR-class sensors.

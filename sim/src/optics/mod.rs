@@ -1,0 +1,1 @@
+//! Polarimetric optics: the model the simulator renders with and the fit inverts.

@@ -1,0 +1,1 @@
+//! Scene description files (TOML): objects, materials, AprilTag boards, rig and capture path.
