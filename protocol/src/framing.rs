@@ -74,10 +74,16 @@ impl fmt::Display for EncodeError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::MessageTooLong => {
-                write!(f, "message body exceeds {MAX_MESSAGE_LEN} bytes of postcard")
+                write!(
+                    f,
+                    "message body exceeds {MAX_MESSAGE_LEN} bytes of postcard"
+                )
             }
             Self::BufferTooSmall { needed } => {
-                write!(f, "output buffer too small: a frame needs up to {needed} bytes")
+                write!(
+                    f,
+                    "output buffer too small: a frame needs up to {needed} bytes"
+                )
             }
         }
     }
@@ -145,10 +151,15 @@ impl FrameError {
 impl fmt::Display for FrameError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::Overflow { max } => write!(f, "frame longer than {max} bytes without a delimiter"),
+            Self::Overflow { max } => {
+                write!(f, "frame longer than {max} bytes without a delimiter")
+            }
             Self::BadCobs => write!(f, "broken COBS encoding"),
             Self::TooShort { len } => {
-                write!(f, "frame of {len} bytes is shorter than a CRC plus a message")
+                write!(
+                    f,
+                    "frame of {len} bytes is shorter than a CRC plus a message"
+                )
             }
             Self::BadCrc => write!(f, "CRC-32C mismatch"),
             Self::UnknownMessage { discriminant } => {
@@ -182,7 +193,12 @@ impl<M: Message> Default for Decoder<M> {
 impl<M: Message> Decoder<M> {
     /// An empty decoder.
     pub const fn new() -> Self {
-        Self { buf: [0; CAPACITY], len: 0, overflowed: false, _message: PhantomData }
+        Self {
+            buf: [0; CAPACITY],
+            len: 0,
+            overflowed: false,
+            _message: PhantomData,
+        }
     }
 
     /// Bytes of the current (unfinished) frame held so far.
@@ -220,7 +236,10 @@ impl<M: Message> Decoder<M> {
 
     /// Feeds a chunk; yields one result per completed frame, in order.
     pub fn feed<'a>(&'a mut self, bytes: &'a [u8]) -> Feed<'a, M> {
-        Feed { decoder: self, bytes }
+        Feed {
+            decoder: self,
+            bytes,
+        }
     }
 }
 
