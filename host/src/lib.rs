@@ -1,9 +1,11 @@
 //! `ellipso-host`: the driver and inverse model behind the `ellipso` binary.
 //!
 //! - [`polar`]: polarisation-mosaic processing (demosaic, Stokes, DoLP, AoLP, observation channels).
+//! - [`link`]: the trigger link (serial/pty/socket), version handshake, pulse events, clock model.
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: trigger link, camera backends, acquisition, sessions, pose, fitting, export.
 
 pub mod cli;
+pub mod link;
 pub mod polar;
