@@ -2,6 +2,7 @@
 //!
 //! - [`polar`]: polarisation-mosaic processing (demosaic, Stokes, DoLP, AoLP, observation channels).
 //! - [`link`]: the trigger link (serial/pty/socket), version handshake, pulse events, clock model.
+//! - [`session`]: the on-disk session format (manifest, event log, raw frames), crash-safe.
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: trigger link, camera backends, acquisition, sessions, pose, fitting, export.
@@ -9,3 +10,4 @@
 pub mod cli;
 pub mod link;
 pub mod polar;
+pub mod session;
