@@ -347,6 +347,9 @@ impl Sequencer {
                     t_off_us: now_us,
                 };
                 report_edge(report, sink, Output::Flash, false, now_us, pulse.seq);
+                // A stop after a missed off-deadline still ends an overlong flash: rule 3.
+                let max_on_us = cap.plan.max_flash_on_us();
+                self.check_forced_off(&mut pulse, t_on_us, now_us, max_on_us, sink);
             }
             Flash::Pending { .. } => {
                 pulse.flash = Flash::NotFired { t_us: now_us };
@@ -517,9 +520,20 @@ impl Sequencer {
             pulse.seq,
         );
         self.check_late(pulse, off_due_us, now, sink);
+        self.check_forced_off(pulse, t_on_us, now, plan.max_flash_on_us(), sink);
+    }
+
+    /// Safety rule 3: flags and reports a flash that was on longer than `max_on_us`.
+    fn check_forced_off<S: MessageSink + ?Sized>(
+        &mut self,
+        pulse: &mut Pulse,
+        t_on_us: u64,
+        now: u64,
+        max_on_us: u32,
+        sink: &mut S,
+    ) {
         let on_for_us = now.saturating_sub(t_on_us);
-        if on_for_us > u64::from(plan.max_flash_on_us()) {
-            // Safety rule 3.
+        if on_for_us > u64::from(max_on_us) {
             pulse.flags |= PULSE_FLASH_FORCED_OFF;
             self.counters.flash_forced_off = self.counters.flash_forced_off.saturating_add(1);
             sink.send(BoardMessage::Fault(Fault::FlashForcedOff {
