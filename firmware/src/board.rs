@@ -38,7 +38,11 @@
 //!   `TooSoon { wait_us }` within one frame period of the previous trigger (or before the sensor
 //!   has read out), or `Busy` when a counted capture has all its pulses.
 //! - `Hello` is answered whatever the host's protocol version, with the board's, so the host can
-//!   report both; the host's version is kept in [`Board::host_protocol_version`].
+//!   report both; the host's version is kept in [`Board::host_protocol_version`]. After a `Hello`
+//!   with another version, the commands that act (`Configure`, `Arm`, `Start`, `FireOne`) are
+//!   refused with `ProtocolMismatch { board }` until a `Hello` with the board's version arrives: a
+//!   frame from a host with another message layout may decode into a different configuration.
+//!   `Stop`, `Ping` and `StatusRequest` always work. A host that never says `Hello` is trusted.
 //! - `Stop` is always accepted and always writes both outputs low first: it is the host's
 //!   panic button. Its `Ack` is sent after the flash is off.
 //! - Each `Rejected` counts in `rejected_commands`; a bad frame counts in `bad_frames` and is
@@ -49,7 +53,7 @@
 
 use ellipso_protocol::{
     BoardInfo, BoardLimits, BoardMessage, BoardState, CommandKind, Decoder, Fault, FaultCounters,
-    FrameError, HostMessage, RejectReason, Status, TriggerSource,
+    FrameError, HostMessage, PROTOCOL_VERSION, RejectReason, Status, TriggerSource,
 };
 
 use crate::config::{BoardConfig, ConfigError};
@@ -263,7 +267,20 @@ impl Board {
             dropped: 0,
         };
         let kind = msg.kind();
+        let mismatch = self
+            .host_protocol_version
+            .is_some_and(|v| v != PROTOCOL_VERSION);
+        let acts = matches!(
+            msg,
+            HostMessage::Configure(_)
+                | HostMessage::Arm
+                | HostMessage::Start
+                | HostMessage::FireOne
+        );
         let reply = match msg {
+            _ if mismatch && acts => Err(RejectReason::ProtocolMismatch {
+                board: PROTOCOL_VERSION,
+            }),
             HostMessage::Hello { protocol_version } => {
                 self.host_protocol_version = Some(protocol_version);
                 Ok(BoardMessage::HelloReply(self.info.clone()))

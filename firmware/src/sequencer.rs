@@ -30,8 +30,8 @@
 //! pulse but keeps the exposure length and the flash's place and energy (its on-time `w`) exact.
 //! Edges due at the same instant run in the order **camera on, flash on, flash off, camera off**
 //! (a flash with `d = 0` lights right after the trigger; one ending at `e` goes off before the
-//! trigger falls). The [`PulseEvent`] is sent when the trigger falls, with every flag known; its
-//! times are those of the polls that executed the edges. When no flash fired, `t_flash_on_us =
+//! trigger falls). The [`PulseEvent`](ellipso_protocol::PulseEvent) is sent when the trigger
+//! falls, with every flag known; its times are those of the polls that executed the edges. When no flash fired, `t_flash_on_us =
 //! t_flash_off_us` = the time that was decided (the trigger edge for `flash_duration_us = 0`, the
 //! skip, or the stop).
 //!
@@ -76,10 +76,11 @@
 //! cancelled by `stop` before its trigger rose takes no number.
 
 use ellipso_protocol::{
-    BoardMessage, Edge, Fault, Output, PULSE_FLASH_FORCED_OFF, PULSE_FLASH_SKIPPED, PULSE_LATE,
-    PULSE_NO_FLASH, PulseEvent, PulseFlags, RejectReason, TriggerSource,
+    BoardMessage, Fault, Output, PULSE_FLASH_FORCED_OFF, PULSE_FLASH_SKIPPED, PULSE_LATE,
+    PULSE_NO_FLASH, RejectReason, TriggerSource,
 };
 
+use self::pulse::{Flash, Pulse, pulse_event, report_edge};
 use crate::config::SequencerTiming;
 use crate::outputs::Outputs;
 use crate::plan::CapturePlan;
@@ -110,28 +111,6 @@ pub struct SequencerCounters {
     pub flash_forced_off: u32,
     /// Flashes skipped because their on-deadline was missed too late.
     pub flash_skipped: u32,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Flash {
-    /// Waiting to light at `on_due_us`.
-    Pending { on_due_us: u64 },
-    /// Lit at `t_on_us`; goes off at `off_due_us`.
-    On { t_on_us: u64, off_due_us: u64 },
-    /// Fired and off.
-    Done { t_on_us: u64, t_off_us: u64 },
-    /// Will not fire this pulse (no flash configured, skipped, or stopped); decided at `t_us`.
-    NotFired { t_us: u64 },
-}
-
-/// The pulse whose trigger is high.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Pulse {
-    seq: u64,
-    t_trigger_us: u64,
-    camera_off_due_us: u64,
-    flash: Flash,
-    flags: PulseFlags,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -614,41 +593,8 @@ fn schedule(cap: &mut Capture, t: u64) {
         .max(t.saturating_add(u64::from(cap.plan.frame_period_us())));
 }
 
-fn report_edge<S: MessageSink + ?Sized>(
-    enabled: bool,
-    sink: &mut S,
-    output: Output,
-    high: bool,
-    t_device_us: u64,
-    seq: u64,
-) {
-    if enabled {
-        sink.send(BoardMessage::Edge(Edge {
-            output,
-            high,
-            t_device_us,
-            seq,
-        }));
-    }
-}
-
-fn pulse_event(pulse: &Pulse) -> PulseEvent {
-    let (t_flash_on_us, t_flash_off_us) = match pulse.flash {
-        Flash::Done { t_on_us, t_off_us } => (t_on_us, t_off_us),
-        Flash::NotFired { t_us } => (t_us, t_us),
-        // Not reachable: events are sent with the flash off. Report the trigger time.
-        Flash::Pending { .. } | Flash::On { .. } => (pulse.t_trigger_us, pulse.t_trigger_us),
-    };
-    PulseEvent {
-        seq: pulse.seq,
-        t_trigger_us: pulse.t_trigger_us,
-        t_flash_on_us,
-        t_flash_off_us,
-        flags: pulse.flags,
-    }
-}
-
 #[cfg(test)]
 mod proptests;
+mod pulse;
 #[cfg(test)]
 mod tests;

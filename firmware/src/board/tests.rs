@@ -108,6 +108,55 @@ fn hello_answers_with_the_boards_version_even_when_the_hosts_differs() {
 }
 
 #[test]
+fn after_a_mismatched_hello_only_safe_commands_are_obeyed() {
+    let mut rig = Rig::new();
+    let board_version = PROTOCOL_VERSION;
+    let mismatch = RejectReason::ProtocolMismatch {
+        board: board_version,
+    };
+    rig.send(
+        HostMessage::Hello {
+            protocol_version: board_version.wrapping_add(1),
+        },
+        0,
+    );
+    let c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    assert_eq!(
+        rig.send(HostMessage::Configure(c), 0),
+        [rejected(CommandKind::Configure, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::Arm, 0),
+        [rejected(CommandKind::Arm, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::Start, 0),
+        [rejected(CommandKind::Start, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 0),
+        [rejected(CommandKind::FireOne, mismatch)]
+    );
+    assert_eq!(rig.send(HostMessage::Stop, 0), [ack(CommandKind::Stop)]);
+    assert!(matches!(
+        rig.send(HostMessage::StatusRequest, 0)[..],
+        [BoardMessage::Status(_)]
+    ));
+    assert_eq!(rig.board.state(), BoardState::Idle);
+    // A Hello with the board's version lifts the refusal.
+    rig.send(
+        HostMessage::Hello {
+            protocol_version: board_version,
+        },
+        0,
+    );
+    assert_eq!(
+        rig.send(HostMessage::Configure(c), 0),
+        [ack(CommandKind::Configure)]
+    );
+}
+
+#[test]
 fn ping_is_answered_with_the_device_time() {
     let mut rig = Rig::new();
     let got = rig.send(HostMessage::Ping { nonce: 0xdead_beef }, 123_456_789_012);

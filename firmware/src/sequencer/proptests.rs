@@ -17,7 +17,7 @@
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
-use ellipso_protocol::{CaptureConfig, PulseCount};
+use ellipso_protocol::{CaptureConfig, PulseCount, PulseEvent};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 

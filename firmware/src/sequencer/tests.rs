@@ -4,7 +4,7 @@
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::{OutputEdge, PinOutputs, RecordingOutputs};
-use ellipso_protocol::{CaptureConfig, PulseCount};
+use ellipso_protocol::{CaptureConfig, PulseCount, PulseEvent};
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as T};
 
 const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;
