@@ -141,6 +141,69 @@ mod tests {
     use ellipso_protocol::{CommandKind, Decoder};
 
     #[test]
+    fn the_worst_pulse_burst_fits_the_recommended_tx_buffer() {
+        // One pulse with report_edges, late on every edge and forced off, at the largest times:
+        // 4 edges, 2 deadline faults, 1 forced-off fault, the pulse, and a Status.
+        use ellipso_protocol::{
+            BoardState, Edge, Fault, FaultCounters, Output, PulseEvent, Status,
+        };
+        let t = u64::MAX;
+        let edge = |output, high| {
+            BoardMessage::Edge(Edge {
+                output,
+                high,
+                t_device_us: t,
+                seq: t,
+            })
+        };
+        let late = BoardMessage::Fault(Fault::DeadlineMissed {
+            seq: t,
+            late_by_us: u32::MAX,
+        });
+        let burst = [
+            edge(Output::CameraTrigger, true),
+            edge(Output::Flash, true),
+            edge(Output::Flash, false),
+            late.clone(),
+            BoardMessage::Fault(Fault::FlashForcedOff {
+                seq: t,
+                on_for_us: u32::MAX,
+            }),
+            edge(Output::CameraTrigger, false),
+            late,
+            BoardMessage::Pulse(PulseEvent {
+                seq: t,
+                t_trigger_us: t,
+                t_flash_on_us: t,
+                t_flash_off_us: t,
+                flags: u8::MAX,
+            }),
+            BoardMessage::Status(Status {
+                state: BoardState::Configured,
+                pulses_fired: t,
+                t_device_us: t,
+                faults: FaultCounters {
+                    bad_frames: u32::MAX,
+                    late_edges: u32::MAX,
+                    flash_forced_off: u32::MAX,
+                    flash_skipped: u32::MAX,
+                    tx_overflows: u32::MAX,
+                    rejected_commands: u32::MAX,
+                },
+            }),
+        ];
+        let mut w = FrameWriter::new(heapless::Deque::<u8, { 8 * MAX_FRAME_LEN }>::new());
+        for m in burst {
+            assert!(w.send(m));
+        }
+        assert!(
+            w.bytes().len() <= 8 * MAX_FRAME_LEN / 2,
+            "{} bytes",
+            w.bytes().len()
+        );
+    }
+
+    #[test]
     fn queue_drops_the_newest_when_full() {
         let mut q = TxQueue::<2>::new();
         assert!(q.send(BoardMessage::Ack(CommandKind::Arm)));
