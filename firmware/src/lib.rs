@@ -91,8 +91,8 @@
 //!    of ≤ 63 bytes. Size `N` for a burst: the worst one pulse can send (4 edge reports, 3
 //!    faults, the pulse event and a completion `Status`, all at the largest values) is under
 //!    `4 · MAX_FRAME_LEN` bytes (a test checks it), so `N = 8 · MAX_FRAME_LEN` holds two such
-//!    bursts while the host stalls. A full queue drops whole
-//!    frames and counts them in `tx_overflows`.
+//!    bursts while the host stalls. A full queue drops whole frames and counts them in
+//!    `tx_overflows`.
 //! 7. **Button.** From the press-edge interrupt: [`Board::button_pressed`]`(now_us())`, then
 //!    re-arm the alarm. Bounce is filtered by the frame period here.
 //! 8. **Outputs.** [`PinOutputs`] over two embedded-hal 1.0 pins (active high). A board with a

@@ -344,7 +344,9 @@ impl Sequencer {
             now_us,
             pulse.seq,
         );
-        self.camera_ready_us = now_us.saturating_add(u64::from(cap.plan.readout_us()));
+        self.camera_ready_us = self
+            .camera_ready_us
+            .max(now_us.saturating_add(u64::from(cap.plan.readout_us())));
         sink.send(BoardMessage::Pulse(pulse_event(&pulse)));
     }
 

@@ -231,6 +231,17 @@ fn the_state_table_for_a_free_run() {
         BoardState::Configured,
         "every capture needs its own Arm"
     );
+    // Stop and Configure both disarm.
+    assert_eq!(rig.send(HostMessage::Arm, 40), [ack(K::Arm)]);
+    assert_eq!(rig.send(HostMessage::Stop, 40), [ack(K::Stop)]);
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert_eq!(rig.send(HostMessage::Arm, 40), [ack(K::Arm)]);
+    assert_eq!(
+        rig.send(HostMessage::Configure(free), 40),
+        [ack(K::Configure)]
+    );
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert_eq!(rig.out.edges().count(), 0, "no pulse was ever due");
     assert_eq!(rig.board.faults().rejected_commands, 9);
 }
 
