@@ -396,4 +396,6 @@ impl Board {
 }
 
 #[cfg(test)]
+mod proptests;
+#[cfg(test)]
 mod tests;
