@@ -569,3 +569,39 @@ fn time_near_the_end_of_u64_saturates_instead_of_wrapping() {
     );
     assert!(!pulses(&msgs).is_empty());
 }
+
+/// A board with a one-pulse timer: the flash cuts itself off after the `max_on_us` it was armed
+/// with, whatever the software does (safety rule 5).
+struct OnePulseFlash {
+    armed_max_on_us: Vec<u32>,
+    cut_at: Option<u64>,
+}
+
+impl Outputs for OnePulseFlash {
+    fn set_camera(&mut self, _high: bool, _t: u64) {}
+    fn flash_on(&mut self, t: u64, max_on_us: u32) {
+        self.armed_max_on_us.push(max_on_us);
+        self.cut_at = Some(t + u64::from(max_on_us));
+    }
+    fn flash_off(&mut self, _t: u64) {
+        self.cut_at = None;
+    }
+}
+
+#[test]
+fn flash_on_arms_the_hardware_cutoff_with_the_boards_cap() {
+    let mut out = OnePulseFlash {
+        armed_max_on_us: Vec::new(),
+        cut_at: None,
+    };
+    let mut seq = started(plan(|_| {}), 0);
+    let _ = seq.poll(LEAD, &mut out, &mut |_| {});
+    let _ = seq.poll(LEAD + 100, &mut out, &mut |_| {});
+    // The CPU hangs here; the hardware would cut the flash at on + 5 ms.
+    assert_eq!(
+        out.cut_at,
+        Some(LEAD + 100 + u64::from(LED_RIG_LIMITS.max_flash_on_us))
+    );
+    let _ = run_on_time(&mut seq, &mut out, 100);
+    assert_eq!(out.armed_max_on_us, [LED_RIG_LIMITS.max_flash_on_us; 2]);
+}
