@@ -77,7 +77,7 @@
 
 use ellipso_protocol::{
     BoardMessage, Fault, Output, PULSE_FLASH_FORCED_OFF, PULSE_FLASH_SKIPPED, PULSE_LATE,
-    PULSE_NO_FLASH, RejectReason, TriggerSource,
+    PULSE_NO_FLASH, PULSE_STOPPED, RejectReason, TriggerSource,
 };
 
 use self::pulse::{Flash, Pulse, pulse_event, report_edge};
@@ -303,8 +303,8 @@ impl Sequencer {
 
     /// Ends the capture now: flash off (always written, safety rule 4), then trigger low (always
     /// written). A pulse whose trigger had risen is still reported (its camera was triggered, so
-    /// a frame may arrive): its times show the truncation, and a flash that had not lit yet is
-    /// flagged `PULSE_FLASH_SKIPPED` without a fault. A pulse that had not risen is cancelled.
+    /// a frame may arrive), flagged `PULSE_STOPPED`: its times show the truncation, and a flash
+    /// that had not lit yet is also flagged `PULSE_FLASH_SKIPPED` without a fault. A pulse that had not risen is cancelled.
     pub fn stop<O, S>(&mut self, now_us: u64, outputs: &mut O, sink: &mut S)
     where
         O: Outputs + ?Sized,
@@ -319,6 +319,7 @@ impl Sequencer {
             return;
         };
         let report = cap.plan.report_edges();
+        pulse.flags |= PULSE_STOPPED;
         match pulse.flash {
             Flash::On { t_on_us, .. } => {
                 pulse.flash = Flash::Done {

@@ -228,6 +228,8 @@ pub const PULSE_FLASH_FORCED_OFF: PulseFlags = 1 << 1;
 pub const PULSE_LATE: PulseFlags = 1 << 2;
 /// The configuration had no flash (`flash_duration_us = 0`).
 pub const PULSE_NO_FLASH: PulseFlags = 1 << 3;
+/// The pulse was cut short by `Stop` (its times show where).
+pub const PULSE_STOPPED: PulseFlags = 1 << 4;
 
 /// One pulse: sent once its flash is off (or its exposure ended without flash).
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]

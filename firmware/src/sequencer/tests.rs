@@ -282,7 +282,7 @@ fn stop_before_the_flash_lit_flags_skip_without_a_fault() {
     let _ = seq.poll(LEAD, &mut out, &mut |m| msgs.push(m));
     seq.stop(LEAD + 50, &mut out, &mut |m| msgs.push(m));
     let p = pulses(&msgs);
-    assert_eq!(p[0].flags, PULSE_FLASH_SKIPPED);
+    assert_eq!(p[0].flags, PULSE_FLASH_SKIPPED | PULSE_STOPPED);
     assert_eq!(
         (p[0].t_flash_on_us, p[0].t_flash_off_us),
         (LEAD + 50, LEAD + 50)
