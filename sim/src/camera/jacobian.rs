@@ -29,7 +29,11 @@ impl CameraModel {
             return None;
         }
         let inv_z = 1.0 / point_camera.z; // z > MIN_DEPTH_M checked above
-        let (x, y) = (point_camera.x * inv_z, point_camera.y * inv_z);
+        // Same arithmetic as `project`, so the pixels agree bit for bit.
+        let (x, y) = (
+            point_camera.x / point_camera.z,
+            point_camera.y / point_camera.z,
+        );
         let d = self.distortion;
         let i = self.intrinsics;
         let [x_d, y_d] = d.distort([x, y]);
