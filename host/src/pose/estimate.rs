@@ -39,9 +39,15 @@ pub struct PoseConfig {
     /// Reprojection RMS (px, over points, √(Σ‖r‖²/N)) above this rejects the frame: a wrong
     /// detection, a moved board or a wrong camera model. Default 1.0 px.
     pub max_rms_px: f64,
-    /// When the two planar candidates refine to different minima, the ratio of the worse cost to
-    /// the better must reach this or the frame is rejected as an ambiguous flip. Default 4.0.
+    /// When the two planar candidates refine to different minima, the flip ratio (see
+    /// [`BoardPose::flip_ratio`]) must reach this or the frame is rejected as an ambiguous flip.
+    /// Default 4.0.
     pub min_flip_ratio: f64,
+    /// Expected per-coordinate corner noise of the detector, px (1σ). Floors the denominator of
+    /// the flip ratio at its expected value (2N − 6)·σ², so that a best fit that is luckily
+    /// *too* good (few points: χ² with 2 degrees of freedom for one tag) cannot make a flip look
+    /// unambiguous. Default 0.2 px (AprilTag on a sharp 5 MP image: 0.1–0.2 px).
+    pub expected_corner_noise_px: f64,
     /// LM iteration cap per candidate. Default 50.
     pub max_iterations: usize,
     /// Points whose distance from their best-fit plane is below this fraction of the point
@@ -56,6 +62,7 @@ impl Default for PoseConfig {
             min_corners: 8,
             max_rms_px: 1.0,
             min_flip_ratio: 4.0,
+            expected_corner_noise_px: 0.2,
             max_iterations: 50,
             coplanarity_tolerance: 1e-6,
         }
@@ -106,7 +113,8 @@ pub struct BoardPose {
     pub rms_px: f64,
     /// Per correspondence (input order): projected − observed, px.
     pub residuals_px: Vec<[f64; 2]>,
-    /// Cost of the other planar minimum divided by the cost of this one; `None` when there is no
+    /// Flip margin: cost of the other planar minimum divided by max(cost of this one,
+    /// (2N − 6)·σ²) with σ = [`PoseConfig::expected_corner_noise_px`]; `None` when there is no
     /// second minimum (both IPPE candidates refined to the same pose, or non-planar points).
     pub flip_ratio: Option<f64>,
     /// The other planar minimum, when there is one.
@@ -198,10 +206,15 @@ pub fn estimate_board_pose(
             max_px: config.max_rms_px,
         });
     }
-    // Guard: a perfect fit (cost 0) with a distinct alternative is infinitely unambiguous.
+    // Denominator floored at the expected cost of a correct fit; if that is 0 too (σ = 0 and a
+    // perfect fit) a distinct alternative is infinitely worse.
+    let dof = (2 * points.len()).saturating_sub(6) as f64;
+    let cost_floor = best
+        .cost_px2
+        .max(dof * config.expected_corner_noise_px.powi(2));
     let flip_ratio = alternative.as_ref().map(|alt| {
-        if best.cost_px2 > 0.0 {
-            alt.cost_px2 / best.cost_px2
+        if cost_floor > 0.0 {
+            alt.cost_px2 / cost_floor
         } else {
             f64::INFINITY
         }

@@ -31,4 +31,6 @@ pub(crate) fn exceeds(value: f64, limit: f64) -> bool {
 }
 
 #[cfg(test)]
+pub(crate) mod synthetic;
+#[cfg(test)]
 mod tests;
