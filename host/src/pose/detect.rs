@@ -256,4 +256,4 @@ impl TagDetector {
 
 #[cfg(test)]
 #[path = "detect_tests.rs"]
-mod tests;
+pub(crate) mod tests;

@@ -7,7 +7,7 @@ use crate::pose::homography::apply_homography;
 use nalgebra::Matrix3;
 
 /// The 10×10 cell image of tag36h11 `id` (1-cell white ring, black border at cells 1..9).
-fn tag36h11_cells(id: i32) -> (usize, Vec<u8>) {
+pub(crate) fn tag36h11_cells(id: i32) -> (usize, Vec<u8>) {
     // SAFETY: the family is created and destroyed here; `apriltag_to_image` returns a fresh
     // image (id < ncodes = 587) that we copy out of and destroy before returning.
     unsafe {

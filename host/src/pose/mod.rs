@@ -31,6 +31,8 @@ pub(crate) fn exceeds(value: f64, limit: f64) -> bool {
 }
 
 #[cfg(test)]
+mod pipeline_tests;
+#[cfg(test)]
 pub(crate) mod synthetic;
 #[cfg(test)]
 mod tests;
