@@ -322,3 +322,57 @@ fn flash_offset_from_sphere_highlights() {
         Err(FlashError::BadRadius { view: 2, .. })
     ));
 }
+
+#[test]
+fn free_k3_and_tangential_are_recovered_with_honest_errors() {
+    let (truth, views, _) = synthetic_views(16, 25, 0.15);
+    let config = CalibConfig {
+        fix_k3: false,
+        ..CalibConfig::default()
+    };
+    let cal = calibrate(&views, (truth.width, truth.height), &config).unwrap();
+    let (e, t) = (cal.camera.params(), truth.params());
+    assert!(cal.estimated.iter().all(|f| *f));
+    for k in 0..CAMERA_PARAM_COUNT {
+        assert!(cal.std_errors[k] > 0.0);
+        assert!(
+            (e[k] - t[k]).abs() < 4.0 * cal.std_errors[k],
+            "param {k}: {} ± {} vs {}",
+            e[k],
+            cal.std_errors[k],
+            t[k]
+        );
+    }
+    // A free k3 costs precision on k1 (they trade off), never accuracy beyond the stated σ.
+    let fixed = calibrate(&views, (truth.width, truth.height), &CalibConfig::default()).unwrap();
+    assert!(cal.std_errors[4] > fixed.std_errors[4]);
+}
+
+#[test]
+fn parallel_views_are_degenerate() {
+    // Every view fronto-parallel (pure translations): Zhang's constraints are degenerate.
+    let cam = camera_5mp();
+    let b = board(0.05);
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
+    let views: Vec<View> = (0..6)
+        .map(|k| {
+            let pose = look_at(
+                Vector3::new(0.01 * k as f64, 0.0, 0.0),
+                0.4 + 0.05 * k as f64,
+                0.0,
+                0.0,
+                0.0,
+            );
+            observe(&cam, &b, &pose, 0.0, &mut rng)
+                .iter()
+                .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
+                .collect()
+        })
+        .collect();
+    let err = calibrate(&views, (cam.width, cam.height), &CalibConfig::default()).unwrap_err();
+    assert!(
+        matches!(err, CalibError::ClosedForm(ZhangError::Degenerate(_))),
+        "{err}"
+    );
+    assert!(err.to_string().contains("vary the board tilt"));
+}

@@ -280,3 +280,69 @@ fn non_coplanar_points_use_the_linear_initialisation() {
     let (r, t) = pose_error(&pose.camera_from_board, &truth);
     assert!(r < 0.1 && t < 0.5, "rot {r}° trans {t} mm");
 }
+
+/// Two small tags far away and nearly fronto-parallel: the weakest board view the default
+/// policy accepts. Nothing accepted may be flipped.
+#[test]
+fn two_small_tags_near_fronto_parallel_never_flip() {
+    let cam = camera_5mp();
+    let b = super::board::TagGridBoard {
+        cols: 2,
+        rows: 1,
+        tag_size_m: 0.03,
+        pitch_m: 0.045,
+        first_id: 0,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
+    let (mut accepted, mut ambiguous, mut flipped, mut rot) = (0, 0, 0, Vec::new());
+    for _ in 0..200 {
+        let truth = super::synthetic::look_at(
+            nalgebra::Vector3::zeros(),
+            rng.random_range(0.5..0.7),
+            rng.random_range(0.0f64..3.0).to_radians(),
+            rng.random_range(0.0..std::f64::consts::TAU),
+            rng.random_range(-3.0..3.0),
+        );
+        let obs = observe(&cam, &b, &truth, 0.2, &mut rng);
+        match estimate_board_pose(&cam, &obs, &PoseConfig::default()) {
+            Ok(p) => {
+                accepted += 1;
+                let err = pose_error(&p.camera_from_board, &truth).0;
+                if p.alternative
+                    .is_some_and(|alt| pose_error(&alt, &truth).0 < err)
+                {
+                    flipped += 1;
+                }
+                rot.push(err);
+            }
+            Err(PoseRejection::AmbiguousFlip { .. }) => ambiguous += 1,
+            Err(e) => panic!("unexpected rejection {e}"),
+        }
+    }
+    let med = if rot.is_empty() {
+        f64::NAN
+    } else {
+        median(&mut rot)
+    };
+    println!(
+        "two tags near-fronto: accepted {accepted}, ambiguous {ambiguous}, flipped {flipped}, median rot {med:.3}°"
+    );
+    assert_eq!(flipped, 0);
+    assert_eq!(accepted + ambiguous, 200);
+}
+
+proptest::proptest! {
+    /// Noise-free observations give the pose back to round-off, from any viewpoint.
+    #[test]
+    fn noise_free_pose_is_exact(seed in 0u64..1000, fronto in proptest::bool::ANY) {
+        let cam = camera_5mp();
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let truth = random_pose(&mut rng, fronto);
+        let obs = observe(&cam, &board(0.04), &truth, 0.0, &mut rng);
+        proptest::prop_assume!(obs.len() >= 8);
+        let pose = estimate_board_pose(&cam, &obs, &PoseConfig::default()).unwrap();
+        let (r, t) = pose_error(&pose.camera_from_board, &truth);
+        proptest::prop_assert!(r < 1e-6 && t < 1e-6, "rot {}° trans {} mm", r, t);
+        proptest::prop_assert!(pose.rms_px < 1e-6);
+    }
+}
