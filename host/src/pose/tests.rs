@@ -332,6 +332,7 @@ fn two_small_tags_near_fronto_parallel_never_flip() {
 }
 
 proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
     /// Noise-free observations give the pose back to round-off, from any viewpoint.
     #[test]
     fn noise_free_pose_is_exact(seed in 0u64..1000, fronto in proptest::bool::ANY) {
