@@ -292,7 +292,7 @@ fn initial_candidates(
     let board_from_plane_rot = Matrix3::from_columns(&[e0, e1, e2]);
     let plane_from_board = Pose::from_parts(
         nalgebra::Translation3::from(-(board_from_plane_rot.transpose() * centroid)),
-        nalgebra::UnitQuaternion::from_matrix(&board_from_plane_rot.transpose()),
+        super::orthonormalise(&board_from_plane_rot.transpose()),
     );
     let plane_xy: Vec<[f64; 2]> = points
         .iter()

@@ -98,7 +98,7 @@ pub fn ippe_planar(
         let r_prime = Matrix3::from_columns(&[c1, c2, c3]);
         let r = r_v * r_prime;
         // Re-orthonormalise against round-off.
-        let rot = UnitQuaternion::from_matrix(&r);
+        let rot = super::orthonormalise(&r);
         let t_centred = translation_least_squares(&rot, &centred, normalised_image)?;
         // X_c = R (p − c) + t  ⇒  t_full = t − R c.
         let c3d = Vector3::new(centroid[0], centroid[1], 0.0);
