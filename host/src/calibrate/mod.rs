@@ -30,8 +30,8 @@ use zhang::{ZhangError, intrinsics_from_homographies, radial_initialisation};
 /// Settings of [`calibrate`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CalibConfig {
-    /// Fewer usable views than this is an error. Default 3 (Zhang's minimum with zero skew… and
-    /// a margin: ≥ 10 tilted views are recommended).
+    /// Fewer usable views than this is an error; values below 3 count as 3 (the closed form's
+    /// minimum). Default 3 — but use ≥ 10 views with varied tilt for a good calibration.
     pub min_views: usize,
     /// Views with fewer points are set aside. Default 8.
     pub min_points_per_view: usize,
@@ -40,9 +40,11 @@ pub struct CalibConfig {
     pub fix_k3: bool,
     /// Hold p1 = p2 = 0. Default false.
     pub fix_tangential: bool,
-    /// A view is an outlier when its RMS exceeds this multiple of the median view RMS… Default 3.
+    /// A view is an outlier when its RMS exceeds this multiple of the median view RMS and also
+    /// `outlier_floor_px`. Default 3.
     pub outlier_factor: f64,
-    /// …and also exceeds this absolute RMS, px. Default 0.5 px.
+    /// Views at or below this RMS (px) are never outliers, however good the others are.
+    /// Default 0.5 px.
     pub outlier_floor_px: f64,
     /// Outlier rejection rounds (each re-runs the joint LM). Default 3.
     pub max_outlier_rounds: usize,
