@@ -5,13 +5,17 @@
 //! - [`session`]: the on-disk session format (manifest, event log, raw frames), crash-safe.
 //! - [`camera`]: the camera trait, frame ids, counters; backends.
 //! - [`acquire`]: capture orchestration and frame ↔ pulse pairing.
+//! - [`pose`]: AprilTag detection and joint board pose (IPPE + LM with distortion, flip checks).
+//! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere highlights.
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
-//! Later modules: trigger link, camera backends, acquisition, sessions, pose, fitting, export.
+//! Later modules: fitting, export.
 
 pub mod acquire;
+pub mod calibrate;
 pub mod camera;
 pub mod cli;
 pub mod link;
 pub mod polar;
+pub mod pose;
 pub mod session;
