@@ -4,11 +4,13 @@
 //! Mitsuba 3 `fresnel.h` / `mueller.h` current convention):
 //! ```text
 //! q   = η·c_t = √(η² − 1 + c²)                 (c = cos θ, η ≥ 1)
-//! r_s = (c − q)/(c + q)          r_p = (η²c − q)/(η²c + q)
+//! r_s = (c − q)/(c + q)          = −(η² − 1)/(c + q)²
+//! r_p = (η²c − q)/(η²c + q)       = (η² − 1)((η² + 1)c² − 1)/(η²c + q)²
 //! T_s = 4cq/(c + q)²             T_p = 4η²cq/(η²c + q)²     T× = 4ηcq/((c + q)(η²c + q))
 //! R± = (R_s ± R_p)/2   R× = r_s·r_p   T± = (T_s ± T_p)/2
 //! ```
-//! These forms are algebraically identical to the textbook ones but have no cancellation
+//! The right-hand forms (used) multiply through by the conjugate denominators. They are
+//! algebraically identical to the textbook ones but have no cancellation
 //! (T = 1 − R is never formed by subtraction, η² − 1 is formed as (η−1)(η+1)) and are smooth
 //! everywhere in c ∈ [0, 1], η ≥ 1, including through Brewster's angle: R× = r_s·r_p is the
 //! signed product, never ∓√(R_s R_p) (whose derivative is infinite at R_p = 0).
@@ -46,7 +48,10 @@ impl<T: Real> FresnelTerms<T> {
         let eta = eta.max_re(T::one());
         let eta_sq = eta.sq();
         let eta_sq_m1 = (eta - T::one()) * (eta + T::one());
-        let q = (eta_sq_m1 + c.sq()).sqrt_clamped();
+        // q = √(η² − 1 + c²); where the radicand underflows (η = 1, c² below the f32 range)
+        // q = c exactly.
+        let q_sq = eta_sq_m1 + c.sq();
+        let q = if q_sq.re() > 0.0 { q_sq.sqrt() } else { c };
         let den_s = c + q;
         let den_p = eta_sq * c + q;
         if den_s.re() <= 0.0 || den_p.re() <= 0.0 {
@@ -61,17 +66,20 @@ impl<T: Real> FresnelTerms<T> {
                 t_cross: o,
             };
         }
-        let four_cq = T::from_f64(4.0) * c * q;
-        let sin_sq = (T::one() - c) * (T::one() + c);
-        let dens = den_s * den_p;
-        let r_minus = T::from_f64(0.5) * four_cq * eta_sq_m1.sq() * sin_sq / dens.sq();
+        // Every quotient is formed as a product of ratios, never as x/(den·den): with η → 1
+        // and c → 0 both denominators are tiny and their product would underflow in f32.
+        let one = T::one();
+        let four = T::from_f64(4.0);
+        let sin_sq = (one - c) * (one + c);
+        let u = eta_sq_m1 / den_s / den_p; // (η² − 1)/((c + q)(η²c + q))
         Self {
-            r_minus,
-            r_s: (c - q) / den_s,
-            r_p: (eta_sq * c - q) / den_p,
-            t_s: four_cq / den_s.sq(),
-            t_p: four_cq * eta_sq / den_p.sq(),
-            t_cross: four_cq * eta / (den_s * den_p),
+            r_s: -(eta_sq_m1 / den_s) / den_s,
+            r_p: (eta_sq_m1 / den_p) * (((eta_sq + one) * c.sq() - one) / den_p),
+            t_s: (four * c / den_s) * (q / den_s),
+            t_p: (four * eta_sq * c / den_p) * (q / den_p),
+            // R− = ½(r_s − r_p)(r_s + r_p) with r_s − r_p = −2cq·u, r_s + r_p = −2 sin²θ·u.
+            r_minus: T::from_f64(2.0) * c * q * sin_sq * u.sq(),
+            t_cross: (four * eta * c / den_s) * (q / den_p),
         }
     }
     /// R_s = r_s².

@@ -19,10 +19,11 @@
 //! - diffuse, n ∥ ω: T− ∝ sin²θ vanishes there, so any rotation is correct; identity is used;
 //! - specular/SS, ω_i ∥ ω_o (exactly coaxial): F^R(θ_d = 0) composed with rotations about one
 //!   shared s-axis is SS·diag(1, 1, −1, −1) for every choice, so the camera x axis is used as s.
+//!
 //! Back-facing geometry (n·ω_i < 0 or n·ω_o < 0) gives zero matrices.
 
 use super::frame::DIRECTION_EPS_SQ;
-use super::fresnel::{FresnelTerms, symmetric_block};
+use super::fresnel::FresnelTerms;
 use super::microfacet::microfacet_weight;
 use super::{Frame, Mueller, OpticsError, Real, Rotator, Stokes, Vec3};
 
@@ -393,7 +394,7 @@ pub fn scalar_brdf<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>) -> [T; 3] {
 #[cfg(test)]
 pub(crate) fn reflection_unit_naive(g: &Geometry<f64>, eta: f64) -> Mueller<f64> {
     let f = FresnelTerms::dielectric(g.cos_theta_d, eta);
-    let fr = symmetric_block(f.r_plus(), f.r_minus(), f.r_cross());
+    let fr = super::fresnel::symmetric_block(f.r_plus(), f.r_minus(), f.r_cross());
     let s = reflection_axis(g);
     let rin = g.light_frame.rotator_to_axis(s).unwrap().mueller();
     let rout = g

@@ -84,20 +84,24 @@ impl<T: Real> Stokes<T> {
         let scale = s0.abs().max(1e-300);
         s0.is_finite() && p.is_finite() && s0 >= -rel_tol * scale && p <= s0 + rel_tol * scale
     }
-    /// Component-wise sum.
+    /// Scales every component.
     #[inline]
-    pub fn add(self, o: Self) -> Self {
+    pub fn scale(self, k: T) -> Self {
+        Self::new(self.s0 * k, self.s1 * k, self.s2 * k, self.s3 * k)
+    }
+}
+
+impl<T: Real> core::ops::Add for Stokes<T> {
+    type Output = Self;
+    /// Component-wise sum (incoherent superposition).
+    #[inline]
+    fn add(self, o: Self) -> Self {
         Self::new(
             self.s0 + o.s0,
             self.s1 + o.s1,
             self.s2 + o.s2,
             self.s3 + o.s3,
         )
-    }
-    /// Scales every component.
-    #[inline]
-    pub fn scale(self, k: T) -> Self {
-        Self::new(self.s0 * k, self.s1 * k, self.s2 * k, self.s3 * k)
     }
 }
 
@@ -262,16 +266,19 @@ impl<T: Real> Rotator<T> {
     /// trigonometry: cos2θ = (c² − s²)/(c² + s²), sin2θ = 2cs/(c² + s²).
     /// Returns `None` when c² + s² ≤ `min_norm_sq` (angle undefined).
     pub fn from_direction(c: T, s: T, min_norm_sq: f64) -> Option<Self> {
-        let n2 = c.sq() + s.sq();
-        if n2.re() > min_norm_sq && n2.re().is_finite() {
-            let inv = n2.recip();
-            Some(Self {
-                cos2: (c.sq() - s.sq()) * inv,
-                sin2: (c * s + c * s) * inv,
-            })
-        } else {
-            None
+        // Decide in f64 on the real parts (no underflow for f32 inputs), then rescale by the
+        // larger component so that c² + s² ∈ [1, 2] and its reciprocal cannot overflow.
+        let n2 = c.re() * c.re() + s.re() * s.re();
+        if !(n2.is_finite() && n2 > min_norm_sq && n2 > 0.0) {
+            return None;
         }
+        let m = c.abs().max_re(s.abs());
+        let (c, s) = (c / m, s / m);
+        let inv = (c.sq() + s.sq()).recip();
+        Some(Self {
+            cos2: (c.sq() - s.sq()) * inv,
+            sin2: (c * s + c * s) * inv,
+        })
     }
     /// C(−θ) = C(θ)⁻¹.
     pub fn inverse(self) -> Self {
@@ -338,7 +345,7 @@ mod tests {
     #[test]
     fn rotation_shifts_aolp_and_keeps_dolp() {
         // optics.md §10.4: AoLP(C(θ)s) = AoLP(s) − θ (mod π); DoLP invariant.
-        let s = Stokes::linear(2.0, 0.3).add(Stokes::unpolarised(1.0));
+        let s = Stokes::linear(2.0, 0.3) + Stokes::unpolarised(1.0);
         for k in 0..12 {
             let theta = -1.4 + 0.27 * k as f64;
             let r = Rotator::from_angle(theta).apply(s);
