@@ -11,7 +11,7 @@
 //!   f = (η² − 1)² sin²θ, g = (η² + 1)(2η² cos²θ + (η² − 1) sin²θ) + 4η² cosθ √(η² − sin²θ),
 //!   DoP = f/g, equal to |T−|/T+ at the exit angle; ∂DoP/∂η = (f′g − f g′)/g².
 
-use super::pbrdf::{Geometry, PbrdfParams, evaluate};
+use super::pbrdf::{Geometry, PbrdfParams, apply};
 use super::{Mueller, Real, Stokes};
 
 /// An ideal linear analyser (polariser in front of a pixel) at `angle_rad` from camera x
@@ -120,9 +120,8 @@ pub fn observe<T: Real>(
     p: &PbrdfParams<T>,
     flash: FlashPolariser,
 ) -> [ObservationChannels<T>; 3] {
-    let lobes = evaluate(g, p);
-    let s_light = flash.stokes(T::one());
-    core::array::from_fn(|c| SensorIntensities::from_stokes(lobes.apply(c, s_light)).observation())
+    let s_cam = apply(g, p, flash.stokes(T::one()));
+    s_cam.map(|s| SensorIntensities::from_stokes(s).observation())
 }
 
 /// The pieces f, g, f′, g′ of DoP_d = f/g (see the module doc), with the clamps:

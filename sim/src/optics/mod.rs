@@ -17,6 +17,7 @@
 //!   or [`pbrdf::Geometry::new`] with prebuilt frames;
 //! - [`pbrdf::evaluate`]`(&g, &params) -> Lobes` (4×4 per lobe, per RGB channel), or single
 //!   lobes [`pbrdf::diffuse`], [`pbrdf::specular`], [`pbrdf::single_scattering`];
+//! - [`pbrdf::apply`]`(&g, &params, s_light) -> [Stokes; 3]` (s_cam directly, no 4×4 built);
 //! - [`pbrdf::evaluate_s0`] (intensity only, any polarised light) and [`pbrdf::scalar_brdf`]
 //!   (M00: unpolarised light, no rotations).
 //!

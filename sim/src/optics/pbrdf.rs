@@ -346,6 +346,43 @@ pub fn evaluate<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>) -> Lobes<T> {
     }
 }
 
+/// s_cam = P·s_light per RGB channel (no 1/d²), without forming any 4×4 matrix: the diffuse
+/// lobe as u·(v·s), the reflection as C_out F C_in s shared by P^s and P^ss. This is the
+/// cheapest full-polarisation path and what [`crate::optics::measure::observe`] uses.
+pub fn apply<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>, s_light: Stokes<T>) -> [Stokes<T>; 3] {
+    if !g.front_facing {
+        return [Stokes::unpolarised(T::zero()); 3];
+    }
+    let s = s_light.to_array();
+    let (col, row) = diffuse_factors(g, p.eta);
+    let k = (row[0] * s[0] + row[1] * s[1] + row[2] * s[2] + row[3] * s[3]) * g.cos_theta_i;
+    let diffuse = Stokes::from_array(col).scale(k);
+    let f = FresnelTerms::dielectric(g.cos_theta_d, p.eta);
+    let axis = reflection_axis(g);
+    let rot_in = g
+        .light_frame
+        .rotator_to_axis(axis)
+        .unwrap_or_else(Rotator::identity);
+    let rot_out = g
+        .camera_frame
+        .rotator_to_axis(axis)
+        .unwrap_or_else(Rotator::identity)
+        .inverse();
+    let local = rot_in.apply(s_light);
+    let (a, b, c) = (f.r_plus(), f.r_minus(), f.r_cross());
+    let reflected = rot_out.apply(Stokes::new(
+        a * local.s0 + b * local.s1,
+        b * local.s0 + a * local.s1,
+        c * local.s2,
+        c * local.s3,
+    ));
+    let w_s = p.rho_s * lobe_weight(g, p.sigma_s);
+    let w_ss = lobe_weight(g, p.sigma_ss);
+    core::array::from_fn(|ch| {
+        diffuse.scale(p.rho_d[ch]) + reflected.scale(w_s + p.rho_ss[ch] * w_ss)
+    })
+}
+
 /// Only the output intensity s0 of P·s_light per channel (row 0 of P): no outgoing rotation,
 /// no 4×4 products.
 pub fn evaluate_s0<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>, s_light: Stokes<T>) -> [T; 3] {

@@ -246,7 +246,12 @@ fn scalar_brdf_is_reciprocal_and_fast_paths_agree() {
             0.1,
         );
         let s0 = evaluate_s0(&g, &p, s_light);
+        let applied = crate::optics::pbrdf::apply(&g, &p, s_light);
         for c in 0..3 {
+            let want = lobes.apply(c, s_light).to_array();
+            for (x, y) in applied[c].to_array().iter().zip(want) {
+                assert!((x - y).abs() <= 1e-12 * want[0].abs().max(1.0));
+            }
             // P carries cosθ_i, so the reciprocal quantity is M00 / cosθ_i.
             let (x, y) = (a[c] / g.cos_theta_i, b[c] / swapped.cos_theta_i);
             assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{x} vs {y}");
