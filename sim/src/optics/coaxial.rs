@@ -31,10 +31,17 @@ pub struct CoaxialGeometry<T> {
 }
 
 impl<T: Real> CoaxialGeometry<T> {
-    /// From the unit normal expressed in the camera frame (x right, y up, z toward camera).
+    /// From the normal expressed in the camera frame (x right, y up, z toward camera).
     /// When the normal points straight at the camera the azimuth is undefined; α = 0, β = 1 is
     /// used there (T− = 0, so DP = 0 and the choice has no effect).
+    ///
+    /// The normal may have any non-zero length: it is normalised here (as in
+    /// [`crate::optics::pbrdf::Geometry::new`]), so derivatives are those of the unit normal. A
+    /// zero normal gives cosθ = 0 (no light returned).
     pub fn from_normal_in_camera(n_cam: Vec3<T>) -> Self {
+        let n_cam = n_cam
+            .normalized_or_none(DIRECTION_EPS_SQ)
+            .unwrap_or(Vec3::new(T::zero(), T::zero(), T::zero()));
         let (a, b) = (n_cam.x, n_cam.y);
         let r2 = a.sq() + b.sq();
         let (alpha, beta) = if r2.re() > DIRECTION_EPS_SQ {

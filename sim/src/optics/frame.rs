@@ -40,7 +40,11 @@ impl<T: Real> Frame<T> {
         let z = z
             .normalized_or_none(DIRECTION_EPS_SQ)
             .ok_or(OpticsError::ZeroDirection("frame z"))?;
-        let project = |u: Vec3<T>| (u - z.scale(u.dot(z))).normalized_or_none(1e-12);
+        // Relative threshold: the up vector may have any length.
+        let project = |u: Vec3<T>| {
+            let scale: f64 = u.re().iter().map(|v| v * v).sum();
+            (u - z.scale(u.dot(z))).normalized_or_none(1e-12 * scale)
+        };
         let y = match project(up) {
             Some(y) => y,
             None => {

@@ -96,6 +96,110 @@ fn dual_jacobian_matches_central_differences_at_ten_thousand_points() {
 }
 
 #[test]
+fn coaxial_dual_derivatives_match_central_differences() {
+    use crate::optics::fit::{seed_normal, seed_params};
+    use crate::optics::{Frame, Vec3};
+    let mut r = rng(202);
+    let camera = Frame::camera(
+        Vec3::from_f64([0.0, 0.0, 1.0]),
+        Vec3::from_f64([0.0, 1.0, 0.0]),
+    )
+    .unwrap();
+    let flat = |t: &[coaxial::CoaxialTerms<f64>; 3]| -> [f64; 12] {
+        core::array::from_fn(|k| {
+            let c = &t[k / 4];
+            [c.ds, c.ss, c.dp_alpha, c.dp_beta][k % 4]
+        })
+    };
+    for _ in 0..2000 {
+        let n = at_cos(
+            [0.0, 0.0, 1.0],
+            tangent(&mut r, [0.0, 0.0, 1.0]),
+            r.random_range(0.2..0.98),
+        );
+        let p = params(&mut r, 0.05);
+        let dual = coaxial::terms(
+            &CoaxialGeometry::from_world(seed_normal(n), &camera.cast()),
+            &seed_params(&p),
+        );
+        let value = |p: &PbrdfParams<f64>, n: [f64; 3]| {
+            let n = Vec3::from_f64(n).normalized_or_none(0.0).unwrap();
+            flat(&coaxial::terms(&CoaxialGeometry::from_world(n, &camera), p))
+        };
+        let v0 = value(&p, n);
+        let scale = v0.iter().fold(0.0f64, |m, x| m.max(x.abs())) + 1e-3;
+        for index in 0..N_FIT_PARAMS {
+            let h = 1e-6;
+            let ((pp, np), (pm, nm)) = (perturb(&p, n, index, h), perturb(&p, n, index, -h));
+            let (vp, vm) = (value(&pp, np), value(&pm, nm));
+            for k in 0..12 {
+                let c = &dual[k / 4];
+                let ad = [c.ds, c.ss, c.dp_alpha, c.dp_beta][k % 4].du[index];
+                let fd = (vp[k] - vm[k]) / (2.0 * h);
+                assert!(
+                    (ad - fd).abs() / (scale + ad.abs()) < 1e-5,
+                    "input {index}, term {k}: {ad} vs {fd}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn jacobian_has_no_component_along_the_normal_and_clamped_inputs_have_none() {
+    let mut r = rng(203);
+    for _ in 0..200 {
+        let n = unit(&mut r);
+        let wi = at_cos(n, tangent(&mut r, n), r.random_range(0.1..0.95));
+        let wo = at_cos(n, tangent(&mut r, n), r.random_range(0.1..0.95));
+        let p = params(&mut r, 0.05);
+        let g = geometry::<f64>(n, wi, wo);
+        let (twi, two) = (
+            crate::optics::Vec3::from_f64(wi),
+            crate::optics::Vec3::from_f64(wo),
+        );
+        let jac = observe_with_jacobian(
+            n,
+            twi,
+            two,
+            &g.light_frame,
+            &g.camera_frame,
+            &p,
+            FlashPolariser::default(),
+        )
+        .unwrap();
+        for c in &jac {
+            for o in [c.diffuse, c.specular, c.alpha] {
+                // Scaling the normal changes nothing: ∇_n · n = 0.
+                let along: f64 = (0..3).map(|k| o.du[slot::NORMAL[k]] * n[k]).sum();
+                assert!(along.abs() < 1e-10 * (1.0 + o.re.abs()));
+            }
+        }
+        // Below ALPHA_MIN the roughness is clamped: no derivative flows through σ.
+        let tiny = PbrdfParams {
+            sigma_s: 1e-9,
+            sigma_ss: 1e-8,
+            ..p
+        };
+        let jac = observe_with_jacobian(
+            n,
+            twi,
+            two,
+            &g.light_frame,
+            &g.camera_frame,
+            &tiny,
+            FlashPolariser::default(),
+        )
+        .unwrap();
+        assert!(
+            jac.iter().all(
+                |c| c.specular.du[slot::SIGMA_S] == 0.0 && c.specular.du[slot::SIGMA_SS] == 0.0
+            )
+        );
+    }
+}
+
+#[test]
 fn dop_derivative_matches_central_differences() {
     let mut r = rng(201);
     for _ in 0..10_000 {

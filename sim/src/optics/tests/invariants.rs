@@ -330,3 +330,46 @@ fn exact_coaxial_full_model_equals_talk_matrix_plus_tau_squared_terms() {
         }
     }
 }
+
+#[test]
+fn polarimetric_reciprocity_of_every_lobe() {
+    // Reciprocity for Mueller matrices (Sekera 1966): with the reversed path's frames obtained by
+    // turning the original ones 180° about x (x' = x, y' = −y, z' = −z),
+    // P(ω_o → ω_i) = Q·P(ω_i → ω_o)ᵀ·Q, Q = diag(1, 1, −1, 1), up to the foreshortening cosine
+    // folded into P (cosθ_i forward, cosθ_o reversed).
+    use crate::optics::{Frame, Vec3};
+    let mut r = rng(10);
+    let q = Mueller::diagonal([1.0, 1.0, -1.0, 1.0]);
+    for _ in 0..2000 {
+        let n = unit(&mut r);
+        let wi = at_cos(n, tangent(&mut r, n), r.random_range(0.02..1.0));
+        let wo = at_cos(n, tangent(&mut r, n), r.random_range(0.02..1.0));
+        let p = params(&mut r, 0.05);
+        let g = geometry_up::<f64>(n, wi, wo, unit(&mut r), unit(&mut r));
+        let turn = |f: &Frame<f64>| Frame {
+            x: f.x,
+            y: -f.y,
+            z: -f.z,
+        };
+        let rev = crate::optics::pbrdf::Geometry::new(
+            Vec3::from_f64(n),
+            Vec3::from_f64(wo),
+            Vec3::from_f64(wi),
+            turn(&g.camera_frame),
+            turn(&g.light_frame),
+        )
+        .unwrap();
+        let (fwd, bwd) = (evaluate(&g, &p), evaluate(&rev, &p));
+        for c in 0..3 {
+            let a = fwd.total(c).scale(1.0 / g.cos_theta_i);
+            let b = q
+                .mul(&bwd.total(c).transpose())
+                .mul(&q)
+                .scale(1.0 / rev.cos_theta_i);
+            assert!(
+                max_abs_diff(&a, &b) < 1e-12 * (1.0 + max_abs(&a)),
+                "{a:?}\n{b:?}"
+            );
+        }
+    }
+}
