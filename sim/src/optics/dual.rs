@@ -131,6 +131,30 @@ assign_op!(SubAssign, sub_assign, -);
 assign_op!(MulAssign, mul_assign, *);
 assign_op!(DivAssign, div_assign, /);
 
+macro_rules! scalar_op {
+    ($tr:ident, $f:ident, $body:expr) => {
+        impl<const N: usize> $tr<f64> for Dual<N> {
+            type Output = Self;
+            /// Mixed operation with an `f64` constant.
+            #[inline]
+            fn $f(self, k: f64) -> Self {
+                let g: fn(Self, f64) -> Self = $body;
+                g(self, k)
+            }
+        }
+    };
+}
+scalar_op!(Add, add, |mut a, k| {
+    a.re += k;
+    a
+});
+scalar_op!(Sub, sub, |mut a, k| {
+    a.re -= k;
+    a
+});
+scalar_op!(Mul, mul, |a, k| a.chain(a.re * k, k));
+scalar_op!(Div, div, |a, k| a.chain(a.re / k, 1.0 / k));
+
 impl<const N: usize> Real for Dual<N> {
     const EPSILON: f64 = f64::EPSILON;
 
@@ -234,5 +258,7 @@ mod tests {
         assert_eq!(z.re, 0.0);
         assert_eq!(D2::variable(1.0, 7), D2::constant(1.0));
         assert_eq!((-a).abs().du[0], 1.0);
+        let m = (a * 3.0 + 1.0 - 0.5) / 2.0;
+        assert_eq!((m.re, m.du[0], m.du[1]), (3.25, 1.5, 0.0));
     }
 }

@@ -91,7 +91,7 @@ impl<T: Real> Frame<T> {
 
     /// C(θ) from this frame to the frame about the same z whose x axis is the projection of
     /// `axis` onto this frame's x–y plane. `None` when that projection vanishes
-    /// (squared length ≤ [`DIRECTION_EPS_SQ`] relative to |axis|²).
+    /// (squared length ≤ 1e-24·|axis|²).
     pub fn rotator_to_axis(&self, axis: Vec3<T>) -> Option<Rotator<T>> {
         let scale: f64 = axis.re().iter().map(|v| v * v).sum();
         Rotator::from_direction(self.x.dot(axis), self.y.dot(axis), DIRECTION_EPS_SQ * scale)
