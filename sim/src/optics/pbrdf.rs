@@ -442,3 +442,102 @@ pub(crate) fn reflection_unit_naive(g: &Geometry<f64>, eta: f64) -> Mueller<f64>
         .mueller();
     rout.mul(&fr).mul(&rin)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p() -> PbrdfParams<f64> {
+        PbrdfParams {
+            eta: 1.5,
+            sigma_s: 0.2,
+            sigma_ss: 0.5,
+            rho_s: 1.0,
+            rho_ss: [0.1; 3],
+            rho_d: [0.5; 3],
+        }
+    }
+
+    #[test]
+    fn validation_names_the_bad_field() {
+        assert_eq!(p().validate(), Ok(()));
+        let cases = [
+            (PbrdfParams { eta: 0.9, ..p() }, "eta"),
+            (
+                PbrdfParams {
+                    eta: f64::NAN,
+                    ..p()
+                },
+                "eta",
+            ),
+            (
+                PbrdfParams {
+                    sigma_s: -0.1,
+                    ..p()
+                },
+                "sigma_s",
+            ),
+            (
+                PbrdfParams {
+                    sigma_ss: 1.5,
+                    ..p()
+                },
+                "sigma_ss",
+            ),
+            (
+                PbrdfParams {
+                    sigma_s: 0.6,
+                    ..p()
+                },
+                "sigma_s (0.6) must not exceed",
+            ),
+            (PbrdfParams { rho_s: -1.0, ..p() }, "rho_s"),
+            (
+                PbrdfParams {
+                    rho_ss: [0.0, f64::INFINITY, 0.0],
+                    ..p()
+                },
+                "rho_ss",
+            ),
+            (
+                PbrdfParams {
+                    rho_d: [0.0, 0.0, -0.1],
+                    ..p()
+                },
+                "rho_d",
+            ),
+        ];
+        for (params, name) in cases {
+            let msg = params.validate().unwrap_err().to_string();
+            assert!(msg.contains(name), "{msg} should name {name}");
+        }
+    }
+
+    #[test]
+    fn geometry_rejects_zero_directions_and_mismatched_frames() {
+        let v = Vec3::<f64>::from_f64;
+        let up = v([0.0, 1.0, 0.0]);
+        let z = v([0.0, 0.0, 1.0]);
+        let zero = v([0.0; 3]);
+        assert_eq!(
+            Geometry::from_up_vectors(zero, z, z, up, up).unwrap_err(),
+            OpticsError::ZeroDirection("normal")
+        );
+        assert!(Geometry::from_up_vectors(z, v([f64::NAN, 0.0, 1.0]), z, up, up).is_err());
+        let light = Frame::light(z, up).unwrap();
+        let camera = Frame::camera(z, up).unwrap();
+        let tilted = v([0.5, 0.0, 1.0]);
+        assert!(matches!(
+            Geometry::new(z, tilted, z, light, camera),
+            Err(OpticsError::FrameMismatch(_))
+        ));
+        assert!(matches!(
+            Geometry::new(z, z, tilted, light, camera),
+            Err(OpticsError::FrameMismatch(_))
+        ));
+        // Unnormalised inputs are accepted and normalised.
+        let g = Geometry::from_up_vectors(z.scale(3.0), tilted, z.scale(0.1), up, up).unwrap();
+        assert!((g.normal.norm_squared() - 1.0).abs() < 1e-15);
+        assert!((g.cos_theta_i - 1.0 / 1.25f64.sqrt()).abs() < 1e-15);
+    }
+}
