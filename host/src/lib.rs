@@ -7,6 +7,7 @@
 //! - [`acquire`]: capture orchestration and frame ↔ pulse pairing.
 //! - [`pose`]: AprilTag detection and joint board pose (IPPE + LM with distortion, flip checks).
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere highlights.
+//! - [`report`]: PNG line plots and a small raster canvas for reports.
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: fitting, export.
@@ -18,4 +19,5 @@ pub mod cli;
 pub mod link;
 pub mod polar;
 pub mod pose;
+pub mod report;
 pub mod session;
