@@ -7,5 +7,7 @@
 //!
 //! Later modules (renderer, sensor effects, virtual rig) build on these.
 
+pub mod geometry;
 pub mod optics;
 pub mod scene;
+pub mod tags;

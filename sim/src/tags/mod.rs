@@ -1,0 +1,1 @@
+//! AprilTag boards (placeholder while the module is written).
