@@ -13,6 +13,15 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::collections::HashMap;
 
+/// Subdivision level of the shipped asset `sim/assets/bumpy_blob.ply`.
+pub const BLOB_SUBDIVISIONS: u32 = 4;
+/// Relative bump amplitude of the shipped asset.
+pub const BLOB_AMPLITUDE: f64 = 0.06;
+/// Region count of the shipped asset.
+pub const BLOB_REGIONS: u32 = 4;
+/// Seed of the shipped asset.
+pub const BLOB_SEED: u64 = 2022;
+
 /// Unit icosphere after `subdivisions` 4-to-1 splits: `10·4^s + 2` vertices, `20·4^s` faces.
 pub fn icosphere(subdivisions: u32) -> (Vec<Unit<Vector3<f64>>>, Vec<[u32; 3]>) {
     let phi = (1.0 + 5f64.sqrt()) / 2.0;
