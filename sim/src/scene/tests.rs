@@ -324,3 +324,15 @@ fn shipped_blob_matches_its_generator() {
         .fold(0.0, f64::max);
     assert!(max_err < 1e-6, "f32 storage error {max_err}");
 }
+
+/// The minimal example in `docs/scene.md` loads (as if it lived in `sim/scenes/`).
+#[test]
+fn documented_minimal_example_loads() {
+    let doc = std::fs::read_to_string(sim_dir().join("../docs/scene.md")).expect("docs/scene.md");
+    let start = doc.find("## Minimal example").expect("section");
+    let body = &doc[start..];
+    let open = body.find("```toml\n").expect("code block") + "```toml\n".len();
+    let close = body[open..].find("```").expect("closed block");
+    let s = load(&body[open..open + close]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.camera_poses.len(), 100);
+}
