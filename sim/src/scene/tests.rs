@@ -336,3 +336,64 @@ fn documented_minimal_example_loads() {
     let s = load(&body[open..open + close]).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s.camera_poses.len(), 100);
 }
+
+/// End to end: render the sphere scene's board from two of its own camera poses (intrinsics
+/// scaled down 4×) with the sphere occluding, detect the tags with the real detector, and check
+/// every detected corner against the world corner projected through `world_from_camera`.
+#[test]
+fn scene_poses_and_board_poses_agree_with_detections() {
+    use crate::tags::detect_for_tests::detect_tag36h11;
+    let s = Scene::load(&sim_dir().join("scenes/sphere.toml")).expect("sphere");
+    let cam = &s.rig.camera;
+    let scale = 4.0;
+    let (w, h) = (
+        (cam.resolution_px[0] / 4) as usize,
+        (cam.resolution_px[1] / 4) as usize,
+    );
+    let (fx, fy) = (cam.fx_px / scale, cam.fy_px / scale);
+    let (cx, cy) = (
+        (cam.cx_px + 0.5) / scale - 0.5,
+        (cam.cy_px + 0.5) / scale - 0.5,
+    );
+    for pose in [s.camera_poses[0], s.camera_poses[75]] {
+        let eye = pose.world_from_camera * Point3::origin();
+        let mut gray = vec![0u8; w * h];
+        for v in 0..h {
+            for u in 0..w {
+                let mut acc = 0.0;
+                for (sx, sy) in [(0.25, 0.25), (0.75, 0.25), (0.25, 0.75), (0.75, 0.75)] {
+                    let (x, y) = (u as f64 - 0.5 + sx, v as f64 - 0.5 + sy);
+                    let dir =
+                        pose.world_from_camera * Vector3::new((x - cx) / fx, (y - cy) / fy, 1.0);
+                    acc += match s.intersect(&Ray::new(eye, dir), 0.0, f64::INFINITY) {
+                        Some(SceneHit {
+                            kind: SurfaceKind::Board { albedo, .. },
+                            ..
+                        }) => albedo as f64,
+                        Some(_) => 0.3,
+                        None => 0.1,
+                    };
+                }
+                gray[v * w + u] = (acc / 4.0 * 255.0).round() as u8;
+            }
+        }
+        let found = detect_tag36h11(&gray, w, h);
+        assert!(found.len() >= 6, "only {} tags detected", found.len());
+        let camera_from_world = pose.world_from_camera.inverse();
+        for (id, corners) in found {
+            let truth = s.boards[0]
+                .tag_corners_world_m(id)
+                .expect("detected id is on the board");
+            for (k, got) in corners.iter().enumerate() {
+                let q = camera_from_world * truth[k];
+                let want = [fx * q.x / q.z + cx, fy * q.y / q.z + cy];
+                let err = ((got[0] - want[0]).powi(2) + (got[1] - want[1]).powi(2)).sqrt();
+                assert!(
+                    err < 0.6,
+                    "pose {} tag {id} corner {k}: {err:.3} px",
+                    pose.index
+                );
+            }
+        }
+    }
+}

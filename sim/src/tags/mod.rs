@@ -12,6 +12,8 @@ pub mod family;
 pub mod placed;
 
 #[cfg(test)]
+pub(crate) mod detect_for_tests;
+#[cfg(test)]
 mod tests;
 
 pub use board::{

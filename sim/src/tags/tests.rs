@@ -226,29 +226,13 @@ fn rendered_board_is_detected_with_correct_ids_and_corners() {
             gray[v * w + u] = (acc / (ss * ss) as f64 * 255.0).round() as u8;
         }
     }
-    let mut det = apriltag::DetectorBuilder::new()
-        .add_family_bits(apriltag::Family::tag_36h11(), 1)
-        .build()
-        .expect("detector");
-    det.set_thread_number(1);
-    let mut img =
-        apriltag::Image::zeros_with_alignment(w, h, apriltag::image_buf::DEFAULT_ALIGNMENT_U8)
-            .expect("image");
-    let stride = img.stride();
-    for y in 0..h {
-        img.as_slice_mut()[y * stride..y * stride + w].copy_from_slice(&gray[y * w..(y + 1) * w]);
-    }
-    let mut found: Vec<usize> = Vec::new();
-    for d in det.detect(&img) {
-        assert_eq!(d.hamming(), 0);
-        let id = d.id() as u32;
-        found.push(d.id());
+    let mut found: Vec<u32> = Vec::new();
+    for (id, corners) in super::detect_for_tests::detect_tag36h11(&gray, w, h) {
+        found.push(id);
         let truth = board
             .tag_corners_board_m(id)
             .expect("detected id is on the board");
-        for (k, corner) in d.corners().iter().enumerate() {
-            // AprilTag puts pixel centres at +0.5: shift back to the integer-centre convention.
-            let got = [corner[0] - 0.5, corner[1] - 0.5];
+        for (k, got) in corners.iter().enumerate() {
             let want = project(&camera_from_board, f, c, &truth[k]);
             let err = ((got[0] - want[0]).powi(2) + (got[1] - want[1]).powi(2)).sqrt();
             assert!(
