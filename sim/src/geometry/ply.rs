@@ -486,3 +486,40 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod robustness {
+    use super::*;
+    use crate::geometry::procedural::bumpy_icosphere;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Corrupted or truncated PLY bytes give an error or a valid mesh, never a panic.
+        #[test]
+        fn corrupted_ply_never_panics(
+            cut in 0usize..4000,
+            flips in proptest::collection::vec((0usize..4000, any::<u8>()), 0..8),
+            ascii in any::<bool>(),
+        ) {
+            let mesh = bumpy_icosphere(1, 0.05, 2, 1);
+            let fmt = if ascii { PlyFormat::Ascii } else { PlyFormat::BinaryLittleEndian };
+            let mut bytes = write_ply(&mesh, fmt, false);
+            for (at, b) in flips {
+                let n = bytes.len();
+                bytes[at % n] = b;
+            }
+            bytes.truncate(cut.max(1).min(bytes.len()));
+            if let Ok(m) = parse_ply(&bytes) {
+                prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.positions.len()));
+            }
+        }
+
+        /// Arbitrary text never panics the OBJ reader.
+        #[test]
+        fn arbitrary_obj_never_panics(text in "(v( -?[0-9]{1,2}(\\.[0-9])?){3}\n|vn 0 0 1\n|f( -?[0-9]{1,2}(/[0-9]?(/[0-9])?)?){2,5}\n|usemtl [ab]\n|# x\n){0,30}") {
+            let _ = crate::geometry::obj::parse_obj(text.as_bytes());
+        }
+    }
+}

@@ -179,3 +179,41 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod properties {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+
+        /// Sphere hits lie on the surface, are the first crossing after t_min, and the normal is
+        /// radial.
+        #[test]
+        fn sphere_hits_are_on_the_surface_and_first(
+            r in 0.001f64..10.0,
+            o in proptest::array::uniform3(-20.0f64..20.0),
+            d in proptest::array::uniform3(-1.0f64..1.0),
+        ) {
+            let s = Sphere { radius_m: r };
+            let ray = Ray::new(Point3::from(o), Vector3::from(d));
+            prop_assume!(ray.dir.norm() > 1e-3);
+            if let Some(h) = s.intersect(&ray, 0.0, f64::INFINITY) {
+                let rel = (h.point.coords.norm() - r).abs() / r;
+                prop_assert!(rel < 1e-9, "off surface by {rel}");
+                prop_assert!((h.normal_geometric.into_inner() - h.point.coords / h.point.coords.norm()).norm() < 1e-9);
+                // Nothing on the sphere is crossed before t: the midpoint of [0, t) is not a
+                // surface crossing from outside to inside and back.
+                let inside_at = |t: f64| ray.at(t).coords.norm() < r;
+                let starts_inside = inside_at(0.0);
+                prop_assert_eq!(inside_at(h.t * 0.5), starts_inside);
+            } else {
+                // A miss means the line stays outside (or the sphere is behind the origin).
+                let t_close = -ray.origin.coords.dot(&ray.dir) / ray.dir.norm_squared();
+                let closest = ray.at(t_close.max(0.0)).coords.norm();
+                prop_assert!(closest >= r * (1.0 - 1e-9), "missed a sphere the ray passes through");
+            }
+        }
+    }
+}

@@ -397,3 +397,34 @@ fn scene_poses_and_board_poses_agree_with_detections() {
         }
     }
 }
+
+mod robustness {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(128))]
+
+        /// Random edits of a valid scene load or fail with a located error; never panic. Errors
+        /// other than I/O always carry a line inside the file.
+        #[test]
+        fn mutated_scenes_never_panic(
+            edits in proptest::collection::vec((0usize..2000, "[-0-9a-z.=\\[\\]{}\"\n ,]"), 1..4),
+        ) {
+            let mut text = BASE.to_string();
+            for (at, with) in edits {
+                let mut at = at % text.len();
+                while !text.is_char_boundary(at) {
+                    at -= 1;
+                }
+                let end = (at + 1..=text.len()).find(|&i| text.is_char_boundary(i)).unwrap_or(text.len());
+                text.replace_range(at..end, &with);
+            }
+            if let Err(e) = load(&text) {
+                let lines = text.lines().count().max(1) + 1;
+                let line = e.line().expect("scene errors are located");
+                prop_assert!((1..=lines).contains(&line), "line {line} of {lines}: {e}");
+            }
+        }
+    }
+}

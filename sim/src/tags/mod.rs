@@ -2,7 +2,8 @@
 //!
 //! - [`family`]: tag families and their code tables, read from the AprilTag C library so printed
 //!   tags carry exactly the bits the detector decodes.
-//! - [`board`]: board descriptions (TOML), validation, albedo lookup, tag corners, ray hits.
+//! - [`spec`]: board descriptions as written in TOML (board files and inline tables).
+//! - [`board`]: validation and the built board: albedo lookup, tag corners, ray hits.
 //! - [`placed`]: a board posed in the world (`world_from_board`) for world-space rays.
 //!
 //! Frame conventions and the corner order are documented in [`board`].
@@ -10,6 +11,7 @@
 pub mod board;
 pub mod family;
 pub mod placed;
+pub mod spec;
 
 #[cfg(test)]
 pub(crate) mod detect_for_tests;
