@@ -428,3 +428,78 @@ mod robustness {
         }
     }
 }
+
+/// OBJ `usemtl` names work as region keys, and barycentric blending yields weights summing to 1
+/// that reproduce the vertex materials at the corners.
+#[test]
+fn obj_named_regions_and_barycentric_blend() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let obj = dir.path().join("two_tone.obj");
+    std::fs::write(
+        &obj,
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nusemtl left\nf 1 2 4\nusemtl right\nf 2 3 4\n",
+    )
+    .expect("write");
+    let object = format!(
+        "shape = \"mesh\"\nmesh = \"{}\"\nregions = {{ left = \"glass\", right = \"tin\" }}\nregion_blend = \"barycentric\"",
+        obj.display()
+    );
+    let text = edit("shape = \"sphere\"\nradius_m = 0.04", &object)
+        .replace("material = \"glass\"\n", "")
+        .replace(
+            "[[objects]]",
+            "[materials.tin]\neta = 2.0\nsigma_s = 0.1\nsigma_ss = 0.2\nrho_s = 1.0\n\
+             rho_ss = [0.1, 0.1, 0.1]\nrho_d = [0.1, 0.1, 0.1]\n\n[[objects]]",
+        );
+    let s = load(&text).unwrap_or_else(|e| panic!("{e}"));
+    let (glass, tin) = (
+        s.material_id("glass").expect("glass"),
+        s.material_id("tin").expect("tin"),
+    );
+    let down = Vector3::new(0.0, 0.0, -1.0);
+    // The object sits at z = 0.04 (pose from BASE); hit the left triangle near vertex 1.
+    let ray = Ray::new(Point3::new(-0.9, -0.9, 1.0), down);
+    let (hit, sample) = s.objects[0].intersect(&ray, 0.0, 10.0).expect("hit");
+    assert!((hit.point.z - 0.04).abs() < 1e-12);
+    let MaterialSample::Blend(items) = sample else {
+        panic!("expected a blend, got {sample:?}")
+    };
+    assert!((items.iter().map(|(_, w)| w).sum::<f64>() - 1.0).abs() < 1e-12);
+    assert!(
+        items.iter().all(|(m, _)| *m == glass),
+        "left triangle is all glass: {items:?}"
+    );
+    let ray = Ray::new(Point3::new(0.9, 0.9, 1.0), down);
+    let (_, sample) = s.objects[0].intersect(&ray, 0.0, 10.0).expect("hit");
+    assert_eq!(s.material_params(&sample).eta, s.materials[tin].params.eta);
+    // A name that is not a region of the mesh is rejected at its key.
+    let bad = text.replace("right = \"tin\"", "middle = \"tin\"");
+    let e = load(&bad).expect_err("unknown region");
+    assert_eq!(e.key(), "objects[0].regions.middle", "{e}");
+}
+
+/// Errors inside arrays of sub-tables (`[[capture.poses]]`) name the element index.
+#[test]
+fn errors_in_arrays_of_tables_name_the_index() {
+    let path = sim_dir().join("scenes/calibration.toml");
+    let text = std::fs::read_to_string(&path).expect("calibration scene");
+    let marker = "roll_deg = 15.0";
+    let bad = text.replace(marker, "roll_deg = 15.0\nfov_deg = 40.0");
+    let e = Scene::from_toml_str(&bad, &path).expect_err("unknown key");
+    assert_eq!(
+        (e.key(), e.line()),
+        ("capture.poses[2].fov_deg", Some(line_of(&bad, "fov_deg"))),
+        "{e}"
+    );
+    let bad = text.replace(
+        "position_m = [0.0, 0.25, 0.45]\nlook_at_m = [0.02, 0.0, 0.0]",
+        "position_m = [0.0, 0.25, 0.45]\nlook_at_m = [0.0, 0.25, 0.45]",
+    );
+    let e = Scene::from_toml_str(&bad, &path).expect_err("degenerate look-at");
+    assert_eq!(e.key(), "capture.poses[3].look_at_m", "{e}");
+    assert_eq!(
+        e.line(),
+        Some(line_of(&bad, "look_at_m = [0.0, 0.25, 0.45]")),
+        "{e}"
+    );
+}

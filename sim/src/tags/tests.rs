@@ -146,7 +146,11 @@ fn validation_names_the_offending_key() {
     s.family = TagFamily::Tag16h5;
     s.grid.as_mut().expect("grid").first_id = 30;
     check(s, "grid.first_id", "ids 0..29");
-    check(grid_spec(100_000, 100_000, 0.04, 0.05), "grid.cols", "exceed the 587 codes");
+    check(
+        grid_spec(100_000, 100_000, 0.04, 0.05),
+        "grid.cols",
+        "exceed the 587 codes",
+    );
     let mut s = grid_spec(2, 1, 0.04, 0.05);
     s.grid.as_mut().expect("grid").first_id = u32::MAX;
     check(s, "grid.first_id", "not in tag36h11");
