@@ -2,7 +2,7 @@
 //! mapping that produces them.
 //!
 //! Contract: every error a scene or board file can cause is a [`SceneError`] whose `Display` reads
-//! `file:line:column: `key.path[index].field`: message`. Syntax and schema errors come from the
+//! ``file:line:column: `key.path[i].field`: message``. Syntax and schema errors come from the
 //! `toml` crate's span-carrying errors (the key path is recovered from the span); semantic errors
 //! are raised with a key path and located by walking the spanned document ([`toml::de::DeTable`]).
 //! A key that is absent (a missing required field) is located at its nearest existing parent.

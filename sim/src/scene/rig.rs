@@ -11,6 +11,7 @@
 
 use super::error::{Located, SceneError};
 use super::spec::positive;
+use nalgebra::{Isometry3, Point3, Unit, Vector3};
 use serde::{Deserialize, Serialize};
 
 /// The camera's sensor (maps to `mosaic::SensorLayout`).
@@ -210,6 +211,27 @@ impl FlashSpec {
         lateral.atan2(distance_m - z).to_degrees()
     }
 
+    /// Flash position in the world for a camera pose.
+    pub fn position_world(&self, world_from_camera: &Isometry3<f64>) -> Point3<f64> {
+        world_from_camera * Point3::from(self.offset_m)
+    }
+
+    /// Flash axis (the camera's optical axis) in the world.
+    pub fn axis_world(&self, world_from_camera: &Isometry3<f64>) -> Unit<Vector3<f64>> {
+        world_from_camera * Vector3::z_axis()
+    }
+
+    /// Transmission axis of the flash polariser in the world: the camera x axis turned by
+    /// `polariser_deg` towards camera y (`None` for an unpolarised flash).
+    pub fn polariser_axis_world(
+        &self,
+        world_from_camera: &Isometry3<f64>,
+    ) -> Option<Unit<Vector3<f64>>> {
+        let (s, c) = self.polariser_deg.to_radians().sin_cos();
+        self.polarised
+            .then(|| world_from_camera * Unit::new_normalize(Vector3::new(c, s, 0.0)))
+    }
+
     /// Relative intensity at `theta_deg` off the flash axis (1 on axis).
     pub fn relative_intensity(&self, theta_deg: f64) -> f64 {
         match self.profile.kind {
@@ -383,6 +405,26 @@ mod tests {
         let f = FlashSpec::default();
         let a = f.separation_deg_at(0.5);
         assert!((a - 3.4336).abs() < 1e-3, "{a}");
+    }
+
+    #[test]
+    fn flash_frame_follows_the_camera() {
+        let mut f = FlashSpec {
+            polariser_deg: 90.0,
+            ..FlashSpec::default()
+        };
+        let pose = Isometry3::new(Vector3::new(1.0, 2.0, 3.0), Vector3::new(0.0, 0.0, 0.5));
+        let p = f.position_world(&pose);
+        assert!((p - pose * Point3::new(0.0, -0.03, 0.0)).norm() < 1e-15);
+        let axis = f.polariser_axis_world(&pose).expect("polarised");
+        // 90° turns the transmission axis from camera x to camera y.
+        assert!((axis.into_inner() - pose * Vector3::y()).norm() < 1e-12);
+        assert!(
+            axis.dot(&f.axis_world(&pose)).abs() < 1e-12,
+            "perpendicular to the beam"
+        );
+        f.polarised = false;
+        assert!(f.polariser_axis_world(&pose).is_none());
     }
 
     #[test]
