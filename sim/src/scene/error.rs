@@ -163,11 +163,13 @@ pub struct Located<'a> {
 }
 
 impl<'a> Located<'a> {
-    /// Parses `text` for location lookups (a syntax error leaves lookups at line 1).
+    /// Parses `text` for location lookups (after a syntax error lookups give no key path).
     pub fn new(text: &'a str, path: &'a Path) -> Self {
         Self {
             text,
             path,
+            // Strict parsing: after a syntax error a recovered tree can attribute the error to
+            // the wrong key, so syntax errors carry the line and column only.
             doc: DeTable::parse(text).ok(),
         }
     }

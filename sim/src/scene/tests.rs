@@ -158,6 +158,11 @@ fn bad_inputs_name_key_and_line() {
         (edit("pose = { translation_m = [0.0, 0.0, 0.04] }", "pose = { quaternion_wxyz = [0.0, 0.0, 0.0, 0.0] }"), "objects[0].pose.quaternion_wxyz", "quaternion_wxyz", "normalised"),
         (edit("shape = \"sphere\"\nradius_m = 0.04", "shape = \"mesh\"\nmesh = \"../assets/missing.ply\""), "objects[0].mesh", "missing.ply", "does not exist"),
         (edit("[capture]", "[capture\n"), "", "[capture", "unclosed table"),
+        (edit("shape = \"sphere\"\n", ""), "objects[0]", "[[objects]]", "missing field `shape`"),
+        (edit("tag_size_m = 0.03\n", ""), "boards[0].inline", "[boards.inline]", "missing field `tag_size_m`"),
+        (edit("rho_d = [0.02, 0.02, 0.02]", "rho_d = [0.02, \"x\", 0.02]"), "materials.glass.rho_d[1]", "rho_d = [0.02, \"x\"", "invalid type"),
+        (edit("seed = 5", "seed = -5"), "seed", "seed = -5", "expected u64"),
+        (edit("exposure_us = 5000.0", "exposure_us = 5000.0\nexposure_us = 1.0"), "", "exposure_us = 1.0", "duplicate key"),
     ];
     for (text, key, line_text, fragment) in cases {
         let e = load(&text).expect_err(&format!("must fail: expected `{key}`"));
