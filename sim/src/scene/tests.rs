@@ -298,7 +298,7 @@ fn mesh_regions_resolve_to_materials_and_blend() {
         let z = -0.9 + 1.8 * (k as f64 / 400.0);
         let r = (1.0 - z * z).sqrt();
         let dir = Vector3::new(r * a.cos(), r * a.sin(), z);
-        let centre = Point3::new(0.0, 0.0, 0.045);
+        let centre = Point3::new(0.0, 0.0, 0.0396);
         let ray = Ray::new(centre + dir * 0.5, -dir);
         if let Some((_, MaterialSample::Uniform(m))) = obj.intersect(&ray, 0.0, 1.0) {
             seen.insert(m);
