@@ -508,3 +508,16 @@ fn errors_in_arrays_of_tables_name_the_index() {
         "{e}"
     );
 }
+
+/// A parsed scene file serialises back to TOML that parses to the same thing (sessions can
+/// record the exact scene they were simulated from).
+#[test]
+fn scene_files_round_trip_through_toml() {
+    for name in ["sphere", "multi_material", "calibration", "s0_only"] {
+        let text = std::fs::read_to_string(sim_dir().join(format!("scenes/{name}.toml"))).expect("scene");
+        let file: SceneFile = toml::from_str(&text).expect("parses");
+        let written = toml::to_string(&file).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let back: SceneFile = toml::from_str(&written).unwrap_or_else(|e| panic!("{name}: {e}\n{written}"));
+        assert_eq!(file, back, "{name}");
+    }
+}
