@@ -18,8 +18,8 @@ fn main() -> std::io::Result<()> {
     println!(
         "wrote {} ({} vertices, {} triangles, {} regions, {} bytes)",
         out.display(),
-        mesh.positions.len(),
-        mesh.triangles.len(),
+        mesh.positions().len(),
+        mesh.triangles().len(),
         mesh.region_count(),
         bytes.len()
     );

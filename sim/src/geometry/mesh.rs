@@ -9,6 +9,8 @@
 //!   by the computed normal.
 //! - Triangles are two-sided for hit testing (Möller–Trumbore); the reported geometric normal is
 //!   the counter-clockwise face normal, the shading normal the barycentric blend of vertex normals.
+//! - A mesh is immutable after construction (read-only accessors), so the precomputed triangle
+//!   edges and the BVH can never go stale.
 //! - Region ids come from the file (PLY vertex property or OBJ `usemtl` groups); `region_names`
 //!   is non-empty only when the file names its regions (OBJ).
 
@@ -53,15 +55,17 @@ pub enum MeshError {
 #[derive(Clone, Debug)]
 pub struct TriangleMesh {
     /// Vertex positions (object frame, metres before object scale).
-    pub positions: Vec<Point3<f64>>,
+    positions: Vec<Point3<f64>>,
     /// Unit vertex normals, one per vertex.
-    pub normals: Vec<Unit<Vector3<f64>>>,
+    normals: Vec<Unit<Vector3<f64>>>,
     /// Optional region id per vertex.
-    pub regions: Option<Vec<u32>>,
+    regions: Option<Vec<u32>>,
     /// Names of region ids (index = id) when the source format names them (OBJ `usemtl`).
-    pub region_names: Vec<String>,
+    region_names: Vec<String>,
     /// Triangles as vertex indices, counter-clockwise seen from outside.
-    pub triangles: Vec<[u32; 3]>,
+    triangles: Vec<[u32; 3]>,
+    /// Per triangle `[p0, p1 - p0, p2 - p0]`, precomputed for the hit test.
+    edges: Vec<[Vector3<f64>; 3]>,
     bvh: Bvh,
 }
 
@@ -131,14 +135,52 @@ impl TriangleMesh {
             .map(|t| Aabb::from_points(t.iter().map(|&i| &positions[i as usize])))
             .collect();
         let bvh = Bvh::build(&boxes);
+        let edges = triangles
+            .iter()
+            .map(|t| {
+                let p = t.map(|i| positions[i as usize].coords);
+                [p[0], p[1] - p[0], p[2] - p[0]]
+            })
+            .collect();
         Ok(Self {
             positions,
             normals,
             regions,
             region_names: Vec::new(),
             triangles,
+            edges,
             bvh,
         })
+    }
+
+    /// Vertex positions (object frame).
+    pub fn positions(&self) -> &[Point3<f64>] {
+        &self.positions
+    }
+
+    /// Unit vertex normals, one per vertex.
+    pub fn normals(&self) -> &[Unit<Vector3<f64>>] {
+        &self.normals
+    }
+
+    /// Region id per vertex, if the source had them.
+    pub fn regions(&self) -> Option<&[u32]> {
+        self.regions.as_deref()
+    }
+
+    /// Names of region ids (index = id) when the source names them (OBJ `usemtl`), else empty.
+    pub fn region_names(&self) -> &[String] {
+        &self.region_names
+    }
+
+    /// Attaches region names (used by the OBJ reader).
+    pub(crate) fn set_region_names(&mut self, names: Vec<String>) {
+        self.region_names = names;
+    }
+
+    /// Triangles as vertex indices, counter-clockwise seen from outside.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
     }
 
     /// Loads a `.ply` or `.obj` file (by extension, case-insensitive).
@@ -200,23 +242,20 @@ impl TriangleMesh {
         t_min: f64,
         t_max: f64,
     ) -> Option<(f64, f64, f64)> {
-        let [i0, i1, i2] = self.triangle(prim);
-        let p0 = self.positions[i0 as usize];
-        let e1 = self.positions[i1 as usize] - p0;
-        let e2 = self.positions[i2 as usize] - p0;
-        let pvec = ray.dir.cross(&e2);
+        let [p0, e1, e2] = &self.edges[prim as usize];
+        let pvec = ray.dir.cross(e2);
         let det = e1.dot(&pvec);
         // Guard: a ray parallel to (or a degenerate) triangle has det ≈ 0 and no hit.
         if det.abs() < 1e-300 {
             return None;
         }
         let inv_det = 1.0 / det;
-        let tvec = ray.origin - p0;
+        let tvec = ray.origin.coords - p0;
         let b1 = tvec.dot(&pvec) * inv_det;
         if !(0.0..=1.0).contains(&b1) {
             return None;
         }
-        let qvec = tvec.cross(&e1);
+        let qvec = tvec.cross(e1);
         let b2 = ray.dir.dot(&qvec) * inv_det;
         if b2 < 0.0 || b1 + b2 > 1.0 {
             return None;

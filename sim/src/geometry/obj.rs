@@ -130,7 +130,7 @@ pub fn parse_obj(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
     let normals = normals.iter().copied().collect::<Option<Vec<_>>>();
     let regions = any_usemtl.then_some(regions);
     let mut mesh = TriangleMesh::new(positions, normals, regions, triangles)?;
-    mesh.region_names = region_names;
+    mesh.set_region_names(region_names);
     Ok(mesh)
 }
 
@@ -145,19 +145,19 @@ mod tests {
             usemtl glass\nf 1 2 5\nf -5 -3 -2 -1\nusemtl gold\nf 1/1 2/1 3/1\n";
         let m = parse_obj(text.as_bytes()).expect("parses");
         assert_eq!(
-            m.region_names,
+            m.region_names(),
             vec!["gold".to_string(), "glass".to_string()]
         );
         // 2 + 1 + 2 (quad) + 1 triangles.
-        assert_eq!(m.triangles.len(), 6);
-        let r = m.regions.as_ref().expect("regions");
+        assert_eq!(m.triangles().len(), 6);
+        let r = m.regions().expect("regions");
         for (f, region) in [(0, 0), (1, 0), (2, 1), (3, 1), (4, 1), (5, 0)] {
-            let t = m.triangles[f];
+            let t = m.triangles()[f];
             assert!(t.iter().all(|&i| r[i as usize] == region), "face {f}");
         }
         // Vertex 1 is used by both regions, so it is duplicated.
         let at_origin = m
-            .positions
+            .positions()
             .iter()
             .filter(|p| p.coords.norm() == 0.0)
             .count();
@@ -168,8 +168,8 @@ mod tests {
     fn explicit_normals_survive_when_every_corner_has_one() {
         let text = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0.6 0 0.8\nf 1//1 2//1 3//1\n";
         let m = parse_obj(text.as_bytes()).expect("parses");
-        assert!((m.normals[0].x - 0.6).abs() < 1e-12);
-        assert!(m.regions.is_none());
+        assert!((m.normals()[0].x - 0.6).abs() < 1e-12);
+        assert!(m.regions().is_none());
     }
 
     #[test]

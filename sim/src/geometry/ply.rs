@@ -352,14 +352,14 @@ pub fn write_ply(mesh: &TriangleMesh, format: PlyFormat, double: bool) -> Vec<u8
         }
     );
     let _ = writeln!(h, "comment written by ellipso-sim");
-    let _ = writeln!(h, "element vertex {}", mesh.positions.len());
+    let _ = writeln!(h, "element vertex {}", mesh.positions().len());
     for p in ["x", "y", "z", "nx", "ny", "nz"] {
         let _ = writeln!(h, "property {ty} {p}");
     }
-    if mesh.regions.is_some() {
+    if mesh.regions().is_some() {
         let _ = writeln!(h, "property uint region");
     }
-    let _ = writeln!(h, "element face {}", mesh.triangles.len());
+    let _ = writeln!(h, "element face {}", mesh.triangles().len());
     let _ = writeln!(h, "property list uchar int vertex_indices\nend_header");
     let mut out = h.into_bytes();
     let put = |out: &mut Vec<u8>, v: f64| {
@@ -371,11 +371,11 @@ pub fn write_ply(mesh: &TriangleMesh, format: PlyFormat, double: bool) -> Vec<u8
             out.extend_from_slice(&(v as f32).to_le_bytes());
         }
     };
-    for (i, (p, n)) in mesh.positions.iter().zip(&mesh.normals).enumerate() {
+    for (i, (p, n)) in mesh.positions().iter().zip(mesh.normals()).enumerate() {
         for v in p.coords.iter().chain(n.iter()) {
             put(&mut out, *v);
         }
-        if let Some(r) = &mesh.regions {
+        if let Some(r) = &mesh.regions() {
             if format == PlyFormat::Ascii {
                 out.extend_from_slice(r[i].to_string().as_bytes());
             } else {
@@ -386,7 +386,7 @@ pub fn write_ply(mesh: &TriangleMesh, format: PlyFormat, double: bool) -> Vec<u8
             out.push(b'\n');
         }
     }
-    for t in &mesh.triangles {
+    for t in mesh.triangles() {
         if format == PlyFormat::Ascii {
             out.extend_from_slice(format!("3 {} {} {}\n", t[0], t[1], t[2]).as_bytes());
         } else {
@@ -405,12 +405,12 @@ mod tests {
     use crate::geometry::procedural::bumpy_icosphere;
 
     fn assert_same(a: &TriangleMesh, b: &TriangleMesh, tol: f64) {
-        assert_eq!(a.triangles, b.triangles);
-        assert_eq!(a.regions, b.regions);
-        for (p, q) in a.positions.iter().zip(&b.positions) {
+        assert_eq!(a.triangles(), b.triangles());
+        assert_eq!(a.regions(), b.regions());
+        for (p, q) in a.positions().iter().zip(b.positions()) {
             assert!((p - q).norm() <= tol, "{p} vs {q} tol {tol}");
         }
-        for (p, q) in a.normals.iter().zip(&b.normals) {
+        for (p, q) in a.normals().iter().zip(b.normals()) {
             assert!((p.into_inner() - q.into_inner()).norm() <= tol * 10.0 + 1e-15);
         }
     }
@@ -436,10 +436,10 @@ mod tests {
             property int v1\nproperty int v2\nend_header\n\
             0 0 0 0 0.1\n1 0 0 1 0.2\n1 1 0 1 0.3\n0 1 0 2 0.4\n4 0 1 2 3\n0 1\n";
         let m = parse_ply(text.as_bytes()).expect("parses");
-        assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3]]);
-        assert_eq!(m.regions, Some(vec![0, 1, 1, 2]));
+        assert_eq!(m.triangles(), vec![[0, 1, 2], [0, 2, 3]]);
+        assert_eq!(m.regions(), Some(&[0, 1, 1, 2][..]));
         assert!(
-            (m.normals[0].z - 1.0).abs() < 1e-12,
+            (m.normals()[0].z - 1.0).abs() < 1e-12,
             "computed normal is +z"
         );
 
@@ -455,7 +455,7 @@ mod tests {
             be.extend_from_slice(&i.to_be_bytes());
         }
         let m = parse_ply(&be).expect("big endian parses");
-        assert_eq!(m.positions[2], Point3::new(0.0, 3.0, 0.0));
+        assert_eq!(m.positions()[2], Point3::new(0.0, 3.0, 0.0));
     }
 
     #[test]
@@ -512,7 +512,7 @@ mod robustness {
             }
             bytes.truncate(cut.max(1).min(bytes.len()));
             if let Ok(m) = parse_ply(&bytes) {
-                prop_assert!(m.triangles.iter().flatten().all(|&i| (i as usize) < m.positions.len()));
+                prop_assert!(m.triangles().iter().flatten().all(|&i| (i as usize) < m.positions().len()));
             }
         }
 

@@ -166,10 +166,10 @@ mod tests {
         let a = bumpy_icosphere(3, 0.08, 4, 3);
         let b = bumpy_icosphere(3, 0.08, 4, 3);
         let c = bumpy_icosphere(3, 0.08, 4, 4);
-        assert_eq!(a.positions, b.positions);
-        assert_ne!(a.positions, c.positions);
+        assert_eq!(a.positions(), b.positions());
+        assert_ne!(a.positions(), c.positions());
         assert_eq!(a.region_count(), 4);
-        let r = a.regions.as_ref().expect("regions");
+        let r = a.regions().expect("regions");
         for k in 0..4 {
             assert!(r.contains(&k), "region {k} present");
         }

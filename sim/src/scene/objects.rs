@@ -277,7 +277,7 @@ fn bind_material(
             let ObjectGeometry::Mesh(mesh) = geometry else {
                 return Err(loc.invalid(k("regions"), "only meshes have regions"));
             };
-            if mesh.regions.is_none() {
+            if mesh.regions().is_none() {
                 return Err(loc.invalid(
                     k("regions"),
                     "the mesh file has no region ids (PLY vertex property `region` or OBJ usemtl)",
@@ -287,7 +287,7 @@ fn bind_material(
             let mut by_region: Vec<Option<MaterialId>> = vec![None; count];
             for (region_key, material) in map {
                 let at = k(&format!("regions.{region_key}"));
-                let id = match mesh.region_names.iter().position(|n| n == region_key) {
+                let id = match mesh.region_names().iter().position(|n| n == region_key) {
                     Some(id) => id,
                     None => {
                         match region_key.parse::<usize>() {
@@ -307,7 +307,7 @@ fn bind_material(
                 by_region[id] = Some(lookup(material, at)?);
             }
             let used: std::collections::BTreeSet<u32> =
-                mesh.regions.iter().flatten().copied().collect();
+                mesh.regions().into_iter().flatten().copied().collect();
             let missing: Vec<String> = used
                 .iter()
                 .filter(|&&r| by_region[r as usize].is_none())

@@ -319,12 +319,12 @@ fn shipped_blob_matches_its_generator() {
     assert!(bytes < 200 * 1024, "asset is {bytes} bytes");
     let shipped = crate::geometry::TriangleMesh::load(&path).expect("loads");
     let fresh = bumpy_icosphere(BLOB_SUBDIVISIONS, BLOB_AMPLITUDE, BLOB_REGIONS, BLOB_SEED);
-    assert_eq!(shipped.triangles, fresh.triangles);
-    assert_eq!(shipped.regions, fresh.regions);
+    assert_eq!(shipped.triangles(), fresh.triangles());
+    assert_eq!(shipped.regions(), fresh.regions());
     let max_err = shipped
-        .positions
+        .positions()
         .iter()
-        .zip(&fresh.positions)
+        .zip(fresh.positions())
         .map(|(a, b)| (a - b).norm())
         .fold(0.0, f64::max);
     assert!(max_err < 1e-6, "f32 storage error {max_err}");
@@ -514,10 +514,12 @@ fn errors_in_arrays_of_tables_name_the_index() {
 #[test]
 fn scene_files_round_trip_through_toml() {
     for name in ["sphere", "multi_material", "calibration", "s0_only"] {
-        let text = std::fs::read_to_string(sim_dir().join(format!("scenes/{name}.toml"))).expect("scene");
+        let text =
+            std::fs::read_to_string(sim_dir().join(format!("scenes/{name}.toml"))).expect("scene");
         let file: SceneFile = toml::from_str(&text).expect("parses");
         let written = toml::to_string(&file).unwrap_or_else(|e| panic!("{name}: {e}"));
-        let back: SceneFile = toml::from_str(&written).unwrap_or_else(|e| panic!("{name}: {e}\n{written}"));
+        let back: SceneFile =
+            toml::from_str(&written).unwrap_or_else(|e| panic!("{name}: {e}\n{written}"));
         assert_eq!(file, back, "{name}");
     }
 }
