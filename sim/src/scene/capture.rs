@@ -33,6 +33,9 @@ use serde::{Deserialize, Serialize};
 pub struct CameraPose {
     /// Photo index (0-based, capture order).
     pub index: u32,
+    /// Nominal trigger time since the first photo, microseconds (`index × interval_ms`; trigger
+    /// jitter, if listed, is applied later by the virtual rig).
+    pub t_trigger_us: u64,
     /// Camera frame (OpenCV: x right, y down, z forward) to world.
     pub world_from_camera: Isometry3<f64>,
 }
@@ -69,6 +72,10 @@ pub struct ExplicitPoseSpec {
     pub quaternion_wxyz: Option<[f64; 4]>,
 }
 
+fn default_interval() -> f64 {
+    500.0
+}
+
 fn default_up() -> [f64; 3] {
     [0.0, 0.0, 1.0]
 }
@@ -85,6 +92,10 @@ pub struct CaptureSpec {
     /// Target point, metres (default origin).
     #[serde(default)]
     pub look_at_m: [f64; 3],
+    /// Time between consecutive triggers, milliseconds (default 500: a hand-held flash capture
+    /// at 2 photos per second).
+    #[serde(default = "default_interval")]
+    pub interval_ms: f64,
     /// World up direction (default `[0, 0, 1]`).
     #[serde(default = "default_up")]
     pub up: [f64; 3],
@@ -157,6 +168,12 @@ impl CaptureSpec {
         };
         if !self.look_at_m.iter().all(|v| v.is_finite()) {
             return Err(loc.invalid(k("look_at_m"), "must be finite"));
+        }
+        if !(self.interval_ms.is_finite() && self.interval_ms > 0.0 && self.interval_ms <= 3.6e6) {
+            return Err(loc.invalid(
+                k("interval_ms"),
+                format!("{}: need 0 < interval ≤ 1 h", self.interval_ms),
+            ));
         }
         let up = Vector3::from(self.up);
         if !(up.iter().all(|v| v.is_finite()) && up.norm() > 1e-9) {
@@ -379,9 +396,12 @@ impl CaptureSpec {
             .map(f64::to_radians);
         let turns = self.turns.unwrap_or(1.0);
         let step = std::f64::consts::TAU * turns / n.max(1) as f64;
+        // Rounded to whole microseconds; validated interval keeps this far inside u64.
+        let trigger_us = |index: u32| (index as f64 * self.interval_ms * 1e3).round() as u64;
         let pose = |index: u32, eye: Point3<f64>, aim: Point3<f64>, roll: f64| {
             look_at(&eye, &aim, &up, roll).map(|r| CameraPose {
                 index,
+                t_trigger_us: trigger_us(index),
                 world_from_camera: Isometry3::from_parts(Translation3::from(eye.coords), r),
             })
         };
@@ -436,6 +456,7 @@ impl CaptureSpec {
                     let world_from_camera = self.explicit_pose(i, p, &up, loc)?;
                     out.push(CameraPose {
                         index: i as u32,
+                        t_trigger_us: trigger_us(i as u32),
                         world_from_camera,
                     });
                 }

@@ -135,6 +135,15 @@ impl Scene {
         let boards = boards::build_boards(&file.boards, base, loc)?;
         file.rig.validate(loc)?;
         file.capture.validate(loc)?;
+        if file.rig.camera.exposure_us > file.capture.interval_ms * 1e3 {
+            return Err(loc.invalid(
+                "capture.interval_ms",
+                format!(
+                    "{} ms between triggers is shorter than the {} µs exposure",
+                    file.capture.interval_ms, file.rig.camera.exposure_us
+                ),
+            ));
+        }
         let camera_poses = file.capture.camera_poses(file.seed, loc)?;
         if camera_poses.is_empty() {
             return Err(loc.invalid("capture", "the capture path produced no poses"));

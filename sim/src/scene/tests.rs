@@ -158,6 +158,7 @@ fn bad_inputs_name_key_and_line() {
         (edit("pose = { translation_m = [0.0, 0.0, 0.04] }", "pose = { quaternion_wxyz = [0.0, 0.0, 0.0, 0.0] }"), "objects[0].pose.quaternion_wxyz", "quaternion_wxyz", "normalised"),
         (edit("shape = \"sphere\"\nradius_m = 0.04", "shape = \"mesh\"\nmesh = \"../assets/missing.ply\""), "objects[0].mesh", "missing.ply", "does not exist"),
         (edit("[capture]", "[capture\n"), "", "[capture", "unclosed table"),
+        (edit("photo_count = 50", "photo_count = 50\ninterval_ms = 2.0"), "capture.interval_ms", "interval_ms = 2.0", "shorter than the 5000 µs exposure"),
         (edit("shape = \"sphere\"\n", ""), "objects[0]", "[[objects]]", "missing field `shape`"),
         (edit("tag_size_m = 0.03\n", ""), "boards[0].inline", "[boards.inline]", "missing field `tag_size_m`"),
         (edit("rho_d = [0.02, 0.02, 0.02]", "rho_d = [0.02, \"x\", 0.02]"), "materials.glass.rho_d[1]", "rho_d = [0.02, \"x\"", "invalid type"),
@@ -223,8 +224,16 @@ fn capture_paths_are_deterministic_per_seed_and_differ_across_seeds() {
         assert_eq!(a, b, "{path}: same seed, same poses");
         assert_ne!(a, c, "{path}: different seed, different poses");
     }
+    let poses = walk_scene(3, "random_walk").camera_poses;
+    for (i, p) in poses.iter().enumerate() {
+        assert_eq!(
+            (p.index as usize, p.t_trigger_us),
+            (i, i as u64 * 500_000),
+            "default 500 ms cadence"
+        );
+    }
     let target = Point3::new(0.0, 0.0, 0.04);
-    for p in walk_scene(3, "random_walk").camera_poses {
+    for p in poses {
         let eye = p.world_from_camera.translation.vector;
         let d = (Point3::from(eye) - target).norm();
         assert!((0.4 - 1e-9..=0.6 + 1e-9).contains(&d), "distance {d}");
