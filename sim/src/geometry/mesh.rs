@@ -18,6 +18,9 @@ use super::{Aabb, Bvh, Intersect, Ray, SurfaceHit};
 use nalgebra::{Point3, Unit, Vector3};
 use std::path::{Path, PathBuf};
 
+/// Largest accepted region id (region tables are dense arrays indexed by id).
+pub const MAX_REGION_ID: u32 = 65_535;
+
 /// Errors from building or loading a mesh.
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
@@ -100,6 +103,11 @@ impl TriangleMesh {
             )));
         }
         if let Some(r) = &regions {
+            if let Some(&big) = r.iter().find(|&&id| id > MAX_REGION_ID) {
+                return Err(MeshError::Invalid(format!(
+                    "region id {big} exceeds the limit of {MAX_REGION_ID}"
+                )));
+            }
             if r.len() != n {
                 return Err(MeshError::Invalid(format!(
                     "{} region ids for {n} vertices",
@@ -431,6 +439,9 @@ mod tests {
         assert!(e.to_string().contains("only 3 vertices"), "{e}");
         let e = TriangleMesh::new(p.clone(), None, None, vec![]).unwrap_err();
         assert!(e.to_string().contains("no triangles"), "{e}");
+        let e = TriangleMesh::new(p.clone(), None, Some(vec![0, 1, 70_000]), vec![[0, 1, 2]])
+            .unwrap_err();
+        assert!(e.to_string().contains("exceeds the limit"), "{e}");
         let e = TriangleMesh::new(p.clone(), None, Some(vec![0]), vec![[0, 1, 2]]).unwrap_err();
         assert!(e.to_string().contains("region ids"), "{e}");
         let mut nan = p;

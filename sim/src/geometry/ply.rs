@@ -261,6 +261,11 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
                 return Err(err("element `face` lacks the list property vertex_indices"));
             }
         }
+        // An element without properties occupies no bytes: skip it whatever its claimed count
+        // (a hostile count must not spin the row loop).
+        if el.properties.is_empty() {
+            continue;
+        }
         let mut scalars = vec![0.0; el.properties.len()];
         let mut list: Vec<f64> = Vec::new();
         for row in 0..el.count {
@@ -460,7 +465,7 @@ mod tests {
 
     #[test]
     fn malformed_files_name_the_problem() {
-        let cases: [(&[u8], &str); 5] = [
+        let cases: [(&[u8], &str); 6] = [
             (b"obj\n", "end_header"),
             (
                 b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
@@ -473,6 +478,10 @@ mod tests {
                 "row 1 property `z`",
             ),
             (b"ply\nformat ebcdic 1.0\nend_header\n", "unknown format"),
+            (
+                b"ply\nformat ascii 1.0\nelement junk 18446744073709551615\nend_header\n",
+                "both a `vertex` and a `face`",
+            ),
             (
                 b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
                   property float y\nproperty float z\nelement face 1\n\
