@@ -132,23 +132,59 @@ enum Seg {
     Index(usize),
 }
 
-/// Splits `a.b[2].c` into segments. Keys containing dots are not supported (none of ours do).
+/// A key as it appears in a key path: bare if it is a TOML bare key (`A-Za-z0-9_-`), otherwise
+/// quoted (`"Material.001"`), so dotted names stay one segment.
+pub fn key_segment(name: &str) -> String {
+    let bare = !name.is_empty()
+        && name
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+    if bare {
+        name.to_string()
+    } else {
+        format!("\"{}\"", name.replace('\\', "\\\\").replace('"', "\\\""))
+    }
+}
+
+/// Splits `a."b.c"[2].d` into segments (quoted keys may contain dots; `\"` escapes a quote).
 fn segments(path: &str) -> Vec<Seg> {
     let mut out = Vec::new();
-    for part in path.split('.').filter(|p| !p.is_empty()) {
-        let mut rest = part;
-        if let Some(b) = rest.find('[') {
-            out.push(Seg::Key(rest[..b].to_string()));
-            rest = &rest[b..];
-            while let Some(end) = rest.find(']') {
-                if let Ok(i) = rest[1..end].parse() {
+    let mut chars = path.chars().peekable();
+    let mut key = String::new();
+    let mut have_key = false;
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => {
+                while let Some(q) = chars.next() {
+                    match q {
+                        '\\' => key.extend(chars.next()),
+                        '"' => break,
+                        other => key.push(other),
+                    }
+                }
+                have_key = true;
+            }
+            '.' => {
+                if have_key || !key.is_empty() {
+                    out.push(Seg::Key(std::mem::take(&mut key)));
+                }
+                have_key = false;
+            }
+            '[' => {
+                if have_key || !key.is_empty() {
+                    out.push(Seg::Key(std::mem::take(&mut key)));
+                }
+                have_key = false;
+                let digits: String = chars.by_ref().take_while(|&d| d != ']').collect();
+                if let Ok(i) = digits.parse() {
                     out.push(Seg::Index(i));
                 }
-                rest = &rest[end + 1..];
             }
-        } else {
-            out.push(Seg::Key(rest.to_string()));
+            other => key.push(other),
         }
+    }
+    if have_key || !key.is_empty() {
+        out.push(Seg::Key(key));
     }
     out
 }
@@ -261,7 +297,7 @@ fn walk_table(t: &DeTable<'_>, offset: usize, path: &mut String) -> bool {
             if !path.is_empty() {
                 path.push('.');
             }
-            path.push_str(k.get_ref());
+            path.push_str(&key_segment(k.get_ref()));
             if in_value {
                 walk_value(v.get_ref(), offset, path);
             }
@@ -274,7 +310,7 @@ fn walk_table(t: &DeTable<'_>, offset: usize, path: &mut String) -> bool {
         if !path.is_empty() {
             path.push('.');
         }
-        path.push_str(k.get_ref());
+        path.push_str(&key_segment(k.get_ref()));
         if walk_value(v.get_ref(), offset, path) {
             return true;
         }
@@ -326,6 +362,25 @@ mod tests {
         assert_eq!(loc.key_at(off), "objects[1].name");
         let off = DOC.find("2, 3").expect("present");
         assert_eq!(loc.key_at(off), "objects[1].pose.translation_m[1]");
+    }
+
+    #[test]
+    fn dotted_names_are_quoted_and_found() {
+        let doc = "[materials.\"Material.001\"]\neta = 0.5\n";
+        let loc = Located::new(doc, Path::new("x.toml"));
+        let key = format!("materials.{}.eta", key_segment("Material.001"));
+        assert_eq!(key, "materials.\"Material.001\".eta");
+        assert_eq!(line_column(doc, loc.span_of(&key).start).0, 2);
+        assert_eq!(loc.key_at(doc.find("0.5").expect("value")), key);
+        assert_eq!(
+            segments("a.\"b.c\"[2].d"),
+            vec![
+                Seg::Key("a".into()),
+                Seg::Key("b.c".into()),
+                Seg::Index(2),
+                Seg::Key("d".into())
+            ]
+        );
     }
 
     #[test]

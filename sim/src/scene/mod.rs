@@ -126,7 +126,7 @@ impl Scene {
     fn from_file(file: SceneFile, path: &Path, loc: &Located<'_>) -> Result<Self, SceneError> {
         let base = path.parent().unwrap_or_else(|| Path::new("."));
         for (name, m) in &file.materials {
-            m.validate(&format!("materials.{name}"), loc)?;
+            m.validate(&format!("materials.{}", error::key_segment(name)), loc)?;
         }
         if file.objects.is_empty() && file.boards.is_empty() {
             return Err(loc.invalid("objects", "the scene has neither objects nor boards"));

@@ -286,7 +286,10 @@ fn bind_material(
             let count = mesh.region_count();
             let mut by_region: Vec<Option<MaterialId>> = vec![None; count];
             for (region_key, material) in map {
-                let at = k(&format!("regions.{region_key}"));
+                let at = k(&format!(
+                    "regions.{}",
+                    super::error::key_segment(region_key)
+                ));
                 let id = match mesh.region_names().iter().position(|n| n == region_key) {
                     Some(id) => id,
                     None => {
