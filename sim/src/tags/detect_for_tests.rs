@@ -5,8 +5,23 @@
 
 /// Detects tag36h11 tags in a row-major `w × h` grey image.
 pub(crate) fn detect_tag36h11(gray: &[u8], w: usize, h: usize) -> Vec<(u32, [[f64; 2]; 4])> {
+    detect(super::TagFamily::Tag36h11, gray, w, h)
+}
+
+/// Detects tags of `family` in a row-major `w × h` grey image.
+pub(crate) fn detect(
+    family: super::TagFamily,
+    gray: &[u8],
+    w: usize,
+    h: usize,
+) -> Vec<(u32, [[f64; 2]; 4])> {
+    let fam = match family {
+        super::TagFamily::Tag36h11 => apriltag::Family::tag_36h11(),
+        super::TagFamily::Tag25h9 => apriltag::Family::tag_25h9(),
+        super::TagFamily::Tag16h5 => apriltag::Family::tag_16h5(),
+    };
     let mut det = apriltag::DetectorBuilder::new()
-        .add_family_bits(apriltag::Family::tag_36h11(), 1)
+        .add_family_bits(fam, 1)
         .build()
         .expect("detector builds");
     det.set_thread_number(1);
