@@ -2,7 +2,8 @@
 //!
 //! Frames: the world is right-handed with `up` (default `+z`) pointing up; the board usually lies
 //! in the world `z = 0` plane. Cameras use the OpenCV frame: x right, y down, z forward (optical
-//! axis). A [`CameraPose`] holds `world_from_camera`.
+//! axis). A [`CameraPose`] holds `world_from_camera` and the nominal trigger time
+//! `t_trigger_us = index × interval_ms` (the virtual rig adds trigger jitter when listed).
 //!
 //! Contract: [`CaptureSpec::camera_poses`] is a pure function of the spec and the scene seed
 //! (ChaCha8 from `seed`), so the same scene always yields the same poses and a different seed
