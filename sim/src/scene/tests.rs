@@ -532,3 +532,45 @@ fn scene_files_round_trip_through_toml() {
         assert_eq!(file, back, "{name}");
     }
 }
+
+/// Non-uniform scale turns the sphere into an ellipsoid with correct normals; a finite plane
+/// object is hit inside its rectangle only.
+#[test]
+fn scaled_sphere_and_plane_objects() {
+    let text = edit(
+        "pose = { translation_m = [0.0, 0.0, 0.04] }\nmaterial = \"glass\"",
+        "pose = { translation_m = [0.0, 0.0, 0.04], rotation_deg = [0.0, 0.0, 90.0] }\n\
+         scale = [2.0, 1.0, 1.0]\nmaterial = \"glass\"\n\n[[objects]]\nname = \"shelf\"\n\
+         shape = \"plane\"\nsize_m = [0.1, 0.1]\npose = { translation_m = [0.5, 0.0, 0.2] }\n\
+         material = \"glass\"",
+    );
+    let s = load(&text).unwrap_or_else(|e| panic!("{e}"));
+    // Rotated 90° about z, the long (2r = 0.08 m) axis lies along world y.
+    let from_y = Ray::new(Point3::new(0.0, 1.0, 0.04), Vector3::new(0.0, -1.0, 0.0));
+    let h = s.intersect(&from_y, 0.0, 10.0).expect("ellipsoid");
+    assert!((h.hit.point.y - 0.08).abs() < 1e-12, "{}", h.hit.point);
+    assert!((h.hit.normal_geometric.y - 1.0).abs() < 1e-12);
+    // On the ellipsoid x²/r² + y²/(2r)² = 1 at 45° in the xy plane the normal tilts towards x.
+    let r = 0.04;
+    let (px, py) = (r / 2f64.sqrt(), 2.0 * r / 2f64.sqrt());
+    let ray = Ray::new(
+        Point3::new(px + 1.0, py, 0.04),
+        Vector3::new(-1.0, 0.0, 0.0),
+    );
+    let h = s.intersect(&ray, 0.0, 10.0).expect("ellipsoid side");
+    let n = h.hit.normal_geometric;
+    let want = Vector3::new(px / (r * r), py / (4.0 * r * r), 0.0).normalize();
+    assert!((n.into_inner() - want).norm() < 1e-9, "{n:?} vs {want}");
+    let down = Vector3::new(0.0, 0.0, -1.0);
+    let h = s
+        .intersect(&Ray::new(Point3::new(0.52, 0.03, 1.0), down), 0.0, 10.0)
+        .expect("plane");
+    assert!(
+        matches!(h.kind, SurfaceKind::Object { index: 1, .. })
+            && (h.hit.point.z - 0.2).abs() < 1e-12
+    );
+    assert!(
+        s.intersect(&Ray::new(Point3::new(0.56, 0.0, 1.0), down), 0.0, 10.0)
+            .is_none()
+    );
+}
