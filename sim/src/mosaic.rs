@@ -112,7 +112,7 @@ impl Analyser {
     }
 
     /// Offset `(dx, dy)` of this analyser inside a 2×2 polariser block (both layouts).
-    pub fn offset_in_block(self) -> (usize, usize) {
+    pub const fn offset_in_block(self) -> (usize, usize) {
         match self {
             Analyser::Deg90 => (0, 0),
             Analyser::Deg45 => (1, 0),

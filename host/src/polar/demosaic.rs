@@ -1,0 +1,493 @@
+//! Demosaicing: from a raw mosaic frame to four analyser-intensity planes per colour band.
+//!
+//! Two methods, named in every output ([`DemosaicMethod::name`]):
+//!
+//! - **Superpixel** (default): each 2×2 polariser block becomes one output pixel, no
+//!   interpolation. Mono gives (W/2)×(H/2); colour gives (W/4)×(H/4) per R, G, B band (the two G
+//!   blocks of a 4×4 tile are averaged). The four analysers of an output pixel see four
+//!   neighbouring points (instantaneous-field-of-view error at edges), but no value is ever mixed
+//!   from different superpixels: the conservative choice for fitting.
+//! - **Bilinear**: full resolution W×H. Each (colour, analyser) sample lattice is interpolated
+//!   with a tent kernel normalised by the weights of the samples used: rectangular lattices (all
+//!   mono planes; R and B) with a separable tent of one lattice period, the quincunx G lattice
+//!   with a tent in its own 45°-rotated lattice axes. In the interior this is exact bilinear
+//!   interpolation (reproduces affine fields); at the frame border missing neighbours are
+//!   dropped and the weights renormalised. Edges in the scene give colour/polarisation fringes
+//!   (IFoV artefacts); use it for viewing, superpixel for measuring.
+//!
+//! Normalisation: `I = (DN − dark_dn) / (full_scale_dn − dark_dn)`, not clamped (noise below
+//! the dark level stays negative and unbiased; dark masking happens on s0 later).
+//!
+//! Masking: a raw sample at or above the saturation level is never used. A superpixel with any
+//! saturated sample is [`MaskReason::Saturated`] (for G, a tile is only saturated when both G
+//! blocks are; otherwise the unsaturated block alone is used). A bilinear output is
+//! [`MaskReason::Saturated`] when any sample in its kernel footprint was saturated (the value is
+//! still interpolated from the unsaturated ones, for display), and [`MaskReason::NoSamples`] when
+//! some analyser had no sample in reach.
+
+use ellipso_sim::mosaic::{Analyser, Channel, SensorLayout};
+use serde::Serialize;
+
+use super::frame::RawFrame;
+use super::mask::{MaskReason, PixelMask};
+use super::plane::Plane;
+
+/// How the mosaic is turned into per-analyser planes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum DemosaicMethod {
+    /// One output pixel per 2×2 polariser block; no interpolation.
+    #[default]
+    Superpixel,
+    /// Full resolution; tent-kernel (bilinear) interpolation per colour-analyser lattice.
+    Bilinear,
+}
+
+impl DemosaicMethod {
+    /// Lowercase name as written in outputs (`superpixel`, `bilinear`).
+    pub fn name(self) -> &'static str {
+        match self {
+            DemosaicMethod::Superpixel => "superpixel",
+            DemosaicMethod::Bilinear => "bilinear",
+        }
+    }
+
+    /// One-line description for reports.
+    pub fn description(self) -> &'static str {
+        match self {
+            DemosaicMethod::Superpixel => {
+                "2x2 superpixel, no interpolation (colour: G blocks averaged), half (mono) or quarter (colour) resolution"
+            }
+            DemosaicMethod::Bilinear => {
+                "bilinear (tent kernel per colour-analyser lattice, renormalised at borders and around saturated samples), full resolution"
+            }
+        }
+    }
+
+    /// Output size for a `width × height` raw frame of `layout`.
+    pub fn output_size(self, layout: SensorLayout, width: u32, height: u32) -> (usize, usize) {
+        let (w, h) = (width as usize, height as usize);
+        match (self, layout) {
+            (DemosaicMethod::Bilinear, _) => (w, h),
+            (DemosaicMethod::Superpixel, SensorLayout::MonoPolar) => (w / 2, h / 2),
+            (DemosaicMethod::Superpixel, SensorLayout::ColourPolar) => (w / 4, h / 4),
+        }
+    }
+}
+
+/// Raw-to-normalised conversion and saturation level, fixed for one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Levels {
+    dark_dn: f32,
+    scale: f32,
+    saturation_dn: u16,
+}
+
+impl Levels {
+    /// Levels for data with `full_scale_dn`, a dark level below it and a saturation level above
+    /// the dark level. Callers validate (see `PolarConfig::levels`); out-of-order inputs are
+    /// clamped so the scale stays finite and positive.
+    pub(crate) fn new(full_scale_dn: u16, dark_dn: f32, saturation_dn: u16) -> Levels {
+        let span = (f32::from(full_scale_dn) - dark_dn).max(1.0);
+        Levels {
+            dark_dn,
+            scale: 1.0 / span,
+            saturation_dn,
+        }
+    }
+
+    /// Dark level subtracted from every sample, in DN.
+    pub fn dark_dn(&self) -> f32 {
+        self.dark_dn
+    }
+
+    /// Samples at or above this DN are saturated.
+    pub fn saturation_dn(&self) -> u16 {
+        self.saturation_dn
+    }
+
+    /// Normalised intensity of a raw sample.
+    #[inline(always)]
+    pub fn normalise(&self, dn: u16) -> f32 {
+        (f32::from(dn) - self.dark_dn) * self.scale
+    }
+
+    /// True when a raw sample is saturated.
+    #[inline(always)]
+    pub fn is_saturated(&self, dn: u16) -> bool {
+        dn >= self.saturation_dn
+    }
+}
+
+/// Four analyser planes (indexed by [`Analyser::index`]: 0°, 45°, 90°, 135°) of one band.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnalyserBand {
+    /// Colour filter (`None` for mono).
+    pub colour: Option<Channel>,
+    /// Normalised intensities `[I0, I45, I90, I135]`.
+    pub intensity: [Plane<f32>; 4],
+    /// Saturated / no-sample flags from demosaicing.
+    pub mask: Plane<PixelMask>,
+}
+
+/// The demosaiced frame: one [`AnalyserBand`] (mono) or three (R, G, B).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnalyserImage {
+    /// Method used.
+    pub method: DemosaicMethod,
+    /// Layout of the source frame.
+    pub layout: SensorLayout,
+    /// Bands: `[mono]` or `[R, G, B]`.
+    pub bands: Vec<AnalyserBand>,
+}
+
+/// Band colours of a layout: `[None]` for mono, `[R, G, B]` for colour.
+pub(crate) fn band_colours(layout: SensorLayout) -> Vec<Option<Channel>> {
+    match layout {
+        SensorLayout::MonoPolar => vec![None],
+        SensorLayout::ColourPolar => Channel::ALL.iter().copied().map(Some).collect(),
+    }
+}
+
+/// Demosaics `frame` with `method` into normalised analyser planes.
+pub fn demosaic(frame: &RawFrame, levels: &Levels, method: DemosaicMethod) -> AnalyserImage {
+    let bands = match method {
+        DemosaicMethod::Superpixel => band_colours(frame.layout())
+            .into_iter()
+            .map(|colour| superpixel_band(frame, levels, colour))
+            .collect(),
+        DemosaicMethod::Bilinear => band_colours(frame.layout())
+            .into_iter()
+            .map(|colour| bilinear_band(frame, levels, colour))
+            .collect(),
+    };
+    AnalyserImage {
+        method,
+        layout: frame.layout(),
+        bands,
+    }
+}
+
+/// Reusable buffers for one superpixel output row.
+#[derive(Debug, Default)]
+pub(crate) struct RowBuf {
+    pub intensity: [Vec<f32>; 4],
+    pub mask: Vec<PixelMask>,
+}
+
+impl RowBuf {
+    fn reshape(&mut self, width: usize) {
+        for v in &mut self.intensity {
+            v.resize(width, 0.0);
+        }
+        self.mask.resize(width, PixelMask::VALID);
+    }
+}
+
+fn superpixel_band(frame: &RawFrame, levels: &Levels, colour: Option<Channel>) -> AnalyserBand {
+    let (w, h) =
+        DemosaicMethod::Superpixel.output_size(frame.layout(), frame.width(), frame.height());
+    let mut band = AnalyserBand {
+        colour,
+        intensity: std::array::from_fn(|_| Plane::new(w, h)),
+        mask: Plane::new(w, h),
+    };
+    let mut buf = RowBuf::default();
+    for y in 0..h {
+        superpixel_row(frame, levels, colour, y, &mut buf);
+        let r = y * w..(y + 1) * w;
+        for (plane, row) in band.intensity.iter_mut().zip(&buf.intensity) {
+            plane.data_mut()[r.clone()].copy_from_slice(row);
+        }
+        band.mask.data_mut()[r].copy_from_slice(&buf.mask);
+    }
+    band
+}
+
+// Positions inside the 2×2 block, taken at compile time from the single mosaic definition.
+const POS_0: (usize, usize) = Analyser::Deg0.offset_in_block();
+const POS_45: (usize, usize) = Analyser::Deg45.offset_in_block();
+const POS_90: (usize, usize) = Analyser::Deg90.offset_in_block();
+const POS_135: (usize, usize) = Analyser::Deg135.offset_in_block();
+
+/// Fills `buf` with superpixel output row `y_out` of band `colour`.
+pub(crate) fn superpixel_row(
+    frame: &RawFrame,
+    levels: &Levels,
+    colour: Option<Channel>,
+    y_out: usize,
+    buf: &mut RowBuf,
+) {
+    let (w_out, _) =
+        DemosaicMethod::Superpixel.output_size(frame.layout(), frame.width(), frame.height());
+    buf.reshape(w_out);
+    match colour {
+        None => superpixel_mono_row(frame, levels, y_out, buf),
+        Some(c) => superpixel_colour_row(frame, levels, c, y_out, buf),
+    }
+}
+
+/// The hot path: one row of 2×2 superpixels, iterator-driven (no bounds checks, no allocation).
+fn superpixel_mono_row(frame: &RawFrame, levels: &Levels, y_out: usize, buf: &mut RowBuf) {
+    let w = frame.width() as usize;
+    let data = frame.data_dn();
+    let start = 2 * y_out * w;
+    let (Some(r0), Some(r1)) = (
+        data.get(start..start + w),
+        data.get(start + w..start + 2 * w),
+    ) else {
+        return; // unreachable for y_out < height/2: the frame size is validated
+    };
+    let rows = [r0, r1];
+    let sat = levels.saturation_dn;
+    let [o0, o45, o90, o135] = &mut buf.intensity;
+    let blocks = rows[0].chunks_exact(2).zip(rows[1].chunks_exact(2));
+    let outs = o0
+        .iter_mut()
+        .zip(o45.iter_mut())
+        .zip(o90.iter_mut())
+        .zip(o135.iter_mut())
+        .zip(buf.mask.iter_mut());
+    for ((top, bottom), ((((v0, v45), v90), v135), m)) in blocks.zip(outs) {
+        let pick = |pos: (usize, usize)| {
+            if pos.1 == 0 {
+                top[pos.0]
+            } else {
+                bottom[pos.0]
+            }
+        };
+        let (d0, d45, d90, d135) = (pick(POS_0), pick(POS_45), pick(POS_90), pick(POS_135));
+        *v0 = levels.normalise(d0);
+        *v45 = levels.normalise(d45);
+        *v90 = levels.normalise(d90);
+        *v135 = levels.normalise(d135);
+        let saturated = (d0 >= sat) | (d45 >= sat) | (d90 >= sat) | (d135 >= sat);
+        *m = PixelMask(u8::from(saturated) * MaskReason::Saturated.bit());
+    }
+}
+
+/// One row of colour superpixels (4×4 tiles) for channel `colour`.
+fn superpixel_colour_row(
+    frame: &RawFrame,
+    levels: &Levels,
+    colour: Channel,
+    y_out: usize,
+    buf: &mut RowBuf,
+) {
+    let layout = frame.layout();
+    let blocks = colour.blocks_in_tile();
+    for x_out in 0..buf.mask.len() {
+        let mut sum = [0.0f32; 4];
+        let mut sum_all = [0.0f32; 4];
+        let mut valid_blocks = 0u32;
+        for &block in blocks {
+            let mut values = [0.0f32; 4];
+            let mut saturated = false;
+            for a in Analyser::ALL {
+                let (dx, dy) = layout.pixel_in_tile(a, block);
+                let dn = frame
+                    .get((4 * x_out + dx) as u32, (4 * y_out + dy) as u32)
+                    .unwrap_or(0);
+                saturated |= levels.is_saturated(dn);
+                values[a.index()] = levels.normalise(dn);
+            }
+            for k in 0..4 {
+                sum_all[k] += values[k];
+                if !saturated {
+                    sum[k] += values[k];
+                }
+            }
+            valid_blocks += u32::from(!saturated);
+        }
+        let (total, count, mask) = if valid_blocks > 0 {
+            (sum, valid_blocks, PixelMask::VALID)
+        } else {
+            (
+                sum_all,
+                blocks.len() as u32,
+                PixelMask::only(MaskReason::Saturated),
+            )
+        };
+        for (plane, sum) in buf.intensity.iter_mut().zip(total) {
+            plane[x_out] = sum / count as f32;
+        }
+        buf.mask[x_out] = mask;
+    }
+}
+
+/// One interpolation tap: raw-pixel offset and weight.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Tap {
+    dx: i32,
+    dy: i32,
+    weight: f32,
+}
+
+/// Taps of the (colour, analyser) lattice for every pixel phase in the tile, row-major by phase.
+/// `spread` 1 is the bilinear kernel (one lattice period); 2 doubles its reach and is only the
+/// fallback for border pixels whose bilinear neighbours all lie outside the frame (the corners
+/// of the quincunx G lattice).
+fn tap_table(
+    layout: SensorLayout,
+    colour: Option<Channel>,
+    analyser: Analyser,
+    spread: i32,
+) -> Vec<Vec<Tap>> {
+    let tile = layout.tile_px() as i32;
+    let reach = spread * tile - 1;
+    let on_lattice = |x: i32, y: i32| {
+        // shift by whole tiles so the lookup never sees negative coordinates
+        let (xs, ys) = ((x + 4 * tile) as u32, (y + 4 * tile) as u32);
+        layout.analyser_at(xs, ys) == analyser && layout.colour_at(xs, ys) == colour
+    };
+    let weight = |dx: i32, dy: i32| -> f32 {
+        let (dx, dy) = (dx as f32, dy as f32);
+        let period = (spread * tile) as f32;
+        if colour == Some(Channel::Green) {
+            // quincunx G lattice: integer lattice in u = (dx+dy)/4, v = (dx−dy)/4
+            let (u, v) = ((dx + dy) / period, (dx - dy) / period);
+            (1.0 - u.abs()).max(0.0) * (1.0 - v.abs()).max(0.0)
+        } else {
+            (1.0 - dx.abs() / period).max(0.0) * (1.0 - dy.abs() / period).max(0.0)
+        }
+    };
+    let mut table = Vec::with_capacity((tile * tile) as usize);
+    for py in 0..tile {
+        for px in 0..tile {
+            let mut taps = Vec::new();
+            for dy in -reach..=reach {
+                for dx in -reach..=reach {
+                    let w = weight(dx, dy);
+                    if w > 0.0 && on_lattice(px + dx, py + dy) {
+                        taps.push(Tap { dx, dy, weight: w });
+                    }
+                }
+            }
+            table.push(taps);
+        }
+    }
+    table
+}
+
+/// Interpolates at `(x, y)` from `taps`: `(value, weight used, saw a saturated sample)`.
+fn interpolate(
+    frame: &RawFrame,
+    levels: &Levels,
+    taps: &[Tap],
+    x: i32,
+    y: i32,
+) -> (f32, f32, bool) {
+    let (w, h) = (frame.width() as i32, frame.height() as i32);
+    let data = frame.data_dn();
+    let (mut acc, mut weight_sum, mut saturated) = (0.0f32, 0.0f32, false);
+    for t in taps {
+        let (xx, yy) = (x + t.dx, y + t.dy);
+        if xx < 0 || yy < 0 || xx >= w || yy >= h {
+            continue;
+        }
+        let dn = data[(yy * w + xx) as usize];
+        if levels.is_saturated(dn) {
+            saturated = true;
+        } else {
+            acc += t.weight * levels.normalise(dn);
+            weight_sum += t.weight;
+        }
+    }
+    let value = if weight_sum > 0.0 {
+        acc / weight_sum
+    } else {
+        0.0
+    };
+    (value, weight_sum, saturated)
+}
+
+fn bilinear_band(frame: &RawFrame, levels: &Levels, colour: Option<Channel>) -> AnalyserBand {
+    let layout = frame.layout();
+    let (w, h) = (frame.width() as i32, frame.height() as i32);
+    let tile = layout.tile_px() as i32;
+    let mut intensity: [Plane<f32>; 4] =
+        std::array::from_fn(|_| Plane::new(w as usize, h as usize));
+    let mut mask: Plane<PixelMask> = Plane::new(w as usize, h as usize);
+    for a in Analyser::ALL {
+        let table = tap_table(layout, colour, a, 1);
+        let fallback = tap_table(layout, colour, a, 2);
+        let plane = intensity[a.index()].data_mut();
+        let masks = mask.data_mut();
+        for y in 0..h {
+            for x in 0..w {
+                let phase = ((y % tile) * tile + x % tile) as usize;
+                let (mut value, mut weight, mut saturated) =
+                    interpolate(frame, levels, &table[phase], x, y);
+                if weight <= 0.0 && !saturated {
+                    (value, weight, saturated) = interpolate(frame, levels, &fallback[phase], x, y);
+                }
+                let i = (y * w + x) as usize;
+                plane[i] = value;
+                if saturated {
+                    masks[i] = masks[i].with(MaskReason::Saturated);
+                } else if weight <= 0.0 {
+                    masks[i] = masks[i].with(MaskReason::NoSamples);
+                }
+            }
+        }
+    }
+    AnalyserBand {
+        colour,
+        intensity,
+        mask,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tent_weights_sum_to_one_in_the_interior() {
+        for layout in SensorLayout::ALL {
+            for colour in band_colours(layout) {
+                for a in Analyser::ALL {
+                    for (phase, taps) in tap_table(layout, colour, a, 1).iter().enumerate() {
+                        let sum: f32 = taps.iter().map(|t| t.weight).sum();
+                        assert!(
+                            (sum - 1.0).abs() < 1e-6,
+                            "{layout:?} {colour:?} {a:?} phase {phase}: {sum} {taps:?}"
+                        );
+                        // a pixel on its own lattice uses only itself (interpolation, not blur)
+                        let own = taps.iter().any(|t| t.dx == 0 && t.dy == 0);
+                        if own {
+                            assert_eq!(taps.len(), 1, "{taps:?}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn output_sizes() {
+        let m = SensorLayout::MonoPolar;
+        let c = SensorLayout::ColourPolar;
+        assert_eq!(
+            DemosaicMethod::Superpixel.output_size(m, 2448, 2048),
+            (1224, 1024)
+        );
+        assert_eq!(
+            DemosaicMethod::Superpixel.output_size(c, 2448, 2048),
+            (612, 512)
+        );
+        assert_eq!(
+            DemosaicMethod::Bilinear.output_size(c, 2448, 2048),
+            (2448, 2048)
+        );
+    }
+
+    #[test]
+    fn levels_normalise_and_saturate() {
+        let l = Levels::new(4095, 95.0, 4000);
+        assert_eq!(l.normalise(95), 0.0);
+        assert!((l.normalise(4095) - 1.0).abs() < 1e-7);
+        assert!(l.normalise(0) < 0.0, "below dark stays negative (unbiased)");
+        assert!(l.is_saturated(4000) && !l.is_saturated(3999));
+    }
+}
