@@ -1,0 +1,225 @@
+//! `ellipso polar` end to end: synthetic PNG in, files and summary.json out; bad files rejected
+//! with one line naming the problem.
+
+use std::path::Path;
+
+use ellipso_sim::mosaic::{Channel, SensorLayout};
+
+use super::*;
+use crate::polar::synthetic::mosaic_from_stokes;
+
+fn args(frame: &Path, out: &Path) -> Args {
+    Args {
+        frame: frame.to_path_buf(),
+        out: out.to_path_buf(),
+        layout: LayoutArg::Mono,
+        bit_depth: None,
+        demosaic: DemosaicMethod::Superpixel,
+        dark_level: 0.0,
+        saturation: None,
+        dark_intensity: crate::polar::DEFAULT_DARK_INTENSITY,
+        max_residual: None,
+        aolp_dolp_weighted: false,
+    }
+}
+
+fn write_png16(path: &Path, w: u32, h: u32, data: Vec<u16>) {
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, data)
+        .expect("size")
+        .save(path)
+        .expect("write test PNG");
+}
+
+fn error_of(a: Args) -> String {
+    match run(a) {
+        Ok(()) => panic!("expected an error"),
+        Err(e) => {
+            let line = e.to_string();
+            assert!(!line.contains('\n'), "one line: {line}");
+            line
+        }
+    }
+}
+
+#[test]
+fn mono_frame_produces_every_file_and_a_truthful_summary() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frame_path = dir.path().join("frame.png");
+    // left half: 30° linearly polarised light; right half has one clipped raw pixel
+    let phi = 30f64.to_radians();
+    let frame = mosaic_from_stokes(SensorLayout::MonoPolar, 64, 32, 12, |_, _, _| {
+        [
+            2000.0,
+            1000.0 * (2.0 * phi).cos(),
+            1000.0 * (2.0 * phi).sin(),
+        ]
+    })
+    .expect("frame");
+    let mut data = frame.into_data();
+    data[10 * 64 + 41] = 4095;
+    write_png16(&frame_path, 64, 32, data);
+    let out = dir.path().join("out");
+    run(args(&frame_path, &out)).expect("run");
+
+    for f in [
+        "s0.png",
+        "dolp.png",
+        "aolp.png",
+        "i_d.png",
+        "i_s.png",
+        "i_alpha.png",
+        "mask.png",
+        "mask_bits.png",
+        "summary.json",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let s0 = image::open(out.join("s0.png")).expect("s0").into_luma16();
+    assert_eq!(s0.dimensions(), (32, 16));
+    // s0/2 = 1000 DN of 4095 → 16-bit
+    let expect = (1000.0 / 4095.0 * 65535.0f64).round() as u16;
+    assert!(s0.get_pixel(0, 0)[0].abs_diff(expect) <= 1);
+    let dolp = image::open(out.join("dolp.png"))
+        .expect("dolp")
+        .into_luma8();
+    assert_eq!(dolp.width(), 240, "narrow frames get a legend-wide canvas");
+    assert!(
+        dolp.get_pixel(0, 0)[0].abs_diff(128) <= 1,
+        "DoLP 0.5 (whole-DN rounding)"
+    );
+    let mask = image::open(out.join("mask_bits.png"))
+        .expect("mask")
+        .into_luma8();
+    assert!(PixelMask(mask.get_pixel(20, 5)[0]).has(MaskReason::Saturated));
+    assert_eq!(mask.get_pixel(0, 0)[0], 0);
+
+    let summary: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("summary.json")).expect("read"))
+            .expect("json");
+    assert_eq!(summary["layout"], "monopolar");
+    assert_eq!(summary["demosaic"]["method"], "superpixel");
+    assert_eq!(summary["raw"]["bit_depth"], 12);
+    assert!(
+        summary["raw"]["bit_depth_source"]
+            .as_str()
+            .unwrap_or("")
+            .contains("default")
+    );
+    assert_eq!(summary["output"]["width"], 32);
+    let band = &summary["bands"][0];
+    let sat = band["masked_fraction"]["saturated"]
+        .as_f64()
+        .unwrap_or(-1.0);
+    assert!((sat - 1.0 / 512.0).abs() < 1e-12, "{sat}");
+    let mean_dolp = band["mean_dolp_valid"].as_f64().unwrap_or(-1.0);
+    assert!((mean_dolp - 0.5).abs() < 1e-3, "{mean_dolp}");
+    let aolp = band["mean_aolp_deg_valid"].as_f64().unwrap_or(-1.0);
+    assert!((aolp - 30.0).abs() < 0.05, "{aolp}");
+}
+
+#[test]
+fn colour_bilinear_writes_per_band_files() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frame_path = dir.path().join("colour.png");
+    let frame = mosaic_from_stokes(SensorLayout::ColourPolar, 16, 8, 12, |_, _, c| match c {
+        Some(Channel::Red) => [3000.0, 600.0, 0.0],
+        _ => [1000.0, 0.0, -200.0],
+    })
+    .expect("frame");
+    write_png16(&frame_path, 16, 8, frame.into_data());
+    let out = dir.path().join("out");
+    let mut a = args(&frame_path, &out);
+    a.layout = LayoutArg::Colour;
+    a.demosaic = DemosaicMethod::Bilinear;
+    a.aolp_dolp_weighted = true;
+    run(a).expect("run");
+    for f in [
+        "s0_r.png",
+        "s0_g.png",
+        "s0_b.png",
+        "s0_rgb.png",
+        "aolp_b.png",
+        "mask_g.png",
+    ] {
+        assert!(out.join(f).is_file(), "{f} missing");
+    }
+    let rgb = image::open(out.join("s0_rgb.png"))
+        .expect("rgb")
+        .into_rgb16();
+    assert_eq!(rgb.dimensions(), (16, 8));
+    let px = rgb.get_pixel(5, 5);
+    assert!(px[0] > px[1] && px[1] == px[2], "{px:?}");
+    let summary = fs::read_to_string(out.join("summary.json")).expect("summary");
+    assert!(summary.contains("\"bilinear\"") && summary.contains("\"colourpolar\""));
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_naming_file_and_problem() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+
+    let text = dir.path().join("notes.png");
+    fs::write(&text, "hello").expect("write");
+    let e = error_of(args(&text, &out));
+    assert!(e.contains("notes.png") && e.contains("not a PNG"), "{e}");
+
+    let rgb = dir.path().join("rgb.png");
+    image::RgbImage::new(4, 4).save(&rgb).expect("write");
+    let e = error_of(args(&rgb, &out));
+    assert!(e.contains("rgb.png") && e.contains("grayscale"), "{e}");
+
+    let truncated = dir.path().join("truncated.png");
+    let full = fs::read(&rgb).expect("read");
+    fs::write(&truncated, &full[..full.len() / 2]).expect("write");
+    let e = error_of(args(&truncated, &out));
+    assert!(
+        e.contains("truncated.png") && e.contains("corrupt or truncated"),
+        "{e}"
+    );
+
+    let odd = dir.path().join("odd.png");
+    write_png16(&odd, 5, 4, vec![100; 20]);
+    let e = error_of(args(&odd, &out));
+    assert!(e.contains("odd.png") && e.contains("5×4"), "{e}");
+
+    let shifted = dir.path().join("left_aligned.png");
+    write_png16(&shifted, 4, 4, vec![4096 * 8; 16]);
+    let e = error_of(args(&shifted, &out));
+    assert!(
+        e.contains("exceeds the 12-bit") && e.contains("left-aligned"),
+        "{e}"
+    );
+    let mut a = args(&shifted, &out);
+    a.bit_depth = Some(16);
+    run(a).expect("16-bit accepted");
+
+    let eight = dir.path().join("eight.png");
+    image::GrayImage::new(4, 4).save(&eight).expect("write");
+    let mut a = args(&eight, &out);
+    a.bit_depth = Some(12);
+    let e = error_of(a);
+    assert!(e.contains("8-bit PNG but --bit-depth 12"), "{e}");
+
+    let mut a = args(&dir.path().join("missing.png"), &out);
+    a.saturation = Some(10);
+    let e = error_of(a);
+    assert!(
+        e.contains("missing.png") && e.contains("cannot open"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bit_depth_flag_accepts_only_camera_depths() {
+    assert_eq!(parse_bit_depth("12"), Ok(12));
+    assert!(parse_bit_depth("14").is_err());
+    assert!(parse_bit_depth("x").is_err());
+}
+
+#[test]
+fn display_range_ignores_masked_pixels_and_never_is_zero() {
+    let masks = [PixelMask::VALID, PixelMask::only(MaskReason::Saturated)];
+    assert_eq!(symmetric_range(&[0.2, -9.0], &masks), 0.2);
+    assert_eq!(symmetric_range(&[0.0, 0.0], &masks), 1e-6);
+    assert_eq!(symmetric_range(&[], &[]), 1e-6);
+}
