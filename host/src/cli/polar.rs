@@ -182,8 +182,8 @@ fn write_band(
         files,
         "s0/2 as 16-bit grey",
     )?;
-    let i_d: Vec<u16> = band
-        .channels
+    let channels = band.observation_channels();
+    let i_d: Vec<u16> = channels
         .i_d
         .data()
         .iter()
@@ -256,14 +256,14 @@ fn write_band(
         what,
     )?;
 
-    let range_s = symmetric_range(band.channels.i_s.data(), masks);
-    let range_alpha = symmetric_range(band.channels.i_alpha.data(), masks);
+    let range_s = symmetric_range(channels.i_s.data(), masks);
+    let range_alpha = symmetric_range(channels.i_alpha.data(), masks);
     for (stem, title, data, range) in [
-        ("i_s", "I^s = I0 - I90", band.channels.i_s.data(), range_s),
+        ("i_s", "I^s = I0 - I90", channels.i_s.data(), range_s),
         (
             "i_alpha",
             "I^alpha = I135 - I45",
-            band.channels.i_alpha.data(),
+            channels.i_alpha.data(),
             range_alpha,
         ),
     ] {

@@ -9,9 +9,12 @@
 //! I^α = I135 − I45   diffuse-polarisation sine part, DP·sin2φ (= −s2)
 //! ```
 //!
-//! I^d ≥ 0 for unclipped data; I^s and I^α are signed. The identities in brackets hold exactly
-//! when the consistency residual I0 + I90 − I45 − I135 is 0; I^d is computed from I90 itself,
-//! so it stays the co-/cross-polarised measurement even where the residual is not 0.
+//! I^d ≥ 0 for unclipped data; I^s and I^α are signed. I^s = s1 and I^α = −s2 hold bit for bit
+//! (same subtraction), so a [`super::StokesBand`] stores only I^d and serves I^s as its s1 plane
+//! and I^α as −s2 ([`super::StokesBand::i_s`], [`super::StokesBand::i_alpha_at`]); this type is
+//! the owned copy for consumers that want three planes. I^d = s0 − s1 holds only when the
+//! consistency residual I0 + I90 − I45 − I135 is 0; I^d is computed from I90 itself, so it stays
+//! the cross-polarised measurement even where the residual is not 0.
 
 use super::plane::Plane;
 

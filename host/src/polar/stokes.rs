@@ -115,8 +115,9 @@ pub struct StokesBand {
     pub aolp_rad: Plane<f32>,
     /// Consistency residual I0 + I90 − I45 − I135.
     pub residual: Plane<f32>,
-    /// The rig's observation channels I^d, I^s, I^α.
-    pub channels: ObservationChannels,
+    /// Observation channel I^d = 2·I90 (cross-polarised: diffuse shading). I^s and I^α are not
+    /// stored twice: see [`StokesBand::i_s`] and [`StokesBand::i_alpha_at`].
+    pub i_d: Plane<f32>,
     /// Validity of each pixel.
     pub mask: Plane<PixelMask>,
 }
@@ -132,6 +133,28 @@ impl StokesBand {
         self.s0.height()
     }
 
+    /// Observation channel I^s = I0 − I90. It is s1 by definition (the same subtraction of the
+    /// same two numbers), so this is the s1 plane, not a copy.
+    pub fn i_s(&self) -> &Plane<f32> {
+        &self.s1
+    }
+
+    /// Observation channel I^α = I135 − I45 at row-major index `i` (0 outside the plane). Equal
+    /// to −s2 bit for bit (IEEE subtraction is antisymmetric), so it is not stored.
+    pub fn i_alpha_at(&self, i: usize) -> f32 {
+        self.s2.data().get(i).map_or(0.0, |v| -v)
+    }
+
+    /// The three observation channels as owned planes (allocates I^d, I^s and I^α copies).
+    pub fn observation_channels(&self) -> ObservationChannels {
+        let i_alpha = self.s2.data().iter().map(|v| -v).collect();
+        ObservationChannels {
+            i_d: self.i_d.clone(),
+            i_s: self.s1.clone(),
+            i_alpha: Plane::from_vec(self.width(), self.height(), i_alpha).unwrap_or_default(),
+        }
+    }
+
     /// Resizes every plane to `width × height`, keeping allocations.
     pub(crate) fn reshape(&mut self, colour: Option<Channel>, width: usize, height: usize) {
         self.colour = colour;
@@ -142,9 +165,7 @@ impl StokesBand {
             &mut self.dolp,
             &mut self.aolp_rad,
             &mut self.residual,
-            &mut self.channels.i_d,
-            &mut self.channels.i_s,
-            &mut self.channels.i_alpha,
+            &mut self.i_d,
         ] {
             p.reshape(width, height);
         }
@@ -162,9 +183,7 @@ impl StokesBand {
             dolp: &mut self.dolp.data_mut()[r.clone()],
             aolp_rad: &mut self.aolp_rad.data_mut()[r.clone()],
             residual: &mut self.residual.data_mut()[r.clone()],
-            i_d: &mut self.channels.i_d.data_mut()[r.clone()],
-            i_s: &mut self.channels.i_s.data_mut()[r.clone()],
-            i_alpha: &mut self.channels.i_alpha.data_mut()[r.clone()],
+            i_d: &mut self.i_d.data_mut()[r.clone()],
             mask: &mut self.mask.data_mut()[r],
         }
     }
@@ -194,8 +213,6 @@ pub(crate) struct StokesRow<'a> {
     pub aolp_rad: &'a mut [f32],
     pub residual: &'a mut [f32],
     pub i_d: &'a mut [f32],
-    pub i_s: &'a mut [f32],
-    pub i_alpha: &'a mut [f32],
     pub mask: &'a mut [PixelMask],
 }
 
@@ -234,12 +251,7 @@ fn stokes_row_portable(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds
         &mut out.aolp_rad[..n],
         &mut out.residual[..n],
     );
-    let (i_d, i_s, i_alpha, m_out) = (
-        &mut out.i_d[..n],
-        &mut out.i_s[..n],
-        &mut out.i_alpha[..n],
-        &mut out.mask[..n],
-    );
+    let (i_d, m_out) = (&mut out.i_d[..n], &mut out.mask[..n]);
     for k in 0..n {
         let (a0, a45, a90, a135) = (i0[k], i45[k], i90[k], i135[k]);
         let v0 = 0.5 * ((a0 + a90) + (a45 + a135));
@@ -255,8 +267,6 @@ fn stokes_row_portable(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds
         aolp_out[k] = aolp_rad(v1, v2);
         res_out[k] = residual;
         i_d[k] = 2.0 * a90;
-        i_s[k] = v1;
-        i_alpha[k] = a135 - a45;
         let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
         let unphysical = u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE))
             * MaskReason::Unphysical.bit();

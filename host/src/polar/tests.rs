@@ -426,3 +426,81 @@ proptest! {
         prop_assert!(img.bands[0].aolp_rad.data()[0].is_finite());
     }
 }
+
+#[test]
+fn stored_and_derived_channels_match_their_definitions() {
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
+    let data: Vec<u16> = (0..16 * 8).map(|_| rng.random_range(0..4096)).collect();
+    let frame = RawFrame::new(16, 8, 12, MONO, data).expect("frame");
+    let cfg = PolarConfig::default();
+    let levels = cfg.levels(&frame).expect("levels");
+    let planes = demosaic(&frame, &levels, DemosaicMethod::Superpixel);
+    let img = process(&frame, &cfg).expect("process");
+    let band = &img.bands[0];
+    let owned = band.observation_channels();
+    let [p0, p45, p90, p135] = &planes.bands[0].intensity;
+    for i in 0..band.s0.data().len() {
+        let (i0, i45, i90, i135) = (p0.data()[i], p45.data()[i], p90.data()[i], p135.data()[i]);
+        assert_eq!(band.i_d.data()[i], 2.0 * i90);
+        assert_eq!(band.i_s().data()[i], i0 - i90);
+        assert_eq!(band.i_alpha_at(i), i135 - i45, "bit-exact −s2");
+        assert_eq!(owned.i_alpha.data()[i], i135 - i45);
+        assert_eq!(owned.i_s.data()[i], i0 - i90);
+    }
+    assert_eq!(band.i_alpha_at(usize::MAX), 0.0);
+}
+
+#[test]
+fn handedness_polariser_at_plus_30_reads_30_not_150() {
+    // optics.md §5.2 check, on the ideal sensor: a linear polariser whose axis is 30°
+    // counter-clockwise from image-right (toward image-up). Malus per analyser θ:
+    // I_θ = I·cos²(θ − 30°), with θ taken from the mosaic definition.
+    let frame = mosaic_from_stokes(MONO, 4, 4, 12, |_, _, _| {
+        let phi = 30f64.to_radians();
+        [
+            3000.0,
+            3000.0 * (2.0 * phi).cos(),
+            3000.0 * (2.0 * phi).sin(),
+        ]
+    })
+    .expect("frame");
+    // I45 (cos² 15°) must be bright and I135 (cos² 105°) dark: the raw pixels say so directly
+    let (x45, y45) = (1, 0); // mosaic: row 0 = 90° 45°
+    let (x135, y135) = (0, 1); // row 1 = 135° 0°
+    assert!(frame.get(x45, y45) > frame.get(x135, y135));
+    let img = process(&frame, &PolarConfig::default()).expect("process");
+    let aolp_deg = f64::from(img.bands[0].aolp_rad.data()[0]).to_degrees();
+    assert!((aolp_deg - 30.0).abs() < 0.05, "{aolp_deg}");
+}
+
+proptest! {
+    #[test]
+    fn any_valid_frame_gives_finite_in_range_outputs(
+        seed in any::<u64>(),
+        colour in any::<bool>(),
+        bilinear in any::<bool>(),
+        dark in 0.0f32..50.0,
+    ) {
+        let layout = if colour { COLOUR } else { MONO };
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let data: Vec<u16> = (0..8 * 8).map(|_| rng.random_range(0..1024)).collect();
+        let frame = RawFrame::new(8, 8, 10, layout, data).expect("frame");
+        let cfg = PolarConfig {
+            demosaic: if bilinear { DemosaicMethod::Bilinear } else { DemosaicMethod::Superpixel },
+            dark_level_dn: dark,
+            ..PolarConfig::default()
+        };
+        let img = process(&frame, &cfg).expect("process");
+        for band in &img.bands {
+            for plane in [&band.s0, &band.s1, &band.s2, &band.residual, &band.i_d] {
+                prop_assert!(plane.data().iter().all(|v| v.is_finite()));
+            }
+            prop_assert!(band.dolp.data().iter().all(|d| (0.0..=1.0).contains(d)));
+            prop_assert!(band
+                .aolp_rad
+                .data()
+                .iter()
+                .all(|a| (0.0..std::f32::consts::PI).contains(a)));
+        }
+    }
+}
