@@ -223,3 +223,69 @@ fn display_range_ignores_masked_pixels_and_never_is_zero() {
     assert_eq!(symmetric_range(&[0.0, 0.0], &masks), 1e-6);
     assert_eq!(symmetric_range(&[], &[]), 1e-6);
 }
+
+/// The synthetic sphere of the docs/polar.md example: DoLP growing toward the limb, AoLP along
+/// the normal azimuth, a clipped highlight, a weakly polarised 20° background (12-bit DN).
+fn documented_sphere(x: u32, y: u32) -> [f64; 3] {
+    let (cx, cy, radius) = (240.0, 160.0, 130.0);
+    let (dx, dy) = (f64::from(x) - cx, cy - f64::from(y)); // dy toward image-up
+    let d = dx.hypot(dy) / radius;
+    let (s0, p, phi) = if d < 1.0 {
+        if (dx + 40.0).hypot(dy - 40.0) < 10.0 {
+            (9000.0, 0.9, 0.0)
+        } else {
+            (
+                3000.0 * (1.0 - d * d).sqrt() + 300.0,
+                0.6 * d.powi(3),
+                dy.atan2(dx),
+            )
+        }
+    } else {
+        (400.0, 0.05, 20f64.to_radians())
+    };
+    [s0, s0 * p * (2.0 * phi).cos(), s0 * p * (2.0 * phi).sin()]
+}
+
+#[test]
+fn documented_sphere_example_reproduces() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frame_path = dir.path().join("sphere.png");
+    let frame = mosaic_from_stokes(SensorLayout::MonoPolar, 480, 320, 12, |x, y, _| {
+        documented_sphere(x, y)
+    })
+    .expect("frame");
+    write_png16(&frame_path, 480, 320, frame.into_data());
+    let out = dir.path().join("out");
+    let mut a = args(&frame_path, &out);
+    a.max_residual = Some(0.05);
+    run(a).expect("run");
+    let summary: serde_json::Value =
+        serde_json::from_str(&fs::read_to_string(out.join("summary.json")).expect("read"))
+            .expect("json");
+    let band = &summary["bands"][0];
+    let get = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    // the figures quoted in docs/polar.md
+    assert!((get(&band["masked_fraction"]["saturated"]) - 0.0022).abs() < 2e-4);
+    let ring = get(&band["masked_fraction"]["inconsistent"]);
+    assert!(
+        ring > 0.002 && ring < 0.005,
+        "IFoV ring at the limb: {ring}"
+    );
+    assert!((get(&band["mean_aolp_deg_valid"]) - 18.48).abs() < 0.1);
+    assert!((get(&band["mean_dolp_valid"]) - 0.116).abs() < 0.002);
+    // the ring is on the limb, not inside the sphere: mask pixel at the centre is valid,
+    // and some pixel within one superpixel of the limb is inconsistent
+    let mask = image::open(out.join("mask_bits.png"))
+        .expect("mask")
+        .into_luma8();
+    assert_eq!(mask.get_pixel(120, 80)[0], 0);
+    let limb_flags = (0..360)
+        .filter(|k| {
+            let t = f64::from(*k).to_radians();
+            let (x, y) = (120.0 + 65.0 * t.cos(), 80.0 - 65.0 * t.sin());
+            let m = PixelMask(mask.get_pixel(x.round() as u32, y.round() as u32)[0]);
+            m.has(MaskReason::Inconsistent)
+        })
+        .count();
+    assert!(limb_flags > 0, "no inconsistent pixel on the limb");
+}
