@@ -28,8 +28,8 @@ use ellipso_sim::mosaic::SensorLayout;
 use serde_json::json;
 
 use crate::polar::{
-    DemosaicMethod, MaskReason, MaskSummary, PixelMask, PolarConfig, PolarImage, StokesBand,
-    process,
+    AnalyserCalibration, DemosaicMethod, MaskReason, MaskSummary, PixelMask, PolarConfig,
+    PolarImage, StokesBand, process,
 };
 use render::{Canvas, Legend, MASKED, Rgb};
 
@@ -85,6 +85,10 @@ pub struct Args {
     /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
     #[arg(long)]
     pub aolp_dolp_weighted: bool,
+    /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
+    /// 0°, 45°, 90°, 135° order); default: ideal analysers.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
 }
 
 /// Parses `--bit-depth`: one of the depths an IMX250 camera delivers.
@@ -104,12 +108,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for w in &loaded.warnings {
         eprintln!("warning: {name}: {w}");
     }
+    let calibration = match &args.calibration {
+        None => None,
+        Some(path) => Some(read_calibration(path)?),
+    };
     let config = PolarConfig {
         demosaic: args.demosaic,
         dark_level_dn: args.dark_level,
         saturation_dn: args.saturation,
         dark_intensity: args.dark_intensity,
         max_residual: args.max_residual,
+        calibration,
     };
     let image = process(&loaded.frame, &config).map_err(|e| anyhow!("{name}: {e}"))?;
     fs::create_dir_all(&args.out)
@@ -152,6 +161,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("  wrote {}  ({what})", args.out.join(file).display());
     }
     Ok(())
+}
+
+/// Reads and checks an analyser calibration file; errors name the file.
+fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
+    let name = path.display();
+    let text = fs::read_to_string(path).map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+    let calibration: AnalyserCalibration = serde_json::from_str(&text)
+        .map_err(|e| anyhow!("{name}: not an analyser calibration: {e}"))?;
+    calibration
+        .stokes_matrix()
+        .map_err(|e| anyhow!("{name}: {e}"))?;
+    Ok(calibration)
 }
 
 /// One written file: name inside DIR and what it holds.
@@ -443,6 +464,7 @@ fn summary_json(
             "normalisation": "I = (DN - dark_level_dn) / (full_scale_dn - dark_level_dn)",
         },
         "thresholds": { "dark_intensity": config.dark_intensity, "max_residual": config.max_residual },
+        "analyser_calibration": config.calibration.map_or(json!("ideal"), |c| json!(c)),
         "output": {
             "width": image.width(),
             "height": image.height(),

@@ -32,6 +32,7 @@
 //! optionally, large consistency residuals are flagged per output pixel ([`MaskReason`]).
 //! Every output is finite for every valid frame (guards documented in [`stokes`]).
 
+pub mod calibration;
 pub mod channels;
 pub mod demosaic;
 pub mod frame;
@@ -42,6 +43,7 @@ pub mod synthetic;
 
 use ellipso_sim::mosaic::SensorLayout;
 
+pub use calibration::{AnalyserCalibration, CalibrationError, StokesMatrix};
 pub use channels::ObservationChannels;
 pub use demosaic::{AnalyserBand, AnalyserImage, DemosaicMethod, Levels, demosaic};
 pub use frame::{FrameError, RawFrame};
@@ -67,7 +69,11 @@ pub struct PolarConfig {
     /// Pixels whose mean analyser intensity s0/2 (normalised) is below this are dark.
     pub dark_intensity: f32,
     /// Pixels with |I0 + I90 − I45 − I135| (normalised) above this are inconsistent; `None` = off.
+    /// With a calibration the residual is `nᵀI` (see [`calibration`]).
     pub max_residual: Option<f32>,
+    /// Measured analyser angles, extinction ratios and gains; `None` = ideal analysers (exact
+    /// textbook formulas, the fast path).
+    pub calibration: Option<AnalyserCalibration>,
 }
 
 impl Default for PolarConfig {
@@ -78,6 +84,7 @@ impl Default for PolarConfig {
             saturation_dn: None,
             dark_intensity: DEFAULT_DARK_INTENSITY,
             max_residual: None,
+            calibration: None,
         }
     }
 }
@@ -107,6 +114,9 @@ pub enum PolarError {
         /// The frame's bit depth.
         bit_depth: u8,
     },
+    /// The analyser calibration cannot be used.
+    #[error("analyser calibration: {0}")]
+    Calibration(#[from] CalibrationError),
     /// A threshold is not a finite non-negative number.
     #[error("{name} = {value} must be finite and ≥ 0")]
     Threshold {
@@ -153,6 +163,7 @@ impl PolarConfig {
                 Some(v) => check("max_residual", v)?,
                 None => f32::INFINITY,
             },
+            matrix: self.calibration.map(|c| c.stokes_matrix()).transpose()?,
         })
     }
 }

@@ -25,6 +25,7 @@ use std::f32::consts::{FRAC_PI_2, PI};
 
 use ellipso_sim::mosaic::Channel;
 
+use super::calibration::StokesMatrix;
 use super::channels::ObservationChannels;
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;
@@ -189,13 +190,15 @@ impl StokesBand {
     }
 }
 
-/// Thresholds the row kernel applies (normalised units).
+/// Thresholds the row kernel applies (normalised units), and the estimator it uses.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Thresholds {
     /// s0 below this is dark (twice the mean-intensity threshold).
     pub dark_s0: f32,
     /// |residual| above this is inconsistent (`f32::INFINITY` disables the check).
     pub max_residual: f32,
+    /// Calibrated estimator; `None` is the exact ideal-analyser formulas.
+    pub matrix: Option<StokesMatrix>,
 }
 
 /// One row of analyser intensities `[I0, I45, I90, I135]` and the mask they carry in.
@@ -219,6 +222,10 @@ pub(crate) struct StokesRow<'a> {
 /// Computes one output row, with AVX2 where the CPU has it (same operations in the same order,
 /// no FMA contraction, so results are bit-identical to the baseline SSE2 build).
 pub(crate) fn stokes_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds) {
+    if let Some(matrix) = t.matrix {
+        calibrated_row(input, out, t, &matrix);
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -273,6 +280,40 @@ fn stokes_row_portable(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds
         let inconsistent =
             u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
         m_out[k] = PixelMask(m_in[k].0 | dark | unphysical | inconsistent);
+    }
+}
+
+/// Row kernel for calibrated analysers: `s = A⁺ I`, residual `= nᵀ I`, and the observation
+/// channels of ideal analysers reconstructed from the corrected Stokes vector
+/// (`I^d = s0 − s1`; I^s = s1 and I^α = −s2 as always).
+#[expect(
+    clippy::needless_range_loop,
+    reason = "one index drives four input and eight output slices of equal length"
+)]
+fn calibrated_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds, m: &StokesMatrix) {
+    let n = out.s0.len();
+    let [i0, i45, i90, i135] = input.intensity;
+    let (i0, i45, i90, i135, m_in) = (&i0[..n], &i45[..n], &i90[..n], &i135[..n], &input.mask[..n]);
+    let dot =
+        |r: &[f32; 4], k: usize| r[0] * i0[k] + r[1] * i45[k] + r[2] * i90[k] + r[3] * i135[k];
+    for k in 0..n {
+        let (v0, v1, v2) = (dot(&m.rows[0], k), dot(&m.rows[1], k), dot(&m.rows[2], k));
+        let residual = dot(&m.null, k);
+        let raw_dolp = (v1 * v1 + v2 * v2).sqrt() / v0.max(S0_FLOOR);
+        let lit = v0 > S0_FLOOR;
+        out.s0[k] = v0;
+        out.s1[k] = v1;
+        out.s2[k] = v2;
+        out.dolp[k] = if lit { raw_dolp.min(1.0) } else { 0.0 };
+        out.aolp_rad[k] = aolp_rad(v1, v2);
+        out.residual[k] = residual;
+        out.i_d[k] = v0 - v1;
+        let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
+        let unphysical = u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE))
+            * MaskReason::Unphysical.bit();
+        let inconsistent =
+            u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
+        out.mask[k] = PixelMask(m_in[k].0 | dark | unphysical | inconsistent);
     }
 }
 
@@ -367,6 +408,7 @@ mod tests {
             Thresholds {
                 dark_s0: 0.002,
                 max_residual: 0.05,
+                matrix: None,
             },
         );
         let m = band.mask.data();

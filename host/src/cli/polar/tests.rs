@@ -20,6 +20,7 @@ fn args(frame: &Path, out: &Path) -> Args {
         dark_intensity: crate::polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
         aolp_dolp_weighted: false,
+        calibration: None,
     }
 }
 
@@ -288,4 +289,52 @@ fn documented_sphere_example_reproduces() {
         })
         .count();
     assert!(limb_flags > 0, "no inconsistent pixel on the limb");
+}
+
+#[test]
+fn calibration_file_is_applied_and_recorded_or_rejected_by_name() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frame_path = dir.path().join("frame.png");
+    let frame = mosaic_from_stokes(SensorLayout::MonoPolar, 8, 8, 12, |_, _, _| {
+        [2000.0, 600.0, -400.0]
+    })
+    .expect("frame");
+    write_png16(&frame_path, 8, 8, frame.into_data());
+    let out = dir.path().join("out");
+
+    let good = dir.path().join("cal.json");
+    fs::write(
+        &good,
+        r#"{"angle_deg":[0,45,90,135],"extinction_ratio":[1e9,1e9,1e9,1e9],"gain":[1,1,1,1]}"#,
+    )
+    .expect("write");
+    let mut a = args(&frame_path, &out);
+    a.calibration = Some(good);
+    run(a).expect("run");
+    let summary = fs::read_to_string(out.join("summary.json")).expect("summary");
+    assert!(summary.contains("\"extinction_ratio\""), "{summary}");
+
+    let degenerate = dir.path().join("same_angles.json");
+    fs::write(
+        &degenerate,
+        r#"{"angle_deg":[0,0,0,0],"extinction_ratio":[30,30,30,30],"gain":[1,1,1,1]}"#,
+    )
+    .expect("write");
+    let mut a = args(&frame_path, &out);
+    a.calibration = Some(degenerate);
+    let e = error_of(a);
+    assert!(
+        e.contains("same_angles.json") && e.contains("cannot separate"),
+        "{e}"
+    );
+
+    let garbage = dir.path().join("garbage.json");
+    fs::write(&garbage, "{\"angle_deg\": 3}").expect("write");
+    let mut a = args(&frame_path, &out);
+    a.calibration = Some(garbage);
+    let e = error_of(a);
+    assert!(
+        e.contains("garbage.json") && e.contains("not an analyser calibration"),
+        "{e}"
+    );
 }
