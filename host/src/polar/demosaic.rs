@@ -28,6 +28,7 @@
 use ellipso_sim::mosaic::{Analyser, Channel, SensorLayout};
 use serde::Serialize;
 
+use super::bilinear;
 use super::frame::RawFrame;
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;
@@ -158,7 +159,7 @@ pub fn demosaic(frame: &RawFrame, levels: &Levels, method: DemosaicMethod) -> An
             .collect(),
         DemosaicMethod::Bilinear => band_colours(frame.layout())
             .into_iter()
-            .map(|colour| bilinear_band(frame, levels, colour))
+            .map(|colour| bilinear::bilinear_band(frame, levels, colour))
             .collect(),
     };
     AnalyserImage {
@@ -338,154 +339,9 @@ fn superpixel_colour_row(
     }
 }
 
-/// One interpolation tap: raw-pixel offset and weight.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Tap {
-    dx: i32,
-    dy: i32,
-    weight: f32,
-}
-
-/// Taps of the (colour, analyser) lattice for every pixel phase in the tile, row-major by phase.
-/// `spread` 1 is the bilinear kernel (one lattice period); 2 doubles its reach and is only the
-/// fallback for border pixels whose bilinear neighbours all lie outside the frame (the corners
-/// of the quincunx G lattice).
-fn tap_table(
-    layout: SensorLayout,
-    colour: Option<Channel>,
-    analyser: Analyser,
-    spread: i32,
-) -> Vec<Vec<Tap>> {
-    let tile = layout.tile_px() as i32;
-    let reach = spread * tile - 1;
-    let on_lattice = |x: i32, y: i32| {
-        // shift by whole tiles so the lookup never sees negative coordinates
-        let (xs, ys) = ((x + 4 * tile) as u32, (y + 4 * tile) as u32);
-        layout.analyser_at(xs, ys) == analyser && layout.colour_at(xs, ys) == colour
-    };
-    let weight = |dx: i32, dy: i32| -> f32 {
-        let (dx, dy) = (dx as f32, dy as f32);
-        let period = (spread * tile) as f32;
-        if colour == Some(Channel::Green) {
-            // quincunx G lattice: integer lattice in u = (dx+dy)/4, v = (dx−dy)/4
-            let (u, v) = ((dx + dy) / period, (dx - dy) / period);
-            (1.0 - u.abs()).max(0.0) * (1.0 - v.abs()).max(0.0)
-        } else {
-            (1.0 - dx.abs() / period).max(0.0) * (1.0 - dy.abs() / period).max(0.0)
-        }
-    };
-    let mut table = Vec::with_capacity((tile * tile) as usize);
-    for py in 0..tile {
-        for px in 0..tile {
-            let mut taps = Vec::new();
-            for dy in -reach..=reach {
-                for dx in -reach..=reach {
-                    let w = weight(dx, dy);
-                    if w > 0.0 && on_lattice(px + dx, py + dy) {
-                        taps.push(Tap { dx, dy, weight: w });
-                    }
-                }
-            }
-            table.push(taps);
-        }
-    }
-    table
-}
-
-/// Interpolates at `(x, y)` from `taps`: `(value, weight used, saw a saturated sample)`.
-fn interpolate(
-    frame: &RawFrame,
-    levels: &Levels,
-    taps: &[Tap],
-    x: i32,
-    y: i32,
-) -> (f32, f32, bool) {
-    let (w, h) = (frame.width() as i32, frame.height() as i32);
-    let data = frame.data_dn();
-    let (mut acc, mut weight_sum, mut saturated) = (0.0f32, 0.0f32, false);
-    for t in taps {
-        let (xx, yy) = (x + t.dx, y + t.dy);
-        if xx < 0 || yy < 0 || xx >= w || yy >= h {
-            continue;
-        }
-        let dn = data[(yy * w + xx) as usize];
-        if levels.is_saturated(dn) {
-            saturated = true;
-        } else {
-            acc += t.weight * levels.normalise(dn);
-            weight_sum += t.weight;
-        }
-    }
-    let value = if weight_sum > 0.0 {
-        acc / weight_sum
-    } else {
-        0.0
-    };
-    (value, weight_sum, saturated)
-}
-
-fn bilinear_band(frame: &RawFrame, levels: &Levels, colour: Option<Channel>) -> AnalyserBand {
-    let layout = frame.layout();
-    let (w, h) = (frame.width() as i32, frame.height() as i32);
-    let tile = layout.tile_px() as i32;
-    let mut intensity: [Plane<f32>; 4] =
-        std::array::from_fn(|_| Plane::new(w as usize, h as usize));
-    let mut mask: Plane<PixelMask> = Plane::new(w as usize, h as usize);
-    for a in Analyser::ALL {
-        let table = tap_table(layout, colour, a, 1);
-        let fallback = tap_table(layout, colour, a, 2);
-        let plane = intensity[a.index()].data_mut();
-        let masks = mask.data_mut();
-        for y in 0..h {
-            for x in 0..w {
-                let phase = ((y % tile) * tile + x % tile) as usize;
-                let (mut value, mut weight, mut saturated) =
-                    interpolate(frame, levels, &table[phase], x, y);
-                if weight <= 0.0 && !saturated {
-                    (value, weight, saturated) = interpolate(frame, levels, &fallback[phase], x, y);
-                }
-                let i = (y * w + x) as usize;
-                plane[i] = value;
-                if saturated {
-                    masks[i] = masks[i].with(MaskReason::Saturated);
-                } else if weight <= 0.0 {
-                    masks[i] = masks[i].with(MaskReason::NoSamples);
-                }
-            }
-        }
-    }
-    AnalyserBand {
-        colour,
-        intensity,
-        mask,
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn tent_weights_sum_to_one_in_the_interior() {
-        for layout in SensorLayout::ALL {
-            for colour in band_colours(layout) {
-                for a in Analyser::ALL {
-                    for (phase, taps) in tap_table(layout, colour, a, 1).iter().enumerate() {
-                        let sum: f32 = taps.iter().map(|t| t.weight).sum();
-                        assert!(
-                            (sum - 1.0).abs() < 1e-6,
-                            "{layout:?} {colour:?} {a:?} phase {phase}: {sum} {taps:?}"
-                        );
-                        // a pixel on its own lattice uses only itself (interpolation, not blur)
-                        let own = taps.iter().any(|t| t.dx == 0 && t.dy == 0);
-                        if own {
-                            assert_eq!(taps.len(), 1, "{taps:?}");
-                        }
-                    }
-                }
-            }
-        }
-    }
 
     #[test]
     fn output_sizes() {
