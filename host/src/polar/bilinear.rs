@@ -14,7 +14,7 @@
 
 use ellipso_sim::mosaic::{Analyser, Channel, SensorLayout};
 
-use super::demosaic::{AnalyserBand, Levels};
+use super::demosaic::{AnalyserBand, Levels, RowBuf};
 use super::frame::RawFrame;
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;
@@ -105,6 +105,7 @@ fn interpolate(
     (value, weight_sum, saturated)
 }
 
+/// A demosaiced band as full planes (the `demosaic()` API), built row by row.
 pub(crate) fn bilinear_band(
     frame: &RawFrame,
     levels: &Levels,
@@ -113,18 +114,59 @@ pub(crate) fn bilinear_band(
     let (w, h) = (frame.width() as usize, frame.height() as usize);
     let mut intensity: [Plane<f32>; 4] = std::array::from_fn(|_| Plane::new(w, h));
     let mut mask: Plane<PixelMask> = Plane::new(w, h);
-    let layout = frame.layout();
-    for a in Analyser::ALL {
-        let plane = intensity[a.index()].data_mut();
-        match rectangular_lattice(layout, colour, a) {
-            Some(lattice) => separable(frame, levels, colour, a, lattice, plane, mask.data_mut()),
-            None => per_pixel(frame, levels, colour, a, plane, mask.data_mut()),
+    let mut rows = BilinearRows::new(frame, levels, colour);
+    let mut buf = RowBuf::default();
+    for y in 0..h {
+        rows.fill_row(y, &mut buf);
+        let span = y * w..(y + 1) * w;
+        for (plane, row) in intensity.iter_mut().zip(&buf.intensity) {
+            plane.data_mut()[span.clone()].copy_from_slice(row);
         }
+        mask.data_mut()[span].copy_from_slice(&buf.mask);
     }
     AnalyserBand {
         colour,
         intensity,
         mask,
+    }
+}
+
+/// Streams bilinear output rows of one band, top to bottom, with O(width) memory.
+pub(crate) struct BilinearRows<'f> {
+    frame: &'f RawFrame,
+    levels: Levels,
+    planes: [PlaneRows; 4],
+}
+
+impl<'f> BilinearRows<'f> {
+    /// Prepares the four analyser planes of band `colour`.
+    pub(crate) fn new(frame: &'f RawFrame, levels: &Levels, colour: Option<Channel>) -> Self {
+        let layout = frame.layout();
+        let width = frame.width() as usize;
+        BilinearRows {
+            frame,
+            levels: *levels,
+            planes: Analyser::ALL.map(|a| {
+                PlaneRows::new(
+                    layout,
+                    colour,
+                    a,
+                    width,
+                    rectangular_lattice(layout, colour, a),
+                )
+            }),
+        }
+    }
+
+    /// Fills `buf` with output row `y` (rows must be requested in increasing order for the
+    /// row cache to be effective; any order is correct).
+    pub(crate) fn fill_row(&mut self, y: usize, buf: &mut RowBuf) {
+        let width = self.frame.width() as usize;
+        buf.reshape(width);
+        buf.mask.fill(PixelMask::VALID);
+        for (plane, out) in self.planes.iter_mut().zip(buf.intensity.iter_mut()) {
+            plane.row(self.frame, &self.levels, y, out, &mut buf.mask);
+        }
     }
 }
 
@@ -155,166 +197,268 @@ fn rectangular_lattice(
     })
 }
 
-/// Marks pixel `i` from its accumulated weights: value, `Saturated`, or the fallback kernel.
-#[expect(
-    clippy::too_many_arguments,
-    reason = "one call site; a struct would only rename them"
-)]
-fn finish_pixel(
-    frame: &RawFrame,
-    levels: &Levels,
-    fallback: &mut Option<Vec<Vec<Tap>>>,
-    colour: Option<Channel>,
-    analyser: Analyser,
-    (x, y): (usize, usize),
-    (acc, weight, saturated_weight): (f32, f32, f32),
-    out: (&mut f32, &mut PixelMask),
-) {
-    let (mut value, mut weight, mut saturated) = (
-        acc / weight.max(f32::MIN_POSITIVE),
-        weight,
-        saturated_weight > 0.0,
-    );
-    if weight <= 0.0 && !saturated {
-        let layout = frame.layout();
-        let tile = layout.tile_px() as usize;
-        let table = fallback.get_or_insert_with(|| tap_table(layout, colour, analyser, 2));
-        let taps = &table[(y % tile) * tile + x % tile];
-        (value, weight, saturated) = interpolate(frame, levels, taps, x as i32, y as i32);
-    }
-    *out.0 = if weight > 0.0 { value } else { 0.0 };
-    if saturated {
-        *out.1 = out.1.with(MaskReason::Saturated);
-    } else if weight <= 0.0 {
-        *out.1 = out.1.with(MaskReason::NoSamples);
-    }
+/// One lattice row scattered along x with the 1-D tent: Σk·v, Σk (usable), Σk (saturated).
+#[derive(Debug, Default)]
+struct ScatteredRow {
+    lattice_row: Option<usize>,
+    sums: [Vec<f32>; 3],
 }
 
-/// Separable normalised convolution for a rectangular lattice: scatter each sample along its row
-/// with the 1-D tent, then gather the (at most two) lattice rows in reach of each output row.
-fn separable(
-    frame: &RawFrame,
-    levels: &Levels,
+/// How one analyser plane is interpolated.
+#[derive(Debug)]
+enum Method {
+    /// Separable tent over a rectangular lattice, with two cached scattered lattice rows.
+    Separable {
+        lattice: Lattice,
+        kernel: Vec<f32>,
+        cache: [ScatteredRow; 2],
+    },
+    /// Per-pixel tap lists (the quincunx G lattice).
+    Taps { table: Vec<Vec<Tap>> },
+}
+
+/// Row-streaming interpolation state of one (colour, analyser) plane.
+#[derive(Debug)]
+struct PlaneRows {
     colour: Option<Channel>,
     analyser: Analyser,
-    lattice: Lattice,
-    plane: &mut [f32],
-    masks: &mut [PixelMask],
-) {
-    let (w, h) = (frame.width() as usize, frame.height() as usize);
-    let period = lattice.period;
-    let reach = period - 1;
-    let kernel: Vec<f32> = (0..2 * period - 1)
-        .map(|j| 1.0 - (j as f32 - reach as f32).abs() / period as f32)
-        .collect();
-    let rows = (h - lattice.y0).div_ceil(period);
-    // per lattice row: Σ k·v, Σ k (unsaturated), Σ k (saturated), at every x
-    let mut sum_v = vec![0.0f32; rows * w];
-    let mut sum_w = vec![0.0f32; rows * w];
-    let mut sum_s = vec![0.0f32; rows * w];
-    for r in 0..rows {
-        let Some(raw) = frame.row((lattice.y0 + r * period) as u32) else {
-            continue;
+    method: Method,
+    /// Accumulated Σk·v, Σk, Σk_saturated of the current output row.
+    acc: [Vec<f32>; 3],
+    /// Twice-the-reach taps, built on first need.
+    fallback: Option<Vec<Vec<Tap>>>,
+}
+
+impl PlaneRows {
+    fn new(
+        layout: SensorLayout,
+        colour: Option<Channel>,
+        analyser: Analyser,
+        width: usize,
+        lattice: Option<Lattice>,
+    ) -> PlaneRows {
+        let method = match lattice {
+            Some(lattice) => {
+                let (period, reach) = (lattice.period as f32, lattice.period - 1);
+                Method::Separable {
+                    lattice,
+                    kernel: (0..=2 * reach)
+                        .map(|j| 1.0 - (j as f32 - reach as f32).abs() / period)
+                        .collect(),
+                    cache: Default::default(),
+                }
+            }
+            None => Method::Taps {
+                table: tap_table(layout, colour, analyser, 1),
+            },
         };
-        let span = r * w..(r + 1) * w;
-        let (sv, sw, ss) = (
-            &mut sum_v[span.clone()],
-            &mut sum_w[span.clone()],
-            &mut sum_s[span],
-        );
-        for x in (lattice.x0..w).step_by(period) {
-            let dn = raw[x];
-            let first = x.saturating_sub(reach);
-            let taps = &kernel[first + reach - x..];
-            let end = (x + period).min(w);
-            if levels.is_saturated(dn) {
-                for (s, k) in ss[first..end].iter_mut().zip(taps) {
-                    *s += k;
-                }
-            } else {
-                let v = levels.normalise(dn);
-                for ((a, b), k) in sv[first..end].iter_mut().zip(&mut sw[first..end]).zip(taps) {
-                    *a += k * v;
-                    *b += k;
-                }
-            }
+        PlaneRows {
+            colour,
+            analyser,
+            method,
+            acc: std::array::from_fn(|_| vec![0.0; width]),
+            fallback: None,
         }
     }
-    let mut fallback = None;
-    let (mut acc_v, mut acc_w, mut acc_s) = (vec![0.0f32; w], vec![0.0f32; w], vec![0.0f32; w]);
-    for y in 0..h {
-        acc_v.fill(0.0);
-        acc_w.fill(0.0);
-        acc_s.fill(0.0);
-        for (j, k) in kernel.iter().enumerate() {
-            let Some(yy) = (y + j).checked_sub(reach) else {
-                continue;
-            };
-            if yy >= h || yy < lattice.y0 || (yy - lattice.y0) % period != 0 {
-                continue;
-            }
-            let span = (yy - lattice.y0) / period * w..((yy - lattice.y0) / period + 1) * w;
-            for (acc, src) in [
-                (&mut acc_v, &sum_v),
-                (&mut acc_w, &sum_w),
-                (&mut acc_s, &sum_s),
-            ] {
-                for (a, b) in acc.iter_mut().zip(&src[span.clone()]) {
-                    *a += k * b;
+
+    /// Writes output row `y` of this plane into `out` and ORs its flags into `mask`.
+    fn row(
+        &mut self,
+        frame: &RawFrame,
+        levels: &Levels,
+        y: usize,
+        out: &mut [f32],
+        mask: &mut [PixelMask],
+    ) {
+        match &mut self.method {
+            Method::Separable {
+                lattice,
+                kernel,
+                cache,
+            } => {
+                let [acc_v, acc_w, acc_s] = &mut self.acc;
+                for a in [&mut *acc_v, &mut *acc_w, &mut *acc_s] {
+                    a.fill(0.0);
+                }
+                let reach = lattice.period - 1;
+                for (j, k) in kernel.iter().enumerate() {
+                    let Some(yy) = (y + j).checked_sub(reach) else {
+                        continue;
+                    };
+                    if yy >= frame.height() as usize
+                        || yy < lattice.y0
+                        || (yy - lattice.y0) % lattice.period != 0
+                    {
+                        continue;
+                    }
+                    let r = (yy - lattice.y0) / lattice.period;
+                    let slot = cached_row(cache, frame, levels, *lattice, kernel, r);
+                    for (acc, src) in [&mut *acc_v, &mut *acc_w, &mut *acc_s]
+                        .into_iter()
+                        .zip(&slot.sums)
+                    {
+                        for (a, b) in acc.iter_mut().zip(src) {
+                            *a += k * b;
+                        }
+                    }
+                }
+                let mut needs_fallback = false;
+                for ((((o, m), v), wt), st) in out
+                    .iter_mut()
+                    .zip(mask.iter_mut())
+                    .zip(&*acc_v)
+                    .zip(&*acc_w)
+                    .zip(&*acc_s)
+                {
+                    *o = if *wt > 0.0 {
+                        v / wt.max(f32::MIN_POSITIVE)
+                    } else {
+                        0.0
+                    };
+                    *m = PixelMask(m.0 | (u8::from(*st > 0.0) * MaskReason::Saturated.bit()));
+                    needs_fallback |= (*wt <= 0.0) & (*st <= 0.0);
+                }
+                if needs_fallback {
+                    for x in 0..out.len() {
+                        if acc_w[x] <= 0.0 && acc_s[x] <= 0.0 {
+                            let (o, m) = fallback_pixel(
+                                &mut self.fallback,
+                                frame,
+                                levels,
+                                self.colour,
+                                self.analyser,
+                                x,
+                                y,
+                            );
+                            out[x] = o;
+                            mask[x] = PixelMask(mask[x].0 | m.0);
+                        }
+                    }
                 }
             }
-        }
-        let out_rows = plane[y * w..(y + 1) * w]
-            .iter_mut()
-            .zip(&mut masks[y * w..(y + 1) * w]);
-        for (x, (out, m)) in out_rows.enumerate() {
-            let sums = (acc_v[x], acc_w[x], acc_s[x]);
-            finish_pixel(
-                frame,
-                levels,
-                &mut fallback,
-                colour,
-                analyser,
-                (x, y),
-                sums,
-                (out, m),
-            );
+            Method::Taps { table } => {
+                let tile = frame.layout().tile_px() as usize;
+                for (x, (o, m)) in out.iter_mut().zip(mask.iter_mut()).enumerate() {
+                    let taps = &table[(y % tile) * tile + x % tile];
+                    let (value, weight, saturated) =
+                        interpolate(frame, levels, taps, x as i32, y as i32);
+                    if saturated {
+                        *o = value;
+                        *m = m.with(MaskReason::Saturated);
+                    } else if weight > 0.0 {
+                        *o = value;
+                    } else {
+                        let (v, extra) = fallback_pixel(
+                            &mut self.fallback,
+                            frame,
+                            levels,
+                            self.colour,
+                            self.analyser,
+                            x,
+                            y,
+                        );
+                        *o = v;
+                        *m = PixelMask(m.0 | extra.0);
+                    }
+                }
+            }
         }
     }
 }
 
-/// Per-pixel tap lists (the quincunx G lattice, and the reference for the separable path).
-fn per_pixel(
+/// The scattered lattice row `r`, computed into the older cache slot if not cached.
+fn cached_row<'c>(
+    cache: &'c mut [ScatteredRow; 2],
+    frame: &RawFrame,
+    levels: &Levels,
+    lattice: Lattice,
+    kernel: &[f32],
+    r: usize,
+) -> &'c ScatteredRow {
+    let slot = match cache.iter().position(|c| c.lattice_row == Some(r)) {
+        Some(i) => i,
+        None => {
+            // evict the empty or lower (older) row: rows are requested in increasing order
+            let i = match (cache[0].lattice_row, cache[1].lattice_row) {
+                (None, _) => 0,
+                (_, None) => 1,
+                (Some(a), Some(b)) => usize::from(b < a),
+            };
+            scatter(frame, levels, lattice, kernel, r, &mut cache[i]);
+            i
+        }
+    };
+    &cache[slot]
+}
+
+/// Scatters lattice row `r` along x into `row.sums`.
+fn scatter(
+    frame: &RawFrame,
+    levels: &Levels,
+    lattice: Lattice,
+    kernel: &[f32],
+    r: usize,
+    row: &mut ScatteredRow,
+) {
+    let w = frame.width() as usize;
+    let reach = lattice.period - 1;
+    row.lattice_row = Some(r);
+    for s in &mut row.sums {
+        s.clear();
+        s.resize(w, 0.0);
+    }
+    let Some(raw) = frame.row((lattice.y0 + r * lattice.period) as u32) else {
+        return;
+    };
+    let [sv, sw, ss] = &mut row.sums;
+    for x in (lattice.x0..w).step_by(lattice.period) {
+        let dn = raw[x];
+        let first = x.saturating_sub(reach);
+        let end = (x + lattice.period).min(w);
+        let taps = &kernel[first + reach - x..];
+        if levels.is_saturated(dn) {
+            for (s, k) in ss[first..end].iter_mut().zip(taps) {
+                *s += k;
+            }
+        } else {
+            let v = levels.normalise(dn);
+            for ((a, b), k) in sv[first..end].iter_mut().zip(&mut sw[first..end]).zip(taps) {
+                *a += k * v;
+                *b += k;
+            }
+        }
+    }
+}
+
+/// Value and flags of a pixel none of whose bilinear taps is usable (and none saturated): the
+/// twice-the-reach kernel, or `NoSamples`.
+fn fallback_pixel(
+    fallback: &mut Option<Vec<Vec<Tap>>>,
     frame: &RawFrame,
     levels: &Levels,
     colour: Option<Channel>,
     analyser: Analyser,
-    plane: &mut [f32],
-    masks: &mut [PixelMask],
-) {
+    x: usize,
+    y: usize,
+) -> (f32, PixelMask) {
     let layout = frame.layout();
-    let (w, h) = (frame.width() as usize, frame.height() as usize);
     let tile = layout.tile_px() as usize;
-    let table = tap_table(layout, colour, analyser, 1);
-    let mut fallback = None;
-    for y in 0..h {
-        for x in 0..w {
-            let taps = &table[(y % tile) * tile + x % tile];
-            let (value, weight, saturated) = interpolate(frame, levels, taps, x as i32, y as i32);
-            let sums = (value * weight, weight, if saturated { 1.0 } else { 0.0 });
-            let i = y * w + x;
-            finish_pixel(
-                frame,
-                levels,
-                &mut fallback,
-                colour,
-                analyser,
-                (x, y),
-                sums,
-                (&mut plane[i], &mut masks[i]),
-            );
-        }
-    }
+    let table = fallback.get_or_insert_with(|| tap_table(layout, colour, analyser, 2));
+    let (value, weight, saturated) = interpolate(
+        frame,
+        levels,
+        &table[(y % tile) * tile + x % tile],
+        x as i32,
+        y as i32,
+    );
+    let mask = if saturated {
+        PixelMask::only(MaskReason::Saturated)
+    } else if weight <= 0.0 {
+        PixelMask::only(MaskReason::NoSamples)
+    } else {
+        PixelMask::VALID
+    };
+    (value, mask)
 }
 
 #[cfg(test)]
@@ -372,17 +516,22 @@ mod tests {
                         layout.colour_at(lattice.x0 as u32, lattice.y0 as u32),
                         colour
                     );
-                    let n = (w * h) as usize;
-                    let (mut p1, mut m1) = (vec![0.0; n], vec![PixelMask::VALID; n]);
-                    let (mut p2, mut m2) = (vec![0.0; n], vec![PixelMask::VALID; n]);
-                    separable(&frame, &levels, colour, a, lattice, &mut p1, &mut m1);
-                    per_pixel(&frame, &levels, colour, a, &mut p2, &mut m2);
-                    assert_eq!(m1, m2, "{layout:?} {colour:?} {a:?}");
-                    for (x, y) in p1.iter().zip(&p2) {
-                        assert!(
-                            (x - y).abs() < 1e-6,
-                            "{layout:?} {colour:?} {a:?}: {x} vs {y}"
-                        );
+                    let mut fast = PlaneRows::new(layout, colour, a, w as usize, Some(lattice));
+                    let mut reference = PlaneRows::new(layout, colour, a, w as usize, None);
+                    for y in 0..h as usize {
+                        let (mut p1, mut m1) =
+                            (vec![0.0; w as usize], vec![PixelMask::VALID; w as usize]);
+                        let (mut p2, mut m2) =
+                            (vec![0.0; w as usize], vec![PixelMask::VALID; w as usize]);
+                        fast.row(&frame, &levels, y, &mut p1, &mut m1);
+                        reference.row(&frame, &levels, y, &mut p2, &mut m2);
+                        assert_eq!(m1, m2, "{layout:?} {colour:?} {a:?} row {y}");
+                        for (x, z) in p1.iter().zip(&p2) {
+                            assert!(
+                                (x - z).abs() < 1e-6,
+                                "{layout:?} {colour:?} {a:?}: {x} vs {z}"
+                            );
+                        }
                     }
                 }
             }

@@ -177,7 +177,7 @@ pub(crate) struct RowBuf {
 }
 
 impl RowBuf {
-    fn reshape(&mut self, width: usize) {
+    pub(crate) fn reshape(&mut self, width: usize) {
         for v in &mut self.intensity {
             v.resize(width, 0.0);
         }

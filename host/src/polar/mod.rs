@@ -212,7 +212,8 @@ pub fn process(frame: &RawFrame, config: &PolarConfig) -> Result<PolarImage, Pol
 }
 
 /// [`process`] into existing buffers (no allocation once `out` has the right size): the path
-/// for streaming. The superpixel method is fused row by row (demosaic row → Stokes row).
+/// for streaming. Both methods run fused row by row (demosaic row → Stokes row), with no
+/// full-resolution intermediate.
 pub fn process_into(
     frame: &RawFrame,
     config: &PolarConfig,
@@ -248,9 +249,18 @@ pub fn process_into(
             }
         }
         DemosaicMethod::Bilinear => {
-            let analysers = demosaic(frame, &levels, config.demosaic);
-            for (band, a_band) in out.bands.iter_mut().zip(&analysers.bands) {
-                fill_band(a_band, band, thresholds);
+            let mut buf = RowBuf::default();
+            for band in &mut out.bands {
+                let mut rows = bilinear::BilinearRows::new(frame, &levels, band.colour);
+                for y in 0..h {
+                    rows.fill_row(y, &mut buf);
+                    let [i0, i45, i90, i135] = &buf.intensity;
+                    let input = AnalyserRow {
+                        intensity: [i0, i45, i90, i135],
+                        mask: &buf.mask,
+                    };
+                    stokes_row(input, band.row_mut(y), thresholds);
+                }
             }
         }
     }

@@ -333,26 +333,28 @@ fn bilinear_reproduces_affine_fields_in_the_interior() {
 }
 
 #[test]
-fn fused_superpixel_equals_demosaic_then_stokes() {
+fn fused_rows_equal_demosaic_then_stokes_for_both_methods() {
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     for layout in SensorLayout::ALL {
         let data: Vec<u16> = (0..16 * 8).map(|_| rng.random_range(0..4096)).collect();
         let frame = RawFrame::new(16, 8, 12, layout, data).expect("frame");
-        let cfg = PolarConfig::default();
-        let fused = process(&frame, &cfg).expect("fused");
-        let levels = cfg.levels(&frame).expect("levels");
-        let planes = demosaic(&frame, &levels, DemosaicMethod::Superpixel);
-        let split = stokes_from_analysers(&planes, levels, &cfg).expect("split");
-        assert_eq!(fused, split);
-        // random data exercises every mask path; outputs stay finite and in range
-        for band in &fused.bands {
-            assert!(band.dolp.data().iter().all(|d| (0.0..=1.0).contains(d)));
-            assert!(
-                band.aolp_rad
-                    .data()
-                    .iter()
-                    .all(|a| (0.0..std::f32::consts::PI).contains(a))
-            );
+        for method in [DemosaicMethod::Superpixel, DemosaicMethod::Bilinear] {
+            let cfg = config(method);
+            let fused = process(&frame, &cfg).expect("fused");
+            let levels = cfg.levels(&frame).expect("levels");
+            let planes = demosaic(&frame, &levels, method);
+            let split = stokes_from_analysers(&planes, levels, &cfg).expect("split");
+            assert_eq!(fused, split, "{layout:?} {method:?}");
+            // random data exercises every mask path; outputs stay finite and in range
+            for band in &fused.bands {
+                assert!(band.dolp.data().iter().all(|d| (0.0..=1.0).contains(d)));
+                assert!(
+                    band.aolp_rad
+                        .data()
+                        .iter()
+                        .all(|a| (0.0..std::f32::consts::PI).contains(a))
+                );
+            }
         }
     }
 }
