@@ -270,6 +270,41 @@ impl PlaneRows {
         out: &mut [f32],
         mask: &mut [PixelMask],
     ) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above), the only requirement of
+                // `row_avx2`.
+                unsafe { self.row_avx2(frame, levels, y, out, mask) };
+                return;
+            }
+        }
+        self.row_portable(frame, levels, y, out, mask);
+    }
+
+    /// [`Self::row_portable`] compiled for AVX2 (same operations, bit-identical results).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn row_avx2(
+        &mut self,
+        frame: &RawFrame,
+        levels: &Levels,
+        y: usize,
+        out: &mut [f32],
+        mask: &mut [PixelMask],
+    ) {
+        self.row_portable(frame, levels, y, out, mask);
+    }
+
+    #[inline(always)]
+    fn row_portable(
+        &mut self,
+        frame: &RawFrame,
+        levels: &Levels,
+        y: usize,
+        out: &mut [f32],
+        mask: &mut [PixelMask],
+    ) {
         match &mut self.method {
             Method::Separable {
                 lattice,
@@ -302,22 +337,18 @@ impl PlaneRows {
                         }
                     }
                 }
-                let mut needs_fallback = false;
-                for ((((o, m), v), wt), st) in out
-                    .iter_mut()
-                    .zip(mask.iter_mut())
-                    .zip(&*acc_v)
-                    .zip(&*acc_w)
-                    .zip(&*acc_s)
-                {
-                    *o = if *wt > 0.0 {
-                        v / wt.max(f32::MIN_POSITIVE)
-                    } else {
-                        0.0
-                    };
-                    *m = PixelMask(m.0 | (u8::from(*st > 0.0) * MaskReason::Saturated.bit()));
-                    needs_fallback |= (*wt <= 0.0) & (*st <= 0.0);
+                // separate simple loops so each vectorises
+                for ((o, v), wt) in out.iter_mut().zip(&*acc_v).zip(&*acc_w) {
+                    let value = v / wt.max(f32::MIN_POSITIVE);
+                    *o = if *wt > 0.0 { value } else { 0.0 };
                 }
+                for (m, st) in mask.iter_mut().zip(&*acc_s) {
+                    *m = PixelMask(m.0 | (u8::from(*st > 0.0) * MaskReason::Saturated.bit()));
+                }
+                let needs_fallback = acc_w
+                    .iter()
+                    .zip(&*acc_s)
+                    .any(|(wt, st)| *wt <= 0.0 && *st <= 0.0);
                 if needs_fallback {
                     for x in 0..out.len() {
                         if acc_w[x] <= 0.0 && acc_s[x] <= 0.0 {
