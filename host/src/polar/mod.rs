@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! RawFrame ──demosaic (superpixel | bilinear)──▶ AnalyserImage ──stokes──▶ PolarImage
-//!          └──────────── process(): superpixel fused row by row, no intermediate ────────┘
+//!          └────── process(): either method fused row by row, no full-size intermediate ──┘
 //! ```
 //!
 //! # Conventions (stated once; docs/polar.md repeats them with the check procedure)
@@ -20,7 +20,9 @@
 //!   `s0 = ½(I0+I45+I90+I135)`, `s1 = I0 − I90`, `s2 = I45 − I135`,
 //!   `DoLP = √(s1²+s2²)/s0`, `AoLP = ½·atan2(s2, s1) mod π`.
 //! - Observation channels (optics.md §5.3): `I^d = 2·I90`, `I^s = I0 − I90`, `I^α = I135 − I45`;
-//!   for consistent data `s1 = I^s`, `s2 = −I^α`, `s0 − s1 = I^d`.
+//!   `s1 = I^s` and `s2 = −I^α` bit for bit; `s0 − s1 = I^d` when the residual is 0.
+//! - Non-ideal analysers: an optional [`AnalyserCalibration`] (angles, extinction ratios, gains)
+//!   replaces the formulas by the least-squares estimator ([`calibration`]).
 //! - Units: normalised, `I = (DN − dark) / (full scale − dark)`; s0 ∈ [0, 2] for unclipped data.
 //! - Handedness check: a linear polariser in front of the lens at +30° counter-clockwise from
 //!   image-right must read AoLP = 30°, not 150°. If it reads 150°, the camera's 45°/135° labels
