@@ -174,12 +174,18 @@ pub fn demosaic(frame: &RawFrame, levels: &Levels, method: DemosaicMethod) -> An
 pub(crate) struct RowBuf {
     pub intensity: [Vec<f32>; 4],
     pub mask: Vec<PixelMask>,
+    /// Second colour block (G) of the row and per-block saturation flags.
+    block: [Vec<f32>; 4],
+    saturated: [Vec<bool>; 2],
 }
 
 impl RowBuf {
     pub(crate) fn reshape(&mut self, width: usize) {
-        for v in &mut self.intensity {
+        for v in self.intensity.iter_mut().chain(&mut self.block) {
             v.resize(width, 0.0);
+        }
+        for v in &mut self.saturated {
+            v.resize(width, false);
         }
         self.mask.resize(width, PixelMask::VALID);
     }
@@ -290,7 +296,8 @@ fn superpixel_mono_row_portable(frame: &RawFrame, levels: &Levels, y_out: usize,
     }
 }
 
-/// One row of colour superpixels (4×4 tiles) for channel `colour`.
+/// One row of colour superpixels (4×4 tiles) for channel `colour`: R and B straight from their
+/// block; G from both G blocks, averaged where both are unsaturated, else the unsaturated one.
 fn superpixel_colour_row(
     frame: &RawFrame,
     levels: &Levels,
@@ -298,44 +305,82 @@ fn superpixel_colour_row(
     y_out: usize,
     buf: &mut RowBuf,
 ) {
-    let layout = frame.layout();
     let blocks = colour.blocks_in_tile();
-    for x_out in 0..buf.mask.len() {
-        let mut sum = [0.0f32; 4];
-        let mut sum_all = [0.0f32; 4];
-        let mut valid_blocks = 0u32;
-        for &block in blocks {
-            let mut values = [0.0f32; 4];
-            let mut saturated = false;
-            for a in Analyser::ALL {
-                let (dx, dy) = layout.pixel_in_tile(a, block);
-                let dn = frame
-                    .get((4 * x_out + dx) as u32, (4 * y_out + dy) as u32)
-                    .unwrap_or(0);
-                saturated |= levels.is_saturated(dn);
-                values[a.index()] = levels.normalise(dn);
-            }
-            for k in 0..4 {
-                sum_all[k] += values[k];
-                if !saturated {
-                    sum[k] += values[k];
-                }
-            }
-            valid_blocks += u32::from(!saturated);
+    let [sat_a, sat_b] = &mut buf.saturated;
+    let Some(&first) = blocks.first() else {
+        return;
+    };
+    block_row(frame, levels, y_out, first, &mut buf.intensity, sat_a);
+    let Some(&second) = blocks.get(1) else {
+        for (m, s) in buf.mask.iter_mut().zip(sat_a.iter()) {
+            *m = PixelMask(u8::from(*s) * MaskReason::Saturated.bit());
         }
-        let (total, count, mask) = if valid_blocks > 0 {
-            (sum, valid_blocks, PixelMask::VALID)
-        } else {
-            (
-                sum_all,
-                blocks.len() as u32,
-                PixelMask::only(MaskReason::Saturated),
-            )
+        return;
+    };
+    block_row(frame, levels, y_out, second, &mut buf.block, sat_b);
+    for (k, (out, other)) in buf.intensity.iter_mut().zip(&buf.block).enumerate() {
+        for (((o, b), sa), sb) in out
+            .iter_mut()
+            .zip(other)
+            .zip(sat_a.iter())
+            .zip(sat_b.iter())
+        {
+            *o = match (*sa, *sb) {
+                (false, true) => *o,
+                (true, false) => *b,
+                _ => 0.5 * (*o + *b), // both usable, or both saturated (display value only)
+            };
+        }
+        if k == 0 {
+            for ((m, sa), sb) in buf.mask.iter_mut().zip(sat_a.iter()).zip(sat_b.iter()) {
+                *m = PixelMask(u8::from(*sa && *sb) * MaskReason::Saturated.bit());
+            }
+        }
+    }
+}
+
+/// Normalised analyser values of 2×2 block `block` (block offsets in the 4×4 tile) for every
+/// tile of colour-superpixel row `y_out`, and whether any of its four samples is saturated.
+fn block_row(
+    frame: &RawFrame,
+    levels: &Levels,
+    y_out: usize,
+    block: (usize, usize),
+    out: &mut [Vec<f32>; 4],
+    saturated: &mut [bool],
+) {
+    let w = frame.width() as usize;
+    let y0 = 4 * y_out + 2 * block.1;
+    let data = frame.data_dn();
+    let (Some(r0), Some(r1)) = (
+        data.get(y0 * w..(y0 + 1) * w),
+        data.get((y0 + 1) * w..(y0 + 2) * w),
+    ) else {
+        return; // unreachable for y_out < height/4: the frame size is validated
+    };
+    let x_off = 2 * block.0;
+    let [o0, o45, o90, o135] = out;
+    let tiles = r0.chunks_exact(4).zip(r1.chunks_exact(4));
+    let outs = o0
+        .iter_mut()
+        .zip(o45.iter_mut())
+        .zip(o90.iter_mut())
+        .zip(o135.iter_mut())
+        .zip(saturated.iter_mut());
+    for ((top, bottom), ((((v0, v45), v90), v135), sat)) in tiles.zip(outs) {
+        let pick = |pos: (usize, usize)| {
+            let row = if pos.1 == 0 { top } else { bottom };
+            row.get(x_off + pos.0).copied().unwrap_or(0)
         };
-        for (plane, sum) in buf.intensity.iter_mut().zip(total) {
-            plane[x_out] = sum / count as f32;
-        }
-        buf.mask[x_out] = mask;
+        let (d0, d45, d90, d135) = (pick(POS_0), pick(POS_45), pick(POS_90), pick(POS_135));
+        *v0 = levels.normalise(d0);
+        *v45 = levels.normalise(d45);
+        *v90 = levels.normalise(d90);
+        *v135 = levels.normalise(d135);
+        *sat = levels.is_saturated(d0)
+            | levels.is_saturated(d45)
+            | levels.is_saturated(d90)
+            | levels.is_saturated(d135);
     }
 }
 
