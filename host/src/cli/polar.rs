@@ -18,6 +18,7 @@
 //! in false-colour images. Errors name the file and what is wrong, in one line.
 
 mod load;
+mod npy;
 mod render;
 
 use std::fs;
@@ -85,6 +86,10 @@ pub struct Args {
     /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
     #[arg(long)]
     pub aolp_dolp_weighted: bool,
+    /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
+    /// aolp_rad, residual, i_d; mask as u8 bits).
+    #[arg(long)]
+    pub npy: bool,
     /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
     /// 0°, 45°, 90°, 135° order); default: ideal analysers.
     #[arg(long)]
@@ -187,6 +192,9 @@ fn write_band(
     let (w, h) = (band.width(), band.height());
     let masks = band.mask.data();
     let out = &args.out;
+    if args.npy {
+        write_npy(out, band, suffix, files)?;
+    }
 
     let s0: Vec<u16> = band
         .s0
@@ -351,6 +359,37 @@ fn write_band(
     )?;
 
     Ok(band_statistics(band, range_s, range_alpha))
+}
+
+/// Writes the f32 planes (and the mask bits) of `band` as `.npy` files.
+fn write_npy(
+    out: &Path,
+    band: &StokesBand,
+    suffix: &str,
+    files: &mut Vec<FileEntry>,
+) -> anyhow::Result<()> {
+    let (w, h) = (band.width(), band.height());
+    for (stem, plane, what) in [
+        ("s0", &band.s0, "s0, f32"),
+        ("s1", &band.s1, "s1 = I^s, f32"),
+        ("s2", &band.s2, "s2 = -I^alpha, f32"),
+        ("dolp", &band.dolp, "DoLP, f32"),
+        ("aolp_rad", &band.aolp_rad, "AoLP in radians [0, pi), f32"),
+        ("residual", &band.residual, "I0 + I90 - I45 - I135, f32"),
+        ("i_d", &band.i_d, "I^d, f32"),
+    ] {
+        let name = format!("{stem}{suffix}.npy");
+        let path = out.join(&name);
+        npy::write(&path, w, h, plane.data())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        files.push((name, what.into()));
+    }
+    let name = format!("mask{suffix}.npy");
+    let path = out.join(&name);
+    let bits: Vec<u8> = band.mask.data().iter().map(|m| m.0).collect();
+    npy::write(&path, w, h, &bits).with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name, "mask reason bits, u8, 0 = valid".into()));
+    Ok(())
 }
 
 /// Reasons in drawing priority, with their colours in `mask.png`.

@@ -21,6 +21,7 @@ fn args(frame: &Path, out: &Path) -> Args {
         max_residual: None,
         aolp_dolp_weighted: false,
         calibration: None,
+        npy: false,
     }
 }
 
@@ -133,7 +134,17 @@ fn colour_bilinear_writes_per_band_files() {
     a.layout = LayoutArg::Colour;
     a.demosaic = DemosaicMethod::Bilinear;
     a.aolp_dolp_weighted = true;
+    a.npy = true;
     run(a).expect("run");
+    // full-precision planes: the R band's s0 is exactly 3000/4095 in the interior
+    let bytes = fs::read(out.join("s0_r.npy")).expect("npy");
+    let header_len = usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
+    let data = &bytes[10 + header_len..];
+    assert_eq!(data.len(), 16 * 8 * 4);
+    let i = 4 * (5 * 16 + 5);
+    let v = f32::from_le_bytes([data[i], data[i + 1], data[i + 2], data[i + 3]]);
+    assert!((f64::from(v) - 3000.0 / 4095.0).abs() < 1e-6, "{v}");
+    assert!(out.join("mask_b.npy").is_file() && out.join("aolp_rad_g.npy").is_file());
     for f in [
         "s0_r.png",
         "s0_g.png",
