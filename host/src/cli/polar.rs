@@ -20,17 +20,17 @@
 mod load;
 mod npy;
 mod render;
+mod summary;
 
 use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow};
 use ellipso_sim::mosaic::SensorLayout;
-use serde_json::json;
 
 use crate::polar::{
-    AnalyserCalibration, DemosaicMethod, MaskReason, MaskSummary, PixelMask, PolarConfig,
-    PolarImage, StokesBand, process,
+    AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
+    StokesBand, process,
 };
 use render::{Canvas, Legend, MASKED, Rgb};
 
@@ -141,7 +141,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if image.layout == SensorLayout::ColourPolar {
         write_s0_rgb(&args.out, &image, &mut files)?;
     }
-    let summary = summary_json(&args, &loaded, &config, &image, band_stats, &files);
+    let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
     fs::write(&summary_path, text + "\n")
@@ -358,7 +358,7 @@ fn write_band(
         "mask reason bits, 0 = valid",
     )?;
 
-    Ok(band_statistics(band, range_s, range_alpha))
+    Ok(summary::band_statistics(band, range_s, range_alpha))
 }
 
 /// Writes the f32 planes (and the mask bits) of `band` as `.npy` files.
@@ -423,102 +423,6 @@ fn symmetric_range(values: &[f32], masks: &[PixelMask]) -> f32 {
     let k = ((abs.len() - 1) as f64 * 0.995).round() as usize;
     let (_, nth, _) = abs.select_nth_unstable_by(k, f32::total_cmp);
     nth.max(1e-6)
-}
-
-fn band_statistics(band: &StokesBand, range_s: f32, range_alpha: f32) -> serde_json::Value {
-    let masks = band.mask.data();
-    let summary = MaskSummary::of(masks);
-    let valid = |plane: &[f32]| -> Vec<f64> {
-        plane
-            .iter()
-            .zip(masks)
-            .filter(|(_, m)| m.is_valid())
-            .map(|(v, _)| f64::from(*v))
-            .collect()
-    };
-    let mean = |v: &[f64]| {
-        if v.is_empty() {
-            None
-        } else {
-            Some(v.iter().sum::<f64>() / v.len() as f64)
-        }
-    };
-    let residual = valid(band.residual.data());
-    let rms_residual = mean(&residual.iter().map(|r| r * r).collect::<Vec<_>>()).map(f64::sqrt);
-    // AoLP is axial: average the doubled angle as a unit vector, then halve.
-    let aolp = valid(band.aolp_rad.data());
-    let (c, s) = aolp.iter().fold((0.0, 0.0), |(c, s), a| {
-        (c + (2.0 * a).cos(), s + (2.0 * a).sin())
-    });
-    let n = aolp.len().max(1) as f64;
-    let resultant = (c / n).hypot(s / n);
-    let mean_aolp_deg = (!aolp.is_empty() && resultant > 1e-9)
-        .then(|| (0.5 * s.atan2(c)).to_degrees().rem_euclid(180.0));
-    let masked: serde_json::Map<String, serde_json::Value> = MaskReason::ALL
-        .iter()
-        .map(|r| (r.name().to_string(), json!(summary.fraction(*r))))
-        .collect();
-    json!({
-        "colour": band.colour,
-        "pixels": summary.pixels,
-        "valid_fraction": summary.valid_fraction(),
-        "masked_fraction": masked,
-        "mean_s0_valid": mean(&valid(band.s0.data())),
-        "mean_dolp_valid": mean(&valid(band.dolp.data())),
-        "mean_aolp_deg_valid": mean_aolp_deg,
-        "aolp_resultant_length": resultant,
-        "rms_residual_valid": rms_residual,
-        "display_range_i_s": range_s,
-        "display_range_i_alpha": range_alpha,
-    })
-}
-
-fn summary_json(
-    args: &Args,
-    loaded: &load::Loaded,
-    config: &PolarConfig,
-    image: &PolarImage,
-    bands: Vec<serde_json::Value>,
-    files: &[FileEntry],
-) -> serde_json::Value {
-    let frame = &loaded.frame;
-    json!({
-        "tool": "ellipso polar",
-        "input": args.frame.file_name().map(|n| n.to_string_lossy().into_owned()),
-        "layout": image.layout,
-        "demosaic": { "method": image.method.name(), "description": image.method.description() },
-        "raw": {
-            "width": frame.width(),
-            "height": frame.height(),
-            "png_bits": loaded.container_bits,
-            "bit_depth": frame.bit_depth(),
-            "bit_depth_source": loaded.bit_depth_source,
-            "max_dn": frame.max_dn(),
-            "warnings": loaded.warnings,
-        },
-        "levels": {
-            "dark_level_dn": image.levels.dark_dn(),
-            "saturation_dn": image.levels.saturation_dn(),
-            "full_scale_dn": frame.full_scale_dn(),
-            "normalisation": "I = (DN - dark_level_dn) / (full_scale_dn - dark_level_dn)",
-        },
-        "thresholds": { "dark_intensity": config.dark_intensity, "max_residual": config.max_residual },
-        "analyser_calibration": config.calibration.map_or(json!("ideal"), |c| json!(c)),
-        "output": {
-            "width": image.width(),
-            "height": image.height(),
-            "note": "PNG rows below `height` are the legend strip",
-        },
-        "conventions": {
-            "rows": "y grows downward, x to image-right, sensor not flipped",
-            "analyser_angle": "from image-right toward image-up, looking back along propagation",
-            "aolp": "counter-clockwise from image-right, [0, 180) degrees",
-            "stokes": "s0 = (I0+I45+I90+I135)/2, s1 = I0-I90, s2 = I45-I135 (Hagen et al. 2019)",
-            "channels": "I^d = 2*I90, I^s = I0-I90 (= s1), I^alpha = I135-I45 (= -s2)",
-        },
-        "bands": bands,
-        "files": files.iter().map(|(f, w)| json!({ "file": f, "content": w })).collect::<Vec<_>>(),
-    })
 }
 
 fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> anyhow::Result<()> {
