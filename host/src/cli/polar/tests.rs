@@ -349,3 +349,55 @@ fn calibration_file_is_applied_and_recorded_or_rejected_by_name() {
         "{e}"
     );
 }
+
+#[test]
+fn bit_depth_defaults_and_warnings_are_recorded() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let read_summary = |out: &Path| -> serde_json::Value {
+        serde_json::from_str(&fs::read_to_string(out.join("summary.json")).expect("read"))
+            .expect("json")
+    };
+
+    // 8-bit PNG: 8-bit data, full scale 255
+    let eight = dir.path().join("eight.png");
+    image::GrayImage::from_raw(4, 4, vec![200; 16])
+        .expect("size")
+        .save(&eight)
+        .expect("write");
+    run(args(&eight, &out)).expect("8-bit");
+    let s = read_summary(&out);
+    assert_eq!(s["raw"]["bit_depth"], 8);
+    assert_eq!(s["levels"]["full_scale_dn"], 255);
+    assert_eq!(s["raw"]["warnings"].as_array().map(Vec::len), Some(0));
+
+    // 16-bit PNG whose values fit 10 bits: still 12-bit by default, with a warning saying so
+    let dim = dir.path().join("dim.png");
+    write_png16(&dim, 4, 4, vec![900; 16]);
+    run(args(&dim, &out)).expect("dim");
+    let s = read_summary(&out);
+    assert_eq!(s["raw"]["bit_depth"], 12);
+    let warning = s["raw"]["warnings"][0].as_str().unwrap_or("").to_string();
+    assert!(warning.contains("--bit-depth 10"), "{warning}");
+
+    // the flag wins and the summary says why
+    let mut a = args(&dim, &out);
+    a.bit_depth = Some(10);
+    run(a).expect("flag");
+    let s = read_summary(&out);
+    assert_eq!(s["raw"]["bit_depth"], 10);
+    assert_eq!(s["raw"]["bit_depth_source"], "--bit-depth");
+
+    // levels that contradict the bit depth fail in one line naming the file
+    let mut a = args(&dim, &out);
+    a.dark_level = 5000.0;
+    let e = error_of(a);
+    assert!(e.contains("dim.png") && e.contains("dark level"), "{e}");
+    let mut a = args(&dim, &out);
+    a.saturation = Some(9000);
+    let e = error_of(a);
+    assert!(
+        e.contains("dim.png") && e.contains("saturation level 9000"),
+        "{e}"
+    );
+}
