@@ -9,6 +9,24 @@
 //!          └────── process(): either method fused row by row, no full-size intermediate ──┘
 //! ```
 //!
+//! ```
+//! use ellipso_host::polar::{PolarConfig, process, synthetic::mosaic_from_stokes};
+//! use ellipso_sim::mosaic::SensorLayout;
+//!
+//! // A 12-bit IMX250MZR frame of light polarised at 30° (DoLP 0.5); s in DN.
+//! let phi = 30f64.to_radians();
+//! let frame = mosaic_from_stokes(SensorLayout::MonoPolar, 64, 48, 12, |_, _, _| {
+//!     [2000.0, 1000.0 * (2.0 * phi).cos(), 1000.0 * (2.0 * phi).sin()]
+//! })?;
+//! let image = process(&frame, &PolarConfig::default())?; // superpixel: 32×24
+//! let band = &image.bands[0];
+//! assert_eq!((image.width(), image.height()), (32, 24));
+//! assert!(band.mask.data()[0].is_valid());
+//! assert!((band.dolp.data()[0] - 0.5).abs() < 1e-3);
+//! assert!((band.aolp_rad.data()[0].to_degrees() - 30.0).abs() < 0.1);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
 //! # Conventions (stated once; docs/polar.md repeats them with the check procedure)
 //!
 //! - Image coordinates: `x` to image-right, rows `y` grow **downward**; origin at the first pixel
