@@ -1,10 +1,499 @@
 //! `ellipso polar FRAME.png --out DIR`: one raw mosaic frame to s0, DoLP, AoLP and I^d/I^s/I^α images.
+//!
+//! Reads a raw IMX250MZR/MYR mosaic (grayscale PNG as the camera delivered it), runs
+//! [`crate::polar::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
+//!
+//! | file | content | encoding |
+//! |---|---|---|
+//! | `s0.png` | total intensity | 16-bit grey, `clamp(s0/2, 0, 1)·65535` (mean analyser intensity) |
+//! | `dolp.png` | DoLP | 8-bit grey `DoLP·255`, legend strip below the image |
+//! | `aolp.png` | AoLP | RGB hue wheel, hue = 2·AoLP (0 and π meet), legend below |
+//! | `i_d.png` | I^d = 2·I90 | 16-bit grey, `clamp(I^d/2, 0, 1)·65535` |
+//! | `i_s.png`, `i_alpha.png` | I^s, I^α (signed) | RGB diverging map, symmetric range, legend |
+//! | `mask.png`, `mask_bits.png` | validity | RGB by reason with legend; raw reason bits (8-bit) |
+//! | `summary.json` | everything needed to read the above, plus statistics | JSON |
+//!
+//! Legends sit in a strip under the image rows (`summary.json` gives the image height), so the
+//! top `height` rows are pixel-aligned with the demosaiced output. Masked pixels are mid-grey
+//! in false-colour images. Errors name the file and what is wrong, in one line.
+
+mod load;
+mod npy;
+mod render;
+mod summary;
+
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, anyhow};
+use ellipso_sim::mosaic::SensorLayout;
+
+use crate::polar::{
+    AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
+    StokesBand, process,
+};
+use render::{Canvas, Legend, MASKED, Rgb};
+
+/// Sensor layout names on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum LayoutArg {
+    /// IMX250MZR: monochrome polarisation mosaic (2×2: 90 45 / 135 0).
+    Mono,
+    /// IMX250MYR: 2×2 polariser blocks under a Bayer RGGB colour pattern (4×4 tile).
+    Colour,
+}
+
+impl From<LayoutArg> for SensorLayout {
+    fn from(arg: LayoutArg) -> SensorLayout {
+        match arg {
+            LayoutArg::Mono => SensorLayout::MonoPolar,
+            LayoutArg::Colour => SensorLayout::ColourPolar,
+        }
+    }
+}
 
 /// Arguments of `ellipso polar`.
 #[derive(Debug, clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Raw mosaic frame: an 8- or 16-bit grayscale PNG exactly as the camera delivered it.
+    pub frame: PathBuf,
+    /// Directory to write the images and summary.json into (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Sensor mosaic layout.
+    #[arg(long, value_enum, default_value = "mono")]
+    pub layout: LayoutArg,
+    /// Bits per sample the camera delivered [default: 8 for 8-bit PNGs, 12 for 16-bit PNGs].
+    #[arg(long, value_parser = parse_bit_depth)]
+    pub bit_depth: Option<u8>,
+    /// Demosaic method: superpixel (half resolution, no interpolation; for measuring) or
+    /// bilinear (full resolution; for viewing).
+    #[arg(long, value_enum, default_value = "superpixel")]
+    pub demosaic: DemosaicMethod,
+    /// Black level subtracted from every raw sample, in DN.
+    #[arg(long, default_value_t = 0.0)]
+    pub dark_level: f32,
+    /// Raw samples at or above this DN are saturated [default: full scale of the bit depth].
+    #[arg(long)]
+    pub saturation: Option<u16>,
+    /// Pixels whose mean analyser intensity (s0/2, normalised to full scale) is below this are
+    /// masked dark.
+    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY)]
+    pub dark_intensity: f32,
+    /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this (off by default).
+    #[arg(long)]
+    pub max_residual: Option<f32>,
+    /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
+    #[arg(long)]
+    pub aolp_dolp_weighted: bool,
+    /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
+    /// aolp_rad, residual, i_d; mask as u8 bits).
+    #[arg(long)]
+    pub npy: bool,
+    /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
+    /// 0°, 45°, 90°, 135° order); default: ideal analysers.
+    #[arg(long)]
+    pub calibration: Option<PathBuf>,
+}
+
+/// Parses `--bit-depth`: one of the depths an IMX250 camera delivers.
+fn parse_bit_depth(text: &str) -> Result<u8, String> {
+    text.parse::<u8>()
+        .ok()
+        .filter(|b| load::BIT_DEPTHS.contains(b))
+        .ok_or_else(|| format!("`{text}` is not one of 8, 10, 12, 16"))
+}
 
 /// Runs `ellipso polar`.
-pub fn run(_args: Args) -> anyhow::Result<()> {
-    anyhow::bail!("`ellipso polar` lands with the polarisation module (issue 5)")
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let name = args.frame.display().to_string();
+    let layout = SensorLayout::from(args.layout);
+    let loaded = load::load_frame(&args.frame, layout, args.bit_depth)
+        .map_err(|msg| anyhow!("{name}: {msg}"))?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {name}: {w}");
+    }
+    let calibration = match &args.calibration {
+        None => None,
+        Some(path) => Some(read_calibration(path)?),
+    };
+    let config = PolarConfig {
+        demosaic: args.demosaic,
+        dark_level_dn: args.dark_level,
+        saturation_dn: args.saturation,
+        dark_intensity: args.dark_intensity,
+        max_residual: args.max_residual,
+        calibration,
+    };
+    let image = process(&loaded.frame, &config).map_err(|e| anyhow!("{name}: {e}"))?;
+    fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
+
+    let mut files = Vec::new();
+    let mut band_stats = Vec::new();
+    for band in &image.bands {
+        let suffix = band
+            .colour
+            .map_or(String::new(), |c| format!("_{}", c.letter()));
+        let stats = write_band(&args, band, &suffix, &mut files)?;
+        band_stats.push(stats);
+    }
+    if image.layout == SensorLayout::ColourPolar {
+        write_s0_rgb(&args.out, &image, &mut files)?;
+    }
+    let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
+    let summary_path = args.out.join("summary.json");
+    let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
+    fs::write(&summary_path, text + "\n")
+        .with_context(|| format!("cannot write {}", summary_path.display()))?;
+    files.push((
+        "summary.json".into(),
+        "layout, method, levels, statistics, encodings".into(),
+    ));
+
+    println!(
+        "{name}: {}×{} {}-bit {:?}, demosaic {} → {}×{} × {} band(s)",
+        loaded.frame.width(),
+        loaded.frame.height(),
+        loaded.frame.bit_depth(),
+        image.layout,
+        image.method.name(),
+        image.width(),
+        image.height(),
+        image.bands.len()
+    );
+    for (file, what) in &files {
+        println!("  wrote {}  ({what})", args.out.join(file).display());
+    }
+    Ok(())
 }
+
+/// Reads and checks an analyser calibration file; errors name the file.
+fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
+    let name = path.display();
+    let text = fs::read_to_string(path).map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+    let calibration: AnalyserCalibration = serde_json::from_str(&text)
+        .map_err(|e| anyhow!("{name}: not an analyser calibration: {e}"))?;
+    calibration
+        .stokes_matrix()
+        .map_err(|e| anyhow!("{name}: {e}"))?;
+    Ok(calibration)
+}
+
+/// One written file: name inside DIR and what it holds.
+type FileEntry = (String, String);
+
+fn write_band(
+    args: &Args,
+    band: &StokesBand,
+    suffix: &str,
+    files: &mut Vec<FileEntry>,
+) -> anyhow::Result<serde_json::Value> {
+    let (w, h) = (band.width(), band.height());
+    let masks = band.mask.data();
+    let out = &args.out;
+    if args.npy {
+        write_npy(out, band, suffix, files)?;
+    }
+
+    let s0: Vec<u16> = band
+        .s0
+        .data()
+        .iter()
+        .map(|v| render::unit_to_u16(v / 2.0))
+        .collect();
+    save_gray16(
+        out,
+        &format!("s0{suffix}.png"),
+        w,
+        h,
+        s0,
+        files,
+        "s0/2 as 16-bit grey",
+    )?;
+    let channels = band.observation_channels();
+    let i_d: Vec<u16> = channels
+        .i_d
+        .data()
+        .iter()
+        .map(|v| render::unit_to_u16(v / 2.0))
+        .collect();
+    save_gray16(
+        out,
+        &format!("i_d{suffix}.png"),
+        w,
+        h,
+        i_d,
+        files,
+        "I^d/2 = I90 as 16-bit grey",
+    )?;
+
+    let mut dolp = Canvas::new(w, h, [0, 0, 0]);
+    for (p, d) in dolp.pixels.iter_mut().zip(band.dolp.data()) {
+        *p = render::grey(*d);
+    }
+    let legend = Legend::Bar {
+        title: "DoLP".into(),
+        map: Box::new(render::grey),
+        ticks: [0.0f32, 0.25, 0.5, 0.75, 1.0]
+            .iter()
+            .map(|t| (*t, format!("{t}")))
+            .collect(),
+    };
+    let dolp = dolp.with_legend(&legend);
+    save_gray8(
+        out,
+        &format!("dolp{suffix}.png"),
+        &dolp,
+        files,
+        "DoLP·255, 8-bit grey, legend below",
+    )?;
+
+    let weighted = args.aolp_dolp_weighted;
+    let mut aolp = Canvas::new(w, h, MASKED);
+    for ((p, a), (d, m)) in aolp
+        .pixels
+        .iter_mut()
+        .zip(band.aolp_rad.data())
+        .zip(band.dolp.data().iter().zip(masks))
+    {
+        let value = if weighted { *d } else { 1.0 };
+        *p = if m.is_valid() {
+            render::hue(a / std::f32::consts::PI, value)
+        } else {
+            MASKED
+        };
+    }
+    let legend = Legend::Bar {
+        title: "AoLP, CCW from image-right".into(),
+        map: Box::new(|t| render::hue(t, 1.0)),
+        ticks: [0u32, 45, 90, 135, 180]
+            .iter()
+            .map(|d| (*d as f32 / 180.0, format!("{d}°")))
+            .collect(),
+    };
+    let what = if weighted {
+        "AoLP hue wheel, value = DoLP"
+    } else {
+        "AoLP hue wheel"
+    };
+    save_rgb8(
+        out,
+        &format!("aolp{suffix}.png"),
+        &aolp.with_legend(&legend),
+        files,
+        what,
+    )?;
+
+    let range_s = symmetric_range(channels.i_s.data(), masks);
+    let range_alpha = symmetric_range(channels.i_alpha.data(), masks);
+    for (stem, title, data, range) in [
+        ("i_s", "I^s = I0 - I90", channels.i_s.data(), range_s),
+        (
+            "i_alpha",
+            "I^alpha = I135 - I45",
+            channels.i_alpha.data(),
+            range_alpha,
+        ),
+    ] {
+        let mut c = Canvas::new(w, h, MASKED);
+        for ((p, v), m) in c.pixels.iter_mut().zip(data).zip(masks) {
+            *p = if m.is_valid() {
+                render::diverging(v / range)
+            } else {
+                MASKED
+            };
+        }
+        let legend = Legend::Bar {
+            title: format!("{title} (normalised)"),
+            map: Box::new(|t| render::diverging(2.0 * t - 1.0)),
+            ticks: vec![
+                (0.0, format!("{:.3}", -range)),
+                (0.5, "0".into()),
+                (1.0, format!("{range:.3}")),
+            ],
+        };
+        let what = format!("{title}, diverging map ±{range:.4}");
+        save_rgb8(
+            out,
+            &format!("{stem}{suffix}.png"),
+            &c.with_legend(&legend),
+            files,
+            &what,
+        )?;
+    }
+
+    let mut mask_img = Canvas::new(w, h, [0, 0, 0]);
+    for (p, m) in mask_img.pixels.iter_mut().zip(masks) {
+        *p = mask_colour(*m);
+    }
+    let swatches = std::iter::once(([0, 0, 0], "valid".to_string()))
+        .chain(MASK_COLOURS.iter().map(|(r, c)| (*c, r.name().to_string())))
+        .map(|(c, n)| {
+            if c == [0, 0, 0] {
+                ([40, 40, 40], n)
+            } else {
+                (c, n)
+            }
+        })
+        .collect();
+    let what = "mask by reason (first of saturated, no_samples, unphysical, inconsistent, dark)";
+    save_rgb8(
+        out,
+        &format!("mask{suffix}.png"),
+        &mask_img.with_legend(&Legend::Swatches(swatches)),
+        files,
+        what,
+    )?;
+    let bits = Canvas {
+        width: w,
+        height: h,
+        pixels: masks.iter().map(|m| [m.0; 3]).collect(),
+    };
+    save_gray8(
+        out,
+        &format!("mask_bits{suffix}.png"),
+        &bits,
+        files,
+        "mask reason bits, 0 = valid",
+    )?;
+
+    Ok(summary::band_statistics(band, range_s, range_alpha))
+}
+
+/// Writes the f32 planes (and the mask bits) of `band` as `.npy` files.
+fn write_npy(
+    out: &Path,
+    band: &StokesBand,
+    suffix: &str,
+    files: &mut Vec<FileEntry>,
+) -> anyhow::Result<()> {
+    let (w, h) = (band.width(), band.height());
+    for (stem, plane, what) in [
+        ("s0", &band.s0, "s0, f32"),
+        ("s1", &band.s1, "s1 = I^s, f32"),
+        ("s2", &band.s2, "s2 = -I^alpha, f32"),
+        ("dolp", &band.dolp, "DoLP, f32"),
+        ("aolp_rad", &band.aolp_rad, "AoLP in radians [0, pi), f32"),
+        ("residual", &band.residual, "I0 + I90 - I45 - I135, f32"),
+        ("i_d", &band.i_d, "I^d, f32"),
+    ] {
+        let name = format!("{stem}{suffix}.npy");
+        let path = out.join(&name);
+        npy::write(&path, w, h, plane.data())
+            .with_context(|| format!("cannot write {}", path.display()))?;
+        files.push((name, what.into()));
+    }
+    let name = format!("mask{suffix}.npy");
+    let path = out.join(&name);
+    let bits: Vec<u8> = band.mask.data().iter().map(|m| m.0).collect();
+    npy::write(&path, w, h, &bits).with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name, "mask reason bits, u8, 0 = valid".into()));
+    Ok(())
+}
+
+/// Reasons in drawing priority, with their colours in `mask.png`.
+const MASK_COLOURS: [(MaskReason, Rgb); 5] = [
+    (MaskReason::Saturated, [255, 0, 0]),
+    (MaskReason::NoSamples, [255, 0, 255]),
+    (MaskReason::Unphysical, [255, 255, 0]),
+    (MaskReason::Inconsistent, [0, 255, 255]),
+    (MaskReason::Dark, [0, 0, 255]),
+];
+
+fn mask_colour(m: PixelMask) -> Rgb {
+    MASK_COLOURS
+        .iter()
+        .find(|(r, _)| m.has(*r))
+        .map_or([0, 0, 0], |(_, c)| *c)
+}
+
+/// Symmetric display range: the 99.5th percentile of |v| over valid pixels (robust to a few
+/// outliers), at least 1e-6 so the map never divides by zero.
+fn symmetric_range(values: &[f32], masks: &[PixelMask]) -> f32 {
+    let mut abs: Vec<f32> = values
+        .iter()
+        .zip(masks)
+        .filter(|(_, m)| m.is_valid())
+        .map(|(v, _)| v.abs())
+        .collect();
+    if abs.is_empty() {
+        return 1e-6;
+    }
+    let k = ((abs.len() - 1) as f64 * 0.995).round() as usize;
+    let (_, nth, _) = abs.select_nth_unstable_by(k, f32::total_cmp);
+    nth.max(1e-6)
+}
+
+fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> anyhow::Result<()> {
+    let (w, h) = (image.width(), image.height());
+    let mut rgb = Vec::with_capacity(3 * w * h);
+    for i in 0..w * h {
+        for band in &image.bands {
+            rgb.push(render::unit_to_u16(band.s0.data()[i] / 2.0));
+        }
+    }
+    let name = "s0_rgb.png";
+    let path = out.join(name);
+    let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb)
+        .ok_or_else(|| anyhow!("internal: s0_rgb buffer size"))?;
+    buf.save(&path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name.into(), "s0/2 of R, G, B as 16-bit RGB".into()));
+    Ok(())
+}
+
+fn save_gray16(
+    out: &Path,
+    name: &str,
+    w: usize,
+    h: usize,
+    data: Vec<u16>,
+    files: &mut Vec<FileEntry>,
+    what: &str,
+) -> anyhow::Result<()> {
+    let path = out.join(name);
+    let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data)
+        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
+    buf.save(&path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name.into(), what.into()));
+    Ok(())
+}
+
+fn save_gray8(
+    out: &Path,
+    name: &str,
+    canvas: &Canvas,
+    files: &mut Vec<FileEntry>,
+    what: &str,
+) -> anyhow::Result<()> {
+    let path = out.join(name);
+    let (w, h) = (canvas.width as u32, canvas.height as u32);
+    let buf = image::GrayImage::from_raw(w, h, canvas.to_gray())
+        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
+    buf.save(&path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name.into(), what.into()));
+    Ok(())
+}
+
+fn save_rgb8(
+    out: &Path,
+    name: &str,
+    canvas: &Canvas,
+    files: &mut Vec<FileEntry>,
+    what: &str,
+) -> anyhow::Result<()> {
+    let path = out.join(name);
+    let (w, h) = (canvas.width as u32, canvas.height as u32);
+    let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes())
+        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
+    buf.save(&path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    files.push((name.into(), what.into()));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests;
