@@ -399,6 +399,30 @@ mod tests {
         assert!(hits > 1000, "the test must exercise hits, got {hits}");
     }
 
+    /// SAH quality guard (counts, not time): a nearest-hit query on the 5120-triangle blob tests
+    /// only a handful of triangles on average (3.3 measured; the guard allows 12).
+    #[test]
+    fn bvh_tests_few_triangles_per_ray() {
+        let blob = bumpy_icosphere(4, 0.06, 4, 1);
+        let mut rng = ChaCha8Rng::seed_from_u64(9);
+        let (mut tests, rays) = (0usize, 500);
+        for _ in 0..rays {
+            let o =
+                Point3::new(rng.random(), rng.random(), rng.random()) * 8.0 - Vector3::repeat(4.0);
+            let ray = Ray::new(o, Point3::origin() - o);
+            blob.bvh.traverse(&ray, 0.0, f64::INFINITY, false, |p, tm| {
+                tests += 1;
+                blob.hit_triangle(p, &ray, 0.0, tm).map(|h| h.0)
+            });
+        }
+        let mean = tests as f64 / rays as f64;
+        assert!(
+            mean < 12.0,
+            "{mean:.1} triangle tests per ray out of {}",
+            blob.triangles.len()
+        );
+    }
+
     #[test]
     fn hit_reports_barycentrics_and_interpolated_normal() {
         let positions = vec![

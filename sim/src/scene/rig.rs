@@ -112,6 +112,29 @@ pub struct CameraSpec {
 }
 
 impl CameraSpec {
+    /// The shared pinhole + Brown–Conrady model ([`crate::camera::CameraModel`]) with this
+    /// camera's resolution, intrinsics and distortion.
+    pub fn camera_model(&self) -> crate::camera::CameraModel {
+        use crate::camera::{CameraModel, Distortion, Intrinsics};
+        CameraModel {
+            width: self.resolution_px[0],
+            height: self.resolution_px[1],
+            intrinsics: Intrinsics {
+                fx: self.fx_px,
+                fy: self.fy_px,
+                cx: self.cx_px,
+                cy: self.cy_px,
+            },
+            distortion: Distortion {
+                k1: self.k1,
+                k2: self.k2,
+                k3: self.k3,
+                p1: self.p1,
+                p2: self.p2,
+            },
+        }
+    }
+
     /// Whether any distortion coefficient is non-zero.
     pub fn has_distortion(&self) -> bool {
         [self.k1, self.k2, self.k3, self.p1, self.p2]

@@ -44,7 +44,8 @@ pub struct SceneFile {
     pub effects: EffectsSpec,
 }
 
-/// Polarimetric BRDF parameters of one material (maps to `optics::pbrdf::PbrdfParams`).
+/// Polarimetric BRDF parameters of one material ([`MaterialSpec::to_pbrdf`] gives the optics
+/// model's `PbrdfParams`).
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MaterialSpec {
@@ -63,6 +64,18 @@ pub struct MaterialSpec {
 }
 
 impl MaterialSpec {
+    /// The optics model's parameter struct (same fields, same units).
+    pub fn to_pbrdf(&self) -> crate::optics::pbrdf::PbrdfParams<f64> {
+        crate::optics::pbrdf::PbrdfParams {
+            eta: self.eta,
+            sigma_s: self.sigma_s,
+            sigma_ss: self.sigma_ss,
+            rho_s: self.rho_s,
+            rho_ss: self.rho_ss,
+            rho_d: self.rho_d,
+        }
+    }
+
     /// Linear blend `Σ wᵢ mᵢ` (weights should sum to 1).
     pub fn blend(items: &[(MaterialSpec, f64)]) -> MaterialSpec {
         let mut out = MaterialSpec {

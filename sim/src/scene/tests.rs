@@ -574,3 +574,37 @@ fn scaled_sphere_and_plane_objects() {
             .is_none()
     );
 }
+
+/// Scene types convert into the shared optics and camera models: every shipped material passes
+/// `PbrdfParams::validate`, every camera model validates, and an orbit camera (no aim jitter)
+/// images its look-at point exactly at the principal point.
+#[test]
+fn scene_types_feed_the_optics_and_camera_models() {
+    for name in ["sphere", "multi_material", "calibration", "s0_only"] {
+        let s = Scene::load(&sim_dir().join(format!("scenes/{name}.toml"))).expect("scene");
+        for m in &s.materials {
+            m.params
+                .to_pbrdf()
+                .validate()
+                .unwrap_or_else(|e| panic!("{name}/{}: {e}", m.name));
+        }
+        let model = s.rig.camera.camera_model();
+        model.validate().unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(
+            (model.width, model.height),
+            (s.rig.camera.resolution_px[0], s.rig.camera.resolution_px[1])
+        );
+    }
+    let s = Scene::load(&sim_dir().join("scenes/sphere.toml")).expect("sphere");
+    let model = s.rig.camera.camera_model();
+    let target = Point3::from(s.capture.look_at_m);
+    for pose in &s.camera_poses {
+        let p = model
+            .project(&(pose.world_from_camera.inverse() * target))
+            .expect("in front");
+        assert!(
+            (p[0] - s.rig.camera.cx_px).abs() < 1e-9 && (p[1] - s.rig.camera.cy_px).abs() < 1e-9,
+            "{p:?}"
+        );
+    }
+}
