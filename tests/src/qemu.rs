@@ -11,11 +11,12 @@
 //!   (`-icount shift=3,align=off,sleep=off`) and GPIO writes logged (`-d unimp`).
 //! - [`QemuBoard::open_link`] returns the host's real [`TriggerLink`] on that UART. It sends
 //!   nothing before the firmware's receiver is on: on the socket it waits for the boot
-//!   announcement (QEMU drops bytes that reach USART1 before the firmware enables it); on a pty,
-//!   whose boot output nobody hears, it retries the handshake.
+//!   announcement (QEMU drops bytes that reach USART1 before the firmware enables it); on a pty
+//!   it holds the pty open from the moment QEMU names it and waits for the announcement there.
 
 use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read, Write};
+use std::os::unix::fs::OpenOptionsExt;
 use std::os::unix::net::UnixStream;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
@@ -23,7 +24,7 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use ellipso_host::link::time::HostClock;
-use ellipso_host::link::{LinkConfig, LinkError, TriggerLink};
+use ellipso_host::link::{LinkConfig, TriggerLink};
 use ellipso_protocol::{BoardMessage, BoardState, Decoder};
 
 /// The emulator binary.
@@ -92,6 +93,7 @@ pub struct QemuBoard {
     dir: tempfile::TempDir,
     serial: Serial,
     pty_path: Option<String>,
+    pty_probe: Option<File>,
 }
 
 fn other(msg: String) -> io::Error {
@@ -139,6 +141,7 @@ impl QemuBoard {
             dir,
             serial,
             pty_path: None,
+            pty_probe: None,
         };
         if serial == Serial::Pty {
             // QEMU 7.2 prints `char device redirected to /dev/pts/N (label serial0)` on stdout.
@@ -155,6 +158,15 @@ impl QemuBoard {
                     ))
                 })?;
             board.pty_path = Some(path.to_string());
+            // Open it at once so the guest's boot announcement is heard (QEMU drops output
+            // while nothing holds the pty open).
+            board.pty_probe = Some(
+                std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .custom_flags(libc::O_NOCTTY | libc::O_NONBLOCK)
+                    .open(path)?,
+            );
             // Keep draining stdout so QEMU never blocks on a full pipe.
             std::thread::spawn(move || io::copy(&mut lines, &mut io::sink()));
         } else {
@@ -171,12 +183,25 @@ impl QemuBoard {
     /// The host's trigger link to the firmware, handshaken.
     pub fn open_link(&mut self, config: LinkConfig) -> io::Result<TriggerLink> {
         match self.serial {
-            Serial::UnixSocket => self.open_socket_link(config),
+            Serial::UnixSocket => self.open_socket_link(config, &[]),
             Serial::Pty => self.open_pty_link(config),
         }
     }
 
-    fn open_socket_link(&mut self, config: LinkConfig) -> io::Result<TriggerLink> {
+    /// Like [`QemuBoard::open_link`] on a socket, but first writes `preamble` raw (e.g. line
+    /// noise) once the firmware's receiver is on, before the link's handshake.
+    pub fn open_link_after_raw_bytes(
+        &mut self,
+        config: LinkConfig,
+        preamble: &[u8],
+    ) -> io::Result<TriggerLink> {
+        if self.serial != Serial::UnixSocket {
+            return Err(other("raw preambles need the unix-socket UART".into()));
+        }
+        self.open_socket_link(config, preamble)
+    }
+
+    fn open_socket_link(&mut self, config: LinkConfig, preamble: &[u8]) -> io::Result<TriggerLink> {
         let sock = self.dir.path().join("s");
         let deadline = Instant::now() + Duration::from_secs(10);
         let mut stream = loop {
@@ -200,12 +225,8 @@ impl QemuBoard {
         stream.set_read_timeout(Some(Duration::from_secs(10)))?;
         let announcement = read_one_frame(&mut stream)
             .map_err(|e| other(format!("no boot announcement: {e}; {}", self.stderr_tail())))?;
-        match announcement {
-            BoardMessage::Status(s) if s.state == BoardState::Idle && s.pulses_fired == 0 => {}
-            other_msg => {
-                return Err(other(format!("unexpected boot announcement {other_msg:?}")));
-            }
-        }
+        check_announcement(&announcement)?;
+        stream.write_all(preamble)?;
         // What TriggerLink::open does for `unix:` paths, on the already connected stream.
         stream.set_read_timeout(Some(Duration::from_millis(50)))?;
         let reader = stream.try_clone()?;
@@ -224,20 +245,23 @@ impl QemuBoard {
             .pty_path
             .clone()
             .ok_or_else(|| other("no pty".into()))?;
-        // The guest boots while QEMU prints the pty's name; a Hello sent in the microseconds
-        // before its UART is enabled is lost, so a timed-out handshake is retried.
-        let mut last = None;
-        for _ in 0..3 {
-            match TriggerLink::open(&path, HostClock::new(), config) {
-                Ok(link) => return Ok(link),
-                Err(e @ LinkError::Timeout { .. }) => last = Some(e),
-                Err(e) => return Err(other(format!("opening {path}: {e}"))),
-            }
+        let Some(probe) = self.pty_probe.as_mut() else {
+            return Err(other("pty probe not open".into()));
+        };
+        // QEMU prints the pty's name before the guest runs. The probe opened it right then, so
+        // it normally hears the boot announcement; if the guest booted before that (a loaded
+        // machine), its receiver is already on and sending is safe anyway.
+        let heard = read_announcement(probe, Duration::from_secs(2))?;
+        if let Some(msg) = &heard {
+            check_announcement(msg)?;
         }
-        Err(other(format!(
-            "handshake over {path} failed: {last:?}; {}",
-            self.stderr_tail()
-        )))
+        // The probe stays open, so QEMU keeps seeing a connected pty.
+        TriggerLink::open(&path, HostClock::new(), config).map_err(|e| {
+            other(format!(
+                "handshake over {path} failed: {e}; {}",
+                self.stderr_tail()
+            ))
+        })
     }
 
     /// Every value the firmware stored to `GPIOA.BSRR`, in order, from QEMU's `-d unimp` log.
@@ -279,6 +303,39 @@ fn short_temp_root() -> PathBuf {
     } else {
         PathBuf::from("/tmp")
     }
+}
+
+/// The boot announcement is an unsolicited `Status`: state `Idle`, no pulses.
+fn check_announcement(msg: &BoardMessage) -> io::Result<()> {
+    match msg {
+        BoardMessage::Status(s) if s.state == BoardState::Idle && s.pulses_fired == 0 => Ok(()),
+        other_msg => Err(other(format!("unexpected boot announcement {other_msg:?}"))),
+    }
+}
+
+/// Reads a non-blocking pty byte by byte until one frame decodes or `timeout` passes
+/// (`Ok(None)`).
+fn read_announcement(pty: &mut File, timeout: Duration) -> io::Result<Option<BoardMessage>> {
+    let mut decoder = Decoder::<BoardMessage>::new();
+    let mut byte = [0u8; 1];
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        match pty.read(&mut byte) {
+            Ok(1) => {
+                if let Some(result) = decoder.push(byte[0]) {
+                    return result
+                        .map(Some)
+                        .map_err(|e| other(format!("bad boot frame: {e}")));
+                }
+            }
+            Ok(_) => std::thread::sleep(Duration::from_millis(1)),
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(None)
 }
 
 /// Reads bytes one at a time up to the first frame delimiter and decodes that frame (so no byte

@@ -236,3 +236,72 @@ fn check_clock_sync(link: &TriggerLink) {
     // Emulated time runs at whatever rate QEMU executes, but it runs forward.
     assert!(fit.gain.is_finite() && fit.gain > 0.0, "gain {}", fit.gain);
 }
+
+/// Line noise before the handshake is counted and answered with a fault, never fatal; a
+/// continuous capture stops on command with both outputs low, pins included.
+#[test]
+fn noise_and_stop_mid_capture_over_a_unix_socket() {
+    let Some(elf) = firmware_or_skip("noise_and_stop_mid_capture_over_a_unix_socket") else {
+        return;
+    };
+    let mut board = QemuBoard::spawn(&elf, Serial::UnixSocket).expect("QEMU starts");
+    // A frame with a broken CRC: COBS-valid bytes, delimiter-terminated.
+    let link = board
+        .open_link_after_raw_bytes(link_config(), &[0x05, 0x11, 0x22, 0x33, 0x44, 0x00])
+        .expect("handshake after noise");
+    let ctx = board.stderr_tail();
+    let fault = link
+        .events()
+        .recv_timeout(Duration::from_secs(5))
+        .expect("the board reports the bad frame");
+    assert!(
+        matches!(
+            fault,
+            LinkEvent::Fault {
+                fault: ellipso_protocol::Fault::BadFrame(_),
+                ..
+            }
+        ),
+        "{fault:?}"
+    );
+
+    link.configure(CaptureConfig {
+        pulses: PulseCount::Continuous,
+        ..CAPTURE
+    })
+    .expect("configure");
+    link.arm().expect("arm");
+    link.start().expect("start");
+    let mut pulses = 0;
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while pulses < 3 {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match link.events().recv_timeout(left) {
+            Ok(LinkEvent::Pulse { .. }) => pulses += 1,
+            Ok(LinkEvent::Edge(_) | LinkEvent::Status(_)) => {}
+            other => panic!("while running: {other:?}; {ctx}"),
+        }
+    }
+    link.stop().expect("stop");
+    let status = link.status().expect("status");
+    assert_eq!(status.state, BoardState::Configured);
+    assert_eq!(status.faults.bad_frames, 1);
+    assert_eq!(status.faults.late_edges, 0);
+    assert!(status.pulses_fired >= 3);
+
+    // The last stores to the pins drove both low: Stop writes the flash off, then the trigger.
+    let writes = board.gpioa_bsrr_writes().expect("unimp log readable");
+    let last_for = |bit: u32| {
+        writes
+            .iter()
+            .rev()
+            .find(|v| *v & (1 << bit | 1 << (bit + 16)) != 0)
+    };
+    assert_eq!(
+        last_for(0),
+        Some(&(1 << 16)),
+        "trigger left high: {writes:#x?}"
+    );
+    assert_eq!(last_for(1), Some(&(1 << 17)), "flash left on: {writes:#x?}");
+    assert_eq!(writes[writes.len() - 2..], [1 << 17, 1 << 16]);
+}
