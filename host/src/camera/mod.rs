@@ -14,6 +14,7 @@
 //! (GigE/USB3 Vision, cargo feature), `v4l` (UVC, cargo feature).
 
 pub mod frame_id;
+pub mod replay;
 
 use std::time::Duration;
 

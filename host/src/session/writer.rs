@@ -25,6 +25,14 @@ pub struct SessionWriter {
     paired: u64,
 }
 
+/// A frame encoded to its temporary file, waiting to be committed.
+#[derive(Debug)]
+pub struct PreparedFrame {
+    tmp: PathBuf,
+    dst: PathBuf,
+    event: SessionEvent,
+}
+
 /// A frame to record.
 #[derive(Debug, Clone, Copy)]
 pub struct FrameRecord<'a> {
@@ -101,17 +109,28 @@ impl SessionWriter {
 
     /// Writes a frame's PNG atomically, then its `frame` event.
     pub fn write_frame(&mut self, f: FrameRecord<'_>) -> Result<(), SessionError> {
+        let prepared = Self::prepare_frame(&self.frames_dir(), f)?;
+        self.commit_frame(prepared)
+    }
+
+    /// The directory frames go to (for [`prepare_frame`](Self::prepare_frame) on other threads).
+    pub fn frames_dir(&self) -> PathBuf {
+        self.dir.join(paths::FRAMES)
+    }
+
+    /// First half of [`write_frame`](Self::write_frame), safe to run on any thread in parallel:
+    /// encodes the PNG to a temporary name in `frames_dir`.
+    pub fn prepare_frame(
+        frames_dir: &Path,
+        f: FrameRecord<'_>,
+    ) -> Result<PreparedFrame, SessionError> {
         let name = paths::frame_file(f.frame_id);
-        let frames = self.dir.join(paths::FRAMES);
-        let tmp = frames.join(format!(".{name}.partial"));
+        let tmp = frames_dir.join(format!(".{name}.partial"));
         frame_png::write(&tmp, f.width, f.height, f.pixels)?;
-        let dst = frames.join(&name);
-        fs::rename(&tmp, &dst).map_err(SessionError::io(&dst))?;
-        self.frames_written += 1;
-        self.log(&SessionEvent::Frame {
+        let event = SessionEvent::Frame {
             t_host_us: f.t_host_us,
             frame_id: f.frame_id,
-            file: name,
+            file: name.clone(),
             t_camera_ns: f.t_camera_ns,
             exposure_us: f.exposure_us,
             gain_db: f.gain_db,
@@ -121,7 +140,19 @@ impl SessionWriter {
                     reason: r.to_string(),
                 },
             },
+        };
+        Ok(PreparedFrame {
+            tmp,
+            dst: frames_dir.join(name),
+            event,
         })
+    }
+
+    /// Second half: renames the frame into place, then appends its `frame` event.
+    pub fn commit_frame(&mut self, prepared: PreparedFrame) -> Result<(), SessionError> {
+        fs::rename(&prepared.tmp, &prepared.dst).map_err(SessionError::io(&prepared.dst))?;
+        self.frames_written += 1;
+        self.log(&prepared.event)
     }
 
     /// Records the end, rewrites the manifest with it and syncs everything to disk.

@@ -1,0 +1,521 @@
+//! One capture: trigger board + camera → a recorded, paired session.
+//!
+//! Threads and queues (every queue bounded, every loss counted):
+//! ```text
+//! camera thread ──frames (bounded, `frame_queue`)──▶ writer pool ──written──▶ main loop ◀── link events
+//!   (drains the camera's buffers)                    (PNG encode, parallel)   (pairing, log, progress)
+//! ```
+//! - The camera thread only moves frames from the camera into the queue, so slow disk or slow
+//!   processing never starves the camera's own buffers until the queue is full; then the camera
+//!   reports underruns (counted in its [`CameraCounters`]), never silently.
+//! - The main loop owns the session log: pulses, frames (after their PNG is in place), pairings
+//!   and pairing errors, faults, link counters, the end. Pose tracking and fitting run after the
+//!   recorder, never on this path.
+//! - A disconnect of the trigger link ends the capture cleanly: frames already queued are
+//!   written, pending pairs are resolved, and the session's end record says what happened.
+//!
+//! Termination: a counted capture ends once the board reports its last pulse and every pulse is
+//! paired or timed out; a continuous one on the `stop` flag; any capture at `max_duration`.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, bounded, select, unbounded};
+use ellipso_protocol::{BoardState, CaptureConfig, PulseCount};
+
+use super::pairing::{Pairer, PairingConfig, PairingCounts, PairingOutcome};
+use crate::camera::{Camera, CameraCounters, CameraError, CameraSettings, Frame, FrameStatus};
+use crate::link::clock::ClockFit;
+use crate::link::time::{DeviceTimeUs, HostTimeUs};
+use crate::link::{LinkCounters, LinkError, LinkEvent, TriggerLink, describe_reject};
+use crate::session::SessionError;
+use crate::session::events::SessionEvent;
+use crate::session::writer::{FrameRecord, PreparedFrame, SessionWriter};
+
+/// What to capture and how.
+#[derive(Debug, Clone)]
+pub struct CapturePlan {
+    /// Timing sent to the trigger board.
+    pub board: CaptureConfig,
+    /// Camera settings.
+    pub camera: CameraSettings,
+    /// Pings for the clock model before starting.
+    pub clock_sync_pings: usize,
+    /// Pairing windows.
+    pub pairing: PairingConfig,
+    /// Frames that may wait between camera and disk.
+    pub frame_queue: usize,
+    /// PNG encoder threads.
+    pub writer_threads: usize,
+    /// Hard stop.
+    pub max_duration: Duration,
+}
+
+/// Live figures for a progress display.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CaptureProgress {
+    /// Pulses the board reported.
+    pub pulses: u64,
+    /// Frames written.
+    pub frames: u64,
+    /// Pulses expected (counted captures).
+    pub expected: Option<u64>,
+    /// Frames paired.
+    pub paired: u64,
+    /// Pairing errors of any kind.
+    pub pairing_errors: u64,
+    /// Frames the camera lost or flagged (underruns + missing packets + other).
+    pub camera_drops: u64,
+    /// Frames written per second since start.
+    pub fps: f64,
+}
+
+/// What happened, for the summary and the closing figures.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CaptureReport {
+    /// Why it ended.
+    pub end_reason: String,
+    /// Wall time, s.
+    pub duration_s: f64,
+    /// Pulses reported by the board.
+    pub pulses: u64,
+    /// Frames written.
+    pub frames: u64,
+    /// Frames delivered flagged (kept, never fitted).
+    pub flagged: u64,
+    /// Pairing outcome counts.
+    pub pairing: PairingCounts,
+    /// Trigger-link counters.
+    pub link: LinkCounters,
+    /// Camera counters.
+    pub camera: CameraCounters,
+    /// Faults the board reported.
+    pub board_faults: u64,
+    /// Clock fit used for pairing.
+    pub clock: Option<ClockFit>,
+}
+
+/// Why a capture could not run (problems during a running capture end it cleanly instead).
+#[derive(Debug, thiserror::Error)]
+pub enum CaptureError {
+    /// The trigger board refused or failed a command before the capture started.
+    #[error(transparent)]
+    Link(#[from] LinkError),
+    /// The camera failed before the capture started.
+    #[error(transparent)]
+    Camera(#[from] CameraError),
+    /// The session could not be written.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// The clock model did not settle.
+    #[error("the trigger board's clock did not settle after {pings} pings; check the link")]
+    ClockNotSettled {
+        /// Pings sent.
+        pings: usize,
+    },
+}
+
+struct Written {
+    prepared: PreparedFrame,
+    frame_id: u64,
+    t_host_us: HostTimeUs,
+    flagged: bool,
+}
+
+/// Runs one capture into `session`; returns the report and the session directory.
+pub fn capture(
+    link: &TriggerLink,
+    mut camera: Box<dyn Camera>,
+    mut session: SessionWriter,
+    plan: &CapturePlan,
+    stop: &AtomicBool,
+    mut progress: impl FnMut(&CaptureProgress),
+) -> Result<(CaptureReport, std::path::PathBuf), CaptureError> {
+    let clock_now = || link.host_clock().now();
+    let started = Instant::now();
+    let board = link.board();
+    session.log(&SessionEvent::Board {
+        t_host_us: clock_now(),
+        name: board.board_name.to_string(),
+        firmware: format!(
+            "{}.{}.{}",
+            board.firmware_version.major,
+            board.firmware_version.minor,
+            board.firmware_version.patch
+        ),
+        protocol_version: board.protocol_version,
+    })?;
+    let clock = link
+        .sync_clock(plan.clock_sync_pings)?
+        .ok_or(CaptureError::ClockNotSettled {
+            pings: plan.clock_sync_pings,
+        })?;
+    session.log(&SessionEvent::ClockFit {
+        t_host_us: clock_now(),
+        gain: clock.gain,
+        offset_us: clock.offset_us,
+        rms_us: clock.rms_us,
+        n_samples: clock.n_samples,
+    })?;
+
+    camera.configure(&plan.camera)?;
+    camera.start()?;
+    link.configure(plan.board).map_err(|e| match e {
+        LinkError::Rejected { reason, .. } => {
+            tracing::error!("capture refused: {}", describe_reject(&reason));
+            e
+        }
+        other => other,
+    })?;
+    session.log(&SessionEvent::Configured {
+        t_host_us: clock_now(),
+        config: serde_json::to_value(plan.board).unwrap_or_default(),
+    })?;
+
+    // camera thread → bounded queue → writer pool → main loop
+    let camera_stop = Arc::new(AtomicBool::new(false));
+    let (frame_tx, frame_rx) = bounded::<Frame>(plan.frame_queue.max(1));
+    let camera_thread = {
+        let camera_stop = camera_stop.clone();
+        thread::Builder::new().name("camera".into()).spawn(move || {
+            while !camera_stop.load(Ordering::Acquire) {
+                match camera.next_frame(Duration::from_millis(50)) {
+                    Ok(Some(frame)) => {
+                        if frame_tx.send(frame).is_err() {
+                            break;
+                        }
+                    }
+                    Ok(None) => {}
+                    Err(CameraError::EndOfStream) => break,
+                    Err(e) => {
+                        tracing::error!("{e}");
+                        break;
+                    }
+                }
+            }
+            let _ = camera.stop();
+            camera.counters()
+        })
+    }
+    .map_err(|e| CameraError::Stream {
+        device: "camera thread".into(),
+        reason: e.to_string(),
+    })?;
+    let (written_tx, written_rx) = unbounded::<Result<Written, SessionError>>();
+    let frames_dir = session.frames_dir();
+    let writers: Vec<_> = (0..plan.writer_threads.max(1))
+        .map(|i| {
+            let (rx, tx, dir) = (frame_rx.clone(), written_tx.clone(), frames_dir.clone());
+            thread::Builder::new()
+                .name(format!("frame-writer-{i}"))
+                .spawn(move || {
+                    for frame in rx.iter() {
+                        let m = &frame.meta;
+                        let flagged = match &m.status {
+                            FrameStatus::Complete => None,
+                            FrameStatus::Flagged(r) => Some(r.as_str()),
+                        };
+                        let record = FrameRecord {
+                            t_host_us: m.t_host_us,
+                            frame_id: m.frame_id,
+                            t_camera_ns: m.t_camera_ns,
+                            exposure_us: m.exposure_us,
+                            gain_db: m.gain_db,
+                            width: m.width,
+                            height: m.height,
+                            pixels: &frame.pixels,
+                            flagged,
+                        };
+                        let r =
+                            SessionWriter::prepare_frame(&dir, record).map(|prepared| Written {
+                                prepared,
+                                frame_id: m.frame_id,
+                                t_host_us: m.t_host_us,
+                                flagged: flagged.is_some(),
+                            });
+                        if tx.send(r).is_err() {
+                            break;
+                        }
+                    }
+                })
+        })
+        .collect::<Result<_, _>>()
+        .map_err(|e| CameraError::Stream {
+            device: "writer threads".into(),
+            reason: e.to_string(),
+        })?;
+    drop((frame_rx, written_tx));
+
+    link.arm()?;
+    link.start()?;
+
+    let expected = match plan.board.pulses {
+        PulseCount::Count(n) => Some(u64::from(n)),
+        PulseCount::Continuous => None,
+    };
+    let mut state = LoopState::new(plan.pairing, expected);
+    let end_reason = state.run(
+        link,
+        &mut session,
+        &written_rx,
+        &clock,
+        plan,
+        stop,
+        started,
+        &mut progress,
+    )?;
+    // wind down: stop the board (idempotent), then the camera, then drain what is in flight
+    if link.is_connected()
+        && let Err(e) = link.stop()
+    {
+        tracing::warn!("stopping the trigger board: {e}");
+    }
+    camera_stop.store(true, Ordering::Release);
+    let camera_counters = camera_thread.join().unwrap_or_default();
+    for w in writers {
+        let _ = w.join();
+    }
+    for w in written_rx.try_iter() {
+        state.on_written(w?, &mut session, &clock)?;
+    }
+    let outcomes = state.pairer.finish();
+    state.log_outcomes(&outcomes, &mut session, clock_now())?;
+    let counters = link.counters();
+    session.log(&SessionEvent::Link {
+        t_host_us: clock_now(),
+        counters,
+    })?;
+    let report = CaptureReport {
+        end_reason: end_reason.clone(),
+        duration_s: started.elapsed().as_secs_f64(),
+        pulses: state.pulses,
+        frames: session.frames_written(),
+        flagged: state.flagged,
+        pairing: state.pairer.counts(),
+        link: counters,
+        camera: camera_counters,
+        board_faults: state.faults,
+        clock: Some(clock),
+    };
+    let dir = session.finish(clock_now(), &end_reason)?;
+    Ok((report, dir))
+}
+
+struct LoopState {
+    pairer: Pairer,
+    expected: Option<u64>,
+    pulses: u64,
+    flagged: u64,
+    faults: u64,
+    board_done: bool,
+    done_since: Option<Instant>,
+}
+
+impl LoopState {
+    fn new(pairing: PairingConfig, expected: Option<u64>) -> Self {
+        Self {
+            pairer: Pairer::new(pairing),
+            expected,
+            pulses: 0,
+            flagged: 0,
+            faults: 0,
+            board_done: false,
+            done_since: None,
+        }
+    }
+
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "one call site; the loop's whole context"
+    )]
+    fn run(
+        &mut self,
+        link: &TriggerLink,
+        session: &mut SessionWriter,
+        written: &Receiver<Result<Written, SessionError>>,
+        clock: &ClockFit,
+        plan: &CapturePlan,
+        stop: &AtomicBool,
+        started: Instant,
+        progress: &mut impl FnMut(&CaptureProgress),
+    ) -> Result<String, SessionError> {
+        let events = link.events().clone();
+        let now = || link.host_clock().now();
+        // after the last pulse, frames may still be in flight for up to the pulse timeout
+        let grace =
+            Duration::from_micros(plan.pairing.max_latency_us as u64) + Duration::from_secs(1);
+        let mut last_progress = Instant::now();
+        loop {
+            if stop.load(Ordering::Acquire) {
+                return Ok("stopped by user".into());
+            }
+            if started.elapsed() > plan.max_duration {
+                return Ok(format!(
+                    "time limit of {} s reached",
+                    plan.max_duration.as_secs()
+                ));
+            }
+            if let Some(t) = self.done_since {
+                let all_in = self
+                    .expected
+                    .is_some_and(|n| self.pairer.counts().paired >= n);
+                if all_in || t.elapsed() > grace {
+                    return Ok("completed".into());
+                }
+            }
+            select! {
+                recv(events) -> ev => match ev {
+                    Ok(ev) => {
+                        if let Some(reason) = self.on_link_event(ev, session, clock, now())? {
+                            return Ok(reason);
+                        }
+                    }
+                    Err(_) => return Ok("trigger link closed".into()),
+                },
+                recv(written) -> w => match w {
+                    Ok(w) => self.on_written(w?, session, clock)?,
+                    Err(_) => return Ok("camera stream ended".into()),
+                },
+                default(Duration::from_millis(50)) => {}
+            }
+            let outcomes = self.pairer.expire(now(), Some(clock));
+            self.log_outcomes(&outcomes, session, now())?;
+            if last_progress.elapsed() > Duration::from_millis(100) {
+                last_progress = Instant::now();
+                let c = self.pairer.counts();
+                let frames = session.frames_written();
+                progress(&CaptureProgress {
+                    pulses: self.pulses,
+                    frames,
+                    expected: self.expected,
+                    paired: c.paired,
+                    pairing_errors: c.frame_without_pulse
+                        + c.pulse_without_frame
+                        + c.duplicate_frames
+                        + c.duplicate_pulses,
+                    camera_drops: self.flagged,
+                    fps: frames as f64 / started.elapsed().as_secs_f64().max(1e-3),
+                });
+            }
+        }
+    }
+
+    /// Handles one link event; `Some(reason)` ends the capture.
+    fn on_link_event(
+        &mut self,
+        ev: LinkEvent,
+        session: &mut SessionWriter,
+        clock: &ClockFit,
+        t: HostTimeUs,
+    ) -> Result<Option<String>, SessionError> {
+        match ev {
+            LinkEvent::Pulse { event, t_host_recv } => {
+                self.pulses += 1;
+                session.log(&SessionEvent::Pulse {
+                    t_host_us: t_host_recv,
+                    seq: event.seq,
+                    t_trigger_device_us: DeviceTimeUs(event.t_trigger_us),
+                    t_flash_on_device_us: DeviceTimeUs(event.t_flash_on_us),
+                    t_flash_off_device_us: DeviceTimeUs(event.t_flash_off_us),
+                    flags: event.flags,
+                })?;
+                let out = self.pairer.add_pulse(
+                    event.seq,
+                    DeviceTimeUs(event.t_trigger_us),
+                    t_host_recv,
+                    Some(clock),
+                );
+                self.log_outcomes(&out, session, t)?;
+                if self.expected.is_some_and(|n| self.pulses >= n) {
+                    self.mark_done();
+                }
+            }
+            LinkEvent::Fault { fault, t_host_recv } => {
+                self.faults += 1;
+                session.log(&SessionEvent::Fault {
+                    t_host_us: t_host_recv,
+                    what: format!("{fault:?}"),
+                })?;
+            }
+            LinkEvent::Status(s) => {
+                if self.expected.is_some() && s.state == BoardState::Configured {
+                    self.mark_done();
+                }
+            }
+            LinkEvent::Edge(_) => {}
+            LinkEvent::Disconnected { reason } => {
+                session.log(&SessionEvent::Disconnected {
+                    t_host_us: t,
+                    reason: reason.clone(),
+                })?;
+                return Ok(Some(format!("trigger link disconnected: {reason}")));
+            }
+        }
+        Ok(None)
+    }
+
+    fn mark_done(&mut self) {
+        if !self.board_done {
+            self.board_done = true;
+            self.done_since = Some(Instant::now());
+        }
+    }
+
+    fn on_written(
+        &mut self,
+        w: Written,
+        session: &mut SessionWriter,
+        clock: &ClockFit,
+    ) -> Result<(), SessionError> {
+        session.commit_frame(w.prepared)?;
+        if w.flagged {
+            self.flagged += 1;
+        }
+        let out = self.pairer.add_frame(w.frame_id, w.t_host_us, Some(clock));
+        self.log_outcomes(&out, session, w.t_host_us)
+    }
+
+    fn log_outcomes(
+        &mut self,
+        outcomes: &[PairingOutcome],
+        session: &mut SessionWriter,
+        t: HostTimeUs,
+    ) -> Result<(), SessionError> {
+        for o in outcomes {
+            let (kind, frame_id, seq) = match *o {
+                PairingOutcome::Paired {
+                    frame_id,
+                    seq,
+                    latency_us,
+                } => {
+                    session.log(&SessionEvent::Pairing {
+                        t_host_us: t,
+                        frame_id,
+                        seq,
+                        latency_us,
+                    })?;
+                    continue;
+                }
+                PairingOutcome::FrameWithoutPulse { frame_id } => {
+                    ("frame_without_pulse", Some(frame_id), None)
+                }
+                PairingOutcome::PulseWithoutFrame { seq } => {
+                    ("pulse_without_frame", None, Some(seq))
+                }
+                PairingOutcome::DuplicateFrame { frame_id } => {
+                    ("duplicate_frame", Some(frame_id), None)
+                }
+                PairingOutcome::DuplicatePulse { seq } => ("duplicate_pulse", None, Some(seq)),
+            };
+            session.log(&SessionEvent::PairingError {
+                t_host_us: t,
+                kind: kind.into(),
+                frame_id,
+                seq,
+            })?;
+        }
+        Ok(())
+    }
+}
