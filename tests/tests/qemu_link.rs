@@ -48,6 +48,7 @@ fn link_config() -> LinkConfig {
             max_round_trip_us: 200_000,
             ..ClockModelConfig::default()
         },
+        ..LinkConfig::default()
     }
 }
 
