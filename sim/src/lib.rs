@@ -1,5 +1,7 @@
 //! `ellipso-sim`: the forward model of the ellipso rig.
 //!
+//! - [`camera`]: the pinhole + Brown–Conrady camera model (OpenCV conventions) with analytic
+//!   Jacobians, shared by the renderer and the host's pose estimation and calibration.
 //! - [`optics`]: Stokes vectors, Mueller matrices, Fresnel, GGX, the polarimetric BRDF
 //!   (diffuse, specular, single scattering) and the polarisation-camera measurement model.
 //!   The fit in `ellipso-host` inverts exactly these functions: one model, never two copies.
@@ -8,6 +10,7 @@
 //!
 //! Later modules (renderer, sensor effects, virtual rig) build on these.
 
+pub mod camera;
 pub mod mosaic;
 pub mod optics;
 pub mod scene;

@@ -1,0 +1,638 @@
+//! Board tests: the state table, every rejection, Hello/Ping/Status, FireOne and grip-button
+//! captures, completion, stop, bad frames through the byte path, and dropped replies.
+
+use super::*;
+use crate::config::{LED_RIG_LIMITS, SequencerTiming};
+use crate::outputs::{OutputEdge, PinOutputs, RecordingOutputs};
+use crate::sink::{FrameWriter, TxQueue};
+use ellipso_protocol::{
+    BadFrameKind, CaptureConfig, MAX_FRAME_LEN, Output, PROTOCOL_VERSION, PulseCount, PulseEvent,
+    encode,
+};
+use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as T};
+
+const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;
+
+struct Rig {
+    board: Board,
+    out: RecordingOutputs<64>,
+}
+
+impl Rig {
+    fn new() -> Self {
+        let board = Board::new(BoardConfig::new("test-board", 1_000_000)).unwrap();
+        Self {
+            board,
+            out: RecordingOutputs::new(),
+        }
+    }
+
+    /// Handles `msg` at `now_us`; returns every message the board sent.
+    fn send(&mut self, msg: HostMessage, now_us: u64) -> Vec<BoardMessage> {
+        let mut got = Vec::new();
+        self.board
+            .handle(msg, now_us, &mut self.out, &mut |m| got.push(m));
+        got
+    }
+
+    /// Polls at every deadline up to and including `until_us`.
+    fn run_until(&mut self, until_us: u64) -> Vec<BoardMessage> {
+        let mut got = Vec::new();
+        while let Some(t) = self.board.next_deadline().filter(|&t| t <= until_us) {
+            self.board.poll(t, &mut self.out, &mut |m| got.push(m));
+        }
+        got
+    }
+
+    fn armed(config: CaptureConfig) -> Self {
+        let mut rig = Self::new();
+        assert_eq!(
+            rig.send(HostMessage::Configure(config), 0),
+            [ack(CommandKind::Configure)]
+        );
+        assert_eq!(rig.send(HostMessage::Arm, 0), [ack(CommandKind::Arm)]);
+        rig
+    }
+}
+
+fn ack(kind: CommandKind) -> BoardMessage {
+    BoardMessage::Ack(kind)
+}
+
+fn rejected(command: CommandKind, reason: RejectReason) -> BoardMessage {
+    BoardMessage::Rejected { command, reason }
+}
+
+fn config(trigger: TriggerSource, pulses: PulseCount) -> CaptureConfig {
+    CaptureConfig {
+        exposure_us: 1_000,
+        flash_delay_us: 100,
+        flash_duration_us: 500,
+        frame_period_us: 50_000,
+        pulses,
+        trigger,
+        report_edges: false,
+    }
+}
+
+fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
+    msgs.iter()
+        .filter_map(|m| {
+            if let BoardMessage::Pulse(p) = m {
+                Some(*p)
+            } else {
+                None
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn hello_answers_with_the_boards_version_even_when_the_hosts_differs() {
+    let mut rig = Rig::new();
+    let other = PROTOCOL_VERSION.wrapping_add(1);
+    let got = rig.send(
+        HostMessage::Hello {
+            protocol_version: other,
+        },
+        0,
+    );
+    assert_eq!(got, [BoardMessage::HelloReply(rig.board.info().clone())]);
+    let BoardMessage::HelloReply(info) = &got[0] else {
+        unreachable!()
+    };
+    assert_eq!(info.protocol_version, PROTOCOL_VERSION);
+    assert_eq!(info.board_name.as_str(), "test-board");
+    assert_eq!(rig.board.host_protocol_version(), Some(other));
+    assert_eq!(rig.board.state(), BoardState::Idle, "Hello changes nothing");
+}
+
+#[test]
+fn after_a_mismatched_hello_only_safe_commands_are_obeyed() {
+    let mut rig = Rig::new();
+    let board_version = PROTOCOL_VERSION;
+    let mismatch = RejectReason::ProtocolMismatch {
+        board: board_version,
+    };
+    rig.send(
+        HostMessage::Hello {
+            protocol_version: board_version.wrapping_add(1),
+        },
+        0,
+    );
+    let c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    assert_eq!(
+        rig.send(HostMessage::Configure(c), 0),
+        [rejected(CommandKind::Configure, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::Arm, 0),
+        [rejected(CommandKind::Arm, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::Start, 0),
+        [rejected(CommandKind::Start, mismatch)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 0),
+        [rejected(CommandKind::FireOne, mismatch)]
+    );
+    assert_eq!(rig.send(HostMessage::Stop, 0), [ack(CommandKind::Stop)]);
+    assert!(matches!(
+        rig.send(HostMessage::StatusRequest, 0)[..],
+        [BoardMessage::Status(_)]
+    ));
+    assert_eq!(rig.board.state(), BoardState::Idle);
+    // A Hello with the board's version lifts the refusal.
+    rig.send(
+        HostMessage::Hello {
+            protocol_version: board_version,
+        },
+        0,
+    );
+    assert_eq!(
+        rig.send(HostMessage::Configure(c), 0),
+        [ack(CommandKind::Configure)]
+    );
+}
+
+#[test]
+fn ping_is_answered_with_the_device_time() {
+    let mut rig = Rig::new();
+    let got = rig.send(HostMessage::Ping { nonce: 0xdead_beef }, 123_456_789_012);
+    assert_eq!(
+        got,
+        [BoardMessage::Pong {
+            nonce: 0xdead_beef,
+            t_device_us: 123_456_789_012
+        }]
+    );
+}
+
+#[test]
+fn the_state_table_for_a_free_run() {
+    let mut rig = Rig::new();
+    let free = config(TriggerSource::FreeRun, PulseCount::Continuous);
+    use CommandKind as K;
+    use RejectReason as R;
+    // Idle
+    assert_eq!(
+        rig.send(HostMessage::Arm, 0),
+        [rejected(K::Arm, R::NotConfigured)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::Start, 0),
+        [rejected(K::Start, R::NotConfigured)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 0),
+        [rejected(K::FireOne, R::NotConfigured)]
+    );
+    assert_eq!(rig.send(HostMessage::Stop, 0), [ack(K::Stop)]);
+    assert_eq!(rig.board.state(), BoardState::Idle);
+    // Configured
+    assert_eq!(
+        rig.send(HostMessage::Configure(free), 0),
+        [ack(K::Configure)]
+    );
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert_eq!(
+        rig.send(HostMessage::Start, 0),
+        [rejected(K::Start, R::NotArmed)]
+    );
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 0),
+        [rejected(K::FireOne, R::WrongTriggerSource)]
+    );
+    // Armed
+    assert_eq!(rig.send(HostMessage::Arm, 0), [ack(K::Arm)]);
+    assert_eq!(rig.send(HostMessage::Arm, 0), [ack(K::Arm)]);
+    assert_eq!(rig.board.state(), BoardState::Armed);
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 0),
+        [rejected(K::FireOne, R::WrongTriggerSource)]
+    );
+    // Running
+    assert_eq!(rig.send(HostMessage::Start, 10), [ack(K::Start)]);
+    assert_eq!(rig.board.state(), BoardState::Running);
+    assert_eq!(rig.board.next_deadline(), Some(10 + LEAD));
+    assert_eq!(
+        rig.send(HostMessage::Configure(free), 20),
+        [rejected(K::Configure, R::Busy)]
+    );
+    assert_eq!(rig.send(HostMessage::Arm, 20), [rejected(K::Arm, R::Busy)]);
+    assert_eq!(
+        rig.send(HostMessage::Start, 20),
+        [rejected(K::Start, R::Busy)]
+    );
+    assert_eq!(rig.send(HostMessage::Stop, 30), [ack(K::Stop)]);
+    assert_eq!(
+        rig.board.state(),
+        BoardState::Configured,
+        "every capture needs its own Arm"
+    );
+    // Stop and Configure both disarm.
+    assert_eq!(rig.send(HostMessage::Arm, 40), [ack(K::Arm)]);
+    assert_eq!(rig.send(HostMessage::Stop, 40), [ack(K::Stop)]);
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert_eq!(rig.send(HostMessage::Arm, 40), [ack(K::Arm)]);
+    assert_eq!(
+        rig.send(HostMessage::Configure(free), 40),
+        [ack(K::Configure)]
+    );
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert_eq!(rig.out.edges().count(), 0, "no pulse was ever due");
+    assert_eq!(rig.board.faults().rejected_commands, 9);
+}
+
+#[test]
+fn configure_rejects_every_invalid_config_with_its_reason_and_keeps_the_old_plan() {
+    let good = config(TriggerSource::FreeRun, PulseCount::Count(3));
+    let mut rig = Rig::armed(good);
+    type Edit = fn(&mut CaptureConfig);
+    let cases: [(Edit, RejectReason); 7] = [
+        (|c| c.exposure_us = 1, RejectReason::ExposureOutOfRange),
+        (|c| c.frame_period_us = 1, RejectReason::PeriodOutOfRange),
+        (
+            |c| c.pulses = PulseCount::Count(0),
+            RejectReason::CountOutOfRange,
+        ),
+        (
+            |c| c.flash_delay_us = 900,
+            RejectReason::FlashOutsideExposure,
+        ),
+        (
+            |c| {
+                c.exposure_us = 9_000;
+                c.flash_duration_us = 6_000;
+            },
+            RejectReason::FlashTooLong { max_us: 5_000 },
+        ),
+        (
+            |c| {
+                c.exposure_us = 3_000;
+                c.flash_delay_us = 0;
+                c.flash_duration_us = 2_500;
+                c.frame_period_us = 23_000; // 2.5 / 23 = 10.9 %
+            },
+            RejectReason::DutyCycleTooHigh { max_permille: 100 },
+        ),
+        (
+            |c| {
+                c.flash_duration_us = 0;
+                c.frame_period_us = 20_500;
+            },
+            RejectReason::PeriodTooShort { min_us: 21_000 },
+        ),
+    ];
+    for (edit, reason) in cases {
+        let mut c = good;
+        edit(&mut c);
+        assert_eq!(
+            rig.send(HostMessage::Configure(c), 0),
+            [rejected(CommandKind::Configure, reason)]
+        );
+        assert_eq!(
+            rig.board.state(),
+            BoardState::Armed,
+            "a rejection changes nothing"
+        );
+        assert_eq!(rig.board.plan().map(|p| *p.config()), Some(good));
+    }
+    assert_eq!(rig.board.faults().rejected_commands, 7);
+}
+
+#[test]
+fn arm_drives_both_outputs_low_on_real_pins() {
+    let mut board = Board::new(BoardConfig::new("pins", 1_000_000)).unwrap();
+    let mut out = PinOutputs::new(
+        PinMock::new(&[T::set(State::Low), T::set(State::High), T::set(State::Low)]),
+        PinMock::new(&[T::set(State::Low), T::set(State::High), T::set(State::Low)]),
+    );
+    let mut sink = |_| {};
+    let c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    board.handle(HostMessage::Configure(c), 0, &mut out, &mut sink);
+    board.handle(HostMessage::Arm, 0, &mut out, &mut sink);
+    board.handle(HostMessage::Start, 0, &mut out, &mut sink);
+    while let Some(t) = board.next_deadline() {
+        board.poll(t, &mut out, &mut sink);
+    }
+    let (mut cam, mut flash) = out.release();
+    cam.done();
+    flash.done();
+}
+
+#[test]
+fn a_counted_free_run_completes_by_itself_and_sends_a_status() {
+    let mut rig = Rig::armed(config(TriggerSource::FreeRun, PulseCount::Count(3)));
+    rig.send(HostMessage::Start, 0);
+    let got = rig.run_until(u64::MAX);
+    assert_eq!(
+        pulses(&got).iter().map(|p| p.seq).collect::<Vec<_>>(),
+        [0, 1, 2]
+    );
+    let end = LEAD + 2 * 50_000 + 1_000;
+    assert_eq!(
+        got.last(),
+        Some(&BoardMessage::Status(Status {
+            state: BoardState::Configured,
+            pulses_fired: 3,
+            t_device_us: end,
+            faults: FaultCounters::default(),
+        }))
+    );
+    assert_eq!(rig.board.next_deadline(), None);
+    assert_eq!(
+        rig.send(HostMessage::Start, end),
+        [rejected(CommandKind::Start, RejectReason::NotArmed)]
+    );
+}
+
+#[test]
+fn a_continuous_capture_runs_until_stop_and_stop_turns_the_flash_off_first() {
+    let mut rig = Rig::armed(config(TriggerSource::FreeRun, PulseCount::Continuous));
+    rig.send(HostMessage::Start, 0);
+    let got = rig.run_until(10 * 50_000 + LEAD + 100);
+    assert_eq!(pulses(&got).len(), 10);
+    assert!(rig.out.flash_high(), "pulse 10's flash is lit");
+    let got = rig.send(HostMessage::Stop, 10 * 50_000 + LEAD + 200);
+    assert!(!rig.out.flash_high() && !rig.out.camera_high());
+    // The truncated pulse is reported before the Ack.
+    assert_eq!(pulses(&got).len(), 1);
+    assert_eq!(got.last(), Some(&ack(CommandKind::Stop)));
+    let n = rig.out.edges().count();
+    assert!(rig.run_until(u64::MAX).is_empty());
+    assert_eq!(rig.out.edges().count(), n, "no edge after Stop");
+    let last: Vec<_> = rig.out.edges().skip(n - 2).copied().collect();
+    let t = 10 * 50_000 + LEAD + 200;
+    assert_eq!(
+        last,
+        [
+            OutputEdge {
+                output: Output::Flash,
+                high: false,
+                t_device_us: t
+            },
+            OutputEdge {
+                output: Output::CameraTrigger,
+                high: false,
+                t_device_us: t
+            },
+        ]
+    );
+}
+
+#[test]
+fn fire_one_starts_from_armed_and_refuses_too_soon_with_the_wait() {
+    let mut rig = Rig::armed(config(TriggerSource::HostCommand, PulseCount::Count(2)));
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 1_000),
+        [ack(CommandKind::FireOne)]
+    );
+    assert_eq!(rig.board.state(), BoardState::Running);
+    assert_eq!(rig.board.next_deadline(), Some(1_000 + LEAD));
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 31_000),
+        [rejected(
+            CommandKind::FireOne,
+            RejectReason::TooSoon { wait_us: 20_000 }
+        )]
+    );
+    let first = rig.run_until(40_000);
+    assert_eq!(pulses(&first)[0].t_trigger_us, 1_000 + LEAD);
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 51_000),
+        [ack(CommandKind::FireOne)]
+    );
+    let got = rig.run_until(u64::MAX);
+    assert_eq!(pulses(&got)[0].seq, 1);
+    assert!(
+        matches!(got.last(), Some(BoardMessage::Status(s)) if s.state == BoardState::Configured)
+    );
+}
+
+#[test]
+fn a_refused_fire_one_from_armed_stays_armed() {
+    // The sensor is still reading out the previous capture's last frame.
+    let mut rig = Rig::armed(config(TriggerSource::HostCommand, PulseCount::Count(1)));
+    rig.send(HostMessage::FireOne, 0);
+    rig.run_until(u64::MAX); // trigger falls at LEAD + 1000; readout until LEAD + 21 000
+    rig.send(HostMessage::Arm, LEAD + 1_000);
+    assert_eq!(
+        rig.send(HostMessage::FireOne, LEAD + 1_000),
+        [rejected(
+            CommandKind::FireOne,
+            RejectReason::TooSoon { wait_us: 19_000 }
+        )]
+    );
+    assert_eq!(rig.board.state(), BoardState::Armed);
+    assert_eq!(rig.board.next_deadline(), None);
+}
+
+#[test]
+fn the_grip_button_fires_debounced_by_the_frame_period() {
+    let mut rig = Rig::armed(config(TriggerSource::GripButton, PulseCount::Continuous));
+    assert_eq!(
+        rig.board.button_pressed(0),
+        ButtonOutcome::Ignored,
+        "not started"
+    );
+    rig.send(HostMessage::Start, 0);
+    assert_eq!(rig.board.next_deadline(), None, "waits for the button");
+    assert_eq!(
+        rig.board.button_pressed(5_000),
+        ButtonOutcome::Fired {
+            t_trigger_us: 5_000 + LEAD
+        }
+    );
+    // Contact bounce and a hasty second press within the 50 ms period are ignored.
+    for t in [5_001, 5_300, 20_000, 54_999] {
+        assert_eq!(rig.board.button_pressed(t), ButtonOutcome::Debounced);
+    }
+    let got = rig.run_until(u64::MAX);
+    assert_eq!(pulses(&got).len(), 1);
+    assert_eq!(
+        rig.board.button_pressed(55_000),
+        ButtonOutcome::Fired {
+            t_trigger_us: 55_000 + LEAD
+        }
+    );
+    assert_eq!(
+        rig.send(HostMessage::FireOne, 60_000),
+        [rejected(
+            CommandKind::FireOne,
+            RejectReason::WrongTriggerSource
+        )]
+    );
+    rig.send(HostMessage::Stop, 60_000);
+    assert_eq!(
+        rig.board.button_pressed(200_000),
+        ButtonOutcome::Ignored,
+        "stopped"
+    );
+}
+
+#[test]
+fn status_request_reports_state_pulses_and_faults() {
+    let mut rig = Rig::armed(config(TriggerSource::FreeRun, PulseCount::Count(1)));
+    rig.send(HostMessage::Start, 0);
+    // Stall the loop so the flash is forced off.
+    rig.board.poll(LEAD, &mut rig.out, &mut |_| {});
+    rig.board.poll(LEAD + 100, &mut rig.out, &mut |_| {});
+    rig.board
+        .poll(LEAD + 100 + 6_000, &mut rig.out, &mut |_| {});
+    rig.board.on_bad_frame(FrameError::BadCrc, &mut |_| {});
+    let got = rig.send(HostMessage::StatusRequest, 9_999);
+    let BoardMessage::Status(s) = got[0] else {
+        panic!("{got:?}")
+    };
+    assert_eq!(
+        (s.state, s.pulses_fired, s.t_device_us),
+        (BoardState::Configured, 1, 9_999)
+    );
+    assert_eq!(
+        s.faults,
+        FaultCounters {
+            bad_frames: 1,
+            late_edges: 2,
+            flash_forced_off: 1,
+            flash_skipped: 0,
+            tx_overflows: 0,
+            rejected_commands: 0,
+        }
+    );
+}
+
+fn frame(msg: &HostMessage) -> Vec<u8> {
+    let mut buf = [0u8; MAX_FRAME_LEN];
+    let n = encode(msg, &mut buf).unwrap();
+    buf[..n].to_vec()
+}
+
+#[test]
+fn bad_frames_are_counted_and_a_good_frame_after_them_is_handled() {
+    let mut rig = Rig::new();
+    let mut wire = Vec::new();
+    let mut corrupt = frame(&HostMessage::Ping { nonce: 1 });
+    corrupt[2] ^= 0x10; // CRC mismatch
+    wire.extend(&corrupt);
+    wire.extend([0x05, 0x01, 0x00]); // COBS code pointing past the end
+    wire.extend([0x42; MAX_FRAME_LEN + 10]); // overflow
+    wire.push(0);
+    wire.extend(frame(&HostMessage::Ping { nonce: 2 }));
+    let mut got = Vec::new();
+    for &b in &wire {
+        rig.board
+            .feed_rx_byte(b, 77, &mut rig.out, &mut |m| got.push(m));
+    }
+    assert_eq!(
+        got,
+        [
+            BoardMessage::Fault(Fault::BadFrame(BadFrameKind::Crc)),
+            BoardMessage::Fault(Fault::BadFrame(BadFrameKind::Cobs)),
+            BoardMessage::Fault(Fault::BadFrame(BadFrameKind::Overflow)),
+            BoardMessage::Pong {
+                nonce: 2,
+                t_device_us: 77
+            },
+        ]
+    );
+    assert_eq!(rig.board.faults().bad_frames, 3);
+}
+
+#[test]
+fn the_byte_path_round_trips_through_frame_writer() {
+    let mut rig = Rig::new();
+    let mut tx = FrameWriter::new(heapless::Deque::<u8, 512>::new());
+    let c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    for msg in [
+        HostMessage::Configure(c),
+        HostMessage::Arm,
+        HostMessage::Start,
+    ] {
+        for b in frame(&msg) {
+            rig.board.feed_rx_byte(b, 0, &mut rig.out, &mut tx);
+        }
+    }
+    while let Some(t) = rig.board.next_deadline() {
+        rig.board.poll(t, &mut rig.out, &mut tx);
+    }
+    let bytes: Vec<u8> = tx.bytes().iter().copied().collect();
+    let mut dec = ellipso_protocol::Decoder::<BoardMessage>::new();
+    let got: Vec<BoardMessage> = dec.feed(&bytes).map(Result::unwrap).collect();
+    assert_eq!(
+        got[..3],
+        [
+            ack(CommandKind::Configure),
+            ack(CommandKind::Arm),
+            ack(CommandKind::Start)
+        ]
+    );
+    assert!(matches!(
+        got[3],
+        BoardMessage::Pulse(PulseEvent { seq: 0, .. })
+    ));
+    assert!(matches!(got[4], BoardMessage::Status(_)));
+    assert_eq!(got.len(), 5);
+}
+
+#[test]
+fn edge_reports_follow_report_edges() {
+    let mut c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    c.report_edges = true;
+    let mut rig = Rig::armed(c);
+    rig.send(HostMessage::Start, 0);
+    let got = rig.run_until(u64::MAX);
+    let edges: Vec<_> = got
+        .iter()
+        .filter_map(|m| match m {
+            BoardMessage::Edge(e) => Some((e.output, e.high, e.t_device_us, e.seq)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(
+        edges,
+        [
+            (Output::CameraTrigger, true, LEAD, 0),
+            (Output::Flash, true, LEAD + 100, 0),
+            (Output::Flash, false, LEAD + 600, 0),
+            (Output::CameraTrigger, false, LEAD + 1_000, 0),
+        ]
+    );
+}
+
+#[test]
+fn dropped_replies_are_counted_and_change_nothing_else() {
+    let mut rig = Rig::new();
+    let mut q = TxQueue::<1>::new();
+    rig.board
+        .handle(HostMessage::Ping { nonce: 1 }, 0, &mut rig.out, &mut q);
+    rig.board
+        .handle(HostMessage::Ping { nonce: 2 }, 0, &mut rig.out, &mut q);
+    rig.board.on_bad_frame(FrameError::Malformed, &mut q);
+    let c = config(TriggerSource::FreeRun, PulseCount::Count(1));
+    rig.board
+        .handle(HostMessage::Configure(c), 0, &mut rig.out, &mut q);
+    assert_eq!(
+        rig.board.state(),
+        BoardState::Configured,
+        "applied though its Ack was dropped"
+    );
+    assert_eq!(
+        q.pop(),
+        Some(BoardMessage::Pong {
+            nonce: 1,
+            t_device_us: 0
+        })
+    );
+    assert_eq!(rig.board.faults().tx_overflows, 3);
+    assert_eq!(rig.board.faults().bad_frames, 1);
+}
+
+#[test]
+fn contradictory_board_configs_are_refused_at_construction() {
+    let mut c = BoardConfig::new("x", 1_000_000);
+    c.limits = LED_RIG_LIMITS;
+    c.limits.max_flash_on_us = 0;
+    assert_eq!(Board::new(c).err(), Some(ConfigError::ZeroFlashOnTime));
+}

@@ -1,0 +1,53 @@
+//! Raw mosaic frames as 16-bit grayscale PNG: lossless, viewable in any image viewer.
+//!
+//! Samples are stored unshifted (a 12-bit frame holds 0..=4095 in the 16-bit container), exactly as
+//! the camera delivered them; the bit depth is in the manifest. Reading rejects anything that is
+//! not a single-channel 16-bit PNG of the expected size.
+
+use std::path::Path;
+
+use image::{ImageBuffer, Luma};
+
+use super::SessionError;
+
+/// Writes `pixels` (row-major, `width × height`) to `path` as a 16-bit grayscale PNG.
+pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<(), SessionError> {
+    let bad = |reason: String| SessionError::BadFrame {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if pixels.len() != width as usize * height as usize {
+        return Err(bad(format!(
+            "{} samples for a {width}×{height} frame",
+            pixels.len()
+        )));
+    }
+    let img: ImageBuffer<Luma<u16>, &[u16]> =
+        ImageBuffer::from_raw(width, height, pixels).ok_or_else(|| bad("buffer size".into()))?;
+    img.save_with_format(path, image::ImageFormat::Png)
+        .map_err(|e| bad(e.to_string()))
+}
+
+/// Reads a 16-bit grayscale PNG: `(width, height, pixels)`.
+pub fn read(path: &Path) -> Result<(u32, u32, Vec<u16>), SessionError> {
+    let bad = |reason: String| SessionError::BadFrame {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let img = image::ImageReader::open(path)
+        .map_err(SessionError::io(path))?
+        .with_guessed_format()
+        .map_err(SessionError::io(path))?
+        .decode()
+        .map_err(|e| bad(format!("not a readable PNG: {e}")))?;
+    match img {
+        image::DynamicImage::ImageLuma16(buf) => {
+            let (w, h) = buf.dimensions();
+            Ok((w, h, buf.into_raw()))
+        }
+        other => Err(bad(format!(
+            "expected a single-channel 16-bit raw mosaic, found {:?}",
+            other.color()
+        ))),
+    }
+}

@@ -1,0 +1,104 @@
+//! `manifest.json`: what a session captured, with what, by which software, in which schema.
+//!
+//! The rig, calibration and board sections are stored as the JSON of the configuration they were
+//! captured with (the scene's or rig file's sections), so a session is self-describing without
+//! this module depending on every configuration type. Readers parse them with the owning module's
+//! types.
+
+use serde::{Deserialize, Serialize};
+
+/// How the sensor's raw frames are laid out.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorInfo {
+    /// Mosaic layout name, e.g. `mono_polar` (IMX250MZR) or `colour_polar` (IMX250MYR).
+    pub layout: String,
+    /// Frame width, px.
+    pub width: u32,
+    /// Frame height, px.
+    pub height: u32,
+    /// Significant bits per pixel (8, 10, 12, 16) in the 16-bit PNG container.
+    pub bit_depth: u8,
+}
+
+/// Where the frames came from.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum SessionSource {
+    /// The simulated rig.
+    Simulator {
+        /// Scene file as given.
+        scene: String,
+        /// Seed.
+        seed: u64,
+    },
+    /// The physical rig.
+    Hardware {
+        /// Trigger board port.
+        trigger_port: String,
+        /// Camera backend and identifier, e.g. `aravis:127.0.0.1`.
+        camera: String,
+    },
+    /// A replay of another session.
+    Replay {
+        /// The original session directory.
+        original: String,
+    },
+}
+
+/// How a session ended (absent while capturing, or when killed).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EndRecord {
+    /// Wall time at the end, µs since the Unix epoch.
+    pub ended_unix_us: u64,
+    /// Why it ended: `completed`, `stopped by user`, `trigger link disconnected`, ….
+    pub reason: String,
+    /// Frames written.
+    pub frames: u64,
+    /// Frames paired with a pulse.
+    pub paired: u64,
+}
+
+/// The manifest.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    /// [`SCHEMA_VERSION`](super::SCHEMA_VERSION) of the writer.
+    pub schema_version: u32,
+    /// Writer software and version, e.g. `ellipso 0.1.0`.
+    pub software: String,
+    /// Wall time of the host clock's epoch (host times in the log count from it), µs since Unix epoch.
+    pub host_epoch_unix_us: u64,
+    /// Source of the frames.
+    pub source: SessionSource,
+    /// Sensor layout of the raw frames.
+    pub sensor: SensorInfo,
+    /// Rig description (camera model, flash offset, polariser…), as configured.
+    #[serde(default)]
+    pub rig: serde_json::Value,
+    /// Calibration in force, if any.
+    #[serde(default)]
+    pub calibration: Option<serde_json::Value>,
+    /// AprilTag boards of the capture.
+    #[serde(default)]
+    pub boards: Vec<serde_json::Value>,
+    /// Set when the session ended cleanly.
+    #[serde(default)]
+    pub end: Option<EndRecord>,
+}
+
+impl Manifest {
+    /// A manifest for a new session written by this build.
+    pub fn new(source: SessionSource, sensor: SensorInfo, host_epoch_unix_us: u64) -> Self {
+        Self {
+            schema_version: super::SCHEMA_VERSION,
+            software: format!("ellipso {}", env!("CARGO_PKG_VERSION")),
+            host_epoch_unix_us,
+            source,
+            sensor,
+            rig: serde_json::Value::Null,
+            calibration: None,
+            boards: Vec::new(),
+            end: None,
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! Opens a recorded session for replay, tolerating what a crash or bad media leaves behind.
+//!
+//! - A missing or unparsable manifest is an error naming the file, line and column.
+//! - A truncated last line of the log (a write cut by SIGKILL) is dropped and reported.
+//! - A corrupt line elsewhere is skipped and reported with its line number; the rest is kept.
+//! - The `frames/` directory is the truth for which frames exist: a frame whose event was never
+//!   written (killed between rename and log) is still listed, without metadata; a `frame` event
+//!   whose file is missing is reported. Temporary `.partial` files are ignored.
+
+use std::collections::BTreeMap;
+use std::fs;
+use std::path::{Path, PathBuf};
+
+use super::events::{FrameStatus, SessionEvent};
+use super::manifest::Manifest;
+use super::{SCHEMA_VERSION, SessionError, frame_png, paths};
+
+/// One frame of a session.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameEntry {
+    /// Frame id.
+    pub frame_id: u64,
+    /// Path of its PNG.
+    pub path: PathBuf,
+    /// Its `frame` event, if it was written.
+    pub event: Option<SessionEvent>,
+    /// The pulse it was paired with, if any.
+    pub pulse_seq: Option<u64>,
+    /// False when the frame was flagged incomplete at capture.
+    pub complete: bool,
+}
+
+/// What reading found wrong (nothing here prevents replay).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReadReport {
+    /// The last line of the log was cut short and dropped.
+    pub truncated_last_line: bool,
+    /// Corrupt lines skipped: (line number from 1, error).
+    pub bad_lines: Vec<(usize, String)>,
+    /// Frames on disk without a `frame` event.
+    pub frames_without_event: Vec<u64>,
+    /// `frame` events whose file is missing.
+    pub events_without_frame: Vec<u64>,
+    /// The manifest has an end record (the capture ended cleanly).
+    pub ended_cleanly: bool,
+}
+
+impl ReadReport {
+    /// One-line human summary.
+    pub fn summary(&self) -> String {
+        let mut parts = Vec::new();
+        if !self.ended_cleanly {
+            parts.push("capture did not end cleanly (no end record)".to_string());
+        }
+        if self.truncated_last_line {
+            parts.push("last log line truncated".to_string());
+        }
+        if !self.bad_lines.is_empty() {
+            parts.push(format!(
+                "{} corrupt log lines skipped",
+                self.bad_lines.len()
+            ));
+        }
+        if !self.frames_without_event.is_empty() {
+            parts.push(format!(
+                "{} frames without metadata",
+                self.frames_without_event.len()
+            ));
+        }
+        if !self.events_without_frame.is_empty() {
+            parts.push(format!(
+                "{} logged frames missing on disk",
+                self.events_without_frame.len()
+            ));
+        }
+        if parts.is_empty() {
+            "intact".to_string()
+        } else {
+            parts.join("; ")
+        }
+    }
+}
+
+/// A session opened for reading.
+#[derive(Debug, Clone)]
+pub struct Session {
+    /// Its directory.
+    pub dir: PathBuf,
+    /// The manifest.
+    pub manifest: Manifest,
+    /// Every readable event, in log order.
+    pub events: Vec<SessionEvent>,
+    /// Every frame on disk, by id.
+    pub frames: Vec<FrameEntry>,
+    /// What was wrong.
+    pub report: ReadReport,
+}
+
+impl Session {
+    /// Loads a frame's raw samples: `(width, height, pixels)`, checked against the manifest.
+    pub fn load_frame(&self, entry: &FrameEntry) -> Result<(u32, u32, Vec<u16>), SessionError> {
+        let (w, h, px) = frame_png::read(&entry.path)?;
+        let s = &self.manifest.sensor;
+        if (w, h) != (s.width, s.height) {
+            return Err(SessionError::BadFrame {
+                path: entry.path.clone(),
+                reason: format!("{w}×{h} but the manifest says {}×{}", s.width, s.height),
+            });
+        }
+        Ok((w, h, px))
+    }
+}
+
+/// Opens the session in `dir`.
+pub fn open(dir: &Path) -> Result<Session, SessionError> {
+    let manifest_path = dir.join(paths::MANIFEST);
+    let text = fs::read_to_string(&manifest_path).map_err(SessionError::io(&manifest_path))?;
+    // check the version before the shape, so a newer schema gets the right message
+    if let Ok(v) = serde_json::from_str::<serde_json::Value>(&text)
+        && let Some(found) = v.get("schema_version").and_then(|x| x.as_u64())
+        && found as u32 != SCHEMA_VERSION
+    {
+        return Err(SessionError::UnsupportedVersion {
+            path: manifest_path,
+            found: found as u32,
+            supported: SCHEMA_VERSION,
+        });
+    }
+    let manifest: Manifest =
+        serde_json::from_str(&text).map_err(|e| SessionError::BadManifest {
+            path: manifest_path.clone(),
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string(),
+        })?;
+    let mut report = ReadReport {
+        ended_cleanly: manifest.end.is_some(),
+        ..ReadReport::default()
+    };
+
+    let log_path = dir.join(paths::EVENTS);
+    let log = match fs::read(&log_path) {
+        Ok(b) => b,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+        Err(e) => {
+            return Err(SessionError::Io {
+                path: log_path,
+                source: e,
+            });
+        }
+    };
+    let ends_with_newline = log.last() == Some(&b'\n');
+    let lines: Vec<&[u8]> = log.split(|&b| b == b'\n').collect();
+    let mut events = Vec::new();
+    for (i, line) in lines.iter().enumerate() {
+        if line.iter().all(u8::is_ascii_whitespace) {
+            continue;
+        }
+        let is_last = i + 1 == lines.len();
+        match serde_json::from_slice::<SessionEvent>(line) {
+            Ok(e) => events.push(e),
+            Err(_) if is_last && !ends_with_newline => report.truncated_last_line = true,
+            Err(e) => report.bad_lines.push((i + 1, e.to_string())),
+        }
+    }
+
+    let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
+    let mut pairs: BTreeMap<u64, u64> = BTreeMap::new();
+    for e in &events {
+        match e {
+            SessionEvent::Frame { frame_id, .. } => {
+                logged.insert(*frame_id, e.clone());
+            }
+            SessionEvent::Pairing { frame_id, seq, .. } => {
+                pairs.insert(*frame_id, *seq);
+            }
+            _ => {}
+        }
+    }
+
+    let frames_dir = dir.join(paths::FRAMES);
+    let mut on_disk: BTreeMap<u64, PathBuf> = BTreeMap::new();
+    if frames_dir.is_dir() {
+        for entry in fs::read_dir(&frames_dir).map_err(SessionError::io(&frames_dir))? {
+            let path = entry.map_err(SessionError::io(&frames_dir))?.path();
+            let name = path
+                .file_name()
+                .and_then(|n| n.to_str())
+                .unwrap_or_default();
+            if let Some(id) = name
+                .strip_suffix(".png")
+                .and_then(|s| s.parse::<u64>().ok())
+            {
+                on_disk.insert(id, path);
+            }
+        }
+    }
+    report.events_without_frame = logged
+        .keys()
+        .filter(|id| !on_disk.contains_key(id))
+        .copied()
+        .collect();
+    let frames = on_disk
+        .into_iter()
+        .map(|(frame_id, path)| {
+            let event = logged.get(&frame_id).cloned();
+            if event.is_none() {
+                report.frames_without_event.push(frame_id);
+            }
+            let complete = !matches!(
+                event,
+                Some(SessionEvent::Frame {
+                    status: FrameStatus::Flagged { .. },
+                    ..
+                })
+            );
+            FrameEntry {
+                frame_id,
+                path,
+                event,
+                pulse_seq: pairs.get(&frame_id).copied(),
+                complete,
+            }
+        })
+        .collect();
+    Ok(Session {
+        dir: dir.to_path_buf(),
+        manifest,
+        events,
+        frames,
+        report,
+    })
+}
+
+#[cfg(test)]
+mod tests;

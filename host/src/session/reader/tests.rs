@@ -1,0 +1,203 @@
+//! Write a session, damage it the ways crashes and media do, read it back.
+
+use std::fs;
+use std::io::Write;
+
+use super::*;
+use crate::link::time::HostTimeUs;
+use crate::session::manifest::{SensorInfo, SessionSource};
+use crate::session::writer::{FrameRecord, SessionWriter};
+
+fn manifest() -> Manifest {
+    Manifest::new(
+        SessionSource::Simulator {
+            scene: "sphere.toml".into(),
+            seed: 7,
+        },
+        SensorInfo {
+            layout: "mono_polar".into(),
+            width: 8,
+            height: 6,
+            bit_depth: 12,
+        },
+        1_700_000_000_000_000,
+    )
+}
+
+fn pixels(id: u64) -> Vec<u16> {
+    (0..48)
+        .map(|i| ((i as u64 * 97 + id * 13) % 4096) as u16)
+        .collect()
+}
+
+fn record(w: &mut SessionWriter, id: u64) {
+    let px = pixels(id);
+    w.write_frame(FrameRecord {
+        t_host_us: HostTimeUs(id * 1000),
+        frame_id: id,
+        t_camera_ns: Some(id * 1_000_000),
+        exposure_us: 8000,
+        gain_db: 0.0,
+        width: 8,
+        height: 6,
+        pixels: &px,
+        flagged: (id == 2).then_some("missing packets"),
+    })
+    .unwrap();
+    w.log(&SessionEvent::Pairing {
+        t_host_us: HostTimeUs(id * 1000 + 1),
+        frame_id: id,
+        seq: id + 100,
+        latency_us: Some(3.5),
+    })
+    .unwrap();
+}
+
+#[test]
+fn round_trip_of_a_clean_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let mut w = SessionWriter::create(&dir, manifest()).unwrap();
+    for id in 0..4 {
+        record(&mut w, id);
+    }
+    w.finish(HostTimeUs(9999), "completed").unwrap();
+    let s = open(&dir).unwrap();
+    assert_eq!(
+        s.report,
+        ReadReport {
+            ended_cleanly: true,
+            ..ReadReport::default()
+        }
+    );
+    assert_eq!(s.report.summary(), "intact");
+    assert_eq!(s.frames.len(), 4);
+    assert_eq!(s.frames[1].pulse_seq, Some(101));
+    assert!(!s.frames[2].complete && s.frames[3].complete);
+    let (w8, h6, px) = s.load_frame(&s.frames[3]).unwrap();
+    assert_eq!((w8, h6, px), (8, 6, pixels(3)));
+    assert_eq!(s.manifest.end.as_ref().unwrap().paired, 4);
+    assert!(matches!(s.events.last(), Some(SessionEvent::End { .. })));
+}
+
+#[test]
+fn a_killed_capture_keeps_every_written_frame() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let mut w = SessionWriter::create(&dir, manifest()).unwrap();
+    for id in 0..3 {
+        record(&mut w, id);
+    }
+    drop(w); // no finish: as after SIGKILL
+    // killed mid-line, after a frame renamed into place but before its event, with a partial PNG
+    let mut log = fs::OpenOptions::new()
+        .append(true)
+        .open(dir.join(paths::EVENTS))
+        .unwrap();
+    log.write_all(br#"{"type":"pulse","t_host_us":5000,"seq":1"#)
+        .unwrap();
+    frame_png::write(
+        &dir.join("frames").join(paths::frame_file(3)),
+        8,
+        6,
+        &pixels(3),
+    )
+    .unwrap();
+    fs::write(dir.join("frames/.00000004.png.partial"), b"\x89PNG half").unwrap();
+
+    let s = open(&dir).unwrap();
+    assert!(!s.report.ended_cleanly);
+    assert!(s.report.truncated_last_line);
+    assert_eq!(s.report.frames_without_event, vec![3]);
+    assert_eq!(s.frames.len(), 4, "every fully written frame is listed");
+    for f in &s.frames {
+        assert_eq!(s.load_frame(f).unwrap().2, pixels(f.frame_id));
+    }
+    assert!(s.report.summary().contains("did not end cleanly"));
+}
+
+#[test]
+fn a_corrupt_middle_line_is_skipped_and_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let mut w = SessionWriter::create(&dir, manifest()).unwrap();
+    record(&mut w, 0);
+    {
+        let mut log = fs::OpenOptions::new()
+            .append(true)
+            .open(dir.join(paths::EVENTS))
+            .unwrap();
+        log.write_all(b"{not json at all\n").unwrap();
+    }
+    record(&mut w, 1);
+    w.finish(HostTimeUs(1), "completed").unwrap();
+    let s = open(&dir).unwrap();
+    assert_eq!(s.report.bad_lines.len(), 1);
+    assert_eq!(s.report.bad_lines[0].0, 3);
+    assert_eq!(s.frames.iter().filter(|f| f.event.is_some()).count(), 2);
+}
+
+#[test]
+fn unknown_event_types_from_newer_writers_are_kept() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let w = SessionWriter::create(&dir, manifest()).unwrap();
+    drop(w);
+    fs::write(
+        dir.join(paths::EVENTS),
+        b"{\"type\":\"hologram\",\"t_host_us\":1,\"x\":2}\n",
+    )
+    .unwrap();
+    let s = open(&dir).unwrap();
+    assert_eq!(s.events, vec![SessionEvent::Unknown]);
+    assert!(s.report.bad_lines.is_empty());
+}
+
+#[test]
+fn bad_manifests_name_file_line_and_version() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    assert!(matches!(open(dir), Err(SessionError::Io { .. })));
+    fs::write(
+        dir.join(paths::MANIFEST),
+        "{\n  \"schema_version\": 1,\n  \"software\": 5\n}",
+    )
+    .unwrap();
+    let e = open(dir).unwrap_err();
+    assert!(
+        matches!(e, SessionError::BadManifest { line: 3, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("manifest.json:3:"), "{e}");
+    fs::write(dir.join(paths::MANIFEST), "{\"schema_version\": 2}").unwrap();
+    let e = open(dir).unwrap_err();
+    assert!(e.to_string().contains("schema v2 is not supported"), "{e}");
+}
+
+#[test]
+fn frames_of_the_wrong_kind_are_refused_by_name() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let w = SessionWriter::create(&dir, manifest()).unwrap();
+    drop(w);
+    let rgb = image::RgbImage::new(8, 6);
+    rgb.save(dir.join("frames").join(paths::frame_file(0)))
+        .unwrap();
+    fs::write(dir.join("frames").join(paths::frame_file(1)), b"not a png").unwrap();
+    let s = open(&dir).unwrap();
+    let e0 = s.load_frame(&s.frames[0]).unwrap_err().to_string();
+    assert!(e0.contains("00000000.png") && e0.contains("16-bit"), "{e0}");
+    let e1 = s.load_frame(&s.frames[1]).unwrap_err().to_string();
+    assert!(e1.contains("00000001.png"), "{e1}");
+}
+
+#[test]
+fn refuses_to_overwrite_a_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    drop(SessionWriter::create(&dir, manifest()).unwrap());
+    assert!(matches!(
+        SessionWriter::create(&dir, manifest()),
+        Err(SessionError::AlreadyExists { .. })
+    ));
+}

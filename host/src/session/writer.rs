@@ -1,0 +1,160 @@
+//! Writes a session while capturing: manifest first, then frames and events as they happen.
+//!
+//! Ordering rules that make a SIGKILL harmless (see the module contract in `session`):
+//! frame PNG → temporary name → rename into `frames/` → append its `frame` event (one `write`).
+//! The manifest is replaced atomically (temporary file + rename) at start and at [`finish`].
+//!
+//! [`finish`]: SessionWriter::finish
+
+use std::fs::{self, File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use super::events::{FrameStatus, SessionEvent};
+use super::manifest::{EndRecord, Manifest};
+use super::{SessionError, frame_png, paths};
+use crate::link::time::HostTimeUs;
+
+/// An open session being written.
+#[derive(Debug)]
+pub struct SessionWriter {
+    dir: PathBuf,
+    manifest: Manifest,
+    events: File,
+    frames_written: u64,
+    paired: u64,
+}
+
+/// A frame to record.
+#[derive(Debug, Clone, Copy)]
+pub struct FrameRecord<'a> {
+    /// Host arrival time.
+    pub t_host_us: HostTimeUs,
+    /// Monotonic 64-bit frame id.
+    pub frame_id: u64,
+    /// Camera timestamp, ns.
+    pub t_camera_ns: Option<u64>,
+    /// Exposure, µs.
+    pub exposure_us: u32,
+    /// Gain, dB.
+    pub gain_db: f32,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Raw mosaic samples, row-major.
+    pub pixels: &'a [u16],
+    /// Completion.
+    pub flagged: Option<&'a str>,
+}
+
+impl SessionWriter {
+    /// Creates `dir` (which must not already hold a session) and writes the manifest.
+    pub fn create(dir: &Path, manifest: Manifest) -> Result<Self, SessionError> {
+        if dir.join(paths::MANIFEST).exists() {
+            return Err(SessionError::AlreadyExists {
+                path: dir.to_path_buf(),
+            });
+        }
+        let frames = dir.join(paths::FRAMES);
+        fs::create_dir_all(&frames).map_err(SessionError::io(&frames))?;
+        write_manifest(dir, &manifest)?;
+        let log = dir.join(paths::EVENTS);
+        let events = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log)
+            .map_err(SessionError::io(&log))?;
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            manifest,
+            events,
+            frames_written: 0,
+            paired: 0,
+        })
+    }
+
+    /// The session directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Frames written so far.
+    pub fn frames_written(&self) -> u64 {
+        self.frames_written
+    }
+
+    /// Appends one event as one line, in one write.
+    pub fn log(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
+        if matches!(event, SessionEvent::Pairing { .. }) {
+            self.paired += 1;
+        }
+        let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
+            path: self.dir.join(paths::EVENTS),
+            source: std::io::Error::other(e),
+        })?;
+        line.push(b'\n');
+        self.events
+            .write_all(&line)
+            .map_err(SessionError::io(self.dir.join(paths::EVENTS)))
+    }
+
+    /// Writes a frame's PNG atomically, then its `frame` event.
+    pub fn write_frame(&mut self, f: FrameRecord<'_>) -> Result<(), SessionError> {
+        let name = paths::frame_file(f.frame_id);
+        let frames = self.dir.join(paths::FRAMES);
+        let tmp = frames.join(format!(".{name}.partial"));
+        frame_png::write(&tmp, f.width, f.height, f.pixels)?;
+        let dst = frames.join(&name);
+        fs::rename(&tmp, &dst).map_err(SessionError::io(&dst))?;
+        self.frames_written += 1;
+        self.log(&SessionEvent::Frame {
+            t_host_us: f.t_host_us,
+            frame_id: f.frame_id,
+            file: name,
+            t_camera_ns: f.t_camera_ns,
+            exposure_us: f.exposure_us,
+            gain_db: f.gain_db,
+            status: match f.flagged {
+                None => FrameStatus::Complete,
+                Some(r) => FrameStatus::Flagged {
+                    reason: r.to_string(),
+                },
+            },
+        })
+    }
+
+    /// Records the end, rewrites the manifest with it and syncs everything to disk.
+    pub fn finish(mut self, t_host_us: HostTimeUs, reason: &str) -> Result<PathBuf, SessionError> {
+        self.log(&SessionEvent::End {
+            t_host_us,
+            reason: reason.to_string(),
+        })?;
+        self.events
+            .sync_all()
+            .map_err(SessionError::io(self.dir.join(paths::EVENTS)))?;
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_micros() as u64)
+            .unwrap_or(0);
+        self.manifest.end = Some(EndRecord {
+            ended_unix_us: now,
+            reason: reason.to_string(),
+            frames: self.frames_written,
+            paired: self.paired,
+        });
+        write_manifest(&self.dir, &self.manifest)?;
+        Ok(self.dir)
+    }
+}
+
+fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
+    let path = dir.join(paths::MANIFEST);
+    let tmp = dir.join(".manifest.json.partial");
+    let json = serde_json::to_vec_pretty(manifest).map_err(|e| SessionError::Io {
+        path: path.clone(),
+        source: std::io::Error::other(e),
+    })?;
+    fs::write(&tmp, json).map_err(SessionError::io(&tmp))?;
+    fs::rename(&tmp, &path).map_err(SessionError::io(&path))
+}

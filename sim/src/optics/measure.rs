@@ -1,0 +1,257 @@
+//! The polarisation-camera measurement model: analysers, the flash polariser, the four sensor
+//! intensities, the fit's observation channels, and the diffuse degree of polarisation.
+//!
+//! Contract (optics.md §5, §6):
+//! - An ideal linear analyser at angle θ (from camera x toward camera y) measures
+//!   I_θ = ½(s0 + s1 cos2θ + s2 sin2θ) (Hagen et al. 2019; Malus' law).
+//! - The flash polariser at angle ψ in the light frame emits s_light = [1, cos2ψ, sin2ψ, 0]
+//!   (unit intensity after the polariser; ψ = 0 is parallel to the 0° analyser, the rig's setup).
+//! - Observation channels per RGB channel: I^d = 2·I90, I^s = I0 − I90, I^α = I135 − I45.
+//! - DoP_d(θ, η) in closed form (§6), rewritten without cancellation:
+//!   f = (η² − 1)² sin²θ, g = (η² + 1)(2η² cos²θ + (η² − 1) sin²θ) + 4η² cosθ √(η² − sin²θ),
+//!   DoP = f/g, equal to |T−|/T+ at the exit angle; ∂DoP/∂η = (f′g − f g′)/g².
+
+use super::pbrdf::{Geometry, PbrdfParams, apply};
+use super::{Mueller, Real, Stokes};
+
+/// An ideal linear analyser (polariser in front of a pixel) at `angle_rad` from camera x
+/// (image right) toward camera y (image up).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Analyser {
+    /// Transmission-axis angle in the camera frame, radians.
+    pub angle_rad: f64,
+}
+
+impl Analyser {
+    /// The sensor's four analyser angles in degrees (IMX250MZR/MYR).
+    pub const SENSOR_ANGLES_DEG: [f64; 4] = [0.0, 45.0, 90.0, 135.0];
+
+    /// An analyser at `angle_deg` degrees.
+    pub fn from_deg(angle_deg: f64) -> Self {
+        Self {
+            angle_rad: angle_deg.to_radians(),
+        }
+    }
+    /// Measured intensity ½(s0 + s1 cos2θ + s2 sin2θ).
+    pub fn intensity<T: Real>(&self, s: Stokes<T>) -> T {
+        let two = 2.0 * self.angle_rad;
+        (s.s0 + s.s1 * T::from_f64(two.cos()) + s.s2 * T::from_f64(two.sin())) * T::from_f64(0.5)
+    }
+    /// The analyser's Mueller matrix (an ideal linear polariser).
+    pub fn mueller<T: Real>(&self) -> Mueller<T> {
+        Mueller::linear_polariser(T::from_f64(self.angle_rad))
+    }
+}
+
+/// The linear polariser on the flash.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct FlashPolariser {
+    /// Transmission-axis angle in the light frame (from light x toward light y), radians.
+    pub angle_rad: f64,
+}
+
+impl FlashPolariser {
+    /// The Stokes vector leaving the flash, light frame, intensity `s0`.
+    pub fn stokes<T: Real>(&self, s0: T) -> Stokes<T> {
+        let two = 2.0 * self.angle_rad;
+        Stokes::new(
+            s0,
+            s0 * T::from_f64(two.cos()),
+            s0 * T::from_f64(two.sin()),
+            T::zero(),
+        )
+    }
+}
+
+/// The four analyser intensities of one superpixel (one colour channel).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SensorIntensities<T> {
+    /// I at 0°.
+    pub i0: T,
+    /// I at 45°.
+    pub i45: T,
+    /// I at 90°.
+    pub i90: T,
+    /// I at 135°.
+    pub i135: T,
+}
+
+impl<T: Real> SensorIntensities<T> {
+    /// What ideal analysers at 0/45/90/135° measure for `s` (camera frame).
+    pub fn from_stokes(s: Stokes<T>) -> Self {
+        let h = T::from_f64(0.5);
+        Self {
+            i0: (s.s0 + s.s1) * h,
+            i45: (s.s0 + s.s2) * h,
+            i90: (s.s0 - s.s1) * h,
+            i135: (s.s0 - s.s2) * h,
+        }
+    }
+    /// Linear Stokes from the four intensities: s0 = ½ΣI, s1 = I0 − I90, s2 = I45 − I135.
+    pub fn to_stokes(&self) -> Stokes<T> {
+        let s0 = (self.i0 + self.i45 + self.i90 + self.i135) * T::from_f64(0.5);
+        Stokes::new(s0, self.i0 - self.i90, self.i45 - self.i135, T::zero())
+    }
+    /// The fit's observation channels.
+    pub fn observation(&self) -> ObservationChannels<T> {
+        ObservationChannels {
+            diffuse: self.i90 + self.i90,
+            specular: self.i0 - self.i90,
+            alpha: self.i135 - self.i45,
+        }
+    }
+}
+
+/// Observation channels of one colour channel (optics.md §5.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ObservationChannels<T> {
+    /// I^d = 2·I90 = s0 − s1 (≈ DS, diffuse shading).
+    pub diffuse: T,
+    /// I^s = I0 − I90 = s1 (≈ SS − DPβ).
+    pub specular: T,
+    /// I^α = I135 − I45 = −s2 (≈ DPα).
+    pub alpha: T,
+}
+
+/// Model prediction of the observation channels per RGB channel for one geometry, with the
+/// flash at unit intensity (multiply by the radiometric normaliser outside).
+pub fn observe<T: Real>(
+    g: &Geometry<T>,
+    p: &PbrdfParams<T>,
+    flash: FlashPolariser,
+) -> [ObservationChannels<T>; 3] {
+    let s_cam = apply(g, p, flash.stokes(T::one()));
+    s_cam.map(|s| SensorIntensities::from_stokes(s).observation())
+}
+
+/// The pieces f, g, f′, g′ of DoP_d = f/g (see the module doc), with the clamps:
+/// cosθ ∈ [0, 1], η ≥ 1; the q′ term is dropped where q = 0 (only η = 1 at grazing).
+fn dop_parts<T: Real>(cos_theta_o: T, eta: T) -> [T; 4] {
+    let c = cos_theta_o.clamp_re(0.0, 1.0);
+    let eta = eta.max_re(T::one());
+    let one = T::one();
+    let s2 = (one - c) * (one + c);
+    let e2 = eta.sq();
+    let e2m1 = (eta - one) * (eta + one);
+    let q = (e2m1 + c.sq()).sqrt_clamped(); // √(η² − sin²θ)
+    let k = T::from_f64;
+    let f = e2m1.sq() * s2;
+    let inner = k(2.0) * e2 * c.sq() + e2m1 * s2;
+    let g = (e2 + one) * inner + k(4.0) * e2 * c * q;
+    let df = k(4.0) * eta * e2m1 * s2;
+    let q_term = if q.re() > 0.0 {
+        k(4.0) * e2 * eta * c / q
+    } else {
+        T::zero()
+    };
+    let dg = k(2.0) * eta * inner
+        + (e2 + one) * (k(4.0) * eta * c.sq() + k(2.0) * eta * s2)
+        + k(8.0) * eta * c * q
+        + q_term;
+    [f, g, df, dg]
+}
+
+/// Diffuse degree of polarisation DoP_d(θ_o, η) for unpolarised or depolarised light leaving a
+/// dielectric at exterior angle θ_o. 0 where g = 0 (η = 1 at grazing: no interface).
+pub fn dop_diffuse<T: Real>(cos_theta_o: T, eta: T) -> T {
+    let [f, g, _, _] = dop_parts(cos_theta_o, eta);
+    if g.re() > 0.0 { f / g } else { T::zero() }
+}
+
+/// (DoP_d, ∂DoP_d/∂η) in closed form (optics.md §6).
+pub fn dop_diffuse_with_d_eta<T: Real>(cos_theta_o: T, eta: T) -> (T, T) {
+    let [f, g, df, dg] = dop_parts(cos_theta_o, eta);
+    if g.re() > 0.0 {
+        (f / g, (df * g - f * dg) / g.sq())
+    } else {
+        (T::zero(), T::zero())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optics::{Dual, FresnelTerms};
+
+    #[test]
+    fn dop_table_and_closed_form_equals_fresnel_ratio() {
+        // optics.md §10.1.
+        let table = [
+            (1.3, [0.008319, 0.022271, 0.051436, 0.150383]),
+            (1.5, [0.016978, 0.043983, 0.095941, 0.246434]),
+            (1.7, [0.025539, 0.064817, 0.136754, 0.327138]),
+        ];
+        for (eta, row) in table {
+            for (deg, want) in [30.0f64, 45.0, 60.0, 80.0].iter().zip(row) {
+                let got: f64 = dop_diffuse(deg.to_radians().cos(), eta);
+                assert!((got - want).abs() < 1e-6, "η={eta} θ={deg}: {got}");
+            }
+        }
+        for k in 0..=200 {
+            for eta in [1.0, 1.1, 1.5, 2.3, 3.0] {
+                let c = k as f64 / 200.0;
+                let f = FresnelTerms::dielectric(c, eta);
+                if f.t_plus() > 1e-3 {
+                    let ratio = -f.t_minus() / f.t_plus();
+                    assert!((dop_diffuse(c, eta) - ratio).abs() < 1e-14, "η={eta} c={c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn d_eta_matches_dual_and_sensitivity_table() {
+        // optics.md §6: ∂DoP/∂η at η = 1.464.
+        for (deg, want) in [
+            (30.0f64, 0.044),
+            (45.0, 0.109),
+            (60.0, 0.219),
+            (75.0, 0.387),
+        ] {
+            let (_, d) = dop_diffuse_with_d_eta(deg.to_radians().cos(), 1.464);
+            assert!((d - want).abs() < 6e-4, "θ={deg}: {d}");
+        }
+        let (_, d23) = dop_diffuse_with_d_eta(45f64.to_radians().cos(), 2.3);
+        assert!((d23 - 0.071).abs() < 6e-4);
+        for k in 0..100 {
+            let c = 0.005 + 0.99 * k as f64 / 100.0;
+            let eta = 1.01 + 0.02 * k as f64;
+            let (v, d) = dop_diffuse_with_d_eta(c, eta);
+            let dual = dop_diffuse(Dual::<1>::constant(c), Dual::variable(eta, 0));
+            assert!(
+                (dual.re - v).abs() < 1e-15 && (dual.du[0] - d).abs() < 1e-12 * (1.0 + d.abs())
+            );
+        }
+    }
+
+    #[test]
+    fn channel_identities() {
+        // optics.md §10.4.
+        let s = Stokes::new(0.7, 0.2, -0.31, 0.05);
+        let i = SensorIntensities::from_stokes(s);
+        assert!((i.i0 + i.i90 - i.i45 - i.i135).abs() < 1e-15);
+        let o = i.observation();
+        assert!((o.specular - s.s1).abs() < 1e-15);
+        assert!((o.alpha + s.s2).abs() < 1e-15);
+        assert!((o.diffuse - (s.s0 - s.s1)).abs() < 1e-15);
+        let back = i.to_stokes();
+        assert!((back.s0 - s.s0).abs() < 1e-15 && (back.s2 - s.s2).abs() < 1e-15);
+        for deg in Analyser::SENSOR_ANGLES_DEG {
+            let a = Analyser::from_deg(deg);
+            let via_matrix = a.mueller::<f64>().apply(s).s0;
+            assert!((a.intensity(s) - via_matrix).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn malus_law_through_flash_and_analyser() {
+        for k in 0..36 {
+            let psi = (k as f64 * 5.0).to_radians();
+            let s = FlashPolariser { angle_rad: psi }.stokes(1.0);
+            for deg in [0.0, 30.0, 45.0, 90.0, 135.0] {
+                let a = Analyser::from_deg(deg);
+                assert!((a.intensity(s) - (psi - a.angle_rad).cos().powi(2)).abs() < 1e-14);
+            }
+        }
+    }
+}
