@@ -6,6 +6,8 @@
 //! pseudo-terminal, the firmware on an emulated MCU, aravis against its fake GigE camera on
 //! loopback inside a private network namespace.
 
+pub mod qemu;
+
 use std::path::PathBuf;
 
 /// Path of the `ellipso` binary built by the same `cargo test` invocation.

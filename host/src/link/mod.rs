@@ -8,7 +8,11 @@
 //! - [`TriggerLink::connect`] performs the `Hello` handshake and refuses a board that speaks another
 //!   protocol version, naming both versions.
 //! - Commands are request/response with a timeout; a refusal comes back as
-//!   [`LinkError::Rejected`] with the board's typed reason.
+//!   [`LinkError::Rejected`] with the board's typed reason. A command whose frame or reply was
+//!   lost on a noisy link is sent again up to [`LinkConfig::retries`] times when repeating it is
+//!   harmless: `Configure`, `Arm`, `Stop` and `StatusRequest` are idempotent on the board, and a
+//!   repeated `Start` that finds the capture already running (`Busy`) or already finished
+//!   (`NotArmed`) means the first one took. `FireOne` is never repeated (it would fire twice).
 //! - Pulse events, faults, edges and unsolicited status arrive on [`TriggerLink::events`], each
 //!   stamped with the host time its frame was decoded ([`HostTimeUs`]).
 //! - When the stream ends or fails, the reader sends one [`LinkEvent::Disconnected`] and stops;
@@ -227,6 +231,8 @@ pub struct LinkConfig {
     pub reply_timeout: Duration,
     /// Clock-model settings.
     pub clock: ClockModelConfig,
+    /// Extra attempts of an idempotent command after a timeout.
+    pub retries: u32,
 }
 
 impl Default for LinkConfig {
@@ -234,6 +240,7 @@ impl Default for LinkConfig {
         Self {
             reply_timeout: Duration::from_millis(1_000),
             clock: ClockModelConfig::default(),
+            retries: 3,
         }
     }
 }
@@ -357,8 +364,15 @@ impl TriggerLink {
         let hello = HostMessage::Hello {
             protocol_version: PROTOCOL_VERSION,
         };
-        let (reply, _) = link.request(&hello, |m| matches!(m, BoardMessage::HelloReply(_)))?;
-        let BoardMessage::HelloReply(info) = reply else {
+        let is_reply = |m: &BoardMessage| matches!(m, BoardMessage::HelloReply(_));
+        let mut reply = link.request(&hello, is_reply);
+        for _ in 0..link.config.retries {
+            if !matches!(reply, Err(LinkError::Timeout { .. })) {
+                break;
+            }
+            reply = link.request(&hello, is_reply);
+        }
+        let (BoardMessage::HelloReply(info), _) = reply? else {
             unreachable!("request only returns matching replies")
         };
         if info.protocol_version != PROTOCOL_VERSION {
@@ -424,11 +438,16 @@ impl TriggerLink {
 
     /// Asks for the board's status.
     pub fn status(&self) -> Result<Status, LinkError> {
-        let (m, _) = self.request(&HostMessage::StatusRequest, |m| {
-            matches!(m, BoardMessage::Status(_))
-        })?;
-        match m {
-            BoardMessage::Status(s) => Ok(s),
+        let is_status = |m: &BoardMessage| matches!(m, BoardMessage::Status(_));
+        let mut reply = self.request(&HostMessage::StatusRequest, is_status);
+        for _ in 0..self.config.retries {
+            if !matches!(reply, Err(LinkError::Timeout { .. })) {
+                break;
+            }
+            reply = self.request(&HostMessage::StatusRequest, is_status);
+        }
+        match reply? {
+            (BoardMessage::Status(s), _) => Ok(s),
             _ => unreachable!("request only returns matching replies"),
         }
     }
@@ -455,10 +474,14 @@ impl TriggerLink {
         Ok(sample)
     }
 
-    /// Sends `n` pings and returns the clock fit (None if too few samples were accepted).
+    /// Sends `n` pings and returns the clock fit (None if too few samples were accepted). A ping
+    /// lost on a noisy link is skipped, not fatal.
     pub fn sync_clock(&self, n: usize) -> Result<Option<clock::ClockFit>, LinkError> {
         for _ in 0..n {
-            self.ping()?;
+            match self.ping() {
+                Ok(_) | Err(LinkError::Timeout { .. }) => {}
+                Err(e) => return Err(e),
+            }
         }
         Ok(self.lock_clock().fit())
     }
@@ -475,15 +498,39 @@ impl TriggerLink {
 
     fn command(&self, msg: &HostMessage) -> Result<(), LinkError> {
         let kind = msg.kind();
-        let (reply, _) = self.request(msg, |m| {
-            matches!(m, BoardMessage::Ack(k) | BoardMessage::Rejected { command: k, .. } if *k == kind)
-        })?;
-        match reply {
-            BoardMessage::Rejected { command, reason } => {
-                Err(LinkError::Rejected { command, reason })
+        let attempts = if kind == CommandKind::FireOne {
+            1
+        } else {
+            self.config.retries + 1
+        };
+        for attempt in 0..attempts {
+            let result = self.request(msg, |m| {
+                matches!(m, BoardMessage::Ack(k) | BoardMessage::Rejected { command: k, .. } if *k == kind)
+            });
+            match result {
+                Ok((BoardMessage::Rejected { command, reason }, _)) => {
+                    let first_start_took = attempt > 0
+                        && kind == CommandKind::Start
+                        && matches!(reason, RejectReason::Busy | RejectReason::NotArmed);
+                    if first_start_took {
+                        return Ok(());
+                    }
+                    return Err(LinkError::Rejected { command, reason });
+                }
+                Ok(_) => return Ok(()),
+                Err(LinkError::Timeout { .. }) if attempt + 1 < attempts => {
+                    tracing::debug!(
+                        "{kind:?} timed out (attempt {}), sending again",
+                        attempt + 1
+                    );
+                }
+                Err(e) => return Err(e),
             }
-            _ => Ok(()),
         }
+        Err(LinkError::Timeout {
+            command: kind,
+            timeout_ms: self.config.reply_timeout.as_millis() as u64,
+        })
     }
 
     /// Sends `msg` and waits for the first reply `accept` matches; other replies are stale

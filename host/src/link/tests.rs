@@ -17,6 +17,8 @@ struct Script {
     noisy: bool,
     /// Close the port when `Stop` arrives.
     hang_up_on_stop: bool,
+    /// Swallow the first reply to this command (as if a bit error had destroyed it), but act on it.
+    lose_first_reply_to: Option<CommandKind>,
 }
 
 fn board_info(version: u16) -> BoardInfo {
@@ -66,6 +68,8 @@ fn scripted(script: Script) -> (TTYPort, std::thread::JoinHandle<()>) {
         let mut dec = Decoder::<HostMessage>::new();
         let mut buf = [0u8; 256];
         let mut seq = 0u64;
+        let mut lost_one = false;
+        let mut running = false;
         let deadline = Instant::now() + Duration::from_secs(20);
         while Instant::now() < deadline {
             let n = match dev.read(&mut buf) {
@@ -95,10 +99,24 @@ fn scripted(script: Script) -> (TTYPort, std::thread::JoinHandle<()>) {
                         faults: FaultCounters::default(),
                     }),
                     HostMessage::Stop if script.hang_up_on_stop => return, // drops the port
+                    HostMessage::Start if running => BoardMessage::Rejected {
+                        command: CommandKind::Start,
+                        reason: RejectReason::Busy,
+                    },
                     other => BoardMessage::Ack(other.kind()),
                 };
-                send(&mut dev, &reply, script.noisy);
                 if m == HostMessage::Start {
+                    running = true;
+                }
+                if m == HostMessage::Stop {
+                    running = false;
+                }
+                if !lost_one && script.lose_first_reply_to == Some(m.kind()) {
+                    lost_one = true;
+                    continue;
+                }
+                send(&mut dev, &reply, script.noisy);
+                if m == HostMessage::Start && seq == 0 {
                     for _ in 0..3 {
                         let pulse = PulseEvent {
                             seq,
@@ -275,4 +293,44 @@ fn a_hang_up_is_reported_and_later_commands_fail_cleanly() {
     assert!(saw, "a Disconnected event arrives");
     assert!(!link.is_connected());
     assert!(matches!(link.arm(), Err(LinkError::Disconnected(_))));
+}
+
+#[test]
+fn a_lost_reply_is_retried_for_idempotent_commands() {
+    for lost in [
+        CommandKind::Hello,
+        CommandKind::Configure,
+        CommandKind::Arm,
+        CommandKind::Start,
+    ] {
+        let (host, _board) = scripted(Script {
+            protocol_version: PROTOCOL_VERSION,
+            lose_first_reply_to: Some(lost),
+            ..Script::default()
+        });
+        let link = connect(host).unwrap_or_else(|e| panic!("{lost:?}: {e}"));
+        link.configure(config(8_000))
+            .unwrap_or_else(|e| panic!("{lost:?}: {e}"));
+        link.arm().unwrap_or_else(|e| panic!("{lost:?}: {e}"));
+        // a repeated Start meets Busy: the first one took
+        link.start().unwrap_or_else(|e| panic!("{lost:?}: {e}"));
+        assert_eq!(pulses(&link, 3), vec![0, 1, 2], "{lost:?}");
+    }
+}
+
+#[test]
+fn fire_one_is_never_repeated() {
+    let (host, _board) = scripted(Script {
+        protocol_version: PROTOCOL_VERSION,
+        lose_first_reply_to: Some(CommandKind::FireOne),
+        ..Script::default()
+    });
+    let link = connect(host).unwrap();
+    assert!(matches!(
+        link.fire_one(),
+        Err(LinkError::Timeout {
+            command: CommandKind::FireOne,
+            ..
+        })
+    ));
 }

@@ -1,0 +1,26 @@
+//! AprilTag boards for the simulator and the host's pose tracker.
+//!
+//! - [`family`]: tag families and their code tables, read from the AprilTag C library so printed
+//!   tags carry exactly the bits the detector decodes.
+//! - [`spec`]: board descriptions as written in TOML (board files and inline tables).
+//! - [`board`]: validation and the built board: albedo lookup, tag corners, ray hits.
+//! - [`placed`]: a board posed in the world (`world_from_board`) for world-space rays.
+//!
+//! Frame conventions and the corner order are documented in [`board`].
+
+pub mod board;
+pub mod family;
+pub mod placed;
+pub mod spec;
+
+#[cfg(test)]
+pub(crate) mod detect_for_tests;
+#[cfg(test)]
+mod tests;
+
+pub use board::{
+    Board, BoardAxes, BoardError, BoardHit, BoardOrigin, BoardSpec, BoardTag, GridSpec,
+    TagPlacementSpec,
+};
+pub use family::{TagCells, TagCodeTable, TagFamily};
+pub use placed::PlacedBoard;
