@@ -24,6 +24,8 @@
 use std::f32::consts::{FRAC_PI_2, PI};
 
 use ellipso_sim::mosaic::Channel;
+use ellipso_sim::optics::Stokes as SimStokes;
+use ellipso_sim::optics::measure::Analyser as SimAnalyser;
 
 use super::calibration::StokesMatrix;
 use super::channels::ObservationChannels;
@@ -56,11 +58,16 @@ pub fn aolp_rad(s1: f32, s2: f32) -> f32 {
     if wrapped >= PI { wrapped - PI } else { wrapped }
 }
 
-/// Intensity behind an ideal linear analyser at `theta_rad` for Stokes `[s0, s1, s2]`:
-/// `I_θ = ½(s0 + s1 cos2θ + s2 sin2θ)` (the forward model this module inverts).
+/// Intensity behind an ideal linear analyser at `theta_rad` for linear Stokes `[s0, s1, s2]`:
+/// `I_θ = ½(s0 + s1 cos2θ + s2 sin2θ)`. Not a second copy of the model: this delegates to the
+/// simulator's measurement model ([`ellipso_sim::optics::measure::Analyser::intensity`]), the
+/// one the renderer uses and this module inverts.
 pub fn intensity_behind_analyser(stokes: [f64; 3], theta_rad: f64) -> f64 {
-    let (sin2, cos2) = (2.0 * theta_rad).sin_cos();
-    0.5 * (stokes[0] + stokes[1] * cos2 + stokes[2] * sin2)
+    let [s0, s1, s2] = stokes;
+    SimAnalyser {
+        angle_rad: theta_rad,
+    }
+    .intensity(SimStokes::new(s0, s1, s2, 0.0))
 }
 
 /// `atan2(y, x)` in (−π, π], branch-free, from the A&S 4.4.49 polynomial for atan on [0, 1].
@@ -425,5 +432,68 @@ mod tests {
                 .chain(band.aolp_rad.data())
                 .all(|v| v.is_finite())
         );
+    }
+
+    #[test]
+    fn row_kernel_agrees_with_the_simulator_measurement_model() {
+        use ellipso_sim::optics::measure::SensorIntensities;
+        use rand::{Rng, SeedableRng};
+        // one model: the sensor angles and the Stokes/DoLP/AoLP/channel definitions of the
+        // simulator are exactly what this module inverts
+        let mosaic_deg = ellipso_sim::mosaic::Analyser::ALL.map(|a| a.angle_deg());
+        assert_eq!(mosaic_deg, SimAnalyser::SENSOR_ANGLES_DEG);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let n = 64;
+        let mut stokes = Vec::new();
+        let (mut i0, mut i45, mut i90, mut i135) = (vec![], vec![], vec![], vec![]);
+        for _ in 0..n {
+            let s0: f64 = rng.random_range(0.01..2.0);
+            let p: f64 = rng.random_range(0.0..1.0);
+            let phi: f64 = rng.random_range(0.0..std::f64::consts::PI);
+            let s = SimStokes::new(
+                s0,
+                s0 * p * (2.0 * phi).cos(),
+                s0 * p * (2.0 * phi).sin(),
+                0.0,
+            );
+            let m = SensorIntensities::from_stokes(s);
+            i0.push(m.i0 as f32);
+            i45.push(m.i45 as f32);
+            i90.push(m.i90 as f32);
+            i135.push(m.i135 as f32);
+            stokes.push((s, m));
+        }
+        let mut band = StokesBand::default();
+        band.reshape(None, n, 1);
+        let masks = vec![PixelMask::VALID; n];
+        stokes_row(
+            AnalyserRow {
+                intensity: [&i0, &i45, &i90, &i135],
+                mask: &masks,
+            },
+            band.row_mut(0),
+            Thresholds {
+                dark_s0: 0.0,
+                max_residual: f32::INFINITY,
+                matrix: None,
+            },
+        );
+        for (k, (s, m)) in stokes.iter().enumerate() {
+            let back = m.to_stokes();
+            let obs = m.observation();
+            let close = |a: f32, b: f64| (f64::from(a) - b).abs() < 2e-6;
+            assert!(close(band.s0.data()[k], back.s0) && close(band.s1.data()[k], back.s1));
+            assert!(close(band.s2.data()[k], back.s2));
+            assert!((f64::from(band.dolp.data()[k]) - s.dolp()).abs() < 1e-5);
+            if s.dolp() > 1e-3 {
+                let d = (f64::from(band.aolp_rad.data()[k]) - s.aolp_rad())
+                    .rem_euclid(std::f64::consts::PI);
+                assert!(d.min(std::f64::consts::PI - d) < 1e-4, "AoLP {k}");
+            }
+            assert!(
+                close(band.i_d.data()[k], obs.diffuse) && close(band.i_s().data()[k], obs.specular)
+            );
+            assert!(close(band.i_alpha_at(k), obs.alpha));
+        }
     }
 }
