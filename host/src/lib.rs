@@ -8,6 +8,7 @@
 //! - [`pose`]: AprilTag detection and joint board pose (IPPE + LM with distortion, flip checks).
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere highlights.
 //! - [`report`]: PNG line plots and a small raster canvas for reports.
+//! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: fitting, export.
@@ -21,3 +22,4 @@ pub mod polar;
 pub mod pose;
 pub mod report;
 pub mod session;
+pub mod track;

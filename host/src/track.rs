@@ -1,0 +1,206 @@
+//! Pose tracking: each raw frame → the camera's pose in the world, or a typed rejection.
+//!
+//! Runs behind the recorder (on a recorded session or a replay), never on the acquisition path,
+//! so a slow detector cannot drop frames.
+//!
+//! Per frame:
+//! 1. Superpixel demosaic (no interpolation) and pick the detection image ([`DetectImage`]):
+//!    the cross-polarised `I90` by default, because the flash's specular glare on glossy
+//!    tags lives in the co-polarised `I0` and washes tag corners out there (`ellipso bench pose`
+//!    measures the three choices).
+//! 2. Scale to 8 bits by the 99.5th percentile (AprilTag thresholds locally; the scaling only
+//!    keeps the dynamic range) and detect tags.
+//! 3. Superpixel corners back to raw pixels: a superpixel of a `t × t` tile at integer coordinate
+//!    `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw `t·u + (t − 1)/2`.
+//! 4. Joint PnP per board over all its detected corners (IPPE + LM with distortion, flip check),
+//!    keep the board with the most corners, and express the pose in the world through that
+//!    board's `world_from_board`.
+
+use ellipso_sim::camera::CameraModel;
+use ellipso_sim::tags::PlacedBoard;
+use nalgebra::{Isometry3, Point3};
+
+use crate::polar::PolarConfig;
+use crate::polar::demosaic::{DemosaicMethod, demosaic};
+use crate::polar::frame::RawFrame;
+use crate::pose::{
+    BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetector,
+    assemble_correspondences, estimate_board_pose,
+};
+
+/// Which analyser image tags are detected on.
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+    clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum DetectImage {
+    /// Total intensity s0 (all four analysers).
+    S0,
+    /// Cross-polarised I90: diffuse only, the flash's specular glare suppressed.
+    #[default]
+    I90,
+    /// Co-polarised I0: carries the specular glare.
+    I0,
+}
+
+/// Settings of the tracker.
+#[derive(Debug, Clone, Default)]
+pub struct TrackConfig {
+    /// Detection image.
+    pub image: DetectImage,
+    /// AprilTag detector settings.
+    pub detector: DetectorConfig,
+    /// Pose estimation and rejection thresholds.
+    pub pose: PoseConfig,
+}
+
+/// A frame's pose.
+#[derive(Debug, Clone)]
+pub struct FramePose {
+    /// Camera frame → world frame.
+    pub world_from_camera: Isometry3<f64>,
+    /// Index of the board the pose came from.
+    pub board: usize,
+    /// The board pose (residuals, covariance, flip margin).
+    pub board_pose: BoardPose,
+}
+
+/// Why a frame has no pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrackRejection {
+    /// No tag of any known board was detected.
+    #[error("no tag of a known board detected")]
+    NoTags,
+    /// Every board's pose was rejected; the reason of the board with most corners.
+    #[error("{0}")]
+    Pose(String),
+    /// The frame could not be processed.
+    #[error("frame not processable: {0}")]
+    Frame(String),
+}
+
+/// `BoardCorners` over a placed scene board (board-frame corners, AprilTag order).
+struct BoardAdapter<'a>(&'a PlacedBoard);
+
+impl BoardCorners for BoardAdapter<'_> {
+    fn corners_board_m(&self, tag_id: u32) -> Option<[Point3<f64>; 4]> {
+        self.0.board.tag_corners_board_m(tag_id)
+    }
+}
+
+/// Tracks frames of one rig against a set of boards.
+pub struct Tracker {
+    camera: CameraModel,
+    boards: Vec<PlacedBoard>,
+    detector: TagDetector,
+    config: TrackConfig,
+}
+
+impl Tracker {
+    /// A tracker for `camera` (full raw resolution) and `boards`.
+    pub fn new(
+        camera: CameraModel,
+        boards: Vec<PlacedBoard>,
+        config: TrackConfig,
+    ) -> Result<Self, DetectError> {
+        let detector = TagDetector::new(config.detector)?;
+        Ok(Self {
+            camera,
+            boards,
+            detector,
+            config,
+        })
+    }
+
+    /// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
+    pub fn detection_image(
+        &self,
+        frame: &RawFrame,
+    ) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
+        let levels = PolarConfig::default()
+            .levels(frame)
+            .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+        let image = demosaic(frame, &levels, DemosaicMethod::Superpixel);
+        let (w, h) = (
+            image.bands[0].intensity[0].width(),
+            image.bands[0].intensity[0].height(),
+        );
+        // colour sensors: sum the bands (tags are grey)
+        let mut plane = vec![0f32; w * h];
+        for band in &image.bands {
+            let [i0, i45, i90, i135] = &band.intensity;
+            for (k, v) in plane.iter_mut().enumerate() {
+                *v += match self.config.image {
+                    DetectImage::S0 => {
+                        0.5 * (i0.data()[k] + i45.data()[k] + i90.data()[k] + i135.data()[k])
+                    }
+                    DetectImage::I90 => i90.data()[k],
+                    DetectImage::I0 => i0.data()[k],
+                };
+            }
+        }
+        let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
+        sorted.sort_by(f32::total_cmp);
+        let p995 = sorted
+            .get(sorted.len().saturating_sub(1) * 995 / 1000)
+            .copied()
+            .unwrap_or(1.0);
+        // guard: an all-dark frame maps to zeros rather than dividing by ~0
+        let scale = if p995 > 1e-6 { 255.0 / p995 } else { 0.0 };
+        let gray = plane
+            .iter()
+            .map(|v| (v * scale).clamp(0.0, 255.0) as u8)
+            .collect();
+        Ok((gray, w, h, frame.layout().tile_px() as usize))
+    }
+
+    /// The pose of one frame.
+    pub fn track(&mut self, frame: &RawFrame) -> Result<FramePose, TrackRejection> {
+        let (gray, w, h, tile) = self.detection_image(frame)?;
+        let mut detections = self
+            .detector
+            .detect(&gray, w, h)
+            .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+        let t = tile as f64;
+        let to_raw = |c: &mut [f64; 2]| {
+            c[0] = t * c[0] + (t - 1.0) / 2.0;
+            c[1] = t * c[1] + (t - 1.0) / 2.0;
+        };
+        for d in &mut detections {
+            d.corners_px.iter_mut().for_each(to_raw);
+            to_raw(&mut d.centre_px);
+        }
+        let mut best: Option<(usize, usize, Result<BoardPose, String>)> = None;
+        for (i, placed) in self.boards.iter().enumerate() {
+            let assembly = assemble_correspondences(&detections, &BoardAdapter(placed));
+            let n = assembly.correspondences.len();
+            if n == 0 || best.as_ref().is_some_and(|(_, m, _)| *m >= n) {
+                continue;
+            }
+            let r = estimate_board_pose(&self.camera, &assembly.correspondences, &self.config.pose)
+                .map_err(|e| e.to_string());
+            best = Some((i, n, r));
+        }
+        match best {
+            None => Err(TrackRejection::NoTags),
+            Some((_, _, Err(reason))) => Err(TrackRejection::Pose(reason)),
+            Some((board, _, Ok(board_pose))) => {
+                let world_from_board = self.boards[board].world_from_board;
+                let world_from_camera = world_from_board * board_pose.camera_from_board.inverse();
+                Ok(FramePose {
+                    world_from_camera,
+                    board,
+                    board_pose,
+                })
+            }
+        }
+    }
+}
