@@ -102,8 +102,10 @@ pub struct CameraCounters {
     pub underruns: u64,
     /// `next_frame` calls that timed out.
     pub timeouts: u64,
-    /// Frames failed for another reason (size mismatch, aborted…).
+    /// Frames failed for another reason (size mismatch, aborted, lost whole in transfer…).
     pub other_failures: u64,
+    /// Frames delivered twice with the same id (the copy is dropped).
+    pub duplicates: u64,
 }
 
 /// Camera errors, naming the device and what is wrong.

@@ -59,6 +59,11 @@ impl HostClock {
         HostTimeUs(self.epoch.elapsed().as_micros() as u64)
     }
 
+    /// An instant on this clock (saturating at the epoch for earlier instants).
+    pub fn at(&self, t: Instant) -> HostTimeUs {
+        HostTimeUs(t.saturating_duration_since(self.epoch).as_micros() as u64)
+    }
+
     /// Wall-clock time of the epoch, µs since the Unix epoch (for session manifests).
     pub fn wall_at_epoch_unix_us(&self) -> u64 {
         self.wall_at_epoch_unix_us
