@@ -16,9 +16,11 @@
 //!    keep the board with the most corners, and express the pose in the world through that
 //!    board's `world_from_board`.
 
+use std::collections::BTreeMap;
+
 use ellipso_sim::camera::CameraModel;
 use ellipso_sim::tags::PlacedBoard;
-use nalgebra::{Isometry3, Point3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::polar::PolarConfig;
 use crate::polar::demosaic::{DemosaicMethod, demosaic};
@@ -87,19 +89,63 @@ pub enum TrackRejection {
     Frame(String),
 }
 
-/// `BoardCorners` over a placed scene board (board-frame corners, AprilTag order).
-struct BoardAdapter<'a>(&'a PlacedBoard);
+/// What tracking needs of a board — its tag corners and its place in the world — in the form a
+/// session manifest records (`boards`), so a recorded session can be tracked without its scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrackedBoard {
+    /// Board name, if any.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Tag id → its four corners in the board frame, metres, AprilTag detection order.
+    pub corners_board_m: BTreeMap<u32, [[f64; 3]; 4]>,
+    /// Board origin in the world, metres.
+    pub world_from_board_translation_m: [f64; 3],
+    /// Board rotation into the world, axis-angle, radians.
+    pub world_from_board_rotation: [f64; 3],
+}
 
-impl BoardCorners for BoardAdapter<'_> {
+impl TrackedBoard {
+    /// From a scene's placed board.
+    pub fn from_placed(placed: &PlacedBoard) -> Self {
+        let corners_board_m = placed
+            .board
+            .tags
+            .iter()
+            .map(|t| (t.id, t.corners_board_m.map(|p| [p.x, p.y, p.z])))
+            .collect();
+        let t = placed.world_from_board.translation.vector;
+        let r = placed.world_from_board.rotation.scaled_axis();
+        Self {
+            name: placed.board.name.clone(),
+            corners_board_m,
+            world_from_board_translation_m: [t.x, t.y, t.z],
+            world_from_board_rotation: [r.x, r.y, r.z],
+        }
+    }
+
+    /// Board frame → world frame.
+    pub fn world_from_board(&self) -> Isometry3<f64> {
+        let [tx, ty, tz] = self.world_from_board_translation_m;
+        let [rx, ry, rz] = self.world_from_board_rotation;
+        Isometry3::from_parts(
+            Translation3::new(tx, ty, tz),
+            UnitQuaternion::from_scaled_axis(Vector3::new(rx, ry, rz)),
+        )
+    }
+}
+
+impl BoardCorners for TrackedBoard {
     fn corners_board_m(&self, tag_id: u32) -> Option<[Point3<f64>; 4]> {
-        self.0.board.tag_corners_board_m(tag_id)
+        self.corners_board_m
+            .get(&tag_id)
+            .map(|c| c.map(|[x, y, z]| Point3::new(x, y, z)))
     }
 }
 
 /// Tracks frames of one rig against a set of boards.
 pub struct Tracker {
     camera: CameraModel,
-    boards: Vec<PlacedBoard>,
+    boards: Vec<TrackedBoard>,
     detector: TagDetector,
     config: TrackConfig,
 }
@@ -108,7 +154,7 @@ impl Tracker {
     /// A tracker for `camera` (full raw resolution) and `boards`.
     pub fn new(
         camera: CameraModel,
-        boards: Vec<PlacedBoard>,
+        boards: Vec<TrackedBoard>,
         config: TrackConfig,
     ) -> Result<Self, DetectError> {
         let detector = TagDetector::new(config.detector)?;
@@ -180,7 +226,7 @@ impl Tracker {
         }
         let mut best: Option<(usize, usize, Result<BoardPose, String>)> = None;
         for (i, placed) in self.boards.iter().enumerate() {
-            let assembly = assemble_correspondences(&detections, &BoardAdapter(placed));
+            let assembly = assemble_correspondences(&detections, placed);
             let n = assembly.correspondences.len();
             if n == 0 || best.as_ref().is_some_and(|(_, m, _)| *m >= n) {
                 continue;
@@ -193,7 +239,7 @@ impl Tracker {
             None => Err(TrackRejection::NoTags),
             Some((_, _, Err(reason))) => Err(TrackRejection::Pose(reason)),
             Some((board, _, Ok(board_pose))) => {
-                let world_from_board = self.boards[board].world_from_board;
+                let world_from_board = self.boards[board].world_from_board();
                 let world_from_camera = world_from_board * board_pose.camera_from_board.inverse();
                 Ok(FramePose {
                     world_from_camera,
