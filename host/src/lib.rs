@@ -9,6 +9,7 @@
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere highlights.
 //! - [`report`]: PNG line plots and a small raster canvas for reports.
 //! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
+//! - [`process`]: the stages after capture on a recorded session (pose tracking; later the fit).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: fitting, export.
@@ -20,6 +21,7 @@ pub mod cli;
 pub mod link;
 pub mod polar;
 pub mod pose;
+pub mod process;
 pub mod report;
 pub mod session;
 pub mod track;

@@ -138,16 +138,17 @@ pub enum SessionEvent {
         /// What was seen.
         reason: String,
     },
-    /// A camera pose estimated for a frame (board frame → camera frame).
+    /// A camera pose estimated for a frame (world frame → camera frame; the world is the frame
+    /// the manifest's boards are placed in).
     Pose {
         /// Host time.
         t_host_us: HostTimeUs,
         /// Frame id.
         frame_id: u64,
-        /// Rotation, axis-angle (rad), board → camera.
-        rotation_camera_from_board: [f64; 3],
-        /// Translation, m, board origin in the camera frame.
-        translation_camera_from_board_m: [f64; 3],
+        /// Rotation, axis-angle (rad), world → camera.
+        rotation_camera_from_world: [f64; 3],
+        /// Translation, m, world origin in the camera frame.
+        translation_camera_from_world_m: [f64; 3],
         /// Reprojection RMS, px.
         rms_px: f64,
         /// Tags used.

@@ -189,3 +189,42 @@ fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
     fs::write(&tmp, json).map_err(SessionError::io(&tmp))?;
     fs::rename(&tmp, &path).map_err(SessionError::io(&path))
 }
+
+/// Appends events to an existing session's log (stages that run after capture, e.g. poses).
+#[derive(Debug)]
+pub struct SessionAppender {
+    path: PathBuf,
+    events: File,
+}
+
+impl SessionAppender {
+    /// Opens the log of the session in `dir` for appending; the session must exist.
+    pub fn open(dir: &Path) -> Result<Self, SessionError> {
+        let manifest = dir.join(paths::MANIFEST);
+        if !manifest.is_file() {
+            return Err(SessionError::Io {
+                path: manifest,
+                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a session"),
+            });
+        }
+        let path = dir.join(paths::EVENTS);
+        let events = OpenOptions::new()
+            .append(true)
+            .create(true)
+            .open(&path)
+            .map_err(SessionError::io(&path))?;
+        Ok(Self { path, events })
+    }
+
+    /// Appends one event as one line, in one write.
+    pub fn log(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
+        let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
+            path: self.path.clone(),
+            source: std::io::Error::other(e),
+        })?;
+        line.push(b'\n');
+        self.events
+            .write_all(&line)
+            .map_err(SessionError::io(&self.path))
+    }
+}
