@@ -22,12 +22,34 @@ enum Command {
     Model(cli::model::Args),
     /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
     Polar(cli::polar::Args),
+    /// List trigger boards (serial ports), video devices and, with --gige, GigE cameras.
+    Devices(cli::devices::Args),
+    /// Replay a recorded session through the stages after capture (pose tracking).
+    Replay(cli::replay::Args),
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let _ = cli.verbose;
-    match cli.command {
+    let filter = if cli.verbose { "debug" } else { "warn" };
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(filter)),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    // one clear line: the error and its causes, joined
+    match run(cli.command) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(command: Command) -> anyhow::Result<()> {
+    match command {
         Command::Demo => {
             println!(
                 "ellipso demo: the simulated rig is not built yet; available subcommands:\n  \
@@ -39,5 +61,7 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Model(args) => cli::model::run(args),
         Command::Polar(args) => cli::polar::run(args),
+        Command::Replay(args) => cli::replay::run(args),
+        Command::Devices(args) => cli::devices::run(args),
     }
 }

@@ -1,4 +1,6 @@
 //! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
 
+pub mod devices;
 pub mod model;
 pub mod polar;
+pub mod replay;

@@ -51,12 +51,12 @@ pub mod paths {
 #[derive(Debug, thiserror::Error)]
 pub enum SessionError {
     /// A filesystem operation failed.
-    #[error("{path}: {source}")]
+    #[error("{path}: {error}")]
     Io {
         /// The file or directory.
         path: std::path::PathBuf,
         /// The OS error.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The manifest does not parse.
     #[error("{path}:{line}:{column}: bad manifest: {message}")]
@@ -101,6 +101,6 @@ pub enum SessionError {
 impl SessionError {
     pub(crate) fn io(path: impl Into<std::path::PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
         let path = path.into();
-        move |source| Self::Io { path, source }
+        move |error| Self::Io { path, error }
     }
 }

@@ -145,7 +145,7 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
         Err(e) => {
             return Err(SessionError::Io {
                 path: log_path,
-                source: e,
+                error: e,
             });
         }
     };

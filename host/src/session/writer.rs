@@ -99,7 +99,7 @@ impl SessionWriter {
         }
         let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
             path: self.dir.join(paths::EVENTS),
-            source: std::io::Error::other(e),
+            error: std::io::Error::other(e),
         })?;
         line.push(b'\n');
         self.events
@@ -184,7 +184,7 @@ fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
     let tmp = dir.join(".manifest.json.partial");
     let json = serde_json::to_vec_pretty(manifest).map_err(|e| SessionError::Io {
         path: path.clone(),
-        source: std::io::Error::other(e),
+        error: std::io::Error::other(e),
     })?;
     fs::write(&tmp, json).map_err(SessionError::io(&tmp))?;
     fs::rename(&tmp, &path).map_err(SessionError::io(&path))
@@ -204,7 +204,7 @@ impl SessionAppender {
         if !manifest.is_file() {
             return Err(SessionError::Io {
                 path: manifest,
-                source: std::io::Error::new(std::io::ErrorKind::NotFound, "not a session"),
+                error: std::io::Error::new(std::io::ErrorKind::NotFound, "not a session"),
             });
         }
         let path = dir.join(paths::EVENTS);
@@ -220,7 +220,7 @@ impl SessionAppender {
     pub fn log(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
         let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
             path: self.path.clone(),
-            source: std::io::Error::other(e),
+            error: std::io::Error::other(e),
         })?;
         line.push(b'\n');
         self.events
