@@ -22,6 +22,8 @@ enum Command {
     Model(cli::model::Args),
     /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
     Polar(cli::polar::Args),
+    /// Calibrate the camera (intrinsics, distortion) from a session of AprilTag board frames.
+    Calibrate(cli::calibrate::Args),
     /// List trigger boards (serial ports), video devices and, with --gige, GigE cameras.
     Devices(cli::devices::Args),
     /// Replay a recorded session through the stages after capture (pose tracking).
@@ -63,5 +65,6 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Polar(args) => cli::polar::run(args),
         Command::Replay(args) => cli::replay::run(args),
         Command::Devices(args) => cli::devices::run(args),
+        Command::Calibrate(args) => cli::calibrate::run(args),
     }
 }

@@ -26,7 +26,7 @@ use crate::polar::PolarConfig;
 use crate::polar::demosaic::{DemosaicMethod, demosaic};
 use crate::polar::frame::RawFrame;
 use crate::pose::{
-    BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetector,
+    BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetection, TagDetector,
     assemble_correspondences, estimate_board_pose,
 };
 
@@ -166,64 +166,9 @@ impl Tracker {
         })
     }
 
-    /// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
-    pub fn detection_image(
-        &self,
-        frame: &RawFrame,
-    ) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
-        let levels = PolarConfig::default()
-            .levels(frame)
-            .map_err(|e| TrackRejection::Frame(e.to_string()))?;
-        let image = demosaic(frame, &levels, DemosaicMethod::Superpixel);
-        let (w, h) = (
-            image.bands[0].intensity[0].width(),
-            image.bands[0].intensity[0].height(),
-        );
-        // colour sensors: sum the bands (tags are grey)
-        let mut plane = vec![0f32; w * h];
-        for band in &image.bands {
-            let [i0, i45, i90, i135] = &band.intensity;
-            for (k, v) in plane.iter_mut().enumerate() {
-                *v += match self.config.image {
-                    DetectImage::S0 => {
-                        0.5 * (i0.data()[k] + i45.data()[k] + i90.data()[k] + i135.data()[k])
-                    }
-                    DetectImage::I90 => i90.data()[k],
-                    DetectImage::I0 => i0.data()[k],
-                };
-            }
-        }
-        let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
-        sorted.sort_by(f32::total_cmp);
-        let p995 = sorted
-            .get(sorted.len().saturating_sub(1) * 995 / 1000)
-            .copied()
-            .unwrap_or(1.0);
-        // guard: an all-dark frame maps to zeros rather than dividing by ~0
-        let scale = if p995 > 1e-6 { 255.0 / p995 } else { 0.0 };
-        let gray = plane
-            .iter()
-            .map(|v| (v * scale).clamp(0.0, 255.0) as u8)
-            .collect();
-        Ok((gray, w, h, frame.layout().tile_px() as usize))
-    }
-
     /// The pose of one frame.
     pub fn track(&mut self, frame: &RawFrame) -> Result<FramePose, TrackRejection> {
-        let (gray, w, h, tile) = self.detection_image(frame)?;
-        let mut detections = self
-            .detector
-            .detect(&gray, w, h)
-            .map_err(|e| TrackRejection::Frame(e.to_string()))?;
-        let t = tile as f64;
-        let to_raw = |c: &mut [f64; 2]| {
-            c[0] = t * c[0] + (t - 1.0) / 2.0;
-            c[1] = t * c[1] + (t - 1.0) / 2.0;
-        };
-        for d in &mut detections {
-            d.corners_px.iter_mut().for_each(to_raw);
-            to_raw(&mut d.centre_px);
-        }
+        let detections = detect_frame(&mut self.detector, frame, self.config.image)?;
         let mut best: Option<(usize, usize, Result<BoardPose, String>)> = None;
         for (i, placed) in self.boards.iter().enumerate() {
             let assembly = assemble_correspondences(&detections, placed);
@@ -249,4 +194,69 @@ impl Tracker {
             }
         }
     }
+}
+
+/// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
+pub fn detection_image(
+    frame: &RawFrame,
+    kind: DetectImage,
+) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
+    let levels = PolarConfig::default()
+        .levels(frame)
+        .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+    let demosaiced = demosaic(frame, &levels, DemosaicMethod::Superpixel);
+    let (w, h) = (
+        demosaiced.bands[0].intensity[0].width(),
+        demosaiced.bands[0].intensity[0].height(),
+    );
+    // colour sensors: sum the bands (tags are grey)
+    let mut plane = vec![0f32; w * h];
+    for band in &demosaiced.bands {
+        let [i0, i45, i90, i135] = &band.intensity;
+        for (k, v) in plane.iter_mut().enumerate() {
+            *v += match kind {
+                DetectImage::S0 => {
+                    0.5 * (i0.data()[k] + i45.data()[k] + i90.data()[k] + i135.data()[k])
+                }
+                DetectImage::I90 => i90.data()[k],
+                DetectImage::I0 => i0.data()[k],
+            };
+        }
+    }
+    let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let p995 = sorted
+        .get(sorted.len().saturating_sub(1) * 995 / 1000)
+        .copied()
+        .unwrap_or(1.0);
+    // guard: an all-dark frame maps to zeros rather than dividing by ~0
+    let scale = if p995 > 1e-6 { 255.0 / p995 } else { 0.0 };
+    let gray = plane
+        .iter()
+        .map(|v| (v * scale).clamp(0.0, 255.0) as u8)
+        .collect();
+    Ok((gray, w, h, frame.layout().tile_px() as usize))
+}
+
+/// Detects tags in a raw frame; corners and centres in raw-pixel coordinates (integer-centre
+/// convention), ready for the full-resolution camera model.
+pub fn detect_frame(
+    detector: &mut TagDetector,
+    frame: &RawFrame,
+    image: DetectImage,
+) -> Result<Vec<TagDetection>, TrackRejection> {
+    let (gray, w, h, tile) = detection_image(frame, image)?;
+    let mut detections = detector
+        .detect(&gray, w, h)
+        .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+    let t = tile as f64;
+    let to_raw = |c: &mut [f64; 2]| {
+        c[0] = t * c[0] + (t - 1.0) / 2.0;
+        c[1] = t * c[1] + (t - 1.0) / 2.0;
+    };
+    for d in &mut detections {
+        d.corners_px.iter_mut().for_each(to_raw);
+        to_raw(&mut d.centre_px);
+    }
+    Ok(detections)
 }
