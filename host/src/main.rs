@@ -22,6 +22,9 @@ enum Command {
     Model(cli::model::Args),
     /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
     Polar(cli::polar::Args),
+    /// The simulator: render a scene's capture, or show which effects it needs.
+    #[command(subcommand)]
+    Sim(cli::sim::Args),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -39,5 +42,6 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Model(args) => cli::model::run(args),
         Command::Polar(args) => cli::polar::run(args),
+        Command::Sim(args) => cli::sim::run(args),
     }
 }

@@ -191,7 +191,7 @@ impl Shader<'_> {
 
     /// Analysed model intensity of an object point (unit flash).
     #[expect(clippy::too_many_arguments, reason = "one shading sample's full state")]
-    fn object(
+    pub(super) fn object(
         &self,
         ctx: &PoseContext,
         normal: Vector3<f64>,
