@@ -429,17 +429,13 @@ impl EffectPlan {
         let listed = scene.effects.listed();
         let e = &scene.effects;
         for stage in &Stage::ALL[Stage::Vignetting.index()..] {
-            let kind = listed
-                .iter()
-                .copied()
-                .find(|k| Stage::from_effect(*k) == *stage);
-            let Some(_) = kind else {
+            if !listed.iter().any(|k| Stage::from_effect(*k) == *stage) {
                 plan.omitted.push(OmittedStage {
                     stage: *stage,
                     reason: format!("not listed in [effects] ({} absent)", stage.name()),
                 });
                 continue;
-            };
+            }
             let params = match stage {
                 Stage::ReadNoise => e.read_noise.map(StageParams::ReadNoise),
                 Stage::Vignetting => e.vignetting.map(StageParams::Vignetting),

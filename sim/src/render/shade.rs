@@ -143,7 +143,7 @@ impl Shader<'_> {
         let to_camera = -ray.dir;
         let to_flash = ctx.flash_world - p;
         let distance_m = to_flash.norm();
-        if !(distance_m > 0.0) {
+        if !distance_m.is_finite() || distance_m <= 0.0 {
             return 0.0;
         }
         let to_light = to_flash / distance_m;

@@ -174,8 +174,8 @@ fn rendered_board_superpixels_obey_the_consistency_sum() {
             let v = all.map(|i| f64::from(f.dn[i]));
             // Only uniform print areas (all four within 3 % of each other).
             let (lo, hi) = (
-                v.iter().cloned().fold(f64::MAX, f64::min),
-                v.iter().cloned().fold(0.0, f64::max),
+                v.iter().copied().fold(f64::MAX, f64::min),
+                v.iter().copied().fold(0.0, f64::max),
             );
             if lo < 50.0 || hi > 1.03 * lo {
                 continue;
