@@ -12,6 +12,7 @@
 //!   - `IntensityOfPolarised`: row 0 of each lobe applied to the polarised flash light (as
 //!     [`pbrdf::evaluate_s0`]), no outgoing rotation;
 //!   - `Scalar`: M00 of each lobe (as [`pbrdf::scalar_brdf`]), no rotation at all.
+//!
 //!   The three paths agree with `pbrdf::apply` / `evaluate_s0` / `scalar_brdf` (tested).
 //! - Flash light: s_light = [1, 1, 0, 0] in the light frame whose x is the flash polariser's
 //!   transmission axis ([`crate::scene::FlashSpec::polariser_axis_world`]); z = −ω_i, so the frame's
