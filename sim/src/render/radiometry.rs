@@ -26,7 +26,7 @@
 //! Contract: `DN_expected = normaliser(d, θ_flash, field angle) × m` before noise, saturation
 //! and quantisation, exactly as the renderer computes it (tested against a render).
 
-use crate::scene::{CameraSpec, FlashSpec};
+use crate::scene::{CameraSpec, FlashProfileKind, FlashSpec};
 
 /// Planck constant × speed of light / 550 nm: the energy of one green photon, joules.
 pub const PHOTON_ENERGY_J: f64 = 6.626_070_15e-34 * 2.997_924_58e8 / 550e-9;
@@ -94,11 +94,31 @@ impl Radiometry {
             / (d * d)
     }
 
+    /// The same irradiance from the cosine of the angle off the flash axis (the renderer's hot
+    /// path: no acos/cos round trip for the `cos_power` profile; tables go through the angle).
+    pub fn flash_irradiance_from_cos(&self, distance_m: f64, cos_from_flash_axis: f64) -> f64 {
+        let c = cos_from_flash_axis.clamp(-1.0, 1.0);
+        let profile = match (self.flash.profile.kind, self.flash.profile.exponent) {
+            // Same clamp as `FlashSpec::relative_intensity`: no light behind the emitter.
+            (FlashProfileKind::CosPower, None) => c.max(0.0),
+            (FlashProfileKind::CosPower, Some(n)) if n == 1.0 => c.max(0.0),
+            (FlashProfileKind::CosPower, Some(n)) => c.max(0.0).powf(n),
+            (FlashProfileKind::Table, _) => self.flash.relative_intensity(c.acos().to_degrees()),
+        };
+        let d = distance_m.max(1e-3);
+        self.flash.radiant_intensity_w_per_sr * profile / (d * d)
+    }
+
     /// `cos^n` of the field angle (1 when vignetting is not planned). The cosine is clamped
     /// to [0, 1].
     pub fn vignetting(&self, field_angle_rad: f64) -> f64 {
+        self.vignetting_from_cos(field_angle_rad.cos())
+    }
+
+    /// `cos^n` from the cosine of the field angle (clamped to [0, 1]).
+    pub fn vignetting_from_cos(&self, cos_field: f64) -> f64 {
         match self.vignetting_exponent {
-            Some(n) => field_angle_rad.cos().clamp(0.0, 1.0).powf(n),
+            Some(n) => cos_field.clamp(0.0, 1.0).powf(n),
             None => 1.0,
         }
     }
@@ -202,6 +222,34 @@ mod tests {
         assert!((v / n1 - 30f64.to_radians().cos().powi(4)).abs() < 1e-12);
         let p = normaliser(&s.rig.camera, &f, None, 0.5, 60f64.to_radians(), 0.0);
         assert!((p / n1 - 0.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn cosine_and_angle_forms_agree_for_both_profile_kinds() {
+        let s = sphere_scene();
+        let mut flash = s.rig.flash.clone();
+        for exponent in [None, Some(1.0), Some(3.5)] {
+            flash.profile.exponent = exponent;
+            let r = Radiometry::new(&s.rig.camera, &flash, Some(4.0));
+            for deg in [0.0f64, 10.0, 45.0, 89.0, 120.0] {
+                let a = r.flash_irradiance_w_per_m2(0.4, deg.to_radians());
+                let b = r.flash_irradiance_from_cos(0.4, deg.to_radians().cos());
+                assert!(
+                    (a - b).abs() <= 1e-12 * a.max(1.0),
+                    "{exponent:?} {deg}: {a} {b}"
+                );
+                let v =
+                    r.vignetting(deg.to_radians()) - r.vignetting_from_cos(deg.to_radians().cos());
+                assert!(v.abs() < 1e-12);
+            }
+        }
+        flash.profile.kind = FlashProfileKind::Table;
+        flash.profile.angle_deg = Some(vec![0.0, 30.0, 60.0]);
+        flash.profile.relative = Some(vec![1.0, 0.5, 0.1]);
+        let r = Radiometry::new(&s.rig.camera, &flash, None);
+        let a = r.flash_irradiance_w_per_m2(0.4, 45f64.to_radians());
+        let b = r.flash_irradiance_from_cos(0.4, 45f64.to_radians().cos());
+        assert!((a - b).abs() <= 1e-9 * a && (a / (0.5 / 0.16) - 0.3).abs() < 1e-9);
     }
 
     #[test]

@@ -163,10 +163,9 @@ impl Shader<'_> {
         }
         let irradiance = if self.set.has(Stage::FlashFalloff) {
             counts.add(Stage::FlashFalloff, 1);
-            // Clamp the cosine into acos's domain.
-            let cos_axis = (-to_light).dot(&ctx.flash_axis_world).clamp(-1.0, 1.0);
+            let cos_axis = (-to_light).dot(&ctx.flash_axis_world);
             self.radiometry
-                .flash_irradiance_w_per_m2(distance_m, cos_axis.acos())
+                .flash_irradiance_from_cos(distance_m, cos_axis)
         } else {
             self.radiometry.flash_irradiance_w_per_m2(1.0, 0.0)
         };
