@@ -28,6 +28,9 @@ enum Command {
     Devices(cli::devices::Args),
     /// Replay a recorded session through the stages after capture (pose tracking).
     Replay(cli::replay::Args),
+    /// The simulator: render a scene's capture, or show which effects it needs.
+    #[command(subcommand)]
+    Sim(cli::sim::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -66,5 +69,6 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Replay(args) => cli::replay::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Sim(args) => cli::sim::run(args),
     }
 }

@@ -10,11 +10,18 @@
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw pixel.
 //! - [`scene`]: scene files (TOML): objects, materials, AprilTag boards, rig, capture path.
 //!
-//! Later modules (renderer, sensor effects, virtual rig) build on these.
+//! - [`effects`]: effects on demand — the plan of stages a scene needs, with reasons, and the
+//!   per-frame stage execution counts that prove it.
+//! - [`render`]: the polarimetric renderer (raw mosaic frames + ground truth) and the
+//!   radiometry shared with the fit.
+//!
+//! Later modules (virtual rig) build on these.
 
 pub mod camera;
+pub mod effects;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;
+pub mod render;
 pub mod scene;
 pub mod tags;

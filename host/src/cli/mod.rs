@@ -5,3 +5,4 @@ pub mod devices;
 pub mod model;
 pub mod polar;
 pub mod replay;
+pub mod sim;
