@@ -59,6 +59,11 @@ impl HostClock {
         HostTimeUs(self.epoch.elapsed().as_micros() as u64)
     }
 
+    /// The epoch (host time 0).
+    pub fn epoch(&self) -> Instant {
+        self.epoch
+    }
+
     /// An instant on this clock (saturating at the epoch for earlier instants).
     pub fn at(&self, t: Instant) -> HostTimeUs {
         HostTimeUs(t.saturating_duration_since(self.epoch).as_micros() as u64)
