@@ -324,8 +324,8 @@ fn gige_frames_pair_with_their_own_pulses() {
     // the wire). A quarter period after pulse K−1 an extra pulse fires that the camera ignores
     // (it came during readout: a missed trigger), and every later pulse's sequence number is one
     // higher, so ids and pulses disagree from then on. The period (50 ms) is chosen so the timing
-    // evidence (extra pulse ≥ 37 ms before frame K) beats this host's arrival jitter (~1–6 ms
-    // after the trigger, seen on a loaded 2-core machine).
+    // evidence (extra pulse ≥ 37 ms before frame K) beats this host's arrival jitter (~1–10 ms
+    // after the trigger, seen on a loaded 2-core machine, plus the 12 ms tolerance).
     const FPS: f64 = 20.0;
     const N: usize = 40;
     const K: u64 = 20;
@@ -377,8 +377,8 @@ fn gige_frames_pair_with_their_own_pulses() {
         min_latency_us: 0.0,
         max_latency_us,
         pulse_timeout_us: period_us * 4.0,
-        // host scheduling puts frame arrivals ~1 ms or ~6 ms after their trigger here
-        latency_tolerance_us: 6_000.0,
+        // host scheduling puts frame arrivals 1–10 ms after their trigger here
+        latency_tolerance_us: 12_000.0,
     };
     let mut pairer = Pairer::new(config);
     let mut outcomes = Vec::new();
@@ -411,7 +411,14 @@ fn gige_frames_pair_with_their_own_pulses() {
             paired += 1;
         }
     }
-    let fed = frames.iter().filter(fed).count();
+    let n_fed = frames.iter().filter(fed).count();
+    let latencies: Vec<i64> = frames
+        .iter()
+        .filter(fed)
+        .map(|f| (f.meta.t_host_us.0 as f64 - trigger(index(f) as f64) as f64) as i64)
+        .collect();
+    println!("arrival after trigger, µs: {latencies:?}");
+    let fed = n_fed;
     println!(
         "pairing: {paired} of {fed} fed frames paired, wrong {wrong:?}, late beyond the window \
          {late:?}, counts {:?}",

@@ -417,35 +417,26 @@ impl AravisCamera {
             }
         };
         let frame_id = self.unwrap_id(buffer.frame_id())?;
-        let header = matches!(
+        let (width, height, encoding) = if flag.is_some() {
+            // a damaged frame: libaravis has not filled in its image part (asking for it logs
+            // glib assertions), so the geometry the stream started with — the region and format
+            // cannot change while streaming — describes the bytes
+            self.geometry
+        } else if matches!(
             buffer.payload_type(),
             BufferPayloadType::Image | BufferPayloadType::ExtendedChunkData
-        )
-        .then(|| {
+        ) {
             let width = u32::try_from(buffer.image_width()).unwrap_or(0);
             let height = u32::try_from(buffer.image_height()).unwrap_or(0);
             let code = buffer.image_pixel_format().raw();
-            (width, height, code)
-        });
-        let (width, height, encoding) = match (header, flag) {
-            (Some((w, h, code)), _) if w > 0 && h > 0 => match format::encoding_of_pfnc(code) {
-                Some(encoding) => (w, h, encoding),
-                None if flag.is_some() => self.geometry,
-                None => {
-                    self.count_failure(format!("unsupported pixel format {code:#010x}"));
-                    return None;
-                }
-            },
-            // a damaged frame whose image header did not arrive: the geometry the stream started
-            // with is the best description of the bytes that did
-            (_, Some(_)) => self.geometry,
-            (_, None) => {
-                self.count_failure(format!(
-                    "no image header (payload type {:?})",
-                    buffer.payload_type()
-                ));
+            let Some(encoding) = format::encoding_of_pfnc(code) else {
+                self.count_failure(format!("unsupported pixel format {code:#010x}"));
                 return None;
-            }
+            };
+            (width, height, encoding)
+        } else {
+            self.count_failure(format!("payload type {:?}", buffer.payload_type()));
+            return None;
         };
         let (ptr, received) = buffer.data();
         // libaravis reports 0 received bytes for a frame that missed packets; its memory is still
