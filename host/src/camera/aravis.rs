@@ -11,8 +11,9 @@
 //!   would destroy the 2×2 polariser mosaic (binning, decimation, odd region offsets or sizes,
 //!   camera-processed polarisation formats) is refused with an error naming it.
 //! - External trigger: `TriggerSelector = FrameStart`, then `TriggerMode = On`, then
-//!   `TriggerSource = Line0`, where the camera has those features; a camera without them gets a
-//!   clear `Setting` error (aravis' fake camera has no `Line0`: tests run free-running).
+//!   `TriggerSource = Line0`, where the camera has those features; a camera without them (or
+//!   without a `Line0` entry) gets a clear `Setting` error. aravis' fake camera has all three and
+//!   then sends nothing (nothing drives its Line0); the tests check that and run free-running.
 //! - Streaming uses a buffer pool sized for the camera's **datasheet** frame rate
 //!   ([`AravisOptions::datasheet_fps`] × [`AravisOptions::pool_span_s`]), not the capture
 //!   rate, so a burst never starves the pool. Buffers are read zero-copy and unpacked to `u16`.
@@ -20,9 +21,11 @@
 //!   [`FrameStatus::Flagged`]`("missing packets")` (kept, never fitted); any other status is
 //!   counted in `other_failures` (with the status name in the log) and not delivered.
 //! - Block ids are unwrapped with [`FrameIdUnwrapper`]; a repeated block id is dropped and
-//!   counted as another failure. `underruns` is libaravis' own count (no free buffer); id gaps
-//!   are tracked too ([`AravisCamera::frames_skipped_by_id`]) and a gap not explained by
-//!   underruns or failed buffers is logged as a warning (frames lost whole on the wire).
+//!   counted as another failure. Frames are lost when the ids jump: a gap of `n` counts `n`
+//!   `underruns` when libaravis reported underruns meanwhile (no free buffer: the consumer was
+//!   too slow), else `n` frames "lost whole on the wire" in `other_failures` (logged). libaravis'
+//!   own underrun statistic counts *packets*, not frames ([`AravisCamera::underrun_packets`]),
+//!   so it is used as evidence only.
 //! - `t_camera_ns` is the buffer's device timestamp (`None` when the camera gives 0), `t_host_us`
 //!   the host clock at the moment the buffer was popped.
 //! - The packet size granted and the socket-buffer mode (with `net.core.rmem_max`) are logged.
@@ -107,7 +110,8 @@ pub struct AravisCamera {
     counters: CameraCounters,
     skipped_by_id: u64,
     duplicates: u64,
-    failed_buffers: u64,
+    underrun_packets_at_last_gap: u64,
+    underrun_packets_stopped: u64,
     failures_by_reason: std::collections::BTreeMap<String, u64>,
     geometry: (u32, u32, RawEncoding),
     payload_bytes: usize,
@@ -150,7 +154,8 @@ impl AravisCamera {
             counters: CameraCounters::default(),
             skipped_by_id: 0,
             duplicates: 0,
-            failed_buffers: 0,
+            underrun_packets_at_last_gap: 0,
+            underrun_packets_stopped: 0,
             failures_by_reason: std::collections::BTreeMap::new(),
             geometry: (0, 0, RawEncoding::Mono8),
             payload_bytes: 0,
@@ -361,32 +366,36 @@ impl AravisCamera {
         self.encoding
     }
 
-    fn refresh_underruns(&mut self) {
-        if let Some(stream) = &self.stream {
-            let (_completed, _failures, underruns) = stream.statistics();
-            self.counters.underruns = underruns;
-        }
+    /// libaravis' own underrun count. In libaravis 0.8.26 it counts **packets** that found no
+    /// free buffer (a lost 9-packet frame adds about 9), so it is evidence, not a frame count.
+    pub fn underrun_packets(&self) -> u64 {
+        self.underrun_packets_stopped + self.stream.as_ref().map_or(0, |s| s.statistics().2)
     }
 
-    /// Unwraps a block id; `None` for a duplicate (counted) or an invalid id 0.
+    /// Unwraps a block id; `None` for a duplicate (counted) or an invalid id 0. A gap of `n`
+    /// frames counts `n` underruns when libaravis saw underruns since the previous gap, else `n`
+    /// frames lost whole on the wire (in `other_failures`).
     fn unwrap_id(&mut self, block_id: u64) -> Option<u64> {
         let block = u16::try_from(block_id).unwrap_or((block_id % 65_535) as u16);
         match self.unwrapper.push(block) {
             Unwrapped::Next { frame_id, skipped } => {
                 self.skipped_by_id += skipped;
                 if skipped > 0 {
-                    self.refresh_underruns();
-                    let explained = self.counters.underruns + self.failed_buffers;
-                    if self.skipped_by_id > explained {
+                    let packets = self.underrun_packets();
+                    if packets > self.underrun_packets_at_last_gap {
+                        self.counters.underruns += skipped;
+                    } else {
                         tracing::warn!(
-                            camera = %self.address,
-                            skipped_by_id = self.skipped_by_id,
-                            underruns = self.counters.underruns,
-                            failed_buffers = self.failed_buffers,
-                            "frames missing from the id sequence beyond underruns and failures \
-                             (lost whole on the wire?)"
+                            camera = %self.address, frame_id, skipped,
+                            "frames lost whole on the wire (id gap without underrun)"
                         );
+                        self.counters.other_failures += skipped;
+                        *self
+                            .failures_by_reason
+                            .entry("frame lost whole (id gap without underrun)".to_owned())
+                            .or_default() += skipped;
                     }
+                    self.underrun_packets_at_last_gap = packets;
                 }
                 Some(frame_id)
             }
@@ -409,7 +418,6 @@ impl AravisCamera {
             BufferStatus::MissingPackets => Some("missing packets"),
             other => {
                 self.count_failure(format!("{other:?}"));
-                self.failed_buffers += 1;
                 // keep the id sequence in step so the failed frame is not also a gap
                 let _ = self.unwrap_id(buffer.frame_id());
                 tracing::warn!(camera = %self.address, status = ?other, "frame failed");
@@ -602,13 +610,11 @@ impl Camera for AravisCamera {
             let left_us = u64::try_from(left.as_micros()).unwrap_or(u64::MAX);
             let Some(buffer) = stream.timeout_pop_buffer(left_us) else {
                 self.counters.timeouts += 1;
-                self.refresh_underruns();
                 return Ok(None);
             };
             let frame = self.take(&buffer);
             stream.push_buffer(buffer);
             if frame.is_some() {
-                self.refresh_underruns();
                 return Ok(frame);
             }
             if left.is_zero() {
@@ -626,12 +632,12 @@ impl Camera for AravisCamera {
             .camera
             .stop_acquisition()
             .map_err(|e| self.stream_err(e));
-        self.refresh_underruns();
         if let Some(stream) = self.stream.take() {
             let (completed, failures, underruns) = stream.statistics();
+            self.underrun_packets_stopped += underruns;
             let gv = stream.downcast::<GvStream>().ok().map(|g| g.statistics());
             tracing::info!(
-                camera = %self.address, completed, failures, underruns,
+                camera = %self.address, completed, failures, underrun_packets = underruns,
                 resent_and_missing_packets = ?gv, "stream statistics"
             );
         }
