@@ -122,6 +122,7 @@ fn rig(width: u32, height: u32, pixel_format: u32, packet_size: u32, fps: f64) -
         frame_rate_hz: Some(fps),
         datasheet_fps: fps,
         pool_span_s: 0.5,
+        ..AravisOptions::default()
     };
     let mut camera =
         AravisCamera::open("127.0.0.1", options, HostClock::new()).expect("open by IP");
@@ -458,6 +459,7 @@ fn gige_slow_consumer_shows_underruns_not_missing_packets() {
         frame_rate_hz: Some(500.0),
         datasheet_fps: 1.0,
         pool_span_s: 1.0,
+        ..AravisOptions::default()
     };
     let mut camera = AravisCamera::open("127.0.0.1", options, HostClock::new()).expect("open");
     camera.start().expect("start");

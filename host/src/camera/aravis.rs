@@ -60,6 +60,9 @@ pub struct AravisOptions {
     pub datasheet_fps: f64,
     /// Seconds of frames at `datasheet_fps` the buffer pool holds.
     pub pool_span_s: f64,
+    /// Mosaic layout name reported in [`CameraInfo::layout`] (`mono_polar` for the IMX250MZR,
+    /// `colour_polar` for the IMX250MYR): GenICam has no standard feature that says it.
+    pub layout: String,
 }
 
 impl Default for AravisOptions {
@@ -71,6 +74,7 @@ impl Default for AravisOptions {
             // IMX250MZR 5 MP polarisation camera over GigE: ~24 fps (8-bit), fewer at 12 bit
             datasheet_fps: 24.0,
             pool_span_s: 1.0,
+            layout: "mono_polar".to_owned(),
         }
     }
 }
@@ -530,7 +534,7 @@ impl Camera for AravisCamera {
             model,
             width: u32::try_from(w).unwrap_or(0),
             height: u32::try_from(h).unwrap_or(0),
-            layout: "mono_polar".to_owned(),
+            layout: self.options.layout.clone(),
             bit_depth: self.encoding.bit_depth(),
         }
     }
