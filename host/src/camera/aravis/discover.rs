@@ -22,7 +22,7 @@ pub struct DiscoveredCamera {
 ///
 /// Call this only behind an explicit opt-in CLI flag on a real rig. Tests, examples, benchmarks
 /// and default code paths must never call it: they open cameras by IP with
-/// [`AravisCamera::open`].
+/// [`AravisCamera::open`](super::AravisCamera::open).
 pub fn discover_gige_cameras() -> Vec<DiscoveredCamera> {
     // libaravis' device list is process-global: serialise our own calls to it
     static DEVICE_LIST: std::sync::Mutex<()> = std::sync::Mutex::new(());
