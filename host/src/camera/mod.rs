@@ -13,8 +13,13 @@
 //! Backends: `sim` (in-process simulator, default), `replay` (a recorded session), `aravis`
 //! (GigE/USB3 Vision, cargo feature), `v4l` (UVC, cargo feature).
 
+#[cfg(feature = "aravis")]
+pub mod aravis;
 pub mod frame_id;
 pub mod replay;
+pub mod unpack;
+#[cfg(feature = "v4l")]
+pub mod v4l;
 
 use std::time::Duration;
 
