@@ -18,7 +18,7 @@
 //!    (learned once any latency is known, configured before), which sets the offset. When the timing contradicts a known offset (the camera missed
 //!    a trigger or fired a spurious frame), the offset is re-learned only from the unique pulse
 //!    inside the *learned* window. Several candidates: ambiguous, no pair. After three unpaired
-//!    frames in a row the offset is forgotten and learned afresh.
+//!    frames in a row the offset and the learned window are forgotten and learned afresh.
 //! 3. Without any clock fit, the first frame and first pulse define the offset (the acquisition
 //!    syncs the clock before starting, so this is a fallback; missed triggers are then undetectable
 //!    and the outcome says so by carrying no latency).
@@ -214,8 +214,10 @@ impl Pairer {
             self.expired_in_a_row += 1;
         }
         if self.expired_in_a_row >= RESET_AFTER_UNPAIRED {
-            // ids and timing keep disagreeing: start over from timing alone
+            // ids and timing keep disagreeing: start over — the learned window too, since an
+            // outlier among the first confirmed latencies would otherwise exclude every frame
             self.offset = None;
+            self.latencies.clear();
             self.expired_in_a_row = 0;
         }
         let timeout = self.config.pulse_timeout_us;

@@ -221,3 +221,28 @@ proptest! {
         check(&out, &truth, nf, np);
     }
 }
+
+#[test]
+fn an_outlier_first_latency_does_not_lock_out_every_later_frame() {
+    // the first frame arrives 60 ms after its trigger, every later one at ~30 ms: the window
+    // learned from the first pair excludes them until the pairer starts over
+    let c = clock();
+    let mut p = Pairer::new(PairingConfig::for_capture(EXPOSURE_US, PERIOD_US as u32, 100_000));
+    let mut out = Vec::new();
+    for k in 0..40u64 {
+        let trig = DeviceTimeUs(5_000_000 + k * PERIOD_US as u64);
+        let host_trig = c.host_us(trig);
+        let latency = if k == 0 { 60_000.0 } else { 30_000.0 };
+        out.extend(p.expire(HostTimeUs((host_trig + 10_000.0) as u64), Some(&c)));
+        out.extend(p.add_pulse(7 + k, trig, HostTimeUs((host_trig + 10_000.0) as u64), Some(&c)));
+        out.extend(p.add_frame(1_000 + k, HostTimeUs((host_trig + latency) as u64), Some(&c)));
+    }
+    out.extend(p.finish());
+    for o in &out {
+        if let PairingOutcome::Paired { frame_id, seq, .. } = o {
+            assert_eq!(seq - 7, frame_id - 1_000, "wrong pair {o:?}");
+        }
+    }
+    let paired = out.iter().filter(|o| matches!(o, PairingOutcome::Paired { .. })).count();
+    assert!(paired >= 35, "only {paired} of 40 paired after an outlier first frame");
+}
