@@ -266,3 +266,49 @@ fn rendered_calibration_board_is_detected_with_accurate_corners() {
     let median = errors[errors.len() / 2];
     assert!(median < 0.35, "median corner error {median} superpixels");
 }
+
+#[test]
+fn raw_into_a_caller_buffer_matches_the_frame_and_checks_its_size() {
+    let scene = Scene::load(&scene_path("sphere.toml")).unwrap();
+    let r = Renderer::new(&scene, small(64, 48)).unwrap();
+    let mut buf = vec![0u16; 64 * 48];
+    let (truth, counts) = r.render_raw_into(2, &mut buf).unwrap();
+    let f = r.render_frame(2).unwrap();
+    assert_eq!(buf, f.raw());
+    assert_eq!((truth, counts), (f.truth, f.counts));
+    let mut short = vec![0u16; 10];
+    assert!(matches!(
+        r.render_raw_into(2, &mut short),
+        Err(RenderError::BufferSize { len: 10, .. })
+    ));
+}
+
+#[test]
+fn motion_blur_smears_the_frame_but_keeps_its_energy() {
+    let scene = scene_edited("multi_material.toml", |t| {
+        without_effects(t)
+            + "\n[effects]\nmotion_blur = { samples = 8, linear_speed_m_per_s = 2.0, angular_speed_deg_per_s = 200.0 }\n"
+    });
+    let r = Renderer::new(&scene, small(96, 80)).unwrap();
+    let blurred = r.render_frame(3).unwrap();
+    let mut plan = r.plan().clone();
+    plan.stages.retain(|s| s.stage != Stage::MotionBlur);
+    let sharp = Renderer::with_plan(&scene, plan, small(96, 80))
+        .unwrap()
+        .render_frame(3)
+        .unwrap();
+    assert_eq!(sharp.counts.get(Stage::MotionBlur), 0);
+    assert_eq!(blurred.counts.get(Stage::MotionBlur), 96 * 80 * 8);
+    let changed = blurred
+        .dn
+        .iter()
+        .zip(&sharp.dn)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(changed > 96 * 80 / 10, "only {changed} pixels changed");
+    let sum = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>();
+    let ratio = sum(&blurred.dn) / sum(&sharp.dn);
+    assert!((ratio - 1.0).abs() < 0.1, "energy ratio {ratio}");
+    // The truth pose is the mid-exposure (listed) pose either way.
+    assert_eq!(blurred.truth, sharp.truth);
+}
