@@ -312,3 +312,41 @@ fn motion_blur_smears_the_frame_but_keeps_its_energy() {
     // The truth pose is the mid-exposure (listed) pose either way.
     assert_eq!(blurred.truth, sharp.truth);
 }
+
+#[test]
+fn vignetting_scales_each_pixel_by_cos_n_of_its_field_angle() {
+    let plain = Scene::load(&scene_path("s0_only.toml")).unwrap();
+    let vignetted = scene_edited("s0_only.toml", |t| {
+        t + "\n[effects]\nvignetting = { exponent = 4.0 }\n"
+    });
+    let r = Renderer::new(&vignetted, small(64, 54)).unwrap();
+    let a = Renderer::new(&plain, small(64, 54))
+        .unwrap()
+        .render_frame(0)
+        .unwrap();
+    let b = r.render_frame(0).unwrap();
+    let mut checked = 0;
+    for y in 0..54u32 {
+        for x in 0..64u32 {
+            let i = (y * 64 + x) as usize;
+            if a.dn[i] < 1.0 {
+                continue;
+            }
+            let d = r.ray_camera(f64::from(x), f64::from(y), &mut StageCounts::default());
+            let ratio = f64::from(b.dn[i]) / f64::from(a.dn[i]);
+            assert!(
+                (ratio - d.z.powi(4)).abs() < 1e-5,
+                "({x}, {y}): {ratio} vs {}",
+                d.z.powi(4)
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 300, "only {checked} lit pixels");
+    // Corners are measurably darker than the centre.
+    let c = r
+        .ray_camera(0.0, 0.0, &mut StageCounts::default())
+        .z
+        .powi(4);
+    assert!(c < 0.99);
+}
