@@ -2,6 +2,7 @@
 //! saturation, shadows, the radiometry contract, and real AprilTag detection on a render.
 
 use super::*;
+use crate::mosaic::SensorLayout;
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -349,4 +350,37 @@ fn vignetting_scales_each_pixel_by_cos_n_of_its_field_angle() {
         .z
         .powi(4);
     assert!(c < 0.99);
+}
+
+#[test]
+fn colour_mosaic_pixels_see_their_filter_channel() {
+    // glossy_plastic has rho_d = [0.60, 0.10, 0.08]: red pixels on it are far brighter than blue.
+    let scene = scene_edited("multi_material.toml", without_effects);
+    let plastic = scene.material_id("glossy_plastic").unwrap() as u16;
+    let opts = RenderOptions {
+        pixel_truth: true,
+        ..small(128, 108)
+    };
+    let r = Renderer::new(&scene, opts).unwrap();
+    assert_eq!(r.layout(), SensorLayout::ColourPolar);
+    let (mut sum, mut n) = ([0.0f64; 3], [0usize; 3]);
+    for k in 0..6 {
+        let f = r.render_frame(k).unwrap();
+        let truth = f.pixels.as_ref().unwrap();
+        for y in 0..108u32 {
+            for x in 0..128u32 {
+                let i = (y * 128 + x) as usize;
+                // I90 pixels only: the cross-polarised, mostly diffuse channel.
+                if truth.material[i] != plastic || r.layout().analyser_deg_at(x, y) != 90.0 {
+                    continue;
+                }
+                let c = r.layout().colour_at(x, y).unwrap().index();
+                sum[c] += f64::from(f.dn[i]);
+                n[c] += 1;
+            }
+        }
+    }
+    assert!(n[0] > 5 && n[2] > 5, "too few plastic pixels: {n:?}");
+    let (red, blue) = (sum[0] / n[0] as f64, sum[2] / n[2] as f64);
+    assert!(red > 3.0 * blue, "red {red}, blue {blue}");
 }
