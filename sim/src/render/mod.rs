@@ -7,7 +7,7 @@
 //! the flash's polarised light, the analyser and colour filter of that pixel's mosaic position
 //! ([`crate::mosaic::SensorLayout`]), radiometry ([`radiometry`]), then the sensor chain (shot and
 //! read noise, saturation, quantisation). Only the stages of the scene's
-//! [`EffectPlan`](crate::effects::EffectPlan) run; each execution is counted per frame.
+//! [`EffectPlan`] run; each execution is counted per frame.
 //!
 //! # Contract
 //! - [`Renderer::render_frame`]`(k)` renders pose `k` of `scene.camera_poses`. The result's
