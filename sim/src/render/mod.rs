@@ -7,7 +7,7 @@
 //! the flash's polarised light, the analyser and colour filter of that pixel's mosaic position
 //! ([`crate::mosaic::SensorLayout`]), radiometry ([`radiometry`]), then the sensor chain (shot and
 //! read noise, saturation, quantisation). Only the stages of the scene's
-//! [`EffectPlan`](crate::effects::EffectPlan) run; each execution is counted per frame.
+//! [`EffectPlan`] run; each execution is counted per frame.
 //!
 //! # Contract
 //! - [`Renderer::render_frame`]`(k)` renders pose `k` of `scene.camera_poses`. The result's
@@ -101,6 +101,16 @@ pub enum RenderError {
         height: u32,
         /// What the mosaic needs.
         source: MosaicError,
+    },
+    /// A caller's buffer does not hold one frame.
+    #[error("buffer of {len} pixels cannot hold a {width}×{height} frame")]
+    BufferSize {
+        /// Buffer length, pixels.
+        len: usize,
+        /// Frame width.
+        width: u32,
+        /// Frame height.
+        height: u32,
     },
     /// Supersampling outside 1..=MAX_SUPERSAMPLING.
     #[error("supersampling {0} must be in 1..={MAX_SUPERSAMPLING}")]
@@ -393,6 +403,29 @@ impl<'s> Renderer<'s> {
             pixels,
             counts,
         })
+    }
+
+    /// Renders frame `index` straight into a caller's u16 buffer (`width × height`, row-major,
+    /// as [`RenderedFrame::raw`]), e.g. a camera backend's frame pool; returns the frame's truth
+    /// and stage counts. A buffer of the wrong size is an error, and then nothing is rendered.
+    pub fn render_raw_into(
+        &self,
+        index: usize,
+        out: &mut [u16],
+    ) -> Result<(FrameTruth, StageCounts), RenderError> {
+        let expected = self.camera.width as usize * self.camera.height as usize;
+        if out.len() != expected {
+            return Err(RenderError::BufferSize {
+                len: out.len(),
+                width: self.camera.width,
+                height: self.camera.height,
+            });
+        }
+        let f = self.render_frame(index)?;
+        for (o, v) in out.iter_mut().zip(&f.dn) {
+            *o = v.round().clamp(0.0, 65535.0) as u16;
+        }
+        Ok((f.truth, f.counts))
     }
 
     /// One row of DN; returns the row's stage counts.

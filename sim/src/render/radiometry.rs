@@ -100,8 +100,7 @@ impl Radiometry {
         let c = cos_from_flash_axis.clamp(-1.0, 1.0);
         let profile = match (self.flash.profile.kind, self.flash.profile.exponent) {
             // Same clamp as `FlashSpec::relative_intensity`: no light behind the emitter.
-            (FlashProfileKind::CosPower, None) => c.max(0.0),
-            (FlashProfileKind::CosPower, Some(n)) if n == 1.0 => c.max(0.0),
+            (FlashProfileKind::CosPower, None | Some(1.0)) => c.max(0.0),
             (FlashProfileKind::CosPower, Some(n)) => c.max(0.0).powf(n),
             (FlashProfileKind::Table, _) => self.flash.relative_intensity(c.acos().to_degrees()),
         };

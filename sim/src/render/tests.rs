@@ -2,6 +2,7 @@
 //! saturation, shadows, the radiometry contract, and real AprilTag detection on a render.
 
 use super::*;
+use crate::mosaic::SensorLayout;
 use crate::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -265,4 +266,121 @@ fn rendered_calibration_board_is_detected_with_accurate_corners() {
     errors.sort_by(f64::total_cmp);
     let median = errors[errors.len() / 2];
     assert!(median < 0.35, "median corner error {median} superpixels");
+}
+
+#[test]
+fn raw_into_a_caller_buffer_matches_the_frame_and_checks_its_size() {
+    let scene = Scene::load(&scene_path("sphere.toml")).unwrap();
+    let r = Renderer::new(&scene, small(64, 48)).unwrap();
+    let mut buf = vec![0u16; 64 * 48];
+    let (truth, counts) = r.render_raw_into(2, &mut buf).unwrap();
+    let f = r.render_frame(2).unwrap();
+    assert_eq!(buf, f.raw());
+    assert_eq!((truth, counts), (f.truth, f.counts));
+    let mut short = vec![0u16; 10];
+    assert!(matches!(
+        r.render_raw_into(2, &mut short),
+        Err(RenderError::BufferSize { len: 10, .. })
+    ));
+}
+
+#[test]
+fn motion_blur_smears_the_frame_but_keeps_its_energy() {
+    let scene = scene_edited("multi_material.toml", |t| {
+        without_effects(t)
+            + "\n[effects]\nmotion_blur = { samples = 8, linear_speed_m_per_s = 2.0, angular_speed_deg_per_s = 200.0 }\n"
+    });
+    let r = Renderer::new(&scene, small(96, 80)).unwrap();
+    let blurred = r.render_frame(3).unwrap();
+    let mut plan = r.plan().clone();
+    plan.stages.retain(|s| s.stage != Stage::MotionBlur);
+    let sharp = Renderer::with_plan(&scene, plan, small(96, 80))
+        .unwrap()
+        .render_frame(3)
+        .unwrap();
+    assert_eq!(sharp.counts.get(Stage::MotionBlur), 0);
+    assert_eq!(blurred.counts.get(Stage::MotionBlur), 96 * 80 * 8);
+    let changed = blurred
+        .dn
+        .iter()
+        .zip(&sharp.dn)
+        .filter(|(a, b)| a != b)
+        .count();
+    assert!(changed > 96 * 80 / 10, "only {changed} pixels changed");
+    let sum = |v: &[f32]| v.iter().map(|x| f64::from(*x)).sum::<f64>();
+    let ratio = sum(&blurred.dn) / sum(&sharp.dn);
+    assert!((ratio - 1.0).abs() < 0.1, "energy ratio {ratio}");
+    // The truth pose is the mid-exposure (listed) pose either way.
+    assert_eq!(blurred.truth, sharp.truth);
+}
+
+#[test]
+fn vignetting_scales_each_pixel_by_cos_n_of_its_field_angle() {
+    let plain = Scene::load(&scene_path("s0_only.toml")).unwrap();
+    let vignetted = scene_edited("s0_only.toml", |t| {
+        t + "\n[effects]\nvignetting = { exponent = 4.0 }\n"
+    });
+    let r = Renderer::new(&vignetted, small(64, 54)).unwrap();
+    let a = Renderer::new(&plain, small(64, 54))
+        .unwrap()
+        .render_frame(0)
+        .unwrap();
+    let b = r.render_frame(0).unwrap();
+    let mut checked = 0;
+    for y in 0..54u32 {
+        for x in 0..64u32 {
+            let i = (y * 64 + x) as usize;
+            if a.dn[i] < 1.0 {
+                continue;
+            }
+            let d = r.ray_camera(f64::from(x), f64::from(y), &mut StageCounts::default());
+            let ratio = f64::from(b.dn[i]) / f64::from(a.dn[i]);
+            assert!(
+                (ratio - d.z.powi(4)).abs() < 1e-5,
+                "({x}, {y}): {ratio} vs {}",
+                d.z.powi(4)
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked > 300, "only {checked} lit pixels");
+    // Corners are measurably darker than the centre.
+    let c = r
+        .ray_camera(0.0, 0.0, &mut StageCounts::default())
+        .z
+        .powi(4);
+    assert!(c < 0.99);
+}
+
+#[test]
+fn colour_mosaic_pixels_see_their_filter_channel() {
+    // glossy_plastic has rho_d = [0.60, 0.10, 0.08]: red pixels on it are far brighter than blue.
+    let scene = scene_edited("multi_material.toml", without_effects);
+    let plastic = scene.material_id("glossy_plastic").unwrap() as u16;
+    let opts = RenderOptions {
+        pixel_truth: true,
+        ..small(128, 108)
+    };
+    let r = Renderer::new(&scene, opts).unwrap();
+    assert_eq!(r.layout(), SensorLayout::ColourPolar);
+    let (mut sum, mut n) = ([0.0f64; 3], [0usize; 3]);
+    for k in 0..6 {
+        let f = r.render_frame(k).unwrap();
+        let truth = f.pixels.as_ref().unwrap();
+        for y in 0..108u32 {
+            for x in 0..128u32 {
+                let i = (y * 128 + x) as usize;
+                // I90 pixels only: the cross-polarised, mostly diffuse channel.
+                if truth.material[i] != plastic || r.layout().analyser_deg_at(x, y) != 90.0 {
+                    continue;
+                }
+                let c = r.layout().colour_at(x, y).unwrap().index();
+                sum[c] += f64::from(f.dn[i]);
+                n[c] += 1;
+            }
+        }
+    }
+    assert!(n[0] > 5 && n[2] > 5, "too few plastic pixels: {n:?}");
+    let (red, blue) = (sum[0] / n[0] as f64, sum[2] / n[2] as f64);
+    assert!(red > 3.0 * blue, "red {red}, blue {blue}");
 }
