@@ -16,5 +16,6 @@ pub mod camera;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;
+pub mod rig;
 pub mod scene;
 pub mod tags;
