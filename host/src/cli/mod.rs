@@ -2,3 +2,4 @@
 
 pub mod model;
 pub mod polar;
+pub mod sim_serve;

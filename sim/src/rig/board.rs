@@ -23,7 +23,7 @@
 //!   [`BoardTruth::end_reason`] says which.
 
 use std::io::{ErrorKind, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -117,6 +117,9 @@ pub struct BoardTruth {
     pub corrupted_pulse_seqs: Vec<u64>,
     /// Frames never handed to the link: transmit queue full, link down.
     pub frames_lost: u64,
+    /// Frames the writer gave up on because the host end did not drain (a write timed out);
+    /// part of such a frame may have gone out, which the host's decoder drops as a bad frame.
+    pub frames_stalled: u64,
     /// Bits flipped board → host.
     pub bits_flipped_to_host: u64,
     /// Bits flipped host → board.
@@ -406,13 +409,14 @@ impl BoardRun {
         let (frames_tx, frames_rx) = crossbeam_channel::bounded(self.tx_queue_frames);
         let (tx_done_tx, tx_done) = crossbeam_channel::bounded::<()>(0);
         let tx_error = Arc::new(Mutex::new(None::<String>));
+        let stalled = Arc::new(AtomicU64::new(0));
         let tx_thread = {
-            let tx_error = tx_error.clone();
+            let (tx_error, stalled) = (tx_error.clone(), stalled.clone());
             std::thread::Builder::new()
                 .name("virtual-board-tx".into())
                 .spawn(move || {
                     let _done = tx_done_tx;
-                    if let Err(e) = tx_loop(writer, &frames_rx) {
+                    if let Err(e) = tx_loop(writer, &frames_rx, &stalled) {
                         *tx_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
                     }
                 })
@@ -429,6 +433,7 @@ impl BoardRun {
         rx_stop.store(true, Ordering::Release);
         let _ = tx_done.recv_timeout(THREAD_GRACE);
         let _ = rx_done.recv_timeout(THREAD_GRACE);
+        lock(truth).frames_stalled = stalled.load(Ordering::Relaxed);
         reason
     }
 
@@ -561,13 +566,21 @@ fn rx_loop(mut reader: Box<dyn Read + Send>, events: &Sender<RxEvent>, stop: &At
     }
 }
 
-fn tx_loop(mut writer: Box<dyn Write + Send>, frames: &Receiver<TxItem>) -> Result<(), String> {
+fn tx_loop(
+    mut writer: Box<dyn Write + Send>,
+    frames: &Receiver<TxItem>,
+    stalled: &AtomicU64,
+) -> Result<(), String> {
     for item in frames {
         match item {
-            TxItem::Frame(f) => {
-                writer.write_all(&f).map_err(|e| e.to_string())?;
-                writer.flush().map_err(|e| e.to_string())?;
-            }
+            TxItem::Frame(f) => match writer.write_all(&f).and_then(|()| writer.flush()) {
+                Ok(()) => {}
+                // A host end that does not drain (nobody reading a pty): drop the frame, go on.
+                Err(e) if matches!(e.kind(), ErrorKind::TimedOut | ErrorKind::WouldBlock) => {
+                    stalled.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(e) => return Err(e.to_string()),
+            },
             TxItem::Close => return Ok(()),
         }
     }
