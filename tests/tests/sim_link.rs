@@ -9,12 +9,17 @@
 
 use std::time::{Duration, Instant};
 
+use ellipso_host::camera::FrameIdUnwrapper;
+use ellipso_host::camera::frame_id::Unwrapped;
 use ellipso_host::link::time::HostClock;
 use ellipso_host::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_protocol::{
     BoardLimits, CaptureConfig, CommandKind, PulseCount, PulseEvent, RejectReason, TriggerSource,
 };
-use ellipso_sim::rig::{Disconnect, VirtualBoard, VirtualBoardConfig};
+use ellipso_sim::rig::{
+    CameraFaults, Disconnect, PoseIndexSource, SimCamera, SimCameraConfig, SimFrame, VirtualBoard,
+    VirtualBoardConfig, wire,
+};
 use ellipso_sim::scene::Scene;
 use serialport::{SerialPort, TTYPort};
 
@@ -51,10 +56,17 @@ struct Rig {
 /// A virtual board on a fresh pty and the host's link on its path (handshake retried while a
 /// corrupted reply times out).
 fn start(config: VirtualBoardConfig) -> Rig {
+    start_with_wire(config, None)
+}
+
+fn start_with_wire(
+    config: VirtualBoardConfig,
+    wire: Option<crossbeam_channel::Sender<ellipso_sim::rig::TriggerEdge>>,
+) -> Rig {
     let (mut master, device_end) = TTYPort::pair().expect("openpty");
     master.set_timeout(Duration::from_millis(20)).unwrap();
     let reader = master.try_clone_native().unwrap();
-    let board = VirtualBoard::spawn(config, Box::new(reader), Box::new(master), None).unwrap();
+    let board = VirtualBoard::spawn(config, Box::new(reader), Box::new(master), wire).unwrap();
     let path = device_end.name().expect("pty path");
     let link_config = LinkConfig {
         reply_timeout: Duration::from_millis(250),
@@ -356,4 +368,74 @@ at_frame = 12
     );
     assert!(!rig.link.is_connected(), "reader saw: {reason}");
     assert!(matches!(rig.link.status(), Err(LinkError::Disconnected(_))));
+}
+
+#[test]
+fn the_in_process_rig_delivers_frames_the_host_can_pair_to_pulses_by_block_id() {
+    // Board on a pty, trigger wire, camera with drops and duplicates whose block ids wrap early.
+    let (edges_tx, edges_rx) = wire::wire();
+    let rig = start_with_wire(board_config(4), Some(edges_tx));
+    let mut camera_config = SimCameraConfig::new(4, 36, rig.board.device_clock());
+    camera_config.first_block_id = 65_525;
+    camera_config.faults = CameraFaults {
+        drop_probability: 0.1,
+        duplicate_probability: 0.1,
+        ..CameraFaults::default()
+    };
+    let source = std::sync::Arc::new(PoseIndexSource {
+        width: 32,
+        height: 16,
+    });
+    let camera = SimCamera::spawn(camera_config, source, edges_rx).unwrap();
+    run_capture(&rig.link, capture(40, 10_000));
+    let pulses = collect_pulses(&rig, 40, None);
+    let Rig { board, link, .. } = rig;
+    let device_clock = board.device_clock();
+    drop(link);
+    board.shutdown(); // closes the wire: the camera delivers what is left and ends
+    let frames: Vec<SimFrame> = camera.frames().iter().collect();
+    let counters = camera.join();
+    assert_eq!(counters.rising_edges, 40);
+    assert!(
+        counters.dropped > 0 && counters.duplicated > 0,
+        "{counters:?}"
+    );
+
+    // What a host does: unwrap block ids to 64-bit frame ids; with no missed triggers the
+    // first exposure is pulse 0, so frame id == pulse seq.
+    let mut unwrapper = FrameIdUnwrapper::new();
+    let (mut paired, mut duplicates, mut skipped_total) = (0, 0, 0);
+    let mut wrapped = false;
+    for f in &frames {
+        wrapped |= f.block_id < 100;
+        match unwrapper.push(f.block_id) {
+            Unwrapped::Next { frame_id, skipped } => {
+                skipped_total += skipped;
+                assert_eq!(frame_id, f.truth.exposure_index);
+                let (pulse, _) = pulses
+                    .iter()
+                    .find(|(p, _)| p.seq == frame_id)
+                    .expect("a pulse for every frame");
+                assert_eq!(pulse.t_trigger_us, f.truth.t_trigger_device_us);
+                assert_eq!(f.truth.pose_index, (frame_id % 36) as usize);
+                // Simulated arrival: exposure + readout + transfer (± jitter) after the trigger.
+                let latency = f
+                    .arrival
+                    .duration_since(device_clock.instant_at_us(pulse.t_trigger_us))
+                    .as_secs_f64()
+                    * 1e6;
+                assert!((60_000.0..70_000.0).contains(&latency), "{latency} µs");
+                paired += 1;
+            }
+            Unwrapped::Duplicate { .. } => {
+                assert!(f.truth.duplicate);
+                duplicates += 1;
+            }
+            Unwrapped::Invalid => panic!("block id 0 delivered"),
+        }
+    }
+    assert!(wrapped, "block ids did not wrap");
+    assert_eq!(paired, 40 - counters.dropped);
+    assert_eq!(skipped_total, counters.dropped);
+    assert_eq!(duplicates, counters.duplicated);
 }
