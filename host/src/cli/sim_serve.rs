@@ -211,12 +211,48 @@ elevation_deg = [30.0, 60.0]
         };
         assert!(endpoints.pty.starts_with("/dev/pts/"), "{}", endpoints.pty);
         assert!(endpoints.wire.as_ref().unwrap().exists());
-        for _ in 0..2 {
+        // A camera in "another process" listens on the wire socket.
+        let edges = ellipso_sim::rig::connect_wire(endpoints.wire.as_ref().unwrap()).unwrap();
+        for round in 0..2 {
             let link =
                 TriggerLink::open(&endpoints.pty, HostClock::new(), LinkConfig::default()).unwrap();
             assert_eq!(link.board().board_name.as_str(), "ellipso-virtual");
             for _ in 0..3 {
                 link.ping().unwrap();
+            }
+            if round == 1 {
+                // The board kept serving across the host's reopen; run a short capture.
+                let config = ellipso_protocol::CaptureConfig {
+                    exposure_us: 1_000,
+                    flash_delay_us: 100,
+                    flash_duration_us: 500,
+                    frame_period_us: 25_000,
+                    pulses: ellipso_protocol::PulseCount::Count(3),
+                    trigger: ellipso_protocol::TriggerSource::FreeRun,
+                    report_edges: false,
+                };
+                link.configure(config).unwrap();
+                link.arm().unwrap();
+                link.start().unwrap();
+                let mut triggers = Vec::new();
+                while triggers.len() < 3 {
+                    match link.events().recv_timeout(Duration::from_secs(5)).unwrap() {
+                        crate::link::LinkEvent::Pulse { event, .. } => {
+                            triggers.push(event.t_trigger_us)
+                        }
+                        crate::link::LinkEvent::Disconnected { reason } => panic!("{reason}"),
+                        _ => {}
+                    }
+                }
+                let rising: Vec<u64> = (0..6)
+                    .map(|_| edges.recv_timeout(Duration::from_secs(5)).unwrap())
+                    .filter(|e| e.rising)
+                    .map(|e| e.t_device_us)
+                    .collect();
+                assert_eq!(
+                    rising, triggers,
+                    "the wire's rising edges are the pulses' triggers"
+                );
             }
             drop(link);
         }

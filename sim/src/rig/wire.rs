@@ -17,7 +17,8 @@
 //! | 8–15 | `t_device_us`, u64 little-endian |
 //!
 //! [`WireServer`] (the board's side) listens on a path and broadcasts every edge to each
-//! connected reader; a reader that stops reading is disconnected rather than stalling the board.
+//! connected reader (a reader whose `connect` returned before an edge was published gets that
+//! edge); a reader that stops reading for 1 s is disconnected rather than stalling the board.
 //! [`connect_wire`] (a camera's side) turns the socket back into a channel of edges.
 
 use std::io::{ErrorKind, Read, Write};
@@ -99,25 +100,18 @@ impl WireServer {
         listener.set_nonblocking(true).map_err(io_err)?;
         let clients: Arc<Mutex<Vec<UnixStream>>> = Arc::default();
         let stop = Arc::new(AtomicBool::new(false));
-        let accept = {
-            let (clients, stop) = (clients.clone(), stop.clone());
-            std::thread::Builder::new()
-                .name("wire-accept".into())
-                .spawn(move || accept_loop(&listener, &clients, &stop))
-                .map_err(io_err)?
-        };
         let forward = {
             let (clients, stop) = (clients.clone(), stop.clone());
             std::thread::Builder::new()
                 .name("wire-forward".into())
-                .spawn(move || forward_loop(&edges, &clients, &stop))
+                .spawn(move || forward_loop(&listener, &edges, &clients, &stop))
                 .map_err(io_err)?
         };
         Ok(Self {
             path: path.to_path_buf(),
             clients,
             stop,
-            threads: vec![accept, forward],
+            threads: vec![forward],
         })
     }
 
@@ -155,8 +149,9 @@ fn lock_clients(c: &Mutex<Vec<UnixStream>>) -> std::sync::MutexGuard<'_, Vec<Uni
     c.lock().unwrap_or_else(|p| p.into_inner())
 }
 
-fn accept_loop(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>, stop: &AtomicBool) {
-    while !stop.load(Ordering::Acquire) {
+/// Registers every reader whose `connect` has completed (non-blocking).
+fn accept_pending(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>) {
+    loop {
         match listener.accept() {
             Ok((stream, _)) => {
                 // A reader that does not drain 1 s of writes is dropped, never waited on.
@@ -167,24 +162,27 @@ fn accept_loop(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>, stop: 
                     lock_clients(clients).push(stream);
                 }
             }
-            Err(e) if e.kind() == ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(20));
-            }
+            Err(e) if e.kind() == ErrorKind::WouldBlock => return,
             Err(e) => {
                 eprintln!("trigger wire: accept failed: {e}");
-                std::thread::sleep(Duration::from_millis(200));
+                return;
             }
         }
     }
 }
 
+/// Forwards edges; pending readers are accepted before each edge, so a reader whose `connect`
+/// returned before an edge was published receives that edge.
 fn forward_loop(
+    listener: &UnixListener,
     edges: &Receiver<TriggerEdge>,
     clients: &Mutex<Vec<UnixStream>>,
     stop: &AtomicBool,
 ) {
     while !stop.load(Ordering::Acquire) {
-        let edge = match edges.recv_timeout(Duration::from_millis(50)) {
+        let edge = edges.recv_timeout(Duration::from_millis(20));
+        accept_pending(listener, clients);
+        let edge = match edge {
             Ok(e) => e,
             Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
             Err(crossbeam_channel::RecvTimeoutError::Disconnected) => return,
@@ -249,11 +247,7 @@ mod tests {
         let (tx, rx) = wire();
         let server = WireServer::bind(&path, rx).unwrap();
         let camera = connect_wire(&path).unwrap();
-        // The accept loop polls every 20 ms: wait until this reader is registered.
-        let deadline = std::time::Instant::now() + Duration::from_secs(5);
-        while server.client_count() == 0 && std::time::Instant::now() < deadline {
-            std::thread::sleep(Duration::from_millis(5));
-        }
+        // No waiting: a reader connected before an edge is published receives it.
         let sent: Vec<_> = (0..10)
             .map(|i| TriggerEdge {
                 t_device_us: 1_000 + i * 7,
@@ -267,6 +261,7 @@ mod tests {
             .map(|_| camera.recv_timeout(Duration::from_secs(5)).unwrap())
             .collect();
         assert_eq!(got, sent);
+        assert_eq!(server.client_count(), 1);
         server.shutdown();
         assert!(!path.exists());
     }
