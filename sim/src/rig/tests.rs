@@ -512,3 +512,77 @@ fn bad_settings_are_refused_with_their_name() {
         .to_string();
     assert!(e.contains("ber_to_host"), "{e}");
 }
+
+#[test]
+fn host_to_board_bit_errors_are_refused_by_the_core_and_counted() {
+    let mut config = fast_board(6);
+    config.link.ber_to_board = 2e-3;
+    let (board, mut host, _edges) = start_board(config);
+    // In batches of 10: a burst of hundreds would overflow the board's 64-frame transmit queue.
+    for batch in 0..30 {
+        for nonce in batch * 10..batch * 10 + 10 {
+            host.send(&HostMessage::Ping { nonce });
+        }
+        host.read_for(Duration::from_millis(3));
+    }
+    host.read_for(Duration::from_millis(100));
+    let truth = board.shutdown();
+    let pongs: Vec<u32> = host
+        .received
+        .iter()
+        .filter_map(|m| match m {
+            BoardMessage::Pong { nonce, .. } => Some(*nonce),
+            _ => None,
+        })
+        .collect();
+    assert!(truth.bits_flipped_to_board > 0);
+    assert!(
+        truth.board_faults.bad_frames > 0,
+        "{:?}",
+        truth.board_faults
+    );
+    assert_eq!(truth.board_faults.tx_overflows, 0);
+    // Only real pings are answered, in order, each at most once; the rest were lost.
+    assert!(pongs.windows(2).all(|w| w[0] < w[1]), "{pongs:?}");
+    assert!(pongs.iter().all(|&n| n < 300));
+    assert!(
+        pongs.len() < 300 && pongs.len() > 150,
+        "{} pongs",
+        pongs.len()
+    );
+}
+
+#[test]
+fn a_paced_camera_never_delivers_a_frame_before_its_arrival() {
+    let mut config = camera_config(8, CameraFaults::default());
+    config.pace_to_arrival = true;
+    config.timing.readout_us = 2_000;
+    config.timing.transfer_us = 3_000;
+    let clock = config.board_clock;
+    let (tx, rx) = wire::wire();
+    let camera = SimCamera::spawn(
+        config,
+        Arc::new(PoseIndexSource {
+            width: 8,
+            height: 8,
+        }),
+        rx,
+    )
+    .unwrap();
+    for i in 0..5u64 {
+        tx.send(TriggerEdge {
+            t_device_us: clock.now_us() + i * 1_000,
+            rising: true,
+        })
+        .unwrap();
+    }
+    drop(tx);
+    for f in camera.frames().iter() {
+        assert!(
+            Instant::now() >= f.arrival,
+            "frame {} delivered early",
+            f.block_id
+        );
+    }
+    assert_eq!(camera.join().delivered, 5);
+}
