@@ -322,10 +322,9 @@ impl MessageSink for LinkTx<'_> {
             truth.disconnected_at_pulse = Some(seq);
             match d.blackout {
                 Some(duration) => self.link.down_until = Some(now + duration),
-                None => {
-                    self.link.closed = true;
-                    let _ = self.frames.send(TxItem::Close);
-                }
+                // The frames queued before go out; the thread ends at its next turn and closes
+                // the writer behind them.
+                None => self.link.closed = true,
             }
         }
         if self.link.is_down(now) {
