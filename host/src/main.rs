@@ -17,7 +17,9 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     /// Run the main job on the simulated rig: capture a shipped scene, then every later stage.
-    Demo,
+    Demo(cli::demo::Args),
+    /// Capture a session: on the simulated rig (`--sim SCENE`), recorded to `--out DIR`.
+    Capture(cli::capture::Args),
     /// Inspect the polarimetric model: Fresnel terms, diffuse DoP, Mueller matrices.
     Model(cli::model::Args),
     /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
@@ -55,15 +57,8 @@ fn main() -> std::process::ExitCode {
 
 fn run(command: Command) -> anyhow::Result<()> {
     match command {
-        Command::Demo => {
-            println!(
-                "ellipso demo: the simulated rig is not built yet; available subcommands:\n  \
-                 model   inspect the polarimetric model\n  \
-                 polar   process one raw polarisation-mosaic frame\n\
-                 Run `ellipso --help` for details."
-            );
-            Ok(())
-        }
+        Command::Demo(args) => cli::demo::run(args),
+        Command::Capture(args) => cli::capture::run(args),
         Command::Model(args) => cli::model::run(args),
         Command::Polar(args) => cli::polar::run(args),
         Command::Replay(args) => cli::replay::run(args),

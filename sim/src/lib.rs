@@ -23,5 +23,6 @@ pub mod geometry;
 pub mod mosaic;
 pub mod optics;
 pub mod render;
+pub mod rig;
 pub mod scene;
 pub mod tags;

@@ -17,6 +17,7 @@
 pub mod aravis;
 pub mod frame_id;
 pub mod replay;
+pub mod sim;
 pub mod unpack;
 #[cfg(feature = "v4l")]
 pub mod v4l;

@@ -1,8 +1,11 @@
 //! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
 
 pub mod calibrate;
+pub mod capture;
+pub mod demo;
 pub mod devices;
 pub mod model;
 pub mod polar;
 pub mod replay;
 pub mod sim;
+pub mod sim_serve;

@@ -11,7 +11,7 @@
 //! - `ellipso sim plan SCENE [--json]` prints the effect plan: each stage, who runs it and why,
 //!   and each stage left out with why.
 //!
-//! More subcommands (the virtual rig's `serve`) join the [`Args`] enum.
+//! `serve` (the virtual trigger board on a pty) lives in [`super::sim_serve`].
 
 mod npy;
 
@@ -32,6 +32,8 @@ pub enum Args {
     Render(RenderArgs),
     /// Print which simulation stages a scene needs, and why (and which it leaves out).
     Plan(PlanArgs),
+    /// Serve the virtual trigger board (the real firmware core) on a pseudo-terminal.
+    Serve(super::sim_serve::ServeArgs),
 }
 
 /// Arguments of `ellipso sim render`.
@@ -80,6 +82,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Render(a) => render(a),
         Args::Plan(a) => plan(a),
+        Args::Serve(a) => super::sim_serve::run(a),
     }
 }
 

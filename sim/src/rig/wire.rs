@@ -1,0 +1,268 @@
+//! The trigger wire between the virtual board and simulated cameras.
+//!
+//! A real camera's trigger input is an opto-isolated line: it sees a level change and when it
+//! happened, nothing else. A [`TriggerEdge`] carries exactly that — the board's device time of
+//! the edge and the new level — and deliberately **no pulse sequence number**: a simulated camera
+//! must number its frames itself, as a GigE camera does, and the host must pair them to pulses.
+//!
+//! In-process the wire is a [`crossbeam_channel`] of edges. Across processes it is a unix stream
+//! socket carrying the same edges as fixed 16-byte records ([`EDGE_RECORD_LEN`]):
+//!
+//! | bytes | field |
+//! |---|---|
+//! | 0–1 | magic `b"TE"` |
+//! | 2 | record version, `1` |
+//! | 3 | level: `1` rising, `0` falling |
+//! | 4–7 | reserved, zero |
+//! | 8–15 | `t_device_us`, u64 little-endian |
+//!
+//! [`WireServer`] (the board's side) listens on a path and broadcasts every edge to each
+//! connected reader (a reader whose `connect` returned before an edge was published gets that
+//! edge); a reader that stops reading for 1 s is disconnected rather than stalling the board.
+//! [`connect_wire`] (a camera's side) turns the socket back into a channel of edges.
+
+use std::io::{ErrorKind, Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use crossbeam_channel::{Receiver, Sender};
+
+use super::RigError;
+
+/// One level change of the camera trigger line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TriggerEdge {
+    /// When the board drove the edge, board device µs.
+    pub t_device_us: u64,
+    /// `true` for low → high (exposure start).
+    pub rising: bool,
+}
+
+/// Size of one edge record on the socket.
+pub const EDGE_RECORD_LEN: usize = 16;
+const MAGIC: [u8; 2] = *b"TE";
+const RECORD_VERSION: u8 = 1;
+
+impl TriggerEdge {
+    /// The socket record of this edge.
+    pub fn to_record(&self) -> [u8; EDGE_RECORD_LEN] {
+        let mut r = [0u8; EDGE_RECORD_LEN];
+        r[..2].copy_from_slice(&MAGIC);
+        r[2] = RECORD_VERSION;
+        r[3] = u8::from(self.rising);
+        r[8..].copy_from_slice(&self.t_device_us.to_le_bytes());
+        r
+    }
+
+    /// Parses a socket record; refuses a wrong magic, version or level byte.
+    pub fn from_record(r: &[u8; EDGE_RECORD_LEN]) -> Result<Self, RigError> {
+        if r[..2] != MAGIC || r[2] != RECORD_VERSION || r[3] > 1 || r[4..8] != [0; 4] {
+            return Err(RigError::WireRecord { record: *r });
+        }
+        let mut t = [0u8; 8];
+        t.copy_from_slice(&r[8..]);
+        Ok(Self {
+            t_device_us: u64::from_le_bytes(t),
+            rising: r[3] == 1,
+        })
+    }
+}
+
+/// An in-process wire: the board's end and the camera's end.
+pub fn wire() -> (Sender<TriggerEdge>, Receiver<TriggerEdge>) {
+    crossbeam_channel::unbounded()
+}
+
+/// Broadcasts edges from a channel to every reader connected to a unix socket.
+pub struct WireServer {
+    path: PathBuf,
+    clients: Arc<Mutex<Vec<UnixStream>>>,
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl WireServer {
+    /// Binds `path` (an existing socket file there is replaced) and forwards every edge from
+    /// `edges` until the channel's senders are gone or [`WireServer::shutdown`] is called.
+    pub fn bind(path: &Path, edges: Receiver<TriggerEdge>) -> Result<Self, RigError> {
+        let io_err = |e: std::io::Error| RigError::Io {
+            what: format!("trigger wire socket {}", path.display()),
+            source: e,
+        };
+        if path.exists() {
+            std::fs::remove_file(path).map_err(io_err)?;
+        }
+        let listener = UnixListener::bind(path).map_err(io_err)?;
+        listener.set_nonblocking(true).map_err(io_err)?;
+        let clients: Arc<Mutex<Vec<UnixStream>>> = Arc::default();
+        let stop = Arc::new(AtomicBool::new(false));
+        let forward = {
+            let (clients, stop) = (clients.clone(), stop.clone());
+            std::thread::Builder::new()
+                .name("wire-forward".into())
+                .spawn(move || forward_loop(&listener, &edges, &clients, &stop))
+                .map_err(io_err)?
+        };
+        Ok(Self {
+            path: path.to_path_buf(),
+            clients,
+            stop,
+            threads: vec![forward],
+        })
+    }
+
+    /// The socket's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Readers connected now.
+    pub fn client_count(&self) -> usize {
+        lock_clients(&self.clients).len()
+    }
+
+    /// Stops forwarding, joins the threads and removes the socket file.
+    pub fn shutdown(mut self) {
+        self.stop_threads();
+    }
+
+    fn stop_threads(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+impl Drop for WireServer {
+    fn drop(&mut self) {
+        self.stop_threads();
+    }
+}
+
+fn lock_clients(c: &Mutex<Vec<UnixStream>>) -> std::sync::MutexGuard<'_, Vec<UnixStream>> {
+    c.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Registers every reader whose `connect` has completed (non-blocking).
+fn accept_pending(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>) {
+    loop {
+        match listener.accept() {
+            Ok((stream, _)) => {
+                // A reader that does not drain 1 s of writes is dropped, never waited on.
+                if stream
+                    .set_write_timeout(Some(Duration::from_secs(1)))
+                    .is_ok()
+                {
+                    lock_clients(clients).push(stream);
+                }
+            }
+            Err(e) if e.kind() == ErrorKind::WouldBlock => return,
+            Err(e) => {
+                eprintln!("trigger wire: accept failed: {e}");
+                return;
+            }
+        }
+    }
+}
+
+/// Forwards edges; pending readers are accepted before each edge, so a reader whose `connect`
+/// returned before an edge was published receives that edge.
+fn forward_loop(
+    listener: &UnixListener,
+    edges: &Receiver<TriggerEdge>,
+    clients: &Mutex<Vec<UnixStream>>,
+    stop: &AtomicBool,
+) {
+    while !stop.load(Ordering::Acquire) {
+        let edge = edges.recv_timeout(Duration::from_millis(20));
+        accept_pending(listener, clients);
+        let edge = match edge {
+            Ok(e) => e,
+            Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => return,
+        };
+        let record = edge.to_record();
+        lock_clients(clients).retain_mut(|c| c.write_all(&record).is_ok());
+    }
+}
+
+/// Connects to a [`WireServer`] at `path`; edges arrive on the returned channel until the server
+/// goes away (then the channel disconnects). A malformed record ends the stream.
+pub fn connect_wire(path: &Path) -> Result<Receiver<TriggerEdge>, RigError> {
+    let io_err = |e: std::io::Error| RigError::Io {
+        what: format!("trigger wire socket {}", path.display()),
+        source: e,
+    };
+    let mut stream = UnixStream::connect(path).map_err(io_err)?;
+    let (tx, rx) = crossbeam_channel::unbounded();
+    std::thread::Builder::new()
+        .name("wire-read".into())
+        .spawn(move || {
+            let mut record = [0u8; EDGE_RECORD_LEN];
+            while stream.read_exact(&mut record).is_ok() {
+                let Ok(edge) = TriggerEdge::from_record(&record) else {
+                    eprintln!("trigger wire: malformed record {record:02x?}");
+                    return;
+                };
+                if tx.send(edge).is_err() {
+                    return;
+                }
+            }
+        })
+        .map_err(io_err)?;
+    Ok(rx)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn records_round_trip_and_garbage_is_refused() {
+        let e = TriggerEdge {
+            t_device_us: 0x0102_0304_0506_0708,
+            rising: true,
+        };
+        let r = e.to_record();
+        assert_eq!(&r[8..], &0x0102_0304_0506_0708u64.to_le_bytes());
+        assert_eq!(TriggerEdge::from_record(&r).unwrap(), e);
+        let mut bad = r;
+        bad[3] = 2;
+        assert!(TriggerEdge::from_record(&bad).is_err());
+        let mut bad = r;
+        bad[0] = b'X';
+        assert!(TriggerEdge::from_record(&bad).is_err());
+    }
+
+    #[test]
+    fn edges_cross_the_socket_in_order() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wire.sock");
+        let (tx, rx) = wire();
+        let server = WireServer::bind(&path, rx).unwrap();
+        let camera = connect_wire(&path).unwrap();
+        // No waiting: a reader connected before an edge is published receives it.
+        let sent: Vec<_> = (0..10)
+            .map(|i| TriggerEdge {
+                t_device_us: 1_000 + i * 7,
+                rising: i % 2 == 0,
+            })
+            .collect();
+        for e in &sent {
+            tx.send(*e).unwrap();
+        }
+        let got: Vec<_> = (0..10)
+            .map(|_| camera.recv_timeout(Duration::from_secs(5)).unwrap())
+            .collect();
+        assert_eq!(got, sent);
+        assert_eq!(server.client_count(), 1);
+        server.shutdown();
+        assert!(!path.exists());
+    }
+}
