@@ -11,6 +11,7 @@ use std::time::{Duration, Instant};
 
 use ellipso_host::camera::FrameIdUnwrapper;
 use ellipso_host::camera::frame_id::Unwrapped;
+use ellipso_host::link::clock::ClockModelConfig;
 use ellipso_host::link::time::HostClock;
 use ellipso_host::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_protocol::{
@@ -70,7 +71,12 @@ fn start_with_wire(
     let path = device_end.name().expect("pty path");
     let link_config = LinkConfig {
         reply_timeout: Duration::from_millis(250),
-        ..LinkConfig::default()
+        // A pty answers in tens of µs; a sample whose round trip a loaded machine stretched
+        // past 2 ms says little about when the board stamped it.
+        clock: ClockModelConfig {
+            max_round_trip_us: 2_000,
+            ..ClockModelConfig::default()
+        },
     };
     let mut last = None;
     for _ in 0..8 {
@@ -156,7 +162,7 @@ fn host_link_captures_fifty_pulses_from_the_virtual_board_over_a_pty() {
     assert_eq!(rig.link.board().board_name.as_str(), "ellipso-virtual");
     rig.link.sync_clock(10).unwrap();
     run_capture(&rig.link, capture(50, 20_000));
-    let pulses = collect_pulses(&rig, 50, Some(Duration::from_millis(20)));
+    let pulses = collect_pulses(&rig, 50, Some(Duration::from_millis(10)));
     let truth = rig.board.truth();
     let got: Vec<PulseEvent> = pulses.iter().map(|p| p.0).collect();
     assert_eq!(
@@ -172,7 +178,13 @@ fn host_link_captures_fifty_pulses_from_the_virtual_board_over_a_pty() {
     // frame period, enough to pair frames) of when the board's device clock really read it
     // (truth: the board's LinearClock). Typical here: rms 30–250 µs, worst 10–100 µs; the bounds
     // leave room for a loaded 2-core CI machine.
-    let fit = rig.link.clock_fit().expect("clock fit after 60 pings");
+    // On a loaded machine many round trips are too long to use: top the fit up to 20 samples.
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while rig.link.clock_fit().is_none_or(|f| f.n_samples < 20) && Instant::now() < deadline {
+        let _ = rig.link.ping();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let fit = rig.link.clock_fit().expect("a clock fit");
     assert!(fit.rms_us < 1_000.0, "clock residual rms {} µs", fit.rms_us);
     let device_clock = rig.board.device_clock();
     let host_clock = rig.link.host_clock();
