@@ -18,7 +18,7 @@
 //! paired or timed out; a continuous one on the `stop` flag; any capture at `max_duration`.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -176,12 +176,15 @@ pub fn capture(
 
     // camera thread → bounded queue → writer pool → main loop
     let camera_stop = Arc::new(AtomicBool::new(false));
+    let in_flight = Arc::new(AtomicU64::new(0));
     let (frame_tx, frame_rx) = bounded::<Frame>(plan.frame_queue.max(1));
     let camera_thread = {
-        let camera_stop = camera_stop.clone();
+        let (camera_stop, in_flight) = (camera_stop.clone(), in_flight.clone());
         thread::Builder::new().name("camera".into()).spawn(move || {
             while !camera_stop.load(Ordering::Acquire) {
-                match camera.next_frame(Duration::from_millis(50)) {
+                let next = camera.next_frame(Duration::from_millis(50));
+                in_flight.store(camera.frames_in_flight(), Ordering::Release);
+                match next {
                     Ok(Some(frame)) => {
                         if frame_tx.send(frame).is_err() {
                             break;
@@ -255,15 +258,15 @@ pub fn capture(
         PulseCount::Count(n) => Some(u64::from(n)),
         PulseCount::Continuous => None,
     };
-    let mut state = LoopState::new(plan.pairing, expected);
+    let mut state = LoopState::new(plan.pairing, expected, clock.clone());
     let end_reason = state.run(
         link,
         &mut session,
         &written_rx,
-        &clock,
         plan,
         stop,
         started,
+        &in_flight,
         &mut progress,
     )?;
     // wind down: stop the board (idempotent), then the camera, then drain what is in flight
@@ -278,7 +281,7 @@ pub fn capture(
         let _ = w.join();
     }
     for w in written_rx.try_iter() {
-        state.on_written(w?, &mut session, &clock)?;
+        state.on_written(w?, &mut session)?;
     }
     let outcomes = state.pairer.finish();
     state.log_outcomes(&outcomes, &mut session, clock_now())?;
@@ -297,7 +300,7 @@ pub fn capture(
         link: counters,
         camera: camera_counters,
         board_faults: state.faults,
-        clock: Some(clock),
+        clock: Some(state.clock.clone()),
     };
     let dir = session.finish(clock_now(), &end_reason)?;
     Ok((report, dir))
@@ -305,6 +308,8 @@ pub fn capture(
 
 struct LoopState {
     pairer: Pairer,
+    /// The device→host clock fit, refreshed by pings during the capture.
+    clock: ClockFit,
     expected: Option<u64>,
     pulses: u64,
     flagged: u64,
@@ -314,9 +319,10 @@ struct LoopState {
 }
 
 impl LoopState {
-    fn new(pairing: PairingConfig, expected: Option<u64>) -> Self {
+    fn new(pairing: PairingConfig, expected: Option<u64>, clock: ClockFit) -> Self {
         Self {
             pairer: Pairer::new(pairing),
+            clock,
             expected,
             pulses: 0,
             flagged: 0,
@@ -335,10 +341,10 @@ impl LoopState {
         link: &TriggerLink,
         session: &mut SessionWriter,
         written: &Receiver<Result<Written, SessionError>>,
-        clock: &ClockFit,
         plan: &CapturePlan,
         stop: &AtomicBool,
         started: Instant,
+        in_flight: &AtomicU64,
         progress: &mut impl FnMut(&CaptureProgress),
     ) -> Result<String, SessionError> {
         let events = link.events().clone();
@@ -347,6 +353,8 @@ impl LoopState {
         let grace =
             Duration::from_micros(plan.pairing.max_latency_us as u64) + Duration::from_secs(1);
         let mut last_progress = Instant::now();
+        let mut last_ping = Instant::now();
+        let mut last_fit_log = Instant::now();
         loop {
             if stop.load(Ordering::Acquire) {
                 return Ok("stopped by user".into());
@@ -361,26 +369,48 @@ impl LoopState {
                 let all_in = self
                     .expected
                     .is_some_and(|n| self.pairer.counts().paired >= n);
-                if all_in || t.elapsed() > grace {
+                // frames still on their way (a camera behind real time) keep the capture open
+                let settled = t.elapsed() > grace && in_flight.load(Ordering::Acquire) == 0;
+                if all_in || settled {
                     return Ok("completed".into());
                 }
             }
             select! {
                 recv(events) -> ev => match ev {
                     Ok(ev) => {
-                        if let Some(reason) = self.on_link_event(ev, session, clock, now())? {
+                        if let Some(reason) = self.on_link_event(ev, session, now())? {
                             return Ok(reason);
                         }
                     }
                     Err(_) => return Ok("trigger link closed".into()),
                 },
                 recv(written) -> w => match w {
-                    Ok(w) => self.on_written(w?, session, clock)?,
+                    Ok(w) => self.on_written(w?, session)?,
                     Err(_) => return Ok("camera stream ended".into()),
                 },
                 default(Duration::from_millis(50)) => {}
             }
-            let outcomes = self.pairer.expire(now(), Some(clock));
+            let outcomes = self.pairer.expire(now(), Some(&self.clock));
+            // keep the clock model current: a short initial fit extrapolates badly over a
+            // capture of minutes; a ping every 250 ms slides it along
+            if last_ping.elapsed() > Duration::from_millis(250) {
+                last_ping = Instant::now();
+                if link.ping().is_ok()
+                    && let Some(fit) = link.clock_fit()
+                {
+                    if last_fit_log.elapsed() > Duration::from_secs(5) {
+                        last_fit_log = Instant::now();
+                        session.log(&SessionEvent::ClockFit {
+                            t_host_us: now(),
+                            gain: fit.gain,
+                            offset_us: fit.offset_us,
+                            rms_us: fit.rms_us,
+                            n_samples: fit.n_samples,
+                        })?;
+                    }
+                    self.clock = fit;
+                }
+            }
             self.log_outcomes(&outcomes, session, now())?;
             if last_progress.elapsed() > Duration::from_millis(100) {
                 last_progress = Instant::now();
@@ -407,7 +437,6 @@ impl LoopState {
         &mut self,
         ev: LinkEvent,
         session: &mut SessionWriter,
-        clock: &ClockFit,
         t: HostTimeUs,
     ) -> Result<Option<String>, SessionError> {
         match ev {
@@ -425,7 +454,7 @@ impl LoopState {
                     event.seq,
                     DeviceTimeUs(event.t_trigger_us),
                     t_host_recv,
-                    Some(clock),
+                    Some(&self.clock),
                 );
                 self.log_outcomes(&out, session, t)?;
                 if self.expected.is_some_and(|n| self.pulses >= n) {
@@ -463,17 +492,14 @@ impl LoopState {
         }
     }
 
-    fn on_written(
-        &mut self,
-        w: Written,
-        session: &mut SessionWriter,
-        clock: &ClockFit,
-    ) -> Result<(), SessionError> {
+    fn on_written(&mut self, w: Written, session: &mut SessionWriter) -> Result<(), SessionError> {
         session.commit_frame(w.prepared)?;
         if w.flagged {
             self.flagged += 1;
         }
-        let out = self.pairer.add_frame(w.frame_id, w.t_host_us, Some(clock));
+        let out = self
+            .pairer
+            .add_frame(w.frame_id, w.t_host_us, Some(&self.clock));
         self.log_outcomes(&out, session, w.t_host_us)
     }
 

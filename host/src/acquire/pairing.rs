@@ -26,7 +26,8 @@
 //!    frame inside it at the very start of a capture, while the real frame of that pulse is lost,
 //!    cannot be told from a real one. Keep the configured window realistic (`for_capture`).
 //! 5. A frame still unpaired `max_latency_us` after arriving is a `FrameWithoutPulse`; a pulse
-//!    still unpaired `pulse_timeout_us` after its trigger is a `PulseWithoutFrame`; a repeated id
+//!    still unpaired when the camera has delivered frames from `pulse_timeout_us` after its
+//!    trigger is a `PulseWithoutFrame` (so a camera lagging behind real time loses nothing); a repeated id
 //!    or sequence number is a duplicate. Every such outcome is reported, none silently dropped.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
@@ -132,6 +133,7 @@ pub struct Pairer {
     offset: Option<i128>,
     latencies: VecDeque<f64>,
     expired_in_a_row: u32,
+    frontier: Option<HostTimeUs>,
     counts: PairingCounts,
 }
 
@@ -153,6 +155,7 @@ impl Pairer {
             offset: None,
             latencies: VecDeque::with_capacity(LATENCY_HISTORY),
             expired_in_a_row: 0,
+            frontier: None,
             counts: PairingCounts::default(),
         }
     }
@@ -194,6 +197,10 @@ impl Pairer {
             return self.record(vec![PairingOutcome::DuplicateFrame { frame_id }]);
         }
         self.frames.insert(frame_id, t_host_arrival);
+        self.frontier = Some(
+            self.frontier
+                .map_or(t_host_arrival, |f| f.max(t_host_arrival)),
+        );
         self.match_pending(clock)
     }
 
@@ -220,13 +227,19 @@ impl Pairer {
             self.latencies.clear();
             self.expired_in_a_row = 0;
         }
+        // A pulse is frameless once the camera has delivered frames from well after it: the
+        // frontier is the latest frame arrival seen (cameras deliver in order). Using it rather
+        // than `now` keeps a camera that lags behind real time (a slow USB stack, a simulator
+        // rendering) from having its pulses expired before their frames arrive. If the camera
+        // delivers nothing more, `finish` reports the pulses still pending.
         let timeout = self.config.pulse_timeout_us;
+        let frontier = self.frontier.map_or(f64::NEG_INFINITY, |t| t.0 as f64);
         let stale_pulses: Vec<u64> = self
             .pulses
             .iter()
             .filter(|(_, p)| {
                 let t0 = clock.map_or(p.t_host_recv.0 as f64, |c| c.host_us(p.t_trigger));
-                now_f - t0 > timeout
+                frontier - t0 > timeout
             })
             .map(|(&s, _)| s)
             .collect();

@@ -162,4 +162,9 @@ pub trait Camera: Send {
     fn stop(&mut self) -> Result<(), CameraError>;
     /// Counters so far.
     fn counters(&self) -> CameraCounters;
+    /// Frames exposed but not yet delivered, where the backend can tell (a simulator rendering
+    /// behind real time); the capture waits for them before it ends. Default: 0.
+    fn frames_in_flight(&self) -> u64 {
+        0
+    }
 }

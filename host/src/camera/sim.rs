@@ -14,8 +14,8 @@ use ellipso_sim::rig::{FrameStatus as SimStatus, SimCamera};
 
 use super::frame_id::Unwrapped;
 use super::{
-    Camera, CameraCounters, CameraError, CameraInfo, CameraSettings, Frame, FrameIdUnwrapper, FrameMeta,
-    FrameStatus,
+    Camera, CameraCounters, CameraError, CameraInfo, CameraSettings, Frame, FrameIdUnwrapper,
+    FrameMeta, FrameStatus,
 };
 use crate::link::time::HostClock;
 
@@ -104,8 +104,9 @@ impl Camera for SimCameraBackend {
                     FrameStatus::Flagged(format!("missing packets ({missing_packets})"))
                 }
             };
-            let (exposure_us, gain_db) =
-                self.settings.map_or((0, 0.0), |s| (s.exposure_us, s.gain_db));
+            let (exposure_us, gain_db) = self
+                .settings
+                .map_or((0, 0.0), |s| (s.exposure_us, s.gain_db));
             return Ok(Some(Frame {
                 meta: FrameMeta {
                     frame_id,
@@ -129,5 +130,12 @@ impl Camera for SimCameraBackend {
 
     fn counters(&self) -> CameraCounters {
         self.counters
+    }
+
+    fn frames_in_flight(&self) -> u64 {
+        let c = self.camera.counters();
+        // exposures not yet handed over: neither delivered (duplicates count twice) nor dropped
+        c.exposures
+            .saturating_sub(c.dropped + c.delivered.saturating_sub(c.duplicated))
     }
 }

@@ -17,7 +17,9 @@ use std::time::Duration;
 use anyhow::Context;
 use ellipso_protocol::{CaptureConfig, PulseCount, TriggerSource};
 use ellipso_sim::render::{RenderOptions, Renderer};
-use ellipso_sim::rig::{self, FrameSource, SimCamera, SimCameraConfig, VirtualBoard, VirtualBoardConfig};
+use ellipso_sim::rig::{
+    self, FrameSource, SimCamera, SimCameraConfig, VirtualBoard, VirtualBoardConfig,
+};
 use ellipso_sim::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 use serialport::{SerialPort, TTYPort};
@@ -67,7 +69,9 @@ pub struct Args {
 }
 
 fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or("expected WIDTHxHEIGHT, e.g. 1224x1024")?;
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or("expected WIDTHxHEIGHT, e.g. 1224x1024")?;
     let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("'{v}': {e}"));
     Ok([p(w)?, p(h)?])
 }
@@ -129,8 +133,15 @@ pub fn capture_sim(
     let camera_model = *renderer.camera();
     let layout = renderer.layout();
     let size = (camera_model.width, camera_model.height);
-    let photos = args.photos.unwrap_or(scene.camera_poses.len() as u32).min(scene.camera_poses.len() as u32);
-    anyhow::ensure!(photos > 0, "{}: the capture path has no poses", args.sim.display());
+    let photos = args
+        .photos
+        .unwrap_or(scene.camera_poses.len() as u32)
+        .min(scene.camera_poses.len() as u32);
+    anyhow::ensure!(
+        photos > 0,
+        "{}: the capture path has no poses",
+        args.sim.display()
+    );
     let source: Arc<dyn FrameSource> = Arc::new(RenderSource { renderer, size });
 
     let clock = HostClock::new();
@@ -141,21 +152,40 @@ pub fn capture_sim(
             let edges = rig::connect_wire(wire)?;
             // The simulated camera places exposures in host time from the edges' device times;
             // across processes it learns the board's clock the way the host does, by ping/pong.
-            let fit = link.sync_clock(20)?.context("the trigger board's clock did not settle")?;
+            let fit = link
+                .sync_clock(20)?
+                .context("the trigger board's clock did not settle")?;
             let device_at_epoch = (-fit.offset_us / fit.gain).max(0.0).round() as u64;
-            let board_clock = rig::LinearClock::new(clock.epoch(), device_at_epoch, (1.0 / fit.gain - 1.0) * 1e6)?;
+            let board_clock = rig::LinearClock::new(
+                clock.epoch(),
+                device_at_epoch,
+                (1.0 / fit.gain - 1.0) * 1e6,
+            )?;
             (link, None, edges, Some(board_clock))
         }
         _ => {
-            let (host_end, board_end) = TTYPort::pair().context("opening a pseudo-terminal pair")?;
+            let (host_end, board_end) =
+                TTYPort::pair().context("opening a pseudo-terminal pair")?;
             let board_reader = board_end.try_clone_native().context("cloning the pty")?;
             let (edges_tx, edges_rx) = rig::wire::wire();
             let config = VirtualBoardConfig::from_scene(scene);
-            let board = VirtualBoard::spawn(config, Box::new(board_reader), Box::new(board_end), Some(edges_tx))?;
+            let board = VirtualBoard::spawn(
+                config,
+                Box::new(board_reader),
+                Box::new(board_end),
+                Some(edges_tx),
+            )?;
             let mut host_end = host_end;
-            host_end.set_timeout(Duration::from_millis(20)).context("pty timeout")?;
+            host_end
+                .set_timeout(Duration::from_millis(20))
+                .context("pty timeout")?;
             let reader = host_end.try_clone_native().context("cloning the pty")?;
-            let link = TriggerLink::connect(Box::new(reader), Box::new(host_end), clock, LinkConfig::default())?;
+            let link = TriggerLink::connect(
+                Box::new(reader),
+                Box::new(host_end),
+                clock,
+                LinkConfig::default(),
+            )?;
             let board_clock = board.device_clock();
             (link, Some(board), edges_rx, Some(board_clock))
         }
@@ -166,25 +196,42 @@ pub fn capture_sim(
     let sim_camera = SimCamera::spawn(cam_config, source, edges)?;
     let info = CameraInfo {
         backend: "sim",
-        model: scene.name.clone().unwrap_or_else(|| "simulated IMX250MZR".into()),
+        model: scene
+            .name
+            .clone()
+            .unwrap_or_else(|| "simulated IMX250MZR".into()),
         width: size.0,
         height: size.1,
-        layout: serde_json::to_value(layout)?.as_str().unwrap_or_default().to_string(),
+        layout: serde_json::to_value(layout)?
+            .as_str()
+            .unwrap_or_default()
+            .to_string(),
         bit_depth: scene.rig.camera.bit_depth,
     };
     let camera = Box::new(SimCameraBackend::new(sim_camera, clock, info.clone()));
 
     let mut manifest = Manifest::new(
-        SessionSource::Simulator { scene: args.sim.display().to_string(), seed: scene.seed },
-        SensorInfo { layout: info.layout.clone(), width: size.0, height: size.1, bit_depth: info.bit_depth },
+        SessionSource::Simulator {
+            scene: args.sim.display().to_string(),
+            seed: scene.seed,
+        },
+        SensorInfo {
+            layout: info.layout.clone(),
+            width: size.0,
+            height: size.1,
+            bit_depth: info.bit_depth,
+        },
         clock.wall_at_epoch_unix_us(),
     );
     manifest.rig = serde_json::to_value(RigRecord {
         camera: camera_model,
         flash: serde_json::to_value(&scene.rig.flash).unwrap_or_default(),
     })?;
-    manifest.boards =
-        scene.boards.iter().map(|b| serde_json::to_value(TrackedBoard::from_placed(b))).collect::<Result<_, _>>()?;
+    manifest.boards = scene
+        .boards
+        .iter()
+        .map(|b| serde_json::to_value(TrackedBoard::from_placed(b)))
+        .collect::<Result<_, _>>()?;
     let session = SessionWriter::create(&args.out, manifest)?;
 
     let board_cfg = board_config(scene, photos, args.interval_ms);
@@ -197,12 +244,22 @@ pub fn capture_sim(
             external_trigger: true,
         },
         clock_sync_pings: 20,
-        pairing: PairingConfig::for_capture(board_cfg.exposure_us, board_cfg.frame_period_us, 150_000),
+        pairing: PairingConfig::for_capture(
+            board_cfg.exposure_us,
+            board_cfg.frame_period_us,
+            150_000,
+        ),
         frame_queue: 16,
         writer_threads: 2,
-        max_duration: Duration::from_secs(u64::from(photos) * u64::from(board_cfg.frame_period_us) / 1_000_000 + 600),
+        max_duration: Duration::from_secs(
+            u64::from(photos) * u64::from(board_cfg.frame_period_us) / 1_000_000 + 600,
+        ),
     };
-    let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new(u64::from(photos)) };
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(u64::from(photos))
+    };
     bar.set_style(
         ProgressStyle::with_template("{spinner} capture [{bar:30}] {pos}/{len} frames · {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -221,7 +278,11 @@ pub fn capture_sim(
         board.shutdown();
     }
     let (report, dir) = result?;
-    let tracked = if args.no_track { None } else { Some(track_and_append(&dir)?) };
+    let tracked = if args.no_track {
+        None
+    } else {
+        Some(track_and_append(&dir)?)
+    };
     Ok((report, dir, tracked))
 }
 
@@ -236,7 +297,10 @@ pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>
 /// Prints the capture summary.
 pub fn print_report(r: &CaptureReport) {
     println!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
-    println!("frames       {} written ({} flagged), {} pulses", r.frames, r.flagged, r.pulses);
+    println!(
+        "frames       {} written ({} flagged), {} pulses",
+        r.frames, r.flagged, r.pulses
+    );
     let p = &r.pairing;
     println!(
         "pairing      {} paired · {} frames without pulse · {} pulses without frame · {} duplicates",
@@ -245,9 +309,17 @@ pub fn print_report(r: &CaptureReport) {
         p.pulse_without_frame,
         p.duplicate_frames + p.duplicate_pulses
     );
-    println!("link         {} frames ok · {} bad frames dropped", r.link.frames_ok, r.link.bad_frames());
+    println!(
+        "link         {} frames ok · {} bad frames dropped",
+        r.link.frames_ok,
+        r.link.bad_frames()
+    );
     if let Some(c) = &r.clock {
-        println!("clock        drift {:+.1} ppm · residual rms {:.0} µs", c.drift_ppm(), c.rms_us);
+        println!(
+            "clock        drift {:+.1} ppm · residual rms {:.0} µs",
+            c.drift_ppm(),
+            c.rms_us
+        );
     }
 }
 

@@ -35,7 +35,11 @@ pub struct Args {
 
 /// The shipped scenes, found from the source tree this binary was built in.
 pub fn shipped_scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join("sim").join("scenes").join(name)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("sim")
+        .join("scenes")
+        .join(name)
 }
 
 /// Pose error statistics against the simulator's truth.
@@ -65,12 +69,20 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
 
 /// Scores tracked poses against the scene's capture path (frame k ↔ pose k of a clean capture;
 /// frames are matched through their pairing to pulses, pulse seq k ↔ pose k).
-pub fn pose_accuracy(scene: &Scene, tracked: &[TrackedFrame], pose_of_frame: &dyn Fn(u64) -> Option<usize>) -> PoseAccuracy {
+pub fn pose_accuracy(
+    scene: &Scene,
+    tracked: &[TrackedFrame],
+    pose_of_frame: &dyn Fn(u64) -> Option<usize>,
+) -> PoseAccuracy {
     let mut rot = Vec::new();
     let mut trans = Vec::new();
     for t in tracked {
-        let (Ok(p), Some(k)) = (&t.result, pose_of_frame(t.frame_id)) else { continue };
-        let Some(truth) = scene.camera_poses.get(k) else { continue };
+        let (Ok(p), Some(k)) = (&t.result, pose_of_frame(t.frame_id)) else {
+            continue;
+        };
+        let Some(truth) = scene.camera_poses.get(k) else {
+            continue;
+        };
         let delta = truth.world_from_camera.inverse() * p.world_from_camera;
         rot.push(delta.rotation.angle().to_degrees());
         trans.push(delta.translation.vector.norm() * 1e3);
@@ -87,7 +99,10 @@ pub fn pose_accuracy(scene: &Scene, tracked: &[TrackedFrame], pose_of_frame: &dy
 
 /// Runs `ellipso demo`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let scene_path = args.scene.clone().unwrap_or_else(|| shipped_scene("sphere.toml"));
+    let scene_path = args
+        .scene
+        .clone()
+        .unwrap_or_else(|| shipped_scene("sphere.toml"));
     anyhow::ensure!(
         scene_path.is_file(),
         "scene {} not found: run the demo from the source tree, or pass --scene",
@@ -95,13 +110,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let scene = Scene::load(&scene_path)?;
     let [w, h] = scene.rig.camera.resolution_px;
-    let (resolution, photos) = if args.quick { ([w / 4 / 2 * 2, h / 4 / 2 * 2], Some(24)) } else { ([w / 2, h / 2], None) };
+    let (resolution, photos) = if args.quick {
+        ([w / 4 / 2 * 2, h / 4 / 2 * 2], Some(24))
+    } else {
+        ([w / 2, h / 2], None)
+    };
     if args.out.exists() {
-        std::fs::remove_dir_all(&args.out).with_context(|| format!("clearing {}", args.out.display()))?;
+        std::fs::remove_dir_all(&args.out)
+            .with_context(|| format!("clearing {}", args.out.display()))?;
     }
     let session_dir = args.out.join("session");
-    println!("ellipso demo: scene {} at {}×{}", scene_path.display(), resolution[0], resolution[1]);
-    println!("[1/3] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…");
+    println!(
+        "ellipso demo: scene {} at {}×{}",
+        scene_path.display(),
+        resolution[0],
+        resolution[1]
+    );
+    println!(
+        "[1/3] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
+    );
     let capture_args = capture::Args {
         sim: scene_path.clone(),
         out: session_dir.clone(),
@@ -125,7 +152,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .filter_map(|f| f.pulse_seq.map(|s| (f.frame_id, s)))
         .collect();
     let first_seq = pairs.values().min().copied().unwrap_or(0);
-    let accuracy = pose_accuracy(&scene, &tracked, &|id| pairs.get(&id).map(|s| (s - first_seq) as usize));
+    let accuracy = pose_accuracy(&scene, &tracked, &|id| {
+        pairs.get(&id).map(|s| (s - first_seq) as usize)
+    });
     println!(
         "poses        {}/{} frames · median error {:.3}° / {:.3} mm (90th percentile {:.3}° / {:.3} mm)",
         accuracy.posed,
@@ -139,7 +168,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("[3/3] pictures…");
     let pictures = args.out.join("pictures");
     std::fs::create_dir_all(&pictures)?;
-    let first = session.frames.iter().find(|f| f.complete).context("no complete frame was captured")?;
+    let first = session
+        .frames
+        .iter()
+        .find(|f| f.complete)
+        .context("no complete frame was captured")?;
     crate::cli::polar::run(crate::cli::polar::Args {
         frame: first.path.clone(),
         out: pictures.join("frame0-polarisation"),
@@ -169,9 +202,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     std::fs::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
     println!("\nresults in {}:", args.out.display());
     println!("  session (raw frames + event log)  {}", dir.display());
-    println!("  polarisation images of frame 0    {}", pictures.join("frame0-polarisation").display());
-    println!("  camera path plot                  {}", path_plot.display());
-    println!("  summary                           {}", summary_path.display());
+    println!(
+        "  polarisation images of frame 0    {}",
+        pictures.join("frame0-polarisation").display()
+    );
+    println!(
+        "  camera path plot                  {}",
+        path_plot.display()
+    );
+    println!(
+        "  summary                           {}",
+        summary_path.display()
+    );
     Ok(())
 }
 

@@ -227,15 +227,28 @@ fn an_outlier_first_latency_does_not_lock_out_every_later_frame() {
     // the first frame arrives 60 ms after its trigger, every later one at ~30 ms: the window
     // learned from the first pair excludes them until the pairer starts over
     let c = clock();
-    let mut p = Pairer::new(PairingConfig::for_capture(EXPOSURE_US, PERIOD_US as u32, 100_000));
+    let mut p = Pairer::new(PairingConfig::for_capture(
+        EXPOSURE_US,
+        PERIOD_US as u32,
+        100_000,
+    ));
     let mut out = Vec::new();
     for k in 0..40u64 {
         let trig = DeviceTimeUs(5_000_000 + k * PERIOD_US as u64);
         let host_trig = c.host_us(trig);
         let latency = if k == 0 { 60_000.0 } else { 30_000.0 };
         out.extend(p.expire(HostTimeUs((host_trig + 10_000.0) as u64), Some(&c)));
-        out.extend(p.add_pulse(7 + k, trig, HostTimeUs((host_trig + 10_000.0) as u64), Some(&c)));
-        out.extend(p.add_frame(1_000 + k, HostTimeUs((host_trig + latency) as u64), Some(&c)));
+        out.extend(p.add_pulse(
+            7 + k,
+            trig,
+            HostTimeUs((host_trig + 10_000.0) as u64),
+            Some(&c),
+        ));
+        out.extend(p.add_frame(
+            1_000 + k,
+            HostTimeUs((host_trig + latency) as u64),
+            Some(&c),
+        ));
     }
     out.extend(p.finish());
     for o in &out {
@@ -243,6 +256,51 @@ fn an_outlier_first_latency_does_not_lock_out_every_later_frame() {
             assert_eq!(seq - 7, frame_id - 1_000, "wrong pair {o:?}");
         }
     }
-    let paired = out.iter().filter(|o| matches!(o, PairingOutcome::Paired { .. })).count();
-    assert!(paired >= 35, "only {paired} of 40 paired after an outlier first frame");
+    let paired = out
+        .iter()
+        .filter(|o| matches!(o, PairingOutcome::Paired { .. }))
+        .count();
+    assert!(
+        paired >= 35,
+        "only {paired} of 40 paired after an outlier first frame"
+    );
+}
+
+#[test]
+fn a_camera_lagging_behind_real_time_loses_nothing() {
+    // pulses arrive in real time; the camera delivers each frame (stamped with its true arrival)
+    // 5 s of wall time later — a renderer or a slow stack; expiry runs at wall time throughout
+    let c = clock();
+    let mut p = Pairer::new(PairingConfig::for_capture(
+        EXPOSURE_US,
+        PERIOD_US as u32,
+        50_000,
+    ));
+    let mut out = Vec::new();
+    let n = 30u64;
+    let lag_us = 5_000_000.0;
+    let trig = |k: u64| DeviceTimeUs(5_000_000 + k * PERIOD_US as u64);
+    for k in 0..n + 20 {
+        let wall = c.host_us(trig(k)) + 10_000.0;
+        out.extend(p.expire(HostTimeUs(wall as u64), Some(&c)));
+        if k < n {
+            out.extend(p.add_pulse(7 + k, trig(k), HostTimeUs(wall as u64), Some(&c)));
+        }
+        // the frame of the trigger `lag` ago is delivered now
+        let behind = (lag_us / PERIOD_US) as u64;
+        if k >= behind && k - behind < n {
+            let j = k - behind;
+            out.extend(p.add_frame(
+                1_000 + j,
+                HostTimeUs((c.host_us(trig(j)) + 30_000.0) as u64),
+                Some(&c),
+            ));
+        }
+    }
+    out.extend(p.finish());
+    let paired = out
+        .iter()
+        .filter(|o| matches!(o, PairingOutcome::Paired { .. }))
+        .count();
+    assert_eq!(paired as u64, n, "{out:?}");
 }
