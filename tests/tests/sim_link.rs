@@ -77,6 +77,7 @@ fn start_with_wire(
             max_round_trip_us: 2_000,
             ..ClockModelConfig::default()
         },
+        ..LinkConfig::default()
     };
     let mut last = None;
     for _ in 0..8 {

@@ -188,7 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         calibration: None,
     })?;
     let path_plot = pictures.join("camera-path.png");
-    plot_path(&scene, &tracked, &path_plot)?;
+    plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
     println!("  {}", path_plot.display());
 
     let summary = serde_json::json!({
@@ -218,10 +218,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Top view of the camera path: truth (line) and tracked positions (points).
-fn plot_path(scene: &Scene, tracked: &[TrackedFrame], out: &Path) -> anyhow::Result<()> {
+fn plot_path(
+    scene: &Scene,
+    photos: usize,
+    tracked: &[TrackedFrame],
+    out: &Path,
+) -> anyhow::Result<()> {
     let truth: Vec<(f64, f64)> = scene
         .camera_poses
         .iter()
+        .take(photos)
         .map(|p| {
             let t = p.world_from_camera.translation.vector;
             (t.x * 1e3, t.y * 1e3)

@@ -1,0 +1,256 @@
+//! The `ellipso` binary end to end, across processes:
+//! - `ellipso sim serve --pty` (the virtual trigger board on a pseudo-terminal) driven by
+//!   `ellipso capture --trigger PTY --wire SOCKET` (the host's real serial code), with link bit
+//!   errors swept over BER 0, 1e-5, 1e-4, 1e-3;
+//! - SIGKILL of a capture mid-recording, then `ellipso replay` on the partial session;
+//! - `ellipso demo --quick` as a user's first impression.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use ellipso_host::session::events::SessionEvent;
+use ellipso_host::session::reader;
+use ellipso_tests::ellipso_bin;
+
+fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("sim")
+        .join("scenes")
+        .join(name)
+}
+
+/// Kills the child on drop (tests must not leave servers behind).
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `ellipso sim serve` and returns it with its pty path.
+fn serve(scene: &Path, wire: &Path, ber: f64) -> (Guard, String) {
+    let mut child = Command::new(ellipso_bin())
+        .args(["sim", "serve"])
+        .arg(scene)
+        .arg("--pty")
+        .arg("--wire")
+        .arg(wire)
+        .args(["--ber", &ber.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("spawn ellipso sim serve");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut lines = BufReader::new(stdout).lines();
+    let first = lines.next().expect("a first line").expect("utf-8");
+    let pty = first
+        .strip_prefix("pty: ")
+        .unwrap_or_else(|| panic!("first line names the pty: {first}"));
+    let pty = pty.trim().to_string();
+    // keep draining stdout so the server never blocks on a full pipe
+    std::thread::spawn(move || for _ in lines {});
+    (Guard(child), pty)
+}
+
+fn capture_args(out: &Path, photos: u32) -> Vec<String> {
+    vec![
+        "capture".into(),
+        "--sim".into(),
+        scene("sphere.toml").display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "--photos".into(),
+        photos.to_string(),
+        "--resolution".into(),
+        "96x80".into(),
+        "--supersampling".into(),
+        "1".into(),
+        "--interval-ms".into(),
+        "100".into(),
+        "--no-track".into(),
+    ]
+}
+
+struct Counts {
+    /// Pulse events that break the board's own timing (flash 100 µs after the trigger, on for
+    /// the configured duration, sequence numbers rising): what a corrupted message that slipped
+    /// through would look like.
+    implausible_pulses: usize,
+    frames: usize,
+    pulses: usize,
+    paired: usize,
+    pairing_errors: usize,
+    bad_frames: u64,
+    ended: Option<String>,
+}
+
+fn counts(dir: &Path) -> Counts {
+    let s = reader::open(dir).expect("session opens");
+    let mut c = Counts {
+        implausible_pulses: 0,
+        frames: s.frames.len(),
+        pulses: 0,
+        paired: 0,
+        pairing_errors: 0,
+        bad_frames: 0,
+        ended: None,
+    };
+    let mut last_seq: Option<u64> = None;
+    for e in &s.events {
+        match e {
+            SessionEvent::Pulse {
+                seq,
+                t_trigger_device_us,
+                t_flash_on_device_us,
+                t_flash_off_device_us,
+                ..
+            } => {
+                c.pulses += 1;
+                let delay = t_flash_on_device_us.0.wrapping_sub(t_trigger_device_us.0);
+                let on = t_flash_off_device_us.0.wrapping_sub(t_flash_on_device_us.0);
+                let rising = last_seq.is_none_or(|l| *seq > l);
+                if delay != 100 || on != 5_000 || !rising {
+                    c.implausible_pulses += 1;
+                }
+                last_seq = Some(*seq);
+            }
+            SessionEvent::Pairing { .. } => c.paired += 1,
+            SessionEvent::PairingError { .. } => c.pairing_errors += 1,
+            SessionEvent::Link { counters, .. } => c.bad_frames = counters.bad_frames(),
+            SessionEvent::End { reason, .. } => c.ended = Some(reason.clone()),
+            _ => {}
+        }
+    }
+    c
+}
+
+#[test]
+fn capture_over_sim_serve_pty_with_bit_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    println!(
+        "| BER | pulses | frames | paired | pairing errors | bad frames dropped | corrupt accepted |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (i, ber) in [0.0, 1e-5, 1e-4, 1e-3].into_iter().enumerate() {
+        let wire = tmp.path().join(format!("w{i}.sock"));
+        let (_server, pty) = serve(&scene("sphere.toml"), &wire, ber);
+        let out = tmp.path().join(format!("s{i}"));
+        let status = Command::new(ellipso_bin())
+            .args(capture_args(&out, 12))
+            .arg("--trigger")
+            .arg(&pty)
+            .arg("--wire")
+            .arg(&wire)
+            .status()
+            .expect("spawn ellipso capture");
+        assert!(status.success(), "capture at BER {ber} failed: {status}");
+        let c = counts(&out);
+        println!(
+            "| {ber:e} | {} | {} | {} | {} | {} | {} |",
+            c.pulses, c.frames, c.paired, c.pairing_errors, c.bad_frames, c.implausible_pulses
+        );
+        assert_eq!(
+            c.implausible_pulses, 0,
+            "a corrupted pulse event was accepted at BER {ber}"
+        );
+        assert_eq!(c.ended.as_deref(), Some("completed"), "BER {ber}");
+        assert_eq!(
+            c.frames, 12,
+            "every exposure delivered a frame at BER {ber}"
+        );
+        assert!(
+            c.paired + c.pairing_errors >= c.frames,
+            "every frame accounted for at BER {ber}"
+        );
+        if ber == 0.0 {
+            assert_eq!((c.pulses, c.paired, c.bad_frames), (12, 12, 0));
+        }
+    }
+}
+
+#[test]
+fn sigkill_mid_recording_leaves_a_replayable_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("killed");
+    let mut child = Command::new(ellipso_bin())
+        .args(capture_args(&out, 200))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn ellipso capture");
+    let frames = out.join("frames");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let n = std::fs::read_dir(&frames)
+            .map(|d| {
+                d.filter_map(Result::ok)
+                    .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
+                    .count()
+            })
+            .unwrap_or(0);
+        if n >= 5 {
+            break;
+        }
+        assert!(Instant::now() < deadline, "capture wrote no frames in time");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // SIGKILL: no chance to finish anything
+    child.kill().expect("kill");
+    let _ = child.wait();
+    let s = reader::open(&out).expect("a killed session still opens");
+    assert!(!s.report.ended_cleanly);
+    assert!(s.frames.len() >= 5);
+    for f in &s.frames {
+        s.load_frame(f)
+            .unwrap_or_else(|e| panic!("frame {} unreadable after SIGKILL: {e}", f.frame_id));
+    }
+    let replay = Command::new(ellipso_bin())
+        .arg("replay")
+        .arg(&out)
+        .output()
+        .expect("spawn ellipso replay");
+    let text = String::from_utf8_lossy(&replay.stdout);
+    assert!(
+        replay.status.success(),
+        "replay failed: {}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    assert!(text.contains("did not end cleanly"), "{text}");
+    // replaying twice gives identical results
+    let first = std::fs::read(out.join("replay").join("replay.json")).unwrap();
+    let again = Command::new(ellipso_bin())
+        .arg("replay")
+        .arg(&out)
+        .status()
+        .unwrap();
+    assert!(again.success());
+    assert_eq!(
+        first,
+        std::fs::read(out.join("replay").join("replay.json")).unwrap()
+    );
+}
+
+#[test]
+fn demo_quick_runs_and_says_where_its_results_are() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("demo");
+    let o = Command::new(ellipso_bin())
+        .args(["demo", "--quick", "--out"])
+        .arg(&out)
+        .output()
+        .expect("spawn demo");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "demo failed: {}\n{text}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(text.contains("results in"), "{text}");
+    assert!(out.join("summary.json").is_file());
+    assert!(out.join("pictures").join("camera-path.png").is_file());
+}
