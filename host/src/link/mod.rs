@@ -292,6 +292,9 @@ impl TriggerLink {
             .timeout(Duration::from_millis(50))
             .open_native()
             .map_err(|e| open_err(e.to_string()))?;
+        // drop what the board sent while nobody was reading (a previous capture's pulses)
+        serialport::SerialPort::clear(&port, serialport::ClearBuffer::Input)
+            .map_err(|e| open_err(e.to_string()))?;
         let reader = port
             .try_clone_native()
             .map_err(|e| open_err(e.to_string()))?;
