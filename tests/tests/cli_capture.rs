@@ -254,3 +254,72 @@ fn demo_quick_runs_and_says_where_its_results_are() {
     assert!(out.join("summary.json").is_file());
     assert!(out.join("pictures").join("camera-path.png").is_file());
 }
+
+/// The sphere scene with its link dropping for good at pulse `at_frame`, in a temp dir (board
+/// file paths made absolute so the copy loads from anywhere).
+fn disconnecting_scene(dir: &Path, at_frame: u32) -> PathBuf {
+    let boards = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("sim")
+        .join("boards");
+    let text = std::fs::read_to_string(scene("sphere.toml"))
+        .unwrap()
+        .replace("\"../boards/", &format!("\"{}/", boards.display()));
+    assert!(
+        text.trim_end()
+            .ends_with("polariser_extinction = { ratio = 300.0 }"),
+        "[effects] ends the scene"
+    );
+    let path = dir.join("disconnecting.toml");
+    std::fs::write(
+        &path,
+        format!("{text}link_disconnect = {{ at_frame = {at_frame} }}\n"),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn a_disconnect_mid_capture_ends_it_cleanly_and_keeps_what_was_recorded() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = disconnecting_scene(tmp.path(), 6);
+    let wire = tmp.path().join("w.sock");
+    let (_server, pty) = serve(&scene, &wire, 0.0);
+    let out = tmp.path().join("s");
+    let mut args = capture_args(&out, 12);
+    args[2] = scene.display().to_string();
+    let status = Command::new(ellipso_bin())
+        .args(args)
+        .arg("--trigger")
+        .arg(&pty)
+        .arg("--wire")
+        .arg(&wire)
+        .status()
+        .expect("spawn ellipso capture");
+    assert!(
+        status.success(),
+        "a disconnect is not a failure of the capture: {status}"
+    );
+    let c = counts(&out);
+    let ended = c.ended.clone().unwrap_or_default();
+    assert!(
+        ended.contains("disconnected"),
+        "the session says what happened: {ended}"
+    );
+    assert_eq!(c.implausible_pulses, 0);
+    assert_eq!(c.pulses, 6, "pulses before the disconnect are all recorded");
+    let s = reader::open(&out).unwrap();
+    assert!(
+        s.report.ended_cleanly,
+        "the capture still ended cleanly: {}",
+        s.report.summary()
+    );
+    for f in &s.frames {
+        s.load_frame(f).unwrap();
+    }
+    assert!(
+        c.paired >= 5,
+        "frames before the disconnect stay paired ({} paired)",
+        c.paired
+    );
+}

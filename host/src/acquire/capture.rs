@@ -347,7 +347,10 @@ impl LoopState {
         in_flight: &AtomicU64,
         progress: &mut impl FnMut(&CaptureProgress),
     ) -> Result<String, SessionError> {
-        let events = link.events().clone();
+        let mut events = link.events().clone();
+        let mut written = written.clone();
+        let mut ending: Option<(String, Instant)> = None;
+        let mut camera_ended = false;
         let now = || link.host_clock().now();
         // after the last pulse, frames may still be in flight for up to the pulse timeout
         let grace =
@@ -356,8 +359,34 @@ impl LoopState {
         let mut last_ping = Instant::now();
         let mut last_fit_log = Instant::now();
         loop {
-            if stop.load(Ordering::Acquire) {
-                return Ok("stopped by user".into());
+            if stop.load(Ordering::Acquire) && ending.is_none() {
+                // stop the pulses now; frames already exposed are still collected below
+                if let Err(e) = link.stop() {
+                    tracing::warn!("stopping the trigger board: {e}");
+                }
+                ending = Some(("stopped by user".into(), Instant::now()));
+            }
+            if camera_ended {
+                // drain link events queued or about to be (a disconnect explains why frames
+                // stopped, and its event may trail the camera's end by a moment)
+                while let Ok(ev) = events.recv_timeout(Duration::from_millis(200)) {
+                    if let Some(reason) = self.on_link_event(ev, session, now())? {
+                        ending.get_or_insert((reason, Instant::now()));
+                    }
+                }
+                let reason = ending
+                    .as_ref()
+                    .map_or("camera stream ended".to_string(), |e| e.0.clone());
+                return Ok(reason);
+            }
+            // Ending (user stop, link gone): keep collecting frames already exposed until the
+            // camera has none in flight and a frame's worth of latency has passed, then end.
+            if let Some((reason, since)) = &ending {
+                let drained = in_flight.load(Ordering::Acquire) == 0
+                    && since.elapsed() > Duration::from_micros(plan.pairing.max_latency_us as u64);
+                if drained || since.elapsed() > 2 * grace {
+                    return Ok(reason.clone());
+                }
             }
             if started.elapsed() > plan.max_duration {
                 return Ok(format!(
@@ -379,21 +408,28 @@ impl LoopState {
                 recv(events) -> ev => match ev {
                     Ok(ev) => {
                         if let Some(reason) = self.on_link_event(ev, session, now())? {
-                            return Ok(reason);
+                            ending.get_or_insert((reason, Instant::now()));
                         }
                     }
-                    Err(_) => return Ok("trigger link closed".into()),
+                    Err(_) => {
+                        events = crossbeam_channel::never();
+                        ending.get_or_insert(("trigger link closed".into(), Instant::now()));
+                    }
                 },
                 recv(written) -> w => match w {
                     Ok(w) => self.on_written(w?, session)?,
-                    Err(_) => return Ok("camera stream ended".into()),
+                    Err(_) => {
+                        // every frame is in: end now, with the link's reason if it has one
+                        written = crossbeam_channel::never();
+                        camera_ended = true;
+                    }
                 },
                 default(Duration::from_millis(50)) => {}
             }
             let outcomes = self.pairer.expire(now(), Some(&self.clock));
             // keep the clock model current: a short initial fit extrapolates badly over a
             // capture of minutes; a ping every 250 ms slides it along
-            if last_ping.elapsed() > Duration::from_millis(250) {
+            if ending.is_none() && last_ping.elapsed() > Duration::from_millis(250) {
                 last_ping = Instant::now();
                 if link.ping().is_ok()
                     && let Some(fit) = link.clock_fit()

@@ -152,15 +152,16 @@ pub fn capture_sim(
             let edges = rig::connect_wire(wire)?;
             // The simulated camera places exposures in host time from the edges' device times;
             // across processes it learns the board's clock the way the host does, by ping/pong.
+            // Only the offset is taken: a few milliseconds of pings cannot resolve a crystal's
+            // ppm drift (a loaded machine made the slope absurd), and ignoring 25 ppm costs
+            // 250 µs over 10 s, far inside the camera's latency jitter.
             let fit = link
                 .sync_clock(20)?
                 .context("the trigger board's clock did not settle")?;
-            let device_at_epoch = (-fit.offset_us / fit.gain).max(0.0).round() as u64;
-            let board_clock = rig::LinearClock::new(
-                clock.epoch(),
-                device_at_epoch,
-                (1.0 / fit.gain - 1.0) * 1e6,
-            )?;
+            let now = clock.now().0 as f64;
+            let device_now = (now - fit.offset_us) / fit.gain;
+            let device_at_epoch = (device_now - now).max(0.0).round() as u64;
+            let board_clock = rig::LinearClock::new(clock.epoch(), device_at_epoch, 0.0)?;
             (link, None, edges, Some(board_clock))
         }
         _ => {
