@@ -78,12 +78,15 @@ fn gige() -> anyhow::Result<()> {
 #[cfg(feature = "aravis")]
 fn gige() -> anyhow::Result<()> {
     println!("GigE Vision / USB3 Vision cameras (discovery broadcast sent):");
-    let cameras = crate::camera::aravis::discover_gige_cameras()?;
+    let cameras = crate::camera::aravis::discover_gige_cameras();
     if cameras.is_empty() {
         println!("  none answered");
     }
     for c in cameras {
-        println!("  {c}");
+        println!(
+            "  {}  {} {}  (id {}; open it by this address)",
+            c.address, c.vendor, c.model, c.id
+        );
     }
     Ok(())
 }
