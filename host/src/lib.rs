@@ -10,6 +10,7 @@
 //! - [`report`]: PNG line plots and a small raster canvas for reports.
 //! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
 //! - [`process`]: the stages after capture on a recorded session (pose tracking; later the fit).
+//! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! Later modules: fitting, export.
@@ -23,5 +24,6 @@ pub mod polar;
 pub mod pose;
 pub mod process;
 pub mod report;
+pub mod rig_file;
 pub mod session;
 pub mod track;

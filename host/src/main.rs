@@ -18,7 +18,7 @@ struct Cli {
 enum Command {
     /// Run the main job on the simulated rig: capture a shipped scene, then every later stage.
     Demo(cli::demo::Args),
-    /// Capture a session: on the simulated rig (`--sim SCENE`), recorded to `--out DIR`.
+    /// Capture a session on the simulated rig (`--sim SCENE`) or the physical one (`--rig RIG`).
     Capture(cli::capture::Args),
     /// Inspect the polarimetric model: Fresnel terms, diffuse DoP, Mueller matrices.
     Model(cli::model::Args),

@@ -80,11 +80,11 @@ pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), Pro
 
 /// The sensor layout named in a manifest.
 pub fn layout_of(manifest: &Manifest) -> Result<SensorLayout, ProcessError> {
-    serde_json::from_value(serde_json::Value::String(manifest.sensor.layout.clone())).map_err(|e| {
-        ProcessError::Manifest {
-            path: crate::session::paths::MANIFEST.into(),
-            what: format!("sensor layout '{}': {e}", manifest.sensor.layout),
-        }
+    // `mono_polar` (camera backends) and `monopolar` (the simulator) name the same layout
+    let name = manifest.sensor.layout.replace('_', "");
+    serde_json::from_value(serde_json::Value::String(name)).map_err(|e| ProcessError::Manifest {
+        path: crate::session::paths::MANIFEST.into(),
+        what: format!("sensor layout '{}': {e}", manifest.sensor.layout),
     })
 }
 

@@ -323,3 +323,43 @@ fn a_disconnect_mid_capture_ends_it_cleanly_and_keeps_what_was_recorded() {
         c.paired
     );
 }
+
+/// `capture --rig` with a camera that is not there: one clear error line naming the camera (or
+/// the missing backend feature), and no session left behind.
+#[test]
+fn capture_from_a_rig_file_without_its_camera_fails_with_one_clear_line() {
+    let tmp = tempfile::tempdir().unwrap();
+    let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/boards/base_a4.toml");
+    let rig = tmp.path().join("rig.toml");
+    std::fs::write(
+        &rig,
+        format!(
+            "[trigger]\nport = \"/dev/null-no-such-board\"\n\n[sensor]\nbackend = \"aravis\"\naddress = \"127.0.0.1\"\n\
+             layout = \"monopolar\"\nbit_depth = 12\nexposure_us = 8000\n\n[camera]\nwidth = 2448\nheight = 2048\n\
+             fx = 3500.0\nfy = 3500.0\ncx = 1223.5\ncy = 1023.5\nk1 = 0.0\nk2 = 0.0\nk3 = 0.0\np1 = 0.0\np2 = 0.0\n\n\
+             [capture]\nphotos = 10\ninterval_ms = 500.0\nflash_duration_us = 2000\n\n[[boards]]\nfile = \"{}\"\n",
+            board.display()
+        ),
+    )
+    .unwrap();
+    let out = tmp.path().join("s");
+    let o = Command::new(ellipso_bin())
+        .args(["capture", "--rig"])
+        .arg(&rig)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .expect("spawn ellipso capture");
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    let line = err.lines().last().unwrap_or_default();
+    assert!(line.starts_with("error: "), "{err}");
+    assert!(
+        line.contains("camera") || line.contains("aravis"),
+        "names the camera: {line}"
+    );
+    assert!(
+        !out.join("manifest.json").exists(),
+        "no session is created when the rig cannot start"
+    );
+}

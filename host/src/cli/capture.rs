@@ -37,10 +37,15 @@ use crate::track::{TrackConfig, TrackedBoard};
 
 /// Arguments of `ellipso capture`.
 #[derive(Debug, Clone, clap::Args)]
+#[command(group(clap::ArgGroup::new("source").required(true).args(["sim", "rig"])))]
 pub struct Args {
     /// Scene file of the simulated rig (`sim/scenes/*.toml`).
     #[arg(long, value_name = "SCENE")]
-    pub sim: PathBuf,
+    pub sim: Option<PathBuf>,
+    /// Rig file of the physical rig (trigger port, camera backend and address, camera model,
+    /// capture, boards; see `host/src/rig_file.rs`).
+    #[arg(long, value_name = "RIG")]
+    pub rig: Option<PathBuf>,
     /// Session directory to create.
     #[arg(long)]
     pub out: PathBuf,
@@ -121,7 +126,11 @@ pub fn capture_sim(
     args: &Args,
     quiet: bool,
 ) -> anyhow::Result<(CaptureReport, PathBuf, Option<Vec<process::TrackedFrame>>)> {
-    let scene = Scene::load(&args.sim)?;
+    let scene_path = args
+        .sim
+        .as_ref()
+        .context("--sim SCENE is required for a simulated capture")?;
+    let scene = Scene::load(scene_path)?;
     // The renderer borrows the scene for the whole process (the capture threads outlive scopes).
     let scene: &'static Scene = Box::leak(Box::new(scene));
     let options = RenderOptions {
@@ -140,7 +149,7 @@ pub fn capture_sim(
     anyhow::ensure!(
         photos > 0,
         "{}: the capture path has no poses",
-        args.sim.display()
+        scene_path.display()
     );
     let source: Arc<dyn FrameSource> = Arc::new(RenderSource { renderer, size });
 
@@ -213,7 +222,7 @@ pub fn capture_sim(
 
     let mut manifest = Manifest::new(
         SessionSource::Simulator {
-            scene: args.sim.display().to_string(),
+            scene: scene_path.display().to_string(),
             seed: scene.seed,
         },
         SensorInfo {
@@ -287,6 +296,161 @@ pub fn capture_sim(
     Ok((report, dir, tracked))
 }
 
+/// Runs the capture with a progress bar (hidden when quiet or not on a terminal).
+fn run_with_progress(
+    link: &TriggerLink,
+    camera: Box<dyn crate::camera::Camera>,
+    session: SessionWriter,
+    plan: &CapturePlan,
+    photos: u32,
+    quiet: bool,
+) -> Result<(CaptureReport, PathBuf), crate::acquire::capture::CaptureError> {
+    let bar = if quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(u64::from(photos))
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} capture [{bar:30}] {pos}/{len} frames · {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let stop = AtomicBool::new(false);
+    let result = capture(link, camera, session, plan, &stop, |p| {
+        bar.set_position(p.frames);
+        bar.set_message(format!(
+            "{:.1} fps · paired {} · pairing errors {} · flagged {}",
+            p.fps, p.paired, p.pairing_errors, p.camera_drops
+        ));
+    });
+    bar.finish_and_clear();
+    result
+}
+
+/// Records a capture on the physical rig described by `--rig`.
+pub fn capture_hw(
+    args: &Args,
+) -> anyhow::Result<(CaptureReport, PathBuf, Option<Vec<process::TrackedFrame>>)> {
+    let rig_path = args
+        .rig
+        .as_ref()
+        .context("--rig RIG.toml is required for a hardware capture")?;
+    let rig = crate::rig_file::RigFile::load(rig_path)?;
+    let boards = rig.boards()?;
+    let clock = HostClock::new();
+    let camera = open_camera(&rig, clock)?;
+    let info = camera.info();
+    anyhow::ensure!(
+        (info.width, info.height) == (rig.camera.width, rig.camera.height),
+        "{}: the camera delivers {}×{} but the rig's camera model is {}×{}; recalibrate or fix [camera]",
+        rig_path.display(),
+        info.width,
+        info.height,
+        rig.camera.width,
+        rig.camera.height
+    );
+    let link = TriggerLink::open(&rig.trigger.port, clock, LinkConfig::default())?;
+    let mut manifest = Manifest::new(
+        SessionSource::Hardware {
+            trigger_port: rig.trigger.port.clone(),
+            camera: format!("{}:{}", info.backend, rig.sensor.address),
+        },
+        SensorInfo {
+            layout: serde_json::to_value(rig.sensor.layout)?
+                .as_str()
+                .unwrap_or_default()
+                .to_string(),
+            width: info.width,
+            height: info.height,
+            bit_depth: rig.sensor.bit_depth,
+        },
+        clock.wall_at_epoch_unix_us(),
+    );
+    manifest.rig = serde_json::to_value(RigRecord {
+        camera: rig.camera,
+        flash: serde_json::Value::Null,
+    })?;
+    manifest.boards = boards
+        .iter()
+        .map(serde_json::to_value)
+        .collect::<Result<_, _>>()?;
+    let session = SessionWriter::create(&args.out, manifest)?;
+    let board_cfg = rig.board_config();
+    let plan = CapturePlan {
+        board: board_cfg,
+        camera: CameraSettings {
+            exposure_us: rig.sensor.exposure_us,
+            gain_db: rig.sensor.gain_db,
+            bit_depth: rig.sensor.bit_depth,
+            external_trigger: true,
+        },
+        clock_sync_pings: 20,
+        pairing: PairingConfig::for_capture(
+            board_cfg.exposure_us,
+            board_cfg.frame_period_us,
+            150_000,
+        ),
+        frame_queue: 16,
+        writer_threads: 2,
+        max_duration: Duration::from_secs(
+            u64::from(rig.capture.photos) * u64::from(board_cfg.frame_period_us) / 1_000_000 + 600,
+        ),
+    };
+    let (report, dir) =
+        run_with_progress(&link, camera, session, &plan, rig.capture.photos, false)?;
+    let tracked = if args.no_track || boards.is_empty() {
+        None
+    } else {
+        Some(track_and_append(&dir)?)
+    };
+    Ok((report, dir, tracked))
+}
+
+/// Opens the rig's camera through its backend (features permitting).
+fn open_camera(
+    rig: &crate::rig_file::RigFile,
+    clock: HostClock,
+) -> anyhow::Result<Box<dyn crate::camera::Camera>> {
+    use crate::rig_file::Backend;
+    match rig.sensor.backend {
+        #[cfg(feature = "aravis")]
+        Backend::Aravis => {
+            let options = crate::camera::aravis::AravisOptions {
+                layout: serde_json::to_value(rig.sensor.layout)?
+                    .as_str()
+                    .unwrap_or_default()
+                    .to_string(),
+                ..Default::default()
+            };
+            Ok(Box::new(crate::camera::aravis::AravisCamera::open(
+                &rig.sensor.address,
+                options,
+                clock,
+            )?))
+        }
+        #[cfg(feature = "v4l")]
+        Backend::V4l => Ok(Box::new(crate::camera::v4l::V4lCamera::open(
+            &rig.sensor.address,
+            clock,
+        )?)),
+        #[cfg(not(feature = "aravis"))]
+        Backend::Aravis => missing_backend(rig, "aravis", clock),
+        #[cfg(not(feature = "v4l"))]
+        Backend::V4l => missing_backend(rig, "v4l", clock),
+    }
+}
+
+#[cfg(not(all(feature = "aravis", feature = "v4l")))]
+fn missing_backend(
+    rig: &crate::rig_file::RigFile,
+    feature: &str,
+    _clock: HostClock,
+) -> anyhow::Result<Box<dyn crate::camera::Camera>> {
+    anyhow::bail!(
+        "{}: camera backend `{feature}` is not in this build; rebuild with `--features {feature}`",
+        rig.path.display()
+    )
+}
+
 /// Tracks the poses of a recorded session and appends them to its log.
 pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>> {
     let session = crate::session::reader::open(dir)?;
@@ -326,7 +490,11 @@ pub fn print_report(r: &CaptureReport) {
 
 /// Runs `ellipso capture`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (report, dir, tracked) = capture_sim(&args, false)?;
+    let (report, dir, tracked) = if args.rig.is_some() {
+        capture_hw(&args)?
+    } else {
+        capture_sim(&args, false)?
+    };
     print_report(&report);
     if let Some(tracked) = tracked {
         let summary = crate::cli::replay::report(&dir, Some(&tracked))?;

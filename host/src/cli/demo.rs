@@ -130,7 +130,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "[1/3] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
     );
     let capture_args = capture::Args {
-        sim: scene_path.clone(),
+        sim: Some(scene_path.clone()),
+        rig: None,
         out: session_dir.clone(),
         trigger: None,
         wire: None,
