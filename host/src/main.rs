@@ -26,6 +26,9 @@ enum Command {
     Polar(cli::polar::Args),
     /// Calibrate the camera (intrinsics, distortion) from a session of AprilTag board frames.
     Calibrate(cli::calibrate::Args),
+    /// Benchmarks that write reports (pose accuracy and speed on rendered frames).
+    #[command(subcommand)]
+    Bench(cli::bench::Args),
     /// List trigger boards (serial ports), video devices and, with --gige, GigE cameras.
     Devices(cli::devices::Args),
     /// Replay a recorded session through the stages after capture (pose tracking).
@@ -63,6 +66,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Polar(args) => cli::polar::run(args),
         Command::Replay(args) => cli::replay::run(args),
         Command::Devices(args) => cli::devices::run(args),
+        Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Sim(args) => cli::sim::run(args),
     }

@@ -5,9 +5,10 @@
 //!
 //! Per frame:
 //! 1. Superpixel demosaic (no interpolation) and pick the detection image ([`DetectImage`]):
-//!    the cross-polarised `I90` by default, because the flash's specular glare on glossy
-//!    tags lives in the co-polarised `I0` and washes tag corners out there (`ellipso bench pose`
-//!    measures the three choices).
+//!    `s0` by default — on matte paper boards it has twice the signal of one analyser and gave
+//!    ~5× smaller rotation errors than `I90` or `I0` in `ellipso bench pose` (docs/pose.md).
+//!    `I90` (cross-polarised) is the choice for glossy or laminated boards, where the flash's
+//!    specular glare lives in the co-polarised `I0` and `s0`.
 //! 2. Scale to 8 bits by the 99.5th percentile (AprilTag thresholds locally; the scaling only
 //!    keeps the dynamic range) and detect tags.
 //! 3. Superpixel corners back to raw pixels: a superpixel of a `t × t` tile at integer coordinate
@@ -44,10 +45,10 @@ use crate::pose::{
 )]
 #[serde(rename_all = "snake_case")]
 pub enum DetectImage {
-    /// Total intensity s0 (all four analysers).
-    S0,
-    /// Cross-polarised I90: diffuse only, the flash's specular glare suppressed.
+    /// Total intensity s0 (all four analysers): most signal; the default for matte boards.
     #[default]
+    S0,
+    /// Cross-polarised I90: diffuse only, the flash's specular glare suppressed (glossy boards).
     I90,
     /// Co-polarised I0: carries the specular glare.
     I0,

@@ -29,7 +29,7 @@ pub struct Args {
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// Detection image.
-    #[arg(long, value_enum, default_value_t = DetectImage::I90)]
+    #[arg(long, value_enum, default_value_t = DetectImage::S0)]
     pub image: DetectImage,
     /// Also estimate k3 (needs corners out to the image corners).
     #[arg(long)]

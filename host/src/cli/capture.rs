@@ -73,7 +73,7 @@ pub struct Args {
     pub no_track: bool,
 }
 
-fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
+pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or("expected WIDTHxHEIGHT, e.g. 1224x1024")?;

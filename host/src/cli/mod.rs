@@ -1,5 +1,6 @@
 //! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
 
+pub mod bench;
 pub mod calibrate;
 pub mod capture;
 pub mod demo;

@@ -1,0 +1,185 @@
+//! `ellipso bench pose SCENE`: pose-tracking accuracy and speed on rendered frames with known
+//! truth — per detection image (I90 cross-polarised, I0 co-polarised, s0), the median and 90th
+//! percentile rotation/translation errors against the simulator's camera poses, flipped poses,
+//! rejections by reason, and milliseconds per frame for detection + pose (one thread).
+//!
+//! Frames are rendered once and tracked with each detection image, so the comparison is on the
+//! same pixels. Writes `pose-bench.json` and prints a table.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use ellipso_sim::render::{RenderOptions, Renderer};
+use ellipso_sim::scene::Scene;
+
+use crate::polar::frame::RawFrame;
+use crate::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
+
+/// `ellipso bench` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum Args {
+    /// Pose accuracy and speed on rendered frames of a scene.
+    Pose(PoseArgs),
+}
+
+/// Arguments of `ellipso bench pose`.
+#[derive(Debug, clap::Args)]
+pub struct PoseArgs {
+    /// Scene file.
+    pub scene: PathBuf,
+    /// Frames to render (spread over the capture path).
+    #[arg(long, default_value_t = 20)]
+    pub frames: usize,
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution.
+    #[arg(long, value_parser = super::capture::parse_resolution)]
+    pub resolution: Option<[u32; 2]>,
+    /// Where to write pose-bench.json.
+    #[arg(long, default_value = ".")]
+    pub out: PathBuf,
+}
+
+/// One detection image's results.
+#[derive(Debug, serde::Serialize)]
+pub struct ImageResult {
+    /// Detection image.
+    pub image: DetectImage,
+    /// Frames tracked.
+    pub frames: usize,
+    /// Frames posed.
+    pub posed: usize,
+    /// Median rotation error, degrees.
+    pub median_rotation_deg: f64,
+    /// 90th percentile rotation error, degrees.
+    pub p90_rotation_deg: f64,
+    /// Median translation error, mm.
+    pub median_translation_mm: f64,
+    /// 90th percentile translation error, mm.
+    pub p90_translation_mm: f64,
+    /// Poses more than 10° from the truth (a flipped planar solution).
+    pub flipped: usize,
+    /// Mean detection + pose time per frame, ms (one thread).
+    pub ms_per_frame: f64,
+    /// Rejections by reason.
+    pub rejected: std::collections::BTreeMap<String, usize>,
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+/// Runs `ellipso bench`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args {
+        Args::Pose(a) => pose(a),
+    }
+}
+
+fn pose(args: PoseArgs) -> anyhow::Result<()> {
+    let scene = Scene::load(&args.scene)?;
+    let options = RenderOptions {
+        resolution_px: args.resolution,
+        ..RenderOptions::default()
+    };
+    let renderer = Renderer::new(&scene, options)?;
+    let camera = *renderer.camera();
+    let layout = renderer.layout();
+    let boards: Vec<TrackedBoard> = scene.boards.iter().map(TrackedBoard::from_placed).collect();
+    anyhow::ensure!(
+        !boards.is_empty(),
+        "{}: the scene has no AprilTag boards",
+        args.scene.display()
+    );
+    let n = scene.camera_poses.len();
+    let step = (n / args.frames.max(1)).max(1);
+    let indices: Vec<usize> = (0..n).step_by(step).take(args.frames).collect();
+    println!(
+        "rendering {} frames of {} at {}×{}…",
+        indices.len(),
+        args.scene.display(),
+        camera.width,
+        camera.height
+    );
+    let mut frames = Vec::new();
+    for &k in &indices {
+        let f = renderer.render_frame(k)?;
+        let raw = RawFrame::new(
+            f.width,
+            f.height,
+            scene.rig.camera.bit_depth,
+            layout,
+            f.raw(),
+        )?;
+        frames.push((k, raw));
+    }
+    let mut results = Vec::new();
+    for image in [DetectImage::I90, DetectImage::I0, DetectImage::S0] {
+        let mut config = TrackConfig {
+            image,
+            ..TrackConfig::default()
+        };
+        config.detector.threads = 1;
+        let mut tracker = Tracker::new(camera, boards.clone(), config)?;
+        let (mut rot, mut trans) = (Vec::new(), Vec::new());
+        let mut rejected = std::collections::BTreeMap::new();
+        let mut flipped = 0;
+        let started = Instant::now();
+        for (k, raw) in &frames {
+            match tracker.track(raw) {
+                Ok(p) => {
+                    let truth = scene.camera_poses[*k].world_from_camera;
+                    let delta = truth.inverse() * p.world_from_camera;
+                    let r = delta.rotation.angle().to_degrees();
+                    if r > 10.0 {
+                        flipped += 1;
+                    }
+                    rot.push(r);
+                    trans.push(delta.translation.vector.norm() * 1e3);
+                }
+                Err(e) => *rejected.entry(e.to_string()).or_insert(0) += 1,
+            }
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3 / frames.len().max(1) as f64;
+        results.push(ImageResult {
+            image,
+            frames: frames.len(),
+            posed: rot.len(),
+            median_rotation_deg: percentile(&mut rot, 0.5),
+            p90_rotation_deg: percentile(&mut rot, 0.9),
+            median_translation_mm: percentile(&mut trans, 0.5),
+            p90_translation_mm: percentile(&mut trans, 0.9),
+            flipped,
+            ms_per_frame: ms,
+            rejected,
+        });
+    }
+    println!(
+        "| image | posed | median rot (°) | p90 rot (°) | median trans (mm) | p90 trans (mm) | flipped | ms/frame |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in &results {
+        println!(
+            "| {:?} | {}/{} | {:.4} | {:.4} | {:.3} | {:.3} | {} | {:.1} |",
+            r.image,
+            r.posed,
+            r.frames,
+            r.median_rotation_deg,
+            r.p90_rotation_deg,
+            r.median_translation_mm,
+            r.p90_translation_mm,
+            r.flipped,
+            r.ms_per_frame
+        );
+        for (why, count) in &r.rejected {
+            println!("|   rejected: {why} ({count}) |||||||");
+        }
+    }
+    std::fs::create_dir_all(&args.out)?;
+    let path = args.out.join("pose-bench.json");
+    std::fs::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    println!("written {}", path.display());
+    Ok(())
+}
