@@ -116,6 +116,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ([w / 2, h / 2], None)
     };
     if args.out.exists() {
+        // only ever clear a previous demo's output, never an arbitrary directory
+        let previous_demo = args.out.join("summary.json").is_file()
+            || args.out.join("session").join("manifest.json").is_file();
+        let empty = std::fs::read_dir(&args.out)
+            .map(|mut d| d.next().is_none())
+            .unwrap_or(false);
+        anyhow::ensure!(
+            previous_demo || empty,
+            "{} exists and is not a previous demo's output; choose another --out",
+            args.out.display()
+        );
         std::fs::remove_dir_all(&args.out)
             .with_context(|| format!("clearing {}", args.out.display()))?;
     }
