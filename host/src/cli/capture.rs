@@ -245,44 +245,14 @@ pub fn capture_sim(
     let session = SessionWriter::create(&args.out, manifest)?;
 
     let board_cfg = board_config(scene, photos, args.interval_ms);
-    let plan = CapturePlan {
-        board: board_cfg,
-        camera: CameraSettings {
-            exposure_us: board_cfg.exposure_us,
-            gain_db: scene.rig.camera.gain_db as f32,
-            bit_depth: info.bit_depth,
-            external_trigger: true,
-        },
-        clock_sync_pings: 20,
-        pairing: PairingConfig::for_capture(
-            board_cfg.exposure_us,
-            board_cfg.frame_period_us,
-            150_000,
-        ),
-        frame_queue: 16,
-        writer_threads: 2,
-        max_duration: Duration::from_secs(
-            u64::from(photos) * u64::from(board_cfg.frame_period_us) / 1_000_000 + 600,
-        ),
+    let settings = CameraSettings {
+        exposure_us: board_cfg.exposure_us,
+        gain_db: scene.rig.camera.gain_db as f32,
+        bit_depth: info.bit_depth,
+        external_trigger: true,
     };
-    let bar = if quiet {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::new(u64::from(photos))
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} capture [{bar:30}] {pos}/{len} frames · {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    let stop = AtomicBool::new(false);
-    let result = capture(&link, camera, session, &plan, &stop, |p| {
-        bar.set_position(p.frames);
-        bar.set_message(format!(
-            "{:.1} fps · paired {} · pairing errors {} · flagged {}",
-            p.fps, p.paired, p.pairing_errors, p.camera_drops
-        ));
-    });
-    bar.finish_and_clear();
+    let plan = capture_plan(board_cfg, settings, photos);
+    let result = run_with_progress(&link, camera, session, &plan, photos, quiet);
     drop(link);
     if let Some(board) = board {
         board.shutdown();
@@ -294,6 +264,22 @@ pub fn capture_sim(
         Some(track_and_append(&dir)?)
     };
     Ok((report, dir, tracked))
+}
+
+/// The capture plan for a board timing: 20 clock pings, a 150 ms transfer budget for pairing,
+/// 16 frames of queue, 2 PNG writers, and a time limit of the capture's length plus 10 minutes.
+fn capture_plan(board: CaptureConfig, camera: CameraSettings, photos: u32) -> CapturePlan {
+    CapturePlan {
+        board,
+        camera,
+        clock_sync_pings: 20,
+        pairing: PairingConfig::for_capture(board.exposure_us, board.frame_period_us, 150_000),
+        frame_queue: 16,
+        writer_threads: 2,
+        max_duration: Duration::from_secs(
+            u64::from(photos) * u64::from(board.frame_period_us) / 1_000_000 + 600,
+        ),
+    }
 }
 
 /// Runs the capture with a progress bar (hidden when quiet or not on a terminal).
@@ -375,26 +361,13 @@ pub fn capture_hw(
         .collect::<Result<_, _>>()?;
     let session = SessionWriter::create(&args.out, manifest)?;
     let board_cfg = rig.board_config();
-    let plan = CapturePlan {
-        board: board_cfg,
-        camera: CameraSettings {
-            exposure_us: rig.sensor.exposure_us,
-            gain_db: rig.sensor.gain_db,
-            bit_depth: rig.sensor.bit_depth,
-            external_trigger: true,
-        },
-        clock_sync_pings: 20,
-        pairing: PairingConfig::for_capture(
-            board_cfg.exposure_us,
-            board_cfg.frame_period_us,
-            150_000,
-        ),
-        frame_queue: 16,
-        writer_threads: 2,
-        max_duration: Duration::from_secs(
-            u64::from(rig.capture.photos) * u64::from(board_cfg.frame_period_us) / 1_000_000 + 600,
-        ),
+    let settings = CameraSettings {
+        exposure_us: rig.sensor.exposure_us,
+        gain_db: rig.sensor.gain_db,
+        bit_depth: rig.sensor.bit_depth,
+        external_trigger: true,
     };
+    let plan = capture_plan(board_cfg, settings, rig.capture.photos);
     let (report, dir) =
         run_with_progress(&link, camera, session, &plan, rig.capture.photos, false)?;
     let tracked = if args.no_track || boards.is_empty() {

@@ -18,7 +18,6 @@
 //! in false-colour images. Errors name the file and what is wrong, in one line.
 
 mod load;
-mod npy;
 mod render;
 mod summary;
 
@@ -380,14 +379,15 @@ fn write_npy(
     ] {
         let name = format!("{stem}{suffix}.npy");
         let path = out.join(&name);
-        npy::write(&path, w, h, plane.data())
+        crate::report::npy::write(&path, &[h, w], plane.data())
             .with_context(|| format!("cannot write {}", path.display()))?;
         files.push((name, what.into()));
     }
     let name = format!("mask{suffix}.npy");
     let path = out.join(&name);
     let bits: Vec<u8> = band.mask.data().iter().map(|m| m.0).collect();
-    npy::write(&path, w, h, &bits).with_context(|| format!("cannot write {}", path.display()))?;
+    crate::report::npy::write(&path, &[h, w], &bits)
+        .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name, "mask reason bits, u8, 0 = valid".into()));
     Ok(())
 }

@@ -13,8 +13,6 @@
 //!
 //! `serve` (the virtual trigger board on a pty) lives in [`super::sim_serve`].
 
-mod npy;
-
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -208,15 +206,15 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
         for (name, bytes) in [
             (
                 format!("normal_{k:05}.npy"),
-                npy::encode(&[h, w, 3], &normals),
+                crate::report::npy::encode(&[h, w, 3], &normals),
             ),
             (
                 format!("depth_{k:05}.npy"),
-                npy::encode(&[h, w], &p.depth_m),
+                crate::report::npy::encode(&[h, w], &p.depth_m),
             ),
             (
                 format!("material_{k:05}.npy"),
-                npy::encode(&[h, w], &p.material),
+                crate::report::npy::encode(&[h, w], &p.material),
             ),
         ] {
             let path = out.join(&name);

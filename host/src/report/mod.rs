@@ -6,6 +6,7 @@
 //! reports (accuracy-vs-time, parameter maps).
 
 pub mod canvas;
+pub mod npy;
 pub mod plot;
 
 pub use canvas::{Canvas, ClipRect, Rgb, Stroke};

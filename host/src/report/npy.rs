@@ -1,14 +1,12 @@
-//! Minimal `.npy` (NumPy format 1.0) writer for f32 and u8 planes, so `ellipso polar --npy`
-//! hands full-precision results to Python without quantising them to PNG integers.
-//!
-//! Contract: writes a C-order 2-D array of shape `(height, width)` with dtype `<f4` or `|u1`,
-//! header padded so the data starts on a 64-byte boundary (format spec: numpy.lib.format).
+//! `.npy` (NumPy format 1.0) encoding, so results reach Python at full precision: arrays of any
+//! shape in C order, little-endian, header padded so the data starts on a 64-byte boundary
+//! (format spec: numpy.lib.format). Used by `ellipso polar --npy` and `ellipso sim render --truth`.
 
 use std::io::Write;
 use std::path::Path;
 
 /// Element types we write.
-pub(super) trait NpyElement: Copy {
+pub trait NpyElement: Copy {
     /// NumPy dtype descriptor.
     const DESCR: &'static str;
     /// Appends the little-endian bytes of `self`.
@@ -22,6 +20,13 @@ impl NpyElement for f32 {
     }
 }
 
+impl NpyElement for u16 {
+    const DESCR: &'static str = "<u2";
+    fn push_le(self, out: &mut Vec<u8>) {
+        out.extend_from_slice(&self.to_le_bytes());
+    }
+}
+
 impl NpyElement for u8 {
     const DESCR: &'static str = "|u1";
     fn push_le(self, out: &mut Vec<u8>) {
@@ -29,17 +34,23 @@ impl NpyElement for u8 {
     }
 }
 
-/// The bytes of a `.npy` file holding `data` as a `height × width` array.
-pub(super) fn encode<T: NpyElement>(width: usize, height: usize, data: &[T]) -> Vec<u8> {
+/// The bytes of a `.npy` file holding `data` with `shape` (the product of `shape` must equal
+/// `data.len()`; callers build both from one image).
+pub fn encode<T: NpyElement>(shape: &[usize], data: &[T]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let shape_text = match dims.len() {
+        1 => format!("({},)", dims[0]),
+        _ => format!("({})", dims.join(", ")),
+    };
     let mut header = format!(
-        "{{'descr': '{}', 'fortran_order': False, 'shape': ({height}, {width}), }}",
+        "{{'descr': '{}', 'fortran_order': False, 'shape': {shape_text}, }}",
         T::DESCR
     );
     // magic (6) + version (2) + header length (2) + header, padded with spaces, ends in '\n'
     let unpadded = 10 + header.len() + 1;
     header.push_str(&" ".repeat((64 - unpadded % 64) % 64));
     header.push('\n');
-    let mut out = Vec::with_capacity(10 + header.len() + data.len() * 4);
+    let mut out = Vec::with_capacity(10 + header.len() + std::mem::size_of_val(data));
     out.extend_from_slice(b"\x93NUMPY\x01\x00");
     // the header is < 200 bytes, so its length always fits in u16
     out.extend_from_slice(&(header.len() as u16).to_le_bytes());
@@ -50,15 +61,9 @@ pub(super) fn encode<T: NpyElement>(width: usize, height: usize, data: &[T]) -> 
     out
 }
 
-/// Writes `data` as `path` (a `height × width` array).
-pub(super) fn write<T: NpyElement>(
-    path: &Path,
-    width: usize,
-    height: usize,
-    data: &[T],
-) -> std::io::Result<()> {
-    let mut file = std::fs::File::create(path)?;
-    file.write_all(&encode(width, height, data))
+/// Writes `data` with `shape` to `path`.
+pub fn write<T: NpyElement>(path: &Path, shape: &[usize], data: &[T]) -> std::io::Result<()> {
+    std::fs::File::create(path)?.write_all(&encode(shape, data))
 }
 
 #[cfg(test)]
@@ -67,7 +72,7 @@ mod tests {
 
     #[test]
     fn header_is_aligned_and_describes_the_array() {
-        let bytes = encode(3, 2, &[0.5f32, 1.0, 2.0, 3.0, 4.0, 5.0]);
+        let bytes = encode(&[2, 3], &[0.5f32, 1.0, 2.0, 3.0, 4.0, 5.0]);
         assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
         let header_len = u16::from_le_bytes([bytes[8], bytes[9]]) as usize;
         assert_eq!((10 + header_len) % 64, 0, "data 64-byte aligned");
@@ -80,7 +85,14 @@ mod tests {
             f32::from_le_bytes([data[0], data[1], data[2], data[3]]),
             0.5
         );
-        let masks = encode(2, 1, &[1u8, 0]);
-        assert!(masks.ends_with(&[1, 0]));
+        assert!(encode(&[1, 2], &[1u8, 0]).ends_with(&[1, 0]));
+        assert!(encode(&[2], &[7u16, 9]).ends_with(&[7, 0, 9, 0]));
+        let one_d = encode(&[4], &[0u8; 4]);
+        let len = u16::from_le_bytes([one_d[8], one_d[9]]) as usize;
+        assert!(
+            std::str::from_utf8(&one_d[10..10 + len])
+                .expect("ascii")
+                .contains("'shape': (4,)")
+        );
     }
 }
