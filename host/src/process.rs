@@ -47,19 +47,17 @@ pub enum ProcessError {
     Session(#[from] SessionError),
 }
 
-/// The camera model and boards recorded in a session's manifest.
-pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), ProcessError> {
+fn manifest_error(session: &Session, what: String) -> ProcessError {
     let path = session
         .dir
         .join(crate::session::paths::MANIFEST)
         .display()
         .to_string();
-    let bad = |what: String| ProcessError::Manifest {
-        path: path.clone(),
-        what,
-    };
-    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone())
-        .map_err(|e| bad(format!("`rig` has no usable camera model: {e}")))?;
+    ProcessError::Manifest { path, what }
+}
+
+/// The AprilTag boards recorded in a session's manifest (at least one).
+pub fn boards_of(session: &Session) -> Result<Vec<TrackedBoard>, ProcessError> {
     let boards = session
         .manifest
         .boards
@@ -67,15 +65,23 @@ pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), Pro
         .enumerate()
         .map(|(i, b)| {
             serde_json::from_value::<TrackedBoard>(b.clone())
-                .map_err(|e| bad(format!("`boards[{i}]`: {e}")))
+                .map_err(|e| manifest_error(session, format!("`boards[{i}]`: {e}")))
         })
         .collect::<Result<Vec<_>, _>>()?;
     if boards.is_empty() {
-        return Err(bad(
-            "no AprilTag boards recorded: poses cannot be tracked".into()
+        return Err(manifest_error(
+            session,
+            "no AprilTag boards recorded: poses cannot be tracked".into(),
         ));
     }
-    Ok((rig.camera, boards))
+    Ok(boards)
+}
+
+/// The camera model and boards recorded in a session's manifest.
+pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), ProcessError> {
+    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone())
+        .map_err(|e| manifest_error(session, format!("`rig` has no usable camera model: {e}")))?;
+    Ok((rig.camera, boards_of(session)?))
 }
 
 /// The sensor layout named in a manifest.

@@ -63,14 +63,6 @@ pub struct ImageResult {
     pub rejected: std::collections::BTreeMap<String, usize>,
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
-
 /// Runs `ellipso bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
@@ -147,10 +139,10 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             image,
             frames: frames.len(),
             posed: rot.len(),
-            median_rotation_deg: percentile(&mut rot, 0.5),
-            p90_rotation_deg: percentile(&mut rot, 0.9),
-            median_translation_mm: percentile(&mut trans, 0.5),
-            p90_translation_mm: percentile(&mut trans, 0.9),
+            median_rotation_deg: crate::report::percentile(&mut rot, 0.5),
+            p90_rotation_deg: crate::report::percentile(&mut rot, 0.9),
+            median_translation_mm: crate::report::percentile(&mut trans, 0.5),
+            p90_translation_mm: crate::report::percentile(&mut trans, 0.9),
             flipped,
             ms_per_frame: ms,
             rejected,

@@ -18,7 +18,7 @@ use crate::polar::frame::RawFrame;
 use crate::pose::{BoardCorners, DetectorConfig, TagDetector, assemble_correspondences};
 use crate::process::layout_of;
 use crate::session::reader;
-use crate::track::{DetectImage, TrackedBoard, detect_frame};
+use crate::track::{DetectImage, detect_frame};
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
@@ -39,20 +39,8 @@ pub struct Args {
 /// Runs `ellipso calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let session = reader::open(&args.session)?;
-    let boards: Vec<TrackedBoard> = session
-        .manifest
-        .boards
-        .iter()
-        .enumerate()
-        .map(|(i, b)| {
-            serde_json::from_value(b.clone()).with_context(|| format!("manifest boards[{i}]"))
-        })
-        .collect::<anyhow::Result<_>>()?;
-    anyhow::ensure!(
-        !boards.is_empty(),
-        "{}: the manifest records no AprilTag boards",
-        args.session.display()
-    );
+    // calibration needs the boards only: the camera model is what it estimates
+    let boards = crate::process::boards_of(&session)?;
     let layout = layout_of(&session.manifest)?;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();

@@ -59,14 +59,6 @@ pub struct PoseAccuracy {
     pub p90_translation_mm: f64,
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
-
 /// Scores tracked poses against the scene's capture path (frame k ↔ pose k of a clean capture;
 /// frames are matched through their pairing to pulses, pulse seq k ↔ pose k).
 pub fn pose_accuracy(
@@ -90,10 +82,10 @@ pub fn pose_accuracy(
     PoseAccuracy {
         posed: rot.len(),
         frames: tracked.len(),
-        median_rotation_deg: percentile(&mut rot, 0.5),
-        median_translation_mm: percentile(&mut trans, 0.5),
-        p90_rotation_deg: percentile(&mut rot, 0.9),
-        p90_translation_mm: percentile(&mut trans, 0.9),
+        median_rotation_deg: crate::report::percentile(&mut rot, 0.5),
+        median_translation_mm: crate::report::percentile(&mut trans, 0.5),
+        p90_rotation_deg: crate::report::percentile(&mut rot, 0.9),
+        p90_translation_mm: crate::report::percentile(&mut trans, 0.9),
     }
 }
 

@@ -46,3 +46,12 @@ impl PartialEq for ReportError {
         }
     }
 }
+
+/// The `p`-quantile (0..=1, nearest rank) of `values`, sorting them in place; NaN when empty.
+pub fn percentile(values: &mut [f64], p: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize]
+}

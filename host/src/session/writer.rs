@@ -97,14 +97,7 @@ impl SessionWriter {
         if matches!(event, SessionEvent::Pairing { .. }) {
             self.paired += 1;
         }
-        let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
-            path: self.dir.join(paths::EVENTS),
-            error: std::io::Error::other(e),
-        })?;
-        line.push(b'\n');
-        self.events
-            .write_all(&line)
-            .map_err(SessionError::io(self.dir.join(paths::EVENTS)))
+        append_line(&mut self.events, &self.dir.join(paths::EVENTS), event)
     }
 
     /// Writes a frame's PNG atomically, then its `frame` event.
@@ -218,13 +211,17 @@ impl SessionAppender {
 
     /// Appends one event as one line, in one write.
     pub fn log(&mut self, event: &SessionEvent) -> Result<(), SessionError> {
-        let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
-            path: self.path.clone(),
-            error: std::io::Error::other(e),
-        })?;
-        line.push(b'\n');
-        self.events
-            .write_all(&line)
-            .map_err(SessionError::io(&self.path))
+        append_line(&mut self.events, &self.path, event)
     }
+}
+
+/// Appends `event` to the log `file` (at `path`, for errors) as one line, in one write: the
+/// crash-safety contract of the event log.
+fn append_line(file: &mut File, path: &Path, event: &SessionEvent) -> Result<(), SessionError> {
+    let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
+        path: path.to_path_buf(),
+        error: std::io::Error::other(e),
+    })?;
+    line.push(b'\n');
+    file.write_all(&line).map_err(SessionError::io(path))
 }
