@@ -13,12 +13,15 @@
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
-//! Later modules: fitting, export.
+//! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, shape update).
+//!
+//! Later modules: export.
 
 pub mod acquire;
 pub mod calibrate;
 pub mod camera;
 pub mod cli;
+pub mod fit;
 pub mod link;
 pub mod polar;
 pub mod pose;

@@ -28,7 +28,7 @@ use super::microfacet::microfacet_weight;
 use super::{Frame, Mueller, OpticsError, Real, Rotator, Stokes, Vec3};
 
 /// Material parameters of one surface point (optics.md §7.1).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PbrdfParams<T> {
     /// Refractive index relative to air, η ≥ 1 (wavelength-independent).
     pub eta: T,

@@ -1,0 +1,306 @@
+//! The data contract of the fit: what observation extraction produces and the solver,
+//! the shape update and export consume.
+//!
+//! Contract:
+//! - World frame = board frame (metres). Every view carries the camera centre, the camera's
+//!   image-up axis and the flash position and polariser axis in the world, so the model's
+//!   light and camera frames are rebuilt exactly as the renderer builds them
+//!   ([`ViewGeometry::geometry_at`]): light frame z = −ω_i with x along the flash polariser
+//!   (light up = (−ω_i) × axis), or the camera's up for an unpolarised flash; camera frame
+//!   z = ω_o, y = image up. The flash Stokes vector is then `[1, 1, 0, 0]` (polarised) or
+//!   `[1, 0, 0, 0]` ([`ViewGeometry::flash_polariser`]).
+//! - A [`Sample`] holds the observation channels (I^d, I^s, I^α per RGB channel, optics.md §5.3)
+//!   already divided by the radiometric normaliser N (`ellipso_sim::render::radiometry`), i.e. in
+//!   the units of `ellipso_sim::optics::measure::observe` with a unit flash. On a monochrome
+//!   sensor all three colour entries are equal and [`SampleSet::colour`] is false.
+//! - `normaliser` (DN per model unit) is kept so the solver can weight by expected noise; it is
+//!   always > 0 and finite in a valid sample.
+//! - Samples reference their view by index into [`SampleSet::views`]; per sample only 44 bytes
+//!   are stored, so 100 000 vertices × 150 views fit in well under 1 GB.
+
+use ellipso_sim::optics::OpticsError;
+use ellipso_sim::optics::Vec3;
+use ellipso_sim::optics::measure::FlashPolariser;
+use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
+use nalgebra::{Point3, Vector3};
+
+/// One view: where the camera and the flash were, in the world.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ViewGeometry {
+    /// The session's frame id of this view.
+    pub frame_id: u64,
+    /// Camera centre, world, metres.
+    pub camera_position_world: [f64; 3],
+    /// Image-up axis of the camera (−y of the OpenCV camera frame), world, unit.
+    pub camera_up_world: [f64; 3],
+    /// Flash (light) position, world, metres.
+    pub flash_position_world: [f64; 3],
+    /// Flash polariser transmission axis, world, unit (`None`: unpolarised flash).
+    pub polariser_axis_world: Option<[f64; 3]>,
+}
+
+/// The model geometry of one (vertex, view) pair: unit directions away from the surface and
+/// the up vectors that fix the light and camera frames.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SampleGeometry {
+    /// Unit vector from the surface point to the flash, world.
+    pub to_light: [f64; 3],
+    /// Unit vector from the surface point to the camera, world.
+    pub to_camera: [f64; 3],
+    /// Light-frame up vector, world (not necessarily unit or orthogonal to `to_light`).
+    pub light_up: [f64; 3],
+    /// Camera-frame up vector, world.
+    pub camera_up: [f64; 3],
+    /// Distance surface → flash, metres.
+    pub light_distance_m: f64,
+    /// Distance surface → camera, metres.
+    pub camera_distance_m: f64,
+}
+
+impl SampleGeometry {
+    /// The optics model's [`Geometry`] for a `normal` (any scalar, e.g. dual numbers).
+    pub fn model<T: ellipso_sim::optics::Real>(
+        &self,
+        normal: Vec3<T>,
+    ) -> Result<Geometry<T>, OpticsError> {
+        let v = |a: [f64; 3]| Vec3::new(T::from_f64(a[0]), T::from_f64(a[1]), T::from_f64(a[2]));
+        Geometry::from_up_vectors(
+            normal,
+            v(self.to_light),
+            v(self.to_camera),
+            v(self.light_up),
+            v(self.camera_up),
+        )
+    }
+}
+
+impl ViewGeometry {
+    /// The flash polariser in the light frame [`ViewGeometry::geometry_at`] builds (angle 0:
+    /// the light frame's x is the polariser axis).
+    pub fn flash_polariser(&self) -> FlashPolariser {
+        FlashPolariser { angle_rad: 0.0 }
+    }
+
+    /// Whether the flash is polarised in this view.
+    pub fn polarised(&self) -> bool {
+        self.polariser_axis_world.is_some()
+    }
+
+    /// The geometry of this view at `position_world`, or `None` when the point coincides with
+    /// the camera or the flash (closer than 1 µm: no direction is defined) or the light frame
+    /// degenerates (ω_i parallel to the polariser axis, impossible for a flash that faces
+    /// the scene).
+    pub fn geometry_at(&self, position_world: &Point3<f64>) -> Option<SampleGeometry> {
+        const MIN_DISTANCE_M: f64 = 1e-6;
+        let to_light = Point3::from(self.flash_position_world) - position_world;
+        let to_camera = Point3::from(self.camera_position_world) - position_world;
+        let light_distance_m = to_light.norm();
+        let camera_distance_m = to_camera.norm();
+        if !(light_distance_m > MIN_DISTANCE_M && camera_distance_m > MIN_DISTANCE_M) {
+            return None;
+        }
+        let to_light = to_light / light_distance_m;
+        let to_camera = to_camera / camera_distance_m;
+        let camera_up = Vector3::from(self.camera_up_world);
+        let light_up = match self.polariser_axis_world {
+            Some(axis) => {
+                let up = (-to_light).cross(&Vector3::from(axis));
+                // A polariser axis along the beam defines no frame.
+                if up.norm() < 1e-9 {
+                    return None;
+                }
+                up
+            }
+            None => camera_up,
+        };
+        Some(SampleGeometry {
+            to_light: to_light.into(),
+            to_camera: to_camera.into(),
+            light_up: light_up.into(),
+            camera_up: camera_up.into(),
+            light_distance_m,
+            camera_distance_m,
+        })
+    }
+}
+
+/// One (vertex, view) observation, in model units (divided by the normaliser N).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Sample {
+    /// Index into [`SampleSet::views`].
+    pub view: u32,
+    /// Per colour channel (R, G, B): [I^d, I^s, I^α] divided by N.
+    pub channels: [[f32; 3]; 3],
+    /// N: digital numbers per model unit at this (vertex, view) (exposure, gain, 1/d², flash
+    /// profile, vignetting). > 0.
+    pub normaliser: f32,
+}
+
+/// Why samples or vertices were gated out; counted per reason (optics.md §7.3).
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct GateCounts {
+    /// Behind the camera, outside the image, or the vertex faces away.
+    pub not_in_view: u64,
+    /// Another part of the mesh hides the vertex from the camera.
+    pub occluded: u64,
+    /// The vertex is in the flash's shadow.
+    pub shadowed: u64,
+    /// View direction beyond the grazing cut-off.
+    pub grazing: u64,
+    /// Any analyser pixel at or above the saturation level.
+    pub saturated: u64,
+    /// Normalised intensity below the dark threshold.
+    pub dark: u64,
+    /// A non-finite value in the sampled pixels.
+    pub non_finite: u64,
+    /// Rejected by the colour-outlier test.
+    pub colour_outlier: u64,
+    /// Samples kept.
+    pub kept: u64,
+}
+
+impl GateCounts {
+    /// Adds `other` to `self`, reason by reason.
+    pub fn add(&mut self, other: &GateCounts) {
+        self.not_in_view += other.not_in_view;
+        self.occluded += other.occluded;
+        self.shadowed += other.shadowed;
+        self.grazing += other.grazing;
+        self.saturated += other.saturated;
+        self.dark += other.dark;
+        self.non_finite += other.non_finite;
+        self.colour_outlier += other.colour_outlier;
+        self.kept += other.kept;
+    }
+}
+
+/// The samples of one vertex.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VertexSamples {
+    /// Vertex index in the mesh.
+    pub vertex: u32,
+    /// Vertex position, world, metres.
+    pub position_world: [f64; 3],
+    /// Current (initial) unit normal, world.
+    pub normal_world: [f64; 3],
+    /// The kept samples, ordered by view index.
+    pub samples: Vec<Sample>,
+    /// What was gated out for this vertex, per reason.
+    pub gates: GateCounts,
+}
+
+/// Everything the solver needs: the views and every vertex's samples.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SampleSet {
+    /// The views, indexed by [`Sample::view`].
+    pub views: Vec<ViewGeometry>,
+    /// Colour sensor (three independent channels) or monochrome (three equal entries).
+    pub colour: bool,
+    /// One entry per mesh vertex, in mesh order.
+    pub vertices: Vec<VertexSamples>,
+}
+
+/// Why a vertex's result should not be trusted as is. A flagged vertex still carries finite
+/// parameters inside their bounds.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum FitFlag {
+    /// Fewer samples than the minimum view count: parameters are the prior / cluster values.
+    TooFewViews,
+    /// Fewer samples than unknowns: the fit is under-determined.
+    UnderDetermined,
+    /// Every sample is dark: albedos are upper bounds, other parameters unidentified.
+    Dark,
+    /// Samples were saturated and dropped; what is left may bias the specular lobe.
+    Saturated,
+    /// All views near normal incidence: η is not identifiable (∂DoP/∂η ≈ 0).
+    EtaUnidentifiable,
+    /// All views grazing: normal and η poorly conditioned.
+    GrazingOnly,
+    /// A parameter sits at a bound (η at its floor, σ at its floor or 1).
+    AtBound,
+    /// The solver stopped at its iteration limit without converging.
+    NotConverged,
+}
+
+/// The fitted parameters of one vertex, with standard errors.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VertexFit {
+    /// Vertex index in the mesh.
+    pub vertex: u32,
+    /// Fitted parameters (always finite and inside the model's domain).
+    pub params: PbrdfParams<f64>,
+    /// Refined unit normal, world.
+    pub normal_world: [f64; 3],
+    /// Standard errors from the Gauss–Newton covariance at the solution (σ²·(JᵀJ)⁻¹), in
+    /// parameter units: η, σ_s, σ_ss, ρ_s, ρ_ss RGB, ρ_d RGB; `f64::INFINITY` where the
+    /// parameter is not identifiable.
+    pub std_error: [f64; 10],
+    /// Normal uncertainty, degrees (1σ cone half-angle).
+    pub normal_std_error_deg: f64,
+    /// Samples used.
+    pub samples_used: u32,
+    /// Final cost (sum of weighted squared residuals).
+    pub cost: f64,
+    /// Solver iterations (last pass).
+    pub iterations: u32,
+    /// Reasons not to trust the result as is (empty: fine).
+    pub flags: Vec<FitFlag>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn view() -> ViewGeometry {
+        ViewGeometry {
+            frame_id: 0,
+            camera_position_world: [0.0, 0.0, 0.5],
+            camera_up_world: [0.0, 1.0, 0.0],
+            flash_position_world: [0.0, -0.03, 0.5],
+            polariser_axis_world: Some([1.0, 0.0, 0.0]),
+        }
+    }
+
+    #[test]
+    fn geometry_directions_are_unit_and_point_away_from_the_surface() {
+        let g = view().geometry_at(&Point3::new(0.01, 0.02, 0.0)).unwrap();
+        for d in [g.to_light, g.to_camera] {
+            let n = Vector3::from(d).norm();
+            assert!((n - 1.0).abs() < 1e-12);
+            assert!(d[2] > 0.9);
+        }
+        assert!(
+            (g.camera_distance_m - (0.01f64.powi(2) + 0.02f64.powi(2) + 0.25).sqrt()).abs() < 1e-12
+        );
+        // Light up is perpendicular to the beam and to the polariser axis.
+        let up = Vector3::from(g.light_up);
+        assert!(up.dot(&Vector3::from(g.to_light)).abs() < 1e-12);
+        assert!(up.dot(&Vector3::x()).abs() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_positions_have_no_geometry() {
+        let v = view();
+        assert!(
+            v.geometry_at(&Point3::from(v.camera_position_world))
+                .is_none()
+        );
+        assert!(
+            v.geometry_at(&Point3::from(v.flash_position_world))
+                .is_none()
+        );
+        // A point along the polariser axis from the flash: the beam is parallel to the axis.
+        let p = Point3::new(1.0, -0.03, 0.5);
+        assert!(v.geometry_at(&p).is_none());
+    }
+
+    #[test]
+    fn model_geometry_builds_for_a_front_facing_normal() {
+        let g = view().geometry_at(&Point3::new(0.0, 0.0, 0.0)).unwrap();
+        let n = Vec3::new(0.0, 0.0, 1.0);
+        assert!(g.model::<f64>(n).is_ok());
+    }
+}

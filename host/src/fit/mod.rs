@@ -1,0 +1,15 @@
+//! The per-vertex polarimetric SVBRDF fit: Sparse Ellipsometry's reconstruction
+//! (optics.md §7), inverting the same optics the simulator renders with
+//! (`ellipso_sim::optics`; never a copy).
+//!
+//! The chain, one module each:
+//! - [`data`]: the contract between stages — per-view geometry ([`data::ViewGeometry`]),
+//!   per-(vertex, view) samples in model units ([`data::Sample`]), the per-vertex bundle
+//!   ([`data::VertexSamples`]) and the per-vertex result ([`data::VertexFit`]). The one place
+//!   that turns a view and a vertex position into the model's geometry
+//!   ([`data::ViewGeometry::geometry_at`]).
+//!
+//! Later stages (observation extraction from a session, the solver, specular augmentation,
+//! the shape update, the pipeline) each consume and produce these types.
+
+pub mod data;
