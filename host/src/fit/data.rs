@@ -136,6 +136,20 @@ pub struct Sample {
     pub normaliser: f32,
 }
 
+/// One virtual specular sample of the paper's augmentation (optics.md §7.7–§7.8): the value of
+/// the vertex's cluster two-lobe model at an exactly coaxial geometry (θ_i = θ_o = θ_h, Fresnel
+/// at normal incidence), compared with the vertex's own model at the same geometry.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VirtualSample {
+    /// cos θ_h of the coaxial geometry (θ_h ∈ [0°, 89.5°]).
+    pub cos_theta_h: f64,
+    /// I^s per colour channel (R, G, B), model units (as a real sample divided by N).
+    pub specular: [f64; 3],
+    /// Weight; a vertex's virtual weights sum to λ_g (0.1 by default), the real samples'
+    /// specular residuals to 1 − λ_g.
+    pub weight: f64,
+}
+
 /// Why samples or vertices were gated out; counted per reason (optics.md §7.3).
 #[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct GateCounts {

@@ -9,7 +9,11 @@
 //!   that turns a view and a vertex position into the model's geometry
 //!   ([`data::ViewGeometry::geometry_at`]).
 //!
+//! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
+//!   extraction from real frames and the synthetic generator.
+//!
 //! Later stages (observation extraction from a session, the solver, specular augmentation,
 //! the shape update, the pipeline) each consume and produce these types.
 
 pub mod data;
+pub mod gate;
