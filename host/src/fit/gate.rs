@@ -96,7 +96,11 @@ impl GateConfig {
             return Err(SampleGate::Grazing);
         }
         let saturation_dn = self.saturation_fraction * full_scale_dn;
-        if used.iter().flatten().any(|&v| f64::from(v) >= saturation_dn) {
+        if used
+            .iter()
+            .flatten()
+            .any(|&v| f64::from(v) >= saturation_dn)
+        {
             return Err(SampleGate::Saturated);
         }
         let diffuse: f64 = used.iter().map(|a| 2.0 * f64::from(a[2])).sum();

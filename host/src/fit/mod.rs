@@ -12,8 +12,12 @@
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
 //!
+//! - [`truth`]: the simulator's ground truth as the fit sees it (world mesh with per-vertex true
+//!   parameters, the capture as fit views), for benchmarks and tests.
+//!
 //! Later stages (observation extraction from a session, the solver, specular augmentation,
 //! the shape update, the pipeline) each consume and produce these types.
 
 pub mod data;
 pub mod gate;
+pub mod truth;
