@@ -17,3 +17,9 @@
 
 pub mod data;
 pub mod gate;
+/// Per-sample prediction (unit-albedo lobes) with exact dual-number derivatives.
+pub mod model;
+/// Per-vertex Levenberg–Marquardt solver with variable projection, uncertainty and flags.
+pub mod solve;
+/// Synthetic samples with known truth (tests, accuracy benchmark).
+pub mod synthetic;
