@@ -35,7 +35,8 @@
 //!   (I^d·N) below `dark_signal_dn`.
 //! - `Saturated`: saturated samples exceed `saturated_fraction` of (kept + saturated).
 //! - `EtaUnidentifiable`: max over samples of |∂DoP_d/∂η| at the solution below
-//!   `min_eta_sensitivity`, or std error of η above `max_eta_std_error` (incl. ∞).
+//!   `min_eta_sensitivity`, or std error of η above `max_eta_std_error` (incl. ∞), or the
+//!   polarisation SNR (mean model DoP_d / RMS of the DoP residuals) below 1.
 //! - `GrazingOnly`: every sample views more than `grazing_only_deg` from the fitted normal, or
 //!   more samples were gated grazing than kept.
 //! - `AtBound`: η < η_floor + `bound_margin_eta`, σ_s < σ_min + `bound_margin_sigma`,
@@ -58,7 +59,7 @@ use ellipso_sim::optics::pbrdf::PbrdfParams;
 use rayon::prelude::*;
 
 use super::data::{FitFlag, SampleSet, VertexFit, VertexSamples, ViewGeometry, VirtualSample};
-use super::model::{unit_sample, tangent_normal};
+use super::model::{tangent_normal, unit_sample};
 use lm::{LmState, RawDual, chart, physical, raw_from};
 use problem::{Albedos, Problem, Scratch};
 
@@ -219,16 +220,37 @@ pub fn fit_vertex(
     };
     let mut best: Option<LmState> = None;
     for s in &starts {
-        let st = lm::run(&problem, *s, start_normal, config, &mut scratch_f, &mut scratch_d);
+        let st = lm::run(
+            &problem,
+            *s,
+            start_normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        );
         if best.as_ref().is_none_or(|b| !(b.cost <= st.cost)) {
             best = Some(st);
         }
     }
     let mut state = best.unwrap_or_else(|| {
-        lm::run(&problem, starts[0], start_normal, config, &mut scratch_f, &mut scratch_d)
+        lm::run(
+            &problem,
+            starts[0],
+            start_normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        )
     });
     for _ in 1..config.passes {
-        let again = lm::run(&problem, state.raw, state.normal, config, &mut scratch_f, &mut scratch_d);
+        let again = lm::run(
+            &problem,
+            state.raw,
+            state.normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        );
         let iterations = again.iterations;
         if again.cost <= state.cost {
             state = again;
@@ -271,14 +293,37 @@ fn finish(
     let normal = tangent_normal(ch.n0, ch.t1, ch.t2, 0.0, 0.0);
     let mut max_sensitivity: f64 = 0.0;
     let mut max_cos_o: f64 = 0.0;
+    let mut dop_sum = 0.0;
     for f in &problem.frames {
         if let Some(s) = unit_sample(f, normal, x.eta, x.sigma_s, x.sigma_ss) {
-            let (_, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
+            let (dop, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
             max_sensitivity = max_sensitivity.max(d.abs());
             max_cos_o = max_cos_o.max(s.cos_theta_o);
+            dop_sum += dop;
         }
     }
-    if max_sensitivity < config.min_eta_sensitivity || !(u.std_error[0] <= config.max_eta_std_error)
+    // Polarisation SNR: RMS of the (unweighted) DoP residuals against the mean model DoP. Below
+    // 1 the observed DoP is dominated by noise and its Rice bias (optics.md §9 dark pixels), so
+    // the std error (which assumes zero-mean noise) understates η's error.
+    let per_sample = 2 * problem.channels + 3;
+    let mut index = 0usize;
+    let mut dop_sq = 0.0;
+    let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
+    problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |r: f64| {
+        let k = index / per_sample;
+        if k < problem.len() && index % per_sample == 2 * problem.channels {
+            let w = (problem.lambda_psi * problem.w_dop[k]).sqrt();
+            if w > 0.0 {
+                dop_sq += (r / w).powi(2);
+            }
+        }
+        index += 1;
+    });
+    let n = problem.len().max(1) as f64;
+    let dop_snr = (dop_sum / n) / (dop_sq / n).sqrt().max(1e-300);
+    if max_sensitivity < config.min_eta_sensitivity
+        || !(u.std_error[0] <= config.max_eta_std_error)
+        || dop_snr < 1.0
     {
         flags.push(FitFlag::EtaUnidentifiable);
     }
@@ -332,10 +377,21 @@ fn prior_fit(
         },
     };
     if init.is_none() && problem.len() > 0 {
-        let raw = raw_from(params.eta, params.sigma_s, params.sigma_ss, params.rho_s, config);
+        let raw = raw_from(
+            params.eta,
+            params.sigma_s,
+            params.sigma_ss,
+            params.rho_s,
+            config,
+        );
         let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
-        let (_, a): (f64, Albedos<f64>) = lm::cost_at(problem, &chart(normal), raw, config, &mut scratch);
-        if a.rho_d.iter().chain(&a.rho_ss).all(|v| v.is_finite() && *v >= 0.0) {
+        let (_, a): (f64, Albedos<f64>) =
+            lm::cost_at(problem, &chart(normal), raw, config, &mut scratch);
+        if a.rho_d
+            .iter()
+            .chain(&a.rho_ss)
+            .all(|v| v.is_finite() && *v >= 0.0)
+        {
             params.rho_d = a.rho_d;
             params.rho_ss = a.rho_ss;
         }

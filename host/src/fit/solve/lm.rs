@@ -67,7 +67,13 @@ pub(super) fn physical<T: Real>(raw: [T; N_RAW], config: &SolverConfig) -> Nonli
 }
 
 /// Raw unknowns (with p = q = 0) for physical values, clamped into the open domain.
-pub(super) fn raw_from(eta: f64, sigma_s: f64, sigma_ss: f64, rho_s: f64, config: &SolverConfig) -> [f64; N_RAW] {
+pub(super) fn raw_from(
+    eta: f64,
+    sigma_s: f64,
+    sigma_ss: f64,
+    rho_s: f64,
+    config: &SolverConfig,
+) -> [f64; N_RAW] {
     let smin = config.sigma_min;
     let s = ((sigma_s - smin) / (1.0 - smin)).clamp(0.0, 1.0);
     let sigma_s_c = smin + (1.0 - smin) * s.clamp(1e-12, 1.0 - 1e-12);
@@ -84,7 +90,11 @@ pub(super) fn raw_from(eta: f64, sigma_s: f64, sigma_ss: f64, rho_s: f64, config
 
 fn clamp_raw(mut raw: [f64; N_RAW]) -> [f64; N_RAW] {
     for v in &mut raw[..4] {
-        *v = if v.is_finite() { v.clamp(-RAW_LIMIT, RAW_LIMIT) } else { 0.0 };
+        *v = if v.is_finite() {
+            v.clamp(-RAW_LIMIT, RAW_LIMIT)
+        } else {
+            0.0
+        };
     }
     raw
 }
@@ -158,13 +168,21 @@ pub(super) fn run(
     raw[4] = 0.0;
     raw[5] = 0.0;
     let mut ch = chart(normal);
-    let (mut cost, mut jtj, mut jtr, mut albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
+    let (mut cost, mut jtj, mut jtr, mut albedos) =
+        jacobian_at(problem, &ch, raw, config, scratch_d);
     let mut mu = config.initial_damping;
     let mut iterations = 0;
     let mut converged = false;
     let abs_tol = 1e-28 * problem.data_scale.max(1e-300);
     if !cost.is_finite() {
-        return LmState { raw, normal, cost, albedos, iterations, converged };
+        return LmState {
+            raw,
+            normal,
+            cost,
+            albedos,
+            iterations,
+            converged,
+        };
     }
     if cost <= abs_tol {
         converged = true;

@@ -11,7 +11,9 @@
 use ellipso_sim::optics::Real;
 
 use super::super::data::{VertexSamples, ViewGeometry, VirtualSample};
-use super::super::model::{SampleFrames, UnitSample, coaxial_unit_specular, tangent_normal, unit_sample};
+use super::super::model::{
+    SampleFrames, UnitSample, coaxial_unit_specular, tangent_normal, unit_sample,
+};
 use super::SolverConfig;
 
 /// The nonlinear unknowns in physical units (η, σ_s, σ_ss, ρ_s, tangent p, q).
@@ -216,9 +218,12 @@ impl<'a> Problem<'a> {
         }
         scratch.virt.clear();
         for v in self.virtuals {
-            scratch
-                .virt
-                .push(coaxial_unit_specular(v.cos_theta_h.clamp(0.0, 1.0), x.eta, x.sigma_s, x.sigma_ss));
+            scratch.virt.push(coaxial_unit_specular(
+                v.cos_theta_h.clamp(0.0, 1.0),
+                x.eta,
+                x.sigma_s,
+                x.sigma_ss,
+            ));
         }
         let albedos = match given {
             Some(a) => a,
@@ -330,8 +335,16 @@ pub(super) fn nnls2<T: Real>(haa: T, hab: T, hbb: T, ga: T, gb: T) -> (T, T) {
             return (x, y);
         }
     }
-    let face_x = if haa.re() > 0.0 && ga.re() > 0.0 { ga / haa } else { z };
-    let face_y = if hbb.re() > 0.0 && gb.re() > 0.0 { gb / hbb } else { z };
+    let face_x = if haa.re() > 0.0 && ga.re() > 0.0 {
+        ga / haa
+    } else {
+        z
+    };
+    let face_y = if hbb.re() > 0.0 && gb.re() > 0.0 {
+        gb / hbb
+    } else {
+        z
+    };
     // Objective on each face: −g²/h (for the clipped-at-0 case, 0).
     let q_x = -face_x.re() * ga.re();
     let q_y = -face_y.re() * gb.re();

@@ -102,7 +102,9 @@ fn covariance_diagonal(
     }
     let s2 = cost / (m - p) as f64;
     let scale: Vec<f64> = active.iter().map(|&i| jtj[(i, i)].sqrt()).collect();
-    let live: Vec<usize> = (0..p).filter(|&a| scale[a] > 0.0 && scale[a].is_finite()).collect();
+    let live: Vec<usize> = (0..p)
+        .filter(|&a| scale[a] > 0.0 && scale[a].is_finite())
+        .collect();
     if live.is_empty() {
         return out;
     }
