@@ -1,6 +1,6 @@
 //! The per-vertex polarimetric SVBRDF fit: Sparse Ellipsometry's reconstruction
 //! (optics.md §7), inverting the same optics the simulator renders with
-//! (`ellipso_sim::optics`; never a copy).
+//! (`ellipso_sim::optics`; never a copy). `docs/fit.md` describes the whole chain.
 //!
 //! The chain, one module each:
 //! - [`data`]: the contract between stages — per-view geometry ([`data::ViewGeometry`]),
@@ -8,16 +8,28 @@
 //!   ([`data::VertexSamples`]) and the per-vertex result ([`data::VertexFit`]). The one place
 //!   that turns a view and a vertex position into the model's geometry
 //!   ([`data::ViewGeometry::geometry_at`]).
-//!
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
-//!
-//! - [`truth`]: the simulator's ground truth as the fit sees it (world mesh with per-vertex true
-//!   parameters, the capture as fit views), for benchmarks and tests.
-//!
-//! Later stages (observation extraction from a session, the solver, specular augmentation,
-//! the shape update, the pipeline) each consume and produce these types.
+//! - [`observe`]: a recorded session + a mesh → samples (projection, occlusion, flash shadow,
+//!   demosaiced analyser sampling, normaliser, gates), streaming one frame at a time.
+//! - [`model`]: per-sample prediction (unit-albedo lobes) with exact dual-number derivatives.
+//! - [`solve`]: per-vertex Levenberg–Marquardt with variable projection, uncertainty and flags.
+//! - [`augment`]: clusters, per-cluster two-lobe models and virtual specular samples.
+//! - [`shape`]: vertex positions updated towards the refined normals.
+//! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
+//! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
+//! - [`truth`], [`synthetic`], [`accuracy`]: the simulator's truth as the fit sees it, synthetic
+//!   samples, simulated captures and error metrics (benchmarks and tests).
 
+pub mod accuracy;
+pub mod augment;
 pub mod data;
 pub mod gate;
+pub mod model;
+pub mod observe;
+pub mod pipeline;
+pub mod session;
+pub mod shape;
+pub mod solve;
+pub mod synthetic;
 pub mod truth;

@@ -11,7 +11,7 @@
 //!   f = (η² − 1)² sin²θ, g = (η² + 1)(2η² cos²θ + (η² − 1) sin²θ) + 4η² cosθ √(η² − sin²θ),
 //!   DoP = f/g, equal to |T−|/T+ at the exit angle; ∂DoP/∂η = (f′g − f g′)/g².
 
-use super::pbrdf::{Geometry, PbrdfParams, apply};
+use super::pbrdf::{Geometry, PbrdfParams, apply, apply_unit_lobes};
 use super::{Mueller, Real, Stokes};
 
 /// An ideal linear analyser (polariser in front of a pixel) at `angle_rad` from camera x
@@ -122,6 +122,45 @@ pub fn observe<T: Real>(
 ) -> [ObservationChannels<T>; 3] {
     let s_cam = apply(g, p, flash.stokes(T::one()));
     s_cam.map(|s| SensorIntensities::from_stokes(s).observation())
+}
+
+/// Observation channels of the three lobes with unit albedo (ρ_d = ρ_ss = ρ_s = 1), for the
+/// fit's linear structure (optics.md §7.1): per colour channel c,
+/// `observe(g, p, flash)[c] = ρ_d[c]·diffuse + ρ_ss[c]·single_scattering + ρ_s·specular`
+/// (to rounding).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitLobeObservations<T> {
+    /// The diffuse lobe with ρ_d = 1.
+    pub diffuse: ObservationChannels<T>,
+    /// The single-scattering lobe (roughness σ_ss) with ρ_ss = 1.
+    pub single_scattering: ObservationChannels<T>,
+    /// The specular lobe (roughness σ_s) with ρ_s = 1.
+    pub specular: ObservationChannels<T>,
+}
+
+/// The unit-albedo lobes' observation channels for one geometry (see [`UnitLobeObservations`])
+/// and the flash's Stokes vector in the light frame (`FlashPolariser::stokes(1)` for the rig,
+/// `Stokes::unpolarised(1)` for a bare flash).
+pub fn observe_unit_lobes<T: Real>(
+    g: &Geometry<T>,
+    eta: T,
+    sigma_s: T,
+    sigma_ss: T,
+    s_light: Stokes<T>,
+) -> UnitLobeObservations<T> {
+    let u = apply_unit_lobes(g, eta, sigma_s, sigma_ss, s_light);
+    let obs = |s: Stokes<T>| SensorIntensities::from_stokes(s).observation();
+    let refl = obs(u.reflection);
+    let scale = |o: ObservationChannels<T>, k: T| ObservationChannels {
+        diffuse: o.diffuse * k,
+        specular: o.specular * k,
+        alpha: o.alpha * k,
+    };
+    UnitLobeObservations {
+        diffuse: obs(u.diffuse),
+        single_scattering: scale(refl, u.weight_ss),
+        specular: scale(refl, u.weight_s),
+    }
 }
 
 /// The pieces f, g, f′, g′ of DoP_d = f/g (see the module doc), with the clamps:
@@ -240,6 +279,46 @@ mod tests {
             let a = Analyser::from_deg(deg);
             let via_matrix = a.mueller::<f64>().apply(s).s0;
             assert!((a.intensity(s) - via_matrix).abs() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn unit_lobes_recombine_to_observe() {
+        use crate::optics::Vec3;
+        let v = Vec3::<f64>::from_f64;
+        let p = PbrdfParams {
+            eta: 1.6,
+            sigma_s: 0.15,
+            sigma_ss: 0.4,
+            rho_s: 0.8,
+            rho_ss: [0.2, 0.1, 0.05],
+            rho_d: [0.6, 0.3, 0.1],
+        };
+        for k in 0..50 {
+            let t = k as f64 * 0.37;
+            let n = v([0.3 * t.sin(), 0.2 * t.cos(), 1.0]);
+            let to_light = v([0.1 + 0.5 * (1.3 * t).sin(), 0.4 * t.cos(), 1.0]);
+            let to_camera = v([0.12 + 0.5 * (1.3 * t).sin(), 0.37 * t.cos(), 1.0]);
+            let up = v([0.0, 1.0, 0.0]);
+            let g = Geometry::from_up_vectors(n, to_light, to_camera, up, up).unwrap();
+            let flash = FlashPolariser { angle_rad: 0.0 };
+            let full = observe(&g, &p, flash);
+            let u = observe_unit_lobes(&g, p.eta, p.sigma_s, p.sigma_ss, flash.stokes(1.0));
+            for c in 0..3 {
+                let comb = |f: fn(&ObservationChannels<f64>) -> f64| {
+                    p.rho_d[c] * f(&u.diffuse)
+                        + p.rho_ss[c] * f(&u.single_scattering)
+                        + p.rho_s * f(&u.specular)
+                };
+                let pairs = [
+                    (full[c].diffuse, comb(|o| o.diffuse)),
+                    (full[c].specular, comb(|o| o.specular)),
+                    (full[c].alpha, comb(|o| o.alpha)),
+                ];
+                for (a, b) in pairs {
+                    assert!((a - b).abs() <= 1e-13 * (1.0 + a.abs()), "{a} vs {b}");
+                }
+            }
         }
     }
 

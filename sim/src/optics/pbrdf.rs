@@ -346,18 +346,43 @@ pub fn evaluate<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>) -> Lobes<T> {
     }
 }
 
-/// s_cam = P·s_light per RGB channel (no 1/d²), without forming any 4×4 matrix: the diffuse
-/// lobe as u·(v·s), the reflection as C_out F C_in s shared by P^s and P^ss. This is the
-/// cheapest full-polarisation path and what [`crate::optics::measure::observe`] uses.
-pub fn apply<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>, s_light: Stokes<T>) -> [Stokes<T>; 3] {
+/// The three lobes of [`apply`] with unit albedos, before they are combined: what the fit needs
+/// because observations are linear in ρ_d, ρ_ss and ρ_s (optics.md §7.1, §8.3).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct UnitLobeStokes<T> {
+    /// P^d·s_light with ρ_d = 1.
+    pub diffuse: Stokes<T>,
+    /// C_{h→o} F^R(θ_d) C_{i→h}·s_light: the microfacet reflection without its scalar weight.
+    pub reflection: Stokes<T>,
+    /// [`lobe_weight`] at σ_s (P^s = ρ_s·`weight_s`·reflection).
+    pub weight_s: T,
+    /// [`lobe_weight`] at σ_ss (P^ss = ρ_ss·`weight_ss`·reflection).
+    pub weight_ss: T,
+}
+
+/// s_cam of each lobe with unit albedo (see [`UnitLobeStokes`]); all zero when back-facing.
+/// [`apply`] is exactly `diffuse·ρ_d + reflection·(ρ_s·weight_s + ρ_ss·weight_ss)`.
+pub fn apply_unit_lobes<T: Real>(
+    g: &Geometry<T>,
+    eta: T,
+    sigma_s: T,
+    sigma_ss: T,
+    s_light: Stokes<T>,
+) -> UnitLobeStokes<T> {
     if !g.front_facing {
-        return [Stokes::unpolarised(T::zero()); 3];
+        let zero = Stokes::unpolarised(T::zero());
+        return UnitLobeStokes {
+            diffuse: zero,
+            reflection: zero,
+            weight_s: T::zero(),
+            weight_ss: T::zero(),
+        };
     }
     let s = s_light.to_array();
-    let (col, row) = diffuse_factors(g, p.eta);
+    let (col, row) = diffuse_factors(g, eta);
     let k = (row[0] * s[0] + row[1] * s[1] + row[2] * s[2] + row[3] * s[3]) * g.cos_theta_i;
     let diffuse = Stokes::from_array(col).scale(k);
-    let f = FresnelTerms::dielectric(g.cos_theta_d, p.eta);
+    let f = FresnelTerms::dielectric(g.cos_theta_d, eta);
     let axis = reflection_axis(g);
     let rot_in = g
         .light_frame
@@ -370,16 +395,31 @@ pub fn apply<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>, s_light: Stokes<T>) -
         .inverse();
     let local = rot_in.apply(s_light);
     let (a, b, c) = (f.r_plus(), f.r_minus(), f.r_cross());
-    let reflected = rot_out.apply(Stokes::new(
+    let reflection = rot_out.apply(Stokes::new(
         a * local.s0 + b * local.s1,
         b * local.s0 + a * local.s1,
         c * local.s2,
         c * local.s3,
     ));
-    let w_s = p.rho_s * lobe_weight(g, p.sigma_s);
-    let w_ss = lobe_weight(g, p.sigma_ss);
+    UnitLobeStokes {
+        diffuse,
+        reflection,
+        weight_s: lobe_weight(g, sigma_s),
+        weight_ss: lobe_weight(g, sigma_ss),
+    }
+}
+
+/// s_cam = P·s_light per RGB channel (no 1/d²), without forming any 4×4 matrix: the diffuse
+/// lobe as u·(v·s), the reflection as C_out F C_in s shared by P^s and P^ss. This is the
+/// cheapest full-polarisation path and what [`crate::optics::measure::observe`] uses.
+pub fn apply<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>, s_light: Stokes<T>) -> [Stokes<T>; 3] {
+    if !g.front_facing {
+        return [Stokes::unpolarised(T::zero()); 3];
+    }
+    let u = apply_unit_lobes(g, p.eta, p.sigma_s, p.sigma_ss, s_light);
+    let w_s = p.rho_s * u.weight_s;
     core::array::from_fn(|ch| {
-        diffuse.scale(p.rho_d[ch]) + reflected.scale(w_s + p.rho_ss[ch] * w_ss)
+        u.diffuse.scale(p.rho_d[ch]) + u.reflection.scale(w_s + p.rho_ss[ch] * u.weight_ss)
     })
 }
 

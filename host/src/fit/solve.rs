@@ -1,0 +1,490 @@
+//! The per-vertex solver of the polarimetric SVBRDF fit: Levenberg–Marquardt with exact
+//! dual-number Jacobians, the albedos by variable projection, standard errors and honest flags
+//! (optics.md §7.4–§7.8, §8; docs/fit-solver.md has the derivations and measured numbers).
+//!
+//! # API
+//! - [`fit_vertex`]`(views, vertex, colour, init, virtual_samples, config) -> VertexFit`
+//! - [`fit_all`]`(set, init, virtual_samples, config) -> Vec<VertexFit>`: rayon over vertices,
+//!   bit-identical for any thread count (no reduction crosses vertices).
+//! - [`forward_cost_all`]`(set, fits) -> ForwardCost`: the model evaluated once per observation
+//!   (f64, no derivatives): the unit the benchmark divides fit time by.
+//!
+//! # Unknowns and bounds (optics.md §8.2)
+//! Outer (LM) unknowns, raw and unbounded: η = η_floor + softplus(u);
+//! σ_s = σ_min + (1 − σ_min)·sigmoid(a); σ_ss = σ_s + (1 − σ_s)·sigmoid(b) (so σ_min ≤ σ_s ≤
+//! σ_ss ≤ 1); ρ_s = softplus(c); normal = normalise(n0 + p·t1 + q·t2), re-centred on the tangent
+//! plane of the current normal after every accepted step. Inner (projected) unknowns: ρ_d and
+//! ρ_ss per colour channel by exact 2-variable NNLS of the L_d + L_s (+ virtual) residuals inside
+//! every evaluation, in dual arithmetic (the outer Jacobian includes the projection's
+//! derivative).
+//!
+//! # Residuals and weights (optics.md §7.4)
+//! See `problem.rs`. Defaults λψ = 10, λd = λs = λφ = 1 (the released code's values). With
+//! virtual samples, real specular residuals weigh (1 − λg)·λs each and a virtual sample of weight
+//! w (weights sum to λg) weighs λs·N_real·w, i.e. the paper's (1 − λg)/N_real : w proportion,
+//! scaled so the real specular term keeps the diffuse term's per-sample scale.
+//! Optional noise weighting ([`SolverConfig::noise_weighting`]): intensity and azimuth residuals
+//! weigh N/s0, DoP residuals N·s0 (shot-noise-limited inverse variances in model units), each
+//! normalised to mean 1 over the vertex.
+//!
+//! # Flags (exact triggers)
+//! - `TooFewViews`: fewer usable samples than `min_views`; parameters are the prior
+//!   (`init`, else [`SolverConfig::prior`] with ρ_d from the data), std errors ∞.
+//! - `UnderDetermined`: fewer samples than unknowns (12 colour, 8 monochrome).
+//! - `Dark`: more samples gated dark than kept, or the kept samples' mean diffuse signal
+//!   (I^d·N) below `dark_signal_dn`.
+//! - `Saturated`: saturated samples exceed `saturated_fraction` of (kept + saturated).
+//! - `EtaUnidentifiable`: max over samples of |∂DoP_d/∂η| at the solution below
+//!   `min_eta_sensitivity`, or std error of η above `max_eta_std_error` (incl. ∞), or the
+//!   polarisation SNR (mean model DoP_d / RMS of the DoP residuals) below 1.
+//! - `GrazingOnly`: every sample views more than `grazing_only_deg` from the fitted normal, or
+//!   more samples were gated grazing than kept.
+//! - `AtBound`: η < η_floor + `bound_margin_eta`, σ_s < σ_min + `bound_margin_sigma`,
+//!   σ_ss > 1 − `bound_margin_sigma`.
+//! - `NotConverged`: the last pass stopped at `max_iterations` (or the damping overflowed).
+//!
+//! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
+
+mod lm;
+mod problem;
+mod uncertainty;
+
+#[cfg(test)]
+mod hard_cases;
+#[cfg(test)]
+mod tests;
+
+use ellipso_sim::optics::measure::dop_diffuse_with_d_eta;
+use ellipso_sim::optics::pbrdf::PbrdfParams;
+use rayon::prelude::*;
+
+use super::data::{FitFlag, SampleSet, VertexFit, VertexSamples, ViewGeometry, VirtualSample};
+use super::model::{tangent_normal, unit_sample};
+use lm::{LmState, RawDual, chart, physical, raw_from};
+use problem::{Albedos, Problem, Scratch};
+
+/// Solver settings. `Default` gives the documented values.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SolverConfig {
+    /// LM iteration cap per pass (default 100).
+    pub max_iterations: u32,
+    /// LM passes from the best start; each later pass restarts the damping (default 2).
+    pub passes: u32,
+    /// Cold starts (η, σ_s, σ_ss) tried without `init`; the lowest cost wins
+    /// (default (1.5, 0.1, 0.3) and (1.5, 0.4, 0.8)).
+    pub cold_starts: Vec<[f64; 3]>,
+    /// ρ_s of cold starts (default 0.5).
+    pub initial_rho_s: f64,
+    /// Weight of L_ψ (DoP) (default 10).
+    pub lambda_psi: f64,
+    /// Weight of L_d (default 1).
+    pub lambda_d: f64,
+    /// Weight of L_s (default 1).
+    pub lambda_s: f64,
+    /// Weight of L_φ (azimuth) (default 1).
+    pub lambda_phi: f64,
+    /// λg: total weight of virtual samples relative to real specular ones (default 0.1).
+    pub lambda_g: f64,
+    /// Floor of both roughnesses (default 0.01; optics.md §9 σ → 0).
+    pub sigma_min: f64,
+    /// Floor of η (default 1.001, so η → 1 stays representable; optics.md §9 η → 1).
+    pub eta_floor: f64,
+    /// Weight residuals by shot-noise inverse variance from N (default false: the paper's
+    /// uniform weights).
+    pub noise_weighting: bool,
+    /// Minimum usable samples (default 12 = `GateConfig::default().min_views`).
+    pub min_views: usize,
+    /// LM stops when the relative cost decrease of an accepted step is below this (1e-10).
+    pub relative_tolerance: f64,
+    /// LM stops when the step is below this relative to the raw parameters (1e-9).
+    pub step_tolerance: f64,
+    /// Initial Marquardt damping (1e-3).
+    pub initial_damping: f64,
+    /// `EtaUnidentifiable` when max |∂DoP/∂η| is below this (0.02 ≈ 25° view at η = 1.5).
+    pub min_eta_sensitivity: f64,
+    /// `EtaUnidentifiable` when the std error of η exceeds this (0.05).
+    pub max_eta_std_error: f64,
+    /// `GrazingOnly` when all views are beyond this angle from the normal, degrees (65).
+    pub grazing_only_deg: f64,
+    /// `Dark` when the mean diffuse signal is below this many DN (8).
+    pub dark_signal_dn: f64,
+    /// `Saturated` when saturated samples exceed this fraction of kept + saturated (0.05).
+    pub saturated_fraction: f64,
+    /// `AtBound` margin on η above its floor (0.005).
+    pub bound_margin_eta: f64,
+    /// `AtBound` margin on σ_s above σ_min and σ_ss below 1 (1e-3).
+    pub bound_margin_sigma: f64,
+    /// Prior (η, σ_s, σ_ss, ρ_s, ρ_ss) for vertices that cannot be fitted (1.5, 0.2, 0.5, 0.5, 0).
+    pub prior: [f64; 5],
+}
+
+impl Default for SolverConfig {
+    fn default() -> Self {
+        Self {
+            max_iterations: 100,
+            passes: 2,
+            cold_starts: vec![[1.5, 0.1, 0.3], [1.5, 0.4, 0.8]],
+            initial_rho_s: 0.5,
+            lambda_psi: 10.0,
+            lambda_d: 1.0,
+            lambda_s: 1.0,
+            lambda_phi: 1.0,
+            lambda_g: 0.1,
+            sigma_min: 0.01,
+            eta_floor: 1.001,
+            noise_weighting: true,
+            min_views: 12,
+            relative_tolerance: 1e-10,
+            step_tolerance: 1e-9,
+            initial_damping: 1e-3,
+            min_eta_sensitivity: 0.02,
+            max_eta_std_error: 0.05,
+            grazing_only_deg: 65.0,
+            dark_signal_dn: 8.0,
+            saturated_fraction: 0.05,
+            bound_margin_eta: 0.005,
+            bound_margin_sigma: 1e-3,
+            prior: [1.5, 0.2, 0.5, 0.5, 0.0],
+        }
+    }
+}
+
+/// Fits one vertex (see the module doc). `init` warm-starts every parameter and the normal
+/// (η is not reset, optics.md §8.5); `virtual_samples` may be empty.
+pub fn fit_vertex(
+    views: &[ViewGeometry],
+    vertex: &VertexSamples,
+    colour: bool,
+    init: Option<&VertexFit>,
+    virtual_samples: &[VirtualSample],
+    config: &SolverConfig,
+) -> VertexFit {
+    let problem = Problem::new(views, vertex, colour, virtual_samples, config);
+    let n = problem.len();
+    let unknowns = if colour { 12 } else { 8 };
+    let mut flags = Vec::new();
+    if n < unknowns {
+        flags.push(FitFlag::UnderDetermined);
+    }
+    let g = &vertex.gates;
+    let mean_signal_dn = if n > 0 {
+        problem
+            .obs
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let s: f64 = o.iter().take(problem.channels).map(|c| c[0]).sum();
+                s / problem.channels as f64 * problem.normalisers[k]
+            })
+            .sum::<f64>()
+            / n as f64
+    } else {
+        0.0
+    };
+    if g.dark > g.kept || (n > 0 && mean_signal_dn < config.dark_signal_dn) {
+        flags.push(FitFlag::Dark);
+    }
+    if g.saturated > 0
+        && g.saturated as f64 > config.saturated_fraction * (g.kept + g.saturated) as f64
+    {
+        flags.push(FitFlag::Saturated);
+    }
+    if g.grazing > g.kept {
+        flags.push(FitFlag::GrazingOnly);
+    }
+    let start_normal = init
+        .map(|f| f.normal_world)
+        .filter(|v| unit(*v).is_some())
+        .or_else(|| unit(vertex.normal_world))
+        .unwrap_or([0.0, 0.0, 1.0]);
+    let start_normal = unit(start_normal).unwrap_or([0.0, 0.0, 1.0]);
+    if n < config.min_views.max(1) {
+        flags.push(FitFlag::TooFewViews);
+        return prior_fit(&problem, vertex, start_normal, init, flags, config);
+    }
+    let mut scratch_f = Scratch::<f64>::new(n, virtual_samples.len());
+    let mut scratch_d = Scratch::<RawDual>::new(n, virtual_samples.len());
+    let starts: Vec<[f64; 6]> = match init {
+        Some(f) => vec![raw_from(
+            f.params.eta,
+            f.params.sigma_s,
+            f.params.sigma_ss,
+            f.params.rho_s,
+            config,
+        )],
+        None => config
+            .cold_starts
+            .iter()
+            .map(|s| raw_from(s[0], s[1], s[2], config.initial_rho_s, config))
+            .collect(),
+    };
+    let mut best: Option<LmState> = None;
+    for s in &starts {
+        let st = lm::run(
+            &problem,
+            *s,
+            start_normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        );
+        if best.as_ref().is_none_or(|b| !(b.cost <= st.cost)) {
+            best = Some(st);
+        }
+    }
+    let mut state = best.unwrap_or_else(|| {
+        lm::run(
+            &problem,
+            starts[0],
+            start_normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        )
+    });
+    for _ in 1..config.passes {
+        let again = lm::run(
+            &problem,
+            state.raw,
+            state.normal,
+            config,
+            &mut scratch_f,
+            &mut scratch_d,
+        );
+        let iterations = again.iterations;
+        if again.cost <= state.cost {
+            state = again;
+        } else {
+            state.iterations = iterations;
+        }
+    }
+    finish(&problem, vertex, state, flags, config)
+}
+
+fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    (l.is_finite() && l > 1e-12).then(|| v.map(|x| x / l))
+}
+
+/// The result of a converged (or capped) LM state: parameters, errors, flags.
+fn finish(
+    problem: &Problem,
+    vertex: &VertexSamples,
+    state: LmState,
+    mut flags: Vec<FitFlag>,
+    config: &SolverConfig,
+) -> VertexFit {
+    let x = physical(state.raw, config);
+    let ch = chart(state.normal);
+    let params = PbrdfParams {
+        eta: x.eta,
+        sigma_s: x.sigma_s,
+        sigma_ss: x.sigma_ss.max(x.sigma_s).min(1.0),
+        rho_s: x.rho_s,
+        rho_ss: state.albedos.rho_ss.map(|v| v.max(0.0)),
+        rho_d: state.albedos.rho_d.map(|v| v.max(0.0)),
+    };
+    if params.validate().is_err() || !state.cost.is_finite() {
+        flags.push(FitFlag::NotConverged);
+        return prior_fit(problem, vertex, state.normal, None, flags, config);
+    }
+    let u = uncertainty::standard_errors(problem, &ch, &x, &state.albedos);
+    // Identifiability of η and grazing, at the solution.
+    let normal = tangent_normal(ch.n0, ch.t1, ch.t2, 0.0, 0.0);
+    let mut max_sensitivity: f64 = 0.0;
+    let mut max_cos_o: f64 = 0.0;
+    let mut dop_sum = 0.0;
+    for f in &problem.frames {
+        if let Some(s) = unit_sample(f, normal, x.eta, x.sigma_s, x.sigma_ss) {
+            let (dop, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
+            max_sensitivity = max_sensitivity.max(d.abs());
+            max_cos_o = max_cos_o.max(s.cos_theta_o);
+            dop_sum += dop;
+        }
+    }
+    // Polarisation SNR: RMS of the (unweighted) DoP residuals against the mean model DoP. Below
+    // 1 the observed DoP is dominated by noise and its Rice bias (optics.md §9 dark pixels), so
+    // the std error (which assumes zero-mean noise) understates η's error.
+    let per_sample = 2 * problem.channels + 3;
+    let mut index = 0usize;
+    let mut dop_sq = 0.0;
+    let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
+    problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |r: f64| {
+        let k = index / per_sample;
+        if k < problem.len() && index % per_sample == 2 * problem.channels {
+            let w = (problem.lambda_psi * problem.w_dop[k]).sqrt();
+            if w > 0.0 {
+                dop_sq += (r / w).powi(2);
+            }
+        }
+        index += 1;
+    });
+    let n = problem.len().max(1) as f64;
+    let dop_snr = (dop_sum / n) / (dop_sq / n).sqrt().max(1e-300);
+    if max_sensitivity < config.min_eta_sensitivity
+        || !(u.std_error[0] <= config.max_eta_std_error)
+        || dop_snr < 1.0
+    {
+        flags.push(FitFlag::EtaUnidentifiable);
+    }
+    if max_cos_o < config.grazing_only_deg.to_radians().cos() {
+        flags.push(FitFlag::GrazingOnly);
+    }
+    if params.eta < config.eta_floor + config.bound_margin_eta
+        || params.sigma_s < config.sigma_min + config.bound_margin_sigma
+        || params.sigma_ss > 1.0 - config.bound_margin_sigma
+    {
+        flags.push(FitFlag::AtBound);
+    }
+    if !state.converged {
+        flags.push(FitFlag::NotConverged);
+    }
+    flags.sort();
+    flags.dedup();
+    VertexFit {
+        vertex: vertex.vertex,
+        params,
+        normal_world: state.normal,
+        std_error: u.std_error,
+        normal_std_error_deg: u.normal_std_error_deg,
+        samples_used: problem.len() as u32,
+        cost: state.cost,
+        iterations: state.iterations,
+        flags,
+    }
+}
+
+/// The prior result for a vertex that cannot be fitted: `init` if given, else the configured
+/// prior with ρ_d, ρ_ss projected from whatever samples exist (0 without samples).
+fn prior_fit(
+    problem: &Problem,
+    vertex: &VertexSamples,
+    normal: [f64; 3],
+    init: Option<&VertexFit>,
+    mut flags: Vec<FitFlag>,
+    config: &SolverConfig,
+) -> VertexFit {
+    let p = config.prior;
+    let mut params = match init {
+        Some(f) if f.params.validate().is_ok() => f.params,
+        _ => PbrdfParams {
+            eta: p[0].max(config.eta_floor),
+            sigma_s: p[1].clamp(config.sigma_min, 1.0),
+            sigma_ss: p[2].clamp(p[1].clamp(config.sigma_min, 1.0), 1.0),
+            rho_s: p[3].max(0.0),
+            rho_ss: [p[4].max(0.0); 3],
+            rho_d: [0.0; 3],
+        },
+    };
+    if init.is_none() && problem.len() > 0 {
+        let raw = raw_from(
+            params.eta,
+            params.sigma_s,
+            params.sigma_ss,
+            params.rho_s,
+            config,
+        );
+        let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
+        let (_, a): (f64, Albedos<f64>) =
+            lm::cost_at(problem, &chart(normal), raw, config, &mut scratch);
+        if a.rho_d
+            .iter()
+            .chain(&a.rho_ss)
+            .all(|v| v.is_finite() && *v >= 0.0)
+        {
+            params.rho_d = a.rho_d;
+            params.rho_ss = a.rho_ss;
+        }
+    }
+    flags.sort();
+    flags.dedup();
+    VertexFit {
+        vertex: vertex.vertex,
+        params,
+        normal_world: normal,
+        std_error: [f64::INFINITY; 10],
+        normal_std_error_deg: f64::INFINITY,
+        samples_used: problem.len() as u32,
+        cost: 0.0,
+        iterations: 0,
+        flags,
+    }
+}
+
+/// Fits every vertex of `set` in parallel (rayon); `init` and `virtual_samples`, when given,
+/// are indexed like `set.vertices`. Deterministic for any thread count.
+pub fn fit_all(
+    set: &SampleSet,
+    init: Option<&[VertexFit]>,
+    virtual_samples: Option<&[Vec<VirtualSample>]>,
+    config: &SolverConfig,
+) -> Vec<VertexFit> {
+    set.vertices
+        .par_iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let warm = init.and_then(|f| f.get(i));
+            let virt = virtual_samples
+                .and_then(|vs| vs.get(i))
+                .map(Vec::as_slice)
+                .unwrap_or(&[]);
+            fit_vertex(&set.views, v, set.colour, warm, virt, config)
+        })
+        .collect()
+}
+
+/// One forward evaluation of the whole set.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForwardCost {
+    /// Σ over observations of the squared differences of I^d, I^s, I^α (model units).
+    pub sum_squared: f64,
+    /// Observations evaluated (samples × colour channels).
+    pub observations: u64,
+}
+
+/// Evaluates the model (f64, no derivatives) once for every observation of `set` at `fits`
+/// (indexed like `set.vertices`): the unit of work the benchmark divides fit time by. Per-vertex
+/// sums are added in vertex order, so the result does not depend on the thread count.
+pub fn forward_cost_all(set: &SampleSet, fits: &[VertexFit]) -> ForwardCost {
+    let channels = if set.colour { 3 } else { 1 };
+    let per_vertex: Vec<(f64, u64)> = set
+        .vertices
+        .par_iter()
+        .zip(fits.par_iter())
+        .map(|(v, fit)| {
+            let normal = ellipso_sim::optics::Vec3::from_f64(fit.normal_world);
+            let p = &fit.params;
+            let mut sum = 0.0;
+            let mut count = 0u64;
+            for s in &v.samples {
+                let Some(view) = set.views.get(s.view as usize) else {
+                    continue;
+                };
+                let Some(f) = super::model::SampleFrames::new(view, v.position_world) else {
+                    continue;
+                };
+                let Some(u) = unit_sample(&f, normal, p.eta, p.sigma_s, p.sigma_ss) else {
+                    continue;
+                };
+                for c in 0..channels {
+                    let pred = u.predict(p.rho_d[c], p.rho_ss[c], p.rho_s);
+                    for k in 0..3 {
+                        let d = pred[k] - f64::from(s.channels[c][k]);
+                        sum += d * d;
+                    }
+                    count += 1;
+                }
+            }
+            (sum, count)
+        })
+        .collect();
+    let mut out = ForwardCost {
+        sum_squared: 0.0,
+        observations: 0,
+    };
+    for (s, c) in per_vertex {
+        out.sum_squared += s;
+        out.observations += c;
+    }
+    out
+}

@@ -1,0 +1,220 @@
+//! The hard cases the user asked to stay numerically stable (README): each its own test. Every
+//! result must be finite, inside its bounds, flagged with the right reason, and carry an
+//! uncertainty — never a silent wrong number.
+
+use super::super::data::{GateCounts, Sample, VertexSamples};
+use super::super::synthetic::orbit_views;
+use super::tests::{MATERIALS, angle_deg, assert_sane, material, sensor, synth, views};
+use super::*;
+
+const UP: [f64; 3] = [0.0, 0.0, 1.0];
+
+#[test]
+fn dark_vertex_is_flagged_and_finite() {
+    let views = views();
+    // 1/2000 of the normal exposure: every sample falls below the dark gate.
+    let v = synth(&views, UP, &material("rubber"), Some(&sensor()), 5e-4, 1);
+    assert!(v.gates.dark > v.gates.kept, "{:?}", v.gates);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::Dark), "{:?}", fit.flags);
+    assert!(fit.flags.contains(&FitFlag::TooFewViews), "{:?}", fit.flags);
+    assert!(fit.std_error.iter().all(|e| e.is_infinite()));
+    // Dim but above the gate on some views: fitted, flagged dark by its signal.
+    let v = synth(&views, UP, &material("rubber"), Some(&sensor()), 0.02, 2);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(
+        fit.flags.contains(&FitFlag::Dark) || fit.flags.contains(&FitFlag::TooFewViews),
+        "{fit:?}"
+    );
+}
+
+#[test]
+fn saturated_vertex_is_flagged_and_finite() {
+    let views = views();
+    let v = synth(
+        &views,
+        UP,
+        &material("glossy_plastic"),
+        Some(&sensor()),
+        4.0,
+        3,
+    );
+    assert!(v.gates.saturated > 5, "{:?}", v.gates);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::Saturated), "{:?}", fit.flags);
+}
+
+#[test]
+fn near_normal_incidence_views_leave_eta_unidentifiable() {
+    // Cameras within ~10° of the normal: ∂DoP/∂η < 0.01.
+    let views = orbit_views(60, 0.5, [80.0, 88.0], 2.0, [0.0; 3], [0.0, 0.03, 0.0]);
+    let truth = material("ceramic");
+    let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 4);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::EtaUnidentifiable), "{fit:?}");
+    let err = (fit.params.eta - truth.eta).abs();
+    assert!(
+        err <= 3.0 * fit.std_error[0] || fit.std_error[0] > 0.05,
+        "{fit:?}"
+    );
+}
+
+#[test]
+fn fewer_views_than_unknowns_is_under_determined() {
+    let views = orbit_views(7, 0.5, [30.0, 60.0], 1.0, [0.0; 3], [0.0, 0.03, 0.0]);
+    let v = synth(&views, UP, &material("glaze"), Some(&sensor()), 1.0, 5);
+    assert!(v.samples.len() < 12);
+    let config = SolverConfig {
+        min_views: 1,
+        ..SolverConfig::default()
+    };
+    let fit = fit_vertex(&views, &v, true, None, &[], &config);
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::UnderDetermined), "{fit:?}");
+    // 7 samples × 9 residuals > 12 unknowns, but the lobes are not separable: some error is ∞
+    // or large.
+    assert!(fit.std_error.iter().any(|e| !(*e < 0.1)), "{fit:?}");
+    // With the default minimum the vertex is not fitted at all.
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(
+        fit.flags.contains(&FitFlag::TooFewViews) && fit.flags.contains(&FitFlag::UnderDetermined)
+    );
+}
+
+#[test]
+fn grazing_only_views_are_flagged() {
+    // Cameras 12–22° above the horizon of an upward normal: every view 68–78° off the normal.
+    let views = orbit_views(80, 0.5, [12.0, 22.0], 1.0, [0.0; 3], [0.0, 0.03, 0.0]);
+    let v = synth(&views, UP, &material("ceramic"), Some(&sensor()), 1.0, 6);
+    assert!(v.samples.len() >= 12, "{:?}", v.gates);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::GrazingOnly), "{fit:?}");
+}
+
+#[test]
+fn eta_near_one_stays_in_bounds_and_honest() {
+    let views = views();
+    let truth = PbrdfParams {
+        eta: 1.02,
+        ..material("ceramic")
+    };
+    let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 7);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    let err = (fit.params.eta - truth.eta).abs();
+    eprintln!("η = 1.02: {fit:?}");
+    assert!(
+        err < 0.02 || fit.flags.contains(&FitFlag::EtaUnidentifiable),
+        "{fit:?}"
+    );
+    // Noiseless: recovered, with ∂DoP/∂η small but non-zero.
+    let v = synth(&views, UP, &truth, None, 1.0, 7);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    assert!((fit.params.eta - 1.02).abs() < 1e-4, "{fit:?}");
+}
+
+#[test]
+fn sigma_towards_zero_hits_the_floor_and_says_so() {
+    let views = views();
+    let truth = PbrdfParams {
+        sigma_s: 0.005,
+        sigma_ss: 0.005,
+        ..material("glossy_plastic")
+    };
+    let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 8);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    eprintln!("σ → 0: {fit:?}");
+    assert!(fit.params.sigma_s >= 0.01);
+    assert!(
+        fit.flags.contains(&FitFlag::AtBound) || fit.std_error[1] > 0.05,
+        "{fit:?}"
+    );
+    assert!(angle_deg(fit.normal_world, UP) < 1.0);
+}
+
+#[test]
+fn very_rough_lobes_at_one() {
+    let views = views();
+    let truth = PbrdfParams {
+        sigma_s: 1.0,
+        sigma_ss: 1.0,
+        ..material("ceramic")
+    };
+    let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 9);
+    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    assert_sane(&fit);
+    eprintln!("σ = 1: {fit:?}");
+    assert!(
+        fit.params.sigma_ss > 0.9 || fit.flags.contains(&FitFlag::AtBound),
+        "{fit:?}"
+    );
+    assert!((fit.params.eta - truth.eta).abs() < 0.1);
+}
+
+#[test]
+fn adversarial_inputs_never_produce_nan() {
+    let views = views();
+    let config = SolverConfig::default();
+    let empty = VertexSamples {
+        vertex: 0,
+        position_world: [0.0; 3],
+        normal_world: [0.0; 3],
+        samples: Vec::new(),
+        gates: GateCounts::default(),
+    };
+    let fit = fit_vertex(&views, &empty, true, None, &[], &config);
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::TooFewViews));
+    // All-zero channels on every view.
+    let zeros = VertexSamples {
+        samples: (0..100)
+            .map(|k| Sample {
+                view: k,
+                channels: [[0.0; 3]; 3],
+                normaliser: 1000.0,
+            })
+            .collect(),
+        normal_world: UP,
+        ..empty.clone()
+    };
+    for colour in [true, false] {
+        let fit = fit_vertex(&views, &zeros, colour, None, &[], &config);
+        assert_sane(&fit);
+        assert!(fit.flags.contains(&FitFlag::Dark), "{fit:?}");
+    }
+    // NaN channels, zero normalisers, views out of range, NaN position/normal, NaN virtuals.
+    let mut bad = synth(
+        &views,
+        UP,
+        &material(MATERIALS[1]),
+        Some(&sensor()),
+        1.0,
+        10,
+    );
+    bad.samples[0].channels[1][1] = f32::NAN;
+    bad.samples[1].normaliser = 0.0;
+    bad.samples[2].view = 10_000;
+    let virt = [VirtualSample {
+        cos_theta_h: f64::NAN,
+        specular: [f64::NAN; 3],
+        weight: f64::NAN,
+    }];
+    let fit = fit_vertex(&views, &bad, true, None, &virt, &config);
+    assert_sane(&fit);
+    assert_eq!(fit.samples_used as usize, bad.samples.len() - 3);
+    bad.normal_world = [f64::NAN; 3];
+    let fit = fit_vertex(&views, &bad, true, None, &[], &config);
+    assert_sane(&fit);
+    bad.position_world = [f64::NAN; 3];
+    let fit = fit_vertex(&views, &bad, true, None, &[], &config);
+    assert_sane(&fit);
+    assert!(fit.flags.contains(&FitFlag::TooFewViews));
+}

@@ -1,0 +1,259 @@
+//! Levenberg–Marquardt over the six raw (unbounded) nonlinear unknowns of one vertex, with
+//! exact Jacobians from dual numbers and the bounds removed by reparameterisation
+//! (optics.md §8.2; formulas in the `solve` module doc).
+
+use ellipso_sim::optics::{Dual, Real};
+use nalgebra::{SMatrix, SVector};
+
+use super::super::model::{tangent_basis, unit_tangent_normal};
+use super::SolverConfig;
+use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
+
+/// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
+pub(super) const N_RAW: usize = 6;
+pub(super) type RawDual = Dual<N_RAW>;
+type Mat = SMatrix<f64, N_RAW, N_RAW>;
+type Vector = SVector<f64, N_RAW>;
+
+/// Raw values are clamped to ±[`RAW_LIMIT`]: sigmoid/softplus are saturated to 1e-26 there, so
+/// nothing is lost, and exp() never overflows.
+const RAW_LIMIT: f64 = 60.0;
+
+/// softplus(x) = ln(1 + eˣ), overflow-free.
+pub(super) fn softplus<T: Real>(x: T) -> T {
+    if x.re() > 0.0 {
+        x + (T::one() + (-x).exp()).ln()
+    } else {
+        (T::one() + x.exp()).ln()
+    }
+}
+
+/// 1/(1 + e⁻ˣ), overflow-free.
+pub(super) fn sigmoid<T: Real>(x: T) -> T {
+    if x.re() >= 0.0 {
+        T::one() / (T::one() + (-x).exp())
+    } else {
+        let e = x.exp();
+        e / (T::one() + e)
+    }
+}
+
+/// Inverse of softplus for y > 0 (y floored at 1e-12).
+pub(super) fn softplus_inv(y: f64) -> f64 {
+    let y = y.max(1e-12);
+    if y > 30.0 { y } else { y.exp_m1().ln() }
+}
+
+/// Inverse of the sigmoid, the argument clamped to [1e-12, 1 − 1e-12].
+pub(super) fn logit(s: f64) -> f64 {
+    let s = s.clamp(1e-12, 1.0 - 1e-12);
+    (s / (1.0 - s)).ln()
+}
+
+/// Physical unknowns from raw ones (the reparameterisation).
+pub(super) fn physical<T: Real>(raw: [T; N_RAW], config: &SolverConfig) -> Nonlinear<T> {
+    let k = T::from_f64;
+    let eta = k(config.eta_floor) + softplus(raw[0]);
+    let sigma_s = k(config.sigma_min) + k(1.0 - config.sigma_min) * sigmoid(raw[1]);
+    let sigma_ss = sigma_s + (T::one() - sigma_s) * sigmoid(raw[2]);
+    Nonlinear {
+        eta,
+        sigma_s,
+        sigma_ss,
+        rho_s: softplus(raw[3]),
+        p: raw[4],
+        q: raw[5],
+    }
+}
+
+/// Raw unknowns (with p = q = 0) for physical values, clamped into the open domain.
+pub(super) fn raw_from(
+    eta: f64,
+    sigma_s: f64,
+    sigma_ss: f64,
+    rho_s: f64,
+    config: &SolverConfig,
+) -> [f64; N_RAW] {
+    let smin = config.sigma_min;
+    let s = ((sigma_s - smin) / (1.0 - smin)).clamp(0.0, 1.0);
+    let sigma_s_c = smin + (1.0 - smin) * s.clamp(1e-12, 1.0 - 1e-12);
+    let t = ((sigma_ss - sigma_s_c) / (1.0 - sigma_s_c).max(1e-12)).clamp(0.0, 1.0);
+    clamp_raw([
+        softplus_inv(eta - config.eta_floor),
+        logit(s),
+        logit(t),
+        softplus_inv(rho_s),
+        0.0,
+        0.0,
+    ])
+}
+
+fn clamp_raw(mut raw: [f64; N_RAW]) -> [f64; N_RAW] {
+    for v in &mut raw[..4] {
+        *v = if v.is_finite() {
+            v.clamp(-RAW_LIMIT, RAW_LIMIT)
+        } else {
+            0.0
+        };
+    }
+    raw
+}
+
+/// The state LM returns.
+#[derive(Clone, Debug)]
+pub(super) struct LmState {
+    pub raw: [f64; N_RAW],
+    pub normal: [f64; 3],
+    pub cost: f64,
+    pub albedos: Albedos<f64>,
+    pub iterations: u32,
+    pub converged: bool,
+}
+
+pub(super) fn chart(normal: [f64; 3]) -> Chart {
+    let (t1, t2) = tangent_basis(normal);
+    Chart { n0: normal, t1, t2 }
+}
+
+/// Cost (Σ r²) and albedos in `f64`.
+pub(super) fn cost_at(
+    problem: &Problem,
+    chart: &Chart,
+    raw: [f64; N_RAW],
+    config: &SolverConfig,
+    scratch: &mut Scratch<f64>,
+) -> (f64, Albedos<f64>) {
+    let x = physical(raw, config);
+    let mut cost = 0.0;
+    let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: f64| cost += r * r);
+    (cost, albedos)
+}
+
+/// Cost, JᵀJ and Jᵀr (the Jacobian includes the projected albedos' derivatives).
+fn jacobian_at(
+    problem: &Problem,
+    chart: &Chart,
+    raw: [f64; N_RAW],
+    config: &SolverConfig,
+    scratch: &mut Scratch<RawDual>,
+) -> (f64, Mat, Vector, Albedos<f64>) {
+    let seeded: [RawDual; N_RAW] = core::array::from_fn(|k| Dual::variable(raw[k], k));
+    let x = physical(seeded, config);
+    let mut cost = 0.0;
+    let mut jtj = Mat::zeros();
+    let mut jtr = Vector::zeros();
+    let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: RawDual| {
+        cost += r.re * r.re;
+        let g = Vector::from(r.du);
+        jtj.ger(1.0, &g, &g, 1.0);
+        jtr.axpy(r.re, &g, 1.0);
+    });
+    let re = Albedos {
+        rho_d: albedos.rho_d.map(|v| v.re),
+        rho_ss: albedos.rho_ss.map(|v| v.re),
+    };
+    (cost, jtj, jtr, re)
+}
+
+/// One LM run from (`raw`, `normal`).
+pub(super) fn run(
+    problem: &Problem,
+    raw: [f64; N_RAW],
+    normal: [f64; 3],
+    config: &SolverConfig,
+    scratch_f: &mut Scratch<f64>,
+    scratch_d: &mut Scratch<RawDual>,
+) -> LmState {
+    let mut raw = clamp_raw(raw);
+    raw[4] = 0.0;
+    raw[5] = 0.0;
+    let mut ch = chart(normal);
+    let (mut cost, mut jtj, mut jtr, mut albedos) =
+        jacobian_at(problem, &ch, raw, config, scratch_d);
+    let mut mu = config.initial_damping;
+    let mut iterations = 0;
+    let mut converged = false;
+    let abs_tol = 1e-28 * problem.data_scale.max(1e-300);
+    if !cost.is_finite() {
+        return LmState {
+            raw,
+            normal,
+            cost,
+            albedos,
+            iterations,
+            converged,
+        };
+    }
+    if cost <= abs_tol {
+        converged = true;
+    }
+    while !converged && iterations < config.max_iterations {
+        iterations += 1;
+        let max_diag = (0..N_RAW).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
+        let mut accepted = false;
+        while !accepted {
+            let mut a = jtj;
+            for i in 0..N_RAW {
+                // Marquardt scaling with a floor so flat directions are still damped.
+                a[(i, i)] += mu * jtj[(i, i)].max(1e-9 * max_diag).max(1e-300);
+            }
+            let Some(chol) = a.cholesky() else {
+                mu *= 10.0;
+                if mu > 1e20 {
+                    break;
+                }
+                continue;
+            };
+            let delta = chol.solve(&(-jtr));
+            let mut trial = raw;
+            for i in 0..N_RAW {
+                trial[i] += delta[i];
+            }
+            let trial = {
+                let mut t = clamp_raw(trial);
+                t[4] = trial[4];
+                t[5] = trial[5];
+                t
+            };
+            let (trial_cost, _) = cost_at(problem, &ch, trial, config, scratch_f);
+            if trial_cost.is_finite() && trial_cost < cost {
+                accepted = true;
+                let decrease = (cost - trial_cost) / cost;
+                let step = delta.norm();
+                let size = raw[..4].iter().map(|v| v * v).sum::<f64>().sqrt();
+                // Re-centre the normal chart on the accepted normal.
+                let new_normal = unit_tangent_normal(ch.n0, ch.t1, ch.t2, trial[4], trial[5]);
+                ch = chart(new_normal);
+                raw = trial;
+                raw[4] = 0.0;
+                raw[5] = 0.0;
+                (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
+                mu = (mu / 3.0).max(1e-12);
+                if decrease < config.relative_tolerance
+                    || step < config.step_tolerance * (size + config.step_tolerance)
+                    || cost <= abs_tol
+                {
+                    converged = true;
+                }
+            } else {
+                mu *= 4.0;
+                if mu > 1e16 {
+                    // No damped step decreases the cost: a stationary point to working precision.
+                    converged = true;
+                    break;
+                }
+            }
+        }
+        if !accepted && !converged {
+            break;
+        }
+    }
+    LmState {
+        raw,
+        normal: ch.n0,
+        cost,
+        albedos,
+        iterations,
+        converged,
+    }
+}

@@ -1,0 +1,352 @@
+//! One vertex's least-squares problem: the prepared samples and the residual vector, generic
+//! over the scalar so one source gives the cost (`f64`), the LM Jacobian (duals over the raw
+//! nonlinear unknowns, albedos projected inside) and the covariance Jacobian (duals over all
+//! parameters, albedos given).
+//!
+//! Residuals, in emission order (optics.md §7.4, §8.4; module doc of `solve` for the weights):
+//! per real sample, per colour channel: L_d `√(λd·w)·(Î^d − I^d)`, L_s `√(λs'·w)·(Î^s − I^s)`;
+//! then L_ψ `√(λψ·w_ψ)·(DoP_d(η, θ_o) − DoP_obs)` and L_φ `√(λφ·w)·(I^α_D − u_α·DP,
+//! I^β − u_β·DP)`; per virtual sample, per channel `√(λs·N_real·w_m)·(Î^s_coax − Ĩ^s)`.
+
+use ellipso_sim::optics::Real;
+
+use super::super::data::{VertexSamples, ViewGeometry, VirtualSample};
+use super::super::model::{
+    SampleFrames, UnitSample, coaxial_unit_specular, tangent_normal, unit_sample,
+};
+use super::SolverConfig;
+
+/// The nonlinear unknowns in physical units (η, σ_s, σ_ss, ρ_s, tangent p, q).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Nonlinear<T> {
+    pub eta: T,
+    pub sigma_s: T,
+    pub sigma_ss: T,
+    pub rho_s: T,
+    pub p: T,
+    pub q: T,
+}
+
+/// The linear albedos (ρ_d, ρ_ss per colour channel).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Albedos<T> {
+    pub rho_d: [T; 3],
+    pub rho_ss: [T; 3],
+}
+
+/// The normal chart: unit n0 and its tangent basis.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Chart {
+    pub n0: [f64; 3],
+    pub t1: [f64; 3],
+    pub t2: [f64; 3],
+}
+
+/// Prepared data of one vertex.
+pub(super) struct Problem<'a> {
+    pub frames: Vec<SampleFrames>,
+    /// Per sample, per colour channel: [I^d, I^s, I^α] (model units).
+    pub obs: Vec<[[f64; 3]; 3]>,
+    /// Per sample: the monochrome projection (optics.md §5.4).
+    pub mono: Vec<[f64; 3]>,
+    /// Per-sample weight of the intensity and azimuth residuals.
+    pub w_int: Vec<f64>,
+    /// Per-sample weight of the DoP residual.
+    pub w_dop: Vec<f64>,
+    /// Per sample: the normaliser N (DN per model unit).
+    pub normalisers: Vec<f64>,
+    pub virtuals: &'a [VirtualSample],
+    /// 3 (colour) or 1 (monochrome: channel 0 only).
+    pub channels: usize,
+    pub colour_weights: [f64; 3],
+    pub lambda_psi: f64,
+    pub lambda_d: f64,
+    /// λs for real specular residuals ((1 − λg)·λs when virtual samples are present).
+    pub lambda_s_real: f64,
+    /// λs·N_real: multiplies each virtual sample's weight.
+    pub lambda_s_virtual: f64,
+    pub lambda_phi: f64,
+    /// Σ of squared observations (scale for the absolute convergence test).
+    pub data_scale: f64,
+}
+
+/// Reusable per-vertex buffers (no allocation inside the LM loop).
+pub(super) struct Scratch<T> {
+    pub units: Vec<UnitSample<T>>,
+    pub virt: Vec<(T, T)>,
+}
+
+impl<T> Scratch<T> {
+    pub fn new(samples: usize, virtuals: usize) -> Self {
+        Self {
+            units: Vec::with_capacity(samples),
+            virt: Vec::with_capacity(virtuals),
+        }
+    }
+}
+
+impl<'a> Problem<'a> {
+    /// Prepares `vertex`'s samples; samples whose view index is out of range or whose geometry
+    /// is degenerate are skipped.
+    pub fn new(
+        views: &[ViewGeometry],
+        vertex: &VertexSamples,
+        colour: bool,
+        virtuals: &'a [VirtualSample],
+        config: &SolverConfig,
+    ) -> Self {
+        let channels = if colour { 3 } else { 1 };
+        let mut frames = Vec::with_capacity(vertex.samples.len());
+        let mut obs = Vec::with_capacity(vertex.samples.len());
+        let mut normalisers = Vec::with_capacity(vertex.samples.len());
+        for s in &vertex.samples {
+            let finite = s.channels.iter().flatten().all(|v| v.is_finite())
+                && s.normaliser.is_finite()
+                && s.normaliser > 0.0;
+            let Some(view) = views.get(s.view as usize) else {
+                continue;
+            };
+            let Some(f) = SampleFrames::new(view, vertex.position_world) else {
+                continue;
+            };
+            if !finite {
+                continue;
+            }
+            frames.push(f);
+            obs.push(s.channels.map(|c| c.map(f64::from)));
+            normalisers.push(f64::from(s.normaliser));
+        }
+        // Colour weights: the vertex's mean diffuse colour, normalised (optics.md §5.4).
+        let mut colour_weights = [1.0, 0.0, 0.0];
+        if colour {
+            let sums: [f64; 3] =
+                core::array::from_fn(|c| obs.iter().map(|o| o[c][0].max(0.0)).sum::<f64>());
+            let total: f64 = sums.iter().sum();
+            colour_weights = if total > 0.0 {
+                sums.map(|v| v / total)
+            } else {
+                [1.0 / 3.0; 3]
+            };
+        }
+        let mono: Vec<[f64; 3]> = obs
+            .iter()
+            .map(|o| core::array::from_fn(|k| (0..3).map(|c| colour_weights[c] * o[c][k]).sum()))
+            .collect();
+        let n = obs.len();
+        let (mut w_int, mut w_dop) = (vec![1.0; n], vec![1.0; n]);
+        if config.noise_weighting && n > 0 {
+            // Shot-noise-limited variances in model units, up to one common gain constant:
+            // a channel ∝ s0/N, the DoP ratio ∝ 2/(s0·N) (two noisy channels over s0). Both are
+            // divided by the same constant (mean of N/s0), so the losses keep their statistical
+            // proportion and the λ's act on top. s0 floored at 1e-6 model units.
+            for k in 0..n {
+                let s0 = (mono[k][0] + mono[k][1]).max(1e-6);
+                w_int[k] = normalisers[k] / s0;
+                w_dop[k] = 0.5 * normalisers[k] * s0;
+            }
+            let mean = w_int.iter().sum::<f64>() / n as f64;
+            for w in [&mut w_int, &mut w_dop] {
+                w.iter_mut().for_each(|v| *v /= mean);
+            }
+        }
+        let has_virtual = !virtuals.is_empty();
+        let data_scale = obs
+            .iter()
+            .flat_map(|o| o.iter().take(channels))
+            .flatten()
+            .map(|v| v * v)
+            .sum::<f64>();
+        Self {
+            frames,
+            obs,
+            mono,
+            w_int,
+            w_dop,
+            normalisers,
+            virtuals,
+            channels,
+            colour_weights,
+            lambda_psi: config.lambda_psi,
+            lambda_d: config.lambda_d,
+            lambda_s_real: if has_virtual {
+                config.lambda_s * (1.0 - config.lambda_g)
+            } else {
+                config.lambda_s
+            },
+            lambda_s_virtual: config.lambda_s * n as f64,
+            lambda_phi: config.lambda_phi,
+            data_scale,
+        }
+    }
+
+    /// Number of real samples.
+    pub fn len(&self) -> usize {
+        self.obs.len()
+    }
+
+    /// Number of residuals [`Problem::evaluate`] emits.
+    #[cfg(test)]
+    pub fn residual_count(&self) -> usize {
+        self.len() * (2 * self.channels + 3) + self.virtuals.len() * self.channels
+    }
+
+    /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
+    /// used: `given`, or the per-channel non-negative least-squares projection (optics.md §8.3)
+    /// of the L_d + L_s (+ virtual) residuals when `given` is `None`.
+    pub fn evaluate<T: Real>(
+        &self,
+        chart: &Chart,
+        x: &Nonlinear<T>,
+        given: Option<Albedos<T>>,
+        scratch: &mut Scratch<T>,
+        sink: &mut impl FnMut(T),
+    ) -> Albedos<T> {
+        let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x.p, x.q);
+        let zero = T::zero();
+        scratch.units.clear();
+        for f in &self.frames {
+            // Back-facing under the current normal: the model returns no light.
+            scratch.units.push(
+                unit_sample(f, normal, x.eta, x.sigma_s, x.sigma_ss).unwrap_or(UnitSample {
+                    diffuse: [zero; 3],
+                    single_scattering: [zero; 3],
+                    specular: [zero; 3],
+                    cos_theta_o: zero,
+                    dop_diffuse: zero,
+                }),
+            );
+        }
+        scratch.virt.clear();
+        for v in self.virtuals {
+            scratch.virt.push(coaxial_unit_specular(
+                v.cos_theta_h.clamp(0.0, 1.0),
+                x.eta,
+                x.sigma_s,
+                x.sigma_ss,
+            ));
+        }
+        let albedos = match given {
+            Some(a) => a,
+            None => self.project(x.rho_s, scratch),
+        };
+        let k = T::from_f64;
+        for (i, u) in scratch.units.iter().enumerate() {
+            let o = &self.obs[i];
+            let wd = k((self.lambda_d * self.w_int[i]).sqrt());
+            let ws = k((self.lambda_s_real * self.w_int[i]).sqrt());
+            for c in 0..self.channels {
+                let pred = u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s);
+                sink(wd * (pred[0] - k(o[c][0])));
+                sink(ws * (pred[1] - k(o[c][1])));
+            }
+            // Diffuse-only observation: the data minus the model's reflection (optics.md §7.5,
+            // generalised to all three channels), monochrome projection (§5.4).
+            let rho_ss_mono = (0..self.channels).fold(zero, |acc, c| {
+                acc + albedos.rho_ss[c] * k(self.colour_weights[c])
+            });
+            let m = &self.mono[i];
+            let refl = |j: usize| rho_ss_mono * u.single_scattering[j] + x.rho_s * u.specular[j];
+            let d_obs = k(m[0]) - refl(0);
+            let beta = k(m[1]) - refl(1);
+            let alpha = k(m[2]) - refl(2);
+            let dp = (alpha.sq() + beta.sq()).sqrt_clamped();
+            // s0 of the diffuse-only light = I^d + I^β; below 1e-12 model units no DoP exists.
+            let s0 = d_obs + beta;
+            let w_psi = k((self.lambda_psi * self.w_dop[i]).sqrt());
+            if s0.re() > 1e-12 {
+                sink(w_psi * (u.dop_diffuse - dp / s0));
+            } else {
+                sink(zero);
+            }
+            // Predicted direction of (I^α, I^β) of the diffuse lobe; ε = 1e-12 keeps it finite at
+            // normal incidence, where DP → 0 and the residual carries no azimuth weight anyway.
+            let (a_alpha, a_beta) = (u.diffuse[2], u.diffuse[1]);
+            let norm = (a_alpha.sq() + a_beta.sq() + k(1e-24)).sqrt();
+            let wp = k((self.lambda_phi * self.w_int[i]).sqrt());
+            sink(wp * (alpha - a_alpha / norm * dp));
+            sink(wp * (beta - a_beta / norm * dp));
+        }
+        for (m, v) in self.virtuals.iter().enumerate() {
+            let (b, s) = scratch.virt[m];
+            let w = k((self.lambda_s_virtual * v.weight.max(0.0)).sqrt());
+            for c in 0..self.channels {
+                sink(w * (albedos.rho_ss[c] * b + x.rho_s * s - k(v.specular[c])));
+            }
+        }
+        albedos
+    }
+
+    /// The per-channel 2×2 NNLS for (ρ_d, ρ_ss) given the nonlinear unknowns (in `scratch`).
+    fn project<T: Real>(&self, rho_s: T, scratch: &Scratch<T>) -> Albedos<T> {
+        let z = T::zero();
+        let k = T::from_f64;
+        let (mut haa, mut hab, mut hbb) = (z, z, z);
+        let mut ga = [z; 3];
+        let mut gb = [z; 3];
+        for (i, u) in scratch.units.iter().enumerate() {
+            let wd = k(self.lambda_d * self.w_int[i]);
+            let ws = k(self.lambda_s_real * self.w_int[i]);
+            let (a, b, c) = (u.diffuse, u.single_scattering, u.specular);
+            haa += wd * a[0].sq() + ws * a[1].sq();
+            hab += wd * a[0] * b[0] + ws * a[1] * b[1];
+            hbb += wd * b[0].sq() + ws * b[1].sq();
+            for ch in 0..self.channels {
+                let o = &self.obs[i][ch];
+                let td = k(o[0]) - rho_s * c[0];
+                let ts = k(o[1]) - rho_s * c[1];
+                ga[ch] += wd * a[0] * td + ws * a[1] * ts;
+                gb[ch] += wd * b[0] * td + ws * b[1] * ts;
+            }
+        }
+        for (m, v) in self.virtuals.iter().enumerate() {
+            let (b, s) = scratch.virt[m];
+            let w = k(self.lambda_s_virtual * v.weight.max(0.0));
+            hbb += w * b.sq();
+            for ch in 0..self.channels {
+                gb[ch] += w * b * (k(v.specular[ch]) - rho_s * s);
+            }
+        }
+        let mut out = Albedos {
+            rho_d: [z; 3],
+            rho_ss: [z; 3],
+        };
+        for ch in 0..3 {
+            let src = ch.min(self.channels - 1);
+            let (x, y) = nnls2(haa, hab, hbb, ga[src], gb[src]);
+            out.rho_d[ch] = x;
+            out.rho_ss[ch] = y;
+        }
+        out
+    }
+}
+
+/// Exact non-negative least squares of ½[x y]H[x y]ᵀ − [x y]·g for a 2×2 symmetric H ⪰ 0:
+/// the unconstrained solution if feasible, else the better of the two faces (each a clipped
+/// 1-D solution) — the complete active-set enumeration for two variables. Clipped values are
+/// constants (zero derivative). A zero diagonal (a lobe that predicts nothing) gives 0.
+pub(super) fn nnls2<T: Real>(haa: T, hab: T, hbb: T, ga: T, gb: T) -> (T, T) {
+    let z = T::zero();
+    let det = haa * hbb - hab * hab;
+    // Relative test: H is numerically singular below 1e-12 of its diagonal product.
+    if det.re() > 1e-12 * haa.re() * hbb.re() && det.re() > 0.0 {
+        let x = (hbb * ga - hab * gb) / det;
+        let y = (haa * gb - hab * ga) / det;
+        if x.re() >= 0.0 && y.re() >= 0.0 {
+            return (x, y);
+        }
+    }
+    let face_x = if haa.re() > 0.0 && ga.re() > 0.0 {
+        ga / haa
+    } else {
+        z
+    };
+    let face_y = if hbb.re() > 0.0 && gb.re() > 0.0 {
+        gb / hbb
+    } else {
+        z
+    };
+    // Objective on each face: −g²/h (for the clipped-at-0 case, 0).
+    let q_x = -face_x.re() * ga.re();
+    let q_y = -face_y.re() * gb.re();
+    if q_x <= q_y { (face_x, z) } else { (z, face_y) }
+}

@@ -1,0 +1,144 @@
+//! Standard errors at the solution: covariance = s²·(JᵀJ)⁻¹, s² = cost/(m − p), with J the
+//! Jacobian of the residuals over ALL parameters in their physical units (η, σ_s, σ_ss, ρ_s,
+//! ρ_ss RGB, ρ_d RGB, normal tangent p, q; the albedos as free parameters, not projected).
+//!
+//! Differentiating directly in physical units equals propagating the raw-parameter covariance
+//! through the reparameterisation wherever that map is invertible, and stays honest where a
+//! sigmoid/softplus saturates (a propagated variance would collapse to 0 at a bound).
+//! Identifiability: JᵀJ is Jacobi-scaled and eigen-decomposed; directions with eigenvalue below
+//! [`NULL_RELATIVE`]·λ_max are null, and any parameter with a non-negligible component
+//! (squared loading > 1e-6) in a null direction, or a zero column, gets `f64::INFINITY`.
+
+use ellipso_sim::optics::Dual;
+use nalgebra::{DMatrix, SMatrix, SVector};
+
+use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
+
+const N_ALL: usize = 12;
+type AllDual = Dual<N_ALL>;
+
+/// Eigenvalues below this fraction of the largest (after Jacobi scaling) are null directions:
+/// a condition number above 1e12 leaves fewer than ~4 significant digits in f64.
+pub(super) const NULL_RELATIVE: f64 = 1e-12;
+
+/// The standard errors: the 10 material parameters (layout of `VertexFit::std_error`) and the
+/// normal's 1σ angle in degrees.
+pub(super) struct Uncertainty {
+    pub std_error: [f64; 10],
+    pub normal_std_error_deg: f64,
+}
+
+/// Standard errors at (`x`, `albedos`) on `chart` (p = q = 0 at the solution).
+pub(super) fn standard_errors(
+    problem: &Problem,
+    chart: &Chart,
+    x: &Nonlinear<f64>,
+    albedos: &Albedos<f64>,
+) -> Uncertainty {
+    let v = |re: f64, k: usize| AllDual::variable(re, k);
+    let xd = Nonlinear {
+        eta: v(x.eta, 0),
+        sigma_s: v(x.sigma_s, 1),
+        sigma_ss: v(x.sigma_ss, 2),
+        rho_s: v(x.rho_s, 3),
+        p: v(0.0, 10),
+        q: v(0.0, 11),
+    };
+    let ad = Albedos {
+        rho_ss: core::array::from_fn(|c| v(albedos.rho_ss[c], 4 + c)),
+        rho_d: core::array::from_fn(|c| v(albedos.rho_d[c], 7 + c)),
+    };
+    let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
+    let mut jtj = SMatrix::<f64, N_ALL, N_ALL>::zeros();
+    let mut cost = 0.0;
+    let mut m = 0usize;
+    problem.evaluate(chart, &xd, Some(ad), &mut scratch, &mut |r: AllDual| {
+        cost += r.re * r.re;
+        m += 1;
+        let g = SVector::<f64, N_ALL>::from(r.du);
+        jtj.ger(1.0, &g, &g, 1.0);
+    });
+    // Monochrome: only the R entries of ρ_ss and ρ_d are parameters; G, B copy them.
+    let active: Vec<usize> = if problem.channels == 3 {
+        (0..N_ALL).collect()
+    } else {
+        vec![0, 1, 2, 3, 4, 7, 10, 11]
+    };
+    let p = active.len();
+    let variance = covariance_diagonal(&jtj, &active, cost, m, p);
+    let at = |k: usize| variance[k].sqrt();
+    let mut std_error = [f64::INFINITY; 10];
+    for (k, e) in std_error.iter_mut().enumerate() {
+        let src = if problem.channels == 3 {
+            k
+        } else {
+            match k {
+                5 | 6 => 4,
+                8 | 9 => 7,
+                _ => k,
+            }
+        };
+        *e = at(src);
+    }
+    let normal_var = variance[10] + variance[11];
+    Uncertainty {
+        std_error,
+        normal_std_error_deg: normal_var.sqrt().to_degrees(),
+    }
+}
+
+/// Diagonal of s²·(JᵀJ)⁻¹ restricted to `active` (others INFINITY), with the null-direction rule
+/// of the module doc.
+fn covariance_diagonal(
+    jtj: &SMatrix<f64, N_ALL, N_ALL>,
+    active: &[usize],
+    cost: f64,
+    m: usize,
+    p: usize,
+) -> [f64; N_ALL] {
+    let mut out = [f64::INFINITY; N_ALL];
+    if m <= p || !cost.is_finite() {
+        return out;
+    }
+    let s2 = cost / (m - p) as f64;
+    let scale: Vec<f64> = active.iter().map(|&i| jtj[(i, i)].sqrt()).collect();
+    let live: Vec<usize> = (0..p)
+        .filter(|&a| scale[a] > 0.0 && scale[a].is_finite())
+        .collect();
+    if live.is_empty() {
+        return out;
+    }
+    let n = live.len();
+    let h = DMatrix::from_fn(n, n, |r, c| {
+        let (i, j) = (active[live[r]], active[live[c]]);
+        jtj[(i, j)] / (scale[live[r]] * scale[live[c]])
+    });
+    if !h.iter().all(|v| v.is_finite()) {
+        return out;
+    }
+    let eig = h.symmetric_eigen();
+    let lambda_max = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
+    if lambda_max <= 0.0 {
+        return out;
+    }
+    for r in 0..n {
+        let mut var = 0.0;
+        let mut null_loading = 0.0;
+        for j in 0..n {
+            let vj = eig.eigenvectors[(r, j)];
+            let l = eig.eigenvalues[j];
+            if l > NULL_RELATIVE * lambda_max {
+                var += vj * vj / l;
+            } else {
+                null_loading += vj * vj;
+            }
+        }
+        let a = live[r];
+        out[active[a]] = if null_loading > 1e-6 {
+            f64::INFINITY
+        } else {
+            s2 * var / (scale[a] * scale[a])
+        };
+    }
+    out
+}
