@@ -12,8 +12,13 @@
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
 //!
+//! - [`augment`]: the paper's specular augmentation — k-means clusters of the joint solve's
+//!   vertices, one two-lobe specular model per cluster, and per-vertex virtual coaxial specular
+//!   samples and σ_s floors for the final passes (optics.md §7.7–§7.8).
+//!
 //! Later stages (observation extraction from a session, the solver, specular augmentation,
 //! the shape update, the pipeline) each consume and produce these types.
 
+pub mod augment;
 pub mod data;
 pub mod gate;
