@@ -240,11 +240,37 @@ fn two_lobe_fit_recovers_noiseless_and_degrades_gracefully_with_noise() {
         assert!(fit.rms < 1e-6, "{fit:?}");
 
         let fit = lobe_fit::fit_lobes(&lobe_samples(&noisy, &m), 0.02).unwrap();
+        eprintln!("noise 0.002: {fit:?} vs {m:?}");
         assert!(rel(fit.sigma_s, m.sigma_s) < 0.05, "{fit:?} vs {m:?}");
         assert!(rel(fit.sigma_ss, m.sigma_ss) < 0.15, "{fit:?} vs {m:?}");
         assert!(rel(fit.rho_s, m.rho_s) < 0.1, "{fit:?} vs {m:?}");
+        // A weak single-scattering channel (B of the second material is ~5e-4 at its peak,
+        // a quarter of the noise) is known only to a fraction of the strongest one.
+        let rho_ss_max = m.rho_ss.iter().copied().fold(0.0, f64::max);
         for c in 0..3 {
-            assert!(rel(fit.rho_ss[c], m.rho_ss[c]) < 0.2, "{fit:?} vs {m:?}");
+            assert!(
+                (fit.rho_ss[c] - m.rho_ss[c]).abs() < 0.2 * rho_ss_max,
+                "{fit:?} vs {m:?}"
+            );
+        }
+        // What the virtual samples carry, the coaxial profile, is right to a few % of its
+        // peak up to 60°.
+        let profile = |p: &PbrdfParams<f64>| {
+            virtual_samples::coaxial_profile(p.eta, p.sigma_s, p.sigma_ss, p.rho_s, p.rho_ss, 180)
+        };
+        let fitted = PbrdfParams {
+            sigma_s: fit.sigma_s,
+            sigma_ss: fit.sigma_ss,
+            rho_s: fit.rho_s,
+            rho_ss: fit.rho_ss,
+            ..m
+        };
+        let (want, got) = (profile(&m), profile(&fitted));
+        for c in 0..3 {
+            let peak = want[0].1[c];
+            for (w, g) in want.iter().zip(&got).take(121) {
+                assert!((w.1[c] - g.1[c]).abs() < 0.05 * peak, "{fit:?} vs {m:?}");
+            }
         }
         // The residual is the noise.
         assert!((fit.rms / 0.002 - 1.0).abs() < 0.1, "{fit:?}");
@@ -326,7 +352,7 @@ fn three_materials_end_to_end() {
     assert_eq!(a.virtual_samples[0][0].specular, peak);
     // Summary serialises without the per-vertex vectors.
     let json = serde_json::to_string(&a).unwrap();
-    assert!(json.contains("\"clusters\"") && !json.contains("virtual_samples\":"));
+    assert!(json.contains("\"clusters\"") && !json.contains("\"virtual_samples\""));
 }
 
 #[test]
