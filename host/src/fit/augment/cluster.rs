@@ -202,7 +202,8 @@ fn seed_centres(points: &[Feature], k: usize, rng: &mut ChaCha8Rng) -> Vec<Featu
     let mut d2: Vec<f64> = points.iter().map(|p| distance_sq(p, &centres[0])).collect();
     while centres.len() < k {
         let total: f64 = d2.iter().sum();
-        if !(total > 0.0) {
+        // NaN-safe: a non-positive or NaN total ends the seeding.
+        if total.partial_cmp(&0.0) != Some(core::cmp::Ordering::Greater) {
             break;
         }
         let target = rng.random::<f64>() * total;
@@ -454,8 +455,7 @@ pub fn select(points: &[Feature], config: &ClusterConfig) -> Selection {
         .fold(f64::NEG_INFINITY, f64::max);
     let chosen = candidates
         .into_iter()
-        .filter(|c| c.0 >= best - SILHOUETTE_TIE)
-        .next_back();
+        .rfind(|c| c.0 >= best - SILHOUETTE_TIE);
     match chosen {
         Some((s, partition)) if best >= config.min_silhouette => Selection {
             partition,

@@ -149,7 +149,7 @@ pub fn dop_sample(
         spec_s0 += w[c] * (spec[c].diffuse + spec[c].specular);
     }
     let s0 = i_d + i_s;
-    if !(s0 > 0.0) || spec_s0 > s0 {
+    if s0.is_nan() || s0 <= 0.0 || spec_s0 > s0 {
         return None;
     }
     let dop = i_s.hypot(i_a) / s0;
@@ -185,7 +185,7 @@ pub fn fit_eta(samples: &[DopSample]) -> Option<f64> {
             num += (model - s.dop) * d;
             den += d * d;
         }
-        if !(den > 0.0) {
+        if den.is_nan() || den <= 0.0 {
             break;
         }
         let mut step = -num / den;
@@ -343,7 +343,7 @@ fn nnls4(h: &[[f64; 4]; 4], g: &[f64; 4]) -> [f64; 4] {
         let gv = DVector::from_fn(k, |r, _| g[free[r]]);
         let Some(chol) = hm.cholesky() else { continue };
         let xf = chol.solve(&gv);
-        if xf.iter().any(|v| !(*v >= 0.0) || !v.is_finite()) {
+        if xf.iter().any(|v| !v.is_finite() || *v < 0.0) {
             continue;
         }
         let mut x = [0.0; 4];
@@ -421,10 +421,10 @@ fn residuals<T: Real>(
     for s in samples {
         let (a, b) = (s.lobe(sigma_s), s.lobe(sigma_ss));
         scratch.push((a, b));
-        aa = aa + a * a;
-        bb = bb + b * b;
-        for c in 0..3 {
-            bt[c] = bt[c] + b * (T::from_f64(s.target[c]) - rho_s * a);
+        aa += a * a;
+        bb += b * b;
+        for (acc, t) in bt.iter_mut().zip(s.target) {
+            *acc += b * (T::from_f64(t) - rho_s * a);
         }
     }
     // ρ_ss per channel: LS clipped at 0 (exact NNLS for one scalar); 0 without signal.
@@ -437,8 +437,8 @@ fn residuals<T: Real>(
     });
     let scale = T::from_f64((3.0 * samples.len() as f64).sqrt().recip());
     for (s, &(a, b)) in samples.iter().zip(scratch.iter()) {
-        for c in 0..3 {
-            sink((rho_s * a + rho_ss[c] * b - T::from_f64(s.target[c])) * scale);
+        for (r, t) in rho_ss.iter().zip(s.target) {
+            sink((rho_s * a + *r * b - T::from_f64(t)) * scale);
         }
     }
     // The relative ridge: RIDGE × the mean squared ρ_s-lobe signal.

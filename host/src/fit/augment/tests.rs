@@ -217,8 +217,8 @@ fn lobe_samples_reproduce_observe() {
         assert!(samples.len() > 200);
         for x in &samples {
             let model = x.model(m.sigma_s, m.sigma_ss, m.rho_s, m.rho_ss);
-            for c in 0..3 {
-                assert!((model[c] - x.target[c]).abs() < 2e-6 * (1.0 + x.target[c].abs()));
+            for (m, t) in model.iter().zip(x.target) {
+                assert!((m - t).abs() < 2e-6 * (1.0 + t.abs()));
             }
         }
     }

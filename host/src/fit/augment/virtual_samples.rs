@@ -71,7 +71,7 @@ pub fn weighted(
         .filter(|&(_, v, raw)| raw > min_raw_weight && v.iter().all(|x| x.is_finite()))
         .collect();
     let total: f64 = kept.iter().map(|s| s.2).sum();
-    if !(total > 0.0) {
+    if total.is_nan() || total <= 0.0 {
         return Vec::new();
     }
     kept.into_iter()
