@@ -1,0 +1,349 @@
+//! Specular augmentation (optics.md §7.7–§7.8, the paper's Step B): cluster the vertices of
+//! the joint solve by material, fit one two-lobe specular model per cluster, and give every
+//! vertex "virtual" coaxial specular samples from its nearest cluster, which regularise the
+//! sharp lobes that sparse views constrain poorly in the final per-vertex passes.
+//!
+//! API:
+//! - [`augment`]`(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation`.
+//!   `fits` are the joint solve's results (any order, matched to `set.vertices` by
+//!   [`VertexFit::vertex`]; out-of-range, duplicate (the first wins) and non-finite fits are
+//!   ignored).
+//! - [`Augmentation`]: `clusters` (only clusters that got a model), per vertex `assignment`
+//!   (index into `clusters` of the nearest model cluster in feature space; `None` without a
+//!   usable fit or when no cluster has a model), `virtual_samples` (for
+//!   `fit::solve::fit_vertex`; empty when the vertex is outside the kernel) and
+//!   `sigma_s_floor` (σ_s,cluster/2 for the final pass, §7.8; 0 — no floor — for a vertex
+//!   without virtual samples: a cluster it is not close to says nothing about its lobe).
+//!
+//! Steps:
+//! 1. [`cluster`]: features (ρ_d RGB clipped and PCA-scaled, 2·min(η, 3)) of the members —
+//!    vertices with a fit and none of `exclude_flags` — then k-means (fixed or automatic k).
+//! 2. [`lobe_fit`]: for each cluster with ≥ the minimum size: η_cluster from the diffuse DoP of
+//!    ≤ `max_eta_samples` samples, then (σ_s, σ_ss, ρ_s, ρ_ss) from I^s of ≤ `max_lobe_samples`
+//!    samples at their real geometry, in model units.
+//! 3. [`virtual_samples`]: every vertex with a fit gets its nearest model cluster's coaxial
+//!    profile (180 half-angles, values ≤ 1), kernel-weighted and renormalised to λ_g.
+//!
+//! Determinism: every random choice comes from `ChaCha8Rng` seeded by [`stream_seed`] (the
+//! config seed, a purpose, an index); parallel loops (rayon) only map independent items and
+//! every reduction is serial in index order, so the result is bit-identical for any number of
+//! threads.
+//!
+//! Memory: `virtual_samples` holds up to `profile_samples` × 40 bytes per vertex (7.2 kB at
+//! 180), i.e. ~720 MB for 100 000 vertices; the values are shared per cluster and the kept
+//! samples are a prefix of its profile, so a compact form is possible if that matters.
+
+pub mod cluster;
+pub mod lobe_fit;
+pub mod virtual_samples;
+
+#[cfg(test)]
+mod tests;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use self::cluster::{ClusterConfig, Feature, FeatureScaling};
+use self::lobe_fit::{DopSample, LobeSample};
+use crate::fit::data::{SampleSet, VertexFit, VirtualSample};
+
+/// Everything the augmentation can be told.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AugmentConfig {
+    /// Features and k-means.
+    pub cluster: ClusterConfig,
+    /// Total weight of a vertex's virtual samples, λ_g (paper: 0.1).
+    pub lambda_g: f64,
+    /// Half-angles of the coaxial profile, θ_h = m·90°/M (paper: 180, i.e. 0.5° steps).
+    pub profile_samples: usize,
+    /// σ of the feature-distance kernel (paper: 0.1).
+    pub kernel_sigma: f64,
+    /// Virtual samples with a raw weight at or below this are dropped (paper: 0.01).
+    pub min_raw_weight: f64,
+    /// Samples per cluster for η_cluster (paper: 4096).
+    pub max_eta_samples: usize,
+    /// Samples per cluster for the two-lobe fit (paper: 65 536).
+    pub max_lobe_samples: usize,
+    /// Smallest σ_s of a cluster model (optics.md §9: 0.01–0.05).
+    pub sigma_min: f64,
+    /// Seed of the sample draws.
+    pub seed: u64,
+}
+
+impl Default for AugmentConfig {
+    fn default() -> Self {
+        Self {
+            cluster: ClusterConfig::default(),
+            lambda_g: 0.1,
+            profile_samples: 180,
+            kernel_sigma: 0.1,
+            min_raw_weight: 0.01,
+            max_eta_samples: 4096,
+            max_lobe_samples: 65_536,
+            sigma_min: 0.02,
+            seed: 0xa06_0e47,
+        }
+    }
+}
+
+/// The model of one cluster.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClusterModel {
+    /// Centroid in feature space ([`cluster::FEATURE_DIM`] values).
+    pub centroid: Vec<f64>,
+    /// Member vertices.
+    pub members: usize,
+    /// η_cluster ∈ [1, 3].
+    pub eta: f64,
+    /// σ_s ∈ [`AugmentConfig::sigma_min`], 1].
+    pub sigma_s: f64,
+    /// σ_ss ∈ [σ_s, 1].
+    pub sigma_ss: f64,
+    /// ρ_s ≥ 0.
+    pub rho_s: f64,
+    /// ρ_ss ≥ 0 per channel.
+    pub rho_ss: [f64; 3],
+    /// RMS I^s residual of the two-lobe fit, model units.
+    pub fit_rms: f64,
+    /// DoP samples η was fitted to (0: too few, η is the members' median η).
+    pub eta_samples: usize,
+    /// Samples of the two-lobe fit.
+    pub lobe_samples: usize,
+}
+
+/// How the vertices were partitioned.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PartitionSummary {
+    /// Vertices clustered (fitted and not excluded by a flag).
+    pub members: usize,
+    /// Number of k-means clusters.
+    pub k: usize,
+    /// Members per k-means cluster.
+    pub sizes: Vec<usize>,
+    /// k-means inertia (sum of squared feature distances).
+    pub inertia: f64,
+    /// Mean silhouette of the partition (None for k ≤ 1).
+    pub silhouette: Option<f64>,
+    /// Automatic choice: (k, silhouette or None when a cluster was too small).
+    pub tried: Vec<(usize, Option<f64>)>,
+    /// Minimum members for a cluster model.
+    pub min_cluster_vertices: usize,
+    /// Feature normalisation.
+    pub scaling: FeatureScaling,
+}
+
+/// The result of [`augment`] (module doc). Serialises as a compact summary: the per-vertex
+/// vectors are skipped, their counts kept.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Augmentation {
+    /// Clusters with a model.
+    pub clusters: Vec<ClusterModel>,
+    /// Per vertex: index into `clusters` of its nearest model cluster.
+    #[serde(skip)]
+    pub assignment: Vec<Option<usize>>,
+    /// Per vertex: its virtual samples (weights sum to λ_g, or empty).
+    #[serde(skip)]
+    pub virtual_samples: Vec<Vec<VirtualSample>>,
+    /// Per vertex: lower bound of σ_s for the final pass (0: none).
+    #[serde(skip)]
+    pub sigma_s_floor: Vec<f64>,
+    /// Vertices with at least one virtual sample.
+    pub vertices_with_virtual_samples: usize,
+    /// The partition.
+    pub partition: PartitionSummary,
+}
+
+/// A seed for one purpose (`stream`) and item (`index`), decorrelated by SplitMix64
+/// (Steele, Lea & Flood 2014).
+pub fn stream_seed(seed: u64, stream: u64, index: u64) -> u64 {
+    let mut z = seed
+        ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ index.wrapping_add(1).wrapping_mul(0xD1B5_4A32_D192_ED03);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn fit_is_finite(f: &VertexFit) -> bool {
+    let p = &f.params;
+    [p.eta, p.sigma_s, p.sigma_ss, p.rho_s]
+        .iter()
+        .chain(&p.rho_ss)
+        .chain(&p.rho_d)
+        .chain(&f.normal_world)
+        .all(|v| v.is_finite())
+}
+
+/// Fits η_cluster and the two-lobe model of one cluster; `None` when the lobe fit has too few
+/// usable samples.
+fn fit_cluster(
+    set: &SampleSet,
+    by_vertex: &[Option<&VertexFit>],
+    members: &[usize],
+    centroid: &Feature,
+    index: usize,
+    config: &AugmentConfig,
+) -> Option<ClusterModel> {
+    let fit_of = |v: usize| by_vertex[v].expect("members have fits");
+    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 10, index as u64));
+    let pairs = lobe_fit::draw_pairs(set, members, config.max_eta_samples, &mut rng);
+    let dop: Vec<DopSample> = pairs
+        .par_iter()
+        .filter_map(|&(v, s)| {
+            let sample = &set.vertices[v].samples[s];
+            let (g, flash) = lobe_fit::sample_geometry(set, v, sample, fit_of(v))?;
+            lobe_fit::dop_sample(&g, flash, sample, fit_of(v))
+        })
+        .collect();
+    let (eta, eta_samples) = match lobe_fit::fit_eta(&dop) {
+        Some(eta) => (eta, dop.len()),
+        None => {
+            let mut etas: Vec<f64> = members.iter().map(|&v| fit_of(v).params.eta).collect();
+            etas.sort_by(f64::total_cmp);
+            let (lo, hi) = lobe_fit::ETA_RANGE;
+            (etas[etas.len() / 2].clamp(lo, hi), 0)
+        }
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 11, index as u64));
+    let pairs = lobe_fit::draw_pairs(set, members, config.max_lobe_samples, &mut rng);
+    let lobe: Vec<LobeSample> = pairs
+        .par_iter()
+        .filter_map(|&(v, s)| {
+            let sample = &set.vertices[v].samples[s];
+            let (g, flash) = lobe_fit::sample_geometry(set, v, sample, fit_of(v))?;
+            LobeSample::new(&g, flash, sample, fit_of(v), eta)
+        })
+        .collect();
+    let fit = lobe_fit::fit_lobes(&lobe, config.sigma_min)?;
+    Some(ClusterModel {
+        centroid: centroid.to_vec(),
+        members: members.len(),
+        eta,
+        sigma_s: fit.sigma_s,
+        sigma_ss: fit.sigma_ss,
+        rho_s: fit.rho_s,
+        rho_ss: fit.rho_ss,
+        fit_rms: fit.rms,
+        eta_samples,
+        lobe_samples: lobe.len(),
+    })
+}
+
+/// Clusters the joint solve's vertices, fits the cluster models and builds every vertex's
+/// virtual specular samples (module doc).
+pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation {
+    let n = set.vertices.len();
+    let mut by_vertex: Vec<Option<&VertexFit>> = vec![None; n];
+    for f in fits {
+        if let Some(slot) = by_vertex.get_mut(f.vertex as usize)
+            && slot.is_none()
+            && fit_is_finite(f)
+        {
+            *slot = Some(f);
+        }
+    }
+    let excluded = |f: &VertexFit| {
+        f.flags
+            .iter()
+            .any(|flag| config.cluster.exclude_flags.contains(flag))
+    };
+    let members: Vec<usize> = (0..n)
+        .filter(|&v| by_vertex[v].is_some_and(|f| !excluded(f)))
+        .collect();
+    let member_rho_d: Vec<[f64; 3]> = members
+        .iter()
+        .map(|&v| by_vertex[v].expect("member").params.rho_d)
+        .collect();
+    let scaling = FeatureScaling::from_members(&member_rho_d);
+    let features: Vec<Option<Feature>> = by_vertex
+        .iter()
+        .map(|f| f.map(|f| scaling.feature(f.params.rho_d, f.params.eta)))
+        .collect();
+    let member_features: Vec<Feature> = members
+        .iter()
+        .map(|&v| features[v].expect("member"))
+        .collect();
+    let selection = cluster::select(&member_features, &config.cluster);
+    let partition = &selection.partition;
+    let mut lists = vec![Vec::new(); partition.centroids.len()];
+    for (i, &label) in partition.labels.iter().enumerate() {
+        lists[label].push(members[i]);
+    }
+    let clusters: Vec<ClusterModel> = lists
+        .par_iter()
+        .enumerate()
+        .map(|(j, list)| {
+            (list.len() >= selection.min_cluster_vertices)
+                .then(|| fit_cluster(set, &by_vertex, list, &partition.centroids[j], j, config))
+                .flatten()
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect();
+    let centroids: Vec<Feature> = clusters
+        .iter()
+        .map(|c| core::array::from_fn(|i| c.centroid[i]))
+        .collect();
+    let profiles: Vec<Vec<(f64, [f64; 3])>> = clusters
+        .iter()
+        .map(|c| {
+            virtual_samples::coaxial_profile(
+                c.eta,
+                c.sigma_s,
+                c.sigma_ss,
+                c.rho_s,
+                c.rho_ss,
+                config.profile_samples,
+            )
+        })
+        .collect();
+    let per_vertex: Vec<(Option<usize>, Vec<VirtualSample>, f64)> = features
+        .par_iter()
+        .map(|f| {
+            let Some(f) = f.filter(|_| !centroids.is_empty()) else {
+                return (None, Vec::new(), 0.0);
+            };
+            let (j, d2) = cluster::nearest(&f, &centroids);
+            let samples = virtual_samples::weighted(
+                &profiles[j],
+                d2.sqrt(),
+                config.kernel_sigma,
+                config.min_raw_weight,
+                config.lambda_g,
+            );
+            let floor = if samples.is_empty() {
+                0.0
+            } else {
+                clusters[j].sigma_s / 2.0
+            };
+            (Some(j), samples, floor)
+        })
+        .collect();
+    let mut assignment = Vec::with_capacity(n);
+    let mut virtual_samples = Vec::with_capacity(n);
+    let mut sigma_s_floor = Vec::with_capacity(n);
+    for (a, v, s) in per_vertex {
+        assignment.push(a);
+        virtual_samples.push(v);
+        sigma_s_floor.push(s);
+    }
+    Augmentation {
+        vertices_with_virtual_samples: virtual_samples.iter().filter(|v| !v.is_empty()).count(),
+        partition: PartitionSummary {
+            members: members.len(),
+            k: partition.centroids.len(),
+            sizes: partition.sizes.clone(),
+            inertia: partition.inertia,
+            silhouette: selection.silhouette,
+            tried: selection.tried.clone(),
+            min_cluster_vertices: selection.min_cluster_vertices,
+            scaling,
+        },
+        clusters,
+        assignment,
+        virtual_samples,
+        sigma_s_floor,
+    }
+}
