@@ -12,8 +12,13 @@
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
 //!
+//! - [`shape`]: the shape update of the outer loop — vertex positions moved to agree with the
+//!   refined normals on the fixed connectivity (positions+normals least squares, Nehab et al.
+//!   2005, instead of the paper's Poisson re-meshing).
+//!
 //! Later stages (observation extraction from a session, the solver, specular augmentation,
 //! the shape update, the pipeline) each consume and produce these types.
 
 pub mod data;
 pub mod gate;
+pub mod shape;
