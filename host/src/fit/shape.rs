@@ -134,7 +134,7 @@ impl ShapeConfig {
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
             return bad("tolerance", self.tolerance);
         }
-        if !(self.max_displacement_m > 0.0) {
+        if self.max_displacement_m.is_nan() || self.max_displacement_m <= 0.0 {
             return bad("max_displacement_m", self.max_displacement_m);
         }
         Ok(())
@@ -493,7 +493,10 @@ impl MeshGraph {
 }
 
 /// Unit normals and confidences with unusable entries zeroed: `(normals, weights, skipped)`.
-fn usable_normals(normals_world: &[[f64; 3]], confidence: &[f64]) -> (Vec<[f64; 3]>, Vec<f64>, usize) {
+fn usable_normals(
+    normals_world: &[[f64; 3]],
+    confidence: &[f64],
+) -> (Vec<[f64; 3]>, Vec<f64>, usize) {
     let mut skipped = 0;
     let mut normals = Vec::with_capacity(normals_world.len());
     let mut weights = Vec::with_capacity(normals_world.len());
@@ -552,7 +555,10 @@ impl<'a> Problem<'a> {
             if !(cu > 0.0 && cv > 0.0) {
                 continue;
             }
-            let (nu, nv) = (Vector3::from(normals[u as usize]), Vector3::from(normals[v as usize]));
+            let (nu, nv) = (
+                Vector3::from(normals[u as usize]),
+                Vector3::from(normals[v as usize]),
+            );
             // Normals 90° or more apart across one edge define no common tangent plane.
             if nu.dot(&nv) <= 0.0 {
                 skipped_edges += 1;
@@ -581,7 +587,13 @@ impl<'a> Problem<'a> {
 
     /// E at displacement `d` from `positions` (m²).
     fn energy(&self, positions: &[Point3<f64>], d: &[f64]) -> f64 {
-        let dv = |i: u32| Vector3::new(d[3 * i as usize], d[3 * i as usize + 1], d[3 * i as usize + 2]);
+        let dv = |i: u32| {
+            Vector3::new(
+                d[3 * i as usize],
+                d[3 * i as usize + 1],
+                d[3 * i as usize + 2],
+            )
+        };
         let anchor: f64 = d.iter().map(|x| x * x).sum::<f64>() * self.lambda_position;
         let smooth: f64 = self
             .edges

@@ -31,12 +31,15 @@ pub fn perturb_mesh(mesh: &TriangleMesh, amplitude_m: f64, seed: u64) -> Triangl
         return mesh.clone();
     }
     let (lo, hi) = positions.iter().fold(
-        (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
         |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)),
     );
     let diagonal = (hi - lo).norm();
     // Guard: a mesh collapsed to a point has no length scale.
-    if !(diagonal > 0.0) {
+    if diagonal.is_nan() || diagonal <= 0.0 {
         return mesh.clone();
     }
     let width = BUMP_WIDTH_FRACTION * diagonal;
@@ -60,7 +63,7 @@ pub fn perturb_mesh(mesh: &TriangleMesh, amplitude_m: f64, seed: u64) -> Triangl
     offsets.iter_mut().for_each(|o| *o -= mean);
     let rms = (offsets.iter().map(|o| o * o).sum::<f64>() / n as f64).sqrt();
     // Guard the scaling: an all-zero field cannot be scaled to the amplitude.
-    if !(rms > 0.0) {
+    if rms.is_nan() || rms <= 0.0 {
         return mesh.clone();
     }
     let scale = amplitude_m.abs() / rms;

@@ -166,7 +166,7 @@ fn invert_symmetric(m: &Block) -> Option<Block> {
     let det = m[0][0] * c00 + m[0][1] * c01 + m[0][2] * c02;
     let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs()));
     // Guard the division: the determinant must be positive and not lost in rounding.
-    if !(det > 1e-12 * scale * scale * scale) {
+    if det.is_nan() || det <= 1e-12 * scale * scale * scale {
         return None;
     }
     let inv = 1.0 / det;
@@ -259,7 +259,7 @@ pub(crate) fn pcg(
         let pap = dot(&p, &ap);
         // Guard: p·Ap ≤ 0 means A is not SPD in this direction (or p vanished); stop rather
         // than divide by it.
-        if !(pap > 0.0) {
+        if pap.is_nan() || pap <= 0.0 {
             break;
         }
         let alpha = rz / pap;
@@ -334,8 +334,8 @@ mod tests {
         };
         for i in 0..12 {
             let ci = column(i);
-            for j in 0..12 {
-                assert!((ci[j] - column(j)[i]).abs() < 1e-15);
+            for (j, cij) in ci.iter().enumerate() {
+                assert!((cij - column(j)[i]).abs() < 1e-15);
             }
         }
     }
