@@ -83,3 +83,50 @@ pub fn perturb_mesh(mesh: &TriangleMesh, amplitude_m: f64, seed: u64) -> Triangl
     )
     .unwrap_or_else(|_| mesh.clone())
 }
+
+#[cfg(test)]
+mod tests {
+    use ellipso_sim::geometry::procedural::bumpy_icosphere;
+
+    /// The perturbation is seeded, moves along the normals with the requested RMS and zero mean, and
+    /// is smooth (neighbouring offsets differ by a small fraction of the amplitude).
+    #[test]
+    fn perturbation_is_seeded_smooth_and_has_the_requested_rms() {
+        let sphere = bumpy_icosphere(4, 0.0, 0, 0);
+        let a = super::perturb_mesh(&sphere, 0.01, 42);
+        let b = super::perturb_mesh(&sphere, 0.01, 42);
+        let c = super::perturb_mesh(&sphere, 0.01, 43);
+        assert_eq!(a.positions(), b.positions());
+        assert_ne!(a.positions(), c.positions());
+        let offsets: Vec<f64> = a
+            .positions()
+            .iter()
+            .zip(sphere.positions())
+            .zip(sphere.normals())
+            .map(|((p, q), normal)| {
+                let d = p - q;
+                // Along the mesh normal only.
+                assert!(d.cross(normal).norm() < 1e-12);
+                d.dot(normal)
+            })
+            .collect();
+        let n = offsets.len() as f64;
+        let mean = offsets.iter().sum::<f64>() / n;
+        let rms = (offsets.iter().map(|o| o * o).sum::<f64>() / n).sqrt();
+        assert!(
+            mean.abs() < 1e-12 && (rms - 0.01).abs() < 1e-12,
+            "{mean} {rms}"
+        );
+        let worst_jump = sphere
+            .triangles()
+            .iter()
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .map(|(u, v)| (offsets[u as usize] - offsets[v as usize]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst_jump < 0.01, "jump {worst_jump} for RMS 0.01");
+        assert_eq!(
+            super::perturb_mesh(&sphere, f64::NAN, 1).positions(),
+            sphere.positions()
+        );
+    }
+}
