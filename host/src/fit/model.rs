@@ -235,6 +235,7 @@ mod tests {
     }
 
     #[test]
+    #[expect(clippy::needless_range_loop, reason = "parallel per-channel arrays")]
     fn linear_model_matches_observe() {
         let mut rng = ChaCha8Rng::seed_from_u64(7);
         let p = params();
@@ -337,6 +338,7 @@ mod tests {
     }
 
     #[test]
+    #[expect(clippy::needless_range_loop, reason = "parallel per-channel arrays")]
     fn coaxial_lobes_recombine_and_tangent_basis_is_orthonormal() {
         let p = params();
         for c in [0.05, 0.4, 0.9, 1.0] {

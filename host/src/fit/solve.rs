@@ -54,6 +54,8 @@ mod hard_cases;
 #[cfg(test)]
 mod tests;
 
+use std::cmp::Ordering;
+
 use ellipso_sim::optics::measure::dop_diffuse_with_d_eta;
 use ellipso_sim::optics::pbrdf::PbrdfParams;
 use rayon::prelude::*;
@@ -228,7 +230,12 @@ pub fn fit_vertex(
             &mut scratch_f,
             &mut scratch_d,
         );
-        if best.as_ref().is_none_or(|b| !(b.cost <= st.cost)) {
+        if best.as_ref().is_none_or(|b| {
+            !matches!(
+                b.cost.partial_cmp(&st.cost),
+                Some(Ordering::Less | Ordering::Equal)
+            )
+        }) {
             best = Some(st);
         }
     }
@@ -322,7 +329,9 @@ fn finish(
     let n = problem.len().max(1) as f64;
     let dop_snr = (dop_sum / n) / (dop_sq / n).sqrt().max(1e-300);
     if max_sensitivity < config.min_eta_sensitivity
-        || !(u.std_error[0] <= config.max_eta_std_error)
+        || u.std_error[0]
+            .partial_cmp(&config.max_eta_std_error)
+            .is_none_or(|o| o == Ordering::Greater)
         || dop_snr < 1.0
     {
         flags.push(FitFlag::EtaUnidentifiable);
@@ -468,8 +477,8 @@ pub fn forward_cost_all(set: &SampleSet, fits: &[VertexFit]) -> ForwardCost {
                 };
                 for c in 0..channels {
                     let pred = u.predict(p.rho_d[c], p.rho_ss[c], p.rho_s);
-                    for k in 0..3 {
-                        let d = pred[k] - f64::from(s.channels[c][k]);
+                    for (pk, ok) in pred.iter().zip(s.channels[c]) {
+                        let d = pk - f64::from(ok);
                         sum += d * d;
                     }
                     count += 1;

@@ -267,6 +267,7 @@ mod tests {
     }
 
     #[test]
+    #[expect(clippy::needless_range_loop, reason = "parallel per-channel arrays")]
     fn noiseless_samples_equal_the_model_and_noise_is_gated() {
         let views = orbit_views(60, 0.5, [20.0, 70.0], 1.5, [0.0; 3], [0.0, 0.03, 0.0]);
         let mut rng = ChaCha8Rng::seed_from_u64(3);

@@ -283,6 +283,7 @@ mod tests {
     }
 
     #[test]
+    #[expect(clippy::needless_range_loop, reason = "parallel per-channel arrays")]
     fn unit_lobes_recombine_to_observe() {
         use crate::optics::Vec3;
         let v = Vec3::<f64>::from_f64;

@@ -89,6 +89,10 @@ pub(super) fn standard_errors(
 
 /// Diagonal of s²·(JᵀJ)⁻¹ restricted to `active` (others INFINITY), with the null-direction rule
 /// of the module doc.
+#[expect(
+    clippy::needless_range_loop,
+    reason = "eigenvector rows, live and active indices are parallel arrays"
+)]
 fn covariance_diagonal(
     jtj: &SMatrix<f64, N_ALL, N_ALL>,
     active: &[usize],
