@@ -20,6 +20,9 @@ use crate::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
 pub enum Args {
     /// Pose accuracy and speed on rendered frames of a scene.
     Pose(PoseArgs),
+    /// What accuracy costs in time: fit error against seconds on simulated captures with known
+    /// truth (photo count, solver effort, vertex count sweeps); writes docs/accuracy-vs-time.md.
+    Accuracy(super::bench_accuracy::AccuracyArgs),
 }
 
 /// Arguments of `ellipso bench pose`.
@@ -67,6 +70,7 @@ pub struct ImageResult {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Pose(a) => pose(a),
+        Args::Accuracy(a) => super::bench_accuracy::run(a),
     }
 }
 

@@ -1,6 +1,8 @@
 //! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
 
 pub mod bench;
+pub mod bench_accuracy;
+pub mod bench_report;
 pub mod calibrate;
 pub mod capture;
 pub mod demo;

@@ -48,6 +48,8 @@ pub struct TruthObject {
     pub material: Vec<usize>,
     /// Material names (the scene's).
     pub material_names: Vec<String>,
+    /// The true surface is convex (an analytic sphere): a front-facing point is never blocked.
+    pub convex: bool,
 }
 
 impl TruthObject {
@@ -89,6 +91,7 @@ impl TruthObject {
                 return Err(TruthError::Unsupported(name, object.name.clone()));
             }
         };
+        let convex = matches!(object.geometry, ObjectGeometry::Sphere(_));
         let t = &object.transform;
         let positions_world: Vec<Point3<f64>> =
             positions.iter().map(|p| t.point_to_world(p)).collect();
@@ -119,6 +122,7 @@ impl TruthObject {
             params,
             material,
             material_names: scene.materials.iter().map(|m| m.name.clone()).collect(),
+            convex,
         })
     }
 

@@ -1,0 +1,331 @@
+//! `ellipso bench accuracy`: what accuracy costs in time — sweeps of photo count, solver effort
+//! and vertex count on simulated captures with known truth (the sphere and the four-material
+//! blob, 12-bit, shot + read noise), each run timed and scored against the truth, plus one large
+//! run (100 000 vertices × 150 views) for throughput. Writes the report (Markdown table + two
+//! PNG plots of error against seconds + JSON) — by default to `docs/accuracy-vs-time.md`.
+//!
+//! Every figure in one report comes from one run of this command on one machine, so ratios
+//! between rows are meaningful even on a shared, noisy machine; absolute seconds are not
+//! portable. The fit time is also reported divided by the time of one forward evaluation of
+//! every observation, measured right after it in the same run.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use ellipso_sim::scene::Scene;
+
+use crate::fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
+use crate::fit::pipeline::{FitConfig, fit_sample_set};
+use crate::report::plot::{LegendPosition, LinePlot};
+
+/// Arguments of `ellipso bench accuracy`.
+#[derive(Debug, clap::Args)]
+pub struct AccuracyArgs {
+    /// Scenes to sweep (default: the shipped sphere and multi-material scenes).
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<PathBuf>,
+    /// Report file (Markdown); plots and JSON are written beside it (plots under `img/`).
+    #[arg(long, default_value = "docs/accuracy-vs-time.md")]
+    pub report: PathBuf,
+    /// Small sweep for a smoke test (few vertices and photos; no large run).
+    #[arg(long)]
+    pub quick: bool,
+    /// Skip the large throughput run (100 000 vertices × 150 views).
+    #[arg(long)]
+    pub no_large: bool,
+    /// Noise and normal-tilt seed.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+}
+
+/// One timed, scored run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct RunResult {
+    /// Scene name.
+    pub scene: String,
+    /// Which sweep the run belongs to.
+    pub sweep: String,
+    /// Solver setting label.
+    pub solver: String,
+    /// Photos.
+    pub photos: usize,
+    /// Views used by the fit (= photos).
+    pub views: usize,
+    /// Simulation wall time, s (not part of the fit).
+    pub simulate_s: f64,
+    /// Fit wall time (steps A + B + C), s.
+    pub fit_s: f64,
+    /// Stage times.
+    pub times: crate::fit::pipeline::StageTimes,
+    /// One forward evaluation of every observation, s.
+    pub forward_s: f64,
+    /// fit_s / forward_s.
+    pub fit_over_forward: f64,
+    /// Scores against the truth.
+    pub scores: Scores,
+}
+
+/// A solver setting of the effort sweep.
+struct SolverSetting {
+    label: &'static str,
+    config: FitConfig,
+}
+
+fn solver_settings() -> Vec<SolverSetting> {
+    let default = FitConfig::default();
+    let joint_only = |iterations: u32| {
+        let mut c = FitConfig {
+            augment: None,
+            ..FitConfig::default()
+        };
+        c.solver.max_iterations = iterations;
+        c
+    };
+    vec![
+        SolverSetting {
+            label: "A only, 4 iterations",
+            config: joint_only(4),
+        },
+        SolverSetting {
+            label: "A only, 12 iterations",
+            config: joint_only(12),
+        },
+        SolverSetting {
+            label: "A only, default iterations",
+            config: joint_only(default.solver.max_iterations),
+        },
+        SolverSetting {
+            label: "A + B + C, 1 final pass",
+            config: FitConfig {
+                final_passes: 1,
+                ..FitConfig::default()
+            },
+        },
+        SolverSetting {
+            label: "A + B + C, 3 final passes (default)",
+            config: default,
+        },
+    ]
+}
+
+/// Runs `ellipso bench accuracy`.
+pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
+    let scenes = if args.scenes.is_empty() {
+        vec![
+            super::demo::shipped_scene("sphere.toml"),
+            super::demo::shipped_scene("multi_material.toml"),
+        ]
+    } else {
+        args.scenes.clone()
+    };
+    let (photo_sweep, subdivision_sweep, effort_photos): (Vec<usize>, Vec<u32>, usize) =
+        if args.quick {
+            (vec![25, 50], vec![2], 25)
+        } else {
+            (vec![25, 50, 100, 200], vec![3, 4, 5], 100)
+        };
+    let base_subdivisions = if args.quick { Some(2) } else { None };
+    let mut results = Vec::new();
+    let started = Instant::now();
+    for path in &scenes {
+        let scene = Scene::load(path).with_context(|| format!("loading {}", path.display()))?;
+        let name = scene
+            .name
+            .clone()
+            .unwrap_or_else(|| path.display().to_string());
+        let default = FitConfig::default();
+        for &photos in &photo_sweep {
+            let case = CaptureCase {
+                photos,
+                subdivisions: base_subdivisions,
+                seed: args.seed,
+                ..CaptureCase::default()
+            };
+            results.push(one_run(
+                &scene, &name, "photos", "default", &case, &default,
+            )?);
+        }
+        for setting in solver_settings() {
+            let case = CaptureCase {
+                photos: effort_photos,
+                subdivisions: base_subdivisions,
+                seed: args.seed,
+                ..CaptureCase::default()
+            };
+            results.push(one_run(
+                &scene,
+                &name,
+                "solver",
+                setting.label,
+                &case,
+                &setting.config,
+            )?);
+        }
+        for &s in &subdivision_sweep {
+            let case = CaptureCase {
+                photos: effort_photos,
+                subdivisions: Some(s),
+                seed: args.seed,
+                ..CaptureCase::default()
+            };
+            results.push(one_run(
+                &scene, &name, "vertices", "default", &case, &default,
+            )?);
+        }
+    }
+    if !args.quick && !args.no_large {
+        let scene = Scene::load(&super::demo::shipped_scene("sphere.toml"))?;
+        let case = CaptureCase {
+            photos: 150,
+            subdivisions: Some(7),
+            max_vertices: Some(100_000),
+            seed: args.seed,
+            ..CaptureCase::default()
+        };
+        results.push(one_run(
+            &scene,
+            "sphere",
+            "large",
+            "default",
+            &case,
+            &FitConfig::default(),
+        )?);
+    }
+    write_report(
+        &args.report,
+        &results,
+        started.elapsed().as_secs_f64(),
+        args.quick,
+    )?;
+    Ok(())
+}
+
+fn one_run(
+    scene: &Scene,
+    name: &str,
+    sweep: &str,
+    solver: &str,
+    case: &CaptureCase,
+    config: &FitConfig,
+) -> anyhow::Result<RunResult> {
+    let t = Instant::now();
+    let capture = simulate(scene, case)?;
+    let simulate_s = t.elapsed().as_secs_f64();
+    let outcome = fit_sample_set(&capture.set, None, config, &mut |_| {});
+    let fit_s = outcome.times.fit_s();
+    let t = Instant::now();
+    let checksum = forward_all(&capture.set, &outcome.fits);
+    let forward_s = t.elapsed().as_secs_f64().max(1e-9);
+    anyhow::ensure!(
+        checksum.is_finite(),
+        "forward evaluation produced a non-finite value"
+    );
+    let scores = evaluate(&capture, &outcome.fits);
+    let r = RunResult {
+        scene: name.to_string(),
+        sweep: sweep.to_string(),
+        solver: solver.to_string(),
+        photos: case.photos,
+        views: capture.set.views.len(),
+        simulate_s,
+        fit_s,
+        times: outcome.times,
+        forward_s,
+        fit_over_forward: fit_s / forward_s,
+        scores,
+    };
+    println!(
+        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} %  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} %  re-render {:.4}",
+        r.scene,
+        r.sweep,
+        r.solver,
+        r.photos,
+        r.scores.vertices,
+        r.scores.samples,
+        r.fit_s,
+        r.fit_over_forward,
+        r.scores.eta_mean_pct,
+        r.scores.normal_median_deg,
+        r.scores.normal_p90_deg,
+        r.scores.rho_d_mean_pct,
+        r.scores.rerender_rmse
+    );
+    Ok(r)
+}
+
+fn write_report(
+    path: &Path,
+    results: &[RunResult],
+    total_s: f64,
+    quick: bool,
+) -> anyhow::Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let img = dir.join("img");
+    std::fs::create_dir_all(&img).with_context(|| format!("creating {}", img.display()))?;
+    let stem = path.file_stem().map_or("accuracy-vs-time".into(), |s| {
+        s.to_string_lossy().to_string()
+    });
+    let eta_png = img.join(format!("{stem}-eta.png"));
+    let normal_png = img.join(format!("{stem}-normal.png"));
+    plot(
+        results,
+        &eta_png,
+        "η error vs fit time",
+        "mean η error (%)",
+        |s| s.eta_mean_pct,
+    )?;
+    plot(
+        results,
+        &normal_png,
+        "normal error vs fit time",
+        "median normal error (°)",
+        |s| s.normal_median_deg,
+    )?;
+    let json = dir.join(format!("{stem}.json"));
+    std::fs::write(&json, serde_json::to_vec_pretty(results)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
+    std::fs::write(path, md).with_context(|| format!("writing {}", path.display()))?;
+    println!(
+        "\nreport  {}\nplots   {}\n        {}\ndata    {}",
+        path.display(),
+        eta_png.display(),
+        normal_png.display(),
+        json.display()
+    );
+    Ok(())
+}
+
+fn plot(
+    results: &[RunResult],
+    out: &Path,
+    title: &str,
+    y_label: &str,
+    metric: impl Fn(&Scores) -> f64,
+) -> anyhow::Result<()> {
+    let mut p = LinePlot::new(title)
+        .x_label("fit wall time (s, log)")
+        .y_label(y_label)
+        .log_x(true)
+        .legend(LegendPosition::TopRight);
+    let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for r in results.iter().filter(|r| r.sweep != "large") {
+        let key = format!("{} · {}", r.scene, r.sweep);
+        let point = (r.fit_s.max(1e-3), metric(&r.scores));
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, pts)) => pts.push(point),
+            None => groups.push((key, vec![point])),
+        }
+    }
+    for (k, mut pts) in groups {
+        pts.retain(|p| p.1.is_finite());
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        p = p.series(k, pts);
+    }
+    p.save_png(out)?;
+    Ok(())
+}
