@@ -18,9 +18,11 @@
 //! Steps:
 //! 1. [`cluster`]: features (ρ_d RGB clipped and PCA-scaled, 2·min(η, 3)) of the members —
 //!    vertices with a fit and none of `exclude_flags` — then k-means (fixed or automatic k).
-//! 2. [`lobe_fit`]: for each cluster with ≥ the minimum size: η_cluster from the diffuse DoP of
-//!    ≤ `max_eta_samples` samples, then (σ_s, σ_ss, ρ_s, ρ_ss) from I^s of ≤ `max_lobe_samples`
-//!    samples at their real geometry, in model units.
+//! 2. For each cluster with ≥ the minimum size, on real samples drawn by [`draw_pairs`] and
+//!    evaluated by [`sample_geometry`] (the vertex's fitted normal; unpolarised-flash views
+//!    skipped): [`eta_fit`] η_cluster from the diffuse DoP of ≤ `max_eta_samples` samples, then
+//!    [`lobe_fit`] (σ_s, σ_ss, ρ_s, ρ_ss) from I^s of ≤ `max_lobe_samples` samples at their
+//!    real geometry, in model units.
 //! 3. [`virtual_samples`]: every vertex with a fit gets its nearest model cluster's coaxial
 //!    profile (180 half-angles, values ≤ 1), kernel-weighted and renormalised to λ_g.
 //!
@@ -34,6 +36,7 @@
 //! samples are a prefix of its profile, so a compact form is possible if that matters.
 
 pub mod cluster;
+pub mod eta_fit;
 pub mod lobe_fit;
 pub mod virtual_samples;
 
@@ -45,8 +48,14 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use self::cluster::{ClusterConfig, Feature, FeatureScaling};
-use self::lobe_fit::{DopSample, LobeSample};
-use crate::fit::data::{SampleSet, VertexFit, VirtualSample};
+use ellipso_sim::optics::Vec3;
+use ellipso_sim::optics::measure::FlashPolariser;
+use ellipso_sim::optics::pbrdf::Geometry;
+use nalgebra::Point3;
+
+use self::eta_fit::DopSample;
+use self::lobe_fit::LobeSample;
+use crate::fit::data::{Sample, SampleSet, VertexFit, VirtualSample};
 
 /// Everything the augmentation can be told.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -165,6 +174,54 @@ pub fn stream_seed(seed: u64, stream: u64, index: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// Draws up to `max` (vertex, sample index) pairs uniformly without replacement from the
+/// samples of `members` (ascending), in ascending order.
+pub fn draw_pairs(
+    set: &SampleSet,
+    members: &[usize],
+    max: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<(usize, usize)> {
+    let mut starts = Vec::with_capacity(members.len() + 1);
+    let mut total = 0usize;
+    for &v in members {
+        starts.push(total);
+        total += set.vertices[v].samples.len();
+    }
+    starts.push(total);
+    let picks: Vec<usize> = if total <= max {
+        (0..total).collect()
+    } else {
+        let mut v = rand::seq::index::sample(rng, total, max).into_vec();
+        v.sort_unstable();
+        v
+    };
+    picks
+        .into_iter()
+        .map(|i| {
+            let m = starts.partition_point(|&s| s <= i) - 1;
+            (members[m], i - starts[m])
+        })
+        .collect()
+}
+
+/// The model geometry of one real sample with the vertex's fitted normal and the view's flash,
+/// or `None` (unpolarised flash, undefined geometry, or back-facing).
+pub fn sample_geometry(
+    set: &SampleSet,
+    vertex: usize,
+    sample: &Sample,
+    fit: &VertexFit,
+) -> Option<(Geometry<f64>, FlashPolariser)> {
+    let view = set.views.get(sample.view as usize)?;
+    if !view.polarised() {
+        return None;
+    }
+    let sg = view.geometry_at(&Point3::from(set.vertices[vertex].position_world))?;
+    let g = sg.model(Vec3::from_f64(fit.normal_world)).ok()?;
+    g.front_facing.then_some((g, view.flash_polariser()))
+}
+
 fn fit_is_finite(f: &VertexFit) -> bool {
     let p = &f.params;
     [p.eta, p.sigma_s, p.sigma_ss, p.rho_s]
@@ -187,31 +244,31 @@ fn fit_cluster(
 ) -> Option<ClusterModel> {
     let fit_of = |v: usize| by_vertex[v].expect("members have fits");
     let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 10, index as u64));
-    let pairs = lobe_fit::draw_pairs(set, members, config.max_eta_samples, &mut rng);
+    let pairs = draw_pairs(set, members, config.max_eta_samples, &mut rng);
     let dop: Vec<DopSample> = pairs
         .par_iter()
         .filter_map(|&(v, s)| {
             let sample = &set.vertices[v].samples[s];
-            let (g, flash) = lobe_fit::sample_geometry(set, v, sample, fit_of(v))?;
-            lobe_fit::dop_sample(&g, flash, sample, fit_of(v))
+            let (g, flash) = sample_geometry(set, v, sample, fit_of(v))?;
+            eta_fit::dop_sample(&g, flash, sample, fit_of(v))
         })
         .collect();
-    let (eta, eta_samples) = match lobe_fit::fit_eta(&dop) {
+    let (eta, eta_samples) = match eta_fit::fit_eta(&dop) {
         Some(eta) => (eta, dop.len()),
         None => {
             let mut etas: Vec<f64> = members.iter().map(|&v| fit_of(v).params.eta).collect();
             etas.sort_by(f64::total_cmp);
-            let (lo, hi) = lobe_fit::ETA_RANGE;
+            let (lo, hi) = eta_fit::ETA_RANGE;
             (etas[etas.len() / 2].clamp(lo, hi), 0)
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 11, index as u64));
-    let pairs = lobe_fit::draw_pairs(set, members, config.max_lobe_samples, &mut rng);
+    let pairs = draw_pairs(set, members, config.max_lobe_samples, &mut rng);
     let lobe: Vec<LobeSample> = pairs
         .par_iter()
         .filter_map(|&(v, s)| {
             let sample = &set.vertices[v].samples[s];
-            let (g, flash) = lobe_fit::sample_geometry(set, v, sample, fit_of(v))?;
+            let (g, flash) = sample_geometry(set, v, sample, fit_of(v))?;
             LobeSample::new(&g, flash, sample, fit_of(v), eta)
         })
         .collect();

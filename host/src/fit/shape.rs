@@ -21,7 +21,7 @@
 //!
 //! # Energy (over displacements d = p − p⁰ from the current positions p⁰)
 //! ```text
-//! E(d) = λ_pos Σ_v ‖d_v‖²                                  (anchor; every vertex weight 1)
+//! E(d) = λ_pos Σ_v (a_v/D²) ‖d_v‖²                         (anchor, area-weighted)
 //!      + Σ_edges(u,v) c_uv (n̄_uv · (p_u − p_v))²            (edges ⟂ the refined normals)
 //!      + λ_smooth Σ_edges(u,v) ‖d_u − d_v‖²                (uniform Laplacian of the displacement)
 //! ```
@@ -40,8 +40,16 @@
 //!   noise from noisy normals. The uniform (graph) Laplacian is used; cotangent weights can be
 //!   negative on obtuse triangles and would break positive definiteness.
 //!
-//! All three terms are squared lengths in m², so the weights are dimensionless and the solution
-//! is scale invariant (a mesh in mm and the same mesh in m move identically, scaled).
+//! - The anchor is area-weighted (`a_v`: a third of the vertex's triangle areas, `D`: bounding-box
+//!   diagonal; every vertex keeps the same anchor, w_v = 1 — the normal's confidence does not
+//!   enter here). The normal term of a smooth displacement field does not change with mesh
+//!   resolution (more, shorter edges), so a per-vertex anchor would trust the normals less and less
+//!   as the mesh is refined (measured: the correction fell from 3.6× at 2.5k vertices to 1.1× at
+//!   164k). With `a_v/D²` the position/normal crossover is a fixed fraction of the object size.
+//!
+//! All terms are squared lengths in m² (`a_v/D²` is dimensionless), so the weights are
+//! dimensionless and the solution is scale invariant (a mesh in mm and the same mesh in m move
+//! identically, scaled).
 //!
 //! # Solver
 //! E is quadratic: the normal equations `A d = b` (3V×3V, sparse, SPD since λ_pos > 0) are solved
@@ -68,22 +76,25 @@ pub use perturb::perturb_mesh;
 
 use super::data::{FitFlag, VertexFit};
 use ellipso_sim::geometry::{MeshError, TriangleMesh};
-use energy::{MeshGraph, Problem, usable_normals};
+use energy::{MeshGraph, Problem, anchor_weights, usable_normals};
 use nalgebra::{Point3, Vector3};
 use sparse::{Block, BlockCsr, IDENTITY, pcg};
 
 /// Weights and limits of the shape update.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ShapeConfig {
-    /// λ_pos: weight of the anchor to the current positions (dimensionless, > 0). Smaller trusts
-    /// the normals over longer wavelengths: the crossover is about `√(6/λ_pos)` edge lengths.
+    /// λ_pos: weight of the anchor to the current positions (dimensionless, > 0), per unit of
+    /// `a_v/D²`. Smaller trusts the normals over longer wavelengths. The default 25 equals a
+    /// per-vertex weight of 0.01 on a 2 562-vertex sphere; it removes ~3.6× of smooth noise per
+    /// update at any resolution while staying stable under 3° normal noise.
     pub lambda_position: f64,
     /// λ_smooth: weight of the uniform Laplacian of the displacement (dimensionless, ≥ 0).
     pub lambda_smooth: f64,
     /// σ_ref of the confidence `1 / (1 + (σ_n/σ_ref)²)`, degrees (> 0): a normal with this
     /// standard error gets half the weight of a perfect one.
     pub normal_sigma_ref_deg: f64,
-    /// Conjugate-gradient iteration limit (≥ 1).
+    /// Conjugate-gradient iteration limit (≥ 1). Iterations grow like √vertices (≈ 160 at 2.5k,
+    /// 1 350 at 164k vertices with the default weights).
     pub max_cg_iterations: u32,
     /// Conjugate-gradient stop: `‖b − A d‖ ≤ tolerance · ‖b‖` (> 0).
     pub tolerance: f64,
@@ -97,10 +108,10 @@ pub struct ShapeConfig {
 impl Default for ShapeConfig {
     fn default() -> Self {
         Self {
-            lambda_position: 0.01,
+            lambda_position: 25.0,
             lambda_smooth: 0.02,
             normal_sigma_ref_deg: 2.0,
-            max_cg_iterations: 1000,
+            max_cg_iterations: 3000,
             tolerance: 1e-8,
             max_displacement_m: 0.002,
         }
@@ -365,12 +376,12 @@ pub fn refine_vertex_positions(
     }
     let graph = MeshGraph::new(positions, triangles)?;
     let (normals, weights, skipped_vertices) = usable_normals(normals_world, confidence);
-    let problem = Problem::new(positions, &graph.edges, &normals, &weights, config);
+    let anchor = anchor_weights(positions, triangles, config.lambda_position);
+    let problem = Problem::new(positions, &graph.edges, &normals, &weights, anchor, config);
 
     let mut a = BlockCsr::from_edges(n, &graph.edges);
-    let anchor = scaled(&IDENTITY, config.lambda_position);
-    for v in 0..n as u32 {
-        a.add_diagonal(v, &anchor);
+    for (v, &w) in problem.anchor.iter().enumerate() {
+        a.add_diagonal(v as u32, &scaled(&IDENTITY, w));
     }
     let smooth = scaled(&IDENTITY, config.lambda_smooth);
     let mut b = vec![0.0; 3 * n];

@@ -200,7 +200,7 @@ fn lobe_samples(s: &Scene, material: &PbrdfParams<f64>) -> Vec<LobeSample> {
             continue;
         }
         for sample in &vs.samples {
-            let (g, flash) = lobe_fit::sample_geometry(&s.set, v, sample, &s.fits[v]).unwrap();
+            let (g, flash) = sample_geometry(&s.set, v, sample, &s.fits[v]).unwrap();
             out.push(LobeSample::new(&g, flash, sample, &s.fits[v], material.eta).unwrap());
         }
     }
@@ -287,11 +287,11 @@ fn eta_of_a_cluster_from_real_geometry() {
                 continue;
             }
             for sample in &vs.samples {
-                let (g, flash) = lobe_fit::sample_geometry(&s.set, v, sample, &s.fits[v]).unwrap();
-                dop.extend(lobe_fit::dop_sample(&g, flash, sample, &s.fits[v]));
+                let (g, flash) = sample_geometry(&s.set, v, sample, &s.fits[v]).unwrap();
+                dop.extend(eta_fit::dop_sample(&g, flash, sample, &s.fits[v]));
             }
         }
-        let eta = lobe_fit::fit_eta(&dop).unwrap();
+        let eta = eta_fit::fit_eta(&dop).unwrap();
         assert!((eta - m.eta).abs() < 1e-4, "{eta} vs {}", m.eta);
     }
 }

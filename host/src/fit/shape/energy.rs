@@ -98,7 +98,8 @@ pub(super) struct Problem<'a> {
     /// Constrained edges, in the order of `edges`.
     pub(super) constraints: Vec<EdgeConstraint>,
     pub(super) skipped_edges: usize,
-    lambda_position: f64,
+    /// Anchor weight per vertex (λ_pos · a_v / D², see [`anchor_weights`]).
+    pub(super) anchor: Vec<f64>,
     lambda_smooth: f64,
 }
 
@@ -108,6 +109,7 @@ impl<'a> Problem<'a> {
         edges: &'a [(u32, u32)],
         normals: &[[f64; 3]],
         weights: &[f64],
+        anchor: Vec<f64>,
         config: &ShapeConfig,
     ) -> Self {
         let mut constraints = Vec::new();
@@ -142,7 +144,7 @@ impl<'a> Problem<'a> {
             edges,
             constraints,
             skipped_edges,
-            lambda_position: config.lambda_position,
+            anchor,
             lambda_smooth: config.lambda_smooth,
         }
     }
@@ -156,7 +158,11 @@ impl<'a> Problem<'a> {
                 d[3 * i as usize + 2],
             )
         };
-        let anchor: f64 = d.iter().map(|x| x * x).sum::<f64>() * self.lambda_position;
+        let anchor: f64 = d
+            .chunks(3)
+            .zip(&self.anchor)
+            .map(|(dv, w)| w * (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]))
+            .sum();
         let smooth: f64 = self
             .edges
             .iter()
@@ -188,4 +194,45 @@ impl<'a> Problem<'a> {
         }
         if den > 0.0 { (num / den).sqrt() } else { 0.0 }
     }
+}
+
+/// Smallest vertex area used in the anchor, as a fraction of the mean vertex area: a vertex in no
+/// triangle of positive area keeps a positive anchor, so the system stays positive definite.
+pub(super) const MIN_AREA_FRACTION: f64 = 1e-3;
+
+/// The anchor weight of each vertex: `λ_pos · a_v / D²`, with `a_v` a third of the area of the
+/// vertex's triangles and `D` the bounding-box diagonal, so the weight per unit surface area is
+/// the same at every mesh resolution and scale. `a_v` is floored at [`MIN_AREA_FRACTION`] of the
+/// mean vertex area; a mesh without extent (D = 0 or no area at all) gets λ_pos per vertex.
+pub(super) fn anchor_weights(
+    positions: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    lambda_position: f64,
+) -> Vec<f64> {
+    let n = positions.len();
+    let mut area = vec![0.0; n];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        let third = (b - a).cross(&(c - a)).norm() / 6.0;
+        for &i in t {
+            area[i as usize] += third;
+        }
+    }
+    let (lo, hi) = positions.iter().fold(
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
+        |(lo, hi), p| (lo.inf(&p.coords), hi.sup(&p.coords)),
+    );
+    let diagonal_sq = (hi - lo).norm_squared();
+    let mean_area = area.iter().sum::<f64>() / n.max(1) as f64;
+    // Guard the divisions: without extent or area there is no length scale to normalise by.
+    if diagonal_sq.is_nan() || diagonal_sq <= 0.0 || mean_area.is_nan() || mean_area <= 0.0 {
+        return vec![lambda_position; n];
+    }
+    let floor = MIN_AREA_FRACTION * mean_area;
+    area.iter()
+        .map(|a| lambda_position * a.max(floor) / diagonal_sq)
+        .collect()
 }

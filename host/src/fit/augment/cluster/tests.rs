@@ -1,0 +1,130 @@
+//! k-means, automatic k and feature scaling on synthetic feature blobs.
+
+use super::*;
+use rand_distr::{Distribution, Normal};
+
+/// `per` points around each centre with isotropic noise `sd`.
+fn blobs(centres: &[Feature], per: usize, sd: f64, seed: u64) -> (Vec<Feature>, Vec<usize>) {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, sd).unwrap();
+    let mut pts = Vec::new();
+    let mut truth = Vec::new();
+    for (c, centre) in centres.iter().enumerate() {
+        for _ in 0..per {
+            pts.push(centre.map(|v| v + noise.sample(&mut rng)));
+            truth.push(c);
+        }
+    }
+    (pts, truth)
+}
+
+/// Fraction of points whose cluster's majority truth label matches their own.
+fn purity(labels: &[usize], truth: &[usize], k: usize, k_true: usize) -> f64 {
+    let mut table = vec![vec![0usize; k_true]; k];
+    for (&l, &t) in labels.iter().zip(truth) {
+        table[l][t] += 1;
+    }
+    let agree: usize = table
+        .iter()
+        .map(|row| row.iter().max().copied().unwrap_or(0))
+        .sum();
+    agree as f64 / labels.len() as f64
+}
+
+const CENTRES: [Feature; 3] = [
+    [1.0, 1.0, 1.0, 3.0],
+    [2.0, 0.5, 0.2, 3.4],
+    [0.2, 0.4, 1.8, 4.2],
+];
+
+#[test]
+fn kmeans_separates_well_separated_blobs_and_is_deterministic() {
+    let (pts, truth) = blobs(&CENTRES, 120, 0.05, 1);
+    let p = kmeans(&pts, 3, 4, 100, 7);
+    assert_eq!(p.centroids.len(), 3);
+    assert_eq!(purity(&p.labels, &truth, 3, 3), 1.0);
+    for c in &CENTRES {
+        let (_, d2) = nearest(c, &p.centroids);
+        assert!(d2.sqrt() < 0.03, "centroid off by {}", d2.sqrt());
+    }
+    assert_eq!(p.sizes.iter().sum::<usize>(), pts.len());
+    // Same seed, same result, bit for bit (also on a 1-thread pool).
+    let again = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| kmeans(&pts, 3, 4, 100, 7));
+    assert_eq!(p, again);
+}
+
+#[test]
+fn automatic_k_finds_three_blobs_and_one_blob() {
+    let (pts, _) = blobs(&CENTRES, 150, 0.08, 2);
+    let config = ClusterConfig::default();
+    let s = select(&pts, &config);
+    assert_eq!(s.partition.centroids.len(), 3, "tried {:?}", s.tried);
+    assert!(s.silhouette.unwrap() > 0.7);
+    // One isotropic blob: no k ≥ 2 reaches "reasonable structure".
+    let (one, _) = blobs(&CENTRES[..1], 400, 0.08, 3);
+    let s = select(&one, &config);
+    assert_eq!(s.partition.centroids.len(), 1, "tried {:?}", s.tried);
+    assert!(s.silhouette.is_none());
+}
+
+#[test]
+fn degenerate_inputs_do_not_panic() {
+    assert!(kmeans(&[], 3, 2, 10, 0).centroids.is_empty());
+    let s = select(&[], &ClusterConfig::default());
+    assert!(s.partition.centroids.is_empty());
+    let single = [[0.5, 0.5, 0.5, 3.0]];
+    let s = select(&single, &ClusterConfig::default());
+    assert_eq!(s.partition.sizes, vec![1]);
+    // Identical features: one cluster even when more are asked for.
+    let same = vec![[0.3, 0.2, 0.1, 3.0]; 50];
+    let p = kmeans(&same, 4, 3, 50, 0);
+    assert_eq!(p.sizes, vec![50]);
+    assert!(p.inertia < 1e-20);
+    let fixed = ClusterConfig {
+        k: Some(5),
+        ..ClusterConfig::default()
+    };
+    assert_eq!(select(&same, &fixed).partition.centroids.len(), 1);
+    assert_eq!(
+        select(&same, &ClusterConfig::default()).partition.sizes,
+        vec![50]
+    );
+}
+
+#[test]
+fn feature_scaling_clips_and_floors() {
+    // Two materials: λ₁ is dominated by the material difference.
+    let mut rho = vec![[0.2, 0.2, 0.2]; 50];
+    rho.extend(vec![[0.6, 0.6, 0.6]; 50]);
+    rho.push([100.0, 0.2, 0.2]); // an outlier, clipped at 10 × max median
+    let s = FeatureScaling::from_members(&rho);
+    assert!((s.rho_d_clip - 6.0).abs() < 1e-12, "{s:?}");
+    let f = s.feature([100.0, 0.2, 0.2], 5.0);
+    assert!((f[0] - 6.0 * s.rho_d_scale).abs() < 1e-12);
+    assert_eq!(f[3], 6.0);
+    // √λ₁ of a ±0.2 split along (1,1,1)/√3: 0.2·√3 ≈ 0.346 (outlier adds a little).
+    assert!(
+        s.rho_d_scale > 1.0 / 0.6 && s.rho_d_scale < 1.0 / 0.3,
+        "{s:?}"
+    );
+    // One material, no spread: the floor (0.5 × max median) sets the scale.
+    let s = FeatureScaling::from_members(&[[0.4, 0.3, 0.2]; 20]);
+    assert!((s.rho_d_scale - 1.0 / 0.2).abs() < 1e-9, "{s:?}");
+    // All zero: identity, finite.
+    let s = FeatureScaling::from_members(&[[0.0; 3]; 5]);
+    assert_eq!(s.rho_d_scale, 1.0);
+    assert!(s.feature([0.0; 3], 1.5).iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn min_cluster_size_scales_with_the_mesh() {
+    assert_eq!(effective_min_cluster_vertices(100, 100_000), 100);
+    assert_eq!(effective_min_cluster_vertices(100, 5000), 100);
+    assert_eq!(effective_min_cluster_vertices(100, 600), 12);
+    assert_eq!(effective_min_cluster_vertices(100, 10), 5);
+    assert_eq!(effective_min_cluster_vertices(3, 10), 3);
+}
