@@ -13,14 +13,14 @@
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
-//! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, shape update).
-//!
-//! Later modules: export.
+//! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, augmentation, shape).
+//! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit).
 
 pub mod acquire;
 pub mod calibrate;
 pub mod camera;
 pub mod cli;
+pub mod export;
 pub mod fit;
 pub mod link;
 pub mod polar;

@@ -75,6 +75,26 @@ impl SampleGeometry {
 }
 
 impl ViewGeometry {
+    /// The view of a rig at `world_from_camera` (OpenCV camera axes): camera up = −y of the
+    /// camera frame, the flash rigidly offset from the camera and its polariser axis, exactly as
+    /// the renderer places them (`FlashSpec::position_world`, `FlashSpec::polariser_axis_world`).
+    pub fn from_rig(
+        frame_id: u64,
+        world_from_camera: &nalgebra::Isometry3<f64>,
+        flash: &ellipso_sim::scene::FlashSpec,
+    ) -> Self {
+        let up = world_from_camera.transform_vector(&Vector3::new(0.0, -1.0, 0.0));
+        Self {
+            frame_id,
+            camera_position_world: world_from_camera.translation.vector.into(),
+            camera_up_world: up.into(),
+            flash_position_world: flash.position_world(world_from_camera).coords.into(),
+            polariser_axis_world: flash
+                .polariser_axis_world(world_from_camera)
+                .map(|a| a.into_inner().into()),
+        }
+    }
+
     /// The flash polariser in the light frame [`ViewGeometry::geometry_at`] builds (angle 0:
     /// the light frame's x is the polariser axis).
     pub fn flash_polariser(&self) -> FlashPolariser {

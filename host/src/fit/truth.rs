@@ -16,10 +16,9 @@ use ellipso_sim::geometry::procedural::{
     BLOB_AMPLITUDE, BLOB_REGIONS, BLOB_SEED, bumpy_icosphere, icosphere,
 };
 use ellipso_sim::geometry::{MeshError, TriangleMesh};
-use ellipso_sim::optics::camera_up_from_opencv;
 use ellipso_sim::optics::pbrdf::PbrdfParams;
 use ellipso_sim::scene::{CameraPose, MaterialBinding, ObjectGeometry, Scene};
-use nalgebra::{Isometry3, Point3, Vector3};
+use nalgebra::{Point3, Vector3};
 
 use super::data::ViewGeometry;
 
@@ -137,33 +136,12 @@ impl TruthObject {
     }
 }
 
-/// The fit's view of one camera pose of `scene`'s rig.
-pub fn view_of_pose(
-    scene: &Scene,
-    frame_id: u64,
-    world_from_camera: &Isometry3<f64>,
-) -> ViewGeometry {
-    let r_camera_from_world = world_from_camera.rotation.inverse().to_rotation_matrix();
-    let m = r_camera_from_world.matrix();
-    let rows = [0, 1, 2].map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]]);
-    let flash = &scene.rig.flash;
-    ViewGeometry {
-        frame_id,
-        camera_position_world: world_from_camera.translation.vector.into(),
-        camera_up_world: camera_up_from_opencv(rows),
-        flash_position_world: flash.position_world(world_from_camera).coords.into(),
-        polariser_axis_world: flash
-            .polariser_axis_world(world_from_camera)
-            .map(|a| a.into_inner().into()),
-    }
-}
-
 /// The fit views of `poses` (frame id = pose index).
 pub fn views_of_scene(scene: &Scene, poses: &[CameraPose]) -> Vec<ViewGeometry> {
     poses
         .iter()
         .enumerate()
-        .map(|(k, p)| view_of_pose(scene, k as u64, &p.world_from_camera))
+        .map(|(k, p)| ViewGeometry::from_rig(k as u64, &p.world_from_camera, &scene.rig.flash))
         .collect()
 }
 

@@ -1,0 +1,458 @@
+//! The fit's pictures, rendered from the fitted model through the same optics the simulator
+//! renders with (`ellipso_sim::optics`).
+//!
+//! Contract (per picture, one PNG each; see docs/fit-outputs.md for how to read them):
+//! - parameter maps: η, σs, σss, ρs, η standard error (viridis, robust range, colour bar), ρd and
+//!   ρss as RGB (linear albedo × display gain, sRGB), the normal map (camera frame, n·½ + ½);
+//! - the 3×3 Mueller grid: per pixel the linear 3×3 block of the full pBRDF (`pbrdf::evaluate`,
+//!   mean of the colour channels) for the rig's own camera/flash geometry at that view, M00 in
+//!   viridis (log10) and every other element as M_ij/M00 in a diverging map over [−1, 1];
+//! - DoLP and AoLP of the light the camera receives under the rig's polarised flash;
+//! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), tone-mapped by its
+//!   99th percentile, sRGB; the novel view: the same light from another camera pose.
+//! Pixels where the mesh is not hit, or whose vertices failed (`TooFewViews`), are grey.
+
+use ellipso_sim::optics::Vec3;
+use ellipso_sim::optics::measure::FlashPolariser;
+use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams, apply, evaluate, evaluate_s0};
+use ellipso_sim::optics::{Frame, Stokes};
+use ellipso_sim::scene::FlashSpec;
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::colour::{Bar, ColourMap, Panel, figure, robust_range, srgb};
+use super::raster::{Hit, ViewCamera, rasterise};
+use crate::fit::data::{FitFlag, VertexFit, ViewGeometry};
+use crate::report::Canvas;
+use ellipso_sim::geometry::TriangleMesh;
+
+/// Per-vertex arrays interpolated over pixels.
+struct Field {
+    params: Vec<[f64; 10]>,
+    normals: Vec<[f64; 3]>,
+    eta_std: Vec<[f64; 1]>,
+    failed: Vec<bool>,
+}
+
+impl Field {
+    fn new(fits: &[VertexFit]) -> Self {
+        Self {
+            params: fits
+                .iter()
+                .map(|f| {
+                    let p = &f.params;
+                    [
+                        p.eta,
+                        p.sigma_s,
+                        p.sigma_ss,
+                        p.rho_s,
+                        p.rho_ss[0],
+                        p.rho_ss[1],
+                        p.rho_ss[2],
+                        p.rho_d[0],
+                        p.rho_d[1],
+                        p.rho_d[2],
+                    ]
+                })
+                .collect(),
+            normals: fits.iter().map(|f| f.normal_world).collect(),
+            eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
+            failed: fits
+                .iter()
+                .map(|f| f.flags.contains(&FitFlag::TooFewViews))
+                .collect(),
+        }
+    }
+
+    /// Parameters and unit normal at a hit; `None` when any vertex of its triangle failed.
+    fn at(&self, hit: &Hit) -> Option<(PbrdfParams<f64>, [f64; 3])> {
+        if hit.vertices.iter().any(|&v| self.failed[v as usize]) {
+            return None;
+        }
+        let p = hit.interpolate(&self.params);
+        let n = Vector3::from(hit.interpolate(&self.normals));
+        let n = n.try_normalize(1e-12)?;
+        // Interpolating valid parameters keeps them valid (a convex combination), except for
+        // rounding at σs = σss: restore the order.
+        let params = PbrdfParams {
+            eta: p[0].max(1.0),
+            sigma_s: p[1].clamp(0.0, 1.0),
+            sigma_ss: p[2].clamp(p[1].clamp(0.0, 1.0), 1.0),
+            rho_s: p[3].max(0.0),
+            rho_ss: [p[4].max(0.0), p[5].max(0.0), p[6].max(0.0)],
+            rho_d: [p[7].max(0.0), p[8].max(0.0), p[9].max(0.0)],
+        };
+        Some((params, n.into()))
+    }
+}
+
+/// One rendered picture.
+pub struct Picture {
+    /// File stem, e.g. `map-eta`.
+    pub name: &'static str,
+    /// The framed figure.
+    pub canvas: Canvas,
+}
+
+/// The model's geometry at a surface point for a view (camera + flash as the rig places them).
+fn model_geometry(
+    view: &ViewGeometry,
+    point: &Point3<f64>,
+    normal: [f64; 3],
+) -> Option<Geometry<f64>> {
+    let g = view.geometry_at(point)?;
+    g.model::<f64>(Vec3::from_f64(normal)).ok()
+}
+
+/// The maps, Mueller grid, DoLP/AoLP and relit pictures of one view.
+pub fn pictures(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+    flash: &FlashSpec,
+    light_world: &Point3<f64>,
+) -> Vec<Picture> {
+    let field = Field::new(fits);
+    let hits = rasterise(mesh, camera);
+    let (w, h) = (camera.width, camera.height);
+    let at: Vec<Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>> = hits
+        .iter()
+        .map(|hit| {
+            let hit = (*hit)?;
+            let (p, n) = field.at(&hit)?;
+            Some((p, n, hit.point_world, hit))
+        })
+        .collect();
+    let mut out = Vec::new();
+    let scalar =
+        |name: &'static str, title: &str, label: &str, f: &dyn Fn(&PbrdfParams<f64>) -> f64| {
+            let values: Vec<Option<f64>> =
+                at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
+            let (lo, hi) = robust_range(&values);
+            let panel = Panel::scalar(w, h, &values, ColourMap::Viridis, lo, hi);
+            let bar = Bar {
+                map: ColourMap::Viridis,
+                lo,
+                hi,
+                label: label.into(),
+            };
+            Picture {
+                name,
+                canvas: figure(title, &panel, Some(&bar)),
+            }
+        };
+    out.push(scalar("map-eta", "refractive index eta", "eta", &|p| p.eta));
+    out.push(scalar(
+        "map-sigma-s",
+        "specular roughness sigma_s (GGX)",
+        "sigma_s",
+        &|p| p.sigma_s,
+    ));
+    out.push(scalar(
+        "map-sigma-ss",
+        "single-scattering roughness sigma_ss",
+        "sigma_ss",
+        &|p| p.sigma_ss,
+    ));
+    out.push(scalar(
+        "map-rho-s",
+        "specular albedo rho_s",
+        "rho_s",
+        &|p| p.rho_s,
+    ));
+    // η standard error (per vertex, interpolated).
+    let eta_std: Vec<Option<f64>> = hits
+        .iter()
+        .zip(&at)
+        .map(|(hit, a)| {
+            a.as_ref()?;
+            let s = hit.as_ref()?.interpolate(&field.eta_std)[0];
+            s.is_finite().then_some(s)
+        })
+        .collect();
+    let (lo, hi) = robust_range(&eta_std);
+    out.push(Picture {
+        name: "map-eta-std",
+        canvas: figure(
+            "eta standard error (grey: not identifiable)",
+            &Panel::scalar(w, h, &eta_std, ColourMap::Viridis, lo, hi),
+            Some(&Bar {
+                map: ColourMap::Viridis,
+                lo,
+                hi,
+                label: "std(eta)".into(),
+            }),
+        ),
+    });
+    let rgb = |name: &'static str, title: &str, f: &dyn Fn(&PbrdfParams<f64>) -> [f64; 3]| {
+        let values: Vec<Option<[f64; 3]>> =
+            at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
+        let mut all: Vec<Option<f64>> = values.iter().flatten().flat_map(|c| c.map(Some)).collect();
+        let gain = 0.9 / robust_range(&all).1.max(1e-9);
+        all.clear();
+        let panel = Panel {
+            width: w,
+            height: h,
+            pixels: values
+                .iter()
+                .map(|v| v.map(|c| c.map(|x| srgb(x * gain))))
+                .collect(),
+        };
+        Picture {
+            name,
+            canvas: figure(&format!("{title} (x{gain:.2} for display)"), &panel, None),
+        }
+    };
+    out.push(rgb("map-rho-d", "diffuse albedo rho_d (RGB)", &|p| p.rho_d));
+    out.push(rgb(
+        "map-rho-ss",
+        "single-scattering albedo rho_ss (RGB)",
+        &|p| p.rho_ss,
+    ));
+    let camera_from_world = camera.world_from_camera.inverse();
+    let normal_panel = Panel {
+        width: w,
+        height: h,
+        pixels: at
+            .iter()
+            .map(|a| {
+                a.as_ref().map(|(_, n, ..)| {
+                    // Camera frame with y up and z toward the viewer (the usual normal-map colours).
+                    let c = camera_from_world.transform_vector(&Vector3::from(*n));
+                    let v = [c.x, -c.y, -c.z];
+                    v.map(|x| ((x * 0.5 + 0.5) * 255.0).clamp(0.0, 255.0) as u8)
+                })
+            })
+            .collect(),
+    };
+    out.push(Picture {
+        name: "map-normal",
+        canvas: figure(
+            "refined normals (camera frame: x red, y-up green, toward viewer blue)",
+            &normal_panel,
+            None,
+        ),
+    });
+    let view = ViewGeometry::from_rig(0, &camera.world_from_camera, flash);
+    out.push(mueller_grid(&at, w, h, &view));
+    out.extend(polarisation(&at, w, h, &view));
+    out.push(relit(
+        &at,
+        w,
+        h,
+        camera,
+        light_world,
+        "relit",
+        "relit under a new point light (unpolarised)",
+    ));
+    out
+}
+
+type PixelModel = Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>;
+
+/// The linear 3×3 block of the full pBRDF (mean over colour channels) at a surface point seen
+/// by `view` with its flash; `None` where the geometry degenerates or nothing is reflected.
+pub fn mueller_at(
+    view: &ViewGeometry,
+    params: &PbrdfParams<f64>,
+    normal: [f64; 3],
+    point: &Point3<f64>,
+) -> Option<[[f64; 3]; 3]> {
+    let g = model_geometry(view, point, normal)?;
+    let lobes = evaluate(&g, params);
+    let mut sum = [[0.0; 3]; 3];
+    for c in 0..3 {
+        let l = lobes.total(c).linear3();
+        for i in 0..3 {
+            for j in 0..3 {
+                sum[i][j] += l[i][j] / 3.0;
+            }
+        }
+    }
+    (sum[0][0] > 0.0 && sum[0][0].is_finite()).then_some(sum)
+}
+
+/// The 3×3 Mueller grid (see the module doc).
+fn mueller_grid(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Picture {
+    let m: Vec<Option<[[f64; 3]; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            mueller_at(view, p, *n, point)
+        })
+        .collect();
+    let cell_w = w;
+    let cell_h = h;
+    let title_px = 14;
+    let mut canvas = Canvas::new(3 * cell_w + 8, 3 * (cell_h + title_px) + 40, [24, 24, 24]);
+    let m00: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[0][0].log10())).collect();
+    let (lo, hi) = robust_range(&m00);
+    for i in 0..3 {
+        for j in 0..3 {
+            let panel = if i == 0 && j == 0 {
+                Panel::scalar(w, h, &m00, ColourMap::Viridis, lo, hi)
+            } else {
+                let v: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[i][j] / x[0][0])).collect();
+                Panel::scalar(w, h, &v, ColourMap::Diverging, -1.0, 1.0)
+            };
+            let (iu, ju) = (i as u32, j as u32);
+            let x = i64::from(ju * (cell_w + 4));
+            let y = i64::from(iu * (cell_h + title_px));
+            let label = if i == 0 && j == 0 {
+                "log10 M00".to_string()
+            } else {
+                format!("M{i}{j}/M00")
+            };
+            canvas.text(x + 2, y + 3, &label, [240, 240, 240], 1);
+            super::colour::blit(&mut canvas, &panel, x, y + i64::from(title_px));
+        }
+    }
+    let bar_y = i64::from(3 * (cell_h + title_px) + 4);
+    let half = (3 * cell_w) / 2 - 8;
+    super::colour::draw_bar(
+        &mut canvas,
+        &Bar {
+            map: ColourMap::Viridis,
+            lo,
+            hi,
+            label: "log10 M00".into(),
+        },
+        4,
+        bar_y,
+        half,
+    );
+    super::colour::draw_bar(
+        &mut canvas,
+        &Bar {
+            map: ColourMap::Diverging,
+            lo: -1.0,
+            hi: 1.0,
+            label: "Mij/M00".into(),
+        },
+        i64::from(half + 12),
+        bar_y,
+        half,
+    );
+    Picture {
+        name: "mueller-grid",
+        canvas,
+    }
+}
+
+/// DoLP and AoLP under the rig's polarised flash.
+fn polarisation(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Vec<Picture> {
+    let stokes: Vec<Option<[f64; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            let g = model_geometry(view, point, *n)?;
+            let s = apply(&g, p, FlashPolariser::default().stokes(1.0));
+            let mean = |f: fn(&Stokes<f64>) -> f64| s.iter().map(f).sum::<f64>() / 3.0;
+            let s0 = mean(|s| s.s0);
+            (s0 > 1e-12).then(|| [s0, mean(|s| s.s1), mean(|s| s.s2)])
+        })
+        .collect();
+    let dolp: Vec<Option<f64>> = stokes
+        .iter()
+        .map(|s| s.map(|s| s[1].hypot(s[2]) / s[0]))
+        .collect();
+    let aolp: Vec<Option<f64>> = stokes
+        .iter()
+        .map(|s| s.map(|s| (0.5 * s[2].atan2(s[1])).rem_euclid(std::f64::consts::PI)))
+        .collect();
+    let (_, hi) = robust_range(&dolp);
+    vec![
+        Picture {
+            name: "dolp",
+            canvas: figure(
+                "degree of linear polarisation under the rig's flash",
+                &Panel::scalar(w, h, &dolp, ColourMap::Viridis, 0.0, hi.max(1e-3)),
+                Some(&Bar {
+                    map: ColourMap::Viridis,
+                    lo: 0.0,
+                    hi: hi.max(1e-3),
+                    label: "DoLP".into(),
+                }),
+            ),
+        },
+        Picture {
+            name: "aolp",
+            canvas: figure(
+                "angle of linear polarisation (camera x = 0, counter-clockwise)",
+                &Panel::scalar(w, h, &aolp, ColourMap::Cyclic, 0.0, std::f64::consts::PI),
+                Some(&Bar {
+                    map: ColourMap::Cyclic,
+                    lo: 0.0,
+                    hi: 180.0,
+                    label: "AoLP (deg)".into(),
+                }),
+            ),
+        },
+    ]
+}
+
+/// s0 under an unpolarised point light at `light_world`, seen by `camera`.
+pub fn relit(
+    at: &[PixelModel],
+    w: u32,
+    h: u32,
+    camera: &ViewCamera,
+    light_world: &Point3<f64>,
+    name: &'static str,
+    title: &str,
+) -> Picture {
+    let eye = camera.centre_world();
+    let rgb: Vec<Option<[f64; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            let to_light = light_world - point;
+            let d2 = to_light.norm_squared().max(1e-12);
+            let to_light = Vec3::from_f64(to_light.normalize().into());
+            let to_camera = Vec3::from_f64((eye - point).normalize().into());
+            let up = Vec3::from_f64([0.0, 0.0, 1.0]);
+            let alt = Vec3::from_f64([1.0, 0.0, 0.0]);
+            // Any frame serves for unpolarised light; pick an up not parallel to the beam.
+            let light = Frame::light(to_light, up)
+                .or_else(|_| Frame::light(to_light, alt))
+                .ok()?;
+            let cam = Frame::camera(to_camera, up)
+                .or_else(|_| Frame::camera(to_camera, alt))
+                .ok()?;
+            let g = Geometry::new(Vec3::from_f64(*n), to_light, to_camera, light, cam).ok()?;
+            let s0 = evaluate_s0(&g, p, Stokes::unpolarised(1.0));
+            Some(s0.map(|v| v / d2))
+        })
+        .collect();
+    let all: Vec<Option<f64>> = rgb.iter().flatten().flat_map(|c| c.map(Some)).collect();
+    let gain = 0.9 / robust_range(&all).1.max(1e-12);
+    let panel = Panel {
+        width: w,
+        height: h,
+        pixels: rgb
+            .iter()
+            .map(|v| v.map(|c| c.map(|x| srgb(x * gain))))
+            .collect(),
+    };
+    Picture {
+        name,
+        canvas: figure(title, &panel, None),
+    }
+}
+
+/// The per-pixel model of a view (for the novel view and tests).
+pub fn pixel_models(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+) -> Vec<PixelModel> {
+    let field = Field::new(fits);
+    rasterise(mesh, camera)
+        .into_iter()
+        .map(|hit| {
+            let hit = hit?;
+            let (p, n) = field.at(&hit)?;
+            Some((p, n, hit.point_world, hit))
+        })
+        .collect()
+}

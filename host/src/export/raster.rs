@@ -1,0 +1,151 @@
+//! Rasterising the fitted mesh into a view: which surface point, normal and per-vertex values
+//! every pixel sees.
+//!
+//! Contract:
+//! - [`ViewCamera`] is an ideal pinhole camera at a pose (`world_from_camera`, OpenCV axes: x
+//!   right, y down, z forward) whose focal length frames a given bounding sphere — so pictures
+//!   show the object large whatever the capture distance. [`ViewCamera::framing`] builds it.
+//! - [`rasterise`] casts one ray per pixel centre through the mesh's BVH (rayon over rows,
+//!   deterministic) and returns, per pixel, the hit triangle's vertex indices and barycentric
+//!   weights, the world point and the camera-frame depth, or `None` for background.
+//! - Values are interpolated with [`Hit::interpolate`]; normals are renormalised by the caller.
+
+use ellipso_sim::geometry::{Intersect, Ray, TriangleMesh};
+use nalgebra::{Isometry3, Point3, Vector3};
+use rayon::prelude::*;
+
+/// An ideal pinhole camera for pictures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewCamera {
+    /// Camera → world (OpenCV axes).
+    pub world_from_camera: Isometry3<f64>,
+    /// Width, px.
+    pub width: u32,
+    /// Height, px.
+    pub height: u32,
+    /// Focal length, px (square pixels).
+    pub focal_px: f64,
+}
+
+impl ViewCamera {
+    /// A `width × height` camera at `world_from_camera` whose view just contains the sphere
+    /// (`centre`, `radius_m`) with a 10 % margin. The camera must be outside the sphere; a
+    /// camera inside (or at) it gets a 90° field of view.
+    pub fn framing(
+        world_from_camera: Isometry3<f64>,
+        width: u32,
+        height: u32,
+        centre: &Point3<f64>,
+        radius_m: f64,
+    ) -> Self {
+        let d = (centre - Point3::from(world_from_camera.translation.vector)).norm();
+        // tan of the half-angle the sphere subtends, guarded for a camera inside it.
+        let tan_half = if d > radius_m * 1.01 {
+            let s = (radius_m / d).clamp(0.0, 0.99);
+            s / (1.0 - s * s).sqrt()
+        } else {
+            1.0
+        };
+        let half_px = f64::from(width.min(height)) / 2.0;
+        Self {
+            world_from_camera,
+            width,
+            height,
+            focal_px: half_px / (1.1 * tan_half),
+        }
+    }
+
+    /// The world ray through pixel centre (x, y).
+    pub fn ray(&self, x: u32, y: u32) -> Ray {
+        let u = (f64::from(x) + 0.5 - f64::from(self.width) / 2.0) / self.focal_px;
+        let v = (f64::from(y) + 0.5 - f64::from(self.height) / 2.0) / self.focal_px;
+        let dir = self
+            .world_from_camera
+            .transform_vector(&Vector3::new(u, v, 1.0).normalize());
+        Ray::new(Point3::from(self.world_from_camera.translation.vector), dir)
+    }
+
+    /// The camera centre, world.
+    pub fn centre_world(&self) -> Point3<f64> {
+        Point3::from(self.world_from_camera.translation.vector)
+    }
+}
+
+/// What one pixel sees.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// The hit triangle's vertex indices.
+    pub vertices: [u32; 3],
+    /// Barycentric weights (sum 1).
+    pub barycentric: [f64; 3],
+    /// The world point.
+    pub point_world: Point3<f64>,
+}
+
+impl Hit {
+    /// Barycentric interpolation of a per-vertex value.
+    pub fn interpolate<const N: usize>(&self, values: &[[f64; N]]) -> [f64; N] {
+        let mut out = [0.0; N];
+        for (k, &v) in self.vertices.iter().enumerate() {
+            let w = self.barycentric[k];
+            for (o, x) in out.iter_mut().zip(values[v as usize]) {
+                *o += w * x;
+            }
+        }
+        out
+    }
+}
+
+/// One hit or `None` per pixel, row-major.
+pub fn rasterise(mesh: &TriangleMesh, camera: &ViewCamera) -> Vec<Option<Hit>> {
+    (0..camera.height)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..camera.width).map(move |x| {
+                let ray = camera.ray(x, y);
+                let hit = mesh.intersect(&ray, 0.0, f64::INFINITY)?;
+                Some(Hit {
+                    vertices: mesh.triangle(hit.primitive),
+                    barycentric: hit.barycentric,
+                    point_world: ray.at(hit.t),
+                })
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ellipso_sim::geometry::procedural::icosphere;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn sphere() -> TriangleMesh {
+        let (dirs, faces) = icosphere(3);
+        let pos = dirs
+            .iter()
+            .map(|d| Point3::from(d.into_inner() * 0.04))
+            .collect();
+        TriangleMesh::new(pos, None, None, faces).unwrap()
+    }
+
+    #[test]
+    fn a_framed_sphere_fills_the_middle_and_leaves_the_corners() {
+        // Camera 0.5 m along +z looking down −z (OpenCV z forward = world −z).
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 0.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let cam = ViewCamera::framing(pose, 64, 48, &Point3::origin(), 0.04);
+        let hits = rasterise(&sphere(), &cam);
+        assert_eq!(hits.len(), 64 * 48);
+        let centre = hits[24 * 64 + 32].expect("centre hits the sphere");
+        assert!((centre.point_world.z - 0.04).abs() < 1e-3);
+        assert!(hits[0].is_none() && hits[64 * 48 - 1].is_none());
+        let covered = hits.iter().filter(|h| h.is_some()).count() as f64 / (64.0 * 48.0);
+        // The disc spans ~1/1.1 of the short side: π·(0.45·48)²/(64·48) ≈ 0.48.
+        assert!((0.35..0.6).contains(&covered), "{covered}");
+        let w: f64 = centre.barycentric.iter().sum();
+        assert!((w - 1.0).abs() < 1e-9);
+    }
+}
