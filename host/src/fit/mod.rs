@@ -12,8 +12,12 @@
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
 //!
+//! - [`observe`]: observation extraction — a recorded session, camera poses and a mesh become
+//!   a [`data::SampleSet`] (visibility, flash shadows, superpixel sampling, normaliser, gates).
+//!
 //! Later stages (observation extraction from a session, the solver, specular augmentation,
 //! the shape update, the pipeline) each consume and produce these types.
 
 pub mod data;
 pub mod gate;
+pub mod observe;
