@@ -26,7 +26,9 @@ enum Command {
     Polar(cli::polar::Args),
     /// Calibrate the camera (intrinsics, distortion) from a session of AprilTag board frames.
     Calibrate(cli::calibrate::Args),
-    /// Benchmarks that write reports (pose accuracy and speed on rendered frames).
+    /// Fit the per-vertex polarimetric SVBRDF and refined shape of a session to a mesh.
+    Fit(cli::fit::Args),
+    /// Benchmarks that write reports (pose accuracy and speed; the fit's accuracy vs time).
     #[command(subcommand)]
     Bench(cli::bench::Args),
     /// List trigger boards (serial ports), video devices and, with --gige, GigE cameras.
@@ -68,6 +70,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Devices(args) => cli::devices::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
+        Command::Fit(args) => cli::fit::run(args),
         Command::Sim(args) => cli::sim::run(args),
     }
 }

@@ -7,6 +7,7 @@ pub mod calibrate;
 pub mod capture;
 pub mod demo;
 pub mod devices;
+pub mod fit;
 pub mod model;
 pub mod polar;
 pub mod replay;

@@ -210,17 +210,7 @@ pub fn view_of(
     frame_id: u64,
     world_from_camera: &Isometry3<f64>,
 ) -> ViewGeometry {
-    // Same expression as the renderer (equal to optics::camera_up_from_opencv of the inverse).
-    let up = -(world_from_camera.rotation * Vector3::y());
-    ViewGeometry {
-        frame_id,
-        camera_position_world: world_from_camera.translation.vector.into(),
-        camera_up_world: up.into(),
-        flash_position_world: flash.position_world(world_from_camera).coords.into(),
-        polariser_axis_world: flash
-            .polariser_axis_world(world_from_camera)
-            .map(|a| a.into_inner().into()),
-    }
+    ViewGeometry::from_rig(frame_id, world_from_camera, flash)
 }
 
 /// One view per pose, in the order given, with the session's recorded flash.

@@ -1,0 +1,144 @@
+//! `ellipso fit SESSION --mesh MESH --out DIR`: the polarimetric SVBRDF and refined shape of a
+//! recorded session, per mesh vertex, with its pictures.
+//!
+//! Poses come from the session's `pose` events (tracked now and appended when the log has
+//! none). The mesh is a triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from
+//! any scanner or photogrammetry. Writes `fit.ply` (per-vertex parameters and uncertainties),
+//! the pictures of the fitted model from one captured view, and `fit-summary.json`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use ellipso_sim::geometry::TriangleMesh;
+use nalgebra::Isometry3;
+
+use crate::fit::observe::poses_from_session;
+use crate::fit::session::{SessionFit, SessionFitConfig, fit_session};
+use crate::session::reader::Session;
+
+/// Arguments of `ellipso fit`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The session directory.
+    pub session: PathBuf,
+    /// Triangle mesh of the object (PLY or OBJ), board coordinates, metres.
+    #[arg(long)]
+    pub mesh: PathBuf,
+    /// Output directory.
+    #[arg(long, default_value = "ellipso-fit")]
+    pub out: PathBuf,
+    /// Frame id of the view the pictures are rendered from (default: the first posed frame).
+    #[arg(long)]
+    pub view: Option<u64>,
+    /// Outer iterations (solve ↔ shape update); 1 keeps the input geometry.
+    #[arg(long, default_value_t = 2)]
+    pub outer: usize,
+    /// Skip the specular augmentation (clusters, virtual samples, final passes).
+    #[arg(long)]
+    pub no_augment: bool,
+}
+
+/// Runs `ellipso fit`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let session = crate::session::reader::open(&args.session)?;
+    let mesh = TriangleMesh::load(&args.mesh)
+        .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
+    let mut config = SessionFitConfig {
+        outer_iterations: args.outer.max(1),
+        ..SessionFitConfig::default()
+    };
+    if args.no_augment {
+        config.fit.augment = None;
+    }
+    let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
+    println!("\nresults in {}:", args.out.display());
+    for f in &result.files {
+        println!("  {}", f.display());
+    }
+    Ok(())
+}
+
+/// What a session fit wrote.
+pub struct FitRun {
+    /// The fit.
+    pub fit: SessionFit,
+    /// Every file written.
+    pub files: Vec<PathBuf>,
+    /// Wall time, seconds.
+    pub wall_s: f64,
+}
+
+/// The session's recorded poses (`pose` events), tracking them first when there are none.
+pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
+    let mut poses = poses_from_session(session);
+    if poses.is_empty() {
+        println!("no poses recorded: tracking the AprilTags first…");
+        super::capture::track_and_append(&session.dir)?;
+        poses = poses_from_session(&crate::session::reader::open(&session.dir)?);
+    }
+    anyhow::ensure!(
+        !poses.is_empty(),
+        "{}: no frame could be posed from the AprilTags",
+        session.dir.display()
+    );
+    Ok(poses)
+}
+
+/// Fits `mesh` to `session` and writes the outputs into `out` (see the module doc).
+pub fn fit_and_export(
+    session: &Session,
+    mesh: &TriangleMesh,
+    out: &Path,
+    view: Option<u64>,
+    config: &SessionFitConfig,
+) -> anyhow::Result<FitRun> {
+    let started = Instant::now();
+    let poses = poses_of(session)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let fit = fit_session(session, mesh, &poses, config, &mut |stage| {
+        println!("  {stage}…")
+    })?;
+    let (frame_id, world_from_camera) = match view {
+        Some(id) => *poses
+            .iter()
+            .find(|p| p.0 == id)
+            .with_context(|| format!("frame {id} has no pose"))?,
+        None => poses[0],
+    };
+    let rig: crate::process::RigRecord = serde_json::from_value(session.manifest.rig.clone())
+        .context("the session's manifest has no usable rig section")?;
+    let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
+        .context("the session's manifest has no usable flash section")?;
+    println!("  pictures from frame {frame_id}…");
+    let captured_s0 = crate::export::captured_s0(session, frame_id, world_from_camera).ok();
+    let report = crate::export::export_all(
+        out,
+        &fit.mesh,
+        &fit.outcome.fits,
+        &rig.camera,
+        &world_from_camera,
+        &flash,
+        &crate::export::ExportConfig::default(),
+        captured_s0.as_ref(),
+    )?;
+    let wall_s = started.elapsed().as_secs_f64();
+    let mut files = report.files.clone();
+    let summary = out.join("fit-summary.json");
+    let json = serde_json::json!({
+        "session": session.dir.display().to_string(),
+        "vertices": fit.outcome.fits.len(),
+        "frames_posed": poses.len(),
+        "view_frame_id": frame_id,
+        "times_s": fit.outcome.times,
+        "wall_s": wall_s,
+        "gates": fit.gates,
+        "shape_updates_rms_mm": fit.shape_updates.iter().map(|u| u.rms_displacement_m * 1e3).collect::<Vec<_>>(),
+        "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
+        "export": report,
+    });
+    std::fs::write(&summary, serde_json::to_vec_pretty(&json)?)
+        .with_context(|| format!("writing {}", summary.display()))?;
+    files.push(summary);
+    Ok(FitRun { fit, files, wall_s })
+}

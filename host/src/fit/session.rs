@@ -1,0 +1,155 @@
+//! The fit of a recorded session: observations from the frames, the per-vertex solve, the shape
+//! update, repeated for a few outer iterations, then the augmentation and final passes
+//! (optics.md §7.6: the paper alternates solve and Poisson reconstruction; we alternate solve
+//! and a normal-guided vertex update on the fixed connectivity, [`super::shape`]).
+//!
+//! Contract:
+//! - Outer iteration k = 1…K: extract observations of the current mesh from every posed frame
+//!   ([`super::observe::extract`], visibility and shadows recomputed on the current geometry),
+//!   run step A warm-started from iteration k − 1 (same vertices: the connectivity never
+//!   changes, so results carry over by index), and — except after the last iteration — move the
+//!   vertices towards the refined normals. The last iteration runs steps A, B, C
+//!   ([`super::pipeline::fit_sample_set`]).
+//! - The session is only read; nothing recorded is changed.
+//! - Deterministic for a given input on any thread count.
+
+use std::time::Instant;
+
+use ellipso_sim::geometry::TriangleMesh;
+use nalgebra::Isometry3;
+
+use super::data::{GateCounts, SampleSet, VertexFit};
+use super::observe::{ObserveConfig, ObserveError, extract};
+use super::pipeline::{FitConfig, FitOutcome, fit_sample_set};
+use super::shape::{
+    ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
+};
+use super::solve::fit_all;
+use crate::session::reader::Session;
+
+/// Settings of a session fit.
+#[derive(Clone, Debug)]
+pub struct SessionFitConfig {
+    /// Observation extraction (gates, sampling).
+    pub observe: ObserveConfig,
+    /// The per-vertex fit.
+    pub fit: FitConfig,
+    /// Outer iterations (solve ↔ shape); 1 = no shape update.
+    pub outer_iterations: usize,
+    /// The shape update between outer iterations.
+    pub shape: ShapeConfig,
+}
+
+impl Default for SessionFitConfig {
+    fn default() -> Self {
+        Self {
+            observe: ObserveConfig::default(),
+            fit: FitConfig::default(),
+            outer_iterations: 2,
+            shape: ShapeConfig::default(),
+        }
+    }
+}
+
+/// Errors of a session fit.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionFitError {
+    /// Reading observations failed.
+    #[error(transparent)]
+    Observe(#[from] ObserveError),
+    /// The shape update failed.
+    #[error("shape update: {0}")]
+    Shape(#[from] ShapeError),
+    /// No posed frame.
+    #[error("no frame of the session has a pose: track poses first")]
+    NoPoses,
+}
+
+/// A session fit's results.
+pub struct SessionFit {
+    /// The refined mesh (input connectivity, updated positions and normals).
+    pub mesh: TriangleMesh,
+    /// The observations of the last outer iteration.
+    pub set: SampleSet,
+    /// The last iteration's fit (steps A, B, C) with stage timings summed over iterations.
+    pub outcome: FitOutcome,
+    /// One entry per shape update.
+    pub shape_updates: Vec<ShapeUpdate>,
+    /// Gate counts of the last extraction, summed over vertices.
+    pub gates: GateCounts,
+}
+
+/// Fits `mesh` to `session` seen from `poses` (frame id, `world_from_camera`).
+pub fn fit_session(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &SessionFitConfig,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SessionFit, SessionFitError> {
+    if poses.is_empty() {
+        return Err(SessionFitError::NoPoses);
+    }
+    let mut mesh = mesh.clone();
+    let mut previous: Option<Vec<VertexFit>> = None;
+    let mut shape_updates = Vec::new();
+    let mut observe_s = 0.0;
+    let mut joint_s = 0.0;
+    let mut shape_s = 0.0;
+    let iterations = config.outer_iterations.max(1);
+    for k in 1..=iterations {
+        progress(&format!(
+            "outer iteration {k}/{iterations}: observations from {} frames of {} vertices",
+            poses.len(),
+            mesh.positions().len()
+        ));
+        let started = Instant::now();
+        let mut set = extract(session, &mesh, poses, &config.observe, &|_, _| {})?.samples;
+        if let Some(prev) = &previous {
+            // Start the solve from the refined normals, not the re-derived mesh normals.
+            for (v, f) in set.vertices.iter_mut().zip(prev) {
+                v.normal_world = f.normal_world;
+            }
+        }
+        observe_s += started.elapsed().as_secs_f64();
+        if k == iterations {
+            let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
+            outcome.times.observe_s = observe_s;
+            outcome.times.joint_s += joint_s;
+            outcome.times.shape_s = shape_s;
+            let mut gates = GateCounts::default();
+            for v in &set.vertices {
+                gates.add(&v.gates);
+            }
+            return Ok(SessionFit {
+                mesh,
+                set,
+                outcome,
+                shape_updates,
+                gates,
+            });
+        }
+        progress(&format!(
+            "outer iteration {k}/{iterations}: joint per-vertex solve"
+        ));
+        let started = Instant::now();
+        let fits = fit_all(&set, previous.as_deref(), None, &config.fit.solver);
+        joint_s += started.elapsed().as_secs_f64();
+        progress(&format!(
+            "outer iteration {k}/{iterations}: shape update from refined normals"
+        ));
+        let started = Instant::now();
+        let targets = normal_targets(&mesh, &fits, &config.shape)?;
+        let update = refine_positions(
+            &mesh,
+            &targets.normals_world,
+            &targets.confidence,
+            &config.shape,
+        )?;
+        mesh = mesh_with_positions(&mesh, update.positions.clone())?;
+        shape_updates.push(update);
+        shape_s += started.elapsed().as_secs_f64();
+        previous = Some(fits);
+    }
+    unreachable!("the last outer iteration returns")
+}
