@@ -77,7 +77,8 @@ pub struct ObserveConfig {
     pub gate: GateConfig,
     /// Worker threads (`None`: rayon's global pool).
     pub threads: Option<usize>,
-    /// Frames held at once (≥ 1; each costs about 2 × its raw size).
+    /// Frames held at once (≥ 1; each costs about 5.6 × its raw size on a mono sensor: raw,
+    /// demosaic and DN planes, see docs/fit-observe.md).
     pub frames_in_flight: usize,
     /// Sample positions inside a superpixel.
     pub sample_point: SamplePoint,
