@@ -77,7 +77,8 @@ pub struct ObserveConfig {
     pub gate: GateConfig,
     /// Worker threads (`None`: rayon's global pool).
     pub threads: Option<usize>,
-    /// Frames held at once (≥ 1; each costs about 2 × its raw size).
+    /// Frames held at once (≥ 1; each costs about 5.6 × its raw size on a mono sensor: raw,
+    /// demosaic and DN planes, see docs/fit-observe.md).
     pub frames_in_flight: usize,
     /// Sample positions inside a superpixel.
     pub sample_point: SamplePoint,
@@ -389,13 +390,15 @@ pub fn extract_with(
         let raw = RawFrame::new(w, h, bit_depth, layout, px)
             .map_err(|e| format!("{}: {e}", job.entry.path.display()))?;
         let levels = polar.levels(&raw).map_err(|e| e.to_string())?;
-        let image = DnImage::new(
-            &raw,
-            &demosaic(&raw, &levels, DemosaicMethod::Superpixel),
-            &levels,
-            config.sample_point,
-        );
-        let bytes = raw.data_dn().len() * 2 + image.bytes();
+        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+        let image = DnImage::new(&raw, &analysers, &levels, config.sample_point);
+        // Held together at this point: the raw frame, the demosaic (4 f32 planes and a mask
+        // byte per band and superpixel) and its DN copy.
+        let superpixels = analysers.bands.first().map_or(0, |b| b.mask.data().len());
+        let bytes = raw.data_dn().len() * 2
+            + analysers.bands.len() * superpixels * (4 * 4 + 1)
+            + image.bytes();
+        drop(analysers);
         drop(raw);
         let view = view_of(&radiometry.flash, job.frame_id, &job.pose);
         let sampler = FrameSampler::new(

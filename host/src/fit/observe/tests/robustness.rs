@@ -145,9 +145,7 @@ fn views_are_built_like_the_renderer() {
         let m = r.matrix();
         let rows = [0, 1, 2].map(|i| [m[(i, 0)], m[(i, 1)], m[(i, 2)]]);
         let up = camera_up_from_opencv(rows);
-        for k in 0..3 {
-            assert!((up[k] - v.camera_up_world[k]).abs() < 1e-12);
-        }
+        assert!((Vector3::from(up) - Vector3::from(v.camera_up_world)).norm() < 1e-12);
         let flash = scene.rig.flash.position_world(pose);
         assert_eq!(v.flash_position_world, <[f64; 3]>::from(flash.coords));
         let axis = v.polariser_axis_world.unwrap();
