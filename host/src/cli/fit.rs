@@ -41,9 +41,9 @@ pub struct Args {
 
 /// Runs `ellipso fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let session = crate::session::reader::open(&args.session)?;
     let mesh = TriangleMesh::load(&args.mesh)
         .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
+    let session = crate::session::reader::open(&args.session)?;
     let mut config = SessionFitConfig {
         outer_iterations: args.outer.max(1),
         ..SessionFitConfig::default()

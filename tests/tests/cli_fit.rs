@@ -1,0 +1,118 @@
+//! `ellipso fit` across processes: a session recorded by `ellipso capture --sim` (real pty link,
+//! pairing, pose tracking) fitted to a mesh file, as a user runs it; and its bad inputs.
+//!
+//! - the fit writes `fit.ply` (loadable as a mesh, one fitted vertex per input vertex), the
+//!   pictures and `fit-summary.json`, and leaves every recorded frame byte-identical;
+//! - a missing session, a missing mesh and a truncated mesh each fail with one line naming the
+//!   file.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use ellipso_sim::geometry::TriangleMesh;
+use ellipso_sim::geometry::ply::{PlyFormat, write_ply};
+use ellipso_sim::geometry::procedural::icosphere;
+use ellipso_tests::ellipso_bin;
+use nalgebra::Point3;
+
+fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("sim")
+        .join("scenes")
+        .join(name)
+}
+
+/// The sphere scene's object (radius 40 mm at z = 40 mm) as an icosphere mesh file.
+fn sphere_mesh(dir: &Path) -> PathBuf {
+    let (dirs, faces) = icosphere(2);
+    let pos = dirs
+        .iter()
+        .map(|d| Point3::new(0.0, 0.0, 0.04) + d.into_inner() * 0.04)
+        .collect();
+    let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
+    let path = dir.join("sphere.ply");
+    std::fs::write(&path, write_ply(&mesh, PlyFormat::BinaryLittleEndian, false)).unwrap();
+    path
+}
+
+fn frames_snapshot(session: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<_> = std::fs::read_dir(session.join("frames"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .collect();
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| (p.display().to_string(), std::fs::read(&p).unwrap()))
+        .collect()
+}
+
+#[test]
+fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("session");
+    let o = Command::new(ellipso_bin())
+        .args(["capture", "--sim"])
+        .arg(scene("sphere.toml"))
+        .args(["--photos", "16", "--resolution", "612x512", "--supersampling", "1", "--out"])
+        .arg(&session)
+        .output()
+        .expect("spawn capture");
+    assert!(o.status.success(), "capture: {}", String::from_utf8_lossy(&o.stderr));
+    let before = frames_snapshot(&session);
+    let mesh = sphere_mesh(tmp.path());
+    let out = tmp.path().join("fit");
+    let o = Command::new(ellipso_bin())
+        .arg("fit")
+        .arg(&session)
+        .arg("--mesh")
+        .arg(&mesh)
+        .args(["--outer", "1", "--out"])
+        .arg(&out)
+        .output()
+        .expect("spawn fit");
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "fit: {}\n{text}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(text.contains("results in"), "{text}");
+    for f in ["fit.ply", "fit-summary.json", "map-eta.png", "mueller-grid.png", "relit.png"] {
+        assert!(out.join(f).is_file(), "{f} missing: {text}");
+    }
+    let fitted = TriangleMesh::load(&out.join("fit.ply")).expect("fit.ply loads as a mesh");
+    assert_eq!(fitted.positions().len(), 162);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("fit-summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["vertices"].as_u64(), Some(162));
+    assert_eq!(frames_snapshot(&session), before, "recorded frames changed");
+}
+
+#[test]
+fn bad_inputs_fail_with_one_line_naming_the_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = Command::new(ellipso_bin()).arg("fit").args(args).output().unwrap();
+        assert!(!o.status.success());
+        String::from_utf8_lossy(&o.stderr).to_string()
+    };
+    let missing = tmp.path().join("no-such-session");
+    let mesh = sphere_mesh(tmp.path());
+    let e = run(&[missing.as_os_str(), "--mesh".as_ref(), mesh.as_os_str()]);
+    assert!(e.contains("no-such-session"), "{e}");
+    assert_eq!(e.trim().lines().count(), 1, "{e}");
+    // A real (empty) session directory is not needed to check the mesh: the mesh is read first.
+    let truncated = tmp.path().join("truncated.ply");
+    let bytes = std::fs::read(&mesh).unwrap();
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    let e = run(&[tmp.path().as_os_str(), "--mesh".as_ref(), truncated.as_os_str()]);
+    assert!(e.contains("truncated.ply"), "{e}");
+    let e = run(&[
+        tmp.path().as_os_str(),
+        "--mesh".as_ref(),
+        tmp.path().join("absent.ply").as_os_str(),
+    ]);
+    assert!(e.contains("absent.ply"), "{e}");
+}
