@@ -32,7 +32,12 @@ fn thread_cpu_ns() -> Option<u64> {
 }
 
 fn presets() -> Vec<(&'static str, SolverConfig)> {
-    vec![("default", SolverConfig::default())]
+    vec![
+        ("reference", SolverConfig::reference()),
+        ("paper", SolverConfig::paper()),
+        ("default", SolverConfig::default()),
+        ("fast", SolverConfig::fast()),
+    ]
 }
 
 fn unit(v: [f64; 3]) -> [f64; 3] {

@@ -6,7 +6,7 @@ use ellipso_sim::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
 use super::super::model::{tangent_basis, unit_tangent_normal};
-use super::SolverConfig;
+use super::{LossMode, SolverConfig};
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
 
 /// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
@@ -155,9 +155,10 @@ fn jacobian_at(
     (cost, jtj, jtr, re)
 }
 
-/// One LM run from (`raw`, `normal`).
+/// One LM run from (`raw`, `normal`). In measurement mode the problem is reweighted from the
+/// model at the start and after every accepted step (`Problem::reweight`).
 pub(super) fn run(
-    problem: &Problem,
+    problem: &mut Problem,
     raw: [f64; N_RAW],
     normal: [f64; 3],
     config: &SolverConfig,
@@ -168,8 +169,18 @@ pub(super) fn run(
     raw[4] = 0.0;
     raw[5] = 0.0;
     let mut ch = chart(normal);
+    let reweighting = problem.loss == LossMode::Measurement;
+    if reweighting {
+        let (_, a) = cost_at(problem, &ch, raw, config, scratch_f);
+        problem.reweight(scratch_f, &a, physical(raw, config).rho_s);
+    }
     let (mut cost, mut jtj, mut jtr, mut albedos) =
         jacobian_at(problem, &ch, raw, config, scratch_d);
+    // Statistical scale of the cost: s² = cost/(m − p) (module doc of `solve`).
+    let dof = problem
+        .residual_count()
+        .saturating_sub(problem.parameter_count())
+        .max(1) as f64;
     let mut mu = config.initial_damping;
     let mut iterations = 0;
     let mut converged = false;
@@ -215,10 +226,15 @@ pub(super) fn run(
                 t[5] = trial[5];
                 t
             };
-            let (trial_cost, _) = cost_at(problem, &ch, trial, config, scratch_f);
+            let (trial_cost, trial_albedos) = cost_at(problem, &ch, trial, config, scratch_f);
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
                 let decrease = (cost - trial_cost) / cost;
+                let small_in_sigma = cost - trial_cost < config.chi2_tolerance * cost / dof;
+                if reweighting {
+                    // scratch_f holds the trial's unit lobes.
+                    problem.reweight(scratch_f, &trial_albedos, physical(trial, config).rho_s);
+                }
                 let step = delta.norm();
                 let size = raw[..4].iter().map(|v| v * v).sum::<f64>().sqrt();
                 // Re-centre the normal chart on the accepted normal.
@@ -230,6 +246,7 @@ pub(super) fn run(
                 (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
                 mu = (mu / 3.0).max(1e-12);
                 if decrease < config.relative_tolerance
+                    || small_in_sigma
                     || step < config.step_tolerance * (size + config.step_tolerance)
                     || cost <= abs_tol
                 {
