@@ -133,9 +133,9 @@ pub struct SolverConfig {
     /// the other cold starts (default 4: ≈ 1 at a good fit with the right sensor model; 4 leaves
     /// room for a gain off by 2× and mild model error).
     pub restart_reduced_chi2: f64,
-    /// LM also stops when an accepted step lowers the cost by less than this × s², s² =
-    /// cost/(m − p) (the parameters are then within ~√tol standard errors of the optimum;
-    /// default 1e-3; 0 disables).
+    /// LM also stops when the Gauss–Newton decrement (the cost decrease the undamped step
+    /// predicts) is below this × s², s² = cost/(m − p): the parameters are then within ~√tol
+    /// standard errors of the local optimum (default 1e-3; 0 disables).
     pub chi2_tolerance: f64,
     /// ρ_s of cold starts (default 0.5).
     pub initial_rho_s: f64,

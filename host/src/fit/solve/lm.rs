@@ -155,6 +155,21 @@ fn jacobian_at(
     (cost, jtj, jtr, re)
 }
 
+/// The Gauss–Newton decrement rᵀJ(JᵀJ)⁻¹Jᵀr: the cost decrease the undamped step predicts,
+/// i.e. the squared distance to the local optimum in the metric of JᵀJ. Divided by s² it is
+/// that distance in standard errors squared, so it does not stop early in flat valleys (where
+/// a small actual decrease says little). JᵀJ gets a 1e-9·max-diagonal ridge so null directions
+/// count as far (large decrement) only where the gradient points along them; ∞ if singular.
+fn newton_decrement(jtj: &Mat, jtr: &Vector) -> f64 {
+    let max_diag = (0..N_RAW).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
+    let mut a = *jtj;
+    for i in 0..N_RAW {
+        a[(i, i)] += 1e-9 * max_diag + 1e-300;
+    }
+    a.cholesky()
+        .map_or(f64::INFINITY, |c| jtr.dot(&c.solve(jtr)))
+}
+
 /// One LM run from (`raw`, `normal`). In measurement mode the problem is reweighted from the
 /// model at the start and after every accepted step (`Problem::reweight`).
 pub(super) fn run(
@@ -230,7 +245,6 @@ pub(super) fn run(
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
                 let decrease = (cost - trial_cost) / cost;
-                let small_in_sigma = cost - trial_cost < config.chi2_tolerance * cost / dof;
                 if reweighting {
                     // scratch_f holds the trial's unit lobes.
                     problem.reweight(scratch_f, &trial_albedos, physical(trial, config).rho_s);
@@ -245,8 +259,10 @@ pub(super) fn run(
                 raw[5] = 0.0;
                 (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
                 mu = (mu / 3.0).max(1e-12);
+                let near_optimum = config.chi2_tolerance > 0.0
+                    && newton_decrement(&jtj, &jtr) < config.chi2_tolerance * cost / dof;
                 if decrease < config.relative_tolerance
-                    || small_in_sigma
+                    || near_optimum
                     || step < config.step_tolerance * (size + config.step_tolerance)
                     || cost <= abs_tol
                 {
