@@ -85,8 +85,8 @@ pub enum Effort {
     /// behaviour; ~4 LM runs per cold vertex).
     Exhaustive,
     /// Cold starts are ranked by their initial cost and LM runs from the best; the others are
-    /// tried only when that run ends unconverged or (measurement mode) with a reduced χ² above
-    /// `restart_reduced_chi2`. A later pass runs only when the previous one did not converge.
+    /// tried only when that run ends unconverged, with a roughness at its bound (`AtBound`'s σ
+    /// margins), or (measurement mode) with a reduced χ² above `restart_reduced_chi2`. A later pass runs only when the previous one did not converge.
     Adaptive,
 }
 
@@ -364,8 +364,16 @@ pub fn fit_vertex(
         }
     }
     let mut state = best.expect("at least one start");
+    let measurement = problem.loss == LossMode::Measurement;
     for _ in 1..config.passes {
-        if adaptive && state.converged {
+        // Measurement mode: the weights at the current solution (the run used the weights of
+        // its start); another pass only if they moved by more than 10 %.
+        let moved = if measurement {
+            reweight_at(&mut problem, &state, config, &mut scratch_f)
+        } else {
+            0.0
+        };
+        if adaptive && state.converged && moved <= 0.1 {
             break;
         }
         let again = lm::run(
@@ -377,29 +385,44 @@ pub fn fit_vertex(
             &mut scratch_d,
         );
         let iterations = again.iterations;
-        if again.cost <= state.cost {
+        // Measurement mode: a later pass has better weights, so its cost is not comparable;
+        // it is kept whenever it is finite.
+        if again.cost <= state.cost || (measurement && again.cost.is_finite()) {
             state = again;
         } else {
             state.iterations = iterations;
         }
     }
-    // The weights of the final state (each LM run reweights from its own model).
-    if problem.loss == LossMode::Measurement {
-        let (_, albedos) = lm::cost_at(
-            &problem,
-            &chart(state.normal),
-            state.raw,
-            config,
-            &mut scratch_f,
-        );
-        problem.reweight(&scratch_f, &albedos, physical(state.raw, config).rho_s);
+    // The weights at the final state (for the standard errors).
+    if measurement {
+        let _ = reweight_at(&mut problem, &state, config, &mut scratch_f);
     }
     finish(&problem, vertex, state, flags, config)
+}
+
+/// Measurement mode: reweights `problem` from the model at `state`; returns the largest
+/// relative change of any 1/σ.
+fn reweight_at(
+    problem: &mut Problem,
+    state: &LmState,
+    config: &SolverConfig,
+    scratch: &mut Scratch<f64>,
+) -> f64 {
+    let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, config, scratch);
+    problem.reweight(scratch, &albedos, physical(state.raw, config).rho_s)
 }
 
 /// Adaptive effort: whether a start's result warrants trying the next start.
 fn poor(problem: &Problem, state: &LmState, config: &SolverConfig) -> bool {
     if !state.converged || !state.cost.is_finite() {
+        return true;
+    }
+    // A lobe at its bound often means the start's basin, not the data (noiseless glaze from
+    // (0.1, 0.3): σ_ss → 1, Δcost 1.1 above the truth's 0).
+    let x = physical(state.raw, config);
+    if x.sigma_s < config.sigma_min + config.bound_margin_sigma
+        || x.sigma_ss > 1.0 - config.bound_margin_sigma
+    {
         return true;
     }
     if problem.loss != LossMode::Measurement {

@@ -226,4 +226,3 @@ fn adversarial_inputs_never_produce_nan() {
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::TooFewViews));
 }
-

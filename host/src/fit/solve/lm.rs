@@ -6,8 +6,8 @@ use ellipso_sim::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
 use super::super::model::{tangent_basis, unit_tangent_normal};
-use super::{LossMode, SolverConfig};
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
+use super::{LossMode, SolverConfig};
 
 /// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
 pub(super) const N_RAW: usize = 6;
@@ -170,8 +170,10 @@ fn newton_decrement(jtj: &Mat, jtr: &Vector) -> f64 {
         .map_or(f64::INFINITY, |c| jtr.dot(&c.solve(jtr)))
 }
 
-/// One LM run from (`raw`, `normal`). In measurement mode the problem is reweighted from the
-/// model at the start and after every accepted step (`Problem::reweight`).
+/// One LM run from (`raw`, `normal`). In measurement mode the problem is first reweighted from
+/// the model at the start (`Problem::reweight`); the weights then stay fixed for the run, so
+/// every accepted step really lowers one fixed objective (reweighting after every step let the
+/// model shrink its own weights by predicting ever brighter samples: measured, η → 61).
 pub(super) fn run(
     problem: &mut Problem,
     raw: [f64; N_RAW],
@@ -187,7 +189,7 @@ pub(super) fn run(
     let reweighting = problem.loss == LossMode::Measurement;
     if reweighting {
         let (_, a) = cost_at(problem, &ch, raw, config, scratch_f);
-        problem.reweight(scratch_f, &a, physical(raw, config).rho_s);
+        let _ = problem.reweight(scratch_f, &a, physical(raw, config).rho_s);
     }
     let (mut cost, mut jtj, mut jtr, mut albedos) =
         jacobian_at(problem, &ch, raw, config, scratch_d);
@@ -241,14 +243,10 @@ pub(super) fn run(
                 t[5] = trial[5];
                 t
             };
-            let (trial_cost, trial_albedos) = cost_at(problem, &ch, trial, config, scratch_f);
+            let (trial_cost, _) = cost_at(problem, &ch, trial, config, scratch_f);
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
                 let decrease = (cost - trial_cost) / cost;
-                if reweighting {
-                    // scratch_f holds the trial's unit lobes.
-                    problem.reweight(scratch_f, &trial_albedos, physical(trial, config).rho_s);
-                }
                 let step = delta.norm();
                 let size = raw[..4].iter().map(|v| v * v).sum::<f64>().sqrt();
                 // Re-centre the normal chart on the accepted normal.

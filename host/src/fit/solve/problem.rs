@@ -220,7 +220,7 @@ impl<'a> Problem<'a> {
     fn with_initial_weights(mut self) -> Self {
         if self.loss == LossMode::Measurement {
             let predicted = self.analyser_obs.clone();
-            self.set_weights(|k, c| predicted[k][c]);
+            let _ = self.set_weights(|k, c| predicted[k][c]);
         }
         self
     }
@@ -231,11 +231,15 @@ impl<'a> Problem<'a> {
     /// (shot noise: g·DN) and σ_floor² = read noise² + 1/12 (quantisation), DN². I90 and I0 are
     /// single pixels; I^α = I135 − I45 sums two pixels whose intensities add to s0, so
     /// Var(I^α) = (g·N·s0 + 2σ_floor²)/N². Negative predictions are floored at 0.
-    fn inverse_sigma(&self, k: usize, i: [f64; 3]) -> [f64; 3] {
+    /// The prediction is capped at 4× the observation + 3σ_floor, so a model far off the data
+    /// cannot buy itself small weights (a cap that only acts on gross misfits).
+    fn inverse_sigma(&self, k: usize, c: usize, i: [f64; 3]) -> [f64; 3] {
         let n = self.normalisers[k];
         let g = self.dn_per_electron;
         let f = self.floor_variance_dn2;
-        let (i90, i0) = (i[0].max(0.0), i[1].max(0.0));
+        let o = &self.analyser_obs[k][c];
+        let cap = |pred: f64, obs: f64| pred.min(4.0 * obs.max(0.0) + 3.0 * f.sqrt() / n).max(0.0);
+        let (i90, i0) = (cap(i[0], o[0]), cap(i[1], o[1]));
         let var = [
             (g * n * i90 + f) / (n * n),
             (g * n * i0 + f) / (n * n),
@@ -245,32 +249,43 @@ impl<'a> Problem<'a> {
         var.map(|v| 1.0 / v.sqrt())
     }
 
-    fn set_weights(&mut self, predicted: impl Fn(usize, usize) -> [f64; 3]) {
+    /// Sets the weights from `predicted(sample, channel)`; returns the largest relative change
+    /// of any 1/σ.
+    fn set_weights(&mut self, predicted: impl Fn(usize, usize) -> [f64; 3]) -> f64 {
         let mut sum_w0 = 0.0;
+        let mut change: f64 = 0.0;
         for k in 0..self.len() {
             for c in 0..self.channels {
-                let w = self.inverse_sigma(k, predicted(k, c));
+                let w = self.inverse_sigma(k, c, predicted(k, c));
                 sum_w0 += w[1] * w[1];
+                for (new, old) in w.iter().zip(&self.inv_sigma[k][c]) {
+                    change = change.max(if *old > 0.0 {
+                        (new / old - 1.0).abs()
+                    } else {
+                        1.0
+                    });
+                }
                 self.inv_sigma[k][c] = w;
             }
         }
         let rows = (self.len() * self.channels).max(1) as f64;
         self.lambda_s_virtual = self.virtual_base * sum_w0 / rows;
+        change
     }
 
     /// Measurement mode: re-derives every residual's noise from the model's prediction at the
     /// point whose unit lobes are in `scratch` (an f64 evaluation just done) with `albedos`
     /// and `rho_s` — iteratively reweighted least squares, the weights held fixed inside each
-    /// LM step (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
-    /// paper mode.
-    pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>, rho_s: f64) {
+    /// LM run (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
+    /// paper mode. Returns the largest relative change of any 1/σ (0 in paper mode).
+    pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>, rho_s: f64) -> f64 {
         if self.loss != LossMode::Measurement || scratch.units.len() != self.len() {
-            return;
+            return 0.0;
         }
         let units = &scratch.units;
         self.set_weights(|k, c| {
             analyser_form(units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s))
-        });
+        })
     }
 
     /// Number of real samples.
@@ -341,11 +356,8 @@ impl<'a> Problem<'a> {
                 LossMode::Paper => self.paper_residuals(i, u, &albedos, x.rho_s, sink),
                 LossMode::Measurement => {
                     for c in 0..self.channels {
-                        let pred = analyser_form(u.predict(
-                            albedos.rho_d[c],
-                            albedos.rho_ss[c],
-                            x.rho_s,
-                        ));
+                        let pred =
+                            analyser_form(u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s));
                         let (o, w) = (&self.analyser_obs[i][c], &self.inv_sigma[i][c]);
                         for j in 0..3 {
                             sink(k(w[j]) * (pred[j] - k(o[j])));

@@ -291,14 +291,13 @@ fn monochrome_and_warm_start() {
     // A warm start at the solution converges at once and does not reset η. The cold fit
     // stopped within `chi2_tolerance` of the optimum (~0.03 standard errors) and measurement
     // mode reweights from the model, so the warm start may move η by a small fraction of its
-    // standard error and the cost by a few 1e-5.
+    // standard error (and its cost is under slightly different weights: not comparable).
     let warm = fit_all(&set, Some(&cold), None, &config);
     for (c, w) in cold.iter().zip(&warm) {
         assert!(
             (c.params.eta - w.params.eta).abs() <= 0.05 * c.std_error[0] + 1e-6,
             "{c:?} {w:?}"
         );
-        assert!(w.cost <= c.cost * (1.0 + 1e-4), "{c:?} {w:?}");
         assert!(w.iterations <= 3, "{w:?}");
     }
     // The reference preset keeps the strict behaviour: exact re-convergence.
