@@ -8,11 +8,15 @@
 //!   channels then carry no I^s/I^α of the polarised model).
 //! - η: each sample's diffuse-only Stokes vector is the observation minus the vertex's own
 //!   fitted specular + single-scattering prediction (`measure::observe` with ρ_d = 0); channels
-//!   are combined with weights ρ_d/Σρ_d (optics.md §5.4) and DoP = √(s1² + s2²)/s0 with
-//!   s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part. This is exactly |T−|/T+ of the
-//!   rank-one diffuse lobe, so it equals `dop_diffuse(θ_o, η)` with no τ² bias (the paper uses
-//!   raw I^s as β and DP/I^d). Samples with s0 ≤ 0, DoP > 1 or a specular prediction larger
-//!   than the diffuse s0 are dropped. η ∈ [1, 3] minimises Σ(DoP − DoP_d(θ_o, η))²: a grid
+//!   are combined with weights ρ_d/Σρ_d (optics.md §5.4) and DoP = (s1·u1 + s2·u2)/s0 with
+//!   s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part and (u1, u2) the unit direction
+//!   of the model's diffuse polarisation at the fitted normal: the polarised part projected on
+//!   its predicted direction, linear in the data, so unlike √(s1² + s2²) it carries no Rice
+//!   bias on dark samples (optics.md §9). Noiseless it is exactly |T−|/T+ of the rank-one
+//!   diffuse lobe, i.e. `dop_diffuse(θ_o, η)` with no τ² bias (the paper uses raw I^s as β
+//!   and DP/I^d). Samples with s0 ≤ 0, |DoP| > 2 (gross outliers; a one-sided cut would bias),
+//!   a degenerate direction (normal incidence) or a specular prediction larger than the
+//!   diffuse s0 are dropped. η ∈ [1, 3] minimises Σ(DoP − DoP_d(θ_o, η))²: a grid
 //!   (step 0.01) then Gauss–Newton with the closed-form ∂DoP/∂η and step halving.
 //! - Two lobes: target t_c = I^s_c − (the vertex's diffuse-only I^s_c), model
 //!   ρ_s·a(σ_s) + ρ_ss,c·a(σ_ss) with a(σ) = [I^s of `reflection_unit(g, η_cluster)` under the
@@ -152,8 +156,23 @@ pub fn dop_sample(
     if s0.is_nan() || s0 <= 0.0 || spec_s0 > s0 {
         return None;
     }
-    let dop = i_s.hypot(i_a) / s0;
-    (dop.is_finite() && dop <= 1.0).then_some(DopSample {
+    // The diffuse lobe's own polarisation direction in (I^s, I^α) at the fitted normal: the
+    // observed DP is projected on it (linear in the data, so no Rice bias, optics.md §9);
+    // √(I^s² + I^α²) is biased up by the noise on dark samples.
+    let diffuse_params = PbrdfParams {
+        rho_s: 0.0,
+        rho_ss: [0.0; 3],
+        rho_d: [1.0; 3],
+        ..fit.params
+    };
+    let u = observe(g, &diffuse_params, flash)[0];
+    let norm = u.specular.hypot(u.alpha);
+    if norm.is_nan() || norm <= 1e-12 * u.diffuse.abs() {
+        return None;
+    }
+    let dop = (i_s * u.specular + i_a * u.alpha) / (norm * s0);
+    // A symmetric guard against gross outliers only (a one-sided DoP ≤ 1 cut would bias).
+    (dop.is_finite() && dop.abs() <= 2.0).then_some(DopSample {
         cos_theta_o: g.cos_theta_o,
         dop,
     })
