@@ -310,10 +310,6 @@ impl<'a> Problem<'a> {
     /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
     /// used: `given`, or the per-channel non-negative least-squares projection (optics.md §8.3)
     /// of the L_d + L_s (+ virtual) residuals when `given` is `None`.
-    #[expect(
-        clippy::needless_range_loop,
-        reason = "observations, albedos and colour weights are parallel arrays indexed by channel"
-    )]
     pub fn evaluate<T: Real>(
         &self,
         chart: &Chart,
@@ -414,6 +410,10 @@ impl<'a> Problem<'a> {
     }
 
     /// The paper-mode residuals of sample `i` (module doc).
+    #[expect(
+        clippy::needless_range_loop,
+        reason = "observations and albedos are parallel arrays indexed by channel"
+    )]
     fn paper_residuals<T: Real>(
         &self,
         i: usize,
@@ -462,10 +462,6 @@ impl<'a> Problem<'a> {
     }
 
     /// The per-channel 2×2 NNLS for (ρ_d, ρ_ss) given the nonlinear unknowns (in `scratch`).
-    #[expect(
-        clippy::needless_range_loop,
-        reason = "normal-equation sums and observations are parallel arrays indexed by channel"
-    )]
     fn project<T: Real>(&self, rho_s: T, scratch: &Scratch<T>) -> Albedos<T> {
         let z = T::zero();
         let k = T::from_f64;

@@ -390,7 +390,7 @@ fn measurement_loss_recovers_eta_without_rice_bias_on_a_dark_material() {
         [-0.25, 0.35, 0.9],
         [0.2, 0.3, 0.93],
     ];
-    let mut bias = |config: &SolverConfig| {
+    let bias = |config: &SolverConfig| {
         let mut sum = 0.0;
         let mut count = 0;
         for (j, n) in normals.iter().enumerate() {
