@@ -63,18 +63,80 @@ use rayon::prelude::*;
 use super::data::{FitFlag, SampleSet, VertexFit, VertexSamples, ViewGeometry, VirtualSample};
 use super::model::{tangent_normal, unit_sample};
 use lm::{LmState, RawDual, chart, physical, raw_from};
+
 use problem::{Albedos, Problem, Scratch};
+
+/// Which least-squares loss the solver minimises (docs/fit-solver.md, optics.md §7.4, §8.4).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum LossMode {
+    /// The paper's four terms L_d, L_s, L_ψ (DoP ratio), L_φ (azimuth with the observed DP),
+    /// weighted by the λ's (reproduction; the DoP ratio is Rice-biased on dark samples).
+    Paper,
+    /// The observation channels I^d, I^s, I^α themselves, each residual whitened by its
+    /// predicted shot + read noise (iteratively reweighted); no ratio of noisy quantities, so the
+    /// estimate is asymptotically unbiased. λψ, λd, λφ and `noise_weighting` do not apply.
+    Measurement,
+}
+
+/// How much effort the solver spends on starts and passes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Effort {
+    /// Every cold start is run to convergence and every pass is run (the first solver's
+    /// behaviour; ~4 LM runs per cold vertex).
+    Exhaustive,
+    /// Cold starts are ranked by their initial cost and LM runs from the best; the others are
+    /// tried only when that run ends unconverged, with a roughness at its bound (`AtBound`'s σ
+    /// margins), or (measurement mode) with a reduced χ² above `restart_reduced_chi2`. A later pass runs only when the previous one did not converge.
+    Adaptive,
+}
+
+/// The sensor's noise, for the measurement-mode weights (DN = N × model units).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SensorNoiseModel {
+    /// DN per photo-electron (shot-noise variance of a pixel = g·DN).
+    pub dn_per_electron: f64,
+    /// Read noise, DN RMS (quantisation's 1/12 DN² is added to its square).
+    pub read_noise_dn: f64,
+}
+
+impl Default for SensorNoiseModel {
+    /// The shipped IMX250 scenes at 0 dB: 4095 DN / 10 500 e⁻ full well ≈ 0.39 DN/e⁻, 2.3 e⁻
+    /// read noise ≈ 0.9 DN. Only the ratio of read to shot noise matters for the fit (the
+    /// overall scale cancels), so a gain off by 2× changes the weights of the darkest samples
+    /// only.
+    fn default() -> Self {
+        Self {
+            dn_per_electron: 0.39,
+            read_noise_dn: 0.9,
+        }
+    }
+}
 
 /// Solver settings. `Default` gives the documented values.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SolverConfig {
-    /// LM iteration cap per pass (default 100).
+    /// The loss (default [`LossMode::Measurement`]; docs/fit-solver.md has the measurement).
+    pub loss: LossMode,
+    /// Starts and passes (default [`Effort::Adaptive`]).
+    pub effort: Effort,
+    /// Sensor noise for the measurement-mode weights.
+    pub sensor: SensorNoiseModel,
+    /// LM iteration cap per pass (default 50).
     pub max_iterations: u32,
-    /// LM passes from the best start; each later pass restarts the damping (default 2).
+    /// LM passes from the best start; each later pass restarts the damping (default 2; with
+    /// [`Effort::Adaptive`] a later pass runs only after an unconverged one).
     pub passes: u32,
-    /// Cold starts (η, σ_s, σ_ss) tried without `init`; the lowest cost wins
-    /// (default (1.5, 0.1, 0.3) and (1.5, 0.4, 0.8)).
+    /// Cold starts (η, σ_s, σ_ss) tried without `init` (default (1.5, 0.1, 0.3) and
+    /// (1.5, 0.4, 0.8)); see [`Effort`].
     pub cold_starts: Vec<[f64; 3]>,
+    /// Adaptive effort, measurement mode: a cold-start result with reduced χ² above this tries
+    /// the other cold starts (default 4: ≈ 1 at a good fit with the right sensor model; 4 leaves
+    /// room for a gain off by 2× and mild model error).
+    pub restart_reduced_chi2: f64,
+    /// LM also stops when the Gauss–Newton decrement (the cost decrease the undamped step
+    /// predicts) is below this × s², s² = cost/(m − p): the parameters are then within ~√tol
+    /// standard errors of the local optimum (default 1e-3; 0 disables).
+    pub chi2_tolerance: f64,
     /// ρ_s of cold starts (default 0.5).
     pub initial_rho_s: f64,
     /// Weight of L_ψ (DoP) (default 10).
@@ -123,9 +185,14 @@ pub struct SolverConfig {
 impl Default for SolverConfig {
     fn default() -> Self {
         Self {
-            max_iterations: 100,
+            loss: LossMode::Measurement,
+            effort: Effort::Adaptive,
+            sensor: SensorNoiseModel::default(),
+            max_iterations: 50,
             passes: 2,
             cold_starts: vec![[1.5, 0.1, 0.3], [1.5, 0.4, 0.8]],
+            restart_reduced_chi2: 4.0,
+            chi2_tolerance: 1e-3,
             initial_rho_s: 0.5,
             lambda_psi: 10.0,
             lambda_d: 1.0,
@@ -151,6 +218,42 @@ impl Default for SolverConfig {
     }
 }
 
+impl SolverConfig {
+    /// The first solver's settings, for reproduction and before/after comparisons: paper loss
+    /// (noise-weighted), every cold start and pass run, 100 iterations, only the relative and
+    /// step tolerances.
+    pub fn reference() -> Self {
+        Self {
+            loss: LossMode::Paper,
+            effort: Effort::Exhaustive,
+            max_iterations: 100,
+            chi2_tolerance: 0.0,
+            ..Self::default()
+        }
+    }
+
+    /// The paper's loss with the default (adaptive) effort.
+    pub fn paper() -> Self {
+        Self {
+            loss: LossMode::Paper,
+            ..Self::default()
+        }
+    }
+
+    /// Throughput preset (docs/fit-solver.md has its measured cost in accuracy): measurement
+    /// loss, one start and one pass, at most 12 iterations, χ² tolerance 1e-2 (~0.1 σ), no
+    /// fallback restart. Meant for many-vertex runs and warm-started passes.
+    pub fn fast() -> Self {
+        Self {
+            max_iterations: 12,
+            passes: 1,
+            chi2_tolerance: 1e-2,
+            restart_reduced_chi2: f64::INFINITY,
+            ..Self::default()
+        }
+    }
+}
+
 /// Fits one vertex (see the module doc). `init` warm-starts every parameter and the normal
 /// (η is not reset, optics.md §8.5); `virtual_samples` may be empty.
 pub fn fit_vertex(
@@ -161,7 +264,7 @@ pub fn fit_vertex(
     virtual_samples: &[VirtualSample],
     config: &SolverConfig,
 ) -> VertexFit {
-    let problem = Problem::new(views, vertex, colour, virtual_samples, config);
+    let mut problem = Problem::new(views, vertex, colour, virtual_samples, config);
     let n = problem.len();
     let unknowns = if colour { 12 } else { 8 };
     let mut flags = Vec::new();
@@ -206,7 +309,7 @@ pub fn fit_vertex(
     }
     let mut scratch_f = Scratch::<f64>::new(n, virtual_samples.len());
     let mut scratch_d = Scratch::<RawDual>::new(n, virtual_samples.len());
-    let starts: Vec<[f64; 6]> = match init {
+    let mut starts: Vec<[f64; 6]> = match init {
         Some(f) => vec![raw_from(
             f.params.eta,
             f.params.sigma_s,
@@ -220,10 +323,31 @@ pub fn fit_vertex(
             .map(|s| raw_from(s[0], s[1], s[2], config.initial_rho_s, config))
             .collect(),
     };
+    if starts.is_empty() {
+        let p = config.prior;
+        starts.push(raw_from(p[0], p[1], p[2], p[3], config));
+    }
+    let adaptive = config.effort == Effort::Adaptive;
+    if adaptive && starts.len() > 1 {
+        // Rank the cold starts by their cost at the start normal (one f64 evaluation each).
+        let ch = chart(start_normal);
+        let mut ranked: Vec<(f64, [f64; 6])> = starts
+            .iter()
+            .map(|s| {
+                let (c, _) = lm::cost_at(&problem, &ch, *s, config, &mut scratch_f);
+                (if c.is_finite() { c } else { f64::INFINITY }, *s)
+            })
+            .collect();
+        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+        starts = ranked.into_iter().map(|(_, s)| s).collect();
+    }
     let mut best: Option<LmState> = None;
-    for s in &starts {
+    for (k, s) in starts.iter().enumerate() {
+        if adaptive && k > 0 && best.as_ref().is_some_and(|b| !poor(&problem, b, config)) {
+            break;
+        }
         let st = lm::run(
-            &problem,
+            &mut problem,
             *s,
             start_normal,
             config,
@@ -239,19 +363,21 @@ pub fn fit_vertex(
             best = Some(st);
         }
     }
-    let mut state = best.unwrap_or_else(|| {
-        lm::run(
-            &problem,
-            starts[0],
-            start_normal,
-            config,
-            &mut scratch_f,
-            &mut scratch_d,
-        )
-    });
+    let mut state = best.expect("at least one start");
+    let measurement = problem.loss == LossMode::Measurement;
     for _ in 1..config.passes {
+        // Measurement mode: the weights at the current solution (the run used the weights of
+        // its start); another pass only if they moved by more than 10 %.
+        let moved = if measurement {
+            reweight_at(&mut problem, &state, config, &mut scratch_f)
+        } else {
+            0.0
+        };
+        if adaptive && state.converged && moved <= 0.1 {
+            break;
+        }
         let again = lm::run(
-            &problem,
+            &mut problem,
             state.raw,
             state.normal,
             config,
@@ -259,13 +385,52 @@ pub fn fit_vertex(
             &mut scratch_d,
         );
         let iterations = again.iterations;
-        if again.cost <= state.cost {
+        // Measurement mode: a later pass has better weights, so its cost is not comparable;
+        // it is kept whenever it is finite.
+        if again.cost <= state.cost || (measurement && again.cost.is_finite()) {
             state = again;
         } else {
             state.iterations = iterations;
         }
     }
+    // The weights at the final state (for the standard errors).
+    if measurement {
+        let _ = reweight_at(&mut problem, &state, config, &mut scratch_f);
+    }
     finish(&problem, vertex, state, flags, config)
+}
+
+/// Measurement mode: reweights `problem` from the model at `state`; returns the largest
+/// relative change of any 1/σ.
+fn reweight_at(
+    problem: &mut Problem,
+    state: &LmState,
+    config: &SolverConfig,
+    scratch: &mut Scratch<f64>,
+) -> f64 {
+    let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, config, scratch);
+    problem.reweight(scratch, &albedos, physical(state.raw, config).rho_s)
+}
+
+/// Adaptive effort: whether a start's result warrants trying the next start.
+fn poor(problem: &Problem, state: &LmState, config: &SolverConfig) -> bool {
+    if !state.converged || !state.cost.is_finite() {
+        return true;
+    }
+    // A lobe at its bound often means the start's basin, not the data (noiseless glaze from
+    // (0.1, 0.3): σ_ss → 1, Δcost 1.1 above the truth's 0).
+    let x = physical(state.raw, config);
+    if x.sigma_s < config.sigma_min + config.bound_margin_sigma
+        || x.sigma_ss > 1.0 - config.bound_margin_sigma
+    {
+        return true;
+    }
+    if problem.loss != LossMode::Measurement {
+        return false;
+    }
+    let m = problem.residual_count();
+    let p = problem.parameter_count();
+    m > p && state.cost / (m - p) as f64 > config.restart_reduced_chi2
 }
 
 fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
@@ -312,20 +477,12 @@ fn finish(
     // Polarisation SNR: RMS of the (unweighted) DoP residuals against the mean model DoP. Below
     // 1 the observed DoP is dominated by noise and its Rice bias (optics.md §9 dark pixels), so
     // the std error (which assumes zero-mean noise) understates η's error.
-    let per_sample = 2 * problem.channels + 3;
-    let mut index = 0usize;
-    let mut dop_sq = 0.0;
     let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
-    problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |r: f64| {
-        let k = index / per_sample;
-        if k < problem.len() && index % per_sample == 2 * problem.channels {
-            let w = (problem.lambda_psi * problem.w_dop[k]).sqrt();
-            if w > 0.0 {
-                dop_sq += (r / w).powi(2);
-            }
-        }
-        index += 1;
-    });
+    let _ = problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |_: f64| {});
+    let dop_sq: f64 = problem
+        .dop_residuals(&scratch, &state.albedos, x.rho_s)
+        .map(|r| r * r)
+        .sum();
     let n = problem.len().max(1) as f64;
     let dop_snr = (dop_sum / n) / (dop_sq / n).sqrt().max(1e-300);
     if max_sensitivity < config.min_eta_sensitivity

@@ -4,17 +4,19 @@
 //! Contract:
 //! - Each sample's diffuse-only Stokes vector is the observation minus the vertex's own
 //!   fitted specular + single-scattering prediction (`measure::observe` with ρ_d = 0). Channels
-//!   are combined with weights ρ_d/Σρ_d (optics.md §5.4), and DoP = √(s1² + s2²)/s0 with
-//!   s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part. This is exactly |T−|/T+ of the
-//!   rank-one diffuse lobe, i.e. `dop_diffuse(θ_o, η)`, with no τ² bias. Deliberate difference:
+//!   are combined with weights ρ_d/Σρ_d (optics.md §5.4), and DoP = (s1·u1 + s2·u2)/s0 with
+//!   s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part and (u1, u2) the unit direction of
+//!   the model's diffuse polarisation at the fitted normal: the polarised part projected on its
+//!   predicted direction is linear in the data, so unlike √(s1² + s2²) it carries no Rice bias
+//!   on dark samples (optics.md §9). Noiseless it is exactly |T−|/T+ of the rank-one diffuse
+//!   lobe, i.e. `dop_diffuse(θ_o, η)`, with no τ² bias. Deliberate difference:
 //!   the paper uses raw I^s as β and DP/I^d (biased by the specular and by the dropped τ²
 //!   terms, up to ~6 % of DoP at DoP 0.25).
-//! - Samples with s0 ≤ 0, DoP > 1 or a specular prediction larger than the diffuse s0 are
-//!   dropped.
+//! - Samples with s0 ≤ 0, |DoP| > 2 (gross outliers only: a one-sided cut would bias), a
+//!   degenerate direction (normal incidence) or a specular prediction larger than the diffuse
+//!   s0 are dropped.
 //! - η ∈ [1, 3] minimises Σ(DoP − DoP_d(θ_o, η))²: a grid (step 0.01), then Gauss–Newton with
 //!   the closed-form ∂DoP/∂η (`measure::dop_diffuse_with_d_eta`) and step halving.
-//! - Known bias: |DP| of noisy channels is biased upward (Rician), so η is slightly high at low
-//!   signal (+0.4 % at noise 0.002 on a 0.5 albedo, measured in `augment::tests`).
 
 use ellipso_sim::optics::measure::{FlashPolariser, dop_diffuse, dop_diffuse_with_d_eta, observe};
 use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
@@ -70,8 +72,23 @@ pub fn dop_sample(
     if s0.is_nan() || s0 <= 0.0 || spec_s0 > s0 {
         return None;
     }
-    let dop = i_s.hypot(i_a) / s0;
-    (dop.is_finite() && dop <= 1.0).then_some(DopSample {
+    // The diffuse lobe's own polarisation direction in (I^s, I^α) at the fitted normal: the
+    // observed DP is projected on it (linear in the data, so no Rice bias, optics.md §9);
+    // √(I^s² + I^α²) is biased up by the noise on dark samples.
+    let diffuse_params = PbrdfParams {
+        rho_s: 0.0,
+        rho_ss: [0.0; 3],
+        rho_d: [1.0; 3],
+        ..fit.params
+    };
+    let u = observe(g, &diffuse_params, flash)[0];
+    let norm = u.specular.hypot(u.alpha);
+    if norm.is_nan() || norm <= 1e-12 * u.diffuse.abs() {
+        return None;
+    }
+    let dop = (i_s * u.specular + i_a * u.alpha) / (norm * s0);
+    // A symmetric guard against gross outliers only (a one-sided DoP ≤ 1 cut would bias).
+    (dop.is_finite() && dop.abs() <= 2.0).then_some(DopSample {
         cos_theta_o: g.cos_theta_o,
         dop,
     })

@@ -6,8 +6,8 @@ use ellipso_sim::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
 use super::super::model::{tangent_basis, unit_tangent_normal};
-use super::SolverConfig;
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
+use super::{LossMode, SolverConfig};
 
 /// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
 pub(super) const N_RAW: usize = 6;
@@ -155,9 +155,27 @@ fn jacobian_at(
     (cost, jtj, jtr, re)
 }
 
-/// One LM run from (`raw`, `normal`).
+/// The Gauss–Newton decrement rᵀJ(JᵀJ)⁻¹Jᵀr: the cost decrease the undamped step predicts,
+/// i.e. the squared distance to the local optimum in the metric of JᵀJ. Divided by s² it is
+/// that distance in standard errors squared, so it does not stop early in flat valleys (where
+/// a small actual decrease says little). JᵀJ gets a 1e-9·max-diagonal ridge so null directions
+/// count as far (large decrement) only where the gradient points along them; ∞ if singular.
+fn newton_decrement(jtj: &Mat, jtr: &Vector) -> f64 {
+    let max_diag = (0..N_RAW).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
+    let mut a = *jtj;
+    for i in 0..N_RAW {
+        a[(i, i)] += 1e-9 * max_diag + 1e-300;
+    }
+    a.cholesky()
+        .map_or(f64::INFINITY, |c| jtr.dot(&c.solve(jtr)))
+}
+
+/// One LM run from (`raw`, `normal`). In measurement mode the problem is first reweighted from
+/// the model at the start (`Problem::reweight`); the weights then stay fixed for the run, so
+/// every accepted step really lowers one fixed objective (reweighting after every step let the
+/// model shrink its own weights by predicting ever brighter samples: measured, η → 61).
 pub(super) fn run(
-    problem: &Problem,
+    problem: &mut Problem,
     raw: [f64; N_RAW],
     normal: [f64; 3],
     config: &SolverConfig,
@@ -168,8 +186,18 @@ pub(super) fn run(
     raw[4] = 0.0;
     raw[5] = 0.0;
     let mut ch = chart(normal);
+    let reweighting = problem.loss == LossMode::Measurement;
+    if reweighting {
+        let (_, a) = cost_at(problem, &ch, raw, config, scratch_f);
+        let _ = problem.reweight(scratch_f, &a, physical(raw, config).rho_s);
+    }
     let (mut cost, mut jtj, mut jtr, mut albedos) =
         jacobian_at(problem, &ch, raw, config, scratch_d);
+    // Statistical scale of the cost: s² = cost/(m − p) (module doc of `solve`).
+    let dof = problem
+        .residual_count()
+        .saturating_sub(problem.parameter_count())
+        .max(1) as f64;
     let mut mu = config.initial_damping;
     let mut iterations = 0;
     let mut converged = false;
@@ -229,7 +257,10 @@ pub(super) fn run(
                 raw[5] = 0.0;
                 (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
                 mu = (mu / 3.0).max(1e-12);
+                let near_optimum = config.chi2_tolerance > 0.0
+                    && newton_decrement(&jtj, &jtr) < config.chi2_tolerance * cost / dof;
                 if decrease < config.relative_tolerance
+                    || near_optimum
                     || step < config.step_tolerance * (size + config.step_tolerance)
                     || cost <= abs_tol
                 {

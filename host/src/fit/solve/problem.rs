@@ -4,9 +4,16 @@
 //! parameters, albedos given).
 //!
 //! Residuals, in emission order (optics.md §7.4, §8.4; module doc of `solve` for the weights):
-//! per real sample, per colour channel: L_d `√(λd·w)·(Î^d − I^d)`, L_s `√(λs'·w)·(Î^s − I^s)`;
-//! then L_ψ `√(λψ·w_ψ)·(DoP_d(η, θ_o) − DoP_obs)` and L_φ `√(λφ·w)·(I^α_D − u_α·DP,
-//! I^β − u_β·DP)`; per virtual sample, per channel `√(λs·N_real·w_m)·(Î^s_coax − Ĩ^s)`.
+//! - [`LossMode::Paper`]: per real sample, per colour channel: L_d `√(λd·w)·(Î^d − I^d)`,
+//!   L_s `√(λs'·w)·(Î^s − I^s)`; then L_ψ `√(λψ·w_ψ)·(DoP_d(η, θ_o) − DoP_obs)` and L_φ
+//!   `√(λφ·w)·(I^α_D − u_α·DP, I^β − u_β·DP)`.
+//! - [`LossMode::Measurement`]: per real sample, per colour channel, the three observation
+//!   channels whitened by their predicted sensor noise (see [`Problem::reweight`]):
+//!   `(Î90 − I90)/σ90`, `(Î0 − I0)/σ0`, `(Î^α − I^α)/σ_α` with I90 = I^d/2 and
+//!   I0 = I^s + I^d/2 — the Mahalanobis form of the (I^d, I^s, I^α) residuals, since I^d and
+//!   I^s share the noise of I90. No ratio of noisy quantities.
+//! - Both: per virtual sample, per channel `√(λs·N_real·w̄·w_m)·(Î^s_coax − Ĩ^s)` (w̄ = 1 in
+//!   paper mode, the mean inverse variance of the I0 rows in measurement mode).
 
 use ellipso_sim::optics::Real;
 
@@ -14,7 +21,7 @@ use super::super::data::{VertexSamples, ViewGeometry, VirtualSample};
 use super::super::model::{
     SampleFrames, UnitSample, coaxial_unit_specular, tangent_normal, unit_sample,
 };
-use super::SolverConfig;
+use super::{LossMode, SolverConfig};
 
 /// The nonlinear unknowns in physical units (η, σ_s, σ_ss, ρ_s, tangent p, q).
 #[derive(Clone, Copy, Debug)]
@@ -68,6 +75,26 @@ pub(super) struct Problem<'a> {
     pub lambda_phi: f64,
     /// Σ of squared observations (scale for the absolute convergence test).
     pub data_scale: f64,
+    /// Which loss [`Problem::evaluate`] emits.
+    pub loss: LossMode,
+    /// Measurement mode: per sample, per channel, the observations in analyser form
+    /// [I90, I0, I^α] (model units).
+    pub analyser_obs: Vec<[[f64; 3]; 3]>,
+    /// Measurement mode: per sample, per channel, 1/σ of [I90, I0, I^α] (model units⁻¹).
+    pub inv_sigma: Vec<[[f64; 3]; 3]>,
+    /// Sensor gain, DN per electron (measurement-mode variances).
+    dn_per_electron: f64,
+    /// Signal-independent variance per analyser pixel, DN² (read noise² + 1/12 quantisation).
+    floor_variance_dn2: f64,
+    /// λs·N_real (the virtual-sample scale before the mean data weight).
+    virtual_base: f64,
+}
+
+/// The analyser form [I90, I0, I^α] of observation channels [I^d, I^s, I^α] (optics.md §5.3:
+/// I^d = 2·I90, I^s = I0 − I90). Linear, so it applies to unit lobes and observations alike.
+pub(super) fn analyser_form<T: Real>(x: [T; 3]) -> [T; 3] {
+    let half = T::from_f64(0.5) * x[0];
+    [half, x[1] + half, x[2]]
 }
 
 /// Reusable per-vertex buffers (no allocation inside the LM loop).
@@ -149,6 +176,7 @@ impl<'a> Problem<'a> {
                 w.iter_mut().for_each(|v| *v /= mean);
             }
         }
+        let analyser_obs: Vec<[[f64; 3]; 3]> = obs.iter().map(|o| o.map(analyser_form)).collect();
         let has_virtual = !virtuals.is_empty();
         let data_scale = obs
             .iter()
@@ -176,7 +204,88 @@ impl<'a> Problem<'a> {
             lambda_s_virtual: config.lambda_s * n as f64,
             lambda_phi: config.lambda_phi,
             data_scale,
+            loss: config.loss,
+            inv_sigma: vec![[[0.0; 3]; 3]; n],
+            analyser_obs,
+            dn_per_electron: config.sensor.dn_per_electron.max(1e-12),
+            floor_variance_dn2: config.sensor.read_noise_dn.powi(2) + 1.0 / 12.0,
+            virtual_base: config.lambda_s * n as f64,
         }
+        .with_initial_weights()
+    }
+
+    /// Measurement mode: weights from the observations themselves (floored at 0), used only
+    /// until [`Problem::reweight`] replaces them with the model's prediction at the start of
+    /// every LM run (observation-derived weights correlate with the noise and bias the fit).
+    fn with_initial_weights(mut self) -> Self {
+        if self.loss == LossMode::Measurement {
+            let predicted = self.analyser_obs.clone();
+            let _ = self.set_weights(|k, c| predicted[k][c]);
+        }
+        self
+    }
+
+    /// The predicted noise of one sample's analyser rows from intensities `i` = [I90, I0, I^α]
+    /// (model units; only I90, I0 and s0 = I90 + I0 matter): for an analyser pixel of expected
+    /// model intensity I, Var = (g·N·I + σ_floor²)/N² in model units², with g DN per electron
+    /// (shot noise: g·DN) and σ_floor² = read noise² + 1/12 (quantisation), DN². I90 and I0 are
+    /// single pixels; I^α = I135 − I45 sums two pixels whose intensities add to s0, so
+    /// Var(I^α) = (g·N·s0 + 2σ_floor²)/N². Negative predictions are floored at 0.
+    /// The prediction is capped at 4× the observation + 3σ_floor, so a model far off the data
+    /// cannot buy itself small weights (a cap that only acts on gross misfits).
+    fn inverse_sigma(&self, k: usize, c: usize, i: [f64; 3]) -> [f64; 3] {
+        let n = self.normalisers[k];
+        let g = self.dn_per_electron;
+        let f = self.floor_variance_dn2;
+        let o = &self.analyser_obs[k][c];
+        let cap = |pred: f64, obs: f64| pred.min(4.0 * obs.max(0.0) + 3.0 * f.sqrt() / n).max(0.0);
+        let (i90, i0) = (cap(i[0], o[0]), cap(i[1], o[1]));
+        let var = [
+            (g * n * i90 + f) / (n * n),
+            (g * n * i0 + f) / (n * n),
+            (g * n * (i90 + i0) + 2.0 * f) / (n * n),
+        ];
+        // f > 0 and n > 0 (non-positive N are skipped in `new`): var > 0.
+        var.map(|v| 1.0 / v.sqrt())
+    }
+
+    /// Sets the weights from `predicted(sample, channel)`; returns the largest relative change
+    /// of any 1/σ.
+    fn set_weights(&mut self, predicted: impl Fn(usize, usize) -> [f64; 3]) -> f64 {
+        let mut sum_w0 = 0.0;
+        let mut change: f64 = 0.0;
+        for k in 0..self.len() {
+            for c in 0..self.channels {
+                let w = self.inverse_sigma(k, c, predicted(k, c));
+                sum_w0 += w[1] * w[1];
+                for (new, old) in w.iter().zip(&self.inv_sigma[k][c]) {
+                    change = change.max(if *old > 0.0 {
+                        (new / old - 1.0).abs()
+                    } else {
+                        1.0
+                    });
+                }
+                self.inv_sigma[k][c] = w;
+            }
+        }
+        let rows = (self.len() * self.channels).max(1) as f64;
+        self.lambda_s_virtual = self.virtual_base * sum_w0 / rows;
+        change
+    }
+
+    /// Measurement mode: re-derives every residual's noise from the model's prediction at the
+    /// point whose unit lobes are in `scratch` (an f64 evaluation just done) with `albedos`
+    /// and `rho_s` — iteratively reweighted least squares, the weights held fixed inside each
+    /// LM run (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
+    /// paper mode. Returns the largest relative change of any 1/σ (0 in paper mode).
+    pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>, rho_s: f64) -> f64 {
+        if self.loss != LossMode::Measurement || scratch.units.len() != self.len() {
+            return 0.0;
+        }
+        let units = &scratch.units;
+        self.set_weights(|k, c| {
+            analyser_form(units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s))
+        })
     }
 
     /// Number of real samples.
@@ -184,19 +293,23 @@ impl<'a> Problem<'a> {
         self.obs.len()
     }
 
+    /// Number of parameters (6 nonlinear + 2 albedos per colour channel).
+    pub fn parameter_count(&self) -> usize {
+        6 + 2 * self.channels
+    }
+
     /// Number of residuals [`Problem::evaluate`] emits.
-    #[cfg(test)]
     pub fn residual_count(&self) -> usize {
-        self.len() * (2 * self.channels + 3) + self.virtuals.len() * self.channels
+        let per_sample = match self.loss {
+            LossMode::Paper => 2 * self.channels + 3,
+            LossMode::Measurement => 3 * self.channels,
+        };
+        self.len() * per_sample + self.virtuals.len() * self.channels
     }
 
     /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
     /// used: `given`, or the per-channel non-negative least-squares projection (optics.md §8.3)
     /// of the L_d + L_s (+ virtual) residuals when `given` is `None`.
-    #[expect(
-        clippy::needless_range_loop,
-        reason = "observations, albedos and colour weights are parallel arrays indexed by channel"
-    )]
     pub fn evaluate<T: Real>(
         &self,
         chart: &Chart,
@@ -235,40 +348,19 @@ impl<'a> Problem<'a> {
         };
         let k = T::from_f64;
         for (i, u) in scratch.units.iter().enumerate() {
-            let o = &self.obs[i];
-            let wd = k((self.lambda_d * self.w_int[i]).sqrt());
-            let ws = k((self.lambda_s_real * self.w_int[i]).sqrt());
-            for c in 0..self.channels {
-                let pred = u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s);
-                sink(wd * (pred[0] - k(o[c][0])));
-                sink(ws * (pred[1] - k(o[c][1])));
+            match self.loss {
+                LossMode::Paper => self.paper_residuals(i, u, &albedos, x.rho_s, sink),
+                LossMode::Measurement => {
+                    for c in 0..self.channels {
+                        let pred =
+                            analyser_form(u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s));
+                        let (o, w) = (&self.analyser_obs[i][c], &self.inv_sigma[i][c]);
+                        for j in 0..3 {
+                            sink(k(w[j]) * (pred[j] - k(o[j])));
+                        }
+                    }
+                }
             }
-            // Diffuse-only observation: the data minus the model's reflection (optics.md §7.5,
-            // generalised to all three channels), monochrome projection (§5.4).
-            let rho_ss_mono = (0..self.channels).fold(zero, |acc, c| {
-                acc + albedos.rho_ss[c] * k(self.colour_weights[c])
-            });
-            let m = &self.mono[i];
-            let refl = |j: usize| rho_ss_mono * u.single_scattering[j] + x.rho_s * u.specular[j];
-            let d_obs = k(m[0]) - refl(0);
-            let beta = k(m[1]) - refl(1);
-            let alpha = k(m[2]) - refl(2);
-            let dp = (alpha.sq() + beta.sq()).sqrt_clamped();
-            // s0 of the diffuse-only light = I^d + I^β; below 1e-12 model units no DoP exists.
-            let s0 = d_obs + beta;
-            let w_psi = k((self.lambda_psi * self.w_dop[i]).sqrt());
-            if s0.re() > 1e-12 {
-                sink(w_psi * (u.dop_diffuse - dp / s0));
-            } else {
-                sink(zero);
-            }
-            // Predicted direction of (I^α, I^β) of the diffuse lobe; ε = 1e-12 keeps it finite at
-            // normal incidence, where DP → 0 and the residual carries no azimuth weight anyway.
-            let (a_alpha, a_beta) = (u.diffuse[2], u.diffuse[1]);
-            let norm = (a_alpha.sq() + a_beta.sq() + k(1e-24)).sqrt();
-            let wp = k((self.lambda_phi * self.w_int[i]).sqrt());
-            sink(wp * (alpha - a_alpha / norm * dp));
-            sink(wp * (beta - a_beta / norm * dp));
         }
         for (m, v) in self.virtuals.iter().enumerate() {
             let (b, s) = scratch.virt[m];
@@ -280,37 +372,148 @@ impl<'a> Problem<'a> {
         albedos
     }
 
-    /// The per-channel 2×2 NNLS for (ρ_d, ρ_ss) given the nonlinear unknowns (in `scratch`).
+    /// The diffuse-only observation of sample `i` (the data minus the model's reflection,
+    /// optics.md §7.5 generalised to all three channels, monochrome projection §5.4):
+    /// (I^d_D, I^β, I^α_D, DP = √(I^α_D² + I^β²)).
+    fn diffuse_only<T: Real>(
+        &self,
+        i: usize,
+        u: &UnitSample<T>,
+        albedos: &Albedos<T>,
+        rho_s: T,
+    ) -> [T; 4] {
+        let k = T::from_f64;
+        let rho_ss_mono = (0..self.channels).fold(T::zero(), |acc, c| {
+            acc + albedos.rho_ss[c] * k(self.colour_weights[c])
+        });
+        let m = &self.mono[i];
+        let refl = |j: usize| rho_ss_mono * u.single_scattering[j] + rho_s * u.specular[j];
+        let d_obs = k(m[0]) - refl(0);
+        let beta = k(m[1]) - refl(1);
+        let alpha = k(m[2]) - refl(2);
+        let dp = (alpha.sq() + beta.sq()).sqrt_clamped();
+        [d_obs, beta, alpha, dp]
+    }
+
+    /// The observed diffuse DoP of sample `i` (DP over s0 of the diffuse-only light
+    /// s0 = I^d_D + I^β), `None` below 1e-12 model units of s0.
+    fn observed_dop<T: Real>(
+        &self,
+        i: usize,
+        u: &UnitSample<T>,
+        albedos: &Albedos<T>,
+        rho_s: T,
+    ) -> Option<T> {
+        let [d_obs, beta, _, dp] = self.diffuse_only(i, u, albedos, rho_s);
+        let s0 = d_obs + beta;
+        (s0.re() > 1e-12).then(|| dp / s0)
+    }
+
+    /// The paper-mode residuals of sample `i` (module doc).
     #[expect(
         clippy::needless_range_loop,
-        reason = "normal-equation sums and observations are parallel arrays indexed by channel"
+        reason = "observations and albedos are parallel arrays indexed by channel"
     )]
+    fn paper_residuals<T: Real>(
+        &self,
+        i: usize,
+        u: &UnitSample<T>,
+        albedos: &Albedos<T>,
+        rho_s: T,
+        sink: &mut impl FnMut(T),
+    ) {
+        let k = T::from_f64;
+        let o = &self.obs[i];
+        let wd = k((self.lambda_d * self.w_int[i]).sqrt());
+        let ws = k((self.lambda_s_real * self.w_int[i]).sqrt());
+        for c in 0..self.channels {
+            let pred = u.predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s);
+            sink(wd * (pred[0] - k(o[c][0])));
+            sink(ws * (pred[1] - k(o[c][1])));
+        }
+        let [_, beta, alpha, dp] = self.diffuse_only(i, u, albedos, rho_s);
+        let w_psi = k((self.lambda_psi * self.w_dop[i]).sqrt());
+        match self.observed_dop(i, u, albedos, rho_s) {
+            Some(dop) => sink(w_psi * (u.dop_diffuse - dop)),
+            None => sink(T::zero()),
+        }
+        // Predicted direction of (I^α, I^β) of the diffuse lobe; ε = 1e-12 keeps it finite at
+        // normal incidence, where DP → 0 and the residual carries no azimuth weight anyway.
+        let (a_alpha, a_beta) = (u.diffuse[2], u.diffuse[1]);
+        let norm = (a_alpha.sq() + a_beta.sq() + k(1e-24)).sqrt();
+        let wp = k((self.lambda_phi * self.w_int[i]).sqrt());
+        sink(wp * (alpha - a_alpha / norm * dp));
+        sink(wp * (beta - a_beta / norm * dp));
+    }
+
+    /// Unweighted (model − observed) diffuse DoP of every sample with a defined DoP, at a
+    /// point evaluated in f64 into `scratch` (both modes; for the polarisation-SNR flag).
+    pub fn dop_residuals<'s>(
+        &'s self,
+        scratch: &'s Scratch<f64>,
+        albedos: &Albedos<f64>,
+        rho_s: f64,
+    ) -> impl Iterator<Item = f64> + 's {
+        let albedos = *albedos;
+        scratch.units.iter().enumerate().filter_map(move |(i, u)| {
+            self.observed_dop(i, u, &albedos, rho_s)
+                .map(|dop| u.dop_diffuse - dop)
+        })
+    }
+
+    /// The per-channel 2×2 NNLS for (ρ_d, ρ_ss) given the nonlinear unknowns (in `scratch`).
     fn project<T: Real>(&self, rho_s: T, scratch: &Scratch<T>) -> Albedos<T> {
         let z = T::zero();
         let k = T::from_f64;
-        let (mut haa, mut hab, mut hbb) = (z, z, z);
+        // Per channel: H = [[haa, hab], [hab, hbb]] and g of the weighted residual rows.
+        let (mut haa, mut hab, mut hbb) = ([z; 3], [z; 3], [z; 3]);
         let mut ga = [z; 3];
         let mut gb = [z; 3];
         for (i, u) in scratch.units.iter().enumerate() {
-            let wd = k(self.lambda_d * self.w_int[i]);
-            let ws = k(self.lambda_s_real * self.w_int[i]);
-            let (a, b, c) = (u.diffuse, u.single_scattering, u.specular);
-            haa += wd * a[0].sq() + ws * a[1].sq();
-            hab += wd * a[0] * b[0] + ws * a[1] * b[1];
-            hbb += wd * b[0].sq() + ws * b[1].sq();
-            for ch in 0..self.channels {
-                let o = &self.obs[i][ch];
-                let td = k(o[0]) - rho_s * c[0];
-                let ts = k(o[1]) - rho_s * c[1];
-                ga[ch] += wd * a[0] * td + ws * a[1] * ts;
-                gb[ch] += wd * b[0] * td + ws * b[1] * ts;
+            match self.loss {
+                LossMode::Paper => {
+                    let wd = k(self.lambda_d * self.w_int[i]);
+                    let ws = k(self.lambda_s_real * self.w_int[i]);
+                    let (a, b, c) = (u.diffuse, u.single_scattering, u.specular);
+                    let h_aa = wd * a[0].sq() + ws * a[1].sq();
+                    let h_ab = wd * a[0] * b[0] + ws * a[1] * b[1];
+                    let h_bb = wd * b[0].sq() + ws * b[1].sq();
+                    for ch in 0..self.channels {
+                        let o = &self.obs[i][ch];
+                        let td = k(o[0]) - rho_s * c[0];
+                        let ts = k(o[1]) - rho_s * c[1];
+                        haa[ch] += h_aa;
+                        hab[ch] += h_ab;
+                        hbb[ch] += h_bb;
+                        ga[ch] += wd * a[0] * td + ws * a[1] * ts;
+                        gb[ch] += wd * b[0] * td + ws * b[1] * ts;
+                    }
+                }
+                LossMode::Measurement => {
+                    let a = analyser_form(u.diffuse);
+                    let b = analyser_form(u.single_scattering);
+                    let c = analyser_form(u.specular);
+                    for ch in 0..self.channels {
+                        let o = &self.analyser_obs[i][ch];
+                        let w = &self.inv_sigma[i][ch];
+                        for j in 0..3 {
+                            let wj = k(w[j] * w[j]);
+                            let t = k(o[j]) - rho_s * c[j];
+                            haa[ch] += wj * a[j].sq();
+                            hab[ch] += wj * a[j] * b[j];
+                            hbb[ch] += wj * b[j].sq();
+                            ga[ch] += wj * a[j] * t;
+                            gb[ch] += wj * b[j] * t;
+                        }
+                    }
+                }
             }
         }
         for (m, v) in self.virtuals.iter().enumerate() {
             let (b, s) = scratch.virt[m];
             let w = k(self.lambda_s_virtual * v.weight.max(0.0));
-            hbb += w * b.sq();
             for ch in 0..self.channels {
+                hbb[ch] += w * b.sq();
                 gb[ch] += w * b * (k(v.specular[ch]) - rho_s * s);
             }
         }
@@ -320,7 +523,7 @@ impl<'a> Problem<'a> {
         };
         for ch in 0..3 {
             let src = ch.min(self.channels - 1);
-            let (x, y) = nnls2(haa, hab, hbb, ga[src], gb[src]);
+            let (x, y) = nnls2(haa[src], hab[src], hbb[src], ga[src], gb[src]);
             out.rho_d[ch] = x;
             out.rho_ss[ch] = y;
         }

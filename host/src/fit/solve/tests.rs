@@ -288,8 +288,22 @@ fn monochrome_and_warm_start() {
         assert_eq!(f.std_error[7], f.std_error[9]);
         assert!(f.std_error[7].is_finite(), "{f:?}");
     }
-    // A warm start at the solution converges at once and does not reset η.
+    // A warm start at the solution converges at once and does not reset η. The cold fit
+    // stopped within `chi2_tolerance` of the optimum (~0.03 standard errors) and measurement
+    // mode reweights from the model, so the warm start may move η by a small fraction of its
+    // standard error (and its cost is under slightly different weights: not comparable).
     let warm = fit_all(&set, Some(&cold), None, &config);
+    for (c, w) in cold.iter().zip(&warm) {
+        assert!(
+            (c.params.eta - w.params.eta).abs() <= 0.05 * c.std_error[0] + 1e-6,
+            "{c:?} {w:?}"
+        );
+        assert!(w.iterations <= 3, "{w:?}");
+    }
+    // The reference preset keeps the strict behaviour: exact re-convergence.
+    let reference = SolverConfig::reference();
+    let cold = fit_all(&set, None, None, &reference);
+    let warm = fit_all(&set, Some(&cold), None, &reference);
     for (c, w) in cold.iter().zip(&warm) {
         assert!((c.params.eta - w.params.eta).abs() < 1e-6, "{c:?} {w:?}");
         assert!(w.cost <= c.cost * (1.0 + 1e-9));
@@ -357,4 +371,51 @@ fn virtual_samples_pull_the_specular_lobe_and_keep_truth() {
         pulled.params.sigma_s > fit.params.sigma_s + 1e-4,
         "{pulled:?}"
     );
+}
+
+/// The Rice bias of the observed DoP (optics.md §9 dark pixels): on a dark material the paper's
+/// L_ψ, which compares DoP_d(η) with √(I^α² + I^β²)/s0 of noisy data, pulls η high; the
+/// measurement-domain loss has no ratio of noisy quantities and stays centred on the truth.
+#[test]
+fn measurement_loss_recovers_eta_without_rice_bias_on_a_dark_material() {
+    let views = views();
+    let noise = sensor();
+    let truth = PbrdfParams {
+        rho_d: [0.02; 3],
+        ..material("rubber")
+    };
+    let normals = [
+        [0.0, 0.0, 1.0],
+        TILTED,
+        [-0.25, 0.35, 0.9],
+        [0.2, 0.3, 0.93],
+    ];
+    let bias = |config: &SolverConfig| {
+        let mut sum = 0.0;
+        let mut count = 0;
+        for (j, n) in normals.iter().enumerate() {
+            for seed in 0..3 {
+                let v = synth(
+                    &views,
+                    *n,
+                    &truth,
+                    Some(&noise),
+                    1.0,
+                    900 + 10 * j as u64 + seed,
+                );
+                let fit = fit_vertex(&views, &v, true, None, &[], config);
+                assert_sane(&fit);
+                sum += fit.params.eta - truth.eta;
+                count += 1;
+            }
+        }
+        sum / f64::from(count)
+    };
+    let measurement = bias(&SolverConfig::default());
+    let paper = bias(&SolverConfig::paper());
+    eprintln!("mean η − truth over 12 vertices: measurement {measurement:+.4}, paper {paper:+.4}");
+    // ±0.06: a few standard errors of a 12-vertex mean at ρ_d = 0.02 (measured −0.03); the
+    // paper loss is biased by +0.39 on the same data.
+    assert!(measurement.abs() < 0.06, "{measurement}");
+    assert!(paper > 0.2, "{paper}");
 }
