@@ -212,7 +212,9 @@ fn one_run(
     let t = Instant::now();
     let capture = simulate(scene, case)?;
     let simulate_s = t.elapsed().as_secs_f64();
-    let outcome = fit_sample_set(&capture.set, None, config, &mut |_| {});
+    let mut config = config.clone();
+    config.solver.sensor = crate::fit::accuracy::sensor_model(scene);
+    let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
     let fit_s = outcome.times.fit_s();
     let t = Instant::now();
     let checksum = forward_all(&capture.set, &outcome.fits);

@@ -1,6 +1,6 @@
 //! `ellipso demo`: the main job on the simulated rig, end to end, in a few minutes on 2 cores.
 //!
-//! 1. Capture a shipped scene (a dielectric sphere on an AprilTag board) on the simulated rig:
+//! 1. Capture a shipped scene (a four-material object on an AprilTag board) on the simulated rig:
 //!    the real firmware core behind a real pty, the host's real link, pairing and session code.
 //! 2. Track the camera pose of every frame from the AprilTags and score it against the
 //!    simulator's ground truth.
@@ -26,7 +26,7 @@ pub struct Args {
     /// Where to put the session and the results.
     #[arg(long, default_value = "ellipso-demo")]
     pub out: PathBuf,
-    /// Scene to capture (default: the shipped sphere scene).
+    /// Scene to capture (default: the shipped four-material demo scene).
     #[arg(long)]
     pub scene: Option<PathBuf>,
     /// Smaller and shorter: for a smoke test (quarter resolution, 24 photos).
@@ -95,7 +95,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene_path = args
         .scene
         .clone()
-        .unwrap_or_else(|| shipped_scene("sphere.toml"));
+        .unwrap_or_else(|| shipped_scene("demo.toml"));
     anyhow::ensure!(
         scene_path.is_file(),
         "scene {} not found: run the demo from the source tree, or pass --scene",
@@ -184,7 +184,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     crate::cli::polar::run(crate::cli::polar::Args {
         frame: first.path.clone(),
         out: pictures.join("frame0-polarisation"),
-        layout: crate::cli::polar::LayoutArg::Mono,
+        layout: match scene.rig.camera.sensor {
+            ellipso_sim::scene::SensorKind::MonoPolar => crate::cli::polar::LayoutArg::Mono,
+            ellipso_sim::scene::SensorKind::ColourPolar => crate::cli::polar::LayoutArg::Colour,
+        },
         bit_depth: Some(session.manifest.sensor.bit_depth),
         demosaic: crate::polar::demosaic::DemosaicMethod::Superpixel,
         dark_level: 0.0,

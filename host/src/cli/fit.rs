@@ -96,7 +96,13 @@ pub fn fit_and_export(
     let started = Instant::now();
     let poses = poses_of(session)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let fit = fit_session(session, mesh, &poses, config, &mut |stage| {
+    // The solver weights samples by their expected noise: the sensor's gain and read noise
+    // where the session says them (simulator sessions), the documented default otherwise.
+    let mut config = config.clone();
+    if let Some(scene) = crate::fit::observe::radiometry::scene_of(session) {
+        config.fit.solver.sensor = crate::fit::accuracy::sensor_model(&scene);
+    }
+    let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
         println!("  {stage}…")
     })?;
     let (frame_id, world_from_camera) = match view {

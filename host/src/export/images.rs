@@ -32,6 +32,7 @@ struct Field {
     normals: Vec<[f64; 3]>,
     eta_std: Vec<[f64; 1]>,
     failed: Vec<bool>,
+    eta_unidentified: Vec<bool>,
 }
 
 impl Field {
@@ -60,6 +61,10 @@ impl Field {
             failed: fits
                 .iter()
                 .map(|f| f.flags.contains(&FitFlag::TooFewViews))
+                .collect(),
+            eta_unidentified: fits
+                .iter()
+                .map(|f| f.flags.contains(&FitFlag::EtaUnidentifiable))
                 .collect(),
         }
     }
@@ -141,7 +146,34 @@ pub fn pictures(
                 canvas: figure(title, &panel, Some(&bar)),
             }
         };
-    out.push(scalar("map-eta", "refractive index eta", "eta", &|p| p.eta));
+    // η where it is identifiable; grey where any vertex of the triangle says it is not.
+    let eta: Vec<Option<f64>> = hits
+        .iter()
+        .zip(&at)
+        .map(|(hit, a)| {
+            let (p, ..) = a.as_ref()?;
+            let unidentified = hit
+                .as_ref()?
+                .vertices
+                .iter()
+                .any(|&v| field.eta_unidentified[v as usize]);
+            (!unidentified).then_some(p.eta)
+        })
+        .collect();
+    let (lo, hi) = robust_range(&eta);
+    out.push(Picture {
+        name: "map-eta",
+        canvas: figure(
+            "refractive index eta (grey: not identifiable)",
+            &Panel::scalar(w, h, &eta, ColourMap::Viridis, lo, hi),
+            Some(&Bar {
+                map: ColourMap::Viridis,
+                lo,
+                hi,
+                label: "eta".into(),
+            }),
+        ),
+    });
     out.push(scalar(
         "map-sigma-s",
         "specular roughness sigma_s (GGX)",
@@ -187,9 +219,16 @@ pub fn pictures(
     let rgb = |name: &'static str, title: &str, f: &dyn Fn(&PbrdfParams<f64>) -> [f64; 3]| {
         let values: Vec<Option<[f64; 3]>> =
             at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
-        let mut all: Vec<Option<f64>> = values.iter().flatten().flat_map(|c| c.map(Some)).collect();
-        let gain = 0.9 / robust_range(&all).1.max(1e-9);
-        all.clear();
+        // Display gain from the 95th percentile: a few specular-contaminated vertices must not
+        // darken the whole map.
+        let mut all: Vec<f64> = values
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
+        let gain = 0.9 / crate::report::percentile(&mut all, 0.95).max(1e-9);
         let panel = Panel {
             width: w,
             height: h,

@@ -61,7 +61,8 @@ pub struct ExportReport {
     /// Every file, in writing order.
     pub files: Vec<PathBuf>,
     /// RMS of (captured − re-rendered s0) over the pictured object pixels divided by the RMS of
-    /// the captured s0, after one global scale (when a captured frame was given).
+    /// the captured s0, after one global scale, the median captured/re-rendered ratio (when a
+    /// captured frame was given).
     pub rerender_rmse: Option<f64>,
 }
 

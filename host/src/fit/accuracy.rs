@@ -137,6 +137,17 @@ pub struct Scores {
     pub flags: BTreeMap<String, usize>,
 }
 
+/// The solver's noise model for a scene's camera (DN per electron with its gain, read noise).
+pub fn sensor_model(scene: &Scene) -> super::solve::SensorNoiseModel {
+    let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
+    let r = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
+    super::solve::SensorNoiseModel {
+        dn_per_electron: r.dn_per_electron(),
+        read_noise_dn: scene.effects.read_noise.as_ref().map_or(0.0, |n| n.sigma_e)
+            * r.dn_per_electron(),
+    }
+}
+
 /// Simulates `case` on `scene` (see the module doc).
 pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCapture> {
     let scene = with_photo_count(scene, case.photos)?;
@@ -431,10 +442,10 @@ pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
             let mut o = 0.0;
             for (s, p) in vs.samples.iter().zip(pred) {
                 let Some(p) = p else { continue };
-                for c in 0..3 {
-                    for k in 0..3 {
-                        let obs = f64::from(s.channels[c][k]);
-                        e += (p[c][k] - obs).powi(2);
+                for (pc, sc) in p.iter().zip(&s.channels) {
+                    for (pk, sk) in pc.iter().zip(sc) {
+                        let obs = f64::from(*sk);
+                        e += (pk - obs).powi(2);
                         o += obs * obs;
                     }
                 }

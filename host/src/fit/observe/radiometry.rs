@@ -226,6 +226,14 @@ fn resolve_scene(session: &Session, recorded: &str) -> Option<PathBuf> {
     None
 }
 
+/// The scene a simulator session was captured from, when its file is still found.
+pub fn scene_of(session: &Session) -> Option<Scene> {
+    match &session.manifest.source {
+        SessionSource::Simulator { scene, .. } => Scene::load(&resolve_scene(session, scene)?).ok(),
+        _ => None,
+    }
+}
+
 /// The radiometry of `session` (see the module doc for the rules per source).
 pub fn radiometry_of(session: &Session) -> Result<SessionRadiometry, ObserveError> {
     let flash = flash_of(session)?;
