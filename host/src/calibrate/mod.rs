@@ -17,6 +17,7 @@
 pub mod bundle;
 pub mod flash;
 pub mod report;
+pub mod views;
 pub mod zhang;
 
 use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CameraModel, Distortion, Pose};

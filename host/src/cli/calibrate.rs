@@ -10,15 +10,15 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use ellipso_sim::camera::CAMERA_PARAM_NAMES;
-use nalgebra::{Point2, Point3};
 use rayon::prelude::*;
 
 use crate::calibrate::{CalibConfig, calibrate};
 use crate::polar::frame::RawFrame;
-use crate::pose::{BoardCorners, DetectorConfig, TagDetector, assemble_correspondences};
+use crate::calibrate::views::board_view;
+use crate::pose::{DetectorConfig, TagDetector};
 use crate::process::layout_of;
 use crate::session::reader;
-use crate::track::{DetectImage, detect_frame};
+use crate::track::DetectImage;
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
@@ -49,7 +49,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames.len(),
         args.image
     );
-    let views: Vec<Vec<(Point3<f64>, Point2<f64>)>> = frames
+    let views: Vec<crate::calibrate::views::View> = frames
         .par_iter()
         .map_init(
             || TagDetector::new(DetectorConfig::default()),
@@ -63,20 +63,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 let Ok(raw) = RawFrame::new(w, h, s.bit_depth, layout, px) else {
                     return Vec::new();
                 };
-                let Ok(dets) = detect_frame(detector, &raw, args.image) else {
-                    return Vec::new();
-                };
-                // the board with the most corners in this frame
-                boards
-                    .iter()
-                    .map(|b| {
-                        assemble_correspondences(&dets, b as &dyn BoardCorners).correspondences
-                    })
-                    .max_by_key(Vec::len)
+                board_view(detector, &raw, &boards, args.image)
+                    .map(|(view, _)| view)
                     .unwrap_or_default()
-                    .into_iter()
-                    .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
-                    .collect()
             },
         )
         .collect();
