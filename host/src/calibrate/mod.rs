@@ -16,6 +16,7 @@
 
 pub mod bundle;
 pub mod flash;
+pub mod highlight;
 pub mod report;
 pub mod views;
 pub mod zhang;
