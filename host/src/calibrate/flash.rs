@@ -56,6 +56,29 @@ pub struct FlashEstimate {
     pub rms_angle_rad: f64,
 }
 
+impl FlashEstimate {
+    /// The rig file's `[flash]` table (`offset_m`, camera frame), each coordinate's 1σ in a
+    /// comment; floats in Rust's shortest round-trip form, so reading it back is exact.
+    pub fn to_toml_flash_section(&self) -> String {
+        let p = self.flash_camera_m;
+        let s = self.std_m;
+        format!(
+            "[flash]\n\
+             # from specular highlights in {} views; ray-angle RMS {:.3} mrad\n\
+             # 1σ: x {:.2} mm, y {:.2} mm, z {:.2} mm (camera frame: x right, y down, z forward)\n\
+             offset_m = [{:?}, {:?}, {:?}]\n",
+            self.ray_angle_residuals_rad.len(),
+            self.rms_angle_rad * 1e3,
+            s[0] * 1e3,
+            s[1] * 1e3,
+            s[2] * 1e3,
+            p.x,
+            p.y,
+            p.z
+        )
+    }
+}
+
 /// Why the flash could not be estimated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FlashError {
