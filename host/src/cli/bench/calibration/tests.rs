@@ -6,33 +6,52 @@ fn scene_path() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/calibration.toml")
 }
 
-/// Half resolution (1224×1024), all 7 listed poses: the corners carry half the pixels of the
-/// full-size render, so the bounds are looser than the 5 MP targets, but still tight
-/// enough to catch a wrong corner convention (0.5 px shift → cx, cy off by ≈0.05 %), a wrong
-/// distortion sign or a broken detection-image mapping (all ≥ 1 %).
+/// A third of the resolution (816×680), 8 of the 40 listed poses — the whole chain (render,
+/// superpixel detection image, border filter, Zhang, joint LM) in a few seconds. Relative
+/// precision is ≈3× worse per corner and ≈2.2× worse for fewer views than the 5 MP bench
+/// (σ(cx)/cx ≈ 2.3e-4 there), so instead of the 0.1 % / 2 % this asserts:
+/// - every estimated parameter within 4σ of the truth (the reported σ is honest);
+/// - fx, fy, cx, cy within 0.6 % and k1 within 10 % (a wrong distortion sign is ≥ 100 %);
+/// - the detected corners unbiased to 0.05 px (a 0.5 px convention slip in the superpixel→raw
+///   mapping shows here, not in cx, which would absorb it) with RMS < 0.3 px;
+/// - all 8 views kept (border-clipped tags made views outliers at up to 27 px).
 #[test]
-fn half_resolution_calibration_recovers_the_rendered_camera() {
+fn reduced_resolution_calibration_recovers_the_rendered_camera() {
     let args = CalibrationArgs {
         scene: scene_path(),
-        frames: None,
-        resolution: Some([1224, 1024]),
+        frames: Some(8),
+        resolution: Some([816, 680]),
         seed: None,
         image: DetectImage::S0,
         free_k3: false,
         out: PathBuf::from("."),
     };
     let b = run_bench(&args).expect("bench runs");
-    assert_eq!(b.frames, 7);
-    assert!(b.views_used >= 6, "views kept: {}", b.views_used);
+    assert_eq!(b.frames, 8);
+    assert_eq!(b.views_used, 8, "rejected: {:?}", b.rejected);
     assert!(b.rms_px < 0.3, "reprojection RMS {} px", b.rms_px);
+    let c = &b.corner_error;
+    eprintln!(
+        "corners: mean {:?} px, RMS {:.3} px over {}",
+        c.mean_px, c.rms_px, c.count
+    );
+    assert!(
+        c.mean_px.iter().all(|m| m.abs() < 0.05),
+        "corner bias {:?} px",
+        c.mean_px
+    );
+    assert!(c.rms_px < 0.3, "corner RMS {} px", c.rms_px);
     for r in &b.params {
         eprintln!(
             "{}: truth {} estimate {} rel {:.2e} σ {:.2e} ({:.1}σ)",
             r.name, r.truth, r.estimate, r.relative_error, r.std_error, r.error_sigmas
         );
+        if r.estimated {
+            assert!(r.error_sigmas < 4.0, "{}: {:.1}σ off", r.name, r.error_sigmas);
+        }
         let bound = match r.name {
-            "fx" | "fy" | "cx" | "cy" => 2e-3,
-            "k1" => 5e-2,
+            "fx" | "fy" | "cx" | "cy" => 6e-3,
+            "k1" => 0.1,
             _ => continue,
         };
         assert!(
