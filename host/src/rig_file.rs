@@ -25,6 +25,9 @@
 //! flash_delay_us = 100
 //! flash_duration_us = 2000
 //!
+//! [flash]                        # optional; as `ellipso calibrate --sphere` writes it
+//! offset_m = [0.0, -0.03, 0.0]   # flash position in the camera frame (x right, y down, z forward)
+//!
 //! [[boards]]
 //! file = "boards/base_a4.toml"   # relative to this rig file
 //! translation_m = [0.0, 0.0, 0.0]
@@ -128,6 +131,14 @@ pub struct BoardEntry {
     pub rotation_deg: [f64; 3],
 }
 
+/// The flash's place on the rig.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlashSection {
+    /// Flash position in the camera frame (OpenCV axes), m.
+    pub offset_m: [f64; 3],
+}
+
 /// A rig file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -140,6 +151,9 @@ pub struct RigFile {
     pub camera: CameraModel,
     /// Capture.
     pub capture: CaptureSection,
+    /// Flash position (from `ellipso calibrate --sphere`), if known.
+    #[serde(default)]
+    pub flash: Option<FlashSection>,
     /// AprilTag boards.
     #[serde(default)]
     pub boards: Vec<BoardEntry>,
@@ -217,6 +231,14 @@ impl RigFile {
             return Err(bad(
                 "capture.interval_ms",
                 format!("is {}; must be > 0", self.capture.interval_ms),
+            ));
+        }
+        if let Some(f) = &self.flash
+            && !f.offset_m.iter().all(|v| v.is_finite())
+        {
+            return Err(bad(
+                "flash.offset_m",
+                format!("{:?} has a non-finite value", f.offset_m),
             ));
         }
         if self.capture.flash_delay_us + self.capture.flash_duration_us > self.sensor.exposure_us {
@@ -351,6 +373,25 @@ file = "{}"
     }
 
     #[test]
+    fn the_flash_section_calibrate_writes_loads_back() {
+        let estimate = crate::calibrate::flash::FlashEstimate {
+            flash_camera_m: nalgebra::Point3::new(0.000_1, -0.030_2, 0.001_7),
+            covariance_m2: nalgebra::Matrix3::identity() * 1e-8,
+            std_m: [1e-4; 3],
+            ray_angle_residuals_rad: vec![1e-3; 12],
+            rms_angle_rad: 1e-3,
+        };
+        let tmp = tempfile::tempdir().unwrap();
+        let text = format!("{}\n{}", good(), estimate.to_toml_flash_section());
+        let rig = RigFile::load(&write(tmp.path(), &text)).unwrap();
+        assert_eq!(
+            rig.flash.map(|f| f.offset_m),
+            Some([0.000_1, -0.030_2, 0.001_7])
+        );
+        assert!(RigFile::load(&write(tmp.path(), &good())).unwrap().flash.is_none());
+    }
+
+    #[test]
     fn errors_name_the_file_and_the_key() {
         let tmp = tempfile::tempdir().unwrap();
         let cases = [
@@ -371,6 +412,10 @@ file = "{}"
                 "capture.photos",
             ),
             (good().replace("port = ", "prot = "), "unknown field `prot`"),
+            (
+                format!("{}\n[flash]\noffset_m = [0.0, nan, 0.0]\n", good()),
+                "flash.offset_m",
+            ),
             (good().replace("[capture]", "[capture\n"), "rig.toml"),
         ];
         for (text, expected) in cases {

@@ -239,8 +239,16 @@ pub fn detection_image(
     Ok((gray, w, h, frame.layout().tile_px() as usize))
 }
 
+/// Detections with a corner closer than this to the detection image's border (detection-image
+/// pixels; outside counts as closer) are dropped. A tag cut by the border is still decoded when
+/// its bits are visible, but the quad's edge fit then runs into the frame edge: on the rendered
+/// calibration capture such corners were off by 2–27 px (`ellipso bench calibration`, docs/pose.md
+/// §3) and made whole views outliers.
+pub const BORDER_MARGIN_PX: f64 = 3.0;
+
 /// Detects tags in a raw frame; corners and centres in raw-pixel coordinates (integer-centre
-/// convention), ready for the full-resolution camera model.
+/// convention), ready for the full-resolution camera model. Tags with a corner within
+/// [`BORDER_MARGIN_PX`] of the image border are left out.
 pub fn detect_frame(
     detector: &mut TagDetector,
     frame: &RawFrame,
@@ -250,6 +258,15 @@ pub fn detect_frame(
     let mut detections = detector
         .detect(&gray, w, h)
         .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+    let (max_x, max_y) = (
+        w as f64 - 1.0 - BORDER_MARGIN_PX,
+        h as f64 - 1.0 - BORDER_MARGIN_PX,
+    );
+    detections.retain(|d| {
+        d.corners_px.iter().all(|c| {
+            (BORDER_MARGIN_PX..=max_x).contains(&c[0]) && (BORDER_MARGIN_PX..=max_y).contains(&c[1])
+        })
+    });
     let t = tile as f64;
     let to_raw = |c: &mut [f64; 2]| {
         c[0] = t * c[0] + (t - 1.0) / 2.0;

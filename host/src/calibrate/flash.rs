@@ -11,11 +11,22 @@
 //! perturbs each ray's *direction*, the second pass weights by wᵢ = 1/τᵢ² (τᵢ = mᵢ·(F − Pᵢ) from
 //! the first pass), turning the residuals into angles (rad).
 //!
+//! Geometry: the reflected rays must come from different directions, or the position along them
+//! is not determined however small their residuals are. An orbit aimed at the sphere's centre at
+//! a fixed distance sees the *same* ray in the camera frame in every view; the sphere has to move
+//! around the image (and in depth). Rays whose directions all lie within
+//! [`MIN_RAY_SPREAD_RAD`] of their mean are rejected as [`FlashError::Degenerate`] — the residual
+//! covariance cannot reveal that degeneracy (identical rays have identical, tiny residuals).
+//!
 //! Uncertainty: σ² = Σ wᵢ‖eᵢ‖² / (2n − 3) (two residual components per ray, three unknowns),
 //! covariance σ²·(Σ wᵢ(I − mᵢmᵢᵀ))⁻¹ — the Gauss–Markov estimate under isotropic angular noise.
 
 use ellipso_sim::camera::{CameraError, CameraModel, Pose};
 use nalgebra::{Matrix3, Point3, Vector3};
+
+/// Smallest accepted largest angle between a reflected ray and the mean ray direction, rad
+/// (1°): below it the flash's position along the rays is not determined (see the module doc).
+pub const MIN_RAY_SPREAD_RAD: f64 = 0.017_453_292_519_943_295;
 
 /// One highlight observation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,6 +56,29 @@ pub struct FlashEstimate {
     pub rms_angle_rad: f64,
 }
 
+impl FlashEstimate {
+    /// The rig file's `[flash]` table (`offset_m`, camera frame), each coordinate's 1σ in a
+    /// comment; floats in Rust's shortest round-trip form, so reading it back is exact.
+    pub fn to_toml_flash_section(&self) -> String {
+        let p = self.flash_camera_m;
+        let s = self.std_m;
+        format!(
+            "[flash]\n\
+             # from specular highlights in {} views; ray-angle RMS {:.3} mrad\n\
+             # 1σ: x {:.2} mm, y {:.2} mm, z {:.2} mm (camera frame: x right, y down, z forward)\n\
+             offset_m = [{:?}, {:?}, {:?}]\n",
+            self.ray_angle_residuals_rad.len(),
+            self.rms_angle_rad * 1e3,
+            s[0] * 1e3,
+            s[1] * 1e3,
+            s[2] * 1e3,
+            p.x,
+            p.y,
+            p.z
+        )
+    }
+}
+
 /// Why the flash could not be estimated.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FlashError {
@@ -61,7 +95,9 @@ pub enum FlashError {
     #[error("view {view}: the ray through the highlight misses the sphere by {miss_m:.2e} m")]
     RayMissesSphere { view: usize, miss_m: f64 },
     /// All reflected rays are (nearly) parallel: the position along them is not determined.
-    #[error("reflected rays are nearly parallel; move the camera around the sphere more")]
+    #[error(
+        "reflected rays are nearly parallel; move the sphere around the image and in depth (not an orbit aimed at its centre)"
+    )]
     Degenerate,
 }
 
@@ -95,6 +131,20 @@ pub fn estimate_flash_position(
         let v = -d;
         let m = (2.0 * n.dot(&v) * n - v).normalize();
         rays.push((p, m));
+    }
+    // Direction spread: the mean of unit vectors is non-zero here (all m point back toward the
+    // camera side), normalised with a guard.
+    let mean = rays
+        .iter()
+        .fold(Vector3::zeros(), |a, (_, m)| a + m)
+        .try_normalize(1e-12)
+        .ok_or(FlashError::Degenerate)?;
+    let spread = rays
+        .iter()
+        .map(|(_, m)| m.dot(&mean).clamp(-1.0, 1.0).acos())
+        .fold(0.0, f64::max);
+    if !(spread >= MIN_RAY_SPREAD_RAD) {
+        return Err(FlashError::Degenerate);
     }
     let solve = |weights: &[f64]| -> Result<(Vector3<f64>, Matrix3<f64>), FlashError> {
         let mut a = Matrix3::zeros();

@@ -16,7 +16,9 @@
 
 pub mod bundle;
 pub mod flash;
+pub mod highlight;
 pub mod report;
+pub mod views;
 pub mod zhang;
 
 use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CameraModel, Distortion, Pose};

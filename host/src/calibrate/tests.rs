@@ -376,3 +376,38 @@ fn parallel_views_are_degenerate() {
     );
     assert!(err.to_string().contains("vary the board tilt"));
 }
+
+/// Every view seeing the sphere at the same place in the camera frame (an orbit aimed at its
+/// centre) gives identical reflected rays: rejected as degenerate instead of a confident
+/// nonsense estimate, noise or not.
+#[test]
+fn flash_from_one_repeated_ray_geometry_is_degenerate() {
+    let cam = camera_5mp();
+    let flash_truth = Vector3::new(0.0, -0.03, 0.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(16);
+    let noise = Normal::new(0.0, 0.3).unwrap();
+    let obs: Vec<HighlightObservation> = (0..20)
+        .map(|k| {
+            // aimed at the sphere's centre from 0.5 m, only the azimuth changes
+            let pose = look_at(Vector3::new(0.0, 0.0, 0.04), 0.5, 0.6, k as f64 * 0.3, 0.0);
+            let centre = Point3::new(0.0, 0.0, 0.04);
+            let c = (pose * centre).coords;
+            let px = cam
+                .project(&Point3::from(highlight_point(c, 0.04, flash_truth)))
+                .unwrap();
+            HighlightObservation {
+                camera_from_board: pose,
+                sphere_centre_board_m: centre,
+                sphere_radius_m: 0.04,
+                highlight_px: [
+                    px[0] + noise.sample(&mut rng),
+                    px[1] + noise.sample(&mut rng),
+                ],
+            }
+        })
+        .collect();
+    assert_eq!(
+        estimate_flash_position(&cam, &obs),
+        Err(FlashError::Degenerate)
+    );
+}

@@ -5,12 +5,19 @@
 //!
 //! Frames are rendered once and tracked with each detection image, so the comparison is on the
 //! same pixels. Writes `pose-bench.json` and prints a table.
+//!
+//! `ellipso bench calibration` ([`calibration`]) checks the camera calibration the same way.
+//! `--seed S` replaces the scene's seed: the poses of seeded capture paths (orbit phase, hand-held
+//! walk) and the sensor noise both change.
 
-use std::path::PathBuf;
+pub mod calibration;
+
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
+use ellipso_sim::scene::error::Located;
 
 use crate::polar::frame::RawFrame;
 use crate::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
@@ -23,6 +30,8 @@ pub enum Args {
     /// What accuracy costs in time: fit error against seconds on simulated captures with known
     /// truth (photo count, solver effort, vertex count sweeps); writes docs/accuracy-vs-time.md.
     Accuracy(super::bench_accuracy::AccuracyArgs),
+    /// Camera calibration accuracy on a rendered calibration capture.
+    Calibration(calibration::CalibrationArgs),
 }
 
 /// Arguments of `ellipso bench pose`.
@@ -36,6 +45,9 @@ pub struct PoseArgs {
     /// Render at WIDTHxHEIGHT instead of the scene's resolution.
     #[arg(long, value_parser = super::capture::parse_resolution)]
     pub resolution: Option<[u32; 2]>,
+    /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Where to write pose-bench.json.
     #[arg(long, default_value = ".")]
     pub out: PathBuf,
@@ -71,11 +83,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Pose(a) => pose(a),
         Args::Accuracy(a) => super::bench_accuracy::run(a),
+        Args::Calibration(a) => calibration::run(a),
     }
 }
 
+/// Loads a scene; with `seed`, recomputes its capture poses and noise seed from that seed.
+pub fn load_scene(path: &Path, seed: Option<u64>) -> anyhow::Result<Scene> {
+    let mut scene = Scene::load(path)?;
+    if let Some(seed) = seed {
+        let text = std::fs::read_to_string(path)?;
+        let loc = Located::new(&text, path);
+        scene.camera_poses = scene.capture.camera_poses(seed, &loc)?;
+        scene.seed = seed;
+    }
+    Ok(scene)
+}
+
+/// `frames` indices spread evenly over `n` poses (all of them for `None`).
+pub fn spread(n: usize, frames: Option<usize>) -> Vec<usize> {
+    let frames = frames.unwrap_or(n).clamp(1, n.max(1));
+    // floor(i·n/frames): distinct, increasing, first 0, covering the whole path
+    (0..frames.min(n)).map(|i| i * n / frames).collect()
+}
+
 fn pose(args: PoseArgs) -> anyhow::Result<()> {
-    let scene = Scene::load(&args.scene)?;
+    let scene = load_scene(&args.scene, args.seed)?;
     let options = RenderOptions {
         resolution_px: args.resolution,
         ..RenderOptions::default()
@@ -89,15 +121,14 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
         "{}: the scene has no AprilTag boards",
         args.scene.display()
     );
-    let n = scene.camera_poses.len();
-    let step = (n / args.frames.max(1)).max(1);
-    let indices: Vec<usize> = (0..n).step_by(step).take(args.frames).collect();
+    let indices = spread(scene.camera_poses.len(), Some(args.frames));
     println!(
-        "rendering {} frames of {} at {}×{}…",
+        "rendering {} frames of {} at {}×{}, seed {}…",
         indices.len(),
         args.scene.display(),
         camera.width,
-        camera.height
+        camera.height,
+        scene.seed
     );
     let mut frames = Vec::new();
     for &k in &indices {

@@ -5,20 +5,29 @@
 //! it sees best (Zhang needs one plane per view). Prints the reprojection RMS and the parameter
 //! standard errors, and writes the rig file's `[camera]` section (`--out`, default
 //! `SESSION/calibration/camera.toml`) with each value's 1σ error in a comment.
+//!
+//! With `--sphere R,X,Y,Z` (a glossy sphere of radius R m centred at (X, Y, Z) m in the world
+//! frame of the session's boards — the base board's frame when it sits at the world origin) it
+//! also finds the flash's specular highlight on the sphere in every calibrated frame
+//! ([`crate::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
+//! position in the camera frame ([`crate::calibrate::flash`]) and writes the `[flash]` section
+//! below the camera section. Frames whose highlight is rejected are listed with the reason.
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use ellipso_sim::camera::CAMERA_PARAM_NAMES;
-use nalgebra::{Point2, Point3};
 use rayon::prelude::*;
 
 use crate::calibrate::{CalibConfig, calibrate};
 use crate::polar::frame::RawFrame;
-use crate::pose::{BoardCorners, DetectorConfig, TagDetector, assemble_correspondences};
+use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};
+use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
+use crate::calibrate::views::board_view;
+use crate::pose::{DetectorConfig, TagDetector};
 use crate::process::layout_of;
 use crate::session::reader;
-use crate::track::{DetectImage, detect_frame};
+use crate::track::DetectImage;
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
@@ -34,6 +43,28 @@ pub struct Args {
     /// Also estimate k3 (needs corners out to the image corners).
     #[arg(long)]
     pub free_k3: bool,
+    /// Estimate the flash position from highlights on a glossy sphere: RADIUS,X,Y,Z in metres,
+    /// the centre in the world frame of the session's boards.
+    #[arg(long, value_parser = parse_sphere, value_name = "R,X,Y,Z")]
+    pub sphere: Option<Sphere>,
+}
+
+/// Parses `R,X,Y,Z` (metres) into a sphere.
+pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>().map_err(|e| format!("'{p}': {e}")))
+        .collect::<Result<_, _>>()?;
+    let [radius_m, x, y, z] = v[..] else {
+        return Err(format!("expected R,X,Y,Z (4 numbers), got {}", v.len()));
+    };
+    if !(radius_m.is_finite() && radius_m > 0.0) || ![x, y, z].iter().all(|c| c.is_finite()) {
+        return Err(format!("radius {radius_m} must be positive and the centre finite"));
+    }
+    Ok(Sphere {
+        radius_m,
+        centre_m: nalgebra::Point3::new(x, y, z),
+    })
 }
 
 /// Runs `ellipso calibrate`.
@@ -49,37 +80,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         frames.len(),
         args.image
     );
-    let views: Vec<Vec<(Point3<f64>, Point2<f64>)>> = frames
+    let detected: Vec<(crate::calibrate::views::View, Option<usize>)> = frames
         .par_iter()
         .map_init(
             || TagDetector::new(DetectorConfig::default()),
             |detector, entry| {
                 let Ok(detector) = detector else {
-                    return Vec::new();
+                    return (Vec::new(), None);
                 };
                 let Ok((w, h, px)) = session.load_frame(entry) else {
-                    return Vec::new();
+                    return (Vec::new(), None);
                 };
                 let Ok(raw) = RawFrame::new(w, h, s.bit_depth, layout, px) else {
-                    return Vec::new();
+                    return (Vec::new(), None);
                 };
-                let Ok(dets) = detect_frame(detector, &raw, args.image) else {
-                    return Vec::new();
-                };
-                // the board with the most corners in this frame
-                boards
-                    .iter()
-                    .map(|b| {
-                        assemble_correspondences(&dets, b as &dyn BoardCorners).correspondences
-                    })
-                    .max_by_key(Vec::len)
-                    .unwrap_or_default()
-                    .into_iter()
-                    .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
-                    .collect()
+                board_view(detector, &raw, &boards, args.image).unwrap_or_default()
             },
         )
         .collect();
+    let views: Vec<_> = detected.iter().map(|(v, _)| v.clone()).collect();
     let usable = views.iter().filter(|v| v.len() >= 8).count();
     println!("{usable} frames with ≥ 2 tags of one board");
     let config = CalibConfig {
@@ -114,8 +133,67 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::fs::create_dir_all(parent)
             .with_context(|| format!("creating {}", parent.display()))?;
     }
-    std::fs::write(&out, cal.to_toml_camera_section())
-        .with_context(|| format!("writing {}", out.display()))?;
-    println!("camera section written to {}", out.display());
+    let mut text = cal.to_toml_camera_section();
+    if let Some(sphere) = args.sphere {
+        // per calibrated view: its frame, board and pose → the highlight
+        let observations: Vec<HighlightObservation> = cal
+            .views
+            .par_iter()
+            .filter_map(|v| {
+                let board = &boards[detected[v.index].1?];
+                let entry = frames[v.index];
+                let found = session
+                    .load_frame(entry)
+                    .map_err(|e| e.to_string())
+                    .and_then(|(w, h, px)| {
+                        RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
+                    })
+                    .and_then(|raw| {
+                        let camera_from_world =
+                            v.camera_from_board * board.world_from_board().inverse();
+                        find_highlight(
+                            &raw,
+                            &cal.camera,
+                            &camera_from_world,
+                            &sphere,
+                            &HighlightConfig::default(),
+                        )
+                        .map_err(|e| e.to_string())
+                    });
+                match found {
+                    Ok(h) => Some(HighlightObservation {
+                        camera_from_board: v.camera_from_board,
+                        sphere_centre_board_m: board.world_from_board().inverse()
+                            * sphere.centre_m,
+                        sphere_radius_m: sphere.radius_m,
+                        highlight_px: h.pixel,
+                    }),
+                    Err(why) => {
+                        println!("  frame {}: no highlight: {why}", entry.frame_id);
+                        None
+                    }
+                }
+            })
+            .collect();
+        let flash = estimate_flash_position(&cal.camera, &observations)
+            .context("estimating the flash position")?;
+        let p = flash.flash_camera_m.coords * 1e3;
+        let sd = flash.std_m.map(|v| v * 1e3);
+        println!(
+            "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
+            p.x,
+            sd[0],
+            p.y,
+            sd[1],
+            p.z,
+            sd[2],
+            observations.len(),
+            flash.rms_angle_rad * 1e3
+        );
+        text.push('\n');
+        text.push_str(&flash.to_toml_flash_section());
+    }
+    std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+    println!("rig sections written to {}", out.display());
     Ok(())
 }

@@ -125,7 +125,7 @@ fn every_shipped_scene_and_board_loads() {
     );
     assert_eq!(multi.effects.listed().len(), 11, "all but lens_distortion");
     let calib = Scene::load(&sim_dir().join("scenes/calibration.toml")).expect("calibration");
-    assert!(calib.objects.is_empty() && calib.camera_poses.len() == 7);
+    assert!(calib.objects.is_empty() && calib.camera_poses.len() == 40);
     let s0 = Scene::load(&sim_dir().join("scenes/s0_only.toml")).expect("s0");
     assert!(!s0.rig.flash.polarised && !s0.rig.camera.analysers && s0.effects.listed().is_empty());
 }
