@@ -388,7 +388,12 @@ file = "{}"
             rig.flash.map(|f| f.offset_m),
             Some([0.000_1, -0.030_2, 0.001_7])
         );
-        assert!(RigFile::load(&write(tmp.path(), &good())).unwrap().flash.is_none());
+        assert!(
+            RigFile::load(&write(tmp.path(), &good()))
+                .unwrap()
+                .flash
+                .is_none()
+        );
     }
 
     #[test]

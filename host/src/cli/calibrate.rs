@@ -19,11 +19,11 @@ use anyhow::Context;
 use ellipso_sim::camera::CAMERA_PARAM_NAMES;
 use rayon::prelude::*;
 
-use crate::calibrate::{CalibConfig, calibrate};
-use crate::polar::frame::RawFrame;
 use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};
 use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
 use crate::calibrate::views::board_view;
+use crate::calibrate::{CalibConfig, calibrate};
+use crate::polar::frame::RawFrame;
 use crate::pose::{DetectorConfig, TagDetector};
 use crate::process::layout_of;
 use crate::session::reader;
@@ -59,7 +59,9 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
         return Err(format!("expected R,X,Y,Z (4 numbers), got {}", v.len()));
     };
     if !(radius_m.is_finite() && radius_m > 0.0) || ![x, y, z].iter().all(|c| c.is_finite()) {
-        return Err(format!("radius {radius_m} must be positive and the centre finite"));
+        return Err(format!(
+            "radius {radius_m} must be positive and the centre finite"
+        ));
     }
     Ok(Sphere {
         radius_m,
@@ -163,8 +165,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 match found {
                     Ok(h) => Some(HighlightObservation {
                         camera_from_board: v.camera_from_board,
-                        sphere_centre_board_m: board.world_from_board().inverse()
-                            * sphere.centre_m,
+                        sphere_centre_board_m: board.world_from_board().inverse() * sphere.centre_m,
                         sphere_radius_m: sphere.radius_m,
                         highlight_px: h.pixel,
                     }),

@@ -124,7 +124,16 @@ fn joint_pnp_agrees_with_opencv_solvepnp() {
          worst {worst_ippe_rot:.3}°, {worst_ippe_trans:.3} mm; ours vs truth worst {worst_truth_rot:.3}°"
     );
     assert!(worst_rot < 1e-5, "rotation differs by {worst_rot}°");
-    assert!(worst_trans < 1e-5, "translation differs by {worst_trans} mm");
-    assert!(worst_ippe_rot < 1.0, "IPPE rotation differs by {worst_ippe_rot}°");
-    assert!(worst_ippe_trans < 1.0, "IPPE translation differs by {worst_ippe_trans} mm");
+    assert!(
+        worst_trans < 1e-5,
+        "translation differs by {worst_trans} mm"
+    );
+    assert!(
+        worst_ippe_rot < 1.0,
+        "IPPE rotation differs by {worst_ippe_rot}°"
+    );
+    assert!(
+        worst_ippe_trans < 1.0,
+        "IPPE translation differs by {worst_ippe_trans} mm"
+    );
 }

@@ -198,7 +198,11 @@ pub fn compare(truth: &CameraModel, cal: &Calibration) -> Vec<ParamRow> {
         .map(|k| {
             let err = (e[k] - t[k]).abs();
             // relative error undefined for a zero truth: NaN, printed as "—"
-            let relative_error = if t[k] != 0.0 { err / t[k].abs() } else { f64::NAN };
+            let relative_error = if t[k] != 0.0 {
+                err / t[k].abs()
+            } else {
+                f64::NAN
+            };
             let std_error = cal.std_errors[k];
             let error_sigmas = if cal.estimated[k] && std_error > 0.0 {
                 err / std_error
@@ -290,7 +294,10 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
 
 /// Runs `ellipso bench calibration`.
 pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
-    println!("calibrating from rendered frames of {}…", args.scene.display());
+    println!(
+        "calibrating from rendered frames of {}…",
+        args.scene.display()
+    );
     let b = run_bench(&args)?;
     println!(
         "{} frames at {}×{}, seed {}: {} views kept, {} corners, reprojection RMS {:.4} px",

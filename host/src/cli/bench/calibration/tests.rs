@@ -47,7 +47,12 @@ fn reduced_resolution_calibration_recovers_the_rendered_camera() {
             r.name, r.truth, r.estimate, r.relative_error, r.std_error, r.error_sigmas
         );
         if r.estimated {
-            assert!(r.error_sigmas < 4.0, "{}: {:.1}σ off", r.name, r.error_sigmas);
+            assert!(
+                r.error_sigmas < 4.0,
+                "{}: {:.1}σ off",
+                r.name,
+                r.error_sigmas
+            );
         }
         let bound = match r.name {
             "fx" | "fy" | "cx" | "cy" => 6e-3,
@@ -81,7 +86,11 @@ fn targets_are_judged_on_intrinsics_and_k1_only() {
         error_sigmas: f64::NAN,
         estimated: true,
     };
-    assert!(meets_targets(&[row("fx", 9e-4), row("k1", 1.9e-2), row("k2", 0.5)]));
+    assert!(meets_targets(&[
+        row("fx", 9e-4),
+        row("k1", 1.9e-2),
+        row("k2", 0.5)
+    ]));
     assert!(!meets_targets(&[row("cy", 1.1e-3)]));
     assert!(!meets_targets(&[row("k1", 2.1e-2)]));
     assert!(!meets_targets(&[row("fx", f64::NAN)]));
