@@ -32,7 +32,11 @@ fn sphere_mesh(dir: &Path) -> PathBuf {
         .collect();
     let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
     let path = dir.join("sphere.ply");
-    std::fs::write(&path, write_ply(&mesh, PlyFormat::BinaryLittleEndian, false)).unwrap();
+    std::fs::write(
+        &path,
+        write_ply(&mesh, PlyFormat::BinaryLittleEndian, false),
+    )
+    .unwrap();
     path
 }
 
@@ -55,11 +59,23 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
     let o = Command::new(ellipso_bin())
         .args(["capture", "--sim"])
         .arg(scene("sphere.toml"))
-        .args(["--photos", "16", "--resolution", "612x512", "--supersampling", "1", "--out"])
+        .args([
+            "--photos",
+            "16",
+            "--resolution",
+            "612x512",
+            "--supersampling",
+            "1",
+            "--out",
+        ])
         .arg(&session)
         .output()
         .expect("spawn capture");
-    assert!(o.status.success(), "capture: {}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "capture: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
     let before = frames_snapshot(&session);
     let mesh = sphere_mesh(tmp.path());
     let out = tmp.path().join("fit");
@@ -79,7 +95,13 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(text.contains("results in"), "{text}");
-    for f in ["fit.ply", "fit-summary.json", "map-eta.png", "mueller-grid.png", "relit.png"] {
+    for f in [
+        "fit.ply",
+        "fit-summary.json",
+        "map-eta.png",
+        "mueller-grid.png",
+        "relit.png",
+    ] {
         assert!(out.join(f).is_file(), "{f} missing: {text}");
     }
     let fitted = TriangleMesh::load(&out.join("fit.ply")).expect("fit.ply loads as a mesh");
@@ -94,7 +116,11 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
 fn bad_inputs_fail_with_one_line_naming_the_file() {
     let tmp = tempfile::tempdir().unwrap();
     let run = |args: &[&std::ffi::OsStr]| {
-        let o = Command::new(ellipso_bin()).arg("fit").args(args).output().unwrap();
+        let o = Command::new(ellipso_bin())
+            .arg("fit")
+            .args(args)
+            .output()
+            .unwrap();
         assert!(!o.status.success());
         String::from_utf8_lossy(&o.stderr).to_string()
     };
@@ -107,7 +133,11 @@ fn bad_inputs_fail_with_one_line_naming_the_file() {
     let truncated = tmp.path().join("truncated.ply");
     let bytes = std::fs::read(&mesh).unwrap();
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
-    let e = run(&[tmp.path().as_os_str(), "--mesh".as_ref(), truncated.as_os_str()]);
+    let e = run(&[
+        tmp.path().as_os_str(),
+        "--mesh".as_ref(),
+        truncated.as_os_str(),
+    ]);
     assert!(e.contains("truncated.ply"), "{e}");
     let e = run(&[
         tmp.path().as_os_str(),

@@ -143,7 +143,8 @@ pub fn estimate_flash_position(
         .iter()
         .map(|(_, m)| m.dot(&mean).clamp(-1.0, 1.0).acos())
         .fold(0.0, f64::max);
-    if !(spread >= MIN_RAY_SPREAD_RAD) {
+    // NaN spread fails too.
+    if spread.is_nan() || spread < MIN_RAY_SPREAD_RAD {
         return Err(FlashError::Degenerate);
     }
     let solve = |weights: &[f64]| -> Result<(Vector3<f64>, Matrix3<f64>), FlashError> {

@@ -257,7 +257,8 @@ pub fn find_highlight(
     let background = crate::report::percentile(&mut disc, 0.5).max(0.0);
     // contrast: peak over median, the median floored at 1e-6 (a black disc) to keep it finite
     let contrast = peak.0 / background.max(1e-6);
-    if !(contrast >= config.min_contrast) {
+    // NaN contrast fails too.
+    if contrast.is_nan() || contrast < config.min_contrast {
         return Err(HighlightRejection::NoContrast {
             contrast,
             required: config.min_contrast,

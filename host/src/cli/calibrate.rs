@@ -58,7 +58,7 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
     let [radius_m, x, y, z] = v[..] else {
         return Err(format!("expected R,X,Y,Z (4 numbers), got {}", v.len()));
     };
-    if !(radius_m.is_finite() && radius_m > 0.0) || ![x, y, z].iter().all(|c| c.is_finite()) {
+    if !(radius_m.is_finite() && radius_m > 0.0 && [x, y, z].iter().all(|c| c.is_finite())) {
         return Err(format!(
             "radius {radius_m} must be positive and the centre finite"
         ));

@@ -10,6 +10,7 @@
 //! - DoLP and AoLP of the light the camera receives under the rig's polarised flash;
 //! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), tone-mapped by its
 //!   99th percentile, sRGB; the novel view: the same light from another camera pose.
+//!
 //! Pixels where the mesh is not hit, or whose vertices failed (`TooFewViews`), are grey.
 
 use ellipso_sim::optics::Vec3;
@@ -120,7 +121,7 @@ pub fn pictures(
     let field = Field::new(fits);
     let hits = rasterise(mesh, camera);
     let (w, h) = (camera.width, camera.height);
-    let at: Vec<Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>> = hits
+    let at: Vec<PixelModel> = hits
         .iter()
         .map(|hit| {
             let hit = (*hit)?;
