@@ -238,7 +238,7 @@ fn one_run(
         scores,
     };
     println!(
-        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} %  re-render {:.4}",
+        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}",
         r.scene,
         r.sweep,
         r.solver,
@@ -252,6 +252,7 @@ fn one_run(
         r.scores.normal_median_deg,
         r.scores.normal_p90_deg,
         r.scores.rho_d_mean_pct,
+        r.scores.rho_d_median_pct,
         r.scores.rerender_rmse
     );
     Ok(r)

@@ -64,7 +64,7 @@ pub fn markdown(
         let _ = writeln!(s, "## {title}\n");
         let _ = writeln!(
             s,
-            "| scene | solver | photos | vertices | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err (%) | σs / σss abs err | re-render RMSE | flagged |"
+            "| scene | solver | photos | vertices | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | flagged |"
         );
         let _ = writeln!(
             s,
@@ -80,7 +80,7 @@ pub fn markdown(
                 .join(", ");
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} | {:.3} / {:.3} | {:.4} | {} |",
+                "| {} | {} | {} | {} | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} | {} |",
                 r.scene,
                 r.solver,
                 r.photos,
@@ -97,6 +97,7 @@ pub fn markdown(
                 r.scores.normal_p90_deg,
                 r.scores.normal_input_median_deg,
                 r.scores.rho_d_mean_pct,
+                r.scores.rho_d_median_pct,
                 r.scores.sigma_s_abs,
                 r.scores.sigma_ss_abs,
                 r.scores.rerender_rmse,

@@ -353,7 +353,12 @@ pub fn capture_hw(
     );
     manifest.rig = serde_json::to_value(RigRecord {
         camera: rig.camera,
-        flash: serde_json::Value::Null,
+        // The flash as `ellipso calibrate --sphere` measured it (the fit needs it); the rest of
+        // the flash description takes the rig's defaults (polarised parallel to the 0° analyser).
+        flash: rig
+            .flash
+            .map(|f| serde_json::json!({ "offset_m": f.offset_m }))
+            .unwrap_or(serde_json::Value::Null),
     })?;
     manifest.boards = boards
         .iter()

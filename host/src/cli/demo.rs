@@ -29,7 +29,8 @@ pub struct Args {
     /// Scene to capture (default: the shipped four-material demo scene).
     #[arg(long)]
     pub scene: Option<PathBuf>,
-    /// Smaller and shorter: for a smoke test (quarter resolution, 24 photos).
+    /// Smaller and shorter: for a smoke test (the glass sphere scene unless --scene, quarter
+    /// resolution, 24 photos).
     #[arg(long)]
     pub quick: bool,
 }
@@ -95,7 +96,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let scene_path = args
         .scene
         .clone()
-        .unwrap_or_else(|| shipped_scene("demo.toml"));
+        // The quick run takes the monochrome sphere scene: the colour sensor's 4×4 tiles leave
+        // too few pixels per tag at quarter resolution to track the poses.
+        .unwrap_or_else(|| {
+            shipped_scene(if args.quick {
+                "sphere.toml"
+            } else {
+                "demo.toml"
+            })
+        });
     anyhow::ensure!(
         scene_path.is_file(),
         "scene {} not found: run the demo from the source tree, or pass --scene",

@@ -128,6 +128,8 @@ pub struct Scores {
     pub normal_input_median_deg: f64,
     /// Mean relative ρd error, %.
     pub rho_d_mean_pct: f64,
+    /// Median relative ρd error, % (robust to the few vertices whose ρd absorbs a highlight).
+    pub rho_d_median_pct: f64,
     /// Mean |σs − σs_true|.
     pub sigma_s_abs: f64,
     /// Mean |σss − σss_true|.
@@ -472,6 +474,10 @@ pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
         normal_p90_deg: crate::report::percentile(&mut normals, 0.9),
         normal_input_median_deg: crate::report::percentile(&mut inputs, 0.5),
         rho_d_mean_pct: mean(&scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
+        rho_d_median_pct: crate::report::percentile(
+            &mut scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>(),
+            0.5,
+        ),
         sigma_s_abs: mean(
             &scored
                 .iter()
