@@ -73,38 +73,38 @@ struct SolverSetting {
 }
 
 fn solver_settings() -> Vec<SolverSetting> {
-    let default = FitConfig::default();
     let joint_only = |iterations: u32| {
-        let mut c = FitConfig {
-            augment: None,
-            ..FitConfig::default()
-        };
+        let mut c = FitConfig::default();
         c.solver.max_iterations = iterations;
         c
     };
     vec![
         SolverSetting {
-            label: "A only, 4 iterations",
+            label: "A, 4 iterations",
             config: joint_only(4),
         },
         SolverSetting {
-            label: "A only, 12 iterations",
+            label: "A, 12 iterations",
             config: joint_only(12),
         },
         SolverSetting {
-            label: "A only, default iterations",
-            config: joint_only(default.solver.max_iterations),
+            label: "A, default iterations (default)",
+            config: FitConfig::default(),
         },
         SolverSetting {
-            label: "A + B + C, 1 final pass",
+            label: "A, fast preset",
             config: FitConfig {
-                final_passes: 1,
+                solver: crate::fit::solve::SolverConfig::fast(),
                 ..FitConfig::default()
             },
         },
         SolverSetting {
-            label: "A + B + C, 3 final passes (default)",
-            config: default,
+            label: "A + B + C, 1 final pass",
+            config: FitConfig::with_augmentation(1),
+        },
+        SolverSetting {
+            label: "A + B + C, 3 final passes",
+            config: FitConfig::with_augmentation(3),
         },
     ]
 }
@@ -278,15 +278,15 @@ fn write_report(
     plot(
         results,
         &eta_png,
-        "η error vs fit time",
-        "mean η error (%)",
+        "eta error vs fit time",
+        "mean per-vertex eta error (%)",
         |s| s.eta_mean_pct,
     )?;
     plot(
         results,
         &normal_png,
         "normal error vs fit time",
-        "median normal error (°)",
+        "median normal error (deg)",
         |s| s.normal_median_deg,
     )?;
     let json = dir.join(format!("{stem}.json"));
@@ -318,7 +318,7 @@ fn plot(
         .legend(LegendPosition::TopRight);
     let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
     for r in results.iter().filter(|r| r.sweep != "large") {
-        let key = format!("{} · {}", r.scene, r.sweep);
+        let key = format!("{} - {}", r.scene, r.sweep);
         let point = (r.fit_s.max(1e-3), metric(&r.scores));
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, pts)) => pts.push(point),

@@ -8,8 +8,8 @@
 //!   ([`super::observe::extract`], visibility and shadows recomputed on the current geometry),
 //!   run step A warm-started from iteration k − 1 (same vertices: the connectivity never
 //!   changes, so results carry over by index), and — except after the last iteration — move the
-//!   vertices towards the refined normals. The last iteration runs steps A, B, C
-//!   ([`super::pipeline::fit_sample_set`]).
+//!   vertices towards the refined normals. The last iteration runs the whole pipeline
+//!   ([`super::pipeline::fit_sample_set`]: step A, and B + C when enabled).
 //! - The session is only read; nothing recorded is changed.
 //! - Deterministic for a given input on any thread count.
 
