@@ -39,24 +39,7 @@ struct Field {
 impl Field {
     fn new(fits: &[VertexFit]) -> Self {
         Self {
-            params: fits
-                .iter()
-                .map(|f| {
-                    let p = &f.params;
-                    [
-                        p.eta,
-                        p.sigma_s,
-                        p.sigma_ss,
-                        p.rho_s,
-                        p.rho_ss[0],
-                        p.rho_ss[1],
-                        p.rho_ss[2],
-                        p.rho_d[0],
-                        p.rho_d[1],
-                        p.rho_d[2],
-                    ]
-                })
-                .collect(),
+            params: fits.iter().map(super::ply::params_of).collect(),
             normals: fits.iter().map(|f| f.normal_world).collect(),
             eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
             failed: fits

@@ -68,7 +68,8 @@ pub fn flag_mask(flags: &[FitFlag]) -> u32 {
         .fold(0, |m, (k, _)| m | (1 << k))
 }
 
-fn params_of(f: &VertexFit) -> [f64; 10] {
+/// A fit's parameters in [`PARAMS`] order.
+pub fn params_of(f: &VertexFit) -> [f64; 10] {
     let p = &f.params;
     [
         p.eta,
