@@ -257,7 +257,16 @@ fn comparison(
     let pairs: Vec<Option<(f64, f64)>> = models
         .par_iter()
         .map(|m| {
-            let (p, n, point, _) = m.as_ref()?;
+            let (p, n, point, hit) = m.as_ref()?;
+            // Vertices whose highlight was clipped never saw their specular peak: their lobe is
+            // extrapolated, so they are left out (grey) rather than compared with clipped data.
+            if hit.vertices.iter().any(|&v| {
+                fits[v as usize]
+                    .flags
+                    .contains(&crate::fit::data::FitFlag::Saturated)
+            }) {
+                return None;
+            }
             let px = camera.project(&camera_from_world.transform_point(point))?;
             let observed = captured.at_raw(px[0], px[1])?;
             let g = rig_view
@@ -274,25 +283,36 @@ fn comparison(
             Some((observed, predicted))
         })
         .collect();
-    let (cp, pp) = pairs
+    // One global scale (the radiometric constant), robustly: the median captured/re-rendered
+    // ratio over pixels with signal, so a few specular spikes cannot set it.
+    let mut ratios: Vec<f64> = pairs
         .iter()
         .flatten()
-        .fold((0.0, 0.0), |a, (c, p)| (a.0 + c * p, a.1 + p * p));
-    let scale = if pp > 0.0 { cp / pp } else { 0.0 };
+        .filter(|(c, p)| *p > 0.0 && *c > 0.0)
+        .map(|(c, p)| c / p)
+        .collect();
+    let scale = if ratios.is_empty() {
+        0.0
+    } else {
+        crate::report::percentile(&mut ratios, 0.5)
+    };
+    // The sensor clips: a re-rendered value above the brightest captured one (a sharp
+    // highlight the model puts where the sampled frames never resolved it) is clipped there too.
+    let hi = pairs.iter().flatten().map(|p| p.0).fold(1e-9, f64::max);
+    let rendered = |p: f64| (scale * p).min(hi);
     let (mut e2, mut c2) = (0.0, 0.0);
     for (c, p) in pairs.iter().flatten() {
-        e2 += (c - scale * p).powi(2);
+        e2 += (c - rendered(*p)).powi(2);
         c2 += c * c;
     }
     let rmse = (c2 > 0.0).then(|| (e2 / c2).sqrt());
     let w = view.width;
     let h = view.height;
-    let hi = pairs.iter().flatten().map(|p| p.0).fold(1e-9, f64::max);
     let captured_v: Vec<Option<f64>> = pairs.iter().map(|p| p.map(|p| p.0)).collect();
-    let rendered_v: Vec<Option<f64>> = pairs.iter().map(|p| p.map(|p| scale * p.1)).collect();
+    let rendered_v: Vec<Option<f64>> = pairs.iter().map(|p| p.map(|p| rendered(p.1))).collect();
     let error_v: Vec<Option<f64>> = pairs
         .iter()
-        .map(|p| p.map(|p| (p.0 - scale * p.1) / hi))
+        .map(|p| p.map(|p| (p.0 - rendered(p.1)) / hi))
         .collect();
     let mut canvas = crate::report::Canvas::new(3 * w + 16, h + 54, [24, 24, 24]);
     let title = format!(
