@@ -102,62 +102,35 @@ pub fn pictures(
     light_world: &Point3<f64>,
 ) -> Vec<Picture> {
     let field = Field::new(fits);
-    let hits = rasterise(mesh, camera);
     let (w, h) = (camera.width, camera.height);
-    let at: Vec<PixelModel> = hits
-        .iter()
-        .map(|hit| {
-            let hit = (*hit)?;
-            let (p, n) = field.at(&hit)?;
-            Some((p, n, hit.point_world, hit))
-        })
-        .collect();
+    let at = models_of(mesh, &field, camera);
     let mut out = Vec::new();
     let scalar =
         |name: &'static str, title: &str, label: &str, f: &dyn Fn(&PbrdfParams<f64>) -> f64| {
             let values: Vec<Option<f64>> =
                 at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
-            let (lo, hi) = robust_range(&values);
-            let panel = Panel::scalar(w, h, &values, ColourMap::Viridis, lo, hi);
-            let bar = Bar {
-                map: ColourMap::Viridis,
-                lo,
-                hi,
-                label: label.into(),
-            };
-            Picture {
-                name,
-                canvas: figure(title, &panel, Some(&bar)),
-            }
+            scalar_picture(name, title, label, w, h, &values)
         };
     // η where it is identifiable; grey where any vertex of the triangle says it is not.
-    let eta: Vec<Option<f64>> = hits
+    let eta: Vec<Option<f64>> = at
         .iter()
-        .zip(&at)
-        .map(|(hit, a)| {
-            let (p, ..) = a.as_ref()?;
+        .map(|a| {
+            let (p, _, _, hit) = a.as_ref()?;
             let unidentified = hit
-                .as_ref()?
                 .vertices
                 .iter()
                 .any(|&v| field.eta_unidentified[v as usize]);
             (!unidentified).then_some(p.eta)
         })
         .collect();
-    let (lo, hi) = robust_range(&eta);
-    out.push(Picture {
-        name: "map-eta",
-        canvas: figure(
-            "refractive index eta (grey: not identifiable)",
-            &Panel::scalar(w, h, &eta, ColourMap::Viridis, lo, hi),
-            Some(&Bar {
-                map: ColourMap::Viridis,
-                lo,
-                hi,
-                label: "eta".into(),
-            }),
-        ),
-    });
+    out.push(scalar_picture(
+        "map-eta",
+        "refractive index eta (grey: not identifiable)",
+        "eta",
+        w,
+        h,
+        &eta,
+    ));
     out.push(scalar(
         "map-sigma-s",
         "specular roughness sigma_s (GGX)",
@@ -177,29 +150,21 @@ pub fn pictures(
         &|p| p.rho_s,
     ));
     // η standard error (per vertex, interpolated).
-    let eta_std: Vec<Option<f64>> = hits
+    let eta_std: Vec<Option<f64>> = at
         .iter()
-        .zip(&at)
-        .map(|(hit, a)| {
-            a.as_ref()?;
-            let s = hit.as_ref()?.interpolate(&field.eta_std)[0];
+        .map(|a| {
+            let s = a.as_ref()?.3.interpolate(&field.eta_std)[0];
             s.is_finite().then_some(s)
         })
         .collect();
-    let (lo, hi) = robust_range(&eta_std);
-    out.push(Picture {
-        name: "map-eta-std",
-        canvas: figure(
-            "eta standard error (grey: not identifiable)",
-            &Panel::scalar(w, h, &eta_std, ColourMap::Viridis, lo, hi),
-            Some(&Bar {
-                map: ColourMap::Viridis,
-                lo,
-                hi,
-                label: "std(eta)".into(),
-            }),
-        ),
-    });
+    out.push(scalar_picture(
+        "map-eta-std",
+        "eta standard error (grey: not identifiable)",
+        "std(eta)",
+        w,
+        h,
+        &eta_std,
+    ));
     let rgb = |name: &'static str, title: &str, f: &dyn Fn(&PbrdfParams<f64>) -> [f64; 3]| {
         let values: Vec<Option<[f64; 3]>> =
             at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
@@ -469,7 +434,11 @@ pub fn pixel_models(
     fits: &[VertexFit],
     camera: &ViewCamera,
 ) -> Vec<PixelModel> {
-    let field = Field::new(fits);
+    models_of(mesh, &Field::new(fits), camera)
+}
+
+/// Rasterises `mesh` and interpolates `field` at every hit.
+fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<PixelModel> {
     rasterise(mesh, camera)
         .into_iter()
         .map(|hit| {
@@ -478,4 +447,30 @@ pub fn pixel_models(
             Some((p, n, hit.point_world, hit))
         })
         .collect()
+}
+
+/// A scalar map (viridis over the robust range, with its colour bar).
+fn scalar_picture(
+    name: &'static str,
+    title: &str,
+    label: &str,
+    w: u32,
+    h: u32,
+    values: &[Option<f64>],
+) -> Picture {
+    let (lo, hi) = robust_range(values);
+    let bar = Bar {
+        map: ColourMap::Viridis,
+        lo,
+        hi,
+        label: label.into(),
+    };
+    Picture {
+        name,
+        canvas: figure(
+            title,
+            &Panel::scalar(w, h, values, ColourMap::Viridis, lo, hi),
+            Some(&bar),
+        ),
+    }
 }
