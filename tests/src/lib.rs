@@ -10,6 +10,15 @@ pub mod qemu;
 
 use std::path::PathBuf;
 
+/// A shipped scene file (`sim/scenes/<name>`).
+pub fn shipped_scene(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("sim")
+        .join("scenes")
+        .join(name)
+}
+
 /// Path of the `ellipso` binary built by the same `cargo test` invocation.
 ///
 /// Cargo puts integration-test executables in `target/<profile>/deps/` and binaries in

@@ -12,15 +12,7 @@ use std::time::{Duration, Instant};
 
 use ellipso_host::session::events::SessionEvent;
 use ellipso_host::session::reader;
-use ellipso_tests::ellipso_bin;
-
-fn scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("sim")
-        .join("scenes")
-        .join(name)
-}
+use ellipso_tests::{ellipso_bin, shipped_scene as scene};
 
 /// Kills the child on drop (tests must not leave servers behind).
 struct Guard(Child);

@@ -12,16 +12,8 @@ use std::process::Command;
 use ellipso_sim::geometry::TriangleMesh;
 use ellipso_sim::geometry::ply::{PlyFormat, write_ply};
 use ellipso_sim::geometry::procedural::icosphere;
-use ellipso_tests::ellipso_bin;
+use ellipso_tests::{ellipso_bin, shipped_scene as scene};
 use nalgebra::Point3;
-
-fn scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("sim")
-        .join("scenes")
-        .join(name)
-}
 
 /// The sphere scene's object (radius 40 mm at z = 40 mm) as an icosphere mesh file.
 fn sphere_mesh(dir: &Path) -> PathBuf {

@@ -106,21 +106,43 @@ pub fn spread(n: usize, frames: Option<usize>) -> Vec<usize> {
     (0..frames.min(n)).map(|i| i * n / frames).collect()
 }
 
-fn pose(args: PoseArgs) -> anyhow::Result<()> {
-    let scene = load_scene(&args.scene, args.seed)?;
+/// The renderer of `scene` (at `resolution` when given) and the scene's AprilTag boards as
+/// tracking sees them; an error names `path` when the scene has no board.
+pub fn renderer_and_boards<'s>(
+    scene: &'s Scene,
+    resolution: Option<[u32; 2]>,
+    path: &std::path::Path,
+) -> anyhow::Result<(Renderer<'s>, Vec<TrackedBoard>)> {
     let options = RenderOptions {
-        resolution_px: args.resolution,
+        resolution_px: resolution,
         ..RenderOptions::default()
     };
-    let renderer = Renderer::new(&scene, options)?;
-    let camera = *renderer.camera();
-    let layout = renderer.layout();
+    let renderer = Renderer::new(scene, options)?;
     let boards: Vec<TrackedBoard> = scene.boards.iter().map(TrackedBoard::from_placed).collect();
     anyhow::ensure!(
         !boards.is_empty(),
         "{}: the scene has no AprilTag boards",
-        args.scene.display()
+        path.display()
     );
+    Ok((renderer, boards))
+}
+
+/// Pose `k` of the scene rendered as the camera delivers it.
+pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::Result<RawFrame> {
+    let f = renderer.render_frame(k)?;
+    Ok(RawFrame::new(
+        f.width,
+        f.height,
+        scene.rig.camera.bit_depth,
+        renderer.layout(),
+        f.raw(),
+    )?)
+}
+
+fn pose(args: PoseArgs) -> anyhow::Result<()> {
+    let scene = load_scene(&args.scene, args.seed)?;
+    let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
+    let camera = *renderer.camera();
     let indices = spread(scene.camera_poses.len(), Some(args.frames));
     println!(
         "rendering {} frames of {} at {}×{}, seed {}…",
@@ -132,15 +154,7 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
     );
     let mut frames = Vec::new();
     for &k in &indices {
-        let f = renderer.render_frame(k)?;
-        let raw = RawFrame::new(
-            f.width,
-            f.height,
-            scene.rig.camera.bit_depth,
-            layout,
-            f.raw(),
-        )?;
-        frames.push((k, raw));
+        frames.push((k, render_raw(&renderer, &scene, k)?));
     }
     let mut results = Vec::new();
     for image in [DetectImage::I90, DetectImage::I0, DetectImage::S0] {

@@ -54,11 +54,12 @@ fn pose() -> Isometry3<f64> {
     )
 }
 
+fn sphere_scene() -> Scene {
+    Scene::load(&crate::cli::demo::shipped_scene("sphere.toml")).unwrap()
+}
+
 fn flash() -> FlashSpec {
-    let scene =
-        Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/sphere.toml"))
-            .unwrap();
-    scene.rig.flash
+    sphere_scene().rig.flash
 }
 
 #[test]
@@ -66,12 +67,7 @@ fn every_output_is_written_and_readable() {
     let mesh = sphere();
     let fits = fits(&mesh);
     let dir = tempfile::tempdir().unwrap();
-    let camera =
-        Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/sphere.toml"))
-            .unwrap()
-            .rig
-            .camera
-            .camera_model();
+    let camera = sphere_scene().rig.camera.camera_model();
     let config = ExportConfig {
         picture_px: 48,
         ..ExportConfig::default()

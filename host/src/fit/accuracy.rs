@@ -148,9 +148,13 @@ pub fn sensor_model(scene: &Scene) -> super::solve::SensorNoiseModel {
     let r = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
     super::solve::SensorNoiseModel {
         dn_per_electron: r.dn_per_electron(),
-        read_noise_dn: scene.effects.read_noise.as_ref().map_or(0.0, |n| n.sigma_e)
-            * r.dn_per_electron(),
+        read_noise_dn: read_noise_e(scene) * r.dn_per_electron(),
     }
+}
+
+/// The scene camera's read noise, electrons RMS (0 when the scene simulates none).
+fn read_noise_e(scene: &Scene) -> f64 {
+    scene.effects.read_noise.as_ref().map_or(0.0, |n| n.sigma_e)
 }
 
 /// Simulates `case` on `scene` (see the module doc).
@@ -160,11 +164,12 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
     let views = views_of_scene(&scene, &scene.camera_poses);
     let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
     let radiometry = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
-    let noise = case.noise.then(|| SensorNoise {
-        full_scale_dn: radiometry.full_scale_dn(),
-        dn_per_electron: radiometry.dn_per_electron(),
-        read_noise_e: scene.effects.read_noise.as_ref().map_or(0.0, |r| r.sigma_e),
-        shot_noise: scene.effects.shot_noise.is_some(),
+    let noise = case.noise.then(|| {
+        SensorNoise::from_radiometry(
+            &radiometry,
+            read_noise_e(&scene),
+            scene.effects.shot_noise.is_some(),
+        )
     });
     let camera = scene.rig.camera.camera_model();
     let flash = scene.rig.flash.clone();

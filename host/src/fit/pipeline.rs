@@ -135,12 +135,9 @@ mod tests {
     use super::*;
     use crate::fit::accuracy::{CaptureCase, evaluate, simulate};
     use ellipso_sim::scene::Scene;
-    use std::path::Path;
 
     fn capture() -> crate::fit::accuracy::SimulatedCapture {
-        let scene =
-            Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/sphere.toml"))
-                .unwrap();
+        let scene = Scene::load(&crate::cli::demo::shipped_scene("sphere.toml")).unwrap();
         let case = CaptureCase {
             photos: 40,
             subdivisions: Some(1),

@@ -148,15 +148,10 @@ pub fn views_of_scene(scene: &Scene, poses: &[CameraPose]) -> Vec<ViewGeometry> 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::path::Path;
+    use crate::cli::demo::shipped_scene;
 
     fn scene(name: &str) -> Scene {
-        Scene::load(
-            &Path::new(env!("CARGO_MANIFEST_DIR"))
-                .join("../sim/scenes")
-                .join(name),
-        )
-        .unwrap()
+        Scene::load(&shipped_scene(name)).unwrap()
     }
 
     #[test]

@@ -10,13 +10,11 @@
 use std::path::PathBuf;
 
 use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
-use ellipso_sim::render::{RenderOptions, Renderer};
 
 use crate::calibrate::views::{View, board_view};
 use crate::calibrate::{CalibConfig, Calibration, calibrate};
-use crate::polar::frame::RawFrame;
 use crate::pose::{DetectorConfig, TagDetector};
-use crate::track::{DetectImage, TrackedBoard};
+use crate::track::DetectImage;
 
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;
@@ -234,32 +232,14 @@ pub fn meets_targets(rows: &[ParamRow]) -> bool {
 /// Renders, detects and calibrates (see the module doc).
 pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
     let scene = super::load_scene(&args.scene, args.seed)?;
-    let options = RenderOptions {
-        resolution_px: args.resolution,
-        ..RenderOptions::default()
-    };
-    let renderer = Renderer::new(&scene, options)?;
+    let (renderer, boards) = super::renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let truth = *renderer.camera();
-    let layout = renderer.layout();
-    let boards: Vec<TrackedBoard> = scene.boards.iter().map(TrackedBoard::from_placed).collect();
-    anyhow::ensure!(
-        !boards.is_empty(),
-        "{}: the scene has no AprilTag boards",
-        args.scene.display()
-    );
     let indices = super::spread(scene.camera_poses.len(), args.frames);
     let mut detector = TagDetector::new(DetectorConfig::default())?;
     let mut views: Vec<View> = Vec::new();
     let mut truth_views = Vec::new();
     for &k in &indices {
-        let f = renderer.render_frame(k)?;
-        let raw = RawFrame::new(
-            f.width,
-            f.height,
-            scene.rig.camera.bit_depth,
-            layout,
-            f.raw(),
-        )?;
+        let raw = super::render_raw(&renderer, &scene, k)?;
         let (view, board) = board_view(&mut detector, &raw, &boards, args.image)?;
         let camera_from_board = board.map(|b| {
             scene.camera_poses[k].world_from_camera.inverse() * boards[b].world_from_board()
