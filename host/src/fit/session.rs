@@ -97,38 +97,27 @@ pub fn fit_session(
     let mut joint_s = 0.0;
     let mut shape_s = 0.0;
     let iterations = config.outer_iterations.max(1);
-    for k in 1..=iterations {
-        progress(&format!(
+    // Observations of the current mesh, the solve starting from the refined normals (not the
+    // re-derived mesh normals) once there are any; with the seconds it took.
+    let observe = |mesh: &TriangleMesh, previous: Option<&[VertexFit]>| {
+        let started = Instant::now();
+        let mut set = extract(session, mesh, poses, &config.observe, &|_, _| {})?.samples;
+        for (v, f) in set.vertices.iter_mut().zip(previous.unwrap_or_default()) {
+            v.normal_world = f.normal_world;
+        }
+        Ok::<_, SessionFitError>((set, started.elapsed().as_secs_f64()))
+    };
+    let announce = |k: usize, mesh: &TriangleMesh| {
+        format!(
             "outer iteration {k}/{iterations}: observations from {} frames of {} vertices",
             poses.len(),
             mesh.positions().len()
-        ));
-        let started = Instant::now();
-        let mut set = extract(session, &mesh, poses, &config.observe, &|_, _| {})?.samples;
-        if let Some(prev) = &previous {
-            // Start the solve from the refined normals, not the re-derived mesh normals.
-            for (v, f) in set.vertices.iter_mut().zip(prev) {
-                v.normal_world = f.normal_world;
-            }
-        }
-        observe_s += started.elapsed().as_secs_f64();
-        if k == iterations {
-            let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
-            outcome.times.observe_s = observe_s;
-            outcome.times.joint_s += joint_s;
-            outcome.times.shape_s = shape_s;
-            let mut gates = GateCounts::default();
-            for v in &set.vertices {
-                gates.add(&v.gates);
-            }
-            return Ok(SessionFit {
-                mesh,
-                set,
-                outcome,
-                shape_updates,
-                gates,
-            });
-        }
+        )
+    };
+    for k in 1..iterations {
+        progress(&announce(k, &mesh));
+        let (set, seconds) = observe(&mesh, previous.as_deref())?;
+        observe_s += seconds;
         progress(&format!(
             "outer iteration {k}/{iterations}: joint per-vertex solve"
         ));
@@ -151,5 +140,22 @@ pub fn fit_session(
         shape_s += started.elapsed().as_secs_f64();
         previous = Some(fits);
     }
-    unreachable!("the last outer iteration returns")
+    progress(&announce(iterations, &mesh));
+    let (set, seconds) = observe(&mesh, previous.as_deref())?;
+    observe_s += seconds;
+    let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
+    outcome.times.observe_s = observe_s;
+    outcome.times.joint_s += joint_s;
+    outcome.times.shape_s = shape_s;
+    let mut gates = GateCounts::default();
+    for v in &set.vertices {
+        gates.add(&v.gates);
+    }
+    Ok(SessionFit {
+        mesh,
+        set,
+        outcome,
+        shape_updates,
+        gates,
+    })
 }
