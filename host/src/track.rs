@@ -197,11 +197,12 @@ impl Tracker {
     }
 }
 
-/// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
-pub fn detection_image(
+/// The detection image of a frame in linear DN (superpixel resolution, colour bands summed):
+/// `(plane, width, height)`.
+pub fn detection_plane(
     frame: &RawFrame,
     kind: DetectImage,
-) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
+) -> Result<(Vec<f32>, usize, usize), TrackRejection> {
     let levels = PolarConfig::default()
         .levels(frame)
         .map_err(|e| TrackRejection::Frame(e.to_string()))?;
@@ -224,6 +225,15 @@ pub fn detection_image(
             };
         }
     }
+    Ok((plane, w, h))
+}
+
+/// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
+pub fn detection_image(
+    frame: &RawFrame,
+    kind: DetectImage,
+) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
+    let (plane, w, h) = detection_plane(frame, kind)?;
     let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
     let p995 = sorted

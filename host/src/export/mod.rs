@@ -140,25 +140,8 @@ pub fn captured_s0(
     let raw =
         crate::polar::frame::RawFrame::new(w, h, session.manifest.sensor.bit_depth, layout, px)
             .map_err(|e| e.to_string())?;
-    let levels = crate::polar::PolarConfig::default()
-        .levels(&raw)
+    let (s0, sw, sh) = crate::track::detection_plane(&raw, crate::track::DetectImage::S0)
         .map_err(|e| e.to_string())?;
-    let d = crate::polar::demosaic::demosaic(
-        &raw,
-        &levels,
-        crate::polar::demosaic::DemosaicMethod::Superpixel,
-    );
-    let (sw, sh) = (
-        d.bands[0].intensity[0].width(),
-        d.bands[0].intensity[0].height(),
-    );
-    let mut s0 = vec![0f32; sw * sh];
-    for band in &d.bands {
-        let [i0, i45, i90, i135] = &band.intensity;
-        for (k, v) in s0.iter_mut().enumerate() {
-            *v += 0.5 * (i0.data()[k] + i45.data()[k] + i90.data()[k] + i135.data()[k]);
-        }
-    }
     Ok(CapturedS0 {
         width: sw,
         height: sh,
