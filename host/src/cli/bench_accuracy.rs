@@ -37,6 +37,15 @@ pub struct AccuracyArgs {
     /// Noise and normal-tilt seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
+    /// Which sweeps to run (default all): photos, solver, vertices.
+    #[arg(long, value_delimiter = ',')]
+    pub sweeps: Vec<String>,
+    /// Photos of the solver and vertex sweeps (default 100; 25 with --quick).
+    #[arg(long)]
+    pub photos: Option<usize>,
+    /// Fraction of the views held out of every fit and scored as a re-render (default 0.1).
+    #[arg(long, default_value_t = 0.1)]
+    pub holdout: f64,
 }
 
 /// One timed, scored run.
@@ -64,6 +73,14 @@ pub struct RunResult {
     pub fit_over_forward: f64,
     /// Scores against the truth.
     pub scores: Scores,
+    /// Re-render errors on the held-out views (`None` when none were held out).
+    pub holdout: Option<crate::fit::holdout::FrameScore>,
+    /// The clusters (when step B ran).
+    pub clusters: Vec<crate::fit::augment::ClusterModel>,
+    /// The uncertainty of η before and after pooling (when step B ran).
+    pub pooling: Option<crate::fit::pipeline::PoolingSummary>,
+    /// Vertices with virtual samples / with a pooled η prior (when step B ran).
+    pub guided: Option<(usize, usize)>,
 }
 
 /// A solver setting of the effort sweep.
@@ -74,33 +91,29 @@ struct SolverSetting {
 
 fn solver_settings() -> Vec<SolverSetting> {
     let joint_only = |iterations: u32| {
-        let mut c = FitConfig::default();
+        let mut c = FitConfig::joint_only();
         c.solver.max_iterations = iterations;
         c
     };
     vec![
         SolverSetting {
-            label: "A, 4 iterations",
-            config: joint_only(4),
-        },
-        SolverSetting {
             label: "A, 12 iterations",
             config: joint_only(12),
         },
         SolverSetting {
-            label: "A, default iterations (default)",
-            config: FitConfig::default(),
+            label: "A alone",
+            config: FitConfig::joint_only(),
         },
         SolverSetting {
             label: "A, fast preset",
             config: FitConfig {
                 solver: crate::fit::solve::SolverConfig::fast(),
-                ..FitConfig::default()
+                ..FitConfig::joint_only()
             },
         },
         SolverSetting {
-            label: "A + B + C, 1 final pass",
-            config: FitConfig::with_augmentation(1),
+            label: "A + B + C, 1 final pass (default)",
+            config: FitConfig::default(),
         },
         SolverSetting {
             label: "A + B + C, 3 final passes",
@@ -121,10 +134,27 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
     };
     let (photo_sweep, subdivision_sweep, effort_photos): (Vec<usize>, Vec<u32>, usize) =
         if args.quick {
-            (vec![25, 50], vec![2], 25)
+            (vec![25, 50], vec![2], args.photos.unwrap_or(25))
         } else {
-            (vec![25, 50, 100, 200], vec![3, 4, 5], 100)
+            (
+                vec![25, 50, 100, 200],
+                vec![3, 4, 5],
+                args.photos.unwrap_or(100),
+            )
         };
+    let wants = |sweep: &str| args.sweeps.is_empty() || args.sweeps.iter().any(|s| s == sweep);
+    for s in &args.sweeps {
+        anyhow::ensure!(
+            ["photos", "solver", "vertices", "large"].contains(&s.as_str()),
+            "--sweeps: unknown sweep `{s}` (photos, solver, vertices, large)"
+        );
+    }
+    anyhow::ensure!(
+        (0.0..0.9).contains(&args.holdout),
+        "--holdout {}: must be in [0, 0.9)",
+        args.holdout
+    );
+    let holdout = args.holdout;
     let base_subdivisions = if args.quick { Some(2) } else { None };
     let mut results = Vec::new();
     let started = Instant::now();
@@ -135,7 +165,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
             .clone()
             .unwrap_or_else(|| path.display().to_string());
         let default = FitConfig::default();
-        for &photos in &photo_sweep {
+        for &photos in photo_sweep.iter().filter(|_| wants("photos")) {
             let case = CaptureCase {
                 photos,
                 subdivisions: base_subdivisions,
@@ -143,10 +173,10 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 ..CaptureCase::default()
             };
             results.push(one_run(
-                &scene, &name, "photos", "default", &case, &default,
+                &scene, &name, "photos", "default", &case, &default, holdout,
             )?);
         }
-        for setting in solver_settings() {
+        for setting in solver_settings().into_iter().filter(|_| wants("solver")) {
             let case = CaptureCase {
                 photos: effort_photos,
                 subdivisions: base_subdivisions,
@@ -160,9 +190,10 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 setting.label,
                 &case,
                 &setting.config,
+                holdout,
             )?);
         }
-        for &s in &subdivision_sweep {
+        for &s in subdivision_sweep.iter().filter(|_| wants("vertices")) {
             let case = CaptureCase {
                 photos: effort_photos,
                 subdivisions: Some(s),
@@ -170,11 +201,11 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 ..CaptureCase::default()
             };
             results.push(one_run(
-                &scene, &name, "vertices", "default", &case, &default,
+                &scene, &name, "vertices", "default", &case, &default, holdout,
             )?);
         }
     }
-    if !args.quick && !args.no_large {
+    if !args.quick && !args.no_large && wants("large") {
         let scene = Scene::load(&super::demo::shipped_scene("sphere.toml"))?;
         let case = CaptureCase {
             photos: 150,
@@ -190,6 +221,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
             "default",
             &case,
             &FitConfig::default(),
+            holdout,
         )?);
     }
     write_report(
@@ -208,13 +240,23 @@ fn one_run(
     solver: &str,
     case: &CaptureCase,
     config: &FitConfig,
+    holdout: f64,
 ) -> anyhow::Result<RunResult> {
     let t = Instant::now();
-    let capture = simulate(scene, case)?;
+    let full = simulate(scene, case)?;
     let simulate_s = t.elapsed().as_secs_f64();
+    // The held-out views are taken out before the fit sees anything.
+    let (train, held) = crate::fit::holdout::split_set(&full.set, holdout);
+    let capture = crate::fit::accuracy::SimulatedCapture {
+        truth: full.truth,
+        set: train,
+    };
     let mut config = config.clone();
     config.solver.sensor = crate::fit::accuracy::sensor_model(scene);
     let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
+    let full_scale = crate::fit::accuracy::full_scale_dn(scene);
+    let holdout = (!held.views.is_empty())
+        .then(|| crate::fit::holdout::score(&held, &outcome.fits, full_scale).overall);
     let fit_s = outcome.times.fit_s();
     let t = Instant::now();
     let checksum = forward_all(&capture.set, &outcome.fits);
@@ -236,9 +278,20 @@ fn one_run(
         forward_s,
         fit_over_forward: fit_s / forward_s,
         scores,
+        holdout,
+        clusters: outcome
+            .augmentation
+            .as_ref()
+            .map(|a| a.clusters.clone())
+            .unwrap_or_default(),
+        pooling: outcome.pooling,
+        guided: outcome
+            .augmentation
+            .as_ref()
+            .map(|a| (a.vertices_with_virtual_samples, a.vertices_with_eta_prior)),
     };
     println!(
-        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}",
+        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
         r.scene,
         r.sweep,
         r.solver,
@@ -248,13 +301,54 @@ fn one_run(
         r.fit_s,
         r.fit_over_forward,
         r.scores.eta_mean_pct,
+        r.scores.eta_median_pct,
         r.scores.eta_material_pct,
         r.scores.normal_median_deg,
         r.scores.normal_p90_deg,
         r.scores.rho_d_mean_pct,
         r.scores.rho_d_median_pct,
-        r.scores.rerender_rmse
+        r.scores.rerender_rmse,
+        r.holdout
+            .as_ref()
+            .map_or("n/a".into(), |h| format!("{:.4}", h.s0.relative_rmse))
     );
+    if let (Some(p), Some((virt, prior))) = (&r.pooling, r.guided) {
+        println!(
+            "    {} clusters, {virt} vertices with virtual samples, {prior} with a pooled η prior; median η se {:.4} → {:.4}",
+            r.clusters.len(),
+            p.median_eta_se_before,
+            p.median_eta_se_after
+        );
+    }
+    for c in &r.clusters {
+        println!(
+            "    cluster ({} members): η {:.4} (pooled {:.4} ± {:.4}, median {:.4}, τ {:.4}, {} used, {} trimmed)  σs {:.3}  σss {:.3}  ρs {:.3}",
+            c.members,
+            c.eta,
+            c.eta_pooled.mean,
+            c.eta_pooled.se,
+            c.eta_pooled.median,
+            c.eta_pooled.tau,
+            c.eta_pooled.vertices,
+            c.eta_pooled.trimmed,
+            c.sigma_s,
+            c.sigma_ss,
+            c.rho_s
+        );
+    }
+    for m in &r.scores.materials {
+        println!(
+            "    {:<16} η {:.4} (true {:.3}, {:+.3} %; vertex median {:.2} %)  σs {:.3}  σss {:.3}  normal {:.2}°",
+            m.name,
+            m.eta_median,
+            m.eta_true,
+            100.0 * (m.eta_median - m.eta_true) / m.eta_true,
+            m.eta_vertex_median_pct,
+            m.sigma_s_median,
+            m.sigma_ss_median,
+            m.normal_median_deg
+        );
+    }
     Ok(r)
 }
 

@@ -8,10 +8,15 @@
 //!   mean of the colour channels) for the rig's own camera/flash geometry at that view, M00 in
 //!   viridis (log10) and every other element as M_ij/M00 in a diverging map over [−1, 1];
 //! - DoLP and AoLP of the light the camera receives under the rig's polarised flash;
-//! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), tone-mapped by its
-//!   99th percentile, sRGB; the novel view: the same light from another camera pose.
+//! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), exposed and
+//!   tone-mapped by Reinhard's global operator ([`tone_map`]), sRGB; the novel view: the same
+//!   light from another camera pose.
 //!
-//! Pixels where the mesh is not hit, or whose vertices failed (`TooFewViews`), are grey.
+//! Parameters are interpolated over a triangle from its reliable vertices only (barycentric
+//! weights renormalised); a vertex is unreliable when flagged `TooFewViews`, `NotConverged` or
+//! `AtBound`. Pixels where the mesh is not hit, or nearer unreliable vertices than reliable ones
+//! (reliable weight < ½), are grey: one bad vertex is drawn as a small grey patch, never as a
+//! fan of its lobe over its neighbours' triangles.
 
 use ellipso_sim::optics::Vec3;
 use ellipso_sim::optics::measure::FlashPolariser;
@@ -32,8 +37,18 @@ struct Field {
     params: Vec<[f64; 10]>,
     normals: Vec<[f64; 3]>,
     eta_std: Vec<[f64; 1]>,
-    failed: Vec<bool>,
+    reliable: Vec<bool>,
     eta_unidentified: Vec<bool>,
+}
+
+/// Whether a vertex's parameters are drawn (module doc).
+fn reliable(f: &VertexFit) -> bool {
+    !f.flags.iter().any(|flag| {
+        matches!(
+            flag,
+            FitFlag::TooFewViews | FitFlag::NotConverged | FitFlag::AtBound
+        )
+    })
 }
 
 impl Field {
@@ -42,10 +57,7 @@ impl Field {
             params: fits.iter().map(super::ply::params_of).collect(),
             normals: fits.iter().map(|f| f.normal_world).collect(),
             eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
-            failed: fits
-                .iter()
-                .map(|f| f.flags.contains(&FitFlag::TooFewViews))
-                .collect(),
+            reliable: fits.iter().map(reliable).collect(),
             eta_unidentified: fits
                 .iter()
                 .map(|f| f.flags.contains(&FitFlag::EtaUnidentifiable))
@@ -53,11 +65,26 @@ impl Field {
         }
     }
 
-    /// Parameters and unit normal at a hit; `None` when any vertex of its triangle failed.
-    fn at(&self, hit: &Hit) -> Option<(PbrdfParams<f64>, [f64; 3])> {
-        if hit.vertices.iter().any(|&v| self.failed[v as usize]) {
+    /// `hit` with its barycentric weights restricted to the reliable vertices and renormalised;
+    /// `None` when they carry less than half the weight (module doc).
+    fn reliable_hit(&self, hit: &Hit) -> Option<Hit> {
+        let mut h = *hit;
+        for (w, &v) in h.barycentric.iter_mut().zip(&hit.vertices) {
+            if !self.reliable[v as usize] {
+                *w = 0.0;
+            }
+        }
+        let total: f64 = h.barycentric.iter().sum();
+        if !(total >= 0.5) {
             return None;
         }
+        h.barycentric.iter_mut().for_each(|w| *w /= total);
+        Some(h)
+    }
+
+    /// Parameters and unit normal at a hit, from its reliable vertices (module doc).
+    fn at(&self, hit: &Hit) -> Option<(PbrdfParams<f64>, [f64; 3])> {
+        let hit = self.reliable_hit(hit)?;
         let p = hit.interpolate(&self.params);
         let n = Vector3::from(hit.interpolate(&self.normals));
         let n = n.try_normalize(1e-12)?;
@@ -412,20 +439,56 @@ pub fn relit(
             Some(s0.map(|v| v / d2))
         })
         .collect();
-    let all: Vec<Option<f64>> = rgb.iter().flatten().flat_map(|c| c.map(Some)).collect();
-    let gain = 0.9 / robust_range(&all).1.max(1e-12);
+    let mapped = tone_map(&rgb);
     let panel = Panel {
         width: w,
         height: h,
-        pixels: rgb
-            .iter()
-            .map(|v| v.map(|c| c.map(|x| srgb(x * gain))))
-            .collect(),
+        pixels: mapped.iter().map(|v| v.map(|c| c.map(srgb))).collect(),
     };
     Picture {
         name,
         canvas: figure(title, &panel, None),
     }
+}
+
+/// Reinhard's global photographic operator (Reinhard, Stark, Shirley & Ferwerda,
+/// "Photographic tone reproduction for digital images", SIGGRAPH 2002, eqs. 1–4) on linear RGB:
+/// luminance L = 0.2126 R + 0.7152 G + 0.0722 B (Rec. 709) is scaled so its log-average over
+/// the object maps to the key 0.18, then L_d = L(1 + L/L_white²)/(1 + L) with L_white the 99.5th
+/// percentile of the scaled luminance, and every channel is scaled by L_d/L. The exposure comes
+/// from the whole object (not its brightest pixel), and highlights are compressed, not clipped:
+/// a sharp highlight stays bright without turning the rest of the object black.
+pub fn tone_map(rgb: &[Option<[f64; 3]>]) -> Vec<Option<[f64; 3]>> {
+    let lum = |c: &[f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    let lums: Vec<f64> = rgb
+        .iter()
+        .flatten()
+        .map(lum)
+        .filter(|l| l.is_finite() && *l > 0.0)
+        .collect();
+    if lums.is_empty() {
+        return rgb.iter().map(|v| v.map(|_| [0.0; 3])).collect();
+    }
+    // δ keeps the log finite for black pixels (Reinhard's eq. 1), relative to the median.
+    let mut sorted = lums.clone();
+    let median = crate::report::percentile(&mut sorted, 0.5);
+    let delta = 1e-4 * median.max(1e-300);
+    let log_average =
+        (lums.iter().map(|l| (delta + l).ln()).sum::<f64>() / lums.len() as f64).exp();
+    let scale = 0.18 / log_average.max(1e-300);
+    let white = (scale * crate::report::percentile(&mut sorted, 0.995)).max(1e-9);
+    rgb.iter()
+        .map(|v| {
+            v.map(|c| {
+                let l = scale * lum(&c).max(0.0);
+                if !(l > 0.0) || !l.is_finite() {
+                    return [0.0; 3];
+                }
+                let ld = l * (1.0 + l / (white * white)) / (1.0 + l);
+                c.map(|x| (x.max(0.0) * scale * ld / l).min(1.0))
+            })
+        })
+        .collect()
 }
 
 /// The per-pixel model of a view (for the novel view and tests).

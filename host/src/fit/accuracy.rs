@@ -96,6 +96,12 @@ pub struct MaterialErrors {
     pub eta_mean_pct: f64,
     /// Median fitted η.
     pub eta_median: f64,
+    /// Median over the material's vertices of |η − η_true| / η_true, %.
+    pub eta_vertex_median_pct: f64,
+    /// Median fitted σs.
+    pub sigma_s_median: f64,
+    /// Median fitted σss.
+    pub sigma_ss_median: f64,
     /// Mean relative ρd error over RGB, %.
     pub rho_d_mean_pct: f64,
     /// Mean |σs − σs_true|.
@@ -117,6 +123,8 @@ pub struct Scores {
     pub samples: usize,
     /// Mean η error over scored vertices, %.
     pub eta_mean_pct: f64,
+    /// Median η error over scored vertices, %.
+    pub eta_median_pct: f64,
     /// Mean over materials of the error of the material's η (median over its vertices), % —
     /// the paper's measure (one η per object, 1.49 % on real objects).
     pub eta_material_pct: f64,
@@ -150,6 +158,12 @@ pub fn sensor_model(scene: &Scene) -> super::solve::SensorNoiseModel {
         dn_per_electron: r.dn_per_electron(),
         read_noise_dn: read_noise_e(scene) * r.dn_per_electron(),
     }
+}
+
+/// The scene camera's largest code, DN.
+pub fn full_scale_dn(scene: &Scene) -> f64 {
+    let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
+    Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting).full_scale_dn()
 }
 
 /// The scene camera's read noise, electrons RMS (0 when the scene simulates none).
@@ -417,12 +431,20 @@ pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
         let tp = &truth.params[members[0]];
         let mut etas: Vec<f64> = members.iter().map(|&v| fits[v].params.eta).collect();
         let mut normals: Vec<f64> = members.iter().map(|&v| normal_err(v)).collect();
+        let mut sigma_s: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_s).collect();
+        let mut sigma_ss: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_ss).collect();
         materials.push(MaterialErrors {
             name: truth.material_names[m].clone(),
             eta_true: tp.eta,
             vertices: members.len(),
             eta_mean_pct: mean(&members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
             eta_median: crate::report::percentile(&mut etas, 0.5),
+            eta_vertex_median_pct: crate::report::percentile(
+                &mut members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
+                0.5,
+            ),
+            sigma_s_median: crate::report::percentile(&mut sigma_s, 0.5),
+            sigma_ss_median: crate::report::percentile(&mut sigma_ss, 0.5),
             rho_d_mean_pct: mean(&members.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
             sigma_s_abs: mean(
                 &members
@@ -475,6 +497,10 @@ pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
         scored: scored.len(),
         samples: set.vertices.iter().map(|v| v.samples.len()).sum(),
         eta_mean_pct: mean(&scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
+        eta_median_pct: crate::report::percentile(
+            &mut scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
+            0.5,
+        ),
         normal_median_deg: crate::report::percentile(&mut normals, 0.5),
         normal_p90_deg: crate::report::percentile(&mut normals, 0.9),
         normal_input_median_deg: crate::report::percentile(&mut inputs, 0.5),

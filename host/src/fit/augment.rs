@@ -10,34 +10,44 @@
 //!   ignored).
 //! - [`Augmentation`]: `clusters` (only clusters that got a model), per vertex `assignment`
 //!   (index into `clusters` of the nearest model cluster in feature space; `None` without a
-//!   usable fit or when no cluster has a model), `virtual_samples` (for
-//!   `fit::solve::fit_vertex`; empty when the vertex is outside the kernel) and
-//!   `sigma_s_floor` (σ_s,cluster/2 for the final pass, §7.8; 0 — no floor — for a vertex
-//!   without virtual samples: a cluster it is not close to says nothing about its lobe).
+//!   usable fit or when no cluster has a model) and `guides` (for `fit::solve::fit_vertex`):
+//!   the virtual samples (empty when the vertex is outside the kernel), the σ_s floor
+//!   (σ_s,cluster/2 for the final pass, §7.8; 0 — no floor — for a vertex without virtual
+//!   samples: a cluster it is not close to says nothing about its lobe), the cluster's lobe as
+//!   a start, and the pooled η prior ([`pool`]).
 //!
 //! Steps:
-//! 1. [`cluster`]: features (ρ_d RGB clipped and PCA-scaled, 2·min(η, 3)) of the members —
-//!    vertices with a fit and none of `exclude_flags` — then k-means (fixed or automatic k).
+//! 1. [`cluster`]: features (ρ_d RGB clipped and PCA-scaled, 2·min(η, 3) with η shrunk towards
+//!    the members' median by its own reliability, so a vertex whose η its data cannot fix is
+//!    placed by its colour) of the members — vertices with a fit and none of `exclude_flags`
+//!    (by default only the prior-valued `TooFewViews` and `UnderDetermined`: a dark or
+//!    η-unidentifiable vertex still belongs to a material) — then k-means (fixed or automatic k).
 //! 2. For each cluster with ≥ the minimum size, on real samples drawn by [`draw_pairs`] and
 //!    evaluated by [`sample_geometry`] (the vertex's fitted normal; unpolarised-flash views
 //!    skipped): [`eta_fit`] η_cluster from the diffuse DoP of ≤ `max_eta_samples` samples, then
 //!    [`lobe_fit`] (σ_s, σ_ss, ρ_s, ρ_ss) from I^s of ≤ `max_lobe_samples` samples at their
 //!    real geometry, in model units.
 //! 3. [`virtual_samples`]: every vertex with a fit gets its nearest model cluster's coaxial
-//!    profile (180 half-angles, values ≤ 1), kernel-weighted and renormalised to λ_g.
+//!    profile (unclipped: virtual samples are model values, not pixels), kernel-weighted and
+//!    renormalised to λ_g.
+//! 4. [`pool_eta`]: per cluster the vertices' step-A η and standard errors give the material's
+//!    η (a robust centre) and the between-vertex spread ([`pool`], DerSimonian & Laird 1986); a
+//!    vertex inside the kernel whose own η agrees with it gets it as a prior for the final
+//!    passes.
 //!
 //! Determinism: every random choice comes from `ChaCha8Rng` seeded by [`stream_seed`] (the
 //! config seed, a purpose, an index); parallel loops (rayon) only map independent items and
 //! every reduction is serial in index order, so the result is bit-identical for any number of
 //! threads.
 //!
-//! Memory: `virtual_samples` holds up to `profile_samples` × 40 bytes per vertex (7.2 kB at
-//! 180), i.e. ~720 MB for 100 000 vertices; the values are shared per cluster and the kept
-//! samples are a prefix of its profile, so a compact form is possible if that matters.
+//! Memory: the guides hold up to `profile_samples` × 40 bytes of virtual samples per vertex
+//! (1.3 kB at 32), i.e. ~130 MB for 100 000 vertices; the values are shared per cluster and the
+//! kept samples are a prefix of its profile, so a compact form is possible if that matters.
 
 pub mod cluster;
 pub mod eta_fit;
 pub mod lobe_fit;
+pub mod pool;
 pub mod virtual_samples;
 
 #[cfg(test)]
@@ -55,7 +65,7 @@ use nalgebra::Point3;
 
 use self::eta_fit::DopSample;
 use self::lobe_fit::LobeSample;
-use crate::fit::data::{Sample, SampleSet, VertexFit, VirtualSample};
+use crate::fit::data::{Sample, SampleSet, VertexFit, VertexGuide};
 
 /// Everything the augmentation can be told.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -64,7 +74,8 @@ pub struct AugmentConfig {
     pub cluster: ClusterConfig,
     /// Total weight of a vertex's virtual samples, λ_g (paper: 0.1).
     pub lambda_g: f64,
-    /// Half-angles of the coaxial profile, θ_h = m·90°/M (paper: 180, i.e. 0.5° steps).
+    /// Points of the coaxial profile (default 32 on a squared grid carrying the paper's 180
+    /// uniform samples' weight, `virtual_samples`).
     pub profile_samples: usize,
     /// σ of the feature-distance kernel (paper: 0.1).
     pub kernel_sigma: f64,
@@ -85,7 +96,7 @@ impl Default for AugmentConfig {
         Self {
             cluster: ClusterConfig::default(),
             lambda_g: 0.1,
-            profile_samples: 180,
+            profile_samples: 32,
             kernel_sigma: 0.1,
             min_raw_weight: 0.01,
             max_eta_samples: 4096,
@@ -119,6 +130,8 @@ pub struct ClusterModel {
     pub eta_samples: usize,
     /// Samples of the two-lobe fit.
     pub lobe_samples: usize,
+    /// The members' pooled η (random-effects mean, [`pool`]).
+    pub eta_pooled: pool::Pooled,
 }
 
 /// How the vertices were partitioned.
@@ -151,14 +164,14 @@ pub struct Augmentation {
     /// Per vertex: index into `clusters` of its nearest model cluster.
     #[serde(skip)]
     pub assignment: Vec<Option<usize>>,
-    /// Per vertex: its virtual samples (weights sum to λ_g, or empty).
+    /// Per vertex: virtual samples (weights sum to λ_g, or empty), σ_s floor (0: none), the
+    /// cluster lobe as a start and the pooled η prior, for the final pass.
     #[serde(skip)]
-    pub virtual_samples: Vec<Vec<VirtualSample>>,
-    /// Per vertex: lower bound of σ_s for the final pass (0: none).
-    #[serde(skip)]
-    pub sigma_s_floor: Vec<f64>,
+    pub guides: Vec<VertexGuide>,
     /// Vertices with at least one virtual sample.
     pub vertices_with_virtual_samples: usize,
+    /// Vertices with a pooled η prior.
+    pub vertices_with_eta_prior: usize,
     /// The partition.
     pub partition: PartitionSummary,
 }
@@ -264,16 +277,24 @@ fn fit_cluster(
     };
     let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 11, index as u64));
     let pairs = draw_pairs(set, members, config.max_lobe_samples, &mut rng);
+    // Shot-noise weights, normalised to mean 1 over the drawn samples (`lobe_fit` module doc).
+    let weights: Vec<f64> = pairs
+        .iter()
+        .map(|&(v, s)| lobe_fit::noise_weight(&set.vertices[v].samples[s]))
+        .collect();
+    let mean_weight = weights.iter().sum::<f64>() / weights.len().max(1) as f64;
     let lobe: Vec<LobeSample> = pairs
         .par_iter()
-        .filter_map(|&(v, s)| {
+        .zip(weights.par_iter())
+        .filter_map(|(&(v, s), &w)| {
             let sample = &set.vertices[v].samples[s];
             let (g, flash) = sample_geometry(set, v, sample, fit_of(v))?;
-            LobeSample::new(&g, flash, sample, fit_of(v), eta)
+            LobeSample::new(&g, flash, sample, fit_of(v), eta, w / mean_weight)
         })
         .collect();
     let fit = lobe_fit::fit_lobes(&lobe, config.sigma_min)?;
     Some(ClusterModel {
+        eta_pooled: pool::Pooled::default(),
         centroid: centroid.to_vec(),
         members: members.len(),
         eta,
@@ -285,6 +306,35 @@ fn fit_cluster(
         eta_samples,
         lobe_samples: lobe.len(),
     })
+}
+
+/// Pools η per cluster from `fits` (indexed like the set's vertices: step A's results) and
+/// gives each vertex inside its cluster's kernel whose own η agrees the pooled
+/// prior ([`pool`]); the cluster's `eta_pooled` and `vertices_with_eta_prior` are updated.
+/// Members are the vertices with virtual samples from the cluster and a finite η standard
+/// error (a vertex returned at its prior has an infinite one).
+pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); a.clusters.len()];
+    for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
+        if let Some(j) = j
+            && !g.virtual_samples.is_empty()
+            && v < fits.len()
+        {
+            members[*j].push(v);
+        }
+    }
+    for (j, list) in members.iter().enumerate() {
+        let points: Vec<(f64, f64)> = list
+            .iter()
+            .map(|&v| (fits[v].params.eta, fits[v].std_error[0]))
+            .collect();
+        let pooled = pool::random_effects(&points);
+        a.clusters[j].eta_pooled = pooled;
+        for &v in list {
+            a.guides[v].eta_prior = pooled.prior_for(fits[v].params.eta, fits[v].std_error[0]);
+        }
+    }
+    a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
 }
 
 /// Clusters the joint solve's vertices, fits the cluster models and builds every vertex's
@@ -313,9 +363,23 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
         .map(|&v| by_vertex[v].expect("member").params.rho_d)
         .collect();
     let scaling = FeatureScaling::from_members(&member_rho_d);
+    let shrink = pool::EtaShrink::from_members(
+        &members
+            .iter()
+            .map(|&v| {
+                let f = by_vertex[v].expect("member");
+                (f.params.eta, f.std_error[0])
+            })
+            .collect::<Vec<_>>(),
+    );
     let features: Vec<Option<Feature>> = by_vertex
         .iter()
-        .map(|f| f.map(|f| scaling.feature(f.params.rho_d, f.params.eta)))
+        .map(|f| {
+            f.map(|f| {
+                let eta = shrink.apply(f.params.eta, f.std_error[0]);
+                scaling.feature(f.params.rho_d, eta)
+            })
+        })
         .collect();
     let member_features: Vec<Feature> = members
         .iter()
@@ -343,7 +407,7 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
         .iter()
         .map(|c| core::array::from_fn(|i| c.centroid[i]))
         .collect();
-    let profiles: Vec<Vec<(f64, [f64; 3])>> = clusters
+    let profiles: Vec<Vec<virtual_samples::ProfilePoint>> = clusters
         .iter()
         .map(|c| {
             virtual_samples::coaxial_profile(
@@ -356,11 +420,11 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
             )
         })
         .collect();
-    let per_vertex: Vec<(Option<usize>, Vec<VirtualSample>, f64)> = features
+    let per_vertex: Vec<(Option<usize>, VertexGuide)> = features
         .par_iter()
         .map(|f| {
             let Some(f) = f.filter(|_| !centroids.is_empty()) else {
-                return (None, Vec::new(), 0.0);
+                return (None, VertexGuide::default());
             };
             let (j, d2) = cluster::nearest(&f, &centroids);
             let samples = virtual_samples::weighted(
@@ -370,24 +434,31 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
                 config.min_raw_weight,
                 config.lambda_g,
             );
-            let floor = if samples.is_empty() {
-                0.0
-            } else {
-                clusters[j].sigma_s / 2.0
+            if samples.is_empty() {
+                return (Some(j), VertexGuide::default());
+            }
+            let c = &clusters[j];
+            let guide = VertexGuide {
+                virtual_samples: samples,
+                sigma_s_floor: c.sigma_s / 2.0,
+                eta_prior: None,
+                lobe_start: Some([c.sigma_s, c.sigma_ss, c.rho_s]),
             };
-            (Some(j), samples, floor)
+            (Some(j), guide)
         })
         .collect();
     let mut assignment = Vec::with_capacity(n);
-    let mut virtual_samples = Vec::with_capacity(n);
-    let mut sigma_s_floor = Vec::with_capacity(n);
-    for (a, v, s) in per_vertex {
+    let mut guides = Vec::with_capacity(n);
+    for (a, g) in per_vertex {
         assignment.push(a);
-        virtual_samples.push(v);
-        sigma_s_floor.push(s);
+        guides.push(g);
     }
     Augmentation {
-        vertices_with_virtual_samples: virtual_samples.iter().filter(|v| !v.is_empty()).count(),
+        vertices_with_virtual_samples: guides
+            .iter()
+            .filter(|g| !g.virtual_samples.is_empty())
+            .count(),
+        vertices_with_eta_prior: 0,
         partition: PartitionSummary {
             members: members.len(),
             k: partition.centroids.len(),
@@ -400,7 +471,6 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
         },
         clusters,
         assignment,
-        virtual_samples,
-        sigma_s_floor,
+        guides,
     }
 }

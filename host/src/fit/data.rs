@@ -9,18 +9,18 @@
 //!   (light up = (−ω_i) × axis), or the camera's up for an unpolarised flash; camera frame
 //!   z = ω_o, y = image up. The flash Stokes vector is then `[1, 1, 0, 0]` (polarised) or
 //!   `[1, 0, 0, 0]` ([`ViewGeometry::flash_polariser`]).
-//! - A [`Sample`] holds the observation channels (I^d, I^s, I^α per RGB channel, optics.md §5.3)
-//!   already divided by the radiometric normaliser N (`ellipso_sim::render::radiometry`), i.e. in
+//! - A [`Sample`] holds the observation channels (I^d, I^s, I^α and I^t = I45 + I135 per RGB
+//!   channel, docs/model.md "Measurement") already divided by the radiometric normaliser N (`ellipso_sim::render::radiometry`), i.e. in
 //!   the units of `ellipso_sim::optics::measure::observe` with a unit flash. On a monochrome
 //!   sensor all three colour entries are equal and [`SampleSet::colour`] is false.
 //! - `normaliser` (DN per model unit) is kept so the solver can weight by expected noise; it is
 //!   always > 0 and finite in a valid sample.
-//! - Samples reference their view by index into [`SampleSet::views`]; per sample only 44 bytes
+//! - Samples reference their view by index into [`SampleSet::views`]; per sample only 56 bytes
 //!   are stored, so 100 000 vertices × 150 views fit in well under 1 GB.
 
 use ellipso_sim::optics::OpticsError;
 use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::FlashPolariser;
+use ellipso_sim::optics::measure::{AnalyserAngles, FlashPolariser};
 use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
 use nalgebra::{Point3, Vector3};
 
@@ -37,6 +37,12 @@ pub struct ViewGeometry {
     pub flash_position_world: [f64; 3],
     /// Flash polariser transmission axis, world, unit (`None`: unpolarised flash).
     pub polariser_axis_world: Option<[f64; 3]>,
+    /// Optical axis of the camera (+z of the OpenCV camera frame), world, unit. With it the
+    /// analysers' effective angles of an off-axis ray follow the wire-grid model
+    /// ([`ellipso_sim::optics::measure::AnalyserAngles::for_ray`]); `None` takes the on-axis
+    /// (ideal 0/45/90/135°) angles for every ray.
+    #[serde(default)]
+    pub camera_axis_world: Option<[f64; 3]>,
 }
 
 /// The model geometry of one (vertex, view) pair: unit directions away from the surface and
@@ -84,10 +90,12 @@ impl ViewGeometry {
         flash: &ellipso_sim::scene::FlashSpec,
     ) -> Self {
         let up = world_from_camera.transform_vector(&Vector3::new(0.0, -1.0, 0.0));
+        let axis = world_from_camera.transform_vector(&Vector3::z());
         Self {
             frame_id,
             camera_position_world: world_from_camera.translation.vector.into(),
             camera_up_world: up.into(),
+            camera_axis_world: Some(axis.into()),
             flash_position_world: flash.position_world(world_from_camera).coords.into(),
             polariser_axis_world: flash
                 .polariser_axis_world(world_from_camera)
@@ -99,6 +107,24 @@ impl ViewGeometry {
     /// the light frame's x is the polariser axis).
     pub fn flash_polariser(&self) -> FlashPolariser {
         FlashPolariser { angle_rad: 0.0 }
+    }
+
+    /// The analysers' effective angles for the ray of `g` (wire-grid model,
+    /// [`AnalyserAngles::for_ray`]); nominal without [`ViewGeometry::camera_axis_world`].
+    pub fn analyser_angles(&self, g: &SampleGeometry) -> AnalyserAngles {
+        match self.camera_axis_world {
+            Some(axis) => {
+                let up = self.camera_up_world;
+                // Image right = (−up) × optical axis (OpenCV: x = y × z with y = −up).
+                let right = [
+                    axis[1] * up[2] - axis[2] * up[1],
+                    axis[2] * up[0] - axis[0] * up[2],
+                    axis[0] * up[1] - axis[1] * up[0],
+                ];
+                AnalyserAngles::for_ray(right, up, g.to_camera)
+            }
+            None => AnalyserAngles::ideal(),
+        }
     }
 
     /// Whether the flash is polarised in this view.
@@ -144,13 +170,20 @@ impl ViewGeometry {
     }
 }
 
+/// Observation channels per colour channel of a [`Sample`]: I^d = 2·I90, I^s = I0 − I90,
+/// I^α = I135 − I45 (the paper's three, optics of docs/model.md) and I^t = I45 + I135, the sum the
+/// paper's channels drop (≈ s0; with it all four analyser pixels reach the fit: about 25 % more
+/// information on η than the three channels alone).
+pub const OBSERVATION_CHANNELS: usize = 4;
+
 /// One (vertex, view) observation, in model units (divided by the normaliser N).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sample {
     /// Index into [`SampleSet::views`].
     pub view: u32,
-    /// Per colour channel (R, G, B): [I^d, I^s, I^α] divided by N.
-    pub channels: [[f32; 3]; 3],
+    /// Per colour channel (R, G, B): [I^d, I^s, I^α, I^t] divided by N
+    /// ([`OBSERVATION_CHANNELS`]).
+    pub channels: [[f32; OBSERVATION_CHANNELS]; 3],
     /// N: digital numbers per model unit at this (vertex, view) (exposure, gain, 1/d², flash
     /// profile, vignetting). > 0.
     pub normaliser: f32,
@@ -168,6 +201,20 @@ pub struct VirtualSample {
     /// Weight; a vertex's virtual weights sum to λ_g (0.1 by default), the real samples'
     /// specular residuals to 1 − λ_g.
     pub weight: f64,
+}
+
+/// What the shared steps (clusters, docs/fit-augment.md) hand one vertex's final solve: the
+/// paper's virtual samples and σs floor (optics §7.8) and a pooled prior on η.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct VertexGuide {
+    /// Virtual coaxial specular samples (empty: none).
+    pub virtual_samples: Vec<VirtualSample>,
+    /// Lower bound of σs (the cluster's σs/2; 0: the solver's own floor).
+    pub sigma_s_floor: f64,
+    /// Pooled prior on η, (mean, standard deviation) (`None`: the solver's weak default prior).
+    pub eta_prior: Option<[f64; 2]>,
+    /// The cluster's lobe (σs, σss, ρs): a start of the final solve beside the vertex's own.
+    pub lobe_start: Option<[f64; 3]>,
 }
 
 /// Why samples or vertices were gated out; counted per reason (optics.md §7.3).
@@ -295,6 +342,7 @@ mod tests {
             camera_up_world: [0.0, 1.0, 0.0],
             flash_position_world: [0.0, -0.03, 0.5],
             polariser_axis_world: Some([1.0, 0.0, 0.0]),
+            camera_axis_world: Some([0.0, 0.0, -1.0]),
         }
     }
 

@@ -188,7 +188,7 @@ mod tests {
     fn sample(rgb: [f32; 3]) -> Sample {
         Sample {
             view: 0,
-            channels: [0, 1, 2].map(|c| [rgb[c], 0.0, 0.0]),
+            channels: [0, 1, 2].map(|c| [rgb[c], 0.0, 0.0, rgb[c]]),
             normaliser: 1.0,
         }
     }

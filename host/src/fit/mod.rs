@@ -17,6 +17,7 @@
 //! - [`augment`]: clusters, per-cluster two-lobe models and virtual specular samples.
 //! - [`shape`]: vertex positions updated towards the refined normals.
 //! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
+//! - [`holdout`]: the held-out views no step sees, and the re-render error on them.
 //! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
 //! - [`truth`], [`synthetic`], [`accuracy`]: the simulator's truth as the fit sees it, synthetic
 //!   samples, simulated captures and error metrics (benchmarks and tests).
@@ -25,6 +26,7 @@ pub mod accuracy;
 pub mod augment;
 pub mod data;
 pub mod gate;
+pub mod holdout;
 pub mod model;
 pub mod observe;
 pub mod pipeline;

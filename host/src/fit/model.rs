@@ -19,9 +19,11 @@
 //!   `ellipso_sim::optics::coaxial::specular_term`.
 //! - A sample whose geometry is degenerate or back-facing has no prediction (`None`).
 
-use ellipso_sim::optics::coaxial::specular_term;
-use ellipso_sim::optics::measure::{ObservationChannels, dop_diffuse, observe_unit_lobes};
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
+use ellipso_sim::optics::coaxial::unit_specular_terms;
+use ellipso_sim::optics::measure::{
+    AnalyserAngles, ObservationChannels, dop_diffuse, observe_unit_lobes,
+};
+use ellipso_sim::optics::pbrdf::Geometry;
 use ellipso_sim::optics::{Frame, Real, Stokes, Vec3};
 use nalgebra::Point3;
 
@@ -43,6 +45,37 @@ pub struct SampleFrames {
     pub camera_frame: Frame<f64>,
     /// Whether the flash is polarised (s_light = [1, 1, 0, 0]) or bare ([1, 0, 0, 0]).
     pub polarised: bool,
+    /// The analyser pixels as linear functions of the observation channels: row k (nominal
+    /// 0°, 45°, 90°, 135°) gives I_k = r·[I^d, I^s, I^α] with the analysers' effective angles
+    /// for this ray ([`AnalyserAngles::for_ray`]; nominal when the view has no optical axis).
+    pub pixel_rows: [[f64; 3]; 4],
+}
+
+/// The analyser pixels [I0, I45, I90, I135] of stored observation channels
+/// [I^d, I^s, I^α, I^t] (I90 = I^d/2, I0 = I^s + I^d/2, I45 = (I^t − I^α)/2,
+/// I135 = (I^t + I^α)/2): the exact inverse of how they were formed, so the measured pixels
+/// themselves are compared.
+pub fn observed_pixels(c: [f64; 4]) -> [f64; 4] {
+    let half_d = 0.5 * c[0];
+    [
+        c[1] + half_d,
+        0.5 * (c[3] - c[2]),
+        half_d,
+        0.5 * (c[3] + c[2]),
+    ]
+}
+
+/// The model's four analyser pixels for observation channels `x` = [I^d, I^s, I^α] of a sample
+/// with [`SampleFrames::pixel_rows`] `rows`.
+pub fn predicted_pixels<T: Real>(rows: &[[f64; 3]; 4], x: [T; 3]) -> [T; 4] {
+    let k = T::from_f64;
+    core::array::from_fn(|j| k(rows[j][0]) * x[0] + k(rows[j][1]) * x[1] + k(rows[j][2]) * x[2])
+}
+
+/// The pixel rows of [`SampleFrames::pixel_rows`] for analyser angles `a`: with
+/// s0 = I^d + I^s, s1 = I^s, s2 = −I^α (docs/model.md), I_k = ½(s0 + s1 cos2ψ_k + s2 sin2ψ_k).
+pub fn pixel_rows(a: &AnalyserAngles) -> [[f64; 3]; 4] {
+    core::array::from_fn(|k| [0.5, 0.5 * (1.0 + a.cos2[k]), -0.5 * a.sin2[k]])
 }
 
 impl SampleFrames {
@@ -55,12 +88,14 @@ impl SampleFrames {
         let to_camera = Vec3::from_f64(g.to_camera);
         let light_frame = Frame::light(to_light, Vec3::from_f64(g.light_up)).ok()?;
         let camera_frame = Frame::camera(to_camera, Vec3::from_f64(g.camera_up)).ok()?;
+        let angles = view.analyser_angles(&g);
         Some(Self {
             to_light,
             to_camera,
             light_frame,
             camera_frame,
             polarised: view.polarised(),
+            pixel_rows: pixel_rows(&angles),
         })
     }
 }
@@ -172,18 +207,7 @@ pub fn unit_sample<T: Real>(
 /// (θ_i = θ_o = θ_h, Fresnel at normal incidence): `(single_scattering, specular)`, so a
 /// virtual sample predicts `ρ_ss,c·B_v + ρ_s·C_v` (optics.md §7.7).
 pub fn coaxial_unit_specular<T: Real>(cos_theta_h: f64, eta: T, sigma_s: T, sigma_ss: T) -> (T, T) {
-    let c = T::from_f64(cos_theta_h);
-    let base = |rho_s: f64, rho_ss: f64| PbrdfParams {
-        eta,
-        sigma_s,
-        sigma_ss,
-        rho_s: T::from_f64(rho_s),
-        rho_ss: [T::from_f64(rho_ss); 3],
-        rho_d: [T::zero(); 3],
-    };
-    let b = specular_term(c, &base(0.0, 1.0))[0];
-    let s = specular_term(c, &base(1.0, 0.0))[0];
-    (b, s)
+    unit_specular_terms(T::from_f64(cos_theta_h), eta, sigma_s, sigma_ss)
 }
 
 #[cfg(test)]
@@ -192,6 +216,7 @@ mod tests {
     use ellipso_sim::optics::Dual;
     use ellipso_sim::optics::coaxial::specular_term;
     use ellipso_sim::optics::measure::{FlashPolariser, observe};
+    use ellipso_sim::optics::pbrdf::PbrdfParams;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 
@@ -220,6 +245,7 @@ mod tests {
                 cam[2] + 0.03 * up[2],
             ],
             polariser_axis_world: Some(right),
+            camera_axis_world: Some(fwd),
         }
     }
 

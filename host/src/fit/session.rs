@@ -4,11 +4,16 @@
 //! and a normal-guided vertex update on the fixed connectivity, [`super::shape`]).
 //!
 //! Contract:
+//! - **Held-out views.** A deterministic `holdout_fraction` of the posed frames
+//!   ([`super::holdout::split`]) is set aside before anything else: no observation, solve,
+//!   cluster or shape step sees them. After the last iteration their observations are extracted
+//!   on the final mesh and the fitted model is scored on them ([`super::holdout::score`]).
 //! - Outer iteration k = 1…K: extract observations of the current mesh from every posed frame
 //!   ([`super::observe::extract`], visibility and shadows recomputed on the current geometry),
 //!   run step A warm-started from iteration k − 1 (same vertices: the connectivity never
-//!   changes, so results carry over by index), and — except after the last iteration — move the
-//!   vertices towards the refined normals. The last iteration runs the whole pipeline
+//!   changes, so results carry over by index; the mesh normal stays the centre of the normal
+//!   prior), and — except after the last iteration — move the vertices towards the refined
+//!   normals. The last iteration runs the whole pipeline
 //!   ([`super::pipeline::fit_sample_set`]: step A, and B + C when enabled).
 //! - The session is only read; nothing recorded is changed.
 //! - Deterministic for a given input on any thread count.
@@ -19,7 +24,8 @@ use ellipso_sim::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
 use super::data::{GateCounts, SampleSet, VertexFit};
-use super::observe::{ObserveConfig, ObserveError, extract};
+use super::holdout::{HoldoutReport, score, split};
+use super::observe::{ObserveConfig, ObserveError, ObserveReport, extract, radiometry_of};
 use super::pipeline::{FitConfig, FitOutcome, fit_sample_set};
 use super::shape::{
     ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
@@ -38,6 +44,8 @@ pub struct SessionFitConfig {
     pub outer_iterations: usize,
     /// The shape update between outer iterations.
     pub shape: ShapeConfig,
+    /// Fraction of the posed frames held out for validation (default 0.1; 0 fits all).
+    pub holdout_fraction: f64,
 }
 
 impl Default for SessionFitConfig {
@@ -47,6 +55,7 @@ impl Default for SessionFitConfig {
             fit: FitConfig::default(),
             outer_iterations: 2,
             shape: ShapeConfig::default(),
+            holdout_fraction: 0.1,
         }
     }
 }
@@ -77,6 +86,17 @@ pub struct SessionFit {
     pub shape_updates: Vec<ShapeUpdate>,
     /// Gate counts of the last extraction, summed over vertices.
     pub gates: GateCounts,
+    /// The last extraction's report (frames used and skipped, with reasons).
+    pub observe: ObserveReport,
+    /// The poses the fit used (the held-out ones excluded), by frame id.
+    pub poses_fitted: Vec<(u64, Isometry3<f64>)>,
+    /// The held-out frames' poses.
+    pub poses_held_out: Vec<(u64, Isometry3<f64>)>,
+    /// The re-render errors on the held-out frames (`None` when none were held out or none
+    /// gave samples).
+    pub holdout: Option<HoldoutReport>,
+    /// The held-out observations on the final mesh (empty when none were held out).
+    pub held_out_set: Option<SampleSet>,
 }
 
 /// Fits `mesh` to `session` seen from `poses` (frame id, `world_from_camera`).
@@ -90,6 +110,18 @@ pub fn fit_session(
     if poses.is_empty() {
         return Err(SessionFitError::NoPoses);
     }
+    let ids: Vec<u64> = poses.iter().map(|p| p.0).collect();
+    let held_idx = split(&ids, config.holdout_fraction);
+    let mut poses_held_out = Vec::with_capacity(held_idx.len());
+    let mut fitted = Vec::with_capacity(poses.len());
+    for (i, p) in poses.iter().enumerate() {
+        if held_idx.binary_search(&i).is_ok() {
+            poses_held_out.push(*p);
+        } else {
+            fitted.push(*p);
+        }
+    }
+    let poses = fitted.as_slice();
     let mut mesh = mesh.clone();
     let mut previous: Option<Vec<VertexFit>> = None;
     let mut shape_updates = Vec::new();
@@ -99,13 +131,12 @@ pub fn fit_session(
     let iterations = config.outer_iterations.max(1);
     // Observations of the current mesh, the solve starting from the refined normals (not the
     // re-derived mesh normals) once there are any; with the seconds it took.
-    let observe = |mesh: &TriangleMesh, previous: Option<&[VertexFit]>| {
+    // (The solve starts from the previous iteration's normals through its warm start; the
+    // samples keep the mesh normal, the centre of the normal prior.)
+    let observe = |mesh: &TriangleMesh| {
         let started = Instant::now();
-        let mut set = extract(session, mesh, poses, &config.observe, &|_, _| {})?.samples;
-        for (v, f) in set.vertices.iter_mut().zip(previous.unwrap_or_default()) {
-            v.normal_world = f.normal_world;
-        }
-        Ok::<_, SessionFitError>((set, started.elapsed().as_secs_f64()))
+        let e = extract(session, mesh, poses, &config.observe, &|_, _| {})?;
+        Ok::<_, SessionFitError>((e, started.elapsed().as_secs_f64()))
     };
     let announce = |k: usize, mesh: &TriangleMesh| {
         format!(
@@ -116,7 +147,8 @@ pub fn fit_session(
     };
     for k in 1..iterations {
         progress(&announce(k, &mesh));
-        let (set, seconds) = observe(&mesh, previous.as_deref())?;
+        let (extraction, seconds) = observe(&mesh)?;
+        let set = extraction.samples;
         observe_s += seconds;
         progress(&format!(
             "outer iteration {k}/{iterations}: joint per-vertex solve"
@@ -141,7 +173,8 @@ pub fn fit_session(
         previous = Some(fits);
     }
     progress(&announce(iterations, &mesh));
-    let (set, seconds) = observe(&mesh, previous.as_deref())?;
+    let (extraction, seconds) = observe(&mesh)?;
+    let set = extraction.samples;
     observe_s += seconds;
     let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
     outcome.times.observe_s = observe_s;
@@ -151,11 +184,31 @@ pub fn fit_session(
     for v in &set.vertices {
         gates.add(&v.gates);
     }
+    let (holdout, held_out_set) = if poses_held_out.is_empty() {
+        (None, None)
+    } else {
+        progress(&format!(
+            "re-rendering {} held-out frames",
+            poses_held_out.len()
+        ));
+        let held = extract(session, &mesh, &poses_held_out, &config.observe, &|_, _| {})?;
+        let full_scale = radiometry_of(session)?.full_scale_dn;
+        let report = score(&held.samples, &outcome.fits, full_scale);
+        (
+            (report.overall.samples > 0).then_some(report),
+            Some(held.samples),
+        )
+    };
     Ok(SessionFit {
         mesh,
         set,
         outcome,
         shape_updates,
         gates,
+        observe: extraction.report,
+        poses_fitted: fitted,
+        poses_held_out,
+        holdout,
+        held_out_set,
     })
 }

@@ -3,20 +3,28 @@
 //! (optics.md §7.4–§7.8, §8; docs/fit-solver.md has the derivations and measured numbers).
 //!
 //! # API
-//! - [`fit_vertex`]`(views, vertex, colour, init, virtual_samples, config) -> VertexFit`
-//! - [`fit_all`]`(set, init, virtual_samples, config) -> Vec<VertexFit>`: rayon over vertices,
+//! - [`fit_vertex`]`(views, vertex, colour, init, guide, config) -> VertexFit`
+//! - [`fit_all`]`(set, init, guides, config) -> Vec<VertexFit>`: rayon over vertices,
 //!   bit-identical for any thread count (no reduction crosses vertices).
 //! - [`forward_cost_all`]`(set, fits) -> ForwardCost`: the model evaluated once per observation
 //!   (f64, no derivatives): the unit the benchmark divides fit time by.
 //!
-//! # Unknowns and bounds (optics.md §8.2)
-//! Outer (LM) unknowns, raw and unbounded: η = η_floor + softplus(u);
-//! σ_s = σ_min + (1 − σ_min)·sigmoid(a); σ_ss = σ_s + (1 − σ_s)·sigmoid(b) (so σ_min ≤ σ_s ≤
-//! σ_ss ≤ 1); ρ_s = softplus(c); normal = normalise(n0 + p·t1 + q·t2), re-centred on the tangent
-//! plane of the current normal after every accepted step. Inner (projected) unknowns: ρ_d and
-//! ρ_ss per colour channel by exact 2-variable NNLS of the L_d + L_s (+ virtual) residuals inside
-//! every evaluation, in dual arithmetic (the outer Jacobian includes the projection's
-//! derivative).
+//! # Unknowns and bounds (docs/fit-solver.md, "Bounds")
+//! Every unknown has a physical range, enforced by the parameterisation. Outer (LM) unknowns,
+//! raw and unbounded: η = η_min + (η_max − η_min)·sigmoid(u) (default [1.1, 3], the paper's);
+//! σ_s = σ_floor + (1 − σ_floor)·sigmoid(a) with σ_floor the larger of `sigma_min` and the
+//! guide's cluster floor; σ_ss = σ_s + (1 − σ_s)·sigmoid(b) (so σ_floor ≤ σ_s ≤ σ_ss ≤ 1);
+//! ρ_s = cap·sigmoid(c); normal = normalise(n0 + p·t1 + q·t2), re-centred on the tangent plane of
+//! the current normal after every accepted step. Inner (projected) unknowns: ρ_d and ρ_ss per
+//! colour channel by exact box-constrained least squares in [0, cap]² inside every evaluation,
+//! in dual arithmetic (the outer Jacobian includes the projection's derivative).
+//!
+//! # Priors (measurement mode)
+//! Weak priors make directions the data leaves flat well defined instead of letting them run
+//! to a bound: ln σ_s and ln σ_ss (a lobe seen only in its tail fixes only ρ_s·σ_s², so without
+//! them σ_s runs to its floor and ρ_s to its cap), η (weak by default; the cluster's pooled η in
+//! the final pass, which is how per-vertex η borrows strength from its material), and the
+//! normal's tilt from the mesh normal (a prior cone: dark vertices cannot swing 30°).
 //!
 //! # Residuals and weights (optics.md §7.4)
 //! See `problem.rs`. Defaults λψ = 10, λd = λs = λφ = 1 (the released code's values). With
@@ -34,13 +42,17 @@
 //! - `Dark`: more samples gated dark than kept, or the kept samples' mean diffuse signal
 //!   (I^d·N) below `dark_signal_dn`.
 //! - `Saturated`: saturated samples exceed `saturated_fraction` of (kept + saturated).
-//! - `EtaUnidentifiable`: max over samples of |∂DoP_d/∂η| at the solution below
-//!   `min_eta_sensitivity`, or std error of η above `max_eta_std_error` (incl. ∞), or the
-//!   polarisation SNR (mean model DoP_d / RMS of the DoP residuals) below 1.
+//! - `EtaUnidentifiable`: std error of η above `max_eta_std_error` (incl. ∞); without a pooled
+//!   prior also when max over samples of |∂DoP_d/∂η| at the solution is below
+//!   `min_eta_sensitivity` or the polarisation SNR (mean model DoP_d / RMS of the DoP
+//!   residuals) is below 1 (with a pooled prior η comes from the material, and its std error —
+//!   the posterior's — says how well).
 //! - `GrazingOnly`: every sample views more than `grazing_only_deg` from the fitted normal, or
 //!   more samples were gated grazing than kept.
-//! - `AtBound`: η < η_floor + `bound_margin_eta`, σ_s < σ_min + `bound_margin_sigma`,
-//!   σ_ss > 1 − `bound_margin_sigma`.
+//! - `AtBound`: η within `bound_margin_eta` of either end of its range, σ_s within
+//!   `bound_margin_sigma` of its floor, σ_ss within it of 1, ρ_s, any ρ_ss or any ρ_d within
+//!   0.1 % of the albedo cap, or the normal more than 2.5 prior-cone widths from the mesh
+//!   normal.
 //! - `NotConverged`: the last pass stopped at `max_iterations` (or the damping overflowed).
 //!
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
@@ -60,11 +72,19 @@ use ellipso_sim::optics::measure::dop_diffuse_with_d_eta;
 use ellipso_sim::optics::pbrdf::PbrdfParams;
 use rayon::prelude::*;
 
-use super::data::{FitFlag, SampleSet, VertexFit, VertexSamples, ViewGeometry, VirtualSample};
+use super::data::{FitFlag, SampleSet, VertexFit, VertexGuide, VertexSamples, ViewGeometry};
 use super::model::{tangent_normal, unit_sample};
 use lm::{LmState, RawDual, chart, physical, raw_from};
 
 use problem::{Albedos, Problem, Scratch};
+
+/// The guide of a vertex without one (no virtual samples, no floor, the default priors).
+static NO_GUIDE: VertexGuide = VertexGuide {
+    virtual_samples: Vec::new(),
+    sigma_s_floor: 0.0,
+    eta_prior: None,
+    lobe_start: None,
+};
 
 /// Which least-squares loss the solver minimises (docs/fit-solver.md, optics.md §7.4, §8.4).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -149,10 +169,24 @@ pub struct SolverConfig {
     pub lambda_phi: f64,
     /// λg: total weight of virtual samples relative to real specular ones (default 0.1).
     pub lambda_g: f64,
-    /// Floor of both roughnesses (default 0.01; optics.md §9 σ → 0).
+    /// Floor of both roughnesses (default 0.01; docs/model.md, σ → 0).
     pub sigma_min: f64,
-    /// Floor of η (default 1.001, so η → 1 stays representable; optics.md §9 η → 1).
-    pub eta_floor: f64,
+    /// Range of η (default [1.1, 3], the paper's bounds; dielectrics of everyday materials lie
+    /// in it, and η → 1 — no polarisation — is flagged at the lower end).
+    pub eta_bounds: [f64; 2],
+    /// Upper bound of ρ_s, ρ_ss and ρ_d, model units (default 5: the paper caps ρ_s at 5·mean N
+    /// in raw units; our samples are divided by N, so 5 is the same cap. Physical albedos are
+    /// ≤ 1, so 5 leaves room for a radiometric calibration off by that much).
+    pub albedo_cap: f64,
+    /// Weak prior on η, (mean, sd) (default (1.5, 0.5)); replaced by a guide's pooled prior.
+    pub eta_prior: [f64; 2],
+    /// Prior on σ_s, (median, sd of ln σ_s) (default (0.2, 1.2): 95 % within ×10.5 of 0.2).
+    pub sigma_s_prior: [f64; 2],
+    /// Prior on σ_ss, (median, sd of ln σ_ss) (default (0.4, 1.2)).
+    pub sigma_ss_prior: [f64; 2],
+    /// 1σ width of the prior cone of the normal about the mesh normal, degrees (default 10;
+    /// 0 disables).
+    pub normal_prior_deg: f64,
     /// Weight residuals by shot-noise inverse variance from N (default false: the paper's
     /// uniform weights).
     pub noise_weighting: bool,
@@ -174,7 +208,7 @@ pub struct SolverConfig {
     pub dark_signal_dn: f64,
     /// `Saturated` when saturated samples exceed this fraction of kept + saturated (0.05).
     pub saturated_fraction: f64,
-    /// `AtBound` margin on η above its floor (0.005).
+    /// `AtBound` margin on η from either end of its range (0.005).
     pub bound_margin_eta: f64,
     /// `AtBound` margin on σ_s above σ_min and σ_ss below 1 (1e-3).
     pub bound_margin_sigma: f64,
@@ -200,7 +234,12 @@ impl Default for SolverConfig {
             lambda_phi: 1.0,
             lambda_g: 0.1,
             sigma_min: 0.01,
-            eta_floor: 1.001,
+            eta_bounds: [1.1, 3.0],
+            albedo_cap: 5.0,
+            eta_prior: [1.5, 0.5],
+            sigma_s_prior: [0.2, 1.2],
+            sigma_ss_prior: [0.4, 1.2],
+            normal_prior_deg: 10.0,
             noise_weighting: true,
             min_views: 12,
             relative_tolerance: 1e-10,
@@ -244,27 +283,47 @@ impl SolverConfig {
     /// loss, one start and one pass, at most 12 iterations, χ² tolerance 1e-2 (~0.1 σ), no
     /// fallback restart. Meant for many-vertex runs and warm-started passes.
     pub fn fast() -> Self {
+        Self::default().with_fast_effort()
+    }
+
+    /// These settings without any prior (infinite widths, no normal cone): the data alone
+    /// decides (tests of exact recovery, reproductions of the first solver).
+    pub fn without_priors(&self) -> Self {
+        Self {
+            eta_prior: [self.eta_prior[0], f64::INFINITY],
+            sigma_s_prior: [self.sigma_s_prior[0], f64::INFINITY],
+            sigma_ss_prior: [self.sigma_ss_prior[0], f64::INFINITY],
+            normal_prior_deg: 0.0,
+            ..self.clone()
+        }
+    }
+
+    /// These settings with the [`SolverConfig::fast`] preset's effort (iterations, passes,
+    /// tolerance, no fallback restart); loss, sensor, bounds and priors unchanged.
+    pub fn with_fast_effort(&self) -> Self {
         Self {
             max_iterations: 12,
             passes: 1,
             chi2_tolerance: 1e-2,
             restart_reduced_chi2: f64::INFINITY,
-            ..Self::default()
+            ..self.clone()
         }
     }
 }
 
 /// Fits one vertex (see the module doc). `init` warm-starts every parameter and the normal
-/// (η is not reset, optics.md §8.5); `virtual_samples` may be empty.
+/// (η is not reset, optics §8.5); `guide` carries the shared steps' virtual samples, σ_s floor,
+/// pooled η prior and cluster lobe (a second start beside `init`; the better initial cost runs
+/// first).
 pub fn fit_vertex(
     views: &[ViewGeometry],
     vertex: &VertexSamples,
     colour: bool,
     init: Option<&VertexFit>,
-    virtual_samples: &[VirtualSample],
+    guide: &VertexGuide,
     config: &SolverConfig,
 ) -> VertexFit {
-    let mut problem = Problem::new(views, vertex, colour, virtual_samples, config);
+    let mut problem = Problem::new(views, vertex, colour, guide, config);
     let n = problem.len();
     let unknowns = if colour { 12 } else { 8 };
     let mut flags = Vec::new();
@@ -307,34 +366,37 @@ pub fn fit_vertex(
         flags.push(FitFlag::TooFewViews);
         return prior_fit(&problem, vertex, start_normal, init, flags, config);
     }
-    let mut scratch_f = Scratch::<f64>::new(n, virtual_samples.len());
-    let mut scratch_d = Scratch::<RawDual>::new(n, virtual_samples.len());
+    let bounds = problem.bounds;
+    let virtuals = problem.virtuals.len();
+    let mut scratch_f = Scratch::<f64>::new(n, virtuals);
+    let mut scratch_d = Scratch::<RawDual>::new(n, virtuals);
     let mut starts: Vec<[f64; 6]> = match init {
-        Some(f) => vec![raw_from(
-            f.params.eta,
-            f.params.sigma_s,
-            f.params.sigma_ss,
-            f.params.rho_s,
-            config,
-        )],
+        Some(f) => {
+            let p = &f.params;
+            let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, p.rho_s, &bounds)];
+            if let Some([sigma_s, sigma_ss, rho_s]) = guide.lobe_start {
+                s.push(raw_from(p.eta, sigma_s, sigma_ss, rho_s, &bounds));
+            }
+            s
+        }
         None => config
             .cold_starts
             .iter()
-            .map(|s| raw_from(s[0], s[1], s[2], config.initial_rho_s, config))
+            .map(|s| raw_from(s[0], s[1], s[2], config.initial_rho_s, &bounds))
             .collect(),
     };
     if starts.is_empty() {
         let p = config.prior;
-        starts.push(raw_from(p[0], p[1], p[2], p[3], config));
+        starts.push(raw_from(p[0], p[1], p[2], p[3], &bounds));
     }
     let adaptive = config.effort == Effort::Adaptive;
-    if adaptive && starts.len() > 1 {
-        // Rank the cold starts by their cost at the start normal (one f64 evaluation each).
+    if starts.len() > 1 && (adaptive || init.is_some()) {
+        // Rank the starts by their cost at the start normal (one f64 evaluation each).
         let ch = chart(start_normal);
         let mut ranked: Vec<(f64, [f64; 6])> = starts
             .iter()
             .map(|s| {
-                let (c, _) = lm::cost_at(&problem, &ch, *s, config, &mut scratch_f);
+                let (c, _) = lm::cost_at(&problem, &ch, *s, &mut scratch_f);
                 (if c.is_finite() { c } else { f64::INFINITY }, *s)
             })
             .collect();
@@ -369,7 +431,7 @@ pub fn fit_vertex(
         // Measurement mode: the weights at the current solution (the run used the weights of
         // its start); another pass only if they moved by more than 10 %.
         let moved = if measurement {
-            reweight_at(&mut problem, &state, config, &mut scratch_f)
+            reweight_at(&mut problem, &state, &mut scratch_f)
         } else {
             0.0
         };
@@ -395,21 +457,20 @@ pub fn fit_vertex(
     }
     // The weights at the final state (for the standard errors).
     if measurement {
-        let _ = reweight_at(&mut problem, &state, config, &mut scratch_f);
+        let _ = reweight_at(&mut problem, &state, &mut scratch_f);
     }
-    finish(&problem, vertex, state, flags, config)
+    finish(&problem, vertex, state, flags, guide, config)
 }
 
 /// Measurement mode: reweights `problem` from the model at `state`; returns the largest
 /// relative change of any 1/σ.
-fn reweight_at(
-    problem: &mut Problem,
-    state: &LmState,
-    config: &SolverConfig,
-    scratch: &mut Scratch<f64>,
-) -> f64 {
-    let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, config, scratch);
-    problem.reweight(scratch, &albedos, physical(state.raw, config).rho_s)
+fn reweight_at(problem: &mut Problem, state: &LmState, scratch: &mut Scratch<f64>) -> f64 {
+    let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, scratch);
+    problem.reweight(
+        scratch,
+        &albedos,
+        physical(state.raw, &problem.bounds).rho_s,
+    )
 }
 
 /// Adaptive effort: whether a start's result warrants trying the next start.
@@ -419,8 +480,8 @@ fn poor(problem: &Problem, state: &LmState, config: &SolverConfig) -> bool {
     }
     // A lobe at its bound often means the start's basin, not the data (noiseless glaze from
     // (0.1, 0.3): σ_ss → 1, Δcost 1.1 above the truth's 0).
-    let x = physical(state.raw, config);
-    if x.sigma_s < config.sigma_min + config.bound_margin_sigma
+    let x = physical(state.raw, &problem.bounds);
+    if x.sigma_s < problem.bounds.sigma_s_min + config.bound_margin_sigma
         || x.sigma_ss > 1.0 - config.bound_margin_sigma
     {
         return true;
@@ -444,9 +505,11 @@ fn finish(
     vertex: &VertexSamples,
     state: LmState,
     mut flags: Vec<FitFlag>,
+    guide: &VertexGuide,
     config: &SolverConfig,
 ) -> VertexFit {
-    let x = physical(state.raw, config);
+    let bounds = problem.bounds;
+    let x = physical(state.raw, &bounds);
     let ch = chart(state.normal);
     let params = PbrdfParams {
         eta: x.eta,
@@ -485,21 +548,17 @@ fn finish(
         .sum();
     let n = problem.len().max(1) as f64;
     let dop_snr = (dop_sum / n) / (dop_sq / n).sqrt().max(1e-300);
-    if max_sensitivity < config.min_eta_sensitivity
-        || u.std_error[0]
-            .partial_cmp(&config.max_eta_std_error)
-            .is_none_or(|o| o == Ordering::Greater)
-        || dop_snr < 1.0
-    {
+    let eta_std_too_large = u.std_error[0]
+        .partial_cmp(&config.max_eta_std_error)
+        .is_none_or(|o| o == Ordering::Greater);
+    let own_data_weak = max_sensitivity < config.min_eta_sensitivity || dop_snr < 1.0;
+    if eta_std_too_large || (guide.eta_prior.is_none() && own_data_weak) {
         flags.push(FitFlag::EtaUnidentifiable);
     }
     if max_cos_o < config.grazing_only_deg.to_radians().cos() {
         flags.push(FitFlag::GrazingOnly);
     }
-    if params.eta < config.eta_floor + config.bound_margin_eta
-        || params.sigma_s < config.sigma_min + config.bound_margin_sigma
-        || params.sigma_ss > 1.0 - config.bound_margin_sigma
-    {
+    if at_bound(&params, state.normal, vertex.normal_world, &bounds, config) {
         flags.push(FitFlag::AtBound);
     }
     if !state.converged {
@@ -520,6 +579,33 @@ fn finish(
     }
 }
 
+/// Whether any parameter ends at (within the documented margin of) its bound: η at either end,
+/// σ_s at its floor, σ_ss at 1, any albedo at the cap, the normal beyond 2.5 widths of the prior
+/// cone from the mesh normal.
+fn at_bound(
+    p: &PbrdfParams<f64>,
+    normal: [f64; 3],
+    mesh_normal: [f64; 3],
+    bounds: &problem::Bounds,
+    config: &SolverConfig,
+) -> bool {
+    let cap = bounds.albedo_cap * (1.0 - 1e-3);
+    let cone = match unit(mesh_normal) {
+        Some(m) if config.normal_prior_deg > 0.0 => {
+            let c = (m[0] * normal[0] + m[1] * normal[1] + m[2] * normal[2]).clamp(-1.0, 1.0);
+            c.acos().to_degrees() > 2.5 * config.normal_prior_deg
+        }
+        _ => false,
+    };
+    p.eta < bounds.eta_min + config.bound_margin_eta
+        || p.eta > bounds.eta_max - config.bound_margin_eta
+        || p.sigma_s < bounds.sigma_s_min + config.bound_margin_sigma
+        || p.sigma_ss > 1.0 - config.bound_margin_sigma
+        || p.rho_s >= cap
+        || p.rho_ss.iter().chain(&p.rho_d).any(|v| *v >= cap)
+        || cone
+}
+
 /// The prior result for a vertex that cannot be fitted: `init` if given, else the configured
 /// prior with ρ_d, ρ_ss projected from whatever samples exist (0 without samples).
 fn prior_fit(
@@ -531,28 +617,22 @@ fn prior_fit(
     config: &SolverConfig,
 ) -> VertexFit {
     let p = config.prior;
+    let b = &problem.bounds;
     let mut params = match init {
         Some(f) if f.params.validate().is_ok() => f.params,
         _ => PbrdfParams {
-            eta: p[0].max(config.eta_floor),
-            sigma_s: p[1].clamp(config.sigma_min, 1.0),
-            sigma_ss: p[2].clamp(p[1].clamp(config.sigma_min, 1.0), 1.0),
-            rho_s: p[3].max(0.0),
-            rho_ss: [p[4].max(0.0); 3],
+            eta: p[0].clamp(b.eta_min, b.eta_max),
+            sigma_s: p[1].clamp(b.sigma_s_min, 1.0),
+            sigma_ss: p[2].clamp(p[1].clamp(b.sigma_s_min, 1.0), 1.0),
+            rho_s: p[3].clamp(0.0, b.albedo_cap),
+            rho_ss: [p[4].clamp(0.0, b.albedo_cap); 3],
             rho_d: [0.0; 3],
         },
     };
     if init.is_none() && problem.len() > 0 {
-        let raw = raw_from(
-            params.eta,
-            params.sigma_s,
-            params.sigma_ss,
-            params.rho_s,
-            config,
-        );
+        let raw = raw_from(params.eta, params.sigma_s, params.sigma_ss, params.rho_s, b);
         let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
-        let (_, a): (f64, Albedos<f64>) =
-            lm::cost_at(problem, &chart(normal), raw, config, &mut scratch);
+        let (_, a): (f64, Albedos<f64>) = lm::cost_at(problem, &chart(normal), raw, &mut scratch);
         if a.rho_d
             .iter()
             .chain(&a.rho_ss)
@@ -577,12 +657,12 @@ fn prior_fit(
     }
 }
 
-/// Fits every vertex of `set` in parallel (rayon); `init` and `virtual_samples`, when given,
-/// are indexed like `set.vertices`. Deterministic for any thread count.
+/// Fits every vertex of `set` in parallel (rayon); `init` and `guides`, when given, are indexed
+/// like `set.vertices`. Deterministic for any thread count.
 pub fn fit_all(
     set: &SampleSet,
     init: Option<&[VertexFit]>,
-    virtual_samples: Option<&[Vec<VirtualSample>]>,
+    guides: Option<&[VertexGuide]>,
     config: &SolverConfig,
 ) -> Vec<VertexFit> {
     set.vertices
@@ -590,11 +670,8 @@ pub fn fit_all(
         .enumerate()
         .map(|(i, v)| {
             let warm = init.and_then(|f| f.get(i));
-            let virt = virtual_samples
-                .and_then(|vs| vs.get(i))
-                .map(Vec::as_slice)
-                .unwrap_or(&[]);
-            fit_vertex(&set.views, v, set.colour, warm, virt, config)
+            let guide = guides.and_then(|g| g.get(i)).unwrap_or(&NO_GUIDE);
+            fit_vertex(&set.views, v, set.colour, warm, guide, config)
         })
         .collect()
 }

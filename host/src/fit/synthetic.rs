@@ -2,8 +2,8 @@
 //!
 //! Contract:
 //! - [`synthesize_vertex`] renders one vertex through the SAME optics as the simulator
-//!   (`pbrdf::apply` with the view's flash Stokes vector, then the four ideal analysers
-//!   0/45/90/135° via `SensorIntensities::from_stokes`), scales by the normaliser N (DN per model
+//!   (`pbrdf::apply` with the view's flash Stokes vector, then the four analysers at their
+//!   effective angles for the ray, `ViewGeometry::analyser_angles`), scales by the normaliser N (DN per model
 //!   unit), adds sensor noise in electrons (shot noise as a Gaussian of variance = electrons,
 //!   Gaussian read noise), quantises to integer DN and clips at full scale, then gates every
 //!   sample with the shared [`GateConfig`] rules and counts the reasons, exactly as observation
@@ -25,7 +25,9 @@ use ellipso_sim::render::radiometry::Radiometry;
 use nalgebra::{Point3, Vector3};
 use rand_distr::{Distribution, StandardNormal};
 
-use super::data::{GateCounts, Sample, SampleGeometry, VertexSamples, ViewGeometry};
+use super::data::{
+    GateCounts, OBSERVATION_CHANNELS, Sample, SampleGeometry, VertexSamples, ViewGeometry,
+};
 use super::gate::GateConfig;
 
 /// The sensor's noise and range, in the units the renderer uses.
@@ -126,9 +128,10 @@ pub fn synthesize_vertex(
         };
         let stokes = apply(&model, params, s_light);
         let n = normaliser(view, &g);
+        let angles = view.analyser_angles(&g);
         let mut analysers_dn = [[0f32; 4]; 3];
         for (c, s) in stokes.iter().enumerate().take(channels) {
-            let i = SensorIntensities::from_stokes(*s);
+            let i = angles.intensities(*s);
             for (k, v) in [i.i0, i.i45, i.i90, i.i135].into_iter().enumerate() {
                 let dn = n * v;
                 let read = match noise {
@@ -146,7 +149,7 @@ pub fn synthesize_vertex(
             reason.count(&mut gates);
             continue;
         }
-        let mut obs = [[0f32; 3]; 3];
+        let mut obs = [[0f32; OBSERVATION_CHANNELS]; 3];
         for (c, entry) in obs.iter_mut().enumerate() {
             let a = analysers_dn[c.min(channels - 1)].map(f64::from);
             let o = SensorIntensities {
@@ -156,7 +159,7 @@ pub fn synthesize_vertex(
                 i135: a[3],
             }
             .observation();
-            *entry = [o.diffuse, o.specular, o.alpha].map(|v| (v / n) as f32);
+            *entry = [o.diffuse, o.specular, o.alpha, a[1] + a[3]].map(|v| (v / n) as f32);
         }
         gates.kept += 1;
         samples.push(Sample {
@@ -220,6 +223,7 @@ pub fn orbit_views(
                 camera_up_world: up.into(),
                 flash_position_world: flash.into(),
                 polariser_axis_world: Some(right.into()),
+                camera_axis_world: Some(forward.into()),
             }
         })
         .collect()
@@ -294,8 +298,14 @@ mod tests {
             let m = g.model::<f64>(Vec3::from_f64(normal)).unwrap();
             let o = ellipso_sim::optics::measure::observe(&m, &truth(), view.flash_polariser());
             for c in 0..3 {
-                let want = [o[c].diffuse, o[c].specular, o[c].alpha];
-                for k in 0..3 {
+                // I^t = I45 + I135 = s0 = I^d + I^s for ideal analysers (on the axis).
+                let want = [
+                    o[c].diffuse,
+                    o[c].specular,
+                    o[c].alpha,
+                    o[c].diffuse + o[c].specular,
+                ];
+                for k in 0..4 {
                     let got = f64::from(s.channels[c][k]);
                     assert!((got - want[k]).abs() < 1e-6 * (1.0 + want[k].abs()));
                 }

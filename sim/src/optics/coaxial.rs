@@ -109,11 +109,19 @@ impl<T: Real> CoaxialTerms<T> {
 
 /// SS per channel: R(0)·(ρ_s D_s G_s + ρ_ss D_ss G_ss)/(4 cosθ) at θ_h = θ_i = θ_o = θ.
 pub fn specular_term<T: Real>(cos_theta: T, p: &PbrdfParams<T>) -> [T; 3] {
+    let (ss, s) = unit_specular_terms(cos_theta, p.eta, p.sigma_s, p.sigma_ss);
+    p.rho_ss.map(|r| p.rho_s * s + r * ss)
+}
+
+/// The two reflection lobes of [`specular_term`] with unit albedo, (single scattering at σ_ss,
+/// specular at σ_s): `specular_term = ρ_ss,c·ss + ρ_s·s`, each lobe evaluated once.
+pub fn unit_specular_terms<T: Real>(cos_theta: T, eta: T, sigma_s: T, sigma_ss: T) -> (T, T) {
     let c = cos_theta.clamp_re(0.0, 1.0);
-    let r0 = normal_incidence_reflectance(p.eta.max_re(T::one()));
-    let w_s = p.rho_s * microfacet_weight(c, c, c, p.sigma_s);
-    let w_ss = microfacet_weight(c, c, c, p.sigma_ss);
-    p.rho_ss.map(|r| r0 * (w_s + r * w_ss))
+    let r0 = normal_incidence_reflectance(eta.max_re(T::one()));
+    (
+        r0 * microfacet_weight(c, c, c, sigma_ss),
+        r0 * microfacet_weight(c, c, c, sigma_s),
+    )
 }
 
 /// The coaxial terms per RGB channel.

@@ -43,6 +43,107 @@ impl Analyser {
     }
 }
 
+/// The four analysers' effective transmission angles for one ray, as cos 2ψ and sin 2ψ in the
+/// ray's camera frame ([`super::Frame::camera`]: z = ω_o, y = image up made perpendicular to the
+/// ray, x = y × z).
+///
+/// Physics (docs/model.md, "Analysers off the optical axis"): each analyser is a wire grid lying
+/// in the sensor plane. A grid passes the field component perpendicular to its wires, so for a
+/// ray arriving along −ω_o its effective transmission axis is ω_o × w (w the wire direction,
+/// i.e. the nominal transmission axis turned by 90° in the sensor plane) — perpendicular to the
+/// ray and to the wires (the dipole model of a thin polariser at oblique incidence, Chipman,
+/// Lam & Young, *Polarized Light and Optical Systems* 2018, §11). Projecting each nominal
+/// transmission axis onto the ray's transverse plane instead differs at second order in the
+/// field angle: by up to ~5° at the corners of a 1224×1024 frame with f = 1739 px. On the
+/// optical axis both give the nominal 0/45/90/135°.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AnalyserAngles {
+    /// cos 2ψ of the analysers at nominal 0°, 45°, 90°, 135°.
+    pub cos2: [f64; 4],
+    /// sin 2ψ of the same analysers.
+    pub sin2: [f64; 4],
+}
+
+impl AnalyserAngles {
+    /// The nominal angles (a ray along the optical axis).
+    pub fn ideal() -> Self {
+        Self {
+            cos2: [1.0, 0.0, -1.0, 0.0],
+            sin2: [0.0, 1.0, 0.0, -1.0],
+        }
+    }
+
+    /// The effective angles of the sensor's four analysers for a ray leaving the surface along
+    /// `to_camera`, with the sensor's image-right and image-up axes (all three in one frame,
+    /// e.g. the world or the OpenCV camera frame with right = +x, up = −y).
+    pub fn for_ray(image_right: [f64; 3], image_up: [f64; 3], to_camera: [f64; 3]) -> Self {
+        let mut out = Self::ideal();
+        for (k, deg) in Analyser::SENSOR_ANGLES_DEG.iter().enumerate() {
+            let (c, s) = effective_cos_sin_2(deg.to_radians(), image_right, image_up, to_camera);
+            out.cos2[k] = c;
+            out.sin2[k] = s;
+        }
+        out
+    }
+
+    /// The four pixel intensities ½(s0 + s1 cos2ψ + s2 sin2ψ), nominal order 0/45/90/135°.
+    pub fn intensities<T: Real>(&self, s: Stokes<T>) -> SensorIntensities<T> {
+        let at = |k: usize| {
+            (s.s0 + s.s1 * T::from_f64(self.cos2[k]) + s.s2 * T::from_f64(self.sin2[k]))
+                * T::from_f64(0.5)
+        };
+        SensorIntensities {
+            i0: at(0),
+            i45: at(1),
+            i90: at(2),
+            i135: at(3),
+        }
+    }
+}
+
+/// (cos 2ψ, sin 2ψ) of one wire-grid analyser at nominal angle `theta` (from image right toward
+/// image up) for a ray along −`to_camera` (see [`AnalyserAngles`]). A degenerate input (a ray in
+/// the sensor plane, zero vectors) gives the nominal angle.
+pub fn effective_cos_sin_2(
+    theta: f64,
+    image_right: [f64; 3],
+    image_up: [f64; 3],
+    to_camera: [f64; 3],
+) -> (f64, f64) {
+    let nominal = ((2.0 * theta).cos(), (2.0 * theta).sin());
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let z = to_camera;
+    // The ray frame's y: image up made perpendicular to the ray (as `Frame::camera` builds it).
+    let uz = dot(image_up, z);
+    let y = [
+        image_up[0] - uz * z[0],
+        image_up[1] - uz * z[1],
+        image_up[2] - uz * z[2],
+    ];
+    let x = cross(y, z);
+    let (s, c) = theta.sin_cos();
+    let wire = [
+        -s * image_right[0] + c * image_up[0],
+        -s * image_right[1] + c * image_up[1],
+        -s * image_right[2] + c * image_up[2],
+    ];
+    let t = cross(z, wire);
+    let (a, b) = (dot(t, x), dot(t, y));
+    let norm = a * a + b * b;
+    // Only a ray grazing the sensor plane along the wires has no transverse component.
+    if !(norm > 1e-24) || !norm.is_finite() {
+        return nominal;
+    }
+    ((a * a - b * b) / norm, 2.0 * a * b / norm)
+}
+
 /// The linear polariser on the flash.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct FlashPolariser {
@@ -211,6 +312,60 @@ pub fn dop_diffuse_with_d_eta<T: Real>(cos_theta_o: T, eta: T) -> (T, T) {
 mod tests {
     use super::*;
     use crate::optics::{Dual, FresnelTerms};
+
+    /// The OpenCV camera frame's image axes: right = +x, up = −y.
+    const RIGHT: [f64; 3] = [1.0, 0.0, 0.0];
+    const UP: [f64; 3] = [0.0, -1.0, 0.0];
+
+    fn ray(u_over_f: f64, v_over_f: f64) -> [f64; 3] {
+        let l = (u_over_f * u_over_f + v_over_f * v_over_f + 1.0).sqrt();
+        // Surface → camera is minus the pinhole ray.
+        [-u_over_f / l, -v_over_f / l, -1.0 / l]
+    }
+
+    #[test]
+    fn analysers_on_axis_are_nominal_and_malus_holds_off_axis() {
+        let on = AnalyserAngles::for_ray(RIGHT, UP, ray(0.0, 0.0));
+        let ideal = AnalyserAngles::ideal();
+        for k in 0..4 {
+            assert!((on.cos2[k] - ideal.cos2[k]).abs() < 1e-15);
+            assert!((on.sin2[k] - ideal.sin2[k]).abs() < 1e-15);
+        }
+        // Along the image axes the 0° and 90° grids stay at 0° and 90°: one of their wires
+        // lies in the plane of incidence.
+        for r in [ray(0.4, 0.0), ray(0.0, 0.3)] {
+            let a = AnalyserAngles::for_ray(RIGHT, UP, r);
+            for k in [0, 2] {
+                assert!((a.cos2[k] - ideal.cos2[k]).abs() < 1e-12, "{a:?}");
+            }
+        }
+        // A corner ray (field angle ~25°): every effective axis is a unit direction (Malus:
+        // fully polarised light along it passes entirely, across it not at all), and the
+        // diagonal analysers move by degrees.
+        let a = AnalyserAngles::for_ray(RIGHT, UP, ray(0.35, 0.29));
+        let mut worst: f64 = 0.0;
+        for k in 0..4 {
+            assert!((a.cos2[k].hypot(a.sin2[k]) - 1.0).abs() < 1e-12);
+            let along = Stokes::new(1.0, a.cos2[k], a.sin2[k], 0.0);
+            let across = Stokes::new(1.0, -a.cos2[k], -a.sin2[k], 0.0);
+            let pass = |s| match k {
+                0 => a.intensities(s).i0,
+                1 => a.intensities(s).i45,
+                2 => a.intensities(s).i90,
+                _ => a.intensities(s).i135,
+            };
+            assert!((pass(along) - 1.0).abs() < 1e-12);
+            assert!(pass(across).abs() < 1e-12);
+            let psi = 0.5 * a.sin2[k].atan2(a.cos2[k]);
+            let nominal = (45.0 * k as f64).to_radians();
+            let mut d = (psi - nominal).rem_euclid(std::f64::consts::PI);
+            if d > std::f64::consts::FRAC_PI_2 {
+                d -= std::f64::consts::PI;
+            }
+            worst = worst.max(d.abs().to_degrees());
+        }
+        assert!(worst > 1.0 && worst < 10.0, "{worst}");
+    }
 
     #[test]
     fn dop_table_and_closed_form_equals_fresnel_ratio() {

@@ -71,7 +71,7 @@ pub struct ClusterConfig {
     /// Lloyd iteration limit per restart.
     pub max_iterations: usize,
     /// Vertices with any of these flags are not cluster members (their joint-step parameters
-    /// are priors or unidentified); they are still assigned to the nearest cluster.
+    /// are priors); they are still assigned to the nearest cluster.
     pub exclude_flags: Vec<FitFlag>,
     /// Seed of every random choice (k-means++ and the silhouette subsample).
     pub seed: u64,
@@ -86,12 +86,10 @@ impl Default for ClusterConfig {
             min_silhouette: 0.5,
             restarts: 4,
             max_iterations: 100,
-            exclude_flags: vec![
-                FitFlag::TooFewViews,
-                FitFlag::UnderDetermined,
-                FitFlag::Dark,
-                FitFlag::EtaUnidentifiable,
-            ],
+            // Only vertices whose parameters are the prior, not a fit. A dark or
+            // η-unidentifiable vertex still belongs to a material (its η feature is shrunk by its
+            // reliability, `pool::EtaShrink`); excluding them left dark objects with no cluster.
+            exclude_flags: vec![FitFlag::TooFewViews, FitFlag::UnderDetermined],
             seed: 0x5eed_c105,
         }
     }

@@ -62,7 +62,7 @@ pub fn dop_sample(
     let w = channel_weights(fit.params.rho_d);
     let (mut i_d, mut i_s, mut i_a, mut spec_s0) = (0.0, 0.0, 0.0, 0.0);
     for c in 0..3 {
-        let [d, s, a] = sample.channels[c].map(f64::from);
+        let [d, s, a, _] = sample.channels[c].map(f64::from);
         i_d += w[c] * (d - spec[c].diffuse);
         i_s += w[c] * (s - spec[c].specular);
         i_a += w[c] * (a - spec[c].alpha);

@@ -68,6 +68,7 @@ fn orbit_views(azimuths: usize, elevations_deg: &[f64]) -> Vec<ViewGeometry> {
                 camera_up_world: up.into(),
                 flash_position_world: (position - up * FLASH_OFFSET_M).into(),
                 polariser_axis_world: Some(right.into()),
+                camera_axis_world: Some(forward.into()),
             });
         }
     }
@@ -118,7 +119,8 @@ fn synthesize(
                 }
                 let obs = observe(&g, p, view.flash_polariser());
                 let channels = obs.map(|o| {
-                    [o.diffuse, o.specular, o.alpha].map(|x| (x + noise.sample(&mut rng)) as f32)
+                    [o.diffuse, o.specular, o.alpha, o.diffuse + o.specular]
+                        .map(|x| (x + noise.sample(&mut rng)) as f32)
                 });
                 samples.push(Sample {
                     view: k as u32,
@@ -201,7 +203,7 @@ fn lobe_samples(s: &Scene, material: &PbrdfParams<f64>) -> Vec<LobeSample> {
         }
         for sample in &vs.samples {
             let (g, flash) = sample_geometry(&s.set, v, sample, &s.fits[v]).unwrap();
-            out.push(LobeSample::new(&g, flash, sample, &s.fits[v], material.eta).unwrap());
+            out.push(LobeSample::new(&g, flash, sample, &s.fits[v], material.eta, 1.0).unwrap());
         }
     }
     out
@@ -257,6 +259,9 @@ fn two_lobe_fit_recovers_noiseless_and_degrades_gracefully_with_noise() {
         // peak up to 60°.
         let profile = |p: &PbrdfParams<f64>| {
             virtual_samples::coaxial_profile(p.eta, p.sigma_s, p.sigma_ss, p.rho_s, p.rho_ss, 180)
+                .into_iter()
+                .map(|q| (q.cos_theta_h, q.specular))
+                .collect::<Vec<_>>()
         };
         let fitted = PbrdfParams {
             sigma_s: fit.sigma_s,
@@ -304,22 +309,22 @@ fn small_config() -> AugmentConfig {
 }
 
 fn check_virtual_samples(a: &Augmentation, config: &AugmentConfig) {
-    for vs in &a.virtual_samples {
+    for g in &a.guides {
+        let vs = &g.virtual_samples;
         if vs.is_empty() {
+            assert_eq!(g.sigma_s_floor, 0.0);
             continue;
         }
         let sum: f64 = vs.iter().map(|s| s.weight).sum();
         assert!((sum - config.lambda_g).abs() < 1e-12, "{sum}");
         for (m, s) in vs.iter().enumerate() {
-            // A prefix of the 0.5° grid.
-            let want = (0.5 * m as f64).to_radians().cos();
+            // A prefix of the squared grid.
+            let want = virtual_samples::grid_deg(m, config.profile_samples)
+                .to_radians()
+                .cos();
             assert!((s.cos_theta_h - want).abs() < 1e-15);
             assert!(s.weight > 0.0 && s.weight.is_finite());
-            assert!(
-                s.specular
-                    .iter()
-                    .all(|v| v.is_finite() && *v >= 0.0 && *v <= 1.0)
-            );
+            assert!(s.specular.iter().all(|v| v.is_finite() && *v >= 0.0));
         }
     }
 }
@@ -341,15 +346,26 @@ fn three_materials_end_to_end() {
             (c.sigma_s - m.sigma_s).abs() < 0.1 * m.sigma_s,
             "{c:?} vs {m:?}"
         );
-        assert!((a.sigma_s_floor[v] - c.sigma_s / 2.0).abs() < 1e-15);
+        assert!((a.guides[v].sigma_s_floor - c.sigma_s / 2.0).abs() < 1e-15);
+        assert_eq!(
+            a.guides[v].lobe_start,
+            Some([c.sigma_s, c.sigma_ss, c.rho_s])
+        );
     }
     check_virtual_samples(&a, &config);
-    // The first virtual sample is the cluster's coaxial peak, clipped at 1.
+    // The first virtual sample is the cluster's coaxial peak, unclipped.
     let j = a.assignment[0].unwrap();
     let c = &a.clusters[j];
-    let peak =
-        virtual_samples::coaxial_profile(c.eta, c.sigma_s, c.sigma_ss, c.rho_s, c.rho_ss, 180)[0].1;
-    assert_eq!(a.virtual_samples[0][0].specular, peak);
+    let peak = virtual_samples::coaxial_profile(
+        c.eta,
+        c.sigma_s,
+        c.sigma_ss,
+        c.rho_s,
+        c.rho_ss,
+        config.profile_samples,
+    )[0]
+    .specular;
+    assert_eq!(a.guides[0].virtual_samples[0].specular, peak);
     // Summary serialises without the per-vertex vectors.
     let json = serde_json::to_string(&a).unwrap();
     assert!(json.contains("\"clusters\"") && !json.contains("\"virtual_samples\""));
@@ -377,8 +393,8 @@ fn far_vertex_gets_no_virtual_samples_and_no_floor() {
     let a = augment(&s.set, &s.fits, &small_config());
     assert_eq!(a.clusters.len(), 3, "{:?}", a.partition);
     assert!(a.assignment[5].is_some());
-    assert!(a.virtual_samples[5].is_empty());
-    assert_eq!(a.sigma_s_floor[5], 0.0);
+    assert!(a.guides[5].virtual_samples.is_empty());
+    assert_eq!(a.guides[5].sigma_s_floor, 0.0);
     assert_eq!(a.vertices_with_virtual_samples, 299);
     check_virtual_samples(&a, &small_config());
 }
@@ -409,8 +425,8 @@ fn degenerate_inputs() {
     let a = augment(&s.set, &s.fits, &config);
     assert!(a.clusters.is_empty() && a.partition.members == 0);
     assert!(a.assignment.iter().all(Option::is_none));
-    assert!(a.virtual_samples.iter().all(Vec::is_empty));
-    assert_eq!(a.sigma_s_floor, vec![0.0; 30]);
+    assert!(a.guides.iter().all(|g| g.virtual_samples.is_empty()));
+    assert!(a.guides.iter().all(|g| g.sigma_s_floor == 0.0));
     // No fits at all, and fits that point past the mesh or are not finite.
     let mut bad = fit_of(99, materials()[0], [0.0, 0.0, 1.0]);
     bad.vertex = 99;

@@ -105,6 +105,51 @@ impl FrameRadiometry {
     }
 }
 
+/// N at any world point of one frame: the frame's radiometry with the sampler's geometry — the
+/// flash aimed along the optical axis, the angle off it of the beam to the point, the field
+/// angle of the point's ray off the optical axis (what `sampler::FrameSampler` evaluates per
+/// vertex, and what a picture of that frame needs per pixel).
+#[derive(Clone, Debug)]
+pub struct PointNormaliser {
+    /// The frame's radiometry.
+    pub radiometry: FrameRadiometry,
+    /// Flash position, world.
+    pub flash_world: nalgebra::Point3<f64>,
+    /// Flash axis (= optical axis), world, unit.
+    pub flash_axis_world: nalgebra::Vector3<f64>,
+    /// World → camera of the frame.
+    pub camera_from_world: nalgebra::Isometry3<f64>,
+}
+
+impl PointNormaliser {
+    /// The normaliser of a frame taken at `world_from_camera` with `radiometry`.
+    pub fn new(
+        radiometry: FrameRadiometry,
+        flash: &FlashSpec,
+        world_from_camera: &nalgebra::Isometry3<f64>,
+    ) -> Self {
+        Self {
+            radiometry,
+            flash_world: flash.position_world(world_from_camera),
+            flash_axis_world: world_from_camera.rotation * nalgebra::Vector3::z(),
+            camera_from_world: world_from_camera.inverse(),
+        }
+    }
+
+    /// N at `point` (DN per model unit); 0 outside the flash's emission, not finite for a
+    /// point on the flash or the camera centre.
+    pub fn at(&self, point: &nalgebra::Point3<f64>) -> f64 {
+        let beam = point - self.flash_world;
+        let d = beam.norm();
+        let cos_axis = (beam / d).dot(&self.flash_axis_world).clamp(-1.0, 1.0);
+        let p_cam = self.camera_from_world * point;
+        // |p_cam| > 0 for any point the camera can see.
+        let cos_field = (p_cam.z / p_cam.coords.norm()).clamp(-1.0, 1.0);
+        self.radiometry
+            .normaliser(d, cos_axis.acos(), cos_field.acos())
+    }
+}
+
 impl SessionRadiometry {
     /// The absolute radiometry of a scene's rig, as its renderer uses it.
     pub fn from_scene(scene: &Scene) -> Self {
@@ -165,13 +210,13 @@ impl SessionRadiometry {
         }
     }
 
-    /// Observation channels `[I^d, I^s, I^α]` from analyser intensities `[I0, I45, I90, I135]`
+    /// Observation channels `[I^d, I^s, I^α, I^t]` from analyser intensities `[I0, I45, I90, I135]`
     /// with this session's analyser extinction undone (module doc).
-    pub fn channels(&self, analysers: [f64; 4]) -> [f64; 3] {
+    pub fn channels(&self, analysers: [f64; 4]) -> [f64; 4] {
         let [i0, i45, i90, i135] = analysers;
         let e = self.analyser_extinction;
         if e == 0.0 {
-            return [i90 + i90, i0 - i90, i135 - i45];
+            return [i90 + i90, i0 - i90, i135 - i45, i45 + i135];
         }
         // e = 1/ER ≤ 1 (ER ≥ 1 is enforced where e is set); 1 − e > 0 unless ER = 1 (no
         // polariser), which no camera with analysers has. The max keeps the division finite.
@@ -179,7 +224,7 @@ impl SessionRadiometry {
         let specular = (i0 - i90) / cross;
         let alpha = (i135 - i45) / cross;
         let s0 = (i0 + i90) / (1.0 + e);
-        [s0 - specular, specular, alpha]
+        [s0 - specular, specular, alpha, (i45 + i135) / (1.0 + e)]
     }
 }
 

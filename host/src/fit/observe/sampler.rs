@@ -26,8 +26,8 @@ use ellipso_sim::mosaic::{Analyser, SensorLayout};
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::SamplePoint;
-use super::radiometry::{FrameRadiometry, SessionRadiometry};
-use crate::fit::data::{Sample, ViewGeometry};
+use super::radiometry::{PointNormaliser, SessionRadiometry};
+use crate::fit::data::{OBSERVATION_CHANNELS, Sample, ViewGeometry};
 use crate::fit::gate::{GateConfig, SampleGate};
 use crate::polar::demosaic::{AnalyserImage, Levels};
 use crate::polar::frame::RawFrame;
@@ -263,9 +263,8 @@ pub struct FrameSampler<'a> {
     session: &'a SessionContext<'a>,
     view: &'a ViewGeometry,
     camera_from_world: Isometry3<f64>,
-    flash_axis_world: Vector3<f64>,
     image: &'a DnImage,
-    radiometry: FrameRadiometry,
+    normaliser: PointNormaliser,
 }
 
 /// The largest squared normalised (undistorted) radius of the image border, with 5 % margin;
@@ -304,10 +303,12 @@ impl<'a> FrameSampler<'a> {
             session,
             view,
             camera_from_world: world_from_camera.inverse(),
-            // The flash is aimed along the optical axis (FlashSpec::axis_world).
-            flash_axis_world: world_from_camera.rotation * Vector3::z(),
             image,
-            radiometry: session.radiometry.for_frame(exposure_us, gain_db),
+            normaliser: PointNormaliser::new(
+                session.radiometry.for_frame(exposure_us, gain_db),
+                &session.radiometry.flash,
+                world_from_camera,
+            ),
         }
     }
 
@@ -385,14 +386,8 @@ impl<'a> FrameSampler<'a> {
             return Outcome::Gate(g);
         }
 
-        // Normaliser geometry exactly as the renderer's: flash axis = camera z, angle off it of
-        // the beam to the point; field angle of the point's ray off the optical axis.
-        let cos_axis = (-to_light).dot(&self.flash_axis_world).clamp(-1.0, 1.0);
-        // |p_cam| > 0: the point projected (z > the camera's minimum depth).
-        let cos_field = (p_cam.z / p_cam.coords.norm()).clamp(-1.0, 1.0);
-        let n = self
-            .radiometry
-            .normaliser(g.light_distance_m, cos_axis.acos(), cos_field.acos());
+        // Normaliser geometry exactly as the renderer's (`PointNormaliser`).
+        let n = self.normaliser.at(&position);
         if !n.is_finite() {
             return Outcome::Gate(SampleGate::NonFinite);
         }
@@ -400,7 +395,7 @@ impl<'a> FrameSampler<'a> {
             // Outside the flash's emission profile: not lit.
             return Outcome::Shadowed;
         }
-        let mut channels = [[0f32; 3]; 3];
+        let mut channels = [[0f32; OBSERVATION_CHANNELS]; 3];
         for (c, out) in channels.iter_mut().enumerate() {
             let a = values[c.min(bands - 1)].map(f64::from);
             *out = self.session.radiometry.channels(a).map(|v| (v / n) as f32);

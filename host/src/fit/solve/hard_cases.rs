@@ -2,7 +2,7 @@
 //! result must be finite, inside its bounds, flagged with the right reason, and carry an
 //! uncertainty — never a silent wrong number.
 
-use super::super::data::{GateCounts, Sample, VertexSamples};
+use super::super::data::{GateCounts, Sample, VertexGuide, VertexSamples, VirtualSample};
 use super::super::synthetic::orbit_views;
 use super::tests::{MATERIALS, angle_deg, assert_sane, material, sensor, synth, views};
 use super::*;
@@ -15,14 +15,28 @@ fn dark_vertex_is_flagged_and_finite() {
     // 1/2000 of the normal exposure: every sample falls below the dark gate.
     let v = synth(&views, UP, &material("rubber"), Some(&sensor()), 5e-4, 1);
     assert!(v.gates.dark > v.gates.kept, "{:?}", v.gates);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::Dark), "{:?}", fit.flags);
     assert!(fit.flags.contains(&FitFlag::TooFewViews), "{:?}", fit.flags);
     assert!(fit.std_error.iter().all(|e| e.is_infinite()));
     // Dim but above the gate on some views: fitted, flagged dark by its signal.
     let v = synth(&views, UP, &material("rubber"), Some(&sensor()), 0.02, 2);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(
         fit.flags.contains(&FitFlag::Dark) || fit.flags.contains(&FitFlag::TooFewViews),
@@ -42,7 +56,14 @@ fn saturated_vertex_is_flagged_and_finite() {
         3,
     );
     assert!(v.gates.saturated > 5, "{:?}", v.gates);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::Saturated), "{:?}", fit.flags);
 }
@@ -53,7 +74,14 @@ fn near_normal_incidence_views_leave_eta_unidentifiable() {
     let views = orbit_views(60, 0.5, [80.0, 88.0], 2.0, [0.0; 3], [0.0, 0.03, 0.0]);
     let truth = material("ceramic");
     let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 4);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::EtaUnidentifiable), "{fit:?}");
     let err = (fit.params.eta - truth.eta).abs();
@@ -72,7 +100,7 @@ fn fewer_views_than_unknowns_is_under_determined() {
         min_views: 1,
         ..SolverConfig::default()
     };
-    let fit = fit_vertex(&views, &v, true, None, &[], &config);
+    let fit = fit_vertex(&views, &v, true, None, &VertexGuide::default(), &config);
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::UnderDetermined), "{fit:?}");
     // 7 samples × 9 residuals > 12 unknowns, but the lobes are not separable: some error is ∞
@@ -82,7 +110,14 @@ fn fewer_views_than_unknowns_is_under_determined() {
         "{fit:?}"
     );
     // With the default minimum the vertex is not fitted at all.
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(
         fit.flags.contains(&FitFlag::TooFewViews) && fit.flags.contains(&FitFlag::UnderDetermined)
@@ -95,7 +130,14 @@ fn grazing_only_views_are_flagged() {
     let views = orbit_views(80, 0.5, [12.0, 22.0], 1.0, [0.0; 3], [0.0, 0.03, 0.0]);
     let v = synth(&views, UP, &material("ceramic"), Some(&sensor()), 1.0, 6);
     assert!(v.samples.len() >= 12, "{:?}", v.gates);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::GrazingOnly), "{fit:?}");
 }
@@ -108,7 +150,14 @@ fn eta_near_one_stays_in_bounds_and_honest() {
         ..material("ceramic")
     };
     let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 7);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     let err = (fit.params.eta - truth.eta).abs();
     eprintln!("η = 1.02: {fit:?}");
@@ -116,11 +165,78 @@ fn eta_near_one_stays_in_bounds_and_honest() {
         err < 0.02 || fit.flags.contains(&FitFlag::EtaUnidentifiable),
         "{fit:?}"
     );
-    // Noiseless: recovered, with ∂DoP/∂η small but non-zero.
+    // η = 1.02 lies below the default range [1.1, 3] (the paper's): the fit ends at the
+    // bound and says so.
     let v = synth(&views, UP, &truth, None, 1.0, 7);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
+    assert!((fit.params.eta - 1.1).abs() < 0.01, "{fit:?}");
+    assert!(fit.flags.contains(&FitFlag::AtBound), "{fit:?}");
+    // With the range opened to η → 1 (configurable), noiseless data is recovered, with
+    // ∂DoP/∂η small but non-zero.
+    let open = SolverConfig {
+        eta_bounds: [1.001, 3.0],
+        ..SolverConfig::default().without_priors()
+    };
+    let fit = fit_vertex(&views, &v, true, None, &VertexGuide::default(), &open);
     assert!((fit.params.eta - 1.02).abs() < 1e-4, "{fit:?}");
+}
+
+/// Every bound of the box (η above, ρ_s, ρ_d caps, the normal cone) is enforced, and a fit that
+/// ends at one is flagged, never silently reported (η below and σ at its floor have their own
+/// tests above and below).
+#[test]
+fn each_bound_is_enforced_and_flagged() {
+    let views = views();
+    let cases: [(&str, PbrdfParams<f64>); 3] = [
+        (
+            "η above its range",
+            PbrdfParams {
+                eta: 3.6,
+                ..material("ceramic")
+            },
+        ),
+        (
+            "ρ_s above the cap",
+            PbrdfParams {
+                rho_s: 9.0,
+                ..material("ceramic")
+            },
+        ),
+        (
+            "ρ_d above the cap",
+            PbrdfParams {
+                rho_d: [8.0, 6.0, 7.0],
+                ..material("ceramic")
+            },
+        ),
+    ];
+    let config = SolverConfig::default();
+    for (what, truth) in cases {
+        let v = synth(&views, UP, &truth, None, 1.0, 21);
+        let fit = fit_vertex(&views, &v, true, None, &VertexGuide::default(), &config);
+        assert_sane(&fit);
+        assert!(fit.flags.contains(&FitFlag::AtBound), "{what}: {fit:?}");
+    }
+    // A dark vertex handed a mesh normal 40° off: the prior cone keeps the fit near the mesh
+    // normal unless the data insists, and a normal far outside the cone is flagged.
+    let tilted = super::tests::unit([40f64.to_radians().sin(), 0.0, 40f64.to_radians().cos()]);
+    let mut v = synth(&views, UP, &material("rubber"), Some(&sensor()), 0.05, 22);
+    v.normal_world = tilted;
+    let fit = fit_vertex(&views, &v, true, None, &VertexGuide::default(), &config);
+    assert_sane(&fit);
+    let off = angle_deg(fit.normal_world, tilted);
+    assert!(
+        off <= 2.5 * config.normal_prior_deg || fit.flags.contains(&FitFlag::AtBound),
+        "{off}° {fit:?}"
+    );
 }
 
 #[test]
@@ -132,7 +248,14 @@ fn sigma_towards_zero_hits_the_floor_and_says_so() {
         ..material("glossy_plastic")
     };
     let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 8);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     eprintln!("σ → 0: {fit:?}");
     assert!(fit.params.sigma_s >= 0.01);
@@ -152,7 +275,14 @@ fn very_rough_lobes_at_one() {
         ..material("ceramic")
     };
     let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 9);
-    let fit = fit_vertex(&views, &v, true, None, &[], &SolverConfig::default());
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
     assert_sane(&fit);
     eprintln!("σ = 1: {fit:?}");
     // Recovered, at the bound, or honestly uncertain: in measurement mode a sharp σ_s lobe
@@ -178,7 +308,7 @@ fn adversarial_inputs_never_produce_nan() {
         samples: Vec::new(),
         gates: GateCounts::default(),
     };
-    let fit = fit_vertex(&views, &empty, true, None, &[], &config);
+    let fit = fit_vertex(&views, &empty, true, None, &VertexGuide::default(), &config);
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::TooFewViews));
     // All-zero channels on every view.
@@ -186,7 +316,7 @@ fn adversarial_inputs_never_produce_nan() {
         samples: (0..100)
             .map(|k| Sample {
                 view: k,
-                channels: [[0.0; 3]; 3],
+                channels: [[0.0; 4]; 3],
                 normaliser: 1000.0,
             })
             .collect(),
@@ -194,7 +324,14 @@ fn adversarial_inputs_never_produce_nan() {
         ..empty.clone()
     };
     for colour in [true, false] {
-        let fit = fit_vertex(&views, &zeros, colour, None, &[], &config);
+        let fit = fit_vertex(
+            &views,
+            &zeros,
+            colour,
+            None,
+            &VertexGuide::default(),
+            &config,
+        );
         assert_sane(&fit);
         assert!(fit.flags.contains(&FitFlag::Dark), "{fit:?}");
     }
@@ -210,19 +347,24 @@ fn adversarial_inputs_never_produce_nan() {
     bad.samples[0].channels[1][1] = f32::NAN;
     bad.samples[1].normaliser = 0.0;
     bad.samples[2].view = 10_000;
-    let virt = [VirtualSample {
-        cos_theta_h: f64::NAN,
-        specular: [f64::NAN; 3],
-        weight: f64::NAN,
-    }];
+    let virt = VertexGuide {
+        virtual_samples: vec![VirtualSample {
+            cos_theta_h: f64::NAN,
+            specular: [f64::NAN; 3],
+            weight: f64::NAN,
+        }],
+        sigma_s_floor: f64::NAN,
+        eta_prior: Some([f64::NAN, f64::NAN]),
+        lobe_start: Some([f64::NAN; 3]),
+    };
     let fit = fit_vertex(&views, &bad, true, None, &virt, &config);
     assert_sane(&fit);
     assert_eq!(fit.samples_used as usize, bad.samples.len() - 3);
     bad.normal_world = [f64::NAN; 3];
-    let fit = fit_vertex(&views, &bad, true, None, &[], &config);
+    let fit = fit_vertex(&views, &bad, true, None, &VertexGuide::default(), &config);
     assert_sane(&fit);
     bad.position_world = [f64::NAN; 3];
-    let fit = fit_vertex(&views, &bad, true, None, &[], &config);
+    let fit = fit_vertex(&views, &bad, true, None, &VertexGuide::default(), &config);
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::TooFewViews));
 }

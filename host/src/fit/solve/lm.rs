@@ -6,7 +6,7 @@ use ellipso_sim::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
 use super::super::model::{tangent_basis, unit_tangent_normal};
-use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
+use super::problem::{Albedos, Bounds, Chart, Nonlinear, Problem, Scratch};
 use super::{LossMode, SolverConfig};
 
 /// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
@@ -19,15 +19,6 @@ type Vector = SVector<f64, N_RAW>;
 /// nothing is lost, and exp() never overflows.
 const RAW_LIMIT: f64 = 60.0;
 
-/// softplus(x) = ln(1 + eˣ), overflow-free.
-pub(super) fn softplus<T: Real>(x: T) -> T {
-    if x.re() > 0.0 {
-        x + (T::one() + (-x).exp()).ln()
-    } else {
-        (T::one() + x.exp()).ln()
-    }
-}
-
 /// 1/(1 + e⁻ˣ), overflow-free.
 pub(super) fn sigmoid<T: Real>(x: T) -> T {
     if x.re() >= 0.0 {
@@ -38,51 +29,47 @@ pub(super) fn sigmoid<T: Real>(x: T) -> T {
     }
 }
 
-/// Inverse of softplus for y > 0 (y floored at 1e-12).
-pub(super) fn softplus_inv(y: f64) -> f64 {
-    let y = y.max(1e-12);
-    if y > 30.0 { y } else { y.exp_m1().ln() }
-}
-
 /// Inverse of the sigmoid, the argument clamped to [1e-12, 1 − 1e-12].
 pub(super) fn logit(s: f64) -> f64 {
     let s = s.clamp(1e-12, 1.0 - 1e-12);
     (s / (1.0 - s)).ln()
 }
 
-/// Physical unknowns from raw ones (the reparameterisation).
-pub(super) fn physical<T: Real>(raw: [T; N_RAW], config: &SolverConfig) -> Nonlinear<T> {
+/// Physical unknowns from raw ones (the reparameterisation): every unknown in its box.
+pub(super) fn physical<T: Real>(raw: [T; N_RAW], bounds: &Bounds) -> Nonlinear<T> {
     let k = T::from_f64;
-    let eta = k(config.eta_floor) + softplus(raw[0]);
-    let sigma_s = k(config.sigma_min) + k(1.0 - config.sigma_min) * sigmoid(raw[1]);
+    let eta = k(bounds.eta_min) + k(bounds.eta_max - bounds.eta_min) * sigmoid(raw[0]);
+    let smin = bounds.sigma_s_min;
+    let sigma_s = k(smin) + k(1.0 - smin) * sigmoid(raw[1]);
     let sigma_ss = sigma_s + (T::one() - sigma_s) * sigmoid(raw[2]);
     Nonlinear {
         eta,
         sigma_s,
         sigma_ss,
-        rho_s: softplus(raw[3]),
+        rho_s: k(bounds.albedo_cap) * sigmoid(raw[3]),
         p: raw[4],
         q: raw[5],
     }
 }
 
-/// Raw unknowns (with p = q = 0) for physical values, clamped into the open domain.
+/// Raw unknowns (with p = q = 0) for physical values, clamped into the open box.
 pub(super) fn raw_from(
     eta: f64,
     sigma_s: f64,
     sigma_ss: f64,
     rho_s: f64,
-    config: &SolverConfig,
+    bounds: &Bounds,
 ) -> [f64; N_RAW] {
-    let smin = config.sigma_min;
+    let smin = bounds.sigma_s_min;
     let s = ((sigma_s - smin) / (1.0 - smin)).clamp(0.0, 1.0);
     let sigma_s_c = smin + (1.0 - smin) * s.clamp(1e-12, 1.0 - 1e-12);
     let t = ((sigma_ss - sigma_s_c) / (1.0 - sigma_s_c).max(1e-12)).clamp(0.0, 1.0);
+    let e = (eta - bounds.eta_min) / (bounds.eta_max - bounds.eta_min);
     clamp_raw([
-        softplus_inv(eta - config.eta_floor),
+        logit(e),
         logit(s),
         logit(t),
-        softplus_inv(rho_s),
+        logit(rho_s / bounds.albedo_cap),
         0.0,
         0.0,
     ])
@@ -120,10 +107,9 @@ pub(super) fn cost_at(
     problem: &Problem,
     chart: &Chart,
     raw: [f64; N_RAW],
-    config: &SolverConfig,
     scratch: &mut Scratch<f64>,
 ) -> (f64, Albedos<f64>) {
-    let x = physical(raw, config);
+    let x = physical(raw, &problem.bounds);
     let mut cost = 0.0;
     let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: f64| cost += r * r);
     (cost, albedos)
@@ -134,11 +120,10 @@ fn jacobian_at(
     problem: &Problem,
     chart: &Chart,
     raw: [f64; N_RAW],
-    config: &SolverConfig,
     scratch: &mut Scratch<RawDual>,
 ) -> (f64, Mat, Vector, Albedos<f64>) {
     let seeded: [RawDual; N_RAW] = core::array::from_fn(|k| Dual::variable(raw[k], k));
-    let x = physical(seeded, config);
+    let x = physical(seeded, &problem.bounds);
     let mut cost = 0.0;
     let mut jtj = Mat::zeros();
     let mut jtr = Vector::zeros();
@@ -188,11 +173,10 @@ pub(super) fn run(
     let mut ch = chart(normal);
     let reweighting = problem.loss == LossMode::Measurement;
     if reweighting {
-        let (_, a) = cost_at(problem, &ch, raw, config, scratch_f);
-        let _ = problem.reweight(scratch_f, &a, physical(raw, config).rho_s);
+        let (_, a) = cost_at(problem, &ch, raw, scratch_f);
+        let _ = problem.reweight(scratch_f, &a, physical(raw, &problem.bounds).rho_s);
     }
-    let (mut cost, mut jtj, mut jtr, mut albedos) =
-        jacobian_at(problem, &ch, raw, config, scratch_d);
+    let (mut cost, mut jtj, mut jtr, mut albedos) = jacobian_at(problem, &ch, raw, scratch_d);
     // Statistical scale of the cost: s² = cost/(m − p) (module doc of `solve`).
     let dof = problem
         .residual_count()
@@ -243,7 +227,7 @@ pub(super) fn run(
                 t[5] = trial[5];
                 t
             };
-            let (trial_cost, _) = cost_at(problem, &ch, trial, config, scratch_f);
+            let (trial_cost, _) = cost_at(problem, &ch, trial, scratch_f);
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
                 let decrease = (cost - trial_cost) / cost;
@@ -255,7 +239,7 @@ pub(super) fn run(
                 raw = trial;
                 raw[4] = 0.0;
                 raw[5] = 0.0;
-                (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, config, scratch_d);
+                (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, scratch_d);
                 mu = (mu / 3.0).max(1e-12);
                 let near_optimum = config.chi2_tolerance > 0.0
                     && newton_decrement(&jtj, &jtr) < config.chi2_tolerance * cost / dof;

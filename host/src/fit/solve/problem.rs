@@ -3,23 +3,32 @@
 //! nonlinear unknowns, albedos projected inside) and the covariance Jacobian (duals over all
 //! parameters, albedos given).
 //!
-//! Residuals, in emission order (optics.md §7.4, §8.4; module doc of `solve` for the weights):
+//! Residuals, in emission order (docs/fit-solver.md; module doc of `solve` for the weights):
 //! - [`LossMode::Paper`]: per real sample, per colour channel: L_d `√(λd·w)·(Î^d − I^d)`,
 //!   L_s `√(λs'·w)·(Î^s − I^s)`; then L_ψ `√(λψ·w_ψ)·(DoP_d(η, θ_o) − DoP_obs)` and L_φ
 //!   `√(λφ·w)·(I^α_D − u_α·DP, I^β − u_β·DP)`.
-//! - [`LossMode::Measurement`]: per real sample, per colour channel, the three observation
-//!   channels whitened by their predicted sensor noise (see [`Problem::reweight`]):
-//!   `(Î90 − I90)/σ90`, `(Î0 − I0)/σ0`, `(Î^α − I^α)/σ_α` with I90 = I^d/2 and
-//!   I0 = I^s + I^d/2 — the Mahalanobis form of the (I^d, I^s, I^α) residuals, since I^d and
-//!   I^s share the noise of I90. No ratio of noisy quantities.
-//! - Both: per virtual sample, per channel `√(λs·N_real·w̄·w_m)·(Î^s_coax − Ĩ^s)` (w̄ = 1 in
-//!   paper mode, the mean inverse variance of the I0 rows in measurement mode).
+//! - [`LossMode::Measurement`]: per real sample, per colour channel, the four analyser pixels
+//!   I0, I45, I90, I135 (recovered exactly from the stored I^d, I^s, I^α, I^t) each whitened by
+//!   its own predicted sensor noise (see [`Problem::reweight`]); the prediction reads each
+//!   pixel at its analyser's effective angle for the ray (`SampleFrames::pixel_rows`). The four
+//!   pixels are independent measurements, so this is the exact Mahalanobis form; no ratio of
+//!   noisy quantities.
+//! - Both: per virtual sample, per channel `√W_m·(Î^s_coax − Ĩ^s)` (paper: W_m = λs·N_real·w_m;
+//!   measurement: the virtual value whitened by the noise an I^s measurement of it would have at
+//!   the vertex's median normaliser, scaled so the virtual samples carry λg/(1 − λg) of the
+//!   real samples' count, the paper's proportion).
+//! - Measurement mode only, the priors (one row each, in standard deviations): η about its
+//!   centre (the solver's weak default or the cluster's pooled value), ln σs and ln σss about
+//!   theirs, and the normal's two tangent components about the mesh normal (the prior cone).
 
 use ellipso_sim::optics::Real;
 
-use super::super::data::{VertexSamples, ViewGeometry, VirtualSample};
+use super::super::data::{
+    OBSERVATION_CHANNELS, VertexGuide, VertexSamples, ViewGeometry, VirtualSample,
+};
 use super::super::model::{
-    SampleFrames, UnitSample, coaxial_unit_specular, tangent_normal, unit_sample,
+    SampleFrames, UnitSample, coaxial_unit_specular, observed_pixels as pixels_of,
+    predicted_pixels as pixel_pred, tangent_basis, tangent_normal, unit_sample,
 };
 use super::{LossMode, SolverConfig};
 
@@ -49,16 +58,83 @@ pub(super) struct Chart {
     pub t2: [f64; 3],
 }
 
+/// The box every unknown of one vertex lives in (docs/fit-solver.md, "Bounds").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Bounds {
+    /// η ∈ [eta_min, eta_max].
+    pub eta_min: f64,
+    pub eta_max: f64,
+    /// σ_s ∈ [sigma_s_min, 1] (the solver's floor or the cluster's σs/2, whichever is larger).
+    pub sigma_s_min: f64,
+    /// ρ_s, ρ_ss and ρ_d ∈ [0, albedo_cap].
+    pub albedo_cap: f64,
+}
+
+impl Bounds {
+    /// The bounds of a vertex under `config` and its `guide`.
+    pub fn new(config: &SolverConfig, guide: &VertexGuide) -> Self {
+        let [eta_min, eta_max] = config.eta_bounds;
+        let floor = if guide.sigma_s_floor.is_finite() {
+            guide.sigma_s_floor
+        } else {
+            0.0
+        };
+        Self {
+            eta_min,
+            eta_max: eta_max.max(eta_min + 1e-6),
+            // Keep σ_s's interval open: at most 0.9 (a cluster σs/2 is at most 0.5).
+            sigma_s_min: config.sigma_min.max(floor).min(0.9),
+            albedo_cap: config.albedo_cap.max(1e-6),
+        }
+    }
+}
+
+/// One Gaussian prior row: (value − centre)/sd.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct Prior {
+    pub centre: f64,
+    pub sd: f64,
+}
+
+impl Prior {
+    fn new(centre: f64, sd: f64) -> Option<Self> {
+        (centre.is_finite() && sd.is_finite() && sd > 0.0).then_some(Self { centre, sd })
+    }
+
+    fn row<T: Real>(&self, value: T) -> T {
+        (value - T::from_f64(self.centre)) / T::from_f64(self.sd)
+    }
+}
+
+/// The priors of one vertex (measurement mode).
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Priors {
+    pub eta: Option<Prior>,
+    pub ln_sigma_s: Option<Prior>,
+    pub ln_sigma_ss: Option<Prior>,
+    /// The prior normal's tangent basis and 1/sd (radians⁻¹).
+    pub normal: Option<([f64; 3], [f64; 3], f64)>,
+}
+
+impl Priors {
+    fn count(&self) -> usize {
+        usize::from(self.eta.is_some())
+            + usize::from(self.ln_sigma_s.is_some())
+            + usize::from(self.ln_sigma_ss.is_some())
+            + 2 * usize::from(self.normal.is_some())
+    }
+}
+
 /// Prepared data of one vertex.
 pub(super) struct Problem<'a> {
     pub frames: Vec<SampleFrames>,
-    /// Per sample, per colour channel: [I^d, I^s, I^α] (model units).
-    pub obs: Vec<[[f64; 3]; 3]>,
-    /// Per sample: the monochrome projection (optics.md §5.4).
+    /// Per sample, per colour channel: [I^d, I^s, I^α, I^t] (model units).
+    pub obs: Vec<[[f64; OBSERVATION_CHANNELS]; 3]>,
+    /// Per sample: the monochrome projection of [I^d, I^s, I^α] (optics §5.4).
     pub mono: Vec<[f64; 3]>,
-    /// Per-sample weight of the intensity and azimuth residuals.
+    /// Per-sample weight of the intensity and azimuth residuals (paper mode).
     pub w_int: Vec<f64>,
-    /// Per-sample weight of the DoP residual.
+    /// Per-sample weight of the DoP residual (paper mode).
     pub w_dop: Vec<f64>,
     /// Per sample: the normaliser N (DN per model unit).
     pub normalisers: Vec<f64>,
@@ -70,31 +146,26 @@ pub(super) struct Problem<'a> {
     pub lambda_d: f64,
     /// λs for real specular residuals ((1 − λg)·λs when virtual samples are present).
     pub lambda_s_real: f64,
-    /// λs·N_real: multiplies each virtual sample's weight.
-    pub lambda_s_virtual: f64,
     pub lambda_phi: f64,
     /// Σ of squared observations (scale for the absolute convergence test).
     pub data_scale: f64,
     /// Which loss [`Problem::evaluate`] emits.
     pub loss: LossMode,
-    /// Measurement mode: per sample, per channel, the observations in analyser form
-    /// [I90, I0, I^α] (model units).
-    pub analyser_obs: Vec<[[f64; 3]; 3]>,
-    /// Measurement mode: per sample, per channel, 1/σ of [I90, I0, I^α] (model units⁻¹).
-    pub inv_sigma: Vec<[[f64; 3]; 3]>,
+    /// Measurement mode: per sample, per channel, the four analyser pixels [I0, I45, I90, I135]
+    /// (model units).
+    pub pixel_obs: Vec<[[f64; 4]; 3]>,
+    /// Measurement mode: per sample, per channel, 1/σ of the four pixels (model units⁻¹).
+    pub inv_sigma: Vec<[[f64; 4]; 3]>,
+    /// Per virtual sample, the weight W_m of its squared residual (module doc).
+    pub virtual_weight: Vec<f64>,
+    /// The box of the unknowns.
+    pub bounds: Bounds,
+    /// Measurement-mode priors.
+    pub priors: Priors,
     /// Sensor gain, DN per electron (measurement-mode variances).
     dn_per_electron: f64,
     /// Signal-independent variance per analyser pixel, DN² (read noise² + 1/12 quantisation).
     floor_variance_dn2: f64,
-    /// λs·N_real (the virtual-sample scale before the mean data weight).
-    virtual_base: f64,
-}
-
-/// The analyser form [I90, I0, I^α] of observation channels [I^d, I^s, I^α] (optics.md §5.3:
-/// I^d = 2·I90, I^s = I0 − I90). Linear, so it applies to unit lobes and observations alike.
-pub(super) fn analyser_form<T: Real>(x: [T; 3]) -> [T; 3] {
-    let half = T::from_f64(0.5) * x[0];
-    [half, x[1] + half, x[2]]
 }
 
 /// Reusable per-vertex buffers (no allocation inside the LM loop).
@@ -112,6 +183,14 @@ impl<T> Scratch<T> {
     }
 }
 
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
 impl<'a> Problem<'a> {
     /// Prepares `vertex`'s samples; samples whose view index is out of range or whose geometry
     /// is degenerate are skipped.
@@ -119,9 +198,10 @@ impl<'a> Problem<'a> {
         views: &[ViewGeometry],
         vertex: &VertexSamples,
         colour: bool,
-        virtuals: &'a [VirtualSample],
+        guide: &'a VertexGuide,
         config: &SolverConfig,
     ) -> Self {
+        let virtuals = guide.virtual_samples.as_slice();
         let channels = if colour { 3 } else { 1 };
         let mut frames = Vec::with_capacity(vertex.samples.len());
         let mut obs = Vec::with_capacity(vertex.samples.len());
@@ -143,7 +223,7 @@ impl<'a> Problem<'a> {
             obs.push(s.channels.map(|c| c.map(f64::from)));
             normalisers.push(f64::from(s.normaliser));
         }
-        // Colour weights: the vertex's mean diffuse colour, normalised (optics.md §5.4).
+        // Colour weights: the vertex's mean diffuse colour, normalised (optics §5.4).
         let mut colour_weights = [1.0, 0.0, 0.0];
         if colour {
             let sums: [f64; 3] =
@@ -176,14 +256,61 @@ impl<'a> Problem<'a> {
                 w.iter_mut().for_each(|v| *v /= mean);
             }
         }
-        let analyser_obs: Vec<[[f64; 3]; 3]> = obs.iter().map(|o| o.map(analyser_form)).collect();
+        let pixel_obs: Vec<[[f64; 4]; 3]> = obs.iter().map(|o| o.map(pixels_of)).collect();
         let has_virtual = !virtuals.is_empty();
         let data_scale = obs
             .iter()
             .flat_map(|o| o.iter().take(channels))
-            .flatten()
+            .flat_map(|c| c[..3].iter())
             .map(|v| v * v)
             .sum::<f64>();
+        let measurement = config.loss == LossMode::Measurement;
+        let dn_per_electron = config.sensor.dn_per_electron.max(1e-12);
+        let floor_variance_dn2 = config.sensor.read_noise_dn.powi(2) + 1.0 / 12.0;
+        // Virtual-sample weights (module doc).
+        let lambda_g = config.lambda_g.clamp(0.0, 0.99);
+        let virtual_weight: Vec<f64> = if measurement {
+            let n_bar = median(normalisers.clone()).max(1e-12);
+            let s0_bar = median(mono.iter().map(|m| (m[0] + m[1]).max(0.0)).collect());
+            let rows = (n * channels).max(1) as f64;
+            virtuals
+                .iter()
+                .map(|v| {
+                    let value = v.specular.iter().take(channels).sum::<f64>() / channels as f64;
+                    let var = (dn_per_electron * n_bar * (s0_bar + value.max(0.0))
+                        + 2.0 * floor_variance_dn2)
+                        / (n_bar * n_bar);
+                    rows / channels as f64 * v.weight.max(0.0) / (1.0 - lambda_g) / var
+                })
+                .collect()
+        } else {
+            virtuals
+                .iter()
+                .map(|v| config.lambda_s * n as f64 * v.weight.max(0.0))
+                .collect()
+        };
+        let bounds = Bounds::new(config, guide);
+        let priors = if measurement {
+            let eta = match guide.eta_prior {
+                Some([c, sd]) => Prior::new(c, sd),
+                None => Prior::new(config.eta_prior[0], config.eta_prior[1]),
+            };
+            let ln_prior = |p: [f64; 2]| Prior::new(p[0].max(1e-6).ln(), p[1]);
+            let normal = unit3(vertex.normal_world)
+                .filter(|_| config.normal_prior_deg > 0.0)
+                .map(|n0| {
+                    let (t1, t2) = tangent_basis(n0);
+                    (t1, t2, 1.0 / config.normal_prior_deg.to_radians())
+                });
+            Priors {
+                eta,
+                ln_sigma_s: ln_prior(config.sigma_s_prior),
+                ln_sigma_ss: ln_prior(config.sigma_ss_prior),
+                normal,
+            }
+        } else {
+            Priors::default()
+        };
         Self {
             frames,
             obs,
@@ -197,19 +324,20 @@ impl<'a> Problem<'a> {
             lambda_psi: config.lambda_psi,
             lambda_d: config.lambda_d,
             lambda_s_real: if has_virtual {
-                config.lambda_s * (1.0 - config.lambda_g)
+                config.lambda_s * (1.0 - lambda_g)
             } else {
                 config.lambda_s
             },
-            lambda_s_virtual: config.lambda_s * n as f64,
             lambda_phi: config.lambda_phi,
             data_scale,
             loss: config.loss,
-            inv_sigma: vec![[[0.0; 3]; 3]; n],
-            analyser_obs,
-            dn_per_electron: config.sensor.dn_per_electron.max(1e-12),
-            floor_variance_dn2: config.sensor.read_noise_dn.powi(2) + 1.0 / 12.0,
-            virtual_base: config.lambda_s * n as f64,
+            inv_sigma: vec![[[0.0; 4]; 3]; n],
+            pixel_obs,
+            virtual_weight,
+            bounds,
+            priors,
+            dn_per_electron,
+            floor_variance_dn2,
         }
         .with_initial_weights()
     }
@@ -219,45 +347,38 @@ impl<'a> Problem<'a> {
     /// every LM run (observation-derived weights correlate with the noise and bias the fit).
     fn with_initial_weights(mut self) -> Self {
         if self.loss == LossMode::Measurement {
-            let predicted = self.analyser_obs.clone();
+            let predicted = self.pixel_obs.clone();
             let _ = self.set_weights(|k, c| predicted[k][c]);
         }
         self
     }
 
-    /// The predicted noise of one sample's analyser rows from intensities `i` = [I90, I0, I^α]
-    /// (model units; only I90, I0 and s0 = I90 + I0 matter): for an analyser pixel of expected
-    /// model intensity I, Var = (g·N·I + σ_floor²)/N² in model units², with g DN per electron
-    /// (shot noise: g·DN) and σ_floor² = read noise² + 1/12 (quantisation), DN². I90 and I0 are
-    /// single pixels; I^α = I135 − I45 sums two pixels whose intensities add to s0, so
-    /// Var(I^α) = (g·N·s0 + 2σ_floor²)/N². Negative predictions are floored at 0.
-    /// The prediction is capped at 4× the observation + 3σ_floor, so a model far off the data
-    /// cannot buy itself small weights (a cap that only acts on gross misfits).
-    fn inverse_sigma(&self, k: usize, c: usize, i: [f64; 3]) -> [f64; 3] {
+    /// The predicted noise of one sample's four analyser pixels from their predicted
+    /// intensities `i` (model units): for a pixel of expected model intensity I,
+    /// Var = (g·N·I + σ_floor²)/N² in model units², with g DN per electron (shot noise: g·DN)
+    /// and σ_floor² = read noise² + 1/12 (quantisation), DN². Negative predictions are floored
+    /// at 0. The prediction is capped at 4× the observation + 3σ_floor, so a model far off the
+    /// data cannot buy itself small weights (a cap that only acts on gross misfits).
+    fn inverse_sigma(&self, k: usize, c: usize, i: [f64; 4]) -> [f64; 4] {
         let n = self.normalisers[k];
         let g = self.dn_per_electron;
         let f = self.floor_variance_dn2;
-        let o = &self.analyser_obs[k][c];
-        let cap = |pred: f64, obs: f64| pred.min(4.0 * obs.max(0.0) + 3.0 * f.sqrt() / n).max(0.0);
-        let (i90, i0) = (cap(i[0], o[0]), cap(i[1], o[1]));
-        let var = [
-            (g * n * i90 + f) / (n * n),
-            (g * n * i0 + f) / (n * n),
-            (g * n * (i90 + i0) + 2.0 * f) / (n * n),
-        ];
+        let o = &self.pixel_obs[k][c];
         // f > 0 and n > 0 (non-positive N are skipped in `new`): var > 0.
-        var.map(|v| 1.0 / v.sqrt())
+        core::array::from_fn(|j| {
+            let pred = i[j].min(4.0 * o[j].max(0.0) + 3.0 * f.sqrt() / n).max(0.0);
+            let var = (g * n * pred + f) / (n * n);
+            1.0 / var.sqrt()
+        })
     }
 
     /// Sets the weights from `predicted(sample, channel)`; returns the largest relative change
     /// of any 1/σ.
-    fn set_weights(&mut self, predicted: impl Fn(usize, usize) -> [f64; 3]) -> f64 {
-        let mut sum_w0 = 0.0;
+    fn set_weights(&mut self, predicted: impl Fn(usize, usize) -> [f64; 4]) -> f64 {
         let mut change: f64 = 0.0;
         for k in 0..self.len() {
             for c in 0..self.channels {
                 let w = self.inverse_sigma(k, c, predicted(k, c));
-                sum_w0 += w[1] * w[1];
                 for (new, old) in w.iter().zip(&self.inv_sigma[k][c]) {
                     change = change.max(if *old > 0.0 {
                         (new / old - 1.0).abs()
@@ -268,8 +389,6 @@ impl<'a> Problem<'a> {
                 self.inv_sigma[k][c] = w;
             }
         }
-        let rows = (self.len() * self.channels).max(1) as f64;
-        self.lambda_s_virtual = self.virtual_base * sum_w0 / rows;
         change
     }
 
@@ -283,8 +402,12 @@ impl<'a> Problem<'a> {
             return 0.0;
         }
         let units = &scratch.units;
+        let rows: Vec<[[f64; 3]; 4]> = self.frames.iter().map(|f| f.pixel_rows).collect();
         self.set_weights(|k, c| {
-            analyser_form(units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s))
+            pixel_pred(
+                &rows[k],
+                units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s),
+            )
         })
     }
 
@@ -302,14 +425,14 @@ impl<'a> Problem<'a> {
     pub fn residual_count(&self) -> usize {
         let per_sample = match self.loss {
             LossMode::Paper => 2 * self.channels + 3,
-            LossMode::Measurement => 3 * self.channels,
+            LossMode::Measurement => 4 * self.channels,
         };
-        self.len() * per_sample + self.virtuals.len() * self.channels
+        self.len() * per_sample + self.virtuals.len() * self.channels + self.priors.count()
     }
 
     /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
-    /// used: `given`, or the per-channel non-negative least-squares projection (optics.md §8.3)
-    /// of the L_d + L_s (+ virtual) residuals when `given` is `None`.
+    /// used: `given`, or the per-channel box-constrained least-squares projection (optics
+    /// §8.3) of the data (+ virtual) residuals when `given` is `None`.
     pub fn evaluate<T: Real>(
         &self,
         chart: &Chart,
@@ -351,11 +474,14 @@ impl<'a> Problem<'a> {
             match self.loss {
                 LossMode::Paper => self.paper_residuals(i, u, &albedos, x.rho_s, sink),
                 LossMode::Measurement => {
+                    let rows = &self.frames[i].pixel_rows;
                     for c in 0..self.channels {
-                        let pred =
-                            analyser_form(u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s));
-                        let (o, w) = (&self.analyser_obs[i][c], &self.inv_sigma[i][c]);
-                        for j in 0..3 {
+                        let pred = pixel_pred(
+                            rows,
+                            u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s),
+                        );
+                        let (o, w) = (&self.pixel_obs[i][c], &self.inv_sigma[i][c]);
+                        for j in 0..4 {
                             sink(k(w[j]) * (pred[j] - k(o[j])));
                         }
                     }
@@ -364,16 +490,46 @@ impl<'a> Problem<'a> {
         }
         for (m, v) in self.virtuals.iter().enumerate() {
             let (b, s) = scratch.virt[m];
-            let w = k((self.lambda_s_virtual * v.weight.max(0.0)).sqrt());
+            let w = k(self.virtual_weight[m].sqrt());
             for c in 0..self.channels {
                 sink(w * (albedos.rho_ss[c] * b + x.rho_s * s - k(v.specular[c])));
             }
         }
+        self.prior_rows(x, normal, sink);
         albedos
     }
 
+    /// The prior rows (module doc), in standard deviations.
+    fn prior_rows<T: Real>(
+        &self,
+        x: &Nonlinear<T>,
+        normal: ellipso_sim::optics::Vec3<T>,
+        sink: &mut impl FnMut(T),
+    ) {
+        let p = &self.priors;
+        if let Some(prior) = &p.eta {
+            sink(prior.row(x.eta));
+        }
+        if let Some(prior) = &p.ln_sigma_s {
+            sink(prior.row(x.sigma_s.ln()));
+        }
+        if let Some(prior) = &p.ln_sigma_ss {
+            sink(prior.row(x.sigma_ss.ln()));
+        }
+        if let Some((t1, t2, inv_sd)) = &p.normal {
+            // |n0 + p t1 + q t2| ≥ 1 (the chart's tangents are orthogonal to its unit n0).
+            let len = normal.norm_squared().sqrt();
+            let k = T::from_f64;
+            let along = |t: &[f64; 3]| {
+                (normal.x * k(t[0]) + normal.y * k(t[1]) + normal.z * k(t[2])) / len * k(*inv_sd)
+            };
+            sink(along(t1));
+            sink(along(t2));
+        }
+    }
+
     /// The diffuse-only observation of sample `i` (the data minus the model's reflection,
-    /// optics.md §7.5 generalised to all three channels, monochrome projection §5.4):
+    /// optics §7.5 generalised to all three channels, monochrome projection §5.4):
     /// (I^d_D, I^β, I^α_D, DP = √(I^α_D² + I^β²)).
     fn diffuse_only<T: Real>(
         &self,
@@ -461,7 +617,8 @@ impl<'a> Problem<'a> {
         })
     }
 
-    /// The per-channel 2×2 NNLS for (ρ_d, ρ_ss) given the nonlinear unknowns (in `scratch`).
+    /// The per-channel 2×2 box-constrained least squares for (ρ_d, ρ_ss) ∈ [0, cap]² given the
+    /// nonlinear unknowns (in `scratch`).
     fn project<T: Real>(&self, rho_s: T, scratch: &Scratch<T>) -> Albedos<T> {
         let z = T::zero();
         let k = T::from_f64;
@@ -490,13 +647,14 @@ impl<'a> Problem<'a> {
                     }
                 }
                 LossMode::Measurement => {
-                    let a = analyser_form(u.diffuse);
-                    let b = analyser_form(u.single_scattering);
-                    let c = analyser_form(u.specular);
+                    let rows = &self.frames[i].pixel_rows;
+                    let a = pixel_pred(rows, u.diffuse);
+                    let b = pixel_pred(rows, u.single_scattering);
+                    let c = pixel_pred(rows, u.specular);
                     for ch in 0..self.channels {
-                        let o = &self.analyser_obs[i][ch];
+                        let o = &self.pixel_obs[i][ch];
                         let w = &self.inv_sigma[i][ch];
-                        for j in 0..3 {
+                        for j in 0..4 {
                             let wj = k(w[j] * w[j]);
                             let t = k(o[j]) - rho_s * c[j];
                             haa[ch] += wj * a[j].sq();
@@ -511,7 +669,7 @@ impl<'a> Problem<'a> {
         }
         for (m, v) in self.virtuals.iter().enumerate() {
             let (b, s) = scratch.virt[m];
-            let w = k(self.lambda_s_virtual * v.weight.max(0.0));
+            let w = k(self.virtual_weight[m]);
             for ch in 0..self.channels {
                 hbb[ch] += w * b.sq();
                 gb[ch] += w * b * (k(v.specular[ch]) - rho_s * s);
@@ -521,9 +679,10 @@ impl<'a> Problem<'a> {
             rho_d: [z; 3],
             rho_ss: [z; 3],
         };
+        let cap = self.bounds.albedo_cap;
         for ch in 0..3 {
             let src = ch.min(self.channels - 1);
-            let (x, y) = nnls2(haa[src], hab[src], hbb[src], ga[src], gb[src]);
+            let (x, y) = box2(haa[src], hab[src], hbb[src], ga[src], gb[src], cap);
             out.rho_d[ch] = x;
             out.rho_ss[ch] = y;
         }
@@ -531,33 +690,64 @@ impl<'a> Problem<'a> {
     }
 }
 
-/// Exact non-negative least squares of ½[x y]H[x y]ᵀ − [x y]·g for a 2×2 symmetric H ⪰ 0:
-/// the unconstrained solution if feasible, else the better of the two faces (each a clipped
-/// 1-D solution) — the complete active-set enumeration for two variables. Clipped values are
-/// constants (zero derivative). A zero diagonal (a lobe that predicts nothing) gives 0.
-pub(super) fn nnls2<T: Real>(haa: T, hab: T, hbb: T, ga: T, gb: T) -> (T, T) {
+/// A unit vector, or `None` for a zero or non-finite one.
+fn unit3(v: [f64; 3]) -> Option<[f64; 3]> {
+    let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    (l.is_finite() && l > 1e-12).then(|| v.map(|x| x / l))
+}
+
+/// Exact box-constrained least squares of ½[x y]H[x y]ᵀ − [x y]·g over [0, cap]² for a 2×2
+/// symmetric H ⪰ 0: every candidate of the active-set enumeration (the free optimum; each
+/// variable free on the four edges with the other at 0 or at the cap, clipped to the box; the
+/// four corners) is scored by the exact objective, and the best feasible one wins. Values at a
+/// bound are constants (zero derivative). A zero diagonal (a lobe that predicts nothing) keeps
+/// that variable at 0.
+pub(super) fn box2<T: Real>(haa: T, hab: T, hbb: T, ga: T, gb: T, cap: f64) -> (T, T) {
     let z = T::zero();
+    let c = T::from_f64(cap);
+    let objective = |x: f64, y: f64| {
+        0.5 * (haa.re() * x * x + 2.0 * hab.re() * x * y + hbb.re() * y * y)
+            - ga.re() * x
+            - gb.re() * y
+    };
+    let mut best: (f64, T, T) = (0.0, z, z);
+    let mut consider = |x: T, y: T| {
+        let o = objective(x.re(), y.re());
+        if o < best.0 {
+            best = (o, x, y);
+        }
+    };
     let det = haa * hbb - hab * hab;
     // Relative test: H is numerically singular below 1e-12 of its diagonal product.
     if det.re() > 1e-12 * haa.re() * hbb.re() && det.re() > 0.0 {
         let x = (hbb * ga - hab * gb) / det;
         let y = (haa * gb - hab * ga) / det;
-        if x.re() >= 0.0 && y.re() >= 0.0 {
-            return (x, y);
+        if (0.0..=cap).contains(&x.re()) && (0.0..=cap).contains(&y.re()) {
+            consider(x, y);
         }
     }
-    let face_x = if haa.re() > 0.0 && ga.re() > 0.0 {
-        ga / haa
-    } else {
-        z
+    // One variable free on an edge: x with y ∈ {0, cap}, y with x ∈ {0, cap}.
+    let clip = |v: T| {
+        if v.re() <= 0.0 {
+            z
+        } else if v.re() >= cap {
+            c
+        } else {
+            v
+        }
     };
-    let face_y = if hbb.re() > 0.0 && gb.re() > 0.0 {
-        gb / hbb
-    } else {
-        z
-    };
-    // Objective on each face: −g²/h (for the clipped-at-0 case, 0).
-    let q_x = -face_x.re() * ga.re();
-    let q_y = -face_y.re() * gb.re();
-    if q_x <= q_y { (face_x, z) } else { (z, face_y) }
+    for y in [z, c] {
+        if haa.re() > 0.0 {
+            consider(clip((ga - hab * y) / haa), y);
+        }
+    }
+    for x in [z, c] {
+        if hbb.re() > 0.0 {
+            consider(x, clip((gb - hab * x) / hbb));
+        }
+    }
+    for (x, y) in [(c, z), (z, c), (c, c)] {
+        consider(x, y);
+    }
+    (best.1, best.2)
 }

@@ -168,7 +168,7 @@ fn board_samples_give_the_print_albedo_and_no_polarisation() {
             let g = view.geometry_at(&p).unwrap();
             // Matte paper: I^d = s0 = albedo · cos θ_i, I^s = I^α = 0.
             let want = a * g.to_light[2];
-            let [d, sp, al] = s.channels[0].map(f64::from);
+            let [d, sp, al, _] = s.channels[0].map(f64::from);
             // Raw frames hold whole DN: each channel is a difference of two values rounded to
             // ±0.5 DN, so 1 DN / N of quantisation comes on top of 1 % interpolation error.
             let err = (d - want).abs().max(sp.abs()).max(al.abs());

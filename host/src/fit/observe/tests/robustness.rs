@@ -94,7 +94,8 @@ fn output_is_identical_for_any_thread_count_and_frames_in_flight() {
     assert_eq!(one.report.gates, two.report.gates);
     // The memory account covers the samples and at least one frame.
     assert!(one.report.peak_bytes > one.report.sample_bytes + 256 * 200 * 2);
-    assert_eq!(one.report.sample_bytes, one.report.samples * 44);
+    let per_sample = std::mem::size_of::<crate::fit::data::Sample>() as u64;
+    assert_eq!(one.report.sample_bytes, one.report.samples * per_sample);
 }
 
 #[test]
@@ -216,12 +217,13 @@ fn analyser_extinction_is_undone_exactly() {
         0.5 * ((1.0 + e) * s.s0 + (1.0 - e) * (s.s1 * cs + s.s2 * sn))
     });
     let got = leaky.channels(measured);
-    let want = [exact.diffuse, exact.specular, exact.alpha];
-    for k in 0..3 {
+    // I^t = I45 + I135 is s0 once the extinction is undone.
+    let want = [exact.diffuse, exact.specular, exact.alpha, s.s0];
+    for k in 0..4 {
         assert!((got[k] - want[k]).abs() < 1e-12, "{got:?} {want:?}");
     }
-    // Ideal analysers: optics.md §5.3 exactly.
+    // Ideal analysers: the channels' definitions exactly.
     let i = [0.7, 0.4, 0.2, 0.5];
     let got = ideal.channels(i);
-    assert_eq!(got, [2.0 * i[2], i[0] - i[2], i[3] - i[1]]);
+    assert_eq!(got, [2.0 * i[2], i[0] - i[2], i[3] - i[1], i[1] + i[3]]);
 }
