@@ -34,11 +34,14 @@ pub struct Args {
     /// Outer iterations (solve ↔ shape update); 1 keeps the input geometry.
     #[arg(long, default_value_t = 2)]
     pub outer: usize,
-    /// Add the paper's specular augmentation (clusters, virtual samples, 3 final passes); off
-    /// by default: on the shipped scenes it costs 3–10× the time and measured worse
-    /// (docs/accuracy-vs-time.md).
+    /// Step A alone: no clusters, virtual samples or pooled η (the paper's shared steps are
+    /// on by default; docs/fit.md).
     #[arg(long)]
-    pub augment: bool,
+    pub joint_only: bool,
+    /// Fraction of the posed frames held out of the fit and scored as a re-render (0 fits all;
+    /// default 0.1).
+    #[arg(long, default_value_t = 0.1)]
+    pub holdout: f64,
 }
 
 /// Runs `ellipso fit`.
@@ -46,15 +49,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mesh = TriangleMesh::load(&args.mesh)
         .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
     let session = crate::session::reader::open(&args.session)?;
+    anyhow::ensure!(
+        (0.0..=0.5).contains(&args.holdout),
+        "--holdout {}: must be a fraction in [0, 0.5]",
+        args.holdout
+    );
     let mut config = SessionFitConfig {
         outer_iterations: args.outer.max(1),
+        holdout_fraction: args.holdout,
         ..SessionFitConfig::default()
     };
-    if args.augment {
-        config.fit = crate::fit::pipeline::FitConfig {
-            solver: config.fit.solver.clone(),
-            ..crate::fit::pipeline::FitConfig::with_augmentation(3)
-        };
+    if args.joint_only {
+        config.fit = crate::fit::pipeline::FitConfig::joint_only();
     }
     let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
     println!("\nresults in {}:", args.out.display());
@@ -115,14 +121,42 @@ pub fn fit_and_export(
             .iter()
             .find(|p| p.0 == id)
             .with_context(|| format!("frame {id} has no pose"))?,
-        None => poses[0],
+        None => fit.poses_fitted.first().copied().unwrap_or(poses[0]),
     };
+    // The comparison picture shows the held-out frame with the most samples (one the fit never
+    // saw); without held-out frames, the view of the maps.
+    let comparison = fit
+        .holdout
+        .as_ref()
+        .and_then(|h| h.per_frame.iter().max_by_key(|f| f.samples))
+        .and_then(|f| f.frame_id)
+        .and_then(|id| fit.poses_held_out.iter().find(|p| p.0 == id))
+        .map(|p| (p.0, p.1, true))
+        .unwrap_or((frame_id, world_from_camera, false));
+    if let Some(h) = &fit.holdout {
+        println!(
+            "  held-out views: {} frames, {} samples: s0 relative RMSE {:.3} (PSNR {:.1} dB), I^s {:.3}, I^alpha {:.3}",
+            h.per_frame.len(),
+            h.overall.samples,
+            h.overall.s0.relative_rmse,
+            h.overall.s0.psnr_db,
+            h.overall.specular.relative_rmse,
+            h.overall.alpha.relative_rmse
+        );
+    }
     let rig: crate::process::RigRecord = serde_json::from_value(session.manifest.rig.clone())
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
     println!("  pictures from frame {frame_id}…");
-    let captured_s0 = crate::export::captured_s0(session, frame_id, world_from_camera).ok();
+    let captured_s0 =
+        match crate::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                println!("  no comparison picture: frame {}: {e}", comparison.0);
+                None
+            }
+        };
     let report = crate::export::export_all(
         out,
         &fit.mesh,
@@ -140,6 +174,11 @@ pub fn fit_and_export(
         "session": session.dir.display().to_string(),
         "vertices": fit.outcome.fits.len(),
         "frames_posed": poses.len(),
+        "frames_fitted": fit.poses_fitted.len(),
+        "frames_held_out": fit.poses_held_out.iter().map(|p| p.0).collect::<Vec<_>>(),
+        "held_out": fit.holdout,
+        "pooling": fit.outcome.pooling,
+        "observe": fit.observe,
         "view_frame_id": frame_id,
         "times_s": fit.outcome.times,
         "wall_s": wall_s,

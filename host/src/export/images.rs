@@ -42,13 +42,14 @@ struct Field {
 }
 
 /// Whether a vertex's parameters are drawn (module doc).
-fn reliable(f: &VertexFit) -> bool {
-    !f.flags.iter().any(|flag| {
-        matches!(
-            flag,
-            FitFlag::TooFewViews | FitFlag::NotConverged | FitFlag::AtBound
-        )
-    })
+fn reliable(f: &VertexFit, albedo_cap: f64) -> bool {
+    let p = &f.params;
+    let capped = [p.rho_s]
+        .iter()
+        .chain(&p.rho_ss)
+        .chain(&p.rho_d)
+        .any(|v| *v >= albedo_cap * (1.0 - 1e-3));
+    !capped && !f.flags.contains(&FitFlag::TooFewViews)
 }
 
 impl Field {
@@ -57,7 +58,10 @@ impl Field {
             params: fits.iter().map(super::ply::params_of).collect(),
             normals: fits.iter().map(|f| f.normal_world).collect(),
             eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
-            reliable: fits.iter().map(reliable).collect(),
+            reliable: fits
+                .iter()
+                .map(|f| reliable(f, crate::fit::solve::SolverConfig::default().albedo_cap))
+                .collect(),
             eta_unidentified: fits
                 .iter()
                 .map(|f| f.flags.contains(&FitFlag::EtaUnidentifiable))
@@ -258,7 +262,7 @@ pub fn pictures(
         camera,
         light_world,
         "relit",
-        "relit under a new point light (unpolarised)",
+        "relit under a key light (unpolarised)",
     ));
     out
 }

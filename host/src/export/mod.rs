@@ -37,8 +37,10 @@ use raster::ViewCamera;
 pub struct ExportConfig {
     /// Picture size, px (square).
     pub picture_px: u32,
-    /// The new point light of the relit pictures, relative to the mesh's bounding-sphere
-    /// centre, in units of its radius (world axes; default: up and to the side).
+    /// The new point light of each relit picture, relative to the mesh's bounding-sphere
+    /// centre, in units of its radius, in the picture camera's axes (image right, image up,
+    /// toward the camera; default: a key light above, to the right of and in front of the
+    /// object, so the side the picture shows is lit).
     pub light_offset_radii: [f64; 3],
     /// The novel view: the chosen view turned by this angle about the world z axis through the
     /// bounding-sphere centre, degrees.
@@ -49,7 +51,7 @@ impl Default for ExportConfig {
     fn default() -> Self {
         Self {
             picture_px: 320,
-            light_offset_radii: [4.0, -3.0, 6.0],
+            light_offset_radii: [2.0, 2.5, 4.0],
             novel_view_turn_deg: 70.0,
         }
     }
@@ -61,9 +63,11 @@ pub struct ExportReport {
     /// Every file, in writing order.
     pub files: Vec<PathBuf>,
     /// RMS of (captured − re-rendered s0) over the pictured object pixels divided by the RMS of
-    /// the captured s0, after one global scale, the median captured/re-rendered ratio (when a
+    /// the captured s0, the re-rendering in DN through the frame's own radiometry (when a
     /// captured frame was given).
     pub rerender_rmse: Option<f64>,
+    /// The frame of the comparison picture, and whether the fit never saw it.
+    pub comparison_frame: Option<(u64, bool)>,
 }
 
 /// Errors of the export.
@@ -85,9 +89,18 @@ pub enum ExportError {
     Png(#[from] crate::report::ReportError),
 }
 
-/// A captured s0 image (superpixel resolution) with the camera that took it.
+/// A captured s0 image (superpixel resolution) with the camera that took it and the
+/// radiometry that turns the model into its DN.
 #[derive(Clone, Debug)]
 pub struct CapturedS0 {
+    /// The frame's id.
+    pub frame_id: u64,
+    /// Whether the fit never saw this frame (a held-out view).
+    pub held_out: bool,
+    /// N at any world point of this frame (DN per model unit).
+    pub normaliser: crate::fit::observe::PointNormaliser,
+    /// Colour bands summed into `s0` (3 colour, 1 monochrome).
+    pub bands: usize,
     /// Superpixel columns.
     pub width: usize,
     /// Superpixel rows.
@@ -124,12 +137,16 @@ impl CapturedS0 {
     }
 }
 
-/// The s0 image of a recorded frame (superpixel demosaic) with its pose.
+/// The s0 image of a recorded frame (superpixel demosaic) with its pose and radiometry;
+/// `held_out` says whether the fit saw it.
 pub fn captured_s0(
     session: &crate::session::reader::Session,
     frame_id: u64,
     world_from_camera: Isometry3<f64>,
+    held_out: bool,
 ) -> Result<CapturedS0, String> {
+    let normaliser = crate::fit::observe::point_normaliser(session, frame_id, &world_from_camera)
+        .map_err(|e| e.to_string())?;
     let entry = session
         .frames
         .iter()
@@ -142,7 +159,14 @@ pub fn captured_s0(
             .map_err(|e| e.to_string())?;
     let (s0, sw, sh) = crate::track::detection_plane(&raw, crate::track::DetectImage::S0)
         .map_err(|e| e.to_string())?;
+    // The detection plane is in fractions of full scale (the polar levels, no dark level).
+    let full_scale = f32::from(raw.full_scale_dn());
+    let s0 = s0.into_iter().map(|v| v * full_scale).collect();
     Ok(CapturedS0 {
+        frame_id,
+        held_out,
+        normaliser,
+        bands: raw.layout().channels().len(),
         width: sw,
         height: sh,
         tile_px: raw.layout().tile_px() as usize,
@@ -189,7 +213,13 @@ pub fn export_all(
     let (centre, radius) = bounding_sphere(mesh);
     let px = config.picture_px.max(16);
     let view = ViewCamera::framing(*world_from_camera, px, px, &centre, radius);
-    let light = centre + Vector3::from(config.light_offset_radii) * radius;
+    // The key light in a picture camera's axes (OpenCV: x right, y down, z forward).
+    let light_for = |camera: &ViewCamera| {
+        let [r, u, t] = config.light_offset_radii;
+        let offset_camera = Vector3::new(r, -u, -t) * radius;
+        centre + camera.world_from_camera.rotation * offset_camera
+    };
+    let light = light_for(&view);
     let mut pictures = images::pictures(mesh, fits, &view, flash, &light);
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(
@@ -205,17 +235,20 @@ pub fn export_all(
         px,
         px,
         &novel,
-        &light,
+        &light_for(&novel),
         "novel-view",
         &format!(
-            "novel view ({:.0} deg about z), same new light",
+            "novel view ({:.0} deg about z), key light",
             config.novel_view_turn_deg
         ),
     ));
     if let Some(c) = captured {
-        let (pic, rmse) = comparison(mesh, fits, &view, camera, flash, c);
+        // Framed from the captured frame's own pose, so the three panels line up with it.
+        let framing = ViewCamera::framing(c.world_from_camera, px, px, &centre, radius);
+        let (pic, rmse) = comparison(mesh, fits, &framing, camera, flash, c);
         pictures.push(pic);
         report.rerender_rmse = rmse;
+        report.comparison_frame = Some((c.frame_id, c.held_out));
     }
     for p in pictures {
         let path = out.join(format!("{}.png", p.name));
@@ -225,7 +258,10 @@ pub fn export_all(
     Ok(report)
 }
 
-/// Captured s0 beside the re-rendered s0 (one global scale) and their difference.
+/// Captured s0 beside the re-rendered s0 and their difference. The re-rendering is absolute:
+/// the model's s0 times the frame's normaliser N at each surface point (DN), summed over colour
+/// bands as the captured s0 is (a monochrome pixel sees the mean of the bands), clipped where
+/// the sensor clips. No fitted scale: a wrong albedo or radiometry shows.
 fn comparison(
     mesh: &TriangleMesh,
     fits: &[VertexFit],
@@ -235,8 +271,9 @@ fn comparison(
     captured: &CapturedS0,
 ) -> (images::Picture, Option<f64>) {
     let models = images::pixel_models(mesh, fits, view);
-    let rig_view = ViewGeometry::from_rig(0, &captured.world_from_camera, flash);
+    let rig_view = ViewGeometry::from_rig(captured.frame_id, &captured.world_from_camera, flash);
     let camera_from_world = captured.world_from_camera.inverse();
+    let band_weight = if captured.bands >= 3 { 1.0 } else { 1.0 / 3.0 };
     let pairs: Vec<Option<(f64, f64)>> = models
         .par_iter()
         .map(|m| {
@@ -250,39 +287,31 @@ fn comparison(
             }) {
                 return None;
             }
-            let px = camera.project(&camera_from_world.transform_point(point))?;
+            let p_cam = camera_from_world.transform_point(point);
+            let px = camera.project(&p_cam)?;
+            // The surface must face the captured camera (the framing camera is the same pose).
+            let to_camera = (Point3::from(rig_view.camera_position_world) - point).normalize();
+            if Vector3::from(*n).dot(&to_camera) <= 0.0 {
+                return None;
+            }
             let observed = captured.at_raw(px[0], px[1])?;
             let g = rig_view
                 .geometry_at(point)?
                 .model::<f64>(ellipso_sim::optics::Vec3::from_f64(*n))
                 .ok()?;
-            // Light reaches the pixel from the flash with 1/d² (the renderer's radiometry up to
-            // a constant, which the global scale absorbs).
-            let d2 = (Point3::from(rig_view.flash_position_world) - point)
-                .norm_squared()
-                .max(1e-12);
+            let normaliser = captured.normaliser.at(point);
+            if !(normaliser.is_finite() && normaliser >= 0.0) {
+                return None;
+            }
             let s = apply(&g, p, FlashPolariser::default().stokes(1.0));
-            let predicted: f64 = s.iter().map(|s| s.s0).sum::<f64>() / d2;
+            let predicted: f64 = band_weight * s.iter().map(|s| s.s0).sum::<f64>() * normaliser;
             Some((observed, predicted))
         })
         .collect();
-    // One global scale (the radiometric constant), robustly: the median captured/re-rendered
-    // ratio over pixels with signal, so a few specular spikes cannot set it.
-    let mut ratios: Vec<f64> = pairs
-        .iter()
-        .flatten()
-        .filter(|(c, p)| *p > 0.0 && *c > 0.0)
-        .map(|(c, p)| c / p)
-        .collect();
-    let scale = if ratios.is_empty() {
-        0.0
-    } else {
-        crate::report::percentile(&mut ratios, 0.5)
-    };
     // The sensor clips: a re-rendered value above the brightest captured one (a sharp
     // highlight the model puts where the sampled frames never resolved it) is clipped there too.
     let hi = pairs.iter().flatten().map(|p| p.0).fold(1e-9, f64::max);
-    let rendered = |p: f64| (scale * p).min(hi);
+    let rendered = |p: f64| p.min(hi);
     let (mut e2, mut c2) = (0.0, 0.0);
     for (c, p) in pairs.iter().flatten() {
         e2 += (c - rendered(*p)).powi(2);
@@ -299,7 +328,9 @@ fn comparison(
         .collect();
     let mut canvas = crate::report::Canvas::new(3 * w + 16, h + 54, [24, 24, 24]);
     let title = format!(
-        "captured s0 | re-rendered fit | difference / max   (relative RMSE {})",
+        "frame {}{}: captured s0 | re-rendered | difference / max   (relative RMSE {})",
+        captured.frame_id,
+        if captured.held_out { " (held out)" } else { "" },
         rmse.map_or("n/a".into(), |r| format!("{r:.3}"))
     );
     canvas.text(4, 3, &title, [240, 240, 240], 1);

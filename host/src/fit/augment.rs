@@ -235,6 +235,19 @@ pub fn sample_geometry(
     g.front_facing.then_some((g, view.flash_polariser()))
 }
 
+/// Whether a vertex's step-A η is its data's (not flagged `EtaUnidentifiable`, `GrazingOnly`
+/// or `AtBound`): only then does it place the vertex in η and decide whether the pooled η
+/// applies to it.
+fn eta_trusted(f: &VertexFit) -> bool {
+    use crate::fit::data::FitFlag;
+    !f.flags.iter().any(|flag| {
+        matches!(
+            flag,
+            FitFlag::EtaUnidentifiable | FitFlag::GrazingOnly | FitFlag::AtBound
+        )
+    })
+}
+
 fn fit_is_finite(f: &VertexFit) -> bool {
     let p = &f.params;
     [p.eta, p.sigma_s, p.sigma_ss, p.rho_s]
@@ -331,7 +344,15 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
         let pooled = pool::random_effects(&points);
         a.clusters[j].eta_pooled = pooled;
         for &v in list {
-            a.guides[v].eta_prior = pooled.prior_for(fits[v].params.eta, fits[v].std_error[0]);
+            let f = &fits[v];
+            // A vertex whose η its own flags disown takes the material's η without the
+            // agreement test.
+            let se = if eta_trusted(f) {
+                f.std_error[0]
+            } else {
+                f64::INFINITY
+            };
+            a.guides[v].eta_prior = pooled.prior_for(f.params.eta, se);
         }
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
@@ -376,8 +397,13 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
         .iter()
         .map(|f| {
             f.map(|f| {
-                let eta = shrink.apply(f.params.eta, f.std_error[0]);
-                scaling.feature(f.params.rho_d, eta)
+                // A vertex whose own η its flags disown is placed by its colour alone.
+                let se = if eta_trusted(f) {
+                    f.std_error[0]
+                } else {
+                    f64::INFINITY
+                };
+                scaling.feature(f.params.rho_d, shrink.apply(f.params.eta, se))
             })
         })
         .collect();

@@ -55,7 +55,7 @@ use crate::process::RigRecord;
 use crate::session::events::SessionEvent;
 use crate::session::reader::{FrameEntry, Session};
 
-pub use radiometry::{SessionRadiometry, flash_of, radiometry_of};
+pub use radiometry::{PointNormaliser, SessionRadiometry, flash_of, radiometry_of};
 use sampler::{DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
 
 /// Where in its superpixel tile each analyser sample is taken to sit.
@@ -257,6 +257,37 @@ pub fn poses_from_session(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
         .into_iter()
         .filter_map(|(id, p)| p.map(|p| (id, p)))
         .collect()
+}
+
+/// The normaliser of recorded frame `frame_id` seen from `world_from_camera` at any world point
+/// (its exposure and gain from its `frame` event), for pictures of that frame.
+pub fn point_normaliser(
+    session: &Session,
+    frame_id: u64,
+    world_from_camera: &Isometry3<f64>,
+) -> Result<PointNormaliser, ObserveError> {
+    let radiometry = radiometry_of(session)?;
+    let event = session
+        .frames
+        .iter()
+        .find(|f| f.frame_id == frame_id)
+        .and_then(|f| f.event.as_ref());
+    let Some(SessionEvent::Frame {
+        exposure_us,
+        gain_db,
+        ..
+    }) = event
+    else {
+        return Err(ObserveError::Manifest {
+            path: session.dir.join(crate::session::paths::EVENTS),
+            what: format!("frame {frame_id} has no `frame` event: exposure and gain unknown"),
+        });
+    };
+    Ok(PointNormaliser::new(
+        radiometry.for_frame(f64::from(*exposure_us), f64::from(*gain_db)),
+        &radiometry.flash,
+        world_from_camera,
+    ))
 }
 
 /// A posed frame to read.

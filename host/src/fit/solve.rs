@@ -78,6 +78,9 @@ use lm::{LmState, RawDual, chart, physical, raw_from};
 
 use problem::{Albedos, Problem, Scratch};
 
+/// Raw unknowns of a warm start are clamped to ±this (sigmoid within 3.4e-4 of a bound).
+const WARM_RAW_LIMIT: f64 = 8.0;
+
 /// The guide of a vertex without one (no virtual samples, no floor, the default priors).
 static NO_GUIDE: VertexGuide = VertexGuide {
     virtual_samples: Vec::new(),
@@ -373,9 +376,16 @@ pub fn fit_vertex(
     let mut starts: Vec<[f64; 6]> = match init {
         Some(f) => {
             let p = &f.params;
-            let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, p.rho_s, &bounds)];
+            // A warm start is pulled off a saturated bound (|raw| ≤ WARM_RAW_LIMIT), where the
+            // reparameterisation is flat and LM could not move it whatever the new terms say.
+            let warm = |raw: [f64; 6]| raw.map(|v| v.clamp(-WARM_RAW_LIMIT, WARM_RAW_LIMIT));
+            let mut s = vec![warm(raw_from(
+                p.eta, p.sigma_s, p.sigma_ss, p.rho_s, &bounds,
+            ))];
             if let Some([sigma_s, sigma_ss, rho_s]) = guide.lobe_start {
-                s.push(raw_from(p.eta, sigma_s, sigma_ss, rho_s, &bounds));
+                // The cluster's lobe with the material's η where it is pooled.
+                let eta = guide.eta_prior.map_or(p.eta, |prior| prior[0]);
+                s.push(warm(raw_from(eta, sigma_s, sigma_ss, rho_s, &bounds)));
             }
             s
         }

@@ -57,7 +57,8 @@ pub struct Pooled {
 }
 
 impl Pooled {
-    /// The prior (mean, sd) for a vertex whose own estimate is `eta` ± `se` (module doc).
+    /// The prior (mean, sd) for a vertex whose own estimate is `eta` ± `se` (module doc); an
+    /// infinite `se` (an estimate the vertex's flags disown) always agrees.
     pub fn prior_for(&self, eta: f64, se: f64) -> Option<[f64; 2]> {
         if !self.usable {
             return None;

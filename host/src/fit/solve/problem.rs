@@ -168,6 +168,10 @@ pub(super) struct Problem<'a> {
     floor_variance_dn2: f64,
 }
 
+/// Huber threshold of [`Problem::downweight_outliers`], in robust standard deviations (3: a
+/// Gaussian sample is downweighted with probability 0.3 %).
+pub(super) const HUBER_K: f64 = 3.0;
+
 /// Reusable per-vertex buffers (no allocation inside the LM loop).
 pub(super) struct Scratch<T> {
     pub units: Vec<UnitSample<T>>,
@@ -403,12 +407,57 @@ impl<'a> Problem<'a> {
         }
         let units = &scratch.units;
         let rows: Vec<[[f64; 3]; 4]> = self.frames.iter().map(|f| f.pixel_rows).collect();
-        self.set_weights(|k, c| {
-            pixel_pred(
-                &rows[k],
-                units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s),
-            )
-        })
+        let predicted: Vec<[[f64; 4]; 3]> = (0..self.len())
+            .map(|k| {
+                core::array::from_fn(|c| {
+                    pixel_pred(
+                        &rows[k],
+                        units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s),
+                    )
+                })
+            })
+            .collect();
+        let change = self.set_weights(|k, c| predicted[k][c]);
+        self.downweight_outliers(&predicted);
+        change
+    }
+
+    /// Huber downweighting of whole samples (Huber, *Robust Statistics*, 1981): a sample's
+    /// standardised residual z_k = RMS over its pixel rows of the whitened residual at the
+    /// current prediction is compared with the vertex's robust scale s = 1.4826·median(z)
+    /// (floored at 1, the value at a perfect fit); beyond [`HUBER_K`]·s every 1/σ of the sample
+    /// is scaled by √(k·s/z_k), the Huber weight k·s/z_k on its squared residual. A pixel that
+    /// sees something the model of one surface point cannot explain — the board behind a
+    /// silhouette, a neighbouring material across a boundary a misplaced vertex straddles —
+    /// then costs linearly, not quadratically, and cannot drag the lobe and η to a bound.
+    fn downweight_outliers(&mut self, predicted: &[[[f64; 4]; 3]]) {
+        let n = self.len();
+        if n == 0 {
+            return;
+        }
+        let z: Vec<f64> = (0..n)
+            .map(|k| {
+                let mut sum = 0.0;
+                for c in 0..self.channels {
+                    for j in 0..4 {
+                        let r = self.inv_sigma[k][c][j]
+                            * (predicted[k][c][j] - self.pixel_obs[k][c][j]);
+                        sum += r * r;
+                    }
+                }
+                (sum / (4 * self.channels) as f64).sqrt()
+            })
+            .collect();
+        let scale = (1.4826 * median(z.clone())).max(1.0);
+        let limit = HUBER_K * scale;
+        for (k, zk) in z.iter().enumerate() {
+            if *zk > limit && zk.is_finite() {
+                let factor = (limit / zk).sqrt();
+                for c in 0..self.channels {
+                    self.inv_sigma[k][c].iter_mut().for_each(|w| *w *= factor);
+                }
+            }
+        }
     }
 
     /// Number of real samples.
