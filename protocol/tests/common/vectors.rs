@@ -43,10 +43,7 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
             }),
         ),
         ("configure", Host(HostMessage::Configure(config))),
-        (
-            "configure_bracket",
-            Host(HostMessage::Configure(bracketed)),
-        ),
+        ("configure_bracket", Host(HostMessage::Configure(bracketed))),
         ("arm", Host(HostMessage::Arm)),
         ("fire_one", Host(HostMessage::FireOne)),
         ("start", Host(HostMessage::Start)),
