@@ -60,6 +60,38 @@ impl Bracket {
         })
     }
 
+    /// A bracket of relative energies in (0, 1], in firing order, each rounded to Q15
+    /// (`round(energy × 32768)`, halves up). Refuses more than [`MAX_BRACKET_STEPS`] steps, a
+    /// step outside (0, 1] or not finite, and a step below the Q15 resolution (< 1/65536).
+    pub fn from_relative(energies: &[f64]) -> Result<Self, BracketError> {
+        if energies.len() > MAX_BRACKET_STEPS {
+            return Err(BracketError::TooManySteps {
+                len: energies.len(),
+            });
+        }
+        let mut q = [0u16; MAX_BRACKET_STEPS];
+        for (step, &e) in energies.iter().enumerate() {
+            // NaN fails both comparisons.
+            if !(e > 0.0 && e <= 1.0) {
+                return Err(BracketError::OutOfRange { step, energy: e });
+            }
+            // e in (0, 1]: the sum is in (0.5, 32768.5], so the cast truncates a positive value
+            // (round half up) and cannot overflow.
+            q[step] = (e * f64::from(ENERGY_ONE_Q15) + 0.5) as u16;
+            if q[step] == 0 {
+                return Err(BracketError::BelowResolution { step, energy: e });
+            }
+        }
+        Ok(Self::from_q15(&q[..energies.len()]).unwrap_or(Self::NONE))
+    }
+
+    /// The relative energy of each step (`q / 32768`), in firing order.
+    pub fn energies(&self) -> impl Iterator<Item = f64> + '_ {
+        self.steps_q15()
+            .iter()
+            .map(|&q| f64::from(q) / f64::from(ENERGY_ONE_Q15))
+    }
+
     /// The steps, Q15, in firing order.
     pub fn steps_q15(&self) -> &[u16] {
         &self.steps_q15[..usize::from(self.len)]
@@ -100,6 +132,50 @@ impl Bracket {
         (full_on_us as u64 * q15 as u64 + (ENERGY_ONE_Q15 as u64 / 2)) / ENERGY_ONE_Q15 as u64
     }
 }
+
+/// Why a list of relative energies is not a [`Bracket`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum BracketError {
+    /// More than [`MAX_BRACKET_STEPS`] steps.
+    TooManySteps {
+        /// Steps given.
+        len: usize,
+    },
+    /// A step outside (0, 1], or not finite.
+    OutOfRange {
+        /// Its index, from 0.
+        step: usize,
+        /// Its value.
+        energy: f64,
+    },
+    /// A step that rounds to 0 in Q15 (below 1/65536).
+    BelowResolution {
+        /// Its index, from 0.
+        step: usize,
+        /// Its value.
+        energy: f64,
+    },
+}
+
+impl fmt::Display for BracketError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::TooManySteps { len } => {
+                write!(f, "{len} bracket steps; at most {MAX_BRACKET_STEPS}")
+            }
+            Self::OutOfRange { step, energy } => write!(
+                f,
+                "bracket step {step} is {energy}; relative energies must be in (0, 1]"
+            ),
+            Self::BelowResolution { step, energy } => write!(
+                f,
+                "bracket step {step} is {energy}; the smallest relative energy is 1/65536"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for BracketError {}
 
 impl fmt::Debug for Bracket {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -167,6 +243,45 @@ mod tests {
         assert_eq!(
             Bracket::on_time_us(u32::MAX, u16::MAX),
             (u64::from(u32::MAX) * u64::from(u16::MAX) + 16_384) / 32_768
+        );
+    }
+
+    #[test]
+    fn relative_energies_round_to_q15_and_bad_ones_are_named() {
+        let b = Bracket::from_relative(&[1.0, 0.25, 0.0625]).unwrap();
+        assert_eq!(b.steps_q15(), [ENERGY_ONE_Q15, 0x2000, 0x0800]);
+        let mut e = [0.0; 3];
+        b.energies().zip(&mut e).for_each(|(v, slot)| *slot = v);
+        assert_eq!(e, [1.0, 0.25, 0.0625]);
+        // 1/3 → 10922.67 → 10923
+        assert_eq!(
+            Bracket::from_relative(&[1.0 / 3.0]).unwrap().steps_q15(),
+            [10_923]
+        );
+        assert_eq!(Bracket::from_relative(&[]).unwrap(), Bracket::NONE);
+        assert_eq!(
+            Bracket::from_relative(&[0.5; 9]),
+            Err(BracketError::TooManySteps { len: 9 })
+        );
+        for bad in [0.0, -0.25, 1.0001, f64::INFINITY] {
+            assert_eq!(
+                Bracket::from_relative(&[1.0, bad]),
+                Err(BracketError::OutOfRange {
+                    step: 1,
+                    energy: bad
+                })
+            );
+        }
+        assert!(matches!(
+            Bracket::from_relative(&[f64::NAN]),
+            Err(BracketError::OutOfRange { step: 0, .. })
+        ));
+        assert_eq!(
+            Bracket::from_relative(&[1e-6]),
+            Err(BracketError::BelowResolution {
+                step: 0,
+                energy: 1e-6
+            })
         );
     }
 

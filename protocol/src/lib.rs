@@ -21,7 +21,7 @@ pub mod bracket;
 pub mod framing;
 pub mod messages;
 
-pub use bracket::{Bracket, ENERGY_ONE_Q15, MAX_BRACKET_STEPS};
+pub use bracket::{Bracket, BracketError, ENERGY_ONE_Q15, MAX_BRACKET_STEPS};
 pub use framing::{
     CRC_LEN, CRC32C, Decoder, EncodeError, Feed, FrameError, MAX_FRAME_LEN, MAX_MESSAGE_LEN,
     Message, encode,
