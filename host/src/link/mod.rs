@@ -221,6 +221,13 @@ pub fn describe_reject(reason: &RejectReason) -> String {
             format!("too soon after the last pulse; wait {wait_us} µs")
         }
         RejectReason::ProtocolMismatch { board } => format!("the board speaks protocol v{board}"),
+        RejectReason::BracketStepOutOfRange { step } => {
+            format!("bracket step {step}: relative energy outside (0, 1]")
+        }
+        RejectReason::BracketStepTooShort { step } => format!(
+            "bracket step {step}: its flash on-time rounds to 0 µs (raise the flash duration or \
+             that step's energy; a bracket needs a flash)"
+        ),
     }
 }
 
