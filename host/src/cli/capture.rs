@@ -474,11 +474,22 @@ fn missing_backend(
     )
 }
 
-/// Tracks the poses of a recorded session and appends them to its log.
+/// Tracks the poses of a recorded session and appends them to its log; short-pulse frames of a
+/// bracketed capture that tracking refused borrow a pose from their tracked neighbours
+/// ([`crate::short_pulse_poses`]), logged as `pose_interpolated`.
 pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>> {
     let session = crate::session::reader::open(dir)?;
     let tracked = process::track_session(&session, &TrackConfig::default())?;
-    process::append_poses(dir, &tracked, HostClock::new().now())?;
+    let now = HostClock::new().now();
+    process::append_poses(dir, &tracked, now)?;
+    let borrowed = crate::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
+    crate::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
+    if !borrowed.is_empty() {
+        println!(
+            "poses        {} short-pulse frames posed from their tracked neighbours",
+            borrowed.len()
+        );
+    }
     Ok(tracked)
 }
 

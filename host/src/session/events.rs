@@ -180,6 +180,23 @@ pub enum SessionEvent {
         /// Why.
         reason: String,
     },
+    /// A short-pulse frame of a bracketed capture that tracking refused, posed from its tracked
+    /// neighbours (`crate::short_pulse_poses`); follows the frame's `pose_rejected`.
+    PoseInterpolated {
+        /// Host time.
+        t_host_us: HostTimeUs,
+        /// Frame id.
+        frame_id: u64,
+        /// Rotation, axis-angle (rad), world → camera.
+        rotation_camera_from_world: [f64; 3],
+        /// Translation, m, world origin in the camera frame.
+        translation_camera_from_world_m: [f64; 3],
+        /// The tracked frames it was interpolated between, `[before, after]` (the same id twice
+        /// when taken from one neighbour).
+        from_frame_ids: [u64; 2],
+        /// Weight of `after` (0: the pose of `before`).
+        weight: f64,
+    },
     /// The capture ended.
     End {
         /// Host time.
