@@ -196,7 +196,9 @@ pub enum LinkError {
 pub fn describe_reject(reason: &RejectReason) -> String {
     match reason {
         RejectReason::FlashOutsideExposure => {
-            "the flash would light outside the exposure (flash delay + duration > exposure)".into()
+            "the flash would light outside the exposure (flash delay + on-time > exposure; with a \
+             bracket, its longest step's on-time)"
+                .into()
         }
         RejectReason::FlashTooLong { max_us } => {
             format!("flash on-time above the LED's safe maximum of {max_us} µs")
