@@ -10,8 +10,8 @@ use std::time::{Duration, Instant};
 
 use ellipso_firmware::{Board, BoardConfig, Outputs, Sequencer, TxQueue};
 use ellipso_protocol::{
-    BoardMessage, CaptureConfig, Decoder, HostMessage, MAX_FRAME_LEN, PulseCount, TriggerSource,
-    encode,
+    BoardMessage, Bracket, CaptureConfig, Decoder, HostMessage, MAX_FRAME_LEN, PulseCount,
+    TriggerSource, encode,
 };
 
 const PULSES: u64 = 200_000;
@@ -53,6 +53,7 @@ fn free_run(report_edges: bool) -> CaptureConfig {
         pulses: PulseCount::Continuous,
         trigger: TriggerSource::FreeRun,
         report_edges,
+        bracket: Bracket::NONE,
     }
 }
 

@@ -399,3 +399,5 @@ impl Board {
 mod proptests;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_bracket;

@@ -25,7 +25,9 @@
 //!
 //! ```
 //! use ellipso_firmware::{Board, BoardConfig, FrameWriter, RecordingOutputs};
-//! use ellipso_protocol::{encode, CaptureConfig, HostMessage, PulseCount, TriggerSource, MAX_FRAME_LEN};
+//! use ellipso_protocol::{
+//!     encode, Bracket, CaptureConfig, HostMessage, PulseCount, TriggerSource, MAX_FRAME_LEN,
+//! };
 //!
 //! // Boot: describe the board, drive both outputs low.
 //! let mut board = Board::new(BoardConfig::new("doc-board", 1_000_000)).unwrap();
@@ -37,7 +39,7 @@
 //! let config = CaptureConfig {
 //!     exposure_us: 1_000, flash_delay_us: 100, flash_duration_us: 500,
 //!     frame_period_us: 50_000, pulses: PulseCount::Count(3),
-//!     trigger: TriggerSource::FreeRun, report_edges: false,
+//!     trigger: TriggerSource::FreeRun, report_edges: false, bracket: Bracket::NONE,
 //! };
 //! let mut now_us = 0;
 //! for msg in [HostMessage::Configure(config), HostMessage::Arm, HostMessage::Start] {

@@ -17,7 +17,8 @@
 //! # One pulse
 //!
 //! With `t` the time the trigger edge actually ran, `e` = `exposure_us`, `d` = `flash_delay_us`,
-//! `w` = `flash_duration_us`:
+//! `w` = the on-time of this pulse's bracket step ([`CapturePlan::step_on_time_us`]; without a
+//! bracket `flash_duration_us`):
 //!
 //! | edge | due at |
 //! |---|---|
@@ -28,6 +29,15 @@
 //!
 //! Every later edge is anchored to the *actual* earlier edge, so a late trigger shifts the whole
 //! pulse but keeps the exposure length and the flash's place and energy (its on-time `w`) exact.
+//!
+//! # Bracket
+//!
+//! Pulse `k` of a capture (counting the triggers that rose since `start`, from 0) fires bracket
+//! step `k mod len` ([`CapturePlan::step_of_pulse`]); the step is fixed when its trigger rises and
+//! reported in its [`PulseEvent`](ellipso_protocol::PulseEvent) with the flash's actual on-time
+//! (`t_flash_off_us − t_flash_on_us`, 0 when it did not light). A pulse cancelled before its
+//! trigger rose takes no step, and each capture starts again at step 0. The safety rules below
+//! hold per pulse with that pulse's own `w`.
 //! Edges due at the same instant run in the order **camera on, flash on, flash off, camera off**
 //! (a flash with `d = 0` lights right after the trigger; one ending at `e` goes off before the
 //! trigger falls). The [`PulseEvent`](ellipso_protocol::PulseEvent) is sent when the trigger
@@ -124,6 +134,8 @@ struct Capture {
     pulse: Option<Pulse>,
     /// No trigger of this capture may rise before this (previous trigger + period).
     period_ready_us: u64,
+    /// Triggers of this capture that rose so far (the next pulse's place in the bracket).
+    pulses_risen: u64,
 }
 
 enum Step {
@@ -217,6 +229,7 @@ impl Sequencer {
             next_trigger_us: None,
             pulse: None,
             period_ready_us: 0,
+            pulses_risen: 0,
         };
         if plan.trigger() == TriggerSource::FreeRun {
             let t = now_us
@@ -397,7 +410,10 @@ impl Sequencer {
         let plan = cap.plan;
         let seq = self.next_seq;
         self.next_seq += 1;
-        let (flash, flags) = if plan.has_flash() {
+        let bracket_step = plan.step_of_pulse(cap.pulses_risen);
+        cap.pulses_risen = cap.pulses_risen.saturating_add(1);
+        let flash_planned_us = plan.step_on_time_us(bracket_step);
+        let (flash, flags) = if flash_planned_us > 0 {
             (
                 Flash::Pending {
                     on_due_us: now.saturating_add(u64::from(plan.flash_delay_us())),
@@ -413,6 +429,8 @@ impl Sequencer {
             camera_off_due_us: now.saturating_add(u64::from(plan.exposure_us())),
             flash,
             flags,
+            bracket_step,
+            flash_planned_us,
         };
         cap.next_trigger_us = None;
         cap.period_ready_us = cap
@@ -445,7 +463,7 @@ impl Sequencer {
         let Some(pulse) = cap.pulse.as_mut() else {
             return;
         };
-        let planned_off = now.saturating_add(u64::from(plan.flash_duration_us()));
+        let planned_off = now.saturating_add(u64::from(pulse.flash_planned_us));
         if planned_off > pulse.camera_off_due_us {
             // Safety rule 2: it would end after the exposure; never light outside it.
             pulse.flash = Flash::NotFired { t_us: now };
@@ -601,3 +619,5 @@ mod proptests;
 mod pulse;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_bracket;

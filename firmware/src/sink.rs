@@ -177,6 +177,8 @@ mod tests {
                 t_flash_on_us: t,
                 t_flash_off_us: t,
                 flags: u8::MAX,
+                bracket_step: u8::MAX,
+                flash_on_us: u32::MAX,
             }),
             BoardMessage::Status(Status {
                 state: BoardState::Configured,

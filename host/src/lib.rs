@@ -10,6 +10,8 @@
 //! - [`report`]: PNG line plots and a small raster canvas for reports.
 //! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
 //! - [`process`]: the stages after capture on a recorded session (pose tracking; later the fit).
+//! - [`short_pulse_poses`]: poses for short-pulse frames of a bracketed capture that tracking
+//!   refused, from their tracked neighbours.
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
@@ -29,4 +31,5 @@ pub mod process;
 pub mod report;
 pub mod rig_file;
 pub mod session;
+pub mod short_pulse_poses;
 pub mod track;

@@ -279,6 +279,8 @@ impl RigFile {
                 TriggerKind::GripButton => TriggerSource::GripButton,
             },
             report_edges: false,
+            // `ellipso capture --bracket` sets one for a capture.
+            bracket: ellipso_protocol::Bracket::NONE,
         }
     }
 

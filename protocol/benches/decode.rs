@@ -19,6 +19,8 @@ fn pulse(i: u64) -> BoardMessage {
         t_flash_on_us: t0 + 500,
         t_flash_off_us: t0 + 2_500,
         flags: 0,
+        bracket_step: (i % 3) as u8,
+        flash_on_us: 2_000,
     })
 }
 

@@ -5,6 +5,7 @@
 //! disagree about the layout.
 //!
 //! - [`messages`]: [`HostMessage`] (host → board) and [`BoardMessage`] (board → host).
+//! - [`bracket`]: [`Bracket`], the flash energies a capture fires in turn (Q15, ≤ 8 steps).
 //! - [`framing`]: `COBS(postcard(msg) ++ crc32c_le) ++ 0x00` frames, [`encode`] and the streaming
 //!   [`Decoder`] that never panics and resynchronises at every delimiter.
 //!
@@ -16,9 +17,11 @@
 #![no_std]
 #![warn(missing_docs)]
 
+pub mod bracket;
 pub mod framing;
 pub mod messages;
 
+pub use bracket::{Bracket, BracketError, ENERGY_ONE_Q15, MAX_BRACKET_STEPS};
 pub use framing::{
     CRC_LEN, CRC32C, Decoder, EncodeError, Feed, FrameError, MAX_FRAME_LEN, MAX_MESSAGE_LEN,
     Message, encode,
@@ -26,4 +29,7 @@ pub use framing::{
 pub use messages::*;
 
 /// Version of this protocol; both sides exchange it in `Hello` / `HelloReply`.
-pub const PROTOCOL_VERSION: u16 = 1;
+///
+/// History: 1 — the first release; 2 — flash-energy brackets (`CaptureConfig::bracket`,
+/// `PulseEvent::{bracket_step, flash_on_us}`, two bracket `RejectReason`s).
+pub const PROTOCOL_VERSION: u16 = 2;

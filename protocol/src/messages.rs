@@ -14,6 +14,8 @@
 use heapless::String;
 use serde::{Deserialize, Serialize};
 
+use crate::bracket::Bracket;
+
 /// What starts each pulse once a capture is running.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TriggerSource {
@@ -40,6 +42,10 @@ pub enum PulseCount {
 /// turns the flash on at `t0 + flash_delay_us` and off at `t0 + flash_delay_us + flash_duration_us`,
 /// and lowers the trigger at `t0 + exposure_us`. The flash must lie inside the exposure:
 /// `flash_delay_us + flash_duration_us ≤ exposure_us`. `flash_duration_us = 0` means no flash.
+///
+/// With a [`Bracket`], `flash_duration_us` is the on-time of relative energy 1 and pulse `k`
+/// is lit for step `k mod len`'s share of it ([`Bracket::on_time_us`]); the rules above then
+/// apply to the longest on-time the bracket fires (see `ellipso_firmware::CapturePlan`).
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CaptureConfig {
     /// Exposure (trigger high) length, µs.
@@ -56,6 +62,8 @@ pub struct CaptureConfig {
     pub trigger: TriggerSource,
     /// Also send one [`BoardMessage::Edge`] per output transition (debug: the emulator has no GPIO).
     pub report_edges: bool,
+    /// Flash-energy bracket fired in turn ([`Bracket::NONE`]: every pulse at energy 1).
+    pub bracket: Bracket,
 }
 
 /// Messages from the host to the board.
@@ -166,6 +174,18 @@ pub enum RejectReason {
         /// The board's protocol version.
         board: u16,
     },
+    /// A bracket step's relative energy is 0 or above 1.0 (Q15 above
+    /// [`ENERGY_ONE_Q15`](crate::ENERGY_ONE_Q15)).
+    BracketStepOutOfRange {
+        /// Index of the first offending step, from 0.
+        step: u8,
+    },
+    /// A bracket step's on-time rounds to 0 device-clock ticks (µs): too little energy to
+    /// realise with this `flash_duration_us`, or a bracket without a flash.
+    BracketStepTooShort {
+        /// Index of the first offending step, from 0.
+        step: u8,
+    },
 }
 
 /// Firmware version, semantic.
@@ -232,6 +252,9 @@ pub const PULSE_NO_FLASH: PulseFlags = 1 << 3;
 pub const PULSE_STOPPED: PulseFlags = 1 << 4;
 
 /// One pulse: sent once its flash is off (or its exposure ended without flash).
+///
+/// `flash_on_us` is the flash's actual on-time, `t_flash_off_us − t_flash_on_us` (0 when it did
+/// not light); with the capture's `flash_duration_us` it gives the pulse's relative energy.
 #[derive(Serialize, Deserialize, Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PulseEvent {
     /// Pulse sequence number since boot, from 0, never reused; the host pairs frames by it.
@@ -244,6 +267,11 @@ pub struct PulseEvent {
     pub t_flash_off_us: u64,
     /// `PULSE_*` flags.
     pub flags: PulseFlags,
+    /// The bracket step this pulse fired (`seq`'s place in its capture mod the bracket length;
+    /// 0 without a bracket).
+    pub bracket_step: u8,
+    /// Actual flash on-time, device µs (saturating; 0 when the flash did not light).
+    pub flash_on_us: u32,
 }
 
 /// The board's state machine.

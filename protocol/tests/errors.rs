@@ -111,3 +111,28 @@ fn errors_map_to_wire_kinds() {
     assert_eq!(FrameError::Malformed.kind(), BadFrameKind::Malformed);
     assert!(FrameError::BadCrc.to_string().contains("CRC"));
 }
+
+/// A bracket of more than MAX_BRACKET_STEPS steps is a malformed body, never a truncated bracket.
+#[test]
+fn overlong_bracket_is_malformed() {
+    let config = CaptureConfig {
+        exposure_us: 8_000,
+        flash_delay_us: 500,
+        flash_duration_us: 2_000,
+        frame_period_us: 250_000,
+        pulses: PulseCount::Count(150),
+        trigger: TriggerSource::FreeRun,
+        report_edges: false,
+        bracket: Bracket::from_q15(&[ENERGY_ONE_Q15; MAX_BRACKET_STEPS]).unwrap(),
+    };
+    let mut buf = [0u8; MAX_MESSAGE_LEN];
+    let mut body = postcard::to_slice(&HostMessage::Configure(config), &mut buf)
+        .unwrap()
+        .to_vec();
+    // The bracket is the body's tail: count 8, then eight 3-byte varints of 0x8000.
+    let tail = body.len() - 1 - 3 * MAX_BRACKET_STEPS;
+    assert_eq!(body[tail], MAX_BRACKET_STEPS as u8);
+    body[tail] = MAX_BRACKET_STEPS as u8 + 1;
+    body.extend([0x80, 0x80, 0x02]);
+    assert_eq!(error_of(&raw_frame(&body)), FrameError::Malformed);
+}

@@ -42,6 +42,29 @@ proptest! {
         prop_assert_eq!(decode_all::<BoardMessage>(&f), vec![Ok(msg)]);
     }
 
+    /// Any 0..=8 steps survive a Configure round trip in order; the bracket's bytes are its
+    /// count and its varints, nothing else (the encoding is the documented one).
+    #[test]
+    fn brackets_round_trip(steps in proptest::collection::vec(any::<u16>(), 0..=MAX_BRACKET_STEPS)) {
+        let bracket = Bracket::from_q15(&steps).unwrap();
+        prop_assert_eq!(bracket.steps_q15(), &steps[..]);
+        let msg = HostMessage::Configure(CaptureConfig {
+            exposure_us: 6_000,
+            flash_delay_us: 100,
+            flash_duration_us: 5_000,
+            frame_period_us: 100_000,
+            pulses: PulseCount::Continuous,
+            trigger: TriggerSource::FreeRun,
+            report_edges: false,
+            bracket,
+        });
+        prop_assert_eq!(decode_all::<HostMessage>(&frame(&msg)), vec![Ok(msg)]);
+        let mut buf = [0u8; MAX_MESSAGE_LEN];
+        let alone = postcard::to_slice(&bracket, &mut buf).unwrap();
+        let varint_len = |v: u16| if v < 0x80 { 1 } else if v < 0x4000 { 2 } else { 3 };
+        prop_assert_eq!(alone.len(), 1 + steps.iter().map(|&v| varint_len(v)).sum::<usize>());
+    }
+
     /// Decoding then re-encoding reproduces the bytes (the encoding is canonical).
     #[test]
     fn encoding_is_canonical(seed in any::<u64>()) {
@@ -117,6 +140,8 @@ fn worst_case_sizes_fit() {
             t_flash_on_us: u64::MAX,
             t_flash_off_us: u64::MAX,
             flags: u8::MAX,
+            bracket_step: u8::MAX,
+            flash_on_us: u32::MAX,
         }),
         BoardMessage::Status(Status {
             state: BoardState::Running,
@@ -145,8 +170,10 @@ fn worst_case_sizes_fit() {
         pulses: PulseCount::Count(u32::MAX),
         trigger: TriggerSource::FreeRun,
         report_edges: true,
+        bracket: Bracket::from_q15(&[u16::MAX; MAX_BRACKET_STEPS]).unwrap(),
     });
     assert!(frame(&cfg).len() <= MAX_FRAME_LEN);
+    assert_eq!(decode_all::<HostMessage>(&frame(&cfg)), vec![Ok(cfg)]);
 }
 
 #[test]

@@ -355,3 +355,89 @@ fn capture_from_a_rig_file_without_its_camera_fails_with_one_clear_line() {
         "no session is created when the rig cannot start"
     );
 }
+
+/// Mean raw DN of a recorded frame.
+fn mean_dn(s: &reader::Session, f: &reader::FrameEntry) -> f64 {
+    let (_, _, px) = s.load_frame(f).expect("frame loads");
+    px.iter().map(|&v| f64::from(v)).sum::<f64>() / px.len() as f64
+}
+
+/// `ellipso sim serve` in one process, `ellipso capture --bracket` in another: the bracket goes to
+/// the board over the pty, the flash's light comes back over the wire socket, and the capture
+/// process renders each frame at the energy its exposure collected. Every frame's recorded step
+/// and energy follow its pulse, and its brightness follows its energy.
+#[test]
+fn bracketed_capture_across_processes_renders_each_step_at_its_energy() {
+    let tmp = tempfile::tempdir().unwrap();
+    let wire = tmp.path().join("w.sock");
+    let (_server, pty) = serve(&scene("sphere.toml"), &wire, 0.0);
+    let out = tmp.path().join("s");
+    let status = Command::new(ellipso_bin())
+        .args(capture_args(&out, 9))
+        .args(["--bracket", "1,0.25,0.0625", "--trigger", &pty, "--wire"])
+        .arg(&wire)
+        .status()
+        .expect("spawn ellipso capture");
+    assert!(status.success(), "capture failed: {status}");
+    let s = reader::open(&out).expect("session opens");
+    assert_eq!(s.frames.len(), 9);
+    let mut means = [Vec::new(), Vec::new(), Vec::new()];
+    for f in &s.frames {
+        let seq = f.pulse_seq.expect("paired");
+        let step = usize::from(f.bracket_step);
+        assert_eq!(step as u64, seq % 3, "frame {}", f.frame_id);
+        // 5 ms full pulse: 5000, 1250 and 313 µs.
+        assert_eq!(f.flash_on_us, Some([5_000, 1_250, 313][step]));
+        assert_eq!(f.flash_energy_rel, [1.0, 0.25, 0.0626][step]);
+        means[step].push(mean_dn(&s, f));
+    }
+    // Neighbouring orbit poses see nearly the same scene: the brightness ratio is the energy's.
+    for (step, (lo, hi)) in [(1, (0.2, 0.3)), (2, (0.045, 0.085))] {
+        for (full, short) in means[0].iter().zip(&means[step]) {
+            let ratio = short / full;
+            assert!(
+                (lo..hi).contains(&ratio),
+                "step {step}: mean {short:.1} DN vs {full:.1} DN at full energy ({ratio:.3})"
+            );
+        }
+    }
+}
+
+/// A shipped bracket scene brackets by itself (no `--bracket`), in process, and refuses a bad
+/// `--bracket` with one line naming the step.
+#[test]
+fn the_bracket_scene_brackets_by_default_and_a_bad_bracket_is_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("s");
+    let mut args = capture_args(&out, 6);
+    args[2] = scene("multi_material_bracket.toml").display().to_string();
+    let status = Command::new(ellipso_bin())
+        .args(&args)
+        .status()
+        .expect("spawn ellipso capture");
+    assert!(status.success(), "capture failed: {status}");
+    let s = reader::open(&out).expect("session opens");
+    let steps: Vec<(u64, u8)> = s
+        .frames
+        .iter()
+        .filter_map(|f| f.pulse_seq.map(|seq| (seq, f.bracket_step)))
+        .collect();
+    assert!(steps.len() >= 5, "{steps:?}");
+    assert!(steps.iter().all(|&(seq, step)| u64::from(step) == seq % 3));
+
+    let bad = Command::new(ellipso_bin())
+        .args(capture_args(&tmp.path().join("bad"), 3))
+        .args(["--bracket", "1,0.25,0"])
+        .output()
+        .expect("spawn ellipso capture");
+    assert!(!bad.status.success());
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        stderr.contains("--bracket") && stderr.contains("step 2 is 0"),
+        "{stderr}"
+    );
+    assert!(
+        !tmp.path().join("bad").exists(),
+        "nothing created for a refused argument"
+    );
+}

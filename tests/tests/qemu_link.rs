@@ -5,7 +5,9 @@
 //! Each run: handshake; an invalid configuration refused with its reason; a free-running capture
 //! of [`PULSES`] pulses with edge reports, checked pulse by pulse (consecutive sequence numbers,
 //! edges in the order camera on, flash on, flash off, camera off, at their configured offsets);
-//! the same sequence read back from the firmware's GPIO register writes; clock sync by ping.
+//! the same sequence read back from the firmware's GPIO register writes; clock sync by ping; a
+//! bracket refused for a step that rounds to 0 µs; a 1, 1/4, 1/16 flash-energy bracket whose every
+//! pulse reports its step and lights for its planned on-time within one timer tick (1 µs).
 //!
 //! Guest time is deterministic (`-icount shift=3,align=off,sleep=off`, busy-idle firmware), so
 //! offsets are asserted as "at least the configured value, at most the board's late tolerance
@@ -20,8 +22,8 @@ use ellipso_firmware::{LED_RIG_LIMITS, SequencerTiming};
 use ellipso_host::link::clock::ClockModelConfig;
 use ellipso_host::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_protocol::{
-    BoardState, CaptureConfig, CommandKind, Edge, Output, PROTOCOL_VERSION, PulseCount, PulseEvent,
-    RejectReason, TriggerSource,
+    BoardState, Bracket, CaptureConfig, CommandKind, Edge, Output, PROTOCOL_VERSION, PulseCount,
+    PulseEvent, RejectReason, TriggerSource,
 };
 use ellipso_tests::qemu::{QemuBoard, Serial, firmware_or_skip};
 
@@ -35,7 +37,11 @@ const CAPTURE: CaptureConfig = CaptureConfig {
     pulses: PulseCount::Count(PULSES),
     trigger: TriggerSource::FreeRun,
     report_edges: true,
+    bracket: Bracket::NONE,
 };
+
+/// Pulses of the bracketed capture: two cycles of 1, 1/4, 1/16.
+const BRACKET_PULSES: u32 = 6;
 
 /// The BSRR stores of one pulse: PA0 (trigger) set, PA1 (flash) set, PA1 reset, PA0 reset.
 const PULSE_BSRR: [u32; 4] = [1 << 0, 1 << 1, 1 << 17, 1 << 16];
@@ -94,6 +100,7 @@ fn run_scenario(name: &str, serial: Serial) {
 
     check_gpio_writes(&board);
     check_clock_sync(&link);
+    bracketed_capture(&link, name, &ctx);
 
     link.stop().expect("stop is always accepted");
     assert_eq!(link.counters().bad_frames(), 0, "{:?}", link.counters());
@@ -199,6 +206,83 @@ fn check_pulses_and_edges(pulses: &[PulseEvent], edges: &[Edge]) {
             );
         }
     }
+}
+
+/// A bracket with a step too short to realise is refused naming the step; a 1, 1/4, 1/16 bracket
+/// of a 5 ms flash then fires in turn, each pulse lit for its step's planned on-time
+/// (`round(5000 · q / 32768)`: 5000, 1250, 313 µs) within one tick, as its edges and its report say.
+fn bracketed_capture(link: &TriggerLink, name: &str, ctx: &str) {
+    let bracket = Bracket::from_relative(&[1.0, 0.25, 0.0625]).unwrap();
+    let config = CaptureConfig {
+        exposure_us: 6_000,
+        flash_delay_us: 100,
+        flash_duration_us: 5_000,
+        frame_period_us: 50_000,
+        pulses: PulseCount::Count(BRACKET_PULSES),
+        bracket,
+        ..CAPTURE
+    };
+    let too_short = CaptureConfig {
+        flash_duration_us: 7, // 7 µs / 16 rounds to 0
+        ..config
+    };
+    assert!(matches!(
+        link.configure(too_short),
+        Err(LinkError::Rejected {
+            reason: RejectReason::BracketStepTooShort { step: 2 },
+            ..
+        })
+    ));
+    link.configure(config).expect("bracket accepted");
+    link.arm().expect("arm");
+    // Status replies to earlier requests may still be queued as events.
+    while link.events().try_recv().is_ok() {}
+    link.start().expect("start");
+    let (mut pulses, mut edges) = (Vec::new(), Vec::new());
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        match link.events().recv_timeout(left) {
+            Ok(LinkEvent::Pulse { event, .. }) => pulses.push(event),
+            Ok(LinkEvent::Edge(edge)) => edges.push(edge),
+            Ok(LinkEvent::Status(s))
+                if s.state == BoardState::Configured && pulses.len() == BRACKET_PULSES as usize =>
+            {
+                break;
+            }
+            Ok(LinkEvent::Status(_)) => {}
+            other => panic!("during the bracketed capture: {other:?}; {ctx}"),
+        }
+    }
+    assert_eq!(pulses.len(), BRACKET_PULSES as usize);
+    let planned = [5_000i64, 1_250, 313];
+    let mut worst = 0i64;
+    for (k, (p, quad)) in pulses.iter().zip(edges.chunks(4)).enumerate() {
+        assert_eq!(p.flags, 0, "pulse {} flagged {:#04x}", p.seq, p.flags);
+        assert_eq!(usize::from(p.bracket_step), k % 3);
+        let width = (quad[2].t_device_us - quad[1].t_device_us) as i64;
+        assert_eq!(
+            i64::from(p.flash_on_us),
+            width,
+            "the report is the edges' on-time"
+        );
+        assert_eq!(
+            p.t_flash_on_us - p.t_trigger_us,
+            100,
+            "same delay for every step"
+        );
+        let error = width - planned[k % 3];
+        assert!(
+            error.abs() <= 1,
+            "pulse {k}: {width} µs lit for a planned {} µs",
+            planned[k % 3]
+        );
+        worst = worst.max(error.abs());
+    }
+    eprintln!(
+        "{name}: bracketed pulse widths within {worst} µs of the plan over {} pulses",
+        pulses.len()
+    );
 }
 
 /// The pins really moved, in the same order: the last `4 · PULSES` BSRR stores are the pulses,

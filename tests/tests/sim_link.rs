@@ -44,6 +44,7 @@ fn capture(pulses: u32, period_us: u32) -> CaptureConfig {
         pulses: PulseCount::Count(pulses),
         trigger: TriggerSource::FreeRun,
         report_edges: false,
+        bracket: ellipso_protocol::Bracket::NONE,
     }
 }
 

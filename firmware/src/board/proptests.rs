@@ -9,14 +9,16 @@
 //! - every garbage burst yields only `BadFrame` faults, and `Status` counters equal the
 //!   `Rejected` replies and `BadFrame` faults actually sent;
 //! - on the pin timeline the flash is only ever lit while the trigger is high, and with on-time
-//!   polls it is on for exactly `flash_duration_us` unless a `Stop` cut it short;
+//!   polls it is on for exactly its bracket step's on-time unless a `Stop` cut it short, and the
+//!   pulse event reports that on-time;
 //! - pulse sequence numbers are consecutive from 0 across all captures.
 
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
 use ellipso_protocol::{
-    CaptureConfig, MAX_FRAME_LEN, Output, PULSE_FLASH_SKIPPED, PULSE_NO_FLASH, PulseCount, encode,
+    Bracket, CaptureConfig, ENERGY_ONE_Q15, MAX_BRACKET_STEPS, MAX_FRAME_LEN, Output,
+    PULSE_FLASH_SKIPPED, PULSE_NO_FLASH, PulseCount, encode,
 };
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
@@ -50,9 +52,10 @@ fn capture_config() -> impl Strategy<Value = CaptureConfig> {
         ],
         trigger(),
         any::<bool>(),
+        bracket(),
     )
         .prop_map(
-            |(e, d, w, p, pulses, trigger, report_edges)| CaptureConfig {
+            |(e, d, w, p, pulses, trigger, report_edges, bracket)| CaptureConfig {
                 exposure_us: e,
                 flash_delay_us: d.min(e),
                 flash_duration_us: w.min(e - d.min(e)),
@@ -60,19 +63,28 @@ fn capture_config() -> impl Strategy<Value = CaptureConfig> {
                 pulses,
                 trigger,
                 report_edges,
+                bracket,
             },
         );
-    let arbitrary = (any::<[u32; 4]>(), any::<u32>(), trigger(), any::<bool>()).prop_map(
-        |([e, d, w, p], n, trigger, report_edges)| CaptureConfig {
-            exposure_us: e,
-            flash_delay_us: d,
-            flash_duration_us: w,
-            frame_period_us: p,
-            pulses: PulseCount::Count(n),
-            trigger,
-            report_edges,
-        },
-    );
+    let arbitrary = (
+        any::<[u32; 4]>(),
+        any::<u32>(),
+        trigger(),
+        any::<bool>(),
+        proptest::collection::vec(any::<u16>(), 0..=MAX_BRACKET_STEPS),
+    )
+        .prop_map(
+            |([e, d, w, p], n, trigger, report_edges, steps)| CaptureConfig {
+                exposure_us: e,
+                flash_delay_us: d,
+                flash_duration_us: w,
+                frame_period_us: p,
+                pulses: PulseCount::Count(n),
+                trigger,
+                report_edges,
+                bracket: Bracket::from_q15(&steps).expect("≤ 8 steps"),
+            },
+        );
     prop_oneof![4 => plausible, 1 => arbitrary]
 }
 
@@ -90,20 +102,36 @@ fn valid_config() -> impl Strategy<Value = CaptureConfig> {
         ],
         trigger(),
         any::<bool>(),
+        bracket(),
     )
-        .prop_map(move |(e, start, w, extra, pulses, trigger, report_edges)| {
-            let w = w.min(e);
-            let duty_min = (1000 * w).div_ceil(u32::from(l.max_flash_duty_permille));
-            CaptureConfig {
-                exposure_us: e,
-                flash_delay_us: (e - w) * start / 1000,
-                flash_duration_us: w,
-                frame_period_us: (e + l.readout_us).max(duty_min) + extra,
-                pulses,
-                trigger,
-                report_edges,
-            }
+        .prop_map(
+            move |(e, start, w, extra, pulses, trigger, report_edges, bracket)| {
+                let w = w.min(e);
+                let duty_min = (1000 * w).div_ceil(u32::from(l.max_flash_duty_permille));
+                CaptureConfig {
+                    exposure_us: e,
+                    flash_delay_us: (e - w) * start / 1000,
+                    flash_duration_us: w,
+                    frame_period_us: (e + l.readout_us).max(duty_min) + extra,
+                    pulses,
+                    trigger,
+                    report_edges,
+                    bracket,
+                }
+            },
+        )
+        .prop_filter("the plan accepts it", move |c| {
+            CapturePlan::new(*c, &l).is_ok()
         })
+}
+
+/// No bracket half of the time, else 1–3 steps of any energy in (0, 1].
+fn bracket() -> impl Strategy<Value = Bracket> {
+    prop_oneof![
+        Just(Bracket::NONE),
+        proptest::collection::vec(1u16..=ENERGY_ONE_Q15, 1..=3)
+            .prop_map(|steps| Bracket::from_q15(&steps).expect("≤ 8 steps")),
+    ]
 }
 
 fn command() -> impl Strategy<Value = HostMessage> {
@@ -202,7 +230,8 @@ proptest! {
         let mut running_durations = Vec::new();
         for ev in &events {
             if let Some(p) = board.sequencer().plan() {
-                running_durations.push(u64::from(p.flash_duration_us()));
+                let steps = p.bracket().cycle_len() as u8;
+                running_durations.extend((0..steps).map(|i| u64::from(p.step_on_time_us(i))));
             }
             match ev {
                 Event::Command(cmd) => {
@@ -245,7 +274,8 @@ proptest! {
                 }
             }
             if let Some(p) = board.sequencer().plan() {
-                running_durations.push(u64::from(p.flash_duration_us()));
+                let steps = p.bracket().cycle_len() as u8;
+                running_durations.extend((0..steps).map(|i| u64::from(p.step_on_time_us(i))));
             }
         }
         // Finish any capture on time, then stop.
@@ -282,7 +312,7 @@ proptest! {
         let mut lit: Option<u64> = None;
         let mut durations = all.iter().filter_map(|m| match m {
             BoardMessage::Pulse(p) if p.flags & (PULSE_FLASH_SKIPPED | PULSE_NO_FLASH) == 0 => {
-                Some(p.t_flash_off_us - p.t_flash_on_us)
+                Some((p.t_flash_off_us - p.t_flash_on_us, u64::from(p.flash_on_us)))
             }
             _ => None,
         });
@@ -299,7 +329,7 @@ proptest! {
                 (Output::Flash, false) => {
                     let on = lit.take().unwrap();
                     let on_for = e.t_device_us - on;
-                    prop_assert_eq!(durations.next(), Some(on_for));
+                    prop_assert_eq!(durations.next(), Some((on_for, on_for)));
                     prop_assert!(on_for <= u64::from(LED_RIG_LIMITS.max_flash_on_us));
                     prop_assert!(
                         stops.contains(&e.t_device_us) || running_durations.contains(&on_for),

@@ -6,20 +6,20 @@ use crate::config::{LED_RIG_LIMITS, SequencerTiming};
 use crate::outputs::{OutputEdge, PinOutputs, RecordingOutputs};
 use crate::sink::{FrameWriter, TxQueue};
 use ellipso_protocol::{
-    BadFrameKind, CaptureConfig, MAX_FRAME_LEN, Output, PROTOCOL_VERSION, PulseCount, PulseEvent,
-    encode,
+    BadFrameKind, Bracket, CaptureConfig, MAX_FRAME_LEN, Output, PROTOCOL_VERSION, PulseCount,
+    PulseEvent, encode,
 };
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as T};
 
 const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;
 
-struct Rig {
-    board: Board,
-    out: RecordingOutputs<64>,
+pub(super) struct Rig {
+    pub(super) board: Board,
+    pub(super) out: RecordingOutputs<64>,
 }
 
 impl Rig {
-    fn new() -> Self {
+    pub(super) fn new() -> Self {
         let board = Board::new(BoardConfig::new("test-board", 1_000_000)).unwrap();
         Self {
             board,
@@ -28,7 +28,7 @@ impl Rig {
     }
 
     /// Handles `msg` at `now_us`; returns every message the board sent.
-    fn send(&mut self, msg: HostMessage, now_us: u64) -> Vec<BoardMessage> {
+    pub(super) fn send(&mut self, msg: HostMessage, now_us: u64) -> Vec<BoardMessage> {
         let mut got = Vec::new();
         self.board
             .handle(msg, now_us, &mut self.out, &mut |m| got.push(m));
@@ -36,7 +36,7 @@ impl Rig {
     }
 
     /// Polls at every deadline up to and including `until_us`.
-    fn run_until(&mut self, until_us: u64) -> Vec<BoardMessage> {
+    pub(super) fn run_until(&mut self, until_us: u64) -> Vec<BoardMessage> {
         let mut got = Vec::new();
         while let Some(t) = self.board.next_deadline().filter(|&t| t <= until_us) {
             self.board.poll(t, &mut self.out, &mut |m| got.push(m));
@@ -44,7 +44,7 @@ impl Rig {
         got
     }
 
-    fn armed(config: CaptureConfig) -> Self {
+    pub(super) fn armed(config: CaptureConfig) -> Self {
         let mut rig = Self::new();
         assert_eq!(
             rig.send(HostMessage::Configure(config), 0),
@@ -55,15 +55,15 @@ impl Rig {
     }
 }
 
-fn ack(kind: CommandKind) -> BoardMessage {
+pub(super) fn ack(kind: CommandKind) -> BoardMessage {
     BoardMessage::Ack(kind)
 }
 
-fn rejected(command: CommandKind, reason: RejectReason) -> BoardMessage {
+pub(super) fn rejected(command: CommandKind, reason: RejectReason) -> BoardMessage {
     BoardMessage::Rejected { command, reason }
 }
 
-fn config(trigger: TriggerSource, pulses: PulseCount) -> CaptureConfig {
+pub(super) fn config(trigger: TriggerSource, pulses: PulseCount) -> CaptureConfig {
     CaptureConfig {
         exposure_us: 1_000,
         flash_delay_us: 100,
@@ -72,10 +72,11 @@ fn config(trigger: TriggerSource, pulses: PulseCount) -> CaptureConfig {
         pulses,
         trigger,
         report_edges: false,
+        bracket: Bracket::NONE,
     }
 }
 
-fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
+pub(super) fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
     msgs.iter()
         .filter_map(|m| {
             if let BoardMessage::Pulse(p) = m {

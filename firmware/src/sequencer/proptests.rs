@@ -2,8 +2,10 @@
 //! extra early polls, requests and stops), checked on the recorded pin timeline.
 //!
 //! Properties:
-//! - the flash goes off at the first poll at or after `t_on + flash_duration_us` (or at the stop),
-//!   never later; so when every poll is at most `max_flash_on_us − flash_duration_us` late the
+//! - pulse `k` fires bracket step `k mod len` and its event reports that step and the flash's
+//!   actual on-time (`t_flash_off_us − t_flash_on_us`);
+//! - the flash goes off at the first poll at or after `t_on + w` (or at the stop), `w` the on-time
+//!   of the pulse's step, never later; so when every poll is at most `max_flash_on_us − w_max` late the
 //!   flash is never on longer than `max_flash_on_us`, and when it was on longer the pulse is
 //!   flagged `PULSE_FLASH_FORCED_OFF` with a matching `FlashForcedOff` fault;
 //! - the flash is never on while the camera trigger is low;
@@ -17,11 +19,20 @@
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
-use ellipso_protocol::{CaptureConfig, PulseCount, PulseEvent};
+use ellipso_protocol::{Bracket, CaptureConfig, ENERGY_ONE_Q15, PulseCount, PulseEvent};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
 const L: ellipso_protocol::BoardLimits = LED_RIG_LIMITS;
+
+/// No bracket half of the time, else 1–4 steps of any energy in (0, 1].
+fn bracket() -> impl Strategy<Value = Bracket> {
+    prop_oneof![
+        Just(Bracket::NONE),
+        proptest::collection::vec(1u16..=ENERGY_ONE_Q15, 1..=4)
+            .prop_map(|steps| Bracket::from_q15(&steps).expect("≤ 8 steps")),
+    ]
+}
 
 /// A valid configuration: flash inside the exposure, within on-time and duty limits.
 fn valid_config() -> impl Strategy<Value = CaptureConfig> {
@@ -36,9 +47,10 @@ fn valid_config() -> impl Strategy<Value = CaptureConfig> {
             Just(TriggerSource::HostCommand)
         ],
         any::<bool>(),
+        bracket(),
     )
         .prop_map(
-            |(exposure_us, start_permille, duration, extra, n, trigger, report_edges)| {
+            |(exposure_us, start_permille, duration, extra, n, trigger, report_edges, bracket)| {
                 let flash_duration_us = duration.min(exposure_us);
                 let free = exposure_us - flash_duration_us;
                 let flash_delay_us = free * start_permille / 1000;
@@ -56,9 +68,12 @@ fn valid_config() -> impl Strategy<Value = CaptureConfig> {
                     pulses: PulseCount::Count(n),
                     trigger,
                     report_edges,
+                    bracket,
                 }
             },
         )
+        // A tiny flash with a small step rounds to 0 µs: refused by the plan, not generated.
+        .prop_filter("the plan accepts it", |c| CapturePlan::new(*c, &L).is_ok())
 }
 
 /// Lateness of one poll after its deadline, µs: mostly on time, sometimes a little or very late.
@@ -141,12 +156,14 @@ fn check(plan: &CapturePlan, run: &Run, bounded: bool) -> Result<(), TestCaseErr
     let mut flash_on_at: Option<u64> = None;
     let mut trigger_at = 0u64;
     let mut triggers = Vec::new(); // (rise, fall)
+    let mut risen = 0u64;
     let mut flashes = Vec::new(); // (on, off)
     for e in &run.edges {
         match (e.output, e.high) {
             (Output::CameraTrigger, true) => {
                 trigger_at = e.t_device_us;
                 camera = true;
+                risen += 1;
             }
             (Output::CameraTrigger, false) => {
                 prop_assert!(
@@ -158,9 +175,10 @@ fn check(plan: &CapturePlan, run: &Run, bounded: bool) -> Result<(), TestCaseErr
             }
             (Output::Flash, true) => {
                 prop_assert!(camera, "flash lit with the trigger low at {e:?}");
+                // This pulse's own on-time: pulse `risen − 1` of the capture.
+                let w = plan.step_on_time_us(plan.step_of_pulse(risen - 1));
                 prop_assert!(
-                    e.t_device_us + u64::from(plan.flash_duration_us())
-                        <= trigger_at + u64::from(plan.exposure_us()),
+                    e.t_device_us + u64::from(w) <= trigger_at + u64::from(plan.exposure_us()),
                     "flash planned past the exposure"
                 );
                 flash_on_at = Some(e.t_device_us);
@@ -188,6 +206,16 @@ fn check(plan: &CapturePlan, run: &Run, bounded: bool) -> Result<(), TestCaseErr
     for (k, (ev, &(rise, _))) in events.iter().zip(&triggers).enumerate() {
         prop_assert_eq!(ev.seq, k as u64, "consecutive sequence numbers");
         prop_assert_eq!(ev.t_trigger_us, rise);
+        prop_assert_eq!(
+            ev.bracket_step,
+            plan.step_of_pulse(k as u64),
+            "step k mod len"
+        );
+        prop_assert_eq!(
+            u64::from(ev.flash_on_us),
+            ev.t_flash_off_us - ev.t_flash_on_us,
+            "the reported on-time is the edges' difference"
+        );
     }
     if run.stopped_at.is_none() {
         prop_assert_eq!(Some(events.len() as u32), plan.pulse_count());
@@ -201,7 +229,9 @@ fn check(plan: &CapturePlan, run: &Run, bounded: bool) -> Result<(), TestCaseErr
     prop_assert_eq!(fired.len(), flashes.len());
     for (ev, &(on, off)) in fired.iter().zip(&flashes) {
         prop_assert_eq!((ev.t_flash_on_us, ev.t_flash_off_us), (on, off));
-        let due = on + u64::from(plan.flash_duration_us()).min(max_on);
+        let w = u64::from(plan.step_on_time_us(ev.bracket_step));
+        prop_assert!(w > 0, "a fired flash has a planned on-time");
+        let due = on + w.min(max_on);
         let first_poll = run.polls.iter().copied().find(|&p| p >= due);
         let by_stop = run
             .stopped_at
@@ -255,7 +285,7 @@ proptest! {
         let run = drive(plan, &lates, None, stop_after);
         check(&plan, &run, false)?;
         // Bounded lateness: no poll later than the flash's margin under its cap.
-        let margin = u64::from(plan.max_flash_on_us() - plan.flash_duration_us());
+        let margin = u64::from(plan.max_flash_on_us() - plan.longest_on_time_us());
         let run = drive(plan, &lates, Some(margin), stop_after);
         check(&plan, &run, true)?;
     }

@@ -26,6 +26,10 @@ pub(super) struct Pulse {
     pub(super) camera_off_due_us: u64,
     pub(super) flash: Flash,
     pub(super) flags: PulseFlags,
+    /// The bracket step this pulse fires (0 without a bracket).
+    pub(super) bracket_step: u8,
+    /// The step's planned flash on-time, µs (0: no flash).
+    pub(super) flash_planned_us: u32,
 }
 
 /// Sends an edge report when the capture asked for them.
@@ -50,7 +54,7 @@ pub(super) fn report_edge<S: MessageSink + ?Sized>(
 /// The event sent when the pulse's trigger falls (or it is stopped).
 pub(super) fn pulse_event(pulse: &Pulse) -> PulseEvent {
     let (t_flash_on_us, t_flash_off_us) = match pulse.flash {
-        Flash::Done { t_on_us, t_off_us } => (t_on_us, t_off_us),
+        Flash::Done { t_on_us, t_off_us } => (t_on_us, t_off_us.max(t_on_us)),
         Flash::NotFired { t_us } => (t_us, t_us),
         // Not reachable: events are sent with the flash off. Report the trigger time.
         Flash::Pending { .. } | Flash::On { .. } => (pulse.t_trigger_us, pulse.t_trigger_us),
@@ -61,5 +65,7 @@ pub(super) fn pulse_event(pulse: &Pulse) -> PulseEvent {
         t_flash_on_us,
         t_flash_off_us,
         flags: pulse.flags,
+        bracket_step: pulse.bracket_step,
+        flash_on_us: u32::try_from(t_flash_off_us - t_flash_on_us).unwrap_or(u32::MAX),
     }
 }

@@ -4,10 +4,10 @@
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::{OutputEdge, PinOutputs, RecordingOutputs};
-use ellipso_protocol::{CaptureConfig, PulseCount, PulseEvent};
+use ellipso_protocol::{Bracket, CaptureConfig, PulseCount, PulseEvent};
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as T};
 
-const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;
+pub(super) const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;
 
 /// 1 ms exposure, flash 100..600 µs, 50 ms period, free run, 2 pulses.
 fn config() -> CaptureConfig {
@@ -19,23 +19,24 @@ fn config() -> CaptureConfig {
         pulses: PulseCount::Count(2),
         trigger: TriggerSource::FreeRun,
         report_edges: false,
+        bracket: Bracket::NONE,
     }
 }
 
-fn plan(f: impl FnOnce(&mut CaptureConfig)) -> CapturePlan {
+pub(super) fn plan(f: impl FnOnce(&mut CaptureConfig)) -> CapturePlan {
     let mut c = config();
     f(&mut c);
     CapturePlan::new(c, &LED_RIG_LIMITS).unwrap()
 }
 
-fn started(plan: CapturePlan, now_us: u64) -> Sequencer {
+pub(super) fn started(plan: CapturePlan, now_us: u64) -> Sequencer {
     let mut seq = Sequencer::new(SequencerTiming::DEFAULT);
     seq.start(plan, now_us).unwrap();
     seq
 }
 
 /// Jumps simulated time to each deadline until idle (or `max_polls`); returns the messages.
-fn run_on_time(
+pub(super) fn run_on_time(
     seq: &mut Sequencer,
     out: &mut impl Outputs,
     max_polls: usize,
@@ -49,7 +50,7 @@ fn run_on_time(
     (msgs, last)
 }
 
-fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
+pub(super) fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
     msgs.iter()
         .filter_map(|m| match m {
             BoardMessage::Pulse(p) => Some(*p),
@@ -58,7 +59,7 @@ fn pulses(msgs: &[BoardMessage]) -> Vec<PulseEvent> {
         .collect()
 }
 
-fn faults(msgs: &[BoardMessage]) -> Vec<Fault> {
+pub(super) fn faults(msgs: &[BoardMessage]) -> Vec<Fault> {
     msgs.iter()
         .filter_map(|m| match m {
             BoardMessage::Fault(f) => Some(*f),
@@ -102,14 +103,18 @@ fn mock_pins_see_exactly_two_pulses_in_order() {
                 t_trigger_us: LEAD,
                 t_flash_on_us: LEAD + 100,
                 t_flash_off_us: LEAD + 600,
-                flags: 0
+                flags: 0,
+                bracket_step: 0,
+                flash_on_us: 500,
             },
             PulseEvent {
                 seq: 1,
                 t_trigger_us: LEAD + 50_000,
                 t_flash_on_us: LEAD + 50_100,
                 t_flash_off_us: LEAD + 50_600,
-                flags: 0
+                flags: 0,
+                bracket_step: 0,
+                flash_on_us: 500,
             },
         ]
     );

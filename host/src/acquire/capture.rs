@@ -16,7 +16,14 @@
 //!
 //! Termination: a counted capture ends once the board reports its last pulse and every pulse is
 //! paired or timed out; a continuous one on the `stop` flag; any capture at `max_duration`.
+//!
+//! Flash-energy bracket: each pulse's bracket step and actual flash on-time (from its `Pulse`
+//! report) are kept by sequence number until the pulse is paired or given up, and written on the
+//! frame's `pairing` event with its relative energy, `flash_on_us / flash_duration_us`. The
+//! pairer matches frames to pulses by id and timing only; a frame inherits whatever its pulse
+//! really fired, so a lost frame or pulse never shifts another frame's step.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread;
@@ -95,6 +102,8 @@ pub struct CaptureReport {
     pub board_faults: u64,
     /// Clock fit used for pairing.
     pub clock: Option<ClockFit>,
+    /// Paired frames per bracket step (one entry without a bracket).
+    pub paired_per_step: Vec<u64>,
 }
 
 /// Why a capture could not run (problems during a running capture end it cleanly instead).
@@ -258,7 +267,7 @@ pub fn capture(
         PulseCount::Count(n) => Some(u64::from(n)),
         PulseCount::Continuous => None,
     };
-    let mut state = LoopState::new(plan.pairing, expected, clock.clone());
+    let mut state = LoopState::new(plan, expected, clock.clone());
     let end_reason = state.run(
         link,
         &mut session,
@@ -301,6 +310,7 @@ pub fn capture(
         camera: camera_counters,
         board_faults: state.faults,
         clock: Some(state.clock.clone()),
+        paired_per_step: state.paired_per_step.clone(),
     };
     let dir = session.finish(clock_now(), &end_reason)?;
     Ok((report, dir))
@@ -316,10 +326,34 @@ struct LoopState {
     faults: u64,
     board_done: bool,
     done_since: Option<Instant>,
+    /// What each pulse not yet paired (or given up) lit its frame with, by sequence number.
+    light: HashMap<u64, PulseLight>,
+    /// The on-time of relative energy 1, µs (the capture's `flash_duration_us`).
+    full_on_us: u32,
+    paired_per_step: Vec<u64>,
+}
+
+/// A pulse's flash as the board reported it.
+#[derive(Debug, Clone, Copy)]
+struct PulseLight {
+    bracket_step: u8,
+    flash_on_us: u32,
+}
+
+impl PulseLight {
+    /// `flash_on_us / full_on_us`; 0 for a capture without a flash.
+    fn energy_rel(&self, full_on_us: u32) -> f64 {
+        if full_on_us == 0 {
+            0.0
+        } else {
+            f64::from(self.flash_on_us) / f64::from(full_on_us)
+        }
+    }
 }
 
 impl LoopState {
-    fn new(pairing: PairingConfig, expected: Option<u64>, clock: ClockFit) -> Self {
+    fn new(plan: &CapturePlan, expected: Option<u64>, clock: ClockFit) -> Self {
+        let pairing: PairingConfig = plan.pairing;
         Self {
             pairer: Pairer::new(pairing),
             clock,
@@ -329,6 +363,9 @@ impl LoopState {
             faults: 0,
             board_done: false,
             done_since: None,
+            light: HashMap::new(),
+            full_on_us: plan.board.flash_duration_us,
+            paired_per_step: vec![0; plan.board.bracket.cycle_len()],
         }
     }
 
@@ -485,7 +522,16 @@ impl LoopState {
                     t_flash_on_device_us: DeviceTimeUs(event.t_flash_on_us),
                     t_flash_off_device_us: DeviceTimeUs(event.t_flash_off_us),
                     flags: event.flags,
+                    bracket_step: event.bracket_step,
+                    flash_on_us: Some(event.flash_on_us),
                 })?;
+                self.light.insert(
+                    event.seq,
+                    PulseLight {
+                        bracket_step: event.bracket_step,
+                        flash_on_us: event.flash_on_us,
+                    },
+                );
                 let out = self.pairer.add_pulse(
                     event.seq,
                     DeviceTimeUs(event.t_trigger_us),
@@ -552,11 +598,20 @@ impl LoopState {
                     seq,
                     latency_us,
                 } => {
+                    let light = self.light.remove(&seq);
+                    if let Some(n) = light
+                        .and_then(|l| self.paired_per_step.get_mut(usize::from(l.bracket_step)))
+                    {
+                        *n += 1;
+                    }
                     session.log(&SessionEvent::Pairing {
                         t_host_us: t,
                         frame_id,
                         seq,
                         latency_us,
+                        bracket_step: light.map(|l| l.bracket_step),
+                        flash_on_us: light.map(|l| l.flash_on_us),
+                        flash_energy_rel: light.map(|l| l.energy_rel(self.full_on_us)),
                     })?;
                     continue;
                 }
@@ -564,6 +619,7 @@ impl LoopState {
                     ("frame_without_pulse", Some(frame_id), None)
                 }
                 PairingOutcome::PulseWithoutFrame { seq } => {
+                    self.light.remove(&seq);
                     ("pulse_without_frame", None, Some(seq))
                 }
                 PairingOutcome::DuplicateFrame { frame_id } => {

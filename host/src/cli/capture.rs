@@ -7,6 +7,13 @@
 //! `--trigger PTY --wire SOCKET` the board is an external `ellipso sim serve` process instead.
 //! After recording, poses are tracked and appended to the session (unless `--no-track`).
 //!
+//! `--bracket 1,0.25,0.0625` asks the trigger board for a flash-energy bracket: frame `k` is lit
+//! by step `k mod len` of the full pulse (the same exposure, a shorter LED on-time). 1 to 8
+//! steps, each in (0, 1], in any order (they fire in the order given; start with the full pulse to
+//! make the first frame of each cycle the brightest). `--photos` counts frames, so 600 photos with
+//! a 3-step bracket are 200 per step. A simulated capture takes the scene's `capture.bracket`
+//! unless `--bracket` is given; its camera renders every frame at the energy it really received.
+//!
 //! [`Camera`]: crate::camera::Camera
 
 use std::path::{Path, PathBuf};
@@ -15,7 +22,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use anyhow::Context;
-use ellipso_protocol::{CaptureConfig, PulseCount, TriggerSource};
+use ellipso_protocol::{Bracket, CaptureConfig, PulseCount, TriggerSource};
 use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::rig::{
     self, FrameSource, SimCamera, SimCameraConfig, VirtualBoard, VirtualBoardConfig,
@@ -71,6 +78,27 @@ pub struct Args {
     /// Skip pose tracking after recording.
     #[arg(long)]
     pub no_track: bool,
+    /// Flash-energy bracket: relative energies in (0, 1], 1 to 8, comma-separated, fired in turn
+    /// (e.g. `1,0.25,0.0625`). Default: the scene's `capture.bracket` (simulator), none (rig).
+    #[arg(long, value_name = "E1,E2,…", value_parser = parse_bracket)]
+    pub bracket: Option<Bracket>,
+}
+
+/// Parses `--bracket`: 1 to 8 comma-separated relative energies, each in (0, 1].
+pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
+    let energies = s
+        .split(',')
+        .map(|v| {
+            let v = v.trim();
+            v.parse::<f64>()
+                .map_err(|e| format!("'{v}' is not a number: {e}"))
+        })
+        .collect::<Result<Vec<f64>, String>>()?;
+    let bracket = Bracket::from_relative(&energies).map_err(|e| e.to_string())?;
+    if bracket.is_empty() {
+        return Err("a bracket needs at least one step".into());
+    }
+    Ok(bracket)
 }
 
 pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
@@ -92,10 +120,11 @@ impl FrameSource for RenderSource {
         self.size
     }
 
-    fn render(&self, pose_index: usize, _frame_seed: u64) -> Vec<u16> {
+    fn render(&self, pose_index: usize, _frame_seed: u64, flash_energy_rel: f64) -> Vec<u16> {
         // The renderer derives each frame's noise from the scene seed and the pose index, so a
-        // pose renders identically whenever it is exposed: captures are reproducible.
-        match self.renderer.render_frame(pose_index) {
+        // pose renders identically whenever it is exposed at the same energy: captures are
+        // reproducible.
+        match self.renderer.render_frame_lit(pose_index, flash_energy_rel) {
             Ok(f) => f.raw(),
             Err(e) => {
                 tracing::error!("render of pose {pose_index} failed: {e}");
@@ -105,8 +134,14 @@ impl FrameSource for RenderSource {
     }
 }
 
-/// The board timing for a scene: its exposure, a flash inside it, its photo interval.
-pub fn board_config(scene: &Scene, photos: u32, interval_ms: Option<f64>) -> CaptureConfig {
+/// The board timing for a scene: its exposure, a flash inside it, its photo interval, and its
+/// flash-energy bracket (`capture.bracket`; `bracket` overrides it).
+pub fn board_config(
+    scene: &Scene,
+    photos: u32,
+    interval_ms: Option<f64>,
+    bracket: Option<Bracket>,
+) -> CaptureConfig {
     let exposure_us = scene.rig.camera.exposure_us.round().max(1.0) as u32;
     let flash_delay_us = if exposure_us > 400 { 100 } else { 0 };
     let flash_duration_us = (exposure_us - 2 * flash_delay_us).min(5_000);
@@ -118,6 +153,10 @@ pub fn board_config(scene: &Scene, photos: u32, interval_ms: Option<f64>) -> Cap
         pulses: PulseCount::Count(photos),
         trigger: TriggerSource::FreeRun,
         report_edges: false,
+        // Validated with the scene; an unrepresentable one would have been refused there.
+        bracket: bracket.unwrap_or_else(|| {
+            Bracket::from_relative(&scene.capture.bracket).unwrap_or(Bracket::NONE)
+        }),
     }
 }
 
@@ -201,8 +240,12 @@ pub fn capture_sim(
         }
     };
     let board_clock = board_clock.context("no board clock")?;
+    let board_cfg = board_config(scene, photos, args.interval_ms, args.bracket);
     let mut cam_config = SimCameraConfig::from_scene(scene, board_clock);
     cam_config.pose_count = photos as usize;
+    // The scene's flash is the full pulse: the camera meters each exposure's on-time against it.
+    cam_config.flash_reference_us =
+        (board_cfg.flash_duration_us > 0).then_some(board_cfg.flash_duration_us);
     let sim_camera = SimCamera::spawn(cam_config, source, edges)?;
     let info = CameraInfo {
         backend: "sim",
@@ -244,7 +287,6 @@ pub fn capture_sim(
         .collect::<Result<_, _>>()?;
     let session = SessionWriter::create(&args.out, manifest)?;
 
-    let board_cfg = board_config(scene, photos, args.interval_ms);
     let settings = CameraSettings {
         exposure_us: board_cfg.exposure_us,
         gain_db: scene.rig.camera.gain_db as f32,
@@ -365,7 +407,10 @@ pub fn capture_hw(
         .map(serde_json::to_value)
         .collect::<Result<_, _>>()?;
     let session = SessionWriter::create(&args.out, manifest)?;
-    let board_cfg = rig.board_config();
+    let mut board_cfg = rig.board_config();
+    if let Some(bracket) = args.bracket {
+        board_cfg.bracket = bracket;
+    }
     let settings = CameraSettings {
         exposure_us: rig.sensor.exposure_us,
         gain_db: rig.sensor.gain_db,
@@ -429,11 +474,22 @@ fn missing_backend(
     )
 }
 
-/// Tracks the poses of a recorded session and appends them to its log.
+/// Tracks the poses of a recorded session and appends them to its log; short-pulse frames of a
+/// bracketed capture that tracking refused borrow a pose from their tracked neighbours
+/// ([`crate::short_pulse_poses`]), logged as `pose_interpolated`.
 pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>> {
     let session = crate::session::reader::open(dir)?;
     let tracked = process::track_session(&session, &TrackConfig::default())?;
-    process::append_poses(dir, &tracked, HostClock::new().now())?;
+    let now = HostClock::new().now();
+    process::append_poses(dir, &tracked, now)?;
+    let borrowed = crate::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
+    crate::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
+    if !borrowed.is_empty() {
+        println!(
+            "poses        {} short-pulse frames posed from their tracked neighbours",
+            borrowed.len()
+        );
+    }
     Ok(tracked)
 }
 
@@ -464,6 +520,10 @@ pub fn print_report(r: &CaptureReport) {
             c.rms_us
         );
     }
+    if r.paired_per_step.len() > 1 {
+        let steps: Vec<String> = r.paired_per_step.iter().map(u64::to_string).collect();
+        println!("bracket      paired frames per step {}", steps.join(" / "));
+    }
 }
 
 /// Runs `ellipso capture`.
@@ -480,4 +540,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     println!("session      {}", dir.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bracket_argument_keeps_its_order_and_names_what_is_wrong() {
+        let b = parse_bracket("1, 0.25,0.0625").unwrap();
+        assert_eq!(b.steps_q15(), [0x8000, 0x2000, 0x0800]);
+        let any_order = parse_bracket("0.25,1,0.5").unwrap();
+        assert_eq!(any_order.steps_q15(), [0x2000, 0x8000, 0x4000]);
+        for (bad, fragment) in [
+            ("", "not a number"),
+            ("1,,0.5", "not a number"),
+            ("1,x", "'x' is not a number"),
+            ("1,0", "step 1 is 0"),
+            ("1.5", "(0, 1]"),
+            ("-0.5", "(0, 1]"),
+            ("nan", "(0, 1]"),
+            ("1,1,1,1,1,1,1,1,1", "at most 8"),
+            ("0.00001", "1/65536"),
+        ] {
+            let e = parse_bracket(bad).unwrap_err();
+            assert!(e.contains(fragment), "{bad:?}: {e}");
+        }
+    }
 }

@@ -230,6 +230,7 @@ elevation_deg = [30.0, 60.0]
                     pulses: ellipso_protocol::PulseCount::Count(3),
                     trigger: ellipso_protocol::TriggerSource::FreeRun,
                     report_edges: false,
+                    bracket: ellipso_protocol::Bracket::NONE,
                 };
                 link.configure(config).unwrap();
                 link.arm().unwrap();
@@ -244,11 +245,23 @@ elevation_deg = [30.0, 60.0]
                         _ => {}
                     }
                 }
-                let rising: Vec<u64> = (0..6)
+                // 3 pulses × (trigger ↑↓, flash ↑↓): the flash's light crosses the socket too.
+                let wire: Vec<_> = (0..12)
                     .map(|_| edges.recv_timeout(Duration::from_secs(5)).unwrap())
-                    .filter(|e| e.rising)
+                    .collect();
+                let rising: Vec<u64> = wire
+                    .iter()
+                    .filter(|e| e.rising && e.output == ellipso_protocol::Output::CameraTrigger)
                     .map(|e| e.t_device_us)
                     .collect();
+                let lit: Vec<u64> = wire
+                    .iter()
+                    .filter(|e| e.output == ellipso_protocol::Output::Flash)
+                    .collect::<Vec<_>>()
+                    .chunks(2)
+                    .map(|p| p[1].t_device_us - p[0].t_device_us)
+                    .collect();
+                assert_eq!(lit, [500; 3]);
                 assert_eq!(
                     rising, triggers,
                     "the wire's rising edges are the pulses' triggers"

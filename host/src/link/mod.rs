@@ -196,7 +196,9 @@ pub enum LinkError {
 pub fn describe_reject(reason: &RejectReason) -> String {
     match reason {
         RejectReason::FlashOutsideExposure => {
-            "the flash would light outside the exposure (flash delay + duration > exposure)".into()
+            "the flash would light outside the exposure (flash delay + on-time > exposure; with a \
+             bracket, its longest step's on-time)"
+                .into()
         }
         RejectReason::FlashTooLong { max_us } => {
             format!("flash on-time above the LED's safe maximum of {max_us} µs")
@@ -221,6 +223,13 @@ pub fn describe_reject(reason: &RejectReason) -> String {
             format!("too soon after the last pulse; wait {wait_us} µs")
         }
         RejectReason::ProtocolMismatch { board } => format!("the board speaks protocol v{board}"),
+        RejectReason::BracketStepOutOfRange { step } => {
+            format!("bracket step {step}: relative energy outside (0, 1]")
+        }
+        RejectReason::BracketStepTooShort { step } => format!(
+            "bracket step {step}: its flash on-time rounds to 0 µs (raise the flash duration or \
+             that step's energy; a bracket needs a flash)"
+        ),
     }
 }
 

@@ -124,6 +124,8 @@ fn scripted(script: Script) -> (TTYPort, std::thread::JoinHandle<()>) {
                             t_flash_on_us: t + seq * 1000 + 10,
                             t_flash_off_us: t + seq * 1000 + 20,
                             flags: 0,
+                            bracket_step: 0,
+                            flash_on_us: 10,
                         };
                         send(&mut dev, &BoardMessage::Pulse(pulse), script.noisy);
                         seq += 1;
@@ -156,6 +158,7 @@ fn config(exposure_us: u32) -> CaptureConfig {
         pulses: PulseCount::Count(3),
         trigger: TriggerSource::FreeRun,
         report_edges: false,
+        bracket: ellipso_protocol::Bracket::NONE,
     }
 }
 

@@ -72,6 +72,12 @@ pub enum SessionEvent {
         t_flash_off_device_us: DeviceTimeUs,
         /// `PULSE_*` flags.
         flags: u8,
+        /// Bracket step the pulse fired (0 without a bracket; absent before protocol v2: 0).
+        #[serde(default)]
+        bracket_step: u8,
+        /// The flash's actual on-time, device µs (absent before protocol v2).
+        #[serde(default)]
+        flash_on_us: Option<u32>,
     },
     /// A camera frame written to `frames/`.
     Frame {
@@ -103,6 +109,17 @@ pub enum SessionEvent {
         /// Frame arrival minus the pulse's trigger mapped to host time, µs (when the clock is fitted).
         #[serde(default)]
         latency_us: Option<f64>,
+        /// The pulse's bracket step (absent in older sessions: step 0).
+        #[serde(default)]
+        bracket_step: Option<u8>,
+        /// The pulse's actual flash on-time, µs (absent in older sessions).
+        #[serde(default)]
+        flash_on_us: Option<u32>,
+        /// The flash energy that lit the frame relative to a full pulse,
+        /// `flash_on_us / flash_duration_us` of the `configured` event (absent in older
+        /// sessions: 1).
+        #[serde(default)]
+        flash_energy_rel: Option<f64>,
     },
     /// A frame or pulse that could not be paired; never silently dropped.
     PairingError {
@@ -162,6 +179,23 @@ pub enum SessionEvent {
         frame_id: u64,
         /// Why.
         reason: String,
+    },
+    /// A short-pulse frame of a bracketed capture that tracking refused, posed from its tracked
+    /// neighbours (`crate::short_pulse_poses`); follows the frame's `pose_rejected`.
+    PoseInterpolated {
+        /// Host time.
+        t_host_us: HostTimeUs,
+        /// Frame id.
+        frame_id: u64,
+        /// Rotation, axis-angle (rad), world → camera.
+        rotation_camera_from_world: [f64; 3],
+        /// Translation, m, world origin in the camera frame.
+        translation_camera_from_world_m: [f64; 3],
+        /// The tracked frames it was interpolated between, `[before, after]` (the same id twice
+        /// when taken from one neighbour).
+        from_frame_ids: [u64; 2],
+        /// Weight of `after` (0: the pose of `before`).
+        weight: f64,
     },
     /// The capture ended.
     End {

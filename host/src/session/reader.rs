@@ -6,6 +6,9 @@
 //! - The `frames/` directory is the truth for which frames exist: a frame whose event was never
 //!   written (killed between rename and log) is still listed, without metadata; a `frame` event
 //!   whose file is missing is reported. Temporary `.partial` files are ignored.
+//! - Each frame carries the flash that lit it from its `pairing` event: bracket step, actual
+//!   on-time and [`FrameEntry::flash_energy_rel`]. Sessions written before bracketing (and frames
+//!   without a pairing) read as step 0 at full energy, 1.0.
 
 use std::collections::BTreeMap;
 use std::fs;
@@ -28,6 +31,15 @@ pub struct FrameEntry {
     pub pulse_seq: Option<u64>,
     /// False when the frame was flagged incomplete at capture.
     pub complete: bool,
+    /// The flash-energy bracket step of its pulse (0 without a bracket or pairing).
+    pub bracket_step: u8,
+    /// Its pulse's actual flash on-time, µs (`None` in sessions before bracketing or unpaired).
+    pub flash_on_us: Option<u32>,
+    /// Flash energy that lit the frame relative to the capture's full pulse
+    /// (`flash_on_us / flash_duration_us`); 1.0 when not recorded. Divide the frame's flash
+    /// signal by it to compare frames of different bracket steps; 0 means the flash did not
+    /// light (skipped) and the frame holds no flash signal.
+    pub flash_energy_rel: f64,
 }
 
 /// What reading found wrong (nothing here prevents replay).
@@ -111,6 +123,14 @@ impl Session {
     }
 }
 
+/// What a `pairing` event says about a frame.
+struct Paired {
+    seq: u64,
+    bracket_step: u8,
+    flash_on_us: Option<u32>,
+    flash_energy_rel: f64,
+}
+
 /// Opens the session in `dir`.
 pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let manifest_path = dir.join(paths::MANIFEST);
@@ -165,14 +185,32 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     }
 
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
-    let mut pairs: BTreeMap<u64, u64> = BTreeMap::new();
+    let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     for e in &events {
         match e {
             SessionEvent::Frame { frame_id, .. } => {
                 logged.insert(*frame_id, e.clone());
             }
-            SessionEvent::Pairing { frame_id, seq, .. } => {
-                pairs.insert(*frame_id, *seq);
+            SessionEvent::Pairing {
+                frame_id,
+                seq,
+                bracket_step,
+                flash_on_us,
+                flash_energy_rel,
+                ..
+            } => {
+                pairs.insert(
+                    *frame_id,
+                    Paired {
+                        seq: *seq,
+                        bracket_step: bracket_step.unwrap_or(0),
+                        flash_on_us: *flash_on_us,
+                        // A non-finite or negative value (hand edits) reads as not recorded.
+                        flash_energy_rel: flash_energy_rel
+                            .filter(|e| e.is_finite() && *e >= 0.0)
+                            .unwrap_or(1.0),
+                    },
+                );
             }
             _ => {}
         }
@@ -214,12 +252,16 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
                     ..
                 })
             );
+            let paired = pairs.get(&frame_id);
             FrameEntry {
                 frame_id,
                 path,
                 event,
-                pulse_seq: pairs.get(&frame_id).copied(),
+                pulse_seq: paired.map(|p| p.seq),
                 complete,
+                bracket_step: paired.map_or(0, |p| p.bracket_step),
+                flash_on_us: paired.and_then(|p| p.flash_on_us),
+                flash_energy_rel: paired.map_or(1.0, |p| p.flash_energy_rel),
             }
         })
         .collect();

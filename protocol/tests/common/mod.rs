@@ -37,7 +37,15 @@ fn config(rng: &mut impl Rng) -> CaptureConfig {
             _ => TriggerSource::FreeRun,
         },
         report_edges: rng.random_bool(0.5),
+        bracket: bracket(rng),
     }
+}
+
+/// 0..=MAX_BRACKET_STEPS steps of any u16 (the codec does not range-check them).
+pub fn bracket(rng: &mut impl Rng) -> Bracket {
+    let len = rng.random_range(0..=MAX_BRACKET_STEPS);
+    let steps: Vec<u16> = (0..len).map(|_| edgy_u32(rng) as u16).collect();
+    Bracket::from_q15(&steps).expect("at most MAX_BRACKET_STEPS")
 }
 
 pub fn host_message(rng: &mut impl Rng) -> HostMessage {
@@ -71,7 +79,7 @@ fn command(rng: &mut impl Rng) -> CommandKind {
 }
 
 fn reason(rng: &mut impl Rng) -> RejectReason {
-    match rng.random_range(0..13) {
+    match rng.random_range(0..15) {
         0 => RejectReason::FlashOutsideExposure,
         1 => RejectReason::FlashTooLong {
             max_us: edgy_u32(rng),
@@ -92,9 +100,11 @@ fn reason(rng: &mut impl Rng) -> RejectReason {
         11 => RejectReason::TooSoon {
             wait_us: edgy_u32(rng),
         },
-        _ => RejectReason::ProtocolMismatch {
+        12 => RejectReason::ProtocolMismatch {
             board: edgy_u32(rng) as u16,
         },
+        13 => RejectReason::BracketStepOutOfRange { step: rng.random() },
+        _ => RejectReason::BracketStepTooShort { step: rng.random() },
     }
 }
 
@@ -178,6 +188,8 @@ pub fn board_message(rng: &mut impl Rng) -> BoardMessage {
             t_flash_on_us: edgy_u64(rng),
             t_flash_off_us: edgy_u64(rng),
             flags: rng.random(),
+            bracket_step: rng.random(),
+            flash_on_us: edgy_u32(rng),
         }),
         4 => BoardMessage::Pong {
             nonce: edgy_u32(rng),

@@ -18,6 +18,12 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
         pulses: PulseCount::Count(150),
         trigger: TriggerSource::GripButton,
         report_edges: false,
+        bracket: Bracket::NONE,
+    };
+    // 1, 1/4, 1/16 of the 2 ms full-energy pulse: 2000, 500 and 125 µs.
+    let bracketed = CaptureConfig {
+        bracket: Bracket::from_q15(&[ENERGY_ONE_Q15, 0x2000, 0x0800]).unwrap(),
+        ..config
     };
     let limits = BoardLimits {
         min_exposure_us: 20,
@@ -33,10 +39,11 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
         (
             "hello",
             Host(HostMessage::Hello {
-                protocol_version: 1,
+                protocol_version: 2,
             }),
         ),
         ("configure", Host(HostMessage::Configure(config))),
+        ("configure_bracket", Host(HostMessage::Configure(bracketed))),
         ("arm", Host(HostMessage::Arm)),
         ("fire_one", Host(HostMessage::FireOne)),
         ("start", Host(HostMessage::Start)),
@@ -46,7 +53,7 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
         (
             "hello_reply",
             Board(BoardMessage::HelloReply(BoardInfo {
-                protocol_version: 1,
+                protocol_version: 2,
                 firmware_version: FirmwareVersion {
                     major: 0,
                     minor: 1,
@@ -66,6 +73,13 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
             }),
         ),
         (
+            "rejected_bracket",
+            Board(BoardMessage::Rejected {
+                command: CommandKind::Configure,
+                reason: RejectReason::BracketStepTooShort { step: 2 },
+            }),
+        ),
+        (
             "pulse",
             Board(BoardMessage::Pulse(PulseEvent {
                 seq: 41,
@@ -73,6 +87,20 @@ pub fn vectors() -> Vec<(&'static str, Vector)> {
                 t_flash_on_us: 12_000_500,
                 t_flash_off_us: 12_002_500,
                 flags: 0,
+                bracket_step: 0,
+                flash_on_us: 2_000,
+            })),
+        ),
+        (
+            "pulse_bracket",
+            Board(BoardMessage::Pulse(PulseEvent {
+                seq: 43,
+                t_trigger_us: 12_500_000,
+                t_flash_on_us: 12_500_500,
+                t_flash_off_us: 12_500_625,
+                flags: 0,
+                bracket_step: 2,
+                flash_on_us: 125,
             })),
         ),
         (

@@ -22,6 +22,11 @@
 //!   of threads. Without noise stages the output does not depend on the seed at all.
 //! - **Resolution override** ([`RenderOptions::resolution_px`]) scales the intrinsics
 //!   (fx·s, (cx + ½)·s − ½) so the same field of view is seen at a coarser sampling.
+//! - **Flash energy** ([`Renderer::render_frame_lit`]): the scene's flash is one full-energy
+//!   pulse; a frame lit by a fraction `e` of it (a bracketed, shorter pulse) collects `e` times
+//!   the electrons before noise, saturation and quantisation. The scene has no other light, so
+//!   this scales the whole signal; shot noise follows the smaller signal, read noise does not
+//!   shrink, so short pulses are noisier relative to their signal, as on the rig.
 //! - Motion blur: the pose moves linearly (speed along the capture path's direction at that
 //!   pose) and turns (about the axis of the path's rotation there) symmetrically about the listed
 //!   pose during the exposure; `samples` instants are averaged. The truth pose is mid-exposure.
@@ -115,6 +120,9 @@ pub enum RenderError {
     /// Supersampling outside 1..=MAX_SUPERSAMPLING.
     #[error("supersampling {0} must be in 1..={MAX_SUPERSAMPLING}")]
     Supersampling(u32),
+    /// A flash energy that is negative or not finite.
+    #[error("flash energy {0} must be finite and ≥ 0 (1 = the scene's full pulse)")]
+    FlashEnergy(f64),
     /// A material outside the pBRDF's domain.
     #[error("material '{name}': {source}")]
     Material {
@@ -171,6 +179,17 @@ fn mix(mut z: u64) -> u64 {
 /// The noise seed of frame `index` under render seed `seed`.
 pub fn frame_seed(seed: u64, index: usize) -> u64 {
     mix(seed ^ mix(index as u64 ^ 0x9e37_79b9_7f4a_7c15))
+}
+
+/// The light of one frame, shared by its rows.
+#[derive(Clone, Copy)]
+struct RowLight<'a, 's> {
+    /// The camera and flash at each instant of the exposure.
+    contexts: &'a [PoseContext],
+    /// The shading state.
+    shader: &'a Shader<'s>,
+    /// Flash energy relative to the scene's full pulse.
+    flash_energy_rel: f64,
 }
 
 /// Renders frames of one scene (see the module doc for the contract).
@@ -360,8 +379,21 @@ impl<'s> Renderer<'s> {
         PixelSensor::new(self.layout.analyser_at(x, y).angle_rad(), weights)
     }
 
-    /// Renders frame `index` on the current rayon pool.
+    /// Renders frame `index` on the current rayon pool, lit by the scene's full flash pulse.
     pub fn render_frame(&self, index: usize) -> Result<RenderedFrame, RenderError> {
+        self.render_frame_lit(index, 1.0)
+    }
+
+    /// Renders frame `index` lit by `flash_energy_rel` of the scene's flash pulse (a bracketed
+    /// pulse's on-time over the full pulse's; 1 is [`Renderer::render_frame`] exactly).
+    pub fn render_frame_lit(
+        &self,
+        index: usize,
+        flash_energy_rel: f64,
+    ) -> Result<RenderedFrame, RenderError> {
+        if !(flash_energy_rel.is_finite() && flash_energy_rel >= 0.0) {
+            return Err(RenderError::FlashEnergy(flash_energy_rel));
+        }
         let count = self.frame_count();
         let pose = self
             .scene
@@ -385,7 +417,14 @@ impl<'s> Renderer<'s> {
         let row_counts: Vec<StageCounts> = dn
             .par_chunks_mut(w)
             .enumerate()
-            .map(|(y, row)| self.render_row(y as u32, row, &contexts, &shader, &chain, seed))
+            .map(|(y, row)| {
+                let light = RowLight {
+                    contexts: &contexts,
+                    shader: &shader,
+                    flash_energy_rel,
+                };
+                self.render_row(y as u32, row, &light, &chain, seed)
+            })
             .collect();
         let mut counts = StageCounts::default();
         for c in &row_counts {
@@ -433,11 +472,15 @@ impl<'s> Renderer<'s> {
         &self,
         y: u32,
         row: &mut [f32],
-        contexts: &[PoseContext],
-        shader: &Shader<'_>,
+        light: &RowLight<'_, '_>,
         chain: &SensorChain,
         seed: u64,
     ) -> StageCounts {
+        let RowLight {
+            contexts,
+            shader,
+            flash_energy_rel,
+        } = *light;
         let mut counts = StageCounts::default();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         rng.set_stream(u64::from(y));
@@ -476,7 +519,9 @@ impl<'s> Renderer<'s> {
                     }
                 }
             }
-            let electrons = signal / samples * self.radiometry.electrons_per_irradiance();
+            // Multiplying by exactly 1.0 leaves a full-energy frame bit-identical.
+            let electrons =
+                signal / samples * self.radiometry.electrons_per_irradiance() * flash_energy_rel;
             *out = chain.digitise(electrons, &mut rng, &mut counts);
         }
         counts

@@ -50,6 +50,7 @@ fn every_shipped_scene_renders_within_the_adc_range() {
         "s0_only.toml",
         "calibration.toml",
         "multi_material.toml",
+        "multi_material_bracket.toml",
     ] {
         let scene = Scene::load(&scene_path(name)).unwrap();
         let r = Renderer::new(&scene, small(64, 48)).unwrap();
@@ -74,6 +75,51 @@ fn same_seed_is_bit_identical_on_one_and_two_threads() {
     assert_eq!(a.raw(), b.raw());
     assert_eq!(b.raw(), c.raw());
     assert_eq!(a.counts, b.counts);
+}
+
+/// A bracketed pulse: the signal scales with the flash energy before the sensor (exactly, without
+/// sensor effects); energy 1 is the plain render bit for bit, noise included; the highlights a full
+/// pulse clips are measured by a sixteenth of it; a bad energy is an error, not a black frame.
+#[test]
+fn flash_energy_scales_the_signal_before_the_sensor() {
+    let clean = scene_edited("sphere.toml", without_effects);
+    let r = Renderer::new(&clean, small(64, 48)).unwrap();
+    let full = r.render_frame(2).unwrap();
+    let quarter = r.render_frame_lit(2, 0.25).unwrap();
+    for (f, q) in full.dn.iter().zip(&quarter.dn) {
+        assert!((q - 0.25 * f).abs() <= 1e-5 * f.max(1.0), "{q} vs {f}/4");
+    }
+    assert!(full.dn.iter().any(|&v| v > 100.0));
+    assert!(
+        r.render_frame_lit(2, 0.0)
+            .unwrap()
+            .dn
+            .iter()
+            .all(|&v| v == 0.0)
+    );
+
+    // A 5× exposure clips the board at full energy; a sixteenth of the pulse measures it.
+    let noisy = scene_edited("sphere.toml", |t| {
+        t.replace("exposure_us = 8000.0", "exposure_us = 40000.0")
+    });
+    let r = Renderer::new(&noisy, small(64, 48)).unwrap();
+    let full = r.render_frame(3).unwrap();
+    assert_eq!(r.render_frame_lit(3, 1.0).unwrap().raw(), full.raw());
+    let max = r.radiometry().full_scale_dn() as f32;
+    let clipped = |f: &RenderedFrame| f.dn.iter().filter(|&&v| v >= max).count();
+    let short = r.render_frame_lit(3, 0.0625).unwrap();
+    assert!(
+        clipped(&full) > 100 && clipped(&short) < clipped(&full) / 10,
+        "{} clipped at 1/16 vs {} at full energy",
+        clipped(&short),
+        clipped(&full)
+    );
+    for bad in [-0.1, f64::NAN, f64::INFINITY] {
+        assert!(matches!(
+            r.render_frame_lit(3, bad),
+            Err(RenderError::FlashEnergy(_))
+        ));
+    }
 }
 
 #[test]

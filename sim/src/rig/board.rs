@@ -9,8 +9,9 @@
 //!   every deadline is polled **with the deadline's own device time**, so edge times are exact
 //!   and never reported late because the host OS woke the thread late; received bytes are fed
 //!   with the device time they arrived, after every deadline due before them.
-//! - Every camera-trigger level change goes out on the trigger wire (if given) as a
-//!   [`TriggerEdge`]; the flash output is recorded in the truth only.
+//! - Every camera-trigger and flash level change goes out on the trigger wire (if given) as a
+//!   [`TriggerEdge`] (the flash's edges stand for its light, which the simulated camera meters)
+//!   and is recorded in the truth.
 //! - Outgoing frames are queued for a writer thread (like a UART ring buffer): a full queue drops
 //!   whole frames, which the core counts in `tx_overflows`; a host that stops reading never
 //!   stalls the sequencer.
@@ -109,6 +110,8 @@ pub struct BoardTruth {
     pub pulses: Vec<PulseEvent>,
     /// Every camera-trigger level change, in order.
     pub trigger_edges: Vec<TriggerEdge>,
+    /// Every flash level change, in order.
+    pub flash_edges: Vec<TriggerEdge>,
     /// Frames handed to the link (corrupted or not).
     pub frames_sent: u64,
     /// Of those, frames with at least one flipped bit.
@@ -355,11 +358,28 @@ impl MessageSink for LinkTx<'_> {
     }
 }
 
-/// [`Outputs`] that put camera-trigger edges on the wire.
+/// [`Outputs`] that put camera-trigger and flash edges on the wire.
 struct WireOutputs<'a> {
     wire: Option<&'a Sender<TriggerEdge>>,
     camera_high: bool,
+    flash_high: bool,
     truth: &'a Mutex<BoardTruth>,
+}
+
+impl WireOutputs<'_> {
+    fn publish(&self, edge: TriggerEdge) {
+        {
+            let mut truth = lock(self.truth);
+            match edge.output {
+                ellipso_protocol::Output::CameraTrigger => truth.trigger_edges.push(edge),
+                ellipso_protocol::Output::Flash => truth.flash_edges.push(edge),
+            }
+        }
+        if let Some(w) = self.wire {
+            // A camera that went away does not stop the board.
+            let _ = w.send(edge);
+        }
+    }
 }
 
 impl Outputs for WireOutputs<'_> {
@@ -368,20 +388,22 @@ impl Outputs for WireOutputs<'_> {
             return;
         }
         self.camera_high = high;
-        let edge = TriggerEdge {
-            t_device_us,
-            rising: high,
-        };
-        lock(self.truth).trigger_edges.push(edge);
-        if let Some(w) = self.wire {
-            // A camera that went away does not stop the board.
-            let _ = w.send(edge);
+        self.publish(TriggerEdge::trigger(t_device_us, high));
+    }
+
+    fn flash_on(&mut self, t_device_us: u64, _max_on_us: u32) {
+        if !self.flash_high {
+            self.flash_high = true;
+            self.publish(TriggerEdge::flash(t_device_us, true));
         }
     }
 
-    fn flash_on(&mut self, _t_device_us: u64, _max_on_us: u32) {}
-
-    fn flash_off(&mut self, _t_device_us: u64) {}
+    fn flash_off(&mut self, t_device_us: u64) {
+        if self.flash_high {
+            self.flash_high = false;
+            self.publish(TriggerEdge::flash(t_device_us, false));
+        }
+    }
 }
 
 impl BoardRun {
@@ -449,6 +471,7 @@ impl BoardRun {
         let mut outputs = WireOutputs {
             wire,
             camera_high: false,
+            flash_high: false,
             truth,
         };
         let mut last_us = self.clock.now_us();

@@ -4,7 +4,9 @@
 //!
 //! Contract of [`CameraCore::on_edge`]:
 //! - Falling edges are ignored (the exposure length is the camera's own setting, as in
-//!   "timed" trigger mode); each rising edge yields at most one [`FramePlan`].
+//!   "timed" trigger mode), and so are flash edges (light, not a trigger; they are metered by
+//!   [`FlashMeter`](super::flash_meter::FlashMeter)); each rising trigger edge yields at most
+//!   one [`FramePlan`], at flash energy 1 until the meter sets it.
 //! - A **missed trigger** takes no exposure and no block id (the camera never saw it).
 //! - Every exposure takes the next block id, emulating GigE Vision 1.x 16-bit ids: they start at
 //!   [`SimCameraConfig::first_block_id`] (65401 by default so the wrap shows within 135 frames)
@@ -23,6 +25,8 @@ use std::time::{Duration, Instant};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
+
+use ellipso_protocol::Output;
 
 use super::RigError;
 use super::clock::LinearClock;
@@ -134,6 +138,11 @@ pub struct SimCameraConfig {
     pub queue_frames: usize,
     /// Hold each frame until its simulated arrival instant before delivering it.
     pub pace_to_arrival: bool,
+    /// On-time of a full-energy flash pulse, µs — the pulse the scene's radiometry describes
+    /// (the capture's `flash_duration_us`). With it the camera meters the flash's light on the
+    /// wire and renders each frame at `lit time inside the exposure / reference`; `None` renders
+    /// every frame at energy 1 and ignores flash edges.
+    pub flash_reference_us: Option<u32>,
 }
 
 impl SimCameraConfig {
@@ -154,6 +163,7 @@ impl SimCameraConfig {
             render_workers: 2,
             queue_frames: 8,
             pace_to_arrival: false,
+            flash_reference_us: None,
         }
     }
 
@@ -188,6 +198,13 @@ impl SimCameraConfig {
         }
         if self.queue_frames == 0 {
             return Err(count_err("queue_frames", 0));
+        }
+        if self.flash_reference_us == Some(0) {
+            return Err(RigError::Parameter {
+                name: "flash_reference_us",
+                value: 0.0,
+                expected: "at least 1 µs (or none: no flash metering)",
+            });
         }
         if self.first_block_id == 0 {
             return Err(RigError::Parameter {
@@ -239,6 +256,12 @@ pub struct FramePlan {
     pub t_camera_ns: u64,
     /// Exposure start, host instant (ground truth).
     pub exposure_start: Instant,
+    /// Exposure start, board device µs (edge + trigger delay + jitter; fractional).
+    pub exposure_start_device_us: f64,
+    /// Flash energy the exposure collected, relative to a full pulse (1 until metered).
+    pub flash_energy_rel: f64,
+    /// Flash on-time inside the exposure, µs (`None` until metered).
+    pub flash_lit_us: Option<f64>,
     /// When the frame arrives at the host, host instant.
     pub arrival: Instant,
     /// Whole or flagged.
@@ -331,7 +354,7 @@ impl CameraCore {
 
     /// The frames one trigger edge produces.
     pub fn on_edge(&mut self, edge: TriggerEdge) -> Option<FramePlan> {
-        if !edge.rising {
+        if !edge.rising || edge.output != Output::CameraTrigger {
             return None;
         }
         self.counters.rising_edges += 1;
@@ -405,6 +428,9 @@ impl CameraCore {
             t_trigger_device_us: edge.t_device_us,
             t_camera_ns: self.config.camera_clock.at_ns(exposure_start),
             exposure_start,
+            exposure_start_device_us: edge.t_device_us as f64 + delay_us,
+            flash_energy_rel: 1.0,
+            flash_lit_us: None,
             arrival,
             status,
             missing_packet_starts,

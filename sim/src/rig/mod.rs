@@ -11,8 +11,10 @@
 //! - [`wire`]: trigger edges ([`wire::TriggerEdge`]: time and level only) from the board to the
 //!   cameras: a channel in-process, a unix socket of 16-byte records across processes.
 //! - [`camera::CameraCore`] decides per edge (missed trigger, block id, timestamps, faults);
-//!   [`sim_camera::SimCamera`] renders through a [`sim_camera::FrameSource`] on worker threads and
-//!   delivers [`sim_camera::SimFrame`]s in order with backpressure.
+//!   [`flash_meter::FlashMeter`] integrates the flash's light (its edges on the wire) over each
+//!   exposure, so a bracketed pulse renders at its energy; [`sim_camera::SimCamera`] renders
+//!   through a [`sim_camera::FrameSource`] on worker threads and delivers
+//!   [`sim_camera::SimFrame`]s in order with backpressure.
 //! - [`seeds`]: one ChaCha stream per fault, so faults are independent and reproducible.
 //!
 //! # In-process rig in five lines
@@ -56,6 +58,7 @@ pub mod board;
 pub mod camera;
 pub mod clock;
 pub mod duplex;
+pub mod flash_meter;
 pub mod link_fault;
 pub mod seeds;
 pub mod sim_camera;
@@ -63,12 +66,15 @@ pub mod wire;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_bracket;
 
 pub use board::{BoardTruth, VirtualBoard, VirtualBoardConfig};
 pub use camera::{
     CameraCore, CameraCounters, CameraFaults, CameraTiming, FrameStatus, SimCameraConfig,
 };
 pub use clock::LinearClock;
+pub use flash_meter::FlashMeter;
 pub use link_fault::{Disconnect, LinkFaults};
 pub use sim_camera::{FrameSource, FrameTruth, PoseIndexSource, SimCamera, SimFrame};
 pub use wire::{TriggerEdge, WireServer, connect_wire};

@@ -4,6 +4,9 @@
 //! Contract:
 //! - Frames come out in the order of their exposures, duplicates right after their original,
 //!   whatever order the renderers finish in.
+//! - Each frame is rendered at the flash energy its exposure collected
+//!   ([`FlashMeter`], with [`SimCameraConfig::flash_reference_us`]); metering holds a plan until
+//!   its trigger falls, a few ms.
 //! - Rendering may be slower than real time: each frame carries its simulated `arrival` instant,
 //!   so the consumer sees camera-realistic latency even when the simulator lags. With
 //!   [`SimCameraConfig::pace_to_arrival`] a frame is also held until that instant.
@@ -24,6 +27,7 @@ use super::RigError;
 use super::camera::{
     CameraCore, CameraCounters, FramePlan, FrameStatus, PIXELS_PER_PACKET, SimCameraConfig,
 };
+use super::flash_meter::FlashMeter;
 use super::wire::TriggerEdge;
 
 /// What a simulated camera renders through (the renderer, or a cheap test pattern).
@@ -31,12 +35,14 @@ pub trait FrameSource: Send + Sync {
     /// Width and height of every frame, pixels.
     fn frame_size(&self) -> (u32, u32);
     /// The raw frame (row-major, `width · height` values) of capture pose `pose_index`, with
-    /// `frame_seed` for its noise. Must be a pure function of its arguments.
-    fn render(&self, pose_index: usize, frame_seed: u64) -> Vec<u16>;
+    /// `frame_seed` for its noise, lit by `flash_energy_rel` of a full flash pulse (≥ 0; 1 is
+    /// the scene as described). Must be a pure function of its arguments.
+    fn render(&self, pose_index: usize, frame_seed: u64, flash_energy_rel: f64) -> Vec<u16>;
 }
 
 /// A test [`FrameSource`]: pixel 0 holds the pose index (low 16 bits), pixels 1–4 the frame seed
-/// (16 bits each, least significant first), every other pixel the pose index again.
+/// (16 bits each, least significant first), pixel 5 the flash energy in units of 1/10 000
+/// (rounded, saturating), every other pixel the pose index again.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PoseIndexSource {
     /// Frame width, pixels.
@@ -55,25 +61,37 @@ impl PoseIndexSource {
             .fold(0u64, |acc, &w| (acc << 16) | u64::from(w));
         Some((pixels[0], seed))
     }
+
+    /// Reads back the flash energy it was rendered with (to 1/10 000; None if under 6 px).
+    pub fn decode_energy(pixels: &[u16]) -> Option<f64> {
+        pixels.get(5).map(|&e| f64::from(e) / ENERGY_SCALE)
+    }
 }
+
+/// Pixel 5 of a [`PoseIndexSource`] frame holds `round(energy × ENERGY_SCALE)`.
+const ENERGY_SCALE: f64 = 10_000.0;
 
 impl FrameSource for PoseIndexSource {
     fn frame_size(&self) -> (u32, u32) {
         (self.width, self.height)
     }
 
-    fn render(&self, pose_index: usize, frame_seed: u64) -> Vec<u16> {
+    fn render(&self, pose_index: usize, frame_seed: u64, flash_energy_rel: f64) -> Vec<u16> {
         let n = self.width as usize * self.height as usize;
         let mut px = vec![pose_index as u16; n];
         for (i, p) in px.iter_mut().enumerate().skip(1).take(4) {
             *p = (frame_seed >> (16 * (i - 1))) as u16;
+        }
+        if let Some(p) = px.get_mut(5) {
+            // `as` saturates: NaN → 0, above 6.5 → 65535.
+            *p = (flash_energy_rel * ENERGY_SCALE).round() as u16;
         }
         px
     }
 }
 
 /// Ground truth a real camera would not give, for scoring the host's pairing.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameTruth {
     /// Exposures before this one.
     pub exposure_index: u64,
@@ -87,6 +105,10 @@ pub struct FrameTruth {
     pub duplicate: bool,
     /// Extra latency of a late frame, µs.
     pub late_by_us: u32,
+    /// Flash energy the exposure collected, relative to a full pulse (what it was rendered at).
+    pub flash_energy_rel: f64,
+    /// Flash on-time inside the exposure, µs (`None` without flash metering).
+    pub flash_lit_us: Option<f64>,
 }
 
 /// One delivered frame.
@@ -149,20 +171,27 @@ impl SimCamera {
         let mut threads = Vec::new();
         {
             let counters = counters.clone();
+            let mut meter = FlashMeter::new(config.flash_reference_us, config.timing.exposure_us);
             threads.push(spawn(
                 "sim-camera-plan",
                 Box::new(move || {
                     let mut index = 0u64;
-                    for edge in edges.iter() {
-                        let Some(plan) = core.on_edge(edge) else {
-                            sync_counters(&counters, &core);
-                            continue;
-                        };
-                        sync_counters(&counters, &core);
-                        if !send_waiting(&job_tx, (index, plan), &counters) {
-                            return;
-                        }
+                    let mut send = |plan: FramePlan| {
+                        let sent = send_waiting(&job_tx, (index, plan), &counters);
                         index += 1;
+                        sent
+                    };
+                    for edge in edges.iter() {
+                        let plan = core.on_edge(edge);
+                        sync_counters(&counters, &core);
+                        for plan in meter.on_edge(edge, plan) {
+                            if !send(plan) {
+                                return;
+                            }
+                        }
+                    }
+                    if let Some(plan) = meter.finish() {
+                        send(plan);
                     }
                 }),
             )?);
@@ -255,7 +284,7 @@ fn send_waiting<T>(tx: &Sender<T>, item: T, counters: &Mutex<CameraCounters>) ->
 fn render(source: &dyn FrameSource, plan: FramePlan, counters: &Mutex<CameraCounters>) -> SimFrame {
     let (width, height) = source.frame_size();
     let n = width as usize * height as usize;
-    let mut pixels = source.render(plan.pose_index, plan.frame_seed);
+    let mut pixels = source.render(plan.pose_index, plan.frame_seed, plan.flash_energy_rel);
     if pixels.len() != n {
         lock(counters).render_size_errors += 1;
         pixels.resize(n, 0);
@@ -281,6 +310,8 @@ fn render(source: &dyn FrameSource, plan: FramePlan, counters: &Mutex<CameraCoun
             t_trigger_device_us: plan.t_trigger_device_us,
             duplicate: plan.duplicate,
             late_by_us: plan.late_by_us,
+            flash_energy_rel: plan.flash_energy_rel,
+            flash_lit_us: plan.flash_lit_us,
         },
     }
 }

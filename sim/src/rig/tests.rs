@@ -13,7 +13,7 @@ use ellipso_protocol::{
 use super::*;
 
 /// Fast limits so tests run pulses every 2 ms.
-fn fast_board(seed: u64) -> VirtualBoardConfig {
+pub(super) fn fast_board(seed: u64) -> VirtualBoardConfig {
     let mut c = VirtualBoardConfig::new(seed);
     c.board.limits = ellipso_protocol::BoardLimits {
         readout_us: 1_000,
@@ -23,7 +23,7 @@ fn fast_board(seed: u64) -> VirtualBoardConfig {
     c
 }
 
-fn capture(pulses: u32, period_us: u32) -> CaptureConfig {
+pub(super) fn capture(pulses: u32, period_us: u32) -> CaptureConfig {
     CaptureConfig {
         exposure_us: 500,
         flash_delay_us: 50,
@@ -32,11 +32,12 @@ fn capture(pulses: u32, period_us: u32) -> CaptureConfig {
         pulses: PulseCount::Count(pulses),
         trigger: TriggerSource::FreeRun,
         report_edges: false,
+        bracket: ellipso_protocol::Bracket::NONE,
     }
 }
 
 /// A minimal host: writes commands, decodes everything the board sends.
-struct TestHost {
+pub(super) struct TestHost {
     reader: duplex::DuplexReader,
     writer: duplex::DuplexWriter,
     decoder: Decoder<BoardMessage>,
@@ -55,14 +56,14 @@ impl TestHost {
         }
     }
 
-    fn send(&mut self, msg: &HostMessage) {
+    pub(super) fn send(&mut self, msg: &HostMessage) {
         let mut buf = [0u8; MAX_FRAME_LEN];
         let n = encode(msg, &mut buf).unwrap();
         self.writer.write_all(&buf[..n]).unwrap();
     }
 
     /// Reads until `done` holds for the received messages or the stream ends or 5 s pass.
-    fn read_until(&mut self, done: impl Fn(&[BoardMessage]) -> bool) {
+    pub(super) fn read_until(&mut self, done: impl Fn(&[BoardMessage]) -> bool) {
         let deadline = Instant::now() + Duration::from_secs(5);
         let mut buf = [0u8; 256];
         while !done(&self.received) && !self.eof && Instant::now() < deadline {
@@ -88,7 +89,7 @@ impl TestHost {
         self.read_until(|_| Instant::now() >= until);
     }
 
-    fn pulses(&self) -> Vec<PulseEvent> {
+    pub(super) fn pulses(&self) -> Vec<PulseEvent> {
         self.received
             .iter()
             .filter_map(|m| match m {
@@ -98,7 +99,7 @@ impl TestHost {
             .collect()
     }
 
-    fn command(&mut self, msg: HostMessage) {
+    pub(super) fn command(&mut self, msg: HostMessage) {
         let kind = msg.kind();
         self.send(&msg);
         self.read_until(|r| {
@@ -115,7 +116,7 @@ impl TestHost {
     }
 }
 
-fn start_board(
+pub(super) fn start_board(
     config: VirtualBoardConfig,
 ) -> (
     VirtualBoard,
@@ -171,7 +172,24 @@ fn board_answers_the_handshake_and_runs_pulses_whose_edges_go_on_the_wire() {
     let truth = board.shutdown();
     assert_eq!(truth.pulses, pulses);
     assert_eq!(truth.end_reason.as_deref(), Some("stopped by its owner"));
-    let wire: Vec<TriggerEdge> = edges.try_iter().collect();
+    let (wire, flash): (Vec<TriggerEdge>, Vec<TriggerEdge>) = edges
+        .try_iter()
+        .partition(|e| e.output == ellipso_protocol::Output::CameraTrigger);
+    assert_eq!(
+        flash, truth.flash_edges,
+        "the flash's light is on the wire too"
+    );
+    let lit: Vec<(u64, u64)> = flash
+        .chunks(2)
+        .map(|p| (p[0].t_device_us, p[1].t_device_us))
+        .collect();
+    assert_eq!(
+        lit,
+        pulses
+            .iter()
+            .map(|p| (p.t_flash_on_us, p.t_flash_off_us))
+            .collect::<Vec<_>>()
+    );
     let rising: Vec<u64> = wire
         .iter()
         .filter(|e| e.rising)
@@ -340,10 +358,7 @@ fn camera_config_at(epoch: Instant, seed: u64, faults: CameraFaults) -> SimCamer
 }
 
 fn rising(i: u64) -> TriggerEdge {
-    TriggerEdge {
-        t_device_us: 1_000_000 + i * 50_000,
-        rising: true,
-    }
+    TriggerEdge::trigger(1_000_000 + i * 50_000, true)
 }
 
 #[test]
@@ -407,13 +422,7 @@ fn block_ids_wrap_from_65535_to_1_and_never_use_0() {
     assert_eq!(camera::next_block_id(7), 8);
     // Pose index follows exposures; falling edges do nothing.
     let mut core = CameraCore::new(camera_config(1, CameraFaults::default()), 64).unwrap();
-    assert!(
-        core.on_edge(TriggerEdge {
-            t_device_us: 5,
-            rising: false
-        })
-        .is_none()
-    );
+    assert!(core.on_edge(TriggerEdge::trigger(5, false)).is_none());
     let poses: Vec<usize> = (0..40)
         .filter_map(|i| core.on_edge(rising(i)))
         .map(|p| p.pose_index)
@@ -468,11 +477,8 @@ fn sim_camera_delivers_in_order_with_duplicates_and_waits_for_a_slow_consumer() 
     let camera = SimCamera::spawn(config, source, rx).unwrap();
     for i in 0..200 {
         tx.send(rising(i)).unwrap();
-        tx.send(TriggerEdge {
-            t_device_us: rising(i).t_device_us + 500,
-            rising: false,
-        })
-        .unwrap();
+        tx.send(TriggerEdge::trigger(rising(i).t_device_us + 500, false))
+            .unwrap();
     }
     drop(tx);
     // Replay the core alone: the delivered stream must be exactly its plans (duplicates twice).
@@ -589,11 +595,8 @@ fn a_paced_camera_never_delivers_a_frame_before_its_arrival() {
     )
     .unwrap();
     for i in 0..5u64 {
-        tx.send(TriggerEdge {
-            t_device_us: clock.now_us() + i * 1_000,
-            rising: true,
-        })
-        .unwrap();
+        tx.send(TriggerEdge::trigger(clock.now_us() + i * 1_000, true))
+            .unwrap();
     }
     drop(tx);
     for f in camera.frames().iter() {

@@ -1,9 +1,16 @@
-//! The trigger wire between the virtual board and simulated cameras.
+//! The trigger wire between the virtual board and simulated cameras — and the flash's light.
 //!
 //! A real camera's trigger input is an opto-isolated line: it sees a level change and when it
 //! happened, nothing else. A [`TriggerEdge`] carries exactly that — the board's device time of
-//! the edge and the new level — and deliberately **no pulse sequence number**: a simulated camera
-//! must number its frames itself, as a GigE camera does, and the host must pair them to pulses.
+//! the edge, the new level and which board output changed — and deliberately **no pulse sequence
+//! number**: a simulated camera must number its frames itself, as a GigE camera does, and the
+//! host must pair them to pulses.
+//!
+//! The same wire also carries the flash output's edges ([`Output::Flash`]). They stand for the
+//! flash's *light*, which a real camera sees through its lens, not through a cable: the simulated
+//! camera integrates the flash's on-time inside its own exposure and renders the frame with that
+//! energy (`flash_meter`), so a bracketed or cut-short pulse shows as a darker frame, as it would
+//! on the rig. A camera ignores flash edges for triggering.
 //!
 //! In-process the wire is a [`crossbeam_channel`] of edges. Across processes it is a unix stream
 //! socket carrying the same edges as fixed 16-byte records ([`EDGE_RECORD_LEN`]):
@@ -11,9 +18,10 @@
 //! | bytes | field |
 //! |---|---|
 //! | 0–1 | magic `b"TE"` |
-//! | 2 | record version, `1` |
+//! | 2 | record version, `2` |
 //! | 3 | level: `1` rising, `0` falling |
-//! | 4–7 | reserved, zero |
+//! | 4 | output: `0` camera trigger, `1` flash (version 2) |
+//! | 5–7 | reserved, zero |
 //! | 8–15 | `t_device_us`, u64 little-endian |
 //!
 //! [`WireServer`] (the board's side) listens on a path and broadcasts every edge to each
@@ -30,22 +38,45 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use crossbeam_channel::{Receiver, Sender};
+use ellipso_protocol::Output;
 
 use super::RigError;
 
-/// One level change of the camera trigger line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// One level change of a board output: the camera trigger line, or the flash's light.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TriggerEdge {
     /// When the board drove the edge, board device µs.
     pub t_device_us: u64,
-    /// `true` for low → high (exposure start).
+    /// `true` for low → high (exposure start; flash lit).
     pub rising: bool,
+    /// Which output changed.
+    pub output: Output,
+}
+
+impl TriggerEdge {
+    /// A camera-trigger edge.
+    pub const fn trigger(t_device_us: u64, rising: bool) -> Self {
+        Self {
+            t_device_us,
+            rising,
+            output: Output::CameraTrigger,
+        }
+    }
+
+    /// A flash edge (the light turning on or off).
+    pub const fn flash(t_device_us: u64, on: bool) -> Self {
+        Self {
+            t_device_us,
+            rising: on,
+            output: Output::Flash,
+        }
+    }
 }
 
 /// Size of one edge record on the socket.
 pub const EDGE_RECORD_LEN: usize = 16;
 const MAGIC: [u8; 2] = *b"TE";
-const RECORD_VERSION: u8 = 1;
+const RECORD_VERSION: u8 = 2;
 
 impl TriggerEdge {
     /// The socket record of this edge.
@@ -54,13 +85,17 @@ impl TriggerEdge {
         r[..2].copy_from_slice(&MAGIC);
         r[2] = RECORD_VERSION;
         r[3] = u8::from(self.rising);
+        r[4] = match self.output {
+            Output::CameraTrigger => 0,
+            Output::Flash => 1,
+        };
         r[8..].copy_from_slice(&self.t_device_us.to_le_bytes());
         r
     }
 
-    /// Parses a socket record; refuses a wrong magic, version or level byte.
+    /// Parses a socket record; refuses a wrong magic, version, level or output byte.
     pub fn from_record(r: &[u8; EDGE_RECORD_LEN]) -> Result<Self, RigError> {
-        if r[..2] != MAGIC || r[2] != RECORD_VERSION || r[3] > 1 || r[4..8] != [0; 4] {
+        if r[..2] != MAGIC || r[2] != RECORD_VERSION || r[3] > 1 || r[4] > 1 || r[5..8] != [0; 3] {
             return Err(RigError::WireRecord { record: *r });
         }
         let mut t = [0u8; 8];
@@ -68,6 +103,11 @@ impl TriggerEdge {
         Ok(Self {
             t_device_us: u64::from_le_bytes(t),
             rising: r[3] == 1,
+            output: if r[4] == 1 {
+                Output::Flash
+            } else {
+                Output::CameraTrigger
+            },
         })
     }
 }
@@ -225,19 +265,21 @@ mod tests {
 
     #[test]
     fn records_round_trip_and_garbage_is_refused() {
-        let e = TriggerEdge {
-            t_device_us: 0x0102_0304_0506_0708,
-            rising: true,
-        };
+        let e = TriggerEdge::trigger(0x0102_0304_0506_0708, true);
         let r = e.to_record();
         assert_eq!(&r[8..], &0x0102_0304_0506_0708u64.to_le_bytes());
         assert_eq!(TriggerEdge::from_record(&r).unwrap(), e);
-        let mut bad = r;
-        bad[3] = 2;
-        assert!(TriggerEdge::from_record(&bad).is_err());
-        let mut bad = r;
-        bad[0] = b'X';
-        assert!(TriggerEdge::from_record(&bad).is_err());
+        let f = TriggerEdge::flash(77, false);
+        assert_eq!(f.to_record()[3..5], [0, 1]);
+        assert_eq!(TriggerEdge::from_record(&f.to_record()).unwrap(), f);
+        for (byte, value) in [(3, 2), (0, b'X'), (2, 1), (4, 2), (6, 1)] {
+            let mut bad = r;
+            bad[byte] = value;
+            assert!(
+                TriggerEdge::from_record(&bad).is_err(),
+                "byte {byte} = {value}"
+            );
+        }
     }
 
     #[test]
@@ -249,9 +291,12 @@ mod tests {
         let camera = connect_wire(&path).unwrap();
         // No waiting: a reader connected before an edge is published receives it.
         let sent: Vec<_> = (0..10)
-            .map(|i| TriggerEdge {
-                t_device_us: 1_000 + i * 7,
-                rising: i % 2 == 0,
+            .map(|i| {
+                if i % 3 == 2 {
+                    TriggerEdge::flash(1_000 + i * 7, i % 2 == 0)
+                } else {
+                    TriggerEdge::trigger(1_000 + i * 7, i % 2 == 0)
+                }
             })
             .collect();
         for e in &sent {

@@ -124,6 +124,11 @@ pub struct CaptureSpec {
     /// Poses (explicit), `[[capture.poses]]`.
     #[serde(default)]
     pub poses: Vec<ExplicitPoseSpec>,
+    /// Flash-energy bracket: relative energies in (0, 1], at most 8, fired in turn by the
+    /// trigger board's flash on-time inside the one exposure (photo `k` gets step `k mod len`).
+    /// Empty (default): every photo at the full pulse.
+    #[serde(default)]
+    pub bracket: Vec<f64>,
 }
 
 /// `world_from_camera` rotation looking from `eye` at `target` with image-up along `up`, rolled
@@ -179,6 +184,9 @@ impl CaptureSpec {
         let up = Vector3::from(self.up);
         if !(up.iter().all(|v| v.is_finite()) && up.norm() > 1e-9) {
             return Err(loc.invalid(k("up"), "must be a finite non-zero vector"));
+        }
+        if let Err(e) = ellipso_protocol::Bracket::from_relative(&self.bracket) {
+            return Err(loc.invalid(k("bracket"), e.to_string()));
         }
         let is = |p| self.path == p;
         only(

@@ -124,6 +124,16 @@ fn every_shipped_scene_and_board_loads() {
         (4, 2, 200)
     );
     assert_eq!(multi.effects.listed().len(), 11, "all but lens_distortion");
+    assert!(multi.capture.bracket.is_empty());
+    let bracketed =
+        Scene::load(&sim_dir().join("scenes/multi_material_bracket.toml")).expect("bracket");
+    assert_eq!(bracketed.capture.bracket, [1.0, 0.25, 0.0625]);
+    assert_eq!(bracketed.camera_poses.len(), 600);
+    // Everything but the capture is the one-exposure scene's.
+    assert_eq!(
+        (&bracketed.materials, &bracketed.rig, &bracketed.effects),
+        (&multi.materials, &multi.rig, &multi.effects)
+    );
     let calib = Scene::load(&sim_dir().join("scenes/calibration.toml")).expect("calibration");
     assert!(calib.objects.is_empty() && calib.camera_poses.len() == 40);
     let s0 = Scene::load(&sim_dir().join("scenes/s0_only.toml")).expect("s0");
@@ -159,6 +169,8 @@ fn bad_inputs_name_key_and_line() {
         (edit("shape = \"sphere\"\nradius_m = 0.04", "shape = \"mesh\"\nmesh = \"../assets/missing.ply\""), "objects[0].mesh", "missing.ply", "does not exist"),
         (edit("[capture]", "[capture\n"), "", "[capture", "unclosed table"),
         (edit("photo_count = 50", "photo_count = 50\ninterval_ms = 2.0"), "capture.interval_ms", "interval_ms = 2.0", "shorter than the 5000 µs exposure"),
+        (edit("photo_count = 50", "photo_count = 50\nbracket = [1.0, 0.0]"), "capture.bracket", "bracket = [1.0, 0.0]", "step 1 is 0; relative energies must be in (0, 1]"),
+        (edit("photo_count = 50", "photo_count = 50\nbracket = [0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5]"), "capture.bracket", "bracket = [0.5", "at most 8"),
         (edit("shape = \"sphere\"\n", ""), "objects[0]", "[[objects]]", "missing field `shape`"),
         (edit("tag_size_m = 0.03\n", ""), "boards[0].inline", "[boards.inline]", "missing field `tag_size_m`"),
         (edit("rho_d = [0.02, 0.02, 0.02]", "rho_d = [0.02, \"x\", 0.02]"), "materials.glass.rho_d[1]", "rho_d = [0.02, \"x\"", "invalid type"),
@@ -522,7 +534,13 @@ fn errors_in_arrays_of_tables_name_the_index() {
 /// record the exact scene they were simulated from).
 #[test]
 fn scene_files_round_trip_through_toml() {
-    for name in ["sphere", "multi_material", "calibration", "s0_only"] {
+    for name in [
+        "sphere",
+        "multi_material",
+        "multi_material_bracket",
+        "calibration",
+        "s0_only",
+    ] {
         let text =
             std::fs::read_to_string(sim_dir().join(format!("scenes/{name}.toml"))).expect("scene");
         let file: SceneFile = toml::from_str(&text).expect("parses");

@@ -19,6 +19,16 @@
 //! hangs, a USB interrupt storm or a long critical section cannot keep the LED on past its
 //! limit. (A hung core also stops re-arming the *on* edge, so no new flash starts.)
 //!
+//! # Bracketed pulse widths
+//!
+//! The flash's off-compare is the core's flash-off deadline, `t_on + w`, where `w` is the on-time
+//! of the pulse's bracket step (`CapturePlan::step_on_time_us`; `flash_duration_us` without a
+//! bracket). So the bracket sets the timer-compare pulse width directly: the on-edge and the
+//! off-edge are both matches of TIM2 CH4 at 1 MHz, and the LED is lit for exactly `w` ticks
+//! (± the compare unit's synchronisation, under one tick), whatever the step. Only a deadline
+//! closer than [`MIN_LEAD_US`] falls back to software, and the core then reports the real time
+//! and the real on-time in the pulse's `flash_on_us`.
+//!
 //! # Which edge is next
 //!
 //! The core exposes only the time of its next deadline; the edge follows from its state

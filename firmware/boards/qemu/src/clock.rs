@@ -30,6 +30,13 @@ pub const TIM2_PSC: u32 = TIM_CLK_HZ / DEVICE_CLOCK_HZ - 1;
 /// Longest SysTick interval, µs: the alarm fires at least this often.
 pub const HEARTBEAT_US: u64 = 50_000;
 
+/// SysTick is armed this long before a deadline, and the alarm spins on TIM2 for the rest
+/// ([`spin_until`]): the SysTick ISR path alone costs 7–13 µs under `-icount shift=3`, so an
+/// alarm armed *at* the deadline executes every edge that late. Arming early makes each edge land
+/// on the first TIM2 count at or after its deadline, which keeps a flash's on-time (its off-edge
+/// anchored to its actual on-edge) within one tick of the plan, as a compare output would.
+pub const ALARM_EARLY_US: u64 = 20;
+
 // SysTick's reload register has 24 bits: the heartbeat must fit at CPU_HZ.
 const _: () = assert!(HEARTBEAT_US * (CPU_HZ as u64 / 1_000_000) <= 1 << 24);
 const _: () = assert!(TIM_CLK_HZ % DEVICE_CLOCK_HZ == 0);
@@ -76,18 +83,35 @@ pub fn read_tim2() -> u32 {
     unsafe { (*pac::TIM2::ptr()).cnt().read().bits() }
 }
 
-/// The SysTick reload value that fires once at `deadline_us` (or after [`HEARTBEAT_US`]):
-/// `cycles − 1` with `cycles = clamp(deadline − now, 1, HEARTBEAT_US) · CPU_HZ / 1 MHz`.
-/// A deadline already past fires after 1 µs.
+/// The SysTick reload value that fires once [`ALARM_EARLY_US`] before `deadline_us` (or after
+/// [`HEARTBEAT_US`]): `cycles − 1` with
+/// `cycles = clamp(deadline − ALARM_EARLY_US − now, 1, HEARTBEAT_US) · CPU_HZ / 1 MHz`.
+/// A deadline already past, or closer than the early margin, fires after 1 µs.
 pub fn systick_reload(now_us: u64, deadline_us: Option<u64>) -> u32 {
     let dt_us = deadline_us
-        .map_or(HEARTBEAT_US, |d| d.saturating_sub(now_us))
+        .map_or(HEARTBEAT_US, |d| {
+            d.saturating_sub(ALARM_EARLY_US).saturating_sub(now_us)
+        })
         .clamp(1, HEARTBEAT_US);
     // ≤ 2^24 by the assertion above, so the cast is exact.
     (dt_us * u64::from(CPU_HZ / 1_000_000)) as u32 - 1
 }
 
-/// Arms SysTick (clock source: processor, interrupt on) to fire once at `deadline_us`.
+/// Waits on `clock` until `deadline_us` when it is at most [`ALARM_EARLY_US`] away (the alarm
+/// fired early on purpose); returns the time to poll the core with. A deadline further away (a
+/// heartbeat) or already past returns at once.
+pub fn spin_until(clock: &mut WideClock, deadline_us: Option<u64>) -> u64 {
+    let mut now = clock.now_us();
+    if let Some(d) = deadline_us.filter(|&d| d > now && d - now <= ALARM_EARLY_US) {
+        while now < d {
+            now = clock.now_us();
+        }
+    }
+    now
+}
+
+/// Arms SysTick (clock source: processor, interrupt on) to fire [`ALARM_EARLY_US`] before
+/// `deadline_us`.
 pub fn arm_systick(syst: &mut cortex_m::peripheral::SYST, now_us: u64, deadline_us: Option<u64>) {
     syst.disable_counter();
     syst.set_reload(systick_reload(now_us, deadline_us));

@@ -45,7 +45,11 @@ fn with_port(f: impl FnOnce(&mut Port<QemuOutputs>, &mut WideClock)) {
 
 #[exception]
 fn SysTick() {
-    with_port(|port, clock| port.on_alarm(clock.now_us()));
+    with_port(|port, clock| {
+        // Armed ALARM_EARLY_US ahead: wait out the last µs so the edge lands on its deadline.
+        let now = clock::spin_until(clock, port.next_deadline());
+        port.on_alarm(now);
+    });
 }
 
 #[interrupt]

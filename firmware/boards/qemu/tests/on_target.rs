@@ -12,11 +12,13 @@ use stm32f4 as _; // links the PAC's interrupt vector table
 #[embedded_test::tests]
 mod tests {
     use ellipso_board_qemu::clock::{self, DEVICE_CLOCK_HZ, WideClock};
-    use ellipso_board_qemu::{BOARD_NAME, GpioaPin, HEARTBEAT_US, Port, board_config};
+    use ellipso_board_qemu::{
+        ALARM_EARLY_US, BOARD_NAME, GpioaPin, HEARTBEAT_US, Port, board_config,
+    };
     use ellipso_firmware::RecordingOutputs;
     use ellipso_protocol::{
-        BoardMessage, BoardState, CaptureConfig, Decoder, HostMessage, MAX_FRAME_LEN, Output,
-        PROTOCOL_VERSION, PulseCount, TriggerSource, encode,
+        BoardMessage, BoardState, Bracket, CaptureConfig, Decoder, HostMessage, MAX_FRAME_LEN,
+        Output, PROTOCOL_VERSION, PulseCount, TriggerSource, encode,
     };
     use stm32f4::stm32f405 as pac;
 
@@ -73,11 +75,16 @@ mod tests {
     }
 
     #[test]
-    fn systick_reload_fires_at_the_deadline_or_the_heartbeat() {
+    fn systick_reload_fires_early_by_the_margin_or_at_the_heartbeat() {
         let mhz = clock::CPU_HZ / 1_000_000;
-        assert_eq!(clock::systick_reload(1_000, Some(1_250)), 250 * mhz - 1);
+        let early = ALARM_EARLY_US as u32;
+        assert_eq!(
+            clock::systick_reload(1_000, Some(1_250)),
+            (250 - early) * mhz - 1
+        );
         assert_eq!(clock::systick_reload(1_000, Some(900)), mhz - 1); // past: 1 µs
         assert_eq!(clock::systick_reload(1_000, Some(1_000)), mhz - 1);
+        assert_eq!(clock::systick_reload(1_000, Some(1_015)), mhz - 1); // inside the margin
         let beat = (HEARTBEAT_US as u32) * mhz - 1;
         assert_eq!(clock::systick_reload(0, None), beat);
         assert_eq!(clock::systick_reload(0, Some(u64::MAX)), beat);
@@ -107,6 +114,7 @@ mod tests {
             pulses: PulseCount::Count(3),
             trigger: TriggerSource::FreeRun,
             report_edges: true,
+            bracket: Bracket::NONE,
         };
         let msgs = [
             HostMessage::Hello {
@@ -172,5 +180,96 @@ mod tests {
         }
         // 4 replies; 3 pulses; 12 edges; boot announcement + completion status.
         assert_eq!((acks, pulses, edge_reports, status), (4, 3, 12, 2));
+    }
+
+    /// The spin that follows an early alarm returns on the deadline's own count.
+    #[test]
+    fn spin_until_lands_on_the_deadline() {
+        let mut clock = WideClock::new();
+        for _ in 0..20 {
+            let d = clock.now_us() + ALARM_EARLY_US / 2;
+            assert_eq!(clock::spin_until(&mut clock, Some(d)), d);
+        }
+        // A heartbeat (deadline far away) and a past deadline return at once.
+        let far = clock.now_us() + 10_000;
+        assert!(clock::spin_until(&mut clock, Some(far)) < far);
+        let now = clock.now_us();
+        assert!(clock::spin_until(&mut clock, Some(now.saturating_sub(5))) >= now);
+    }
+
+    /// A 1, 1/4, 1/16 bracket of a 5 ms flash on the emulated TIM2, polled as the port's alarm
+    /// does (each edge on the first count at or after its deadline): every pulse's flash lasts
+    /// its step's planned on-time within one timer tick (1 µs), and its `Pulse` report carries
+    /// the step and that on-time.
+    #[test]
+    fn a_bracketed_capture_holds_each_pulse_width_within_one_tick() {
+        const N: usize = 6;
+        let mut clock = WideClock::new();
+        let mut port = Port::new(RecordingOutputs::<32>::new());
+        port.boot(clock.now_us());
+        let config = CaptureConfig {
+            exposure_us: 6_000,
+            flash_delay_us: 100,
+            flash_duration_us: 5_000,
+            frame_period_us: 50_000,
+            pulses: PulseCount::Count(N as u32),
+            trigger: TriggerSource::FreeRun,
+            report_edges: false,
+            bracket: Bracket::from_q15(&[0x8000, 0x2000, 0x0800]).unwrap(),
+        };
+        let mut wire = heapless::Vec::<u8, 2048>::new();
+        for msg in [
+            HostMessage::Configure(config),
+            HostMessage::Arm,
+            HostMessage::Start,
+        ] {
+            let mut frame = [0u8; MAX_FRAME_LEN];
+            let n = encode(&msg, &mut frame).unwrap();
+            for &b in &frame[..n] {
+                port.on_rx_byte(b, clock.now_us());
+            }
+        }
+        let t_start = clock.now_us();
+        while let Some(deadline) = port.next_deadline() {
+            assert!(clock.now_us() < t_start + 400_000, "capture did not finish");
+            let now = clock::spin_until(&mut clock, Some(deadline));
+            if now >= deadline {
+                port.on_alarm(now);
+            }
+        }
+        while let Some(b) = port.pop_tx_byte() {
+            wire.push(b).unwrap();
+        }
+        let plan = *port.board().plan().unwrap();
+        let flashes: heapless::Vec<_, 16> = port
+            .outputs()
+            .edges()
+            .filter(|e| e.output == Output::Flash)
+            .copied()
+            .collect();
+        assert_eq!(flashes.len(), 2 * N);
+        let mut dec = Decoder::<BoardMessage>::new();
+        let mut k = 0;
+        for m in dec.feed(&wire) {
+            let BoardMessage::Pulse(p) = m.unwrap() else {
+                continue;
+            };
+            let step = (k % 3) as u8;
+            assert_eq!(p.bracket_step, step);
+            let planned = i64::from(plan.step_on_time_us(step));
+            let width = (flashes[2 * k + 1].t_device_us - flashes[2 * k].t_device_us) as i64;
+            assert!(
+                (width - planned).abs() <= 1,
+                "pulse {k}: {width} µs for a planned {planned} µs"
+            );
+            assert_eq!(i64::from(p.flash_on_us), width);
+            assert_eq!(p.flags, 0);
+            k += 1;
+        }
+        assert_eq!(k, N);
+        assert_eq!(
+            [0, 1, 2].map(|s| plan.step_on_time_us(s)),
+            [5_000, 1_250, 313]
+        );
     }
 }

@@ -49,6 +49,9 @@ fn record(w: &mut SessionWriter, id: u64) {
         frame_id: id,
         seq: id + 100,
         latency_us: Some(3.5),
+        bracket_step: Some((id % 3) as u8),
+        flash_on_us: Some([5_000, 1_250, 313][(id % 3) as usize]),
+        flash_energy_rel: Some([1.0, 0.25, 0.0626][(id % 3) as usize]),
     })
     .unwrap();
 }
@@ -73,6 +76,20 @@ fn round_trip_of_a_clean_session() {
     assert_eq!(s.report.summary(), "intact");
     assert_eq!(s.frames.len(), 4);
     assert_eq!(s.frames[1].pulse_seq, Some(101));
+    let light: Vec<(u8, Option<u32>, f64)> = s
+        .frames
+        .iter()
+        .map(|f| (f.bracket_step, f.flash_on_us, f.flash_energy_rel))
+        .collect();
+    assert_eq!(
+        light,
+        [
+            (0, Some(5_000), 1.0),
+            (1, Some(1_250), 0.25),
+            (2, Some(313), 0.0626),
+            (0, Some(5_000), 1.0)
+        ]
+    );
     assert!(!s.frames[2].complete && s.frames[3].complete);
     let (w8, h6, px) = s.load_frame(&s.frames[3]).unwrap();
     assert_eq!((w8, h6, px), (8, 6, pixels(3)));
@@ -200,4 +217,74 @@ fn refuses_to_overwrite_a_session() {
         SessionWriter::create(&dir, manifest()),
         Err(SessionError::AlreadyExists { .. })
     ));
+}
+
+/// A log written before bracketing (no bracket fields on `pulse` and `pairing`) reads as step 0
+/// at full energy; an unpaired frame too; a nonsense energy from a hand edit reads as 1.
+#[test]
+fn sessions_without_bracket_fields_read_as_step_zero_at_full_energy() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let mut w = SessionWriter::create(&dir, manifest()).unwrap();
+    for id in 0..3 {
+        let px = pixels(id);
+        w.write_frame(FrameRecord {
+            t_host_us: HostTimeUs(id * 1000),
+            frame_id: id,
+            t_camera_ns: None,
+            exposure_us: 8000,
+            gain_db: 0.0,
+            width: 8,
+            height: 6,
+            pixels: &px,
+            flagged: None,
+        })
+        .unwrap();
+    }
+    w.finish(HostTimeUs(9999), "completed").unwrap();
+    let mut log = fs::OpenOptions::new()
+        .append(true)
+        .open(dir.join(paths::EVENTS))
+        .unwrap();
+    // Lines exactly as a pre-bracket build wrote them, and one with a corrupt energy.
+    log.write_all(
+        b"{\"type\":\"pulse\",\"t_host_us\":10,\"seq\":7,\"t_trigger_device_us\":1,\
+          \"t_flash_on_device_us\":2,\"t_flash_off_device_us\":3,\"flags\":0}\n\
+          {\"type\":\"pairing\",\"t_host_us\":11,\"frame_id\":0,\"seq\":7,\"latency_us\":4.0}\n\
+          {\"type\":\"pairing\",\"t_host_us\":12,\"frame_id\":1,\"seq\":8,\"bracket_step\":1,\
+          \"flash_energy_rel\":-2.0}\n",
+    )
+    .unwrap();
+    let s = open(&dir).unwrap();
+    assert!(s.report.bad_lines.is_empty(), "{:?}", s.report.bad_lines);
+    assert!(matches!(
+        s.events
+            .iter()
+            .find(|e| matches!(e, SessionEvent::Pulse { .. })),
+        Some(SessionEvent::Pulse {
+            bracket_step: 0,
+            flash_on_us: None,
+            ..
+        })
+    ));
+    let light: Vec<(Option<u64>, u8, Option<u32>, f64)> = s
+        .frames
+        .iter()
+        .map(|f| {
+            (
+                f.pulse_seq,
+                f.bracket_step,
+                f.flash_on_us,
+                f.flash_energy_rel,
+            )
+        })
+        .collect();
+    assert_eq!(
+        light,
+        [
+            (Some(7), 0, None, 1.0),
+            (Some(8), 1, None, 1.0),
+            (None, 0, None, 1.0)
+        ]
+    );
 }
