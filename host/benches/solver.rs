@@ -15,7 +15,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use ellipso_host::fit::data::{SampleGeometry, VertexSamples, ViewGeometry};
+use ellipso_host::fit::data::{SampleGeometry, VertexGuide, VertexSamples, ViewGeometry};
 use ellipso_host::fit::gate::GateConfig;
 use ellipso_host::fit::solve::{SolverConfig, fit_vertex};
 use ellipso_host::fit::synthetic::{SensorNoise, orbit_views, synthesize_vertex};
@@ -141,7 +141,7 @@ fn main() {
                 let mut normal_err = 0.0;
                 let mut iterations = 0;
                 for (v, (eta, normal)) in c.vertices.iter().zip(&c.truth) {
-                    let fit = black_box(fit_vertex(&c.views, v, true, None, &[], config));
+                    let fit = black_box(fit_vertex(&c.views, v, true, None, &VertexGuide::default(), config));
                     eta_err += (fit.params.eta - eta).abs() / eta;
                     let d: f64 = (0..3).map(|i| fit.normal_world[i] * normal[i]).sum();
                     normal_err += d.clamp(-1.0, 1.0).acos().to_degrees();

@@ -38,6 +38,13 @@ pub struct Args {
     /// on by default; docs/fit.md).
     #[arg(long)]
     pub joint_only: bool,
+    /// 1σ width of the prior cone of each refined normal about the mesh normal, degrees: how
+    /// far the mesh's normals can be trusted (0 disables the prior).
+    #[arg(long, default_value_t = 10.0)]
+    pub normal_prior_deg: f64,
+    /// Samples seen more obliquely than this from the mesh normal are gated out, degrees.
+    #[arg(long, default_value_t = crate::fit::gate::GateConfig::default().grazing_cutoff_deg)]
+    pub grazing_cutoff_deg: f64,
     /// Fraction of the posed frames held out of the fit and scored as a re-render (0 fits all;
     /// default 0.1).
     #[arg(long, default_value_t = 0.1)]
@@ -59,9 +66,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         holdout_fraction: args.holdout,
         ..SessionFitConfig::default()
     };
+    anyhow::ensure!(
+        args.normal_prior_deg.is_finite() && (0.0..=90.0).contains(&args.normal_prior_deg),
+        "--normal-prior-deg {}: must be in [0, 90]",
+        args.normal_prior_deg
+    );
     if args.joint_only {
         config.fit = crate::fit::pipeline::FitConfig::joint_only();
     }
+    config.fit.solver.normal_prior_deg = args.normal_prior_deg;
+    anyhow::ensure!(
+        args.grazing_cutoff_deg.is_finite() && (10.0..=89.0).contains(&args.grazing_cutoff_deg),
+        "--grazing-cutoff-deg {}: must be in [10, 89]",
+        args.grazing_cutoff_deg
+    );
+    config.observe.gate.grazing_cutoff_deg = args.grazing_cutoff_deg;
     let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
     println!("\nresults in {}:", args.out.display());
     for f in &result.files {

@@ -79,7 +79,7 @@ impl Field {
             }
         }
         let total: f64 = h.barycentric.iter().sum();
-        if !(total >= 0.5) {
+        if total.is_nan() || total < 0.5 {
             return None;
         }
         h.barycentric.iter_mut().for_each(|w| *w /= total);
@@ -485,7 +485,7 @@ pub fn tone_map(rgb: &[Option<[f64; 3]>]) -> Vec<Option<[f64; 3]>> {
         .map(|v| {
             v.map(|c| {
                 let l = scale * lum(&c).max(0.0);
-                if !(l > 0.0) || !l.is_finite() {
+                if l.is_nan() || l <= 0.0 || !l.is_finite() {
                     return [0.0; 3];
                 }
                 let ld = l * (1.0 + l / (white * white)) / (1.0 + l);

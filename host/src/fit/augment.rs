@@ -235,6 +235,11 @@ pub fn sample_geometry(
     g.front_facing.then_some((g, view.flash_polariser()))
 }
 
+/// Clusters whose colour centroids are closer than this pool η together: the virtual-sample
+/// kernel's reach, 0.1·√(2 ln 100) ≈ 0.30 (`virtual_samples` module doc) — colours that share
+/// virtual samples share a material.
+pub const POOL_COLOUR_DISTANCE: f64 = 0.3035;
+
 /// Whether a vertex's step-A η is its data's (not flagged `EtaUnidentifiable`, `GrazingOnly`
 /// or `AtBound`): only then does it place the vertex in η and decide whether the pooled η
 /// applies to it.
@@ -326,23 +331,54 @@ fn fit_cluster(
 /// prior ([`pool`]); the cluster's `eta_pooled` and `vertices_with_eta_prior` are updated.
 /// Members are the vertices with virtual samples from the cluster and a finite η standard
 /// error (a vertex returned at its prior has an infinite one).
+///
+/// Clusters whose colour (the ρ_d part of their centroids) lies within the kernel's reach of
+/// each other ([`POOL_COLOUR_DISTANCE`]) pool together: k-means may split one material by the
+/// noise of its η, and pooling each half alone would return the bias that split selected.
 pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); a.clusters.len()];
+    let k = a.clusters.len();
+    // Union-find over clusters by colour distance.
+    let mut group: Vec<usize> = (0..k).collect();
+    fn root(group: &mut [usize], mut i: usize) -> usize {
+        while group[i] != i {
+            group[i] = group[group[i]];
+            i = group[i];
+        }
+        i
+    }
+    for i in 0..k {
+        for j in i + 1..k {
+            let (ci, cj) = (&a.clusters[i].centroid, &a.clusters[j].centroid);
+            let d2: f64 = (0..3).map(|c| (ci[c] - cj[c]).powi(2)).sum();
+            if d2.sqrt() < POOL_COLOUR_DISTANCE {
+                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
+                group[ri.max(rj)] = ri.min(rj);
+            }
+        }
+    }
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
         if let Some(j) = j
             && !g.virtual_samples.is_empty()
             && v < fits.len()
         {
-            members[*j].push(v);
+            members[root(&mut group, *j)].push(v);
         }
     }
     for (j, list) in members.iter().enumerate() {
+        if list.is_empty() {
+            continue;
+        }
         let points: Vec<(f64, f64)> = list
             .iter()
             .map(|&v| (fits[v].params.eta, fits[v].std_error[0]))
             .collect();
         let pooled = pool::random_effects(&points);
-        a.clusters[j].eta_pooled = pooled;
+        for c in 0..k {
+            if root(&mut group, c) == j {
+                a.clusters[c].eta_pooled = pooled;
+            }
+        }
         for &v in list {
             let f = &fits[v];
             // A vertex whose η its own flags disown takes the material's η without the

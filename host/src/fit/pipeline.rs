@@ -169,7 +169,7 @@ pub fn fit_sample_set(
                 pass + 1,
                 config.final_passes
             ));
-            fits = fit_all(set, Some(&fits), Some(&a.guides), &solver);
+            fits = final_pass(set, &fits, &a.guides, &solver);
             // The cluster lobe is a start of the first final pass only.
             a.guides.iter_mut().for_each(|g| g.lobe_start = None);
         }
@@ -189,6 +189,33 @@ pub fn fit_sample_set(
         pooling,
         times,
     }
+}
+
+/// One final pass: every vertex with something from the clusters (virtual samples, floor,
+/// pooled η) is re-solved warm from `fits`; a vertex without a guide would re-converge where it
+/// is, so it keeps its result (the pass costs only what the clusters changed).
+fn final_pass(
+    set: &SampleSet,
+    fits: &[VertexFit],
+    guides: &[crate::fit::data::VertexGuide],
+    solver: &SolverConfig,
+) -> Vec<VertexFit> {
+    use rayon::prelude::*;
+    set.vertices
+        .par_iter()
+        .enumerate()
+        .map(|(i, v)| {
+            // One fit per vertex (step A's output); the guides are indexed alike.
+            let fit = &fits[i];
+            let Some(guide) = guides.get(i) else {
+                return fit.clone();
+            };
+            if guide.virtual_samples.is_empty() && guide.eta_prior.is_none() {
+                return fit.clone();
+            }
+            crate::fit::solve::fit_vertex(&set.views, v, set.colour, Some(fit), guide, solver)
+        })
+        .collect()
 }
 
 #[cfg(test)]

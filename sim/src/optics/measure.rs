@@ -138,7 +138,7 @@ pub fn effective_cos_sin_2(
     let (a, b) = (dot(t, x), dot(t, y));
     let norm = a * a + b * b;
     // Only a ray grazing the sensor plane along the wires has no transverse component.
-    if !(norm > 1e-24) || !norm.is_finite() {
+    if norm.is_nan() || norm <= 1e-24 || !norm.is_finite() {
         return nominal;
     }
     ((a * a - b * b) / norm, 2.0 * a * b / norm)

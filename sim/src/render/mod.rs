@@ -506,6 +506,7 @@ impl<'s> Renderer<'s> {
                     } else {
                         1.0
                     };
+                    let ray_pixel = pixel.for_ray(&dir_camera);
                     for ctx in contexts {
                         if blur {
                             counts.add(Stage::MotionBlur, 1);
@@ -514,7 +515,7 @@ impl<'s> Renderer<'s> {
                         let ray =
                             Ray::new(w2c.translation.vector.into(), w2c.rotation * dir_camera);
                         if let Some(hit) = self.scene.intersect(&ray, 0.0, f64::INFINITY) {
-                            signal += vig * shader.sample(ctx, &ray, &hit, &pixel, &mut counts);
+                            signal += vig * shader.sample(ctx, &ray, &hit, &ray_pixel, &mut counts);
                         }
                     }
                 }

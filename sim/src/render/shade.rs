@@ -19,8 +19,10 @@
 //!   up is y = z × x (optics.md §1.2, §5.3). Unpolarised flash: [1, 0, 0, 0].
 //! - Boards are matte paper: a Lambertian depolariser with the print albedo (no specular), so
 //!   they never need Mueller work.
-//! - Analyser at θ with extinction ratio ER (when planned; e = 1/ER, else 0):
-//!   I = ½[(1 + e) s0 + (1 − e)(s1 cos2θ + s2 sin2θ)]; a camera without analysers measures s0.
+//! - Analyser at nominal θ with extinction ratio ER (when planned; e = 1/ER, else 0):
+//!   I = ½[(1 + e) s0 + (1 − e)(s1 cos2ψ + s2 sin2ψ)], ψ the wire grid's effective axis for the
+//!   ray in the ray's camera frame (`PixelSensor::for_ray`; ψ = θ on the optical axis); a
+//!   camera without analysers measures s0.
 
 use crate::effects::{LightTransport, Stage, StageCounts, StageSet};
 use crate::geometry::Ray;
@@ -68,9 +70,12 @@ impl PoseContext {
 /// What one raw pixel measures: its analyser and colour response.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct PixelSensor {
-    /// cos 2θ of the analyser.
+    /// Nominal analyser angle (from image right toward image up), radians.
+    pub angle_rad: f64,
+    /// cos 2ψ of the analyser's effective axis for the ray being shaded (the nominal angle
+    /// until [`PixelSensor::for_ray`]).
     pub cos2: f64,
-    /// sin 2θ of the analyser.
+    /// sin 2ψ of the same.
     pub sin2: f64,
     /// Colour weights over (R, G, B): one-hot under a colour filter, ⅓ each on a mono sensor.
     pub weights: [f64; 3],
@@ -81,9 +86,29 @@ impl PixelSensor {
     pub fn new(angle_rad: f64, weights: [f64; 3]) -> Self {
         let (sin2, cos2) = (2.0 * angle_rad).sin_cos();
         Self {
+            angle_rad,
             cos2,
             sin2,
             weights,
+        }
+    }
+
+    /// The pixel for a primary ray along `dir_camera` (OpenCV camera frame, unit): its wire-grid
+    /// analyser's effective axis in the ray's camera frame
+    /// ([`crate::optics::measure::effective_cos_sin_2`], docs/model.md "Analysers off the
+    /// optical axis") — the same model the fit inverts.
+    pub fn for_ray(&self, dir_camera: &Vector3<f64>) -> Self {
+        let to_camera = [-dir_camera.x, -dir_camera.y, -dir_camera.z];
+        let (cos2, sin2) = crate::optics::measure::effective_cos_sin_2(
+            self.angle_rad,
+            [1.0, 0.0, 0.0],
+            [0.0, -1.0, 0.0],
+            to_camera,
+        );
+        Self {
+            cos2,
+            sin2,
+            ..*self
         }
     }
 }

@@ -21,8 +21,11 @@
 //!   new member's η — only when its own estimate agrees with it (within [`AGREE_SIGMAS`] of the
 //!   combined spread): a precise vertex of another material keeps its own η.
 //! - [`EtaShrink`]: the η a vertex contributes to the clustering features, shrunk towards the
-//!   members' median by its reliability r = 1/(1 + (s/(2·s_ref))²), s_ref the members' median
-//!   standard error, so vertices whose data cannot fix η are placed by their colour.
+//!   members' median by the empirical-Bayes factor r = τ²/(τ² + s²) (James & Stein 1961;
+//!   Efron & Morris 1975), τ the members' between-vertex spread of η ([`random_effects`] over
+//!   all of them). On a single material τ ≈ 0, so η's noise cannot split it into clusters of
+//!   high and low η (whose pooled values would then be biased by that very selection); with
+//!   materials of different η, τ is their spread and precise vertices keep their η.
 
 /// Fewer usable vertices than this give no pooled value.
 pub const MIN_VERTICES: usize = 5;
@@ -148,46 +151,33 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
 pub struct EtaShrink {
     /// The members' median η.
     pub median_eta: f64,
-    /// The members' median standard error of η (floored at 1e-4).
-    pub reference_se: f64,
+    /// The members' between-vertex spread τ (0 when it cannot be estimated).
+    pub tau: f64,
 }
 
 impl EtaShrink {
     /// The statistics of the members' `(η, standard error)`.
     pub fn from_members(members: &[(f64, f64)]) -> Self {
+        let pooled = random_effects(members);
         let mut etas: Vec<f64> = members
             .iter()
             .map(|m| m.0)
             .filter(|v| v.is_finite())
             .collect();
-        let mut ses: Vec<f64> = members
-            .iter()
-            .map(|m| m.1)
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
-        let median = |v: &mut Vec<f64>, fallback: f64| {
-            if v.is_empty() {
-                return fallback;
-            }
-            v.sort_by(f64::total_cmp);
-            v[v.len() / 2]
-        };
+        etas.sort_by(f64::total_cmp);
         Self {
-            median_eta: median(&mut etas, 1.5),
-            reference_se: median(&mut ses, 1e-4).max(1e-4),
+            median_eta: etas.get(etas.len() / 2).copied().unwrap_or(1.5),
+            tau: if pooled.usable { pooled.tau } else { 0.0 },
         }
     }
 
     /// The feature η of a vertex with estimate `eta` ± `se`.
     pub fn apply(&self, eta: f64, se: f64) -> f64 {
-        if !eta.is_finite() {
+        if !eta.is_finite() || !se.is_finite() {
             return self.median_eta;
         }
-        let r = if se.is_finite() {
-            1.0 / (1.0 + (se / (2.0 * self.reference_se)).powi(2))
-        } else {
-            0.0
-        };
+        let t2 = self.tau * self.tau;
+        let r = if t2 > 0.0 { t2 / (t2 + se * se) } else { 0.0 };
         self.median_eta + r * (eta - self.median_eta)
     }
 }
@@ -255,12 +245,22 @@ mod tests {
     }
 
     #[test]
-    fn shrinkage_follows_reliability() {
-        let s = EtaShrink::from_members(&[(1.4, 0.01), (1.5, 0.01), (1.6, 0.02)]);
-        assert_eq!(s.median_eta, 1.5);
-        assert!((s.apply(1.7, 0.01) - 1.7).abs() < 0.05);
-        assert!((s.apply(2.5, 1.0) - 1.5).abs() < 0.01);
-        assert_eq!(s.apply(2.5, f64::INFINITY), 1.5);
-        assert_eq!(s.apply(f64::NAN, 0.01), 1.5);
+    fn shrinkage_follows_reliability_and_the_population_spread() {
+        // Two materials (η 1.4 and 1.7): τ is their spread, precise vertices keep their η.
+        let mut two = draw(200, 1.4, 0.0, &[0.01], 8);
+        two.extend(draw(200, 1.7, 0.0, &[0.01], 9));
+        let s = EtaShrink::from_members(&two);
+        assert!(s.tau > 0.1, "{s:?}");
+        assert!((s.apply(1.7, 0.01) - 1.7).abs() < 0.01);
+        assert!((s.apply(2.5, 1.0) - s.median_eta).abs() < 0.05);
+        assert_eq!(s.apply(2.5, f64::INFINITY), s.median_eta);
+        assert_eq!(s.apply(f64::NAN, 0.01), s.median_eta);
+        // One material with noisy η: (almost) no spread, so η's noise is shrunk by > 10×.
+        let one = EtaShrink::from_members(&draw(300, 1.5, 0.0, &[0.1], 10));
+        assert!(one.tau < 0.04, "{one:?}");
+        assert!(
+            (one.apply(1.7, 0.1) - one.median_eta).abs() < 0.02,
+            "{one:?}"
+        );
     }
 }

@@ -162,6 +162,10 @@ pub(super) struct Problem<'a> {
     pub bounds: Bounds,
     /// Measurement-mode priors.
     pub priors: Priors,
+    /// Huber-downweight outlying samples ([`Problem::downweight_outliers`]): only with the
+    /// clusters' virtual samples, which anchor the lobe — without them, a highlight the current
+    /// lobe misses would itself look like an outlier and the lobe could run away from it.
+    pub robust: bool,
     /// Sensor gain, DN per electron (measurement-mode variances).
     dn_per_electron: f64,
     /// Signal-independent variance per analyser pixel, DN² (read noise² + 1/12 quantisation).
@@ -340,6 +344,7 @@ impl<'a> Problem<'a> {
             virtual_weight,
             bounds,
             priors,
+            robust: measurement && !virtuals.is_empty(),
             dn_per_electron,
             floor_variance_dn2,
         }
@@ -418,7 +423,9 @@ impl<'a> Problem<'a> {
             })
             .collect();
         let change = self.set_weights(|k, c| predicted[k][c]);
-        self.downweight_outliers(&predicted);
+        if self.robust {
+            self.downweight_outliers(&predicted);
+        }
         change
     }
 
@@ -438,10 +445,14 @@ impl<'a> Problem<'a> {
         let z: Vec<f64> = (0..n)
             .map(|k| {
                 let mut sum = 0.0;
-                for c in 0..self.channels {
-                    for j in 0..4 {
-                        let r = self.inv_sigma[k][c][j]
-                            * (predicted[k][c][j] - self.pixel_obs[k][c][j]);
+                let rows = predicted[k]
+                    .iter()
+                    .zip(&self.pixel_obs[k])
+                    .zip(&self.inv_sigma[k])
+                    .take(self.channels);
+                for ((pred, obs), w) in rows {
+                    for ((p, o), w) in pred.iter().zip(obs).zip(w) {
+                        let r = w * (p - o);
                         sum += r * r;
                     }
                 }

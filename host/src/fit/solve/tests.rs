@@ -311,14 +311,17 @@ fn monochrome_and_warm_start() {
         );
         assert!(w.iterations <= 3, "{w:?}");
     }
-    // The reference preset keeps the strict behaviour: exact re-convergence at an interior
-    // optimum (a vertex that ended at a bound sits where the reparameterisation is flat, and is
-    // flagged so).
+    // The reference preset keeps the strict behaviour: exact re-convergence at an interior,
+    // identified optimum. A vertex that ended at a bound (flagged so), or with a lobe switched
+    // off (ρ = 0 leaves its roughness unidentified: standard error > 1), sits where the
+    // objective is flat, and a warm start — pulled off saturated bounds — may find another
+    // point of it.
     let reference = SolverConfig::reference();
     let cold = fit_all(&set, None, None, &reference);
     let warm = fit_all(&set, Some(&cold), None, &reference);
     for (c, w) in cold.iter().zip(&warm) {
-        if c.flags.contains(&FitFlag::AtBound) {
+        let unidentified = c.std_error[1..3].iter().any(|e| e.is_nan() || *e > 1.0);
+        if c.flags.contains(&FitFlag::AtBound) || unidentified {
             continue;
         }
         assert!((c.params.eta - w.params.eta).abs() < 1e-6, "{c:?} {w:?}");
