@@ -141,7 +141,14 @@ fn main() {
                 let mut normal_err = 0.0;
                 let mut iterations = 0;
                 for (v, (eta, normal)) in c.vertices.iter().zip(&c.truth) {
-                    let fit = black_box(fit_vertex(&c.views, v, true, None, &VertexGuide::default(), config));
+                    let fit = black_box(fit_vertex(
+                        &c.views,
+                        v,
+                        true,
+                        None,
+                        &VertexGuide::default(),
+                        config,
+                    ));
                     eta_err += (fit.params.eta - eta).abs() / eta;
                     let d: f64 = (0..3).map(|i| fit.normal_world[i] * normal[i]).sum();
                     normal_err += d.clamp(-1.0, 1.0).acos().to_degrees();

@@ -87,6 +87,8 @@ pub struct AugmentConfig {
     pub max_lobe_samples: usize,
     /// Smallest σ_s of a cluster model (optics.md §9: 0.01–0.05).
     pub sigma_min: f64,
+    /// Upper bound of the cluster lobes' albedos (the solver's cap, default 5).
+    pub albedo_cap: f64,
     /// Seed of the sample draws.
     pub seed: u64,
 }
@@ -102,6 +104,7 @@ impl Default for AugmentConfig {
             max_eta_samples: 4096,
             max_lobe_samples: 65_536,
             sigma_min: 0.02,
+            albedo_cap: crate::fit::solve::SolverConfig::default().albedo_cap,
             seed: 0xa06_0e47,
         }
     }
@@ -310,7 +313,7 @@ fn fit_cluster(
             LobeSample::new(&g, flash, sample, fit_of(v), eta, w / mean_weight)
         })
         .collect();
-    let fit = lobe_fit::fit_lobes(&lobe, config.sigma_min)?;
+    let fit = lobe_fit::fit_lobes(&lobe, config.sigma_min, config.albedo_cap)?;
     Some(ClusterModel {
         eta_pooled: pool::Pooled::default(),
         centroid: centroid.to_vec(),

@@ -52,7 +52,7 @@ impl Analyser {
 /// ray arriving along −ω_o its effective transmission axis is ω_o × w (w the wire direction,
 /// i.e. the nominal transmission axis turned by 90° in the sensor plane) — perpendicular to the
 /// ray and to the wires (the dipole model of a thin polariser at oblique incidence, Chipman,
-/// Lam & Young, *Polarized Light and Optical Systems* 2018, §11). Projecting each nominal
+/// Lam & Young, *Polarized Light and Optical Systems*, CRC 2018). Projecting each nominal
 /// transmission axis onto the ray's transverse plane instead differs at second order in the
 /// field angle: by up to ~5° at the corners of a 1224×1024 frame with f = 1739 px. On the
 /// optical axis both give the nominal 0/45/90/135°.

@@ -231,7 +231,7 @@ fn two_lobe_fit_recovers_noiseless_and_degrades_gracefully_with_noise() {
     let clean = scene(240, |v| v % 3, 0.0, 0.0);
     let noisy = scene(240, |v| v % 3, 0.002, 0.0);
     for m in materials() {
-        let fit = lobe_fit::fit_lobes(&lobe_samples(&clean, &m), 0.02).unwrap();
+        let fit = lobe_fit::fit_lobes(&lobe_samples(&clean, &m), 0.02, 5.0).unwrap();
         let rel = |a: f64, b: f64| (a - b).abs() / b;
         assert!(rel(fit.sigma_s, m.sigma_s) < 1e-3, "{fit:?} vs {m:?}");
         assert!(rel(fit.sigma_ss, m.sigma_ss) < 1e-3, "{fit:?} vs {m:?}");
@@ -241,7 +241,7 @@ fn two_lobe_fit_recovers_noiseless_and_degrades_gracefully_with_noise() {
         }
         assert!(fit.rms < 1e-6, "{fit:?}");
 
-        let fit = lobe_fit::fit_lobes(&lobe_samples(&noisy, &m), 0.02).unwrap();
+        let fit = lobe_fit::fit_lobes(&lobe_samples(&noisy, &m), 0.02, 5.0).unwrap();
         eprintln!("noise 0.002: {fit:?} vs {m:?}");
         assert!(rel(fit.sigma_s, m.sigma_s) < 0.05, "{fit:?} vs {m:?}");
         assert!(rel(fit.sigma_ss, m.sigma_ss) < 0.15, "{fit:?} vs {m:?}");
