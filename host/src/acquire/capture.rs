@@ -25,8 +25,10 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, bounded, select, unbounded};
 use ellipso_protocol::{BoardState, CaptureConfig, PulseCount};
 
-use super::pairing::{Pairer, PairingConfig, PairingCounts, PairingOutcome};
-use crate::camera::{Camera, CameraCounters, CameraError, CameraSettings, Frame, FrameStatus};
+use super::pairing::{FrameArrival, Pairer, PairingConfig, PairingCounts, PairingOutcome, Pulse};
+use crate::camera::{
+    Camera, CameraClockSample, CameraCounters, CameraError, CameraSettings, Frame, FrameStatus,
+};
 use crate::link::clock::ClockFit;
 use crate::link::time::{DeviceTimeUs, HostTimeUs};
 use crate::link::{LinkCounters, LinkError, LinkEvent, TriggerLink, describe_reject};
@@ -119,20 +121,49 @@ pub enum CaptureError {
 
 struct Written {
     prepared: PreparedFrame,
-    frame_id: u64,
-    t_host_us: HostTimeUs,
+    arrival: FrameArrival,
     flagged: bool,
 }
 
+/// Latch readings of the camera's counter taken before streaming; the tightest brackets win.
+const CAMERA_CLOCK_SAMPLES: usize = 8;
+
 /// Runs one capture into `session`; returns the report and the session directory.
+///
+/// The session always ends with an end record: a capture that fails after the session was
+/// created (the board refuses the configuration, the camera fails to start, the disk fills)
+/// records `failed: <why>` rather than looking like a crash.
 pub fn capture(
     link: &TriggerLink,
-    mut camera: Box<dyn Camera>,
+    camera: Box<dyn Camera>,
     mut session: SessionWriter,
     plan: &CapturePlan,
     stop: &AtomicBool,
-    mut progress: impl FnMut(&CaptureProgress),
+    progress: impl FnMut(&CaptureProgress),
 ) -> Result<(CaptureReport, std::path::PathBuf), CaptureError> {
+    match record(link, camera, &mut session, plan, stop, progress) {
+        Ok(report) => {
+            let dir = session.finish(link.host_clock().now(), &report.end_reason)?;
+            Ok((report, dir))
+        }
+        Err(e) => {
+            let reason = format!("failed: {e}");
+            if let Err(finish) = session.finish(link.host_clock().now(), &reason) {
+                tracing::warn!("recording why the capture failed: {finish}");
+            }
+            Err(e)
+        }
+    }
+}
+
+fn record(
+    link: &TriggerLink,
+    mut camera: Box<dyn Camera>,
+    session: &mut SessionWriter,
+    plan: &CapturePlan,
+    stop: &AtomicBool,
+    mut progress: impl FnMut(&CaptureProgress),
+) -> Result<CaptureReport, CaptureError> {
     let clock_now = || link.host_clock().now();
     let started = Instant::now();
     let board = link.board();
@@ -161,6 +192,20 @@ pub fn capture(
     })?;
 
     camera.configure(&plan.camera)?;
+    // the camera's clock model: exposure timestamps then pair frames at any frame rate
+    let mut latches: Vec<CameraClockSample> = (0..CAMERA_CLOCK_SAMPLES)
+        .filter_map(|_| camera.clock_sample())
+        .collect();
+    latches.sort_by_key(|s| s.t_host_after.0.saturating_sub(s.t_host_before.0));
+    latches.truncate(2);
+    for l in &latches {
+        session.log(&SessionEvent::CameraClock {
+            t_host_us: clock_now(),
+            t_camera_ns: l.t_camera_ns,
+            t_host_before_us: l.t_host_before,
+            t_host_after_us: l.t_host_after,
+        })?;
+    }
     camera.start()?;
     link.configure(plan.board).map_err(|e| match e {
         LinkError::Rejected { reason, .. } => {
@@ -234,8 +279,11 @@ pub fn capture(
                         let r =
                             SessionWriter::prepare_frame(&dir, record).map(|prepared| Written {
                                 prepared,
-                                frame_id: m.frame_id,
-                                t_host_us: m.t_host_us,
+                                arrival: FrameArrival {
+                                    frame_id: m.frame_id,
+                                    t_host_arrival: m.t_host_us,
+                                    t_camera_ns: m.t_camera_ns,
+                                },
                                 flagged: flagged.is_some(),
                             });
                         if tx.send(r).is_err() {
@@ -251,17 +299,26 @@ pub fn capture(
         })?;
     drop((frame_rx, written_tx));
 
-    link.arm()?;
-    link.start()?;
+    if let Err(e) = link.arm().and_then(|()| link.start()) {
+        camera_stop.store(true, Ordering::Release);
+        let _ = camera_thread.join();
+        for w in writers {
+            let _ = w.join();
+        }
+        return Err(e.into());
+    }
 
     let expected = match plan.board.pulses {
         PulseCount::Count(n) => Some(u64::from(n)),
         PulseCount::Continuous => None,
     };
     let mut state = LoopState::new(plan.pairing, expected, clock.clone());
+    for l in &latches {
+        state.pairer.add_camera_clock_sample(l);
+    }
     let end_reason = state.run(
         link,
-        &mut session,
+        session,
         &written_rx,
         plan,
         stop,
@@ -281,10 +338,10 @@ pub fn capture(
         let _ = w.join();
     }
     for w in written_rx.try_iter() {
-        state.on_written(w?, &mut session)?;
+        state.on_written(w?, session)?;
     }
-    let outcomes = state.pairer.finish();
-    state.log_outcomes(&outcomes, &mut session, clock_now())?;
+    let outcomes = state.pairer.finish(Some(&state.clock));
+    state.log_outcomes(&outcomes, session, clock_now())?;
     let counters = link.counters();
     session.log(&SessionEvent::Link {
         t_host_us: clock_now(),
@@ -302,8 +359,7 @@ pub fn capture(
         board_faults: state.faults,
         clock: Some(state.clock.clone()),
     };
-    let dir = session.finish(clock_now(), &end_reason)?;
-    Ok((report, dir))
+    Ok(report)
 }
 
 struct LoopState {
@@ -426,7 +482,7 @@ impl LoopState {
                 },
                 default(Duration::from_millis(50)) => {}
             }
-            let outcomes = self.pairer.expire(now(), Some(&self.clock));
+            let outcomes = self.pairer.expire(Some(&self.clock));
             // keep the clock model current: a short initial fit extrapolates badly over a
             // capture of minutes; a ping every 250 ms slides it along
             if ending.is_none() && last_ping.elapsed() > Duration::from_millis(250) {
@@ -486,12 +542,12 @@ impl LoopState {
                     t_flash_off_device_us: DeviceTimeUs(event.t_flash_off_us),
                     flags: event.flags,
                 })?;
-                let out = self.pairer.add_pulse(
-                    event.seq,
-                    DeviceTimeUs(event.t_trigger_us),
+                let pulse = Pulse {
+                    seq: event.seq,
+                    t_trigger: DeviceTimeUs(event.t_trigger_us),
                     t_host_recv,
-                    Some(&self.clock),
-                );
+                };
+                let out = self.pairer.add_pulse(pulse, Some(&self.clock));
                 self.log_outcomes(&out, session, t)?;
                 if self.expected.is_some_and(|n| self.pulses >= n) {
                     self.mark_done();
@@ -533,10 +589,8 @@ impl LoopState {
         if w.flagged {
             self.flagged += 1;
         }
-        let out = self
-            .pairer
-            .add_frame(w.frame_id, w.t_host_us, Some(&self.clock));
-        self.log_outcomes(&out, session, w.t_host_us)
+        let out = self.pairer.add_frame(w.arrival, Some(&self.clock));
+        self.log_outcomes(&out, session, w.arrival.t_host_arrival)
     }
 
     fn log_outcomes(
@@ -546,36 +600,46 @@ impl LoopState {
         t: HostTimeUs,
     ) -> Result<(), SessionError> {
         for o in outcomes {
-            let (kind, frame_id, seq) = match *o {
+            let (kind, frame_id, seq, reason) = match *o {
                 PairingOutcome::Paired {
                     frame_id,
-                    seq,
+                    pulse,
                     latency_us,
+                    basis,
                 } => {
                     session.log(&SessionEvent::Pairing {
                         t_host_us: t,
                         frame_id,
-                        seq,
-                        latency_us,
+                        seq: pulse.seq,
+                        latency_us: Some(latency_us),
+                        basis: serde_json::to_value(basis)
+                            .ok()
+                            .and_then(|v| v.as_str().map(str::to_string)),
                     })?;
                     continue;
                 }
-                PairingOutcome::FrameWithoutPulse { frame_id } => {
-                    ("frame_without_pulse", Some(frame_id), None)
-                }
+                PairingOutcome::FrameWithoutPulse { frame_id, reason } => (
+                    "frame_without_pulse",
+                    Some(frame_id),
+                    None,
+                    Some(reason.as_str().to_string()),
+                ),
                 PairingOutcome::PulseWithoutFrame { seq } => {
-                    ("pulse_without_frame", None, Some(seq))
+                    ("pulse_without_frame", None, Some(seq), None)
                 }
                 PairingOutcome::DuplicateFrame { frame_id } => {
-                    ("duplicate_frame", Some(frame_id), None)
+                    ("duplicate_frame", Some(frame_id), None, None)
                 }
-                PairingOutcome::DuplicatePulse { seq } => ("duplicate_pulse", None, Some(seq)),
+                PairingOutcome::DuplicatePulse { seq } => {
+                    ("duplicate_pulse", None, Some(seq), None)
+                }
             };
             session.log(&SessionEvent::PairingError {
                 t_host_us: t,
                 kind: kind.into(),
                 frame_id,
                 seq,
+                reason,
             })?;
         }
         Ok(())

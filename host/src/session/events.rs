@@ -103,6 +103,9 @@ pub enum SessionEvent {
         /// Frame arrival minus the pulse's trigger mapped to host time, µs (when the clock is fitted).
         #[serde(default)]
         latency_us: Option<f64>,
+        /// The evidence: `camera_time` (the frame's exposure timestamp) or `arrival_time`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        basis: Option<String>,
     },
     /// A frame or pulse that could not be paired; never silently dropped.
     PairingError {
@@ -116,6 +119,22 @@ pub enum SessionEvent {
         /// Pulse sequence number, if a pulse is involved.
         #[serde(default)]
         seq: Option<u64>,
+        /// Why a frame found no pulse: `no_clock`, `no_pulse`, `ambiguous`, `pulse_taken`,
+        /// `unconfirmed` (see `acquire::pairing::Unpaired`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
+    },
+    /// The camera's timestamp counter read between two host times (its clock model for pairing
+    /// on exposure times).
+    CameraClock {
+        /// Host time.
+        t_host_us: HostTimeUs,
+        /// The camera's counter, ns.
+        t_camera_ns: u64,
+        /// Host time before the latch.
+        t_host_before_us: HostTimeUs,
+        /// Host time after the read-back.
+        t_host_after_us: HostTimeUs,
     },
     /// A fault reported by the board or seen by the host.
     Fault {

@@ -49,6 +49,7 @@ fn record(w: &mut SessionWriter, id: u64) {
         frame_id: id,
         seq: id + 100,
         latency_us: Some(3.5),
+        basis: None,
     })
     .unwrap();
 }
