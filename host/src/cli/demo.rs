@@ -154,8 +154,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         interval_ms: None,
         no_track: true,
     };
-    let (report, dir, _) = capture::capture_sim(&capture_args, false)?;
+    let captured = capture::capture_sim(&capture_args, false)?;
+    let (report, dir) = (captured.report, captured.dir);
     print_report(&report);
+    if let Some(signal) = captured.signal {
+        return Err(capture::Interrupted { signal, dir }.into());
+    }
 
     println!("[2/4] tracking camera poses from the AprilTags…");
     let tracked = capture::track_and_append(&dir)?;

@@ -81,8 +81,8 @@ pub struct Manifest {
     /// AprilTag boards of the capture.
     #[serde(default)]
     pub boards: Vec<serde_json::Value>,
-    /// Set when the session ended cleanly.
-    #[serde(default)]
+    /// Set when the session ended cleanly; absent (not `null`) otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub end: Option<EndRecord>,
 }
 

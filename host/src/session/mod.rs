@@ -96,6 +96,18 @@ pub enum SessionError {
         /// The directory.
         path: std::path::PathBuf,
     },
+    /// The directory is not a fresh one: a new session is never written among other files
+    /// (an older recording's `frames/` or `events.jsonl` above all).
+    #[error(
+        "{path}: {what}; a capture writes only into a new or empty directory, never over \
+         another recording — choose a new --out"
+    )]
+    NotFresh {
+        /// The directory.
+        path: std::path::PathBuf,
+        /// What is there.
+        what: String,
+    },
 }
 
 impl SessionError {

@@ -57,19 +57,27 @@ pub struct FrameRecord<'a> {
 }
 
 impl SessionWriter {
-    /// Creates `dir` (which must not already hold a session) and writes the manifest.
+    /// Creates `dir`, which must be new or an empty directory ([`check_fresh`]), and writes the
+    /// manifest.
     pub fn create(dir: &Path, manifest: Manifest) -> Result<Self, SessionError> {
-        if dir.join(paths::MANIFEST).exists() {
-            return Err(SessionError::AlreadyExists {
-                path: dir.to_path_buf(),
-            });
+        check_fresh(dir)?;
+        if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(SessionError::io(parent))?;
         }
+        match fs::create_dir(dir) {
+            Ok(()) => {}
+            // an empty directory (checked above) is fine
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir() => {}
+            Err(e) => return Err(SessionError::io(dir)(e)),
+        }
+        // `create_dir`, `create_new`: if another process raced us into `dir`, fail rather than
+        // share it
         let frames = dir.join(paths::FRAMES);
-        fs::create_dir_all(&frames).map_err(SessionError::io(&frames))?;
+        fs::create_dir(&frames).map_err(SessionError::io(&frames))?;
         write_manifest(dir, &manifest)?;
         let log = dir.join(paths::EVENTS);
         let events = OpenOptions::new()
-            .create(true)
+            .create_new(true)
             .append(true)
             .open(&log)
             .map_err(SessionError::io(&log))?;
@@ -169,6 +177,43 @@ impl SessionWriter {
         });
         write_manifest(&self.dir, &self.manifest)?;
         Ok(self.dir)
+    }
+}
+
+/// Refuses a `dir` that is not new or an empty directory: it must never be another session
+/// (even one whose manifest is gone), nor a file.
+pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
+    if dir.join(paths::MANIFEST).exists() {
+        return Err(SessionError::AlreadyExists {
+            path: dir.to_path_buf(),
+        });
+    }
+    let not_fresh = |what: String| SessionError::NotFresh {
+        path: dir.to_path_buf(),
+        what,
+    };
+    match fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(SessionError::io(dir)(e)),
+        Ok(m) if !m.is_dir() => Err(not_fresh("exists and is not a directory".into())),
+        Ok(_) => {
+            let mut names: Vec<String> = fs::read_dir(dir)
+                .map_err(SessionError::io(dir))?
+                .filter_map(Result::ok)
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            if names.is_empty() {
+                return Ok(());
+            }
+            names.sort();
+            let n = names.len();
+            names.truncate(3);
+            let more = if n > 3 { ", …" } else { "" };
+            Err(not_fresh(format!(
+                "is not empty ({n} entries: {}{more})",
+                names.join(", ")
+            )))
+        }
     }
 }
 
