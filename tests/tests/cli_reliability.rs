@@ -109,3 +109,128 @@ fn wait_for_frames(dir: &Path, n: usize, what: &str) {
         std::thread::sleep(Duration::from_millis(20));
     }
 }
+
+/// Every file under `dir` with its bytes (to prove nothing recorded changed).
+fn snapshot(dir: &Path) -> Vec<(std::path::PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().filter_map(Result::ok) {
+            let p = e.path();
+            if p.is_dir() {
+                stack.push(p);
+            } else {
+                out.push((p.clone(), std::fs::read(&p).unwrap()));
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+#[test]
+fn capture_refuses_an_out_that_holds_an_older_recording() {
+    let tmp = tempfile::tempdir().unwrap();
+    let old = tmp.path().join("old");
+    let o = capture_cmd(&old, 3, 100).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    // the manifest lost (a crash before it was written, a user's `rm`), frames and log there
+    std::fs::remove_file(old.join("manifest.json")).unwrap();
+    let before = snapshot(&old);
+    let o = capture_cmd(&old, 3, 100).output().unwrap();
+    assert!(!o.status.success(), "captured over an older recording");
+    let err = stderr(&o);
+    assert!(
+        err.contains("not empty") && err.contains(&old.display().to_string()),
+        "{err}"
+    );
+    assert_eq!(snapshot(&old), before, "the older recording changed");
+    // a file, and any other non-empty directory, are refused too
+    let file = tmp.path().join("file");
+    std::fs::write(&file, b"x").unwrap();
+    let o = capture_cmd(&file, 3, 100).output().unwrap();
+    assert!(!o.status.success() && stderr(&o).contains("not a directory"));
+    let other = tmp.path().join("other");
+    std::fs::create_dir(&other).unwrap();
+    std::fs::write(other.join("notes.txt"), b"mine").unwrap();
+    let o = capture_cmd(&other, 3, 100).output().unwrap();
+    assert!(!o.status.success() && stderr(&o).contains("not empty"));
+    assert_eq!(std::fs::read(other.join("notes.txt")).unwrap(), b"mine");
+    // an empty directory is fine
+    let empty = tmp.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let o = capture_cmd(&empty, 2, 100).output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn sigint_and_sigterm_end_a_capture_cleanly() {
+    let tmp = tempfile::tempdir().unwrap();
+    for (signal, name) in [(libc::SIGINT, "SIGINT"), (libc::SIGTERM, "SIGTERM")] {
+        let out = tmp.path().join(name);
+        let mut child = capture_cmd(&out, 200, 100)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        wait_for_frames(&out, 3, name);
+        let pid = i32::try_from(child.id()).unwrap();
+        // SAFETY: `pid` is our own child, alive (its stderr is still open); kill only signals it.
+        assert_eq!(unsafe { libc::kill(pid, signal) }, 0);
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            assert!(Instant::now() < deadline, "{name}: capture did not end");
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(status.code(), Some(128 + signal), "{name}: {}", stderr(&o));
+        assert!(stderr(&o).contains("stopped by signal"), "{}", stderr(&o));
+        let s = reader::open(&out).expect("session opens");
+        assert!(s.report.ended_cleanly, "{name}: no end record");
+        assert_eq!(s.report.summary(), "intact", "{name}");
+        let end = s.manifest.end.as_ref().unwrap();
+        assert_eq!(end.reason, "stopped by user", "{name}");
+        assert!(
+            s.events.iter().any(
+                |e| matches!(e, SessionEvent::End { reason, .. } if reason == "stopped by user")
+            )
+        );
+        let pulses = s
+            .events
+            .iter()
+            .filter(|e| matches!(e, SessionEvent::Pulse { .. }))
+            .count();
+        assert!(pulses < 200, "{name}: the board was not stopped");
+        // frames in flight were drained: every pulse's frame is on disk, logged and paired
+        let paired = s.frames.iter().filter(|f| f.pulse_seq.is_some()).count();
+        assert_eq!(
+            (s.frames.len(), paired),
+            (pulses, pulses),
+            "{name}: frames in flight lost"
+        );
+        for f in &s.frames {
+            s.load_frame(f).expect("every frame loads");
+        }
+    }
+}
+
+#[test]
+fn a_killed_capture_leaves_no_end_key_at_all() {
+    // docs/session-format.md: `end` is absent after a crash (it was written as `null`)
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("killed");
+    let mut child = capture_cmd(&out, 200, 100)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    wait_for_frames(&out, 2, "kill");
+    child.kill().unwrap();
+    let _ = child.wait();
+    let text = std::fs::read_to_string(out.join("manifest.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    assert!(v.get("end").is_none(), "{text}");
+}
