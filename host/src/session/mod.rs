@@ -70,6 +70,16 @@ pub enum SessionError {
         /// What serde said.
         message: String,
     },
+    /// A manifest field holds an impossible value.
+    #[error("{path}: `{field}`: {what}")]
+    InvalidManifest {
+        /// The manifest file.
+        path: std::path::PathBuf,
+        /// The field, e.g. `sensor.bit_depth`.
+        field: &'static str,
+        /// What is wrong.
+        what: String,
+    },
     /// The session was written by a newer, incompatible schema.
     #[error(
         "{path}: session schema v{found} is not supported by this ellipso (reads v{supported})"

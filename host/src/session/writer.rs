@@ -236,7 +236,9 @@ pub struct SessionAppender {
 }
 
 impl SessionAppender {
-    /// Opens the log of the session in `dir` for appending; the session must exist.
+    /// Opens the log of the session in `dir` for appending; the session must exist. A log whose
+    /// last line was cut short (a killed writer) is first ended with a newline, so appended
+    /// events start on a line of their own and the cut line stays a (reported) corrupt line.
     pub fn open(dir: &Path) -> Result<Self, SessionError> {
         let manifest = dir.join(paths::MANIFEST);
         if !manifest.is_file() {
@@ -246,11 +248,15 @@ impl SessionAppender {
             });
         }
         let path = dir.join(paths::EVENTS);
-        let events = OpenOptions::new()
+        let mut events = OpenOptions::new()
+            .read(true)
             .append(true)
             .create(true)
             .open(&path)
             .map_err(SessionError::io(&path))?;
+        if !ends_with_newline(&mut events).map_err(SessionError::io(&path))? {
+            write_all_or_nothing(&mut events, b"\n").map_err(SessionError::io(&path))?;
+        }
         Ok(Self { path, events })
     }
 
@@ -261,12 +267,41 @@ impl SessionAppender {
 }
 
 /// Appends `event` to the log `file` (at `path`, for errors) as one line, in one write: the
-/// crash-safety contract of the event log.
+/// crash-safety contract of the event log. All or nothing: a write cut short (a full disk) is
+/// truncated away again, so no partial line is ever left behind by an error.
 fn append_line(file: &mut File, path: &Path, event: &SessionEvent) -> Result<(), SessionError> {
     let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
         path: path.to_path_buf(),
         error: std::io::Error::other(e),
     })?;
     line.push(b'\n');
-    file.write_all(&line).map_err(SessionError::io(path))
+    write_all_or_nothing(file, &line).map_err(SessionError::io(path))
+}
+
+/// Writes `bytes` at the end of `file` (opened for appending) completely, or restores the
+/// file's previous length and returns the error.
+fn write_all_or_nothing(file: &mut File, bytes: &[u8]) -> std::io::Result<()> {
+    let before = file.metadata()?.len();
+    match file.write_all(bytes) {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            if let Err(undo) = file.set_len(before) {
+                tracing::error!("could not remove a partly written log line: {undo}");
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Whether `file` is empty or its last byte is a newline.
+fn ends_with_newline(file: &mut File) -> std::io::Result<bool> {
+    use std::io::{Read, Seek, SeekFrom};
+    let len = file.metadata()?.len();
+    if len == 0 {
+        return Ok(true);
+    }
+    file.seek(SeekFrom::Start(len - 1))?;
+    let mut last = [0u8; 1];
+    file.read_exact(&mut last)?;
+    Ok(last[0] == b'\n')
 }
