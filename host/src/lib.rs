@@ -11,12 +11,14 @@
 //! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
 //! - [`process`]: the stages after capture on a recorded session (pose tracking; later the fit).
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
+//! - [`atomic_file`]: result files written whole or not at all (temporary name + rename).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, augmentation, shape).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit).
 
 pub mod acquire;
+pub mod atomic_file;
 pub mod calibrate;
 pub mod camera;
 pub mod cli;

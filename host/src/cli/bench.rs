@@ -220,7 +220,7 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("pose-bench.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
     println!("written {}", path.display());
     Ok(())
 }

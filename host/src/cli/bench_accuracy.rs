@@ -290,10 +290,10 @@ fn write_report(
         |s| s.normal_median_deg,
     )?;
     let json = dir.join(format!("{stem}.json"));
-    std::fs::write(&json, serde_json::to_vec_pretty(results)?)
+    crate::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
-    std::fs::write(path, md).with_context(|| format!("writing {}", path.display()))?;
+    crate::atomic_file::write(path, md).with_context(|| format!("writing {}", path.display()))?;
     println!(
         "\nreport  {}\nplots   {}\n        {}\ndata    {}",
         path.display(),

@@ -194,7 +194,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push('\n');
         text.push_str(&flash.to_toml_flash_section());
     }
-    std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+    crate::atomic_file::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
     println!("rig sections written to {}", out.display());
     Ok(())
 }

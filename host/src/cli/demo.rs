@@ -223,7 +223,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "fit": fit.summary,
     });
     let summary_path = args.out.join("summary.json");
-    std::fs::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
+    crate::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
     println!("\nresults in {}:", args.out.display());
     println!("  session (raw frames + event log)  {}", dir.display());
     println!(
@@ -300,7 +300,7 @@ fn fit_and_score(
     // A scanned mesh is never exact: smooth noise of 0.3 mm along the normals.
     let input = crate::fit::shape::perturb_mesh(&truth.mesh, 3e-4, scene.seed);
     let mesh_path = out.join("input-mesh.ply");
-    std::fs::write(
+    crate::atomic_file::write(
         &mesh_path,
         ellipso_sim::geometry::ply::write_ply(
             &input,

@@ -143,7 +143,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
-    fs::write(&summary_path, text + "\n")
+    crate::atomic_file::write(&summary_path, text + "\n")
         .with_context(|| format!("cannot write {}", summary_path.display()))?;
     files.push((
         "summary.json".into(),
@@ -437,7 +437,7 @@ fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> a
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb)
         .ok_or_else(|| anyhow!("internal: s0_rgb buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), "s0/2 of R, G, B as 16-bit RGB".into()));
     Ok(())
@@ -455,7 +455,7 @@ fn save_gray16(
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data)
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -472,7 +472,7 @@ fn save_gray8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::GrayImage::from_raw(w, h, canvas.to_gray())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -489,7 +489,7 @@ fn save_rgb8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())

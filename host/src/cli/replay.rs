@@ -160,7 +160,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| args.session.join("replay"));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("replay.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&r)?)
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
         .with_context(|| format!("writing {}", path.display()))?;
     println!("report       {}", path.display());
     Ok(())

@@ -172,7 +172,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frames,
     };
     let path = args.out.join("truth.json");
-    fs::write(&path, serde_json::to_string_pretty(&truth)?)
+    crate::atomic_file::write(&path, serde_json::to_string_pretty(&truth)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let c = renderer.camera();
     println!(
@@ -197,7 +197,7 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
     let path = out.join(&file);
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(f.width, f.height, f.raw())
         .ok_or_else(|| anyhow!("frame {k}: buffer does not match {}×{}", f.width, f.height))?;
-    img.save(&path)
+    crate::atomic_file::write_png(&path, &img)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let mut pixel_truth_files = Vec::new();
     if let Some(p) = &f.pixels {
@@ -218,7 +218,8 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
             ),
         ] {
             let path = out.join(&name);
-            fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+            crate::atomic_file::write(&path, bytes)
+                .with_context(|| format!("cannot write {}", path.display()))?;
             pixel_truth_files.push(name);
         }
     }

@@ -320,7 +320,7 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
     );
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("calibration-bench.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&b)?)?;
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&b)?)?;
     println!("written {}", path.display());
     Ok(())
 }
