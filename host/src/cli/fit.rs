@@ -74,12 +74,27 @@ pub struct FitRun {
     pub wall_s: f64,
 }
 
-/// The session's recorded poses (`pose` events), tracking them first when there are none.
+/// The session's recorded poses (`pose` events), tracking first every complete frame that has
+/// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
+    let untracked = crate::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
-    if poses.is_empty() {
-        println!("no poses recorded: tracking the AprilTags first…");
-        super::capture::track_and_append(&session.dir)?;
+    if !untracked.is_empty() {
+        println!(
+            "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
+            untracked.len(),
+            session.frames.iter().filter(|f| f.complete).count()
+        );
+        let tracked =
+            crate::process::track_frames(session, &crate::track::TrackConfig::default(), |id| {
+                untracked.contains(&id)
+            })?;
+        crate::process::append_poses(
+            &session.dir,
+            &tracked,
+            crate::link::time::HostClock::new().now(),
+        )
+        .context("recording the new poses (nothing recorded was changed)")?;
         poses = poses_from_session(&crate::session::reader::open(&session.dir)?);
     }
     anyhow::ensure!(
@@ -110,6 +125,17 @@ pub fn fit_and_export(
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
         println!("  {stage}…")
     })?;
+    // every posed frame that gave nothing is said, with its reason, and counted in the summary
+    for s in &fit.observe.skipped {
+        tracing::warn!("frame {} skipped: {}", s.frame_id, s.reason);
+    }
+    if !fit.observe.skipped.is_empty() {
+        eprintln!(
+            "warning: {} of {} posed frames skipped (reasons above and in fit-summary.json)",
+            fit.observe.skipped.len(),
+            fit.observe.frames_posed
+        );
+    }
     let (frame_id, world_from_camera) = match view {
         Some(id) => *poses
             .iter()
@@ -140,6 +166,9 @@ pub fn fit_and_export(
         "session": session.dir.display().to_string(),
         "vertices": fit.outcome.fits.len(),
         "frames_posed": poses.len(),
+        "frames_used": fit.observe.frames_used,
+        "frames_skipped": fit.observe.skipped,
+        "session_report": session.report.summary(),
         "view_frame_id": frame_id,
         "times_s": fit.outcome.times,
         "wall_s": wall_s,
@@ -148,7 +177,7 @@ pub fn fit_and_export(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
-    std::fs::write(&summary, serde_json::to_vec_pretty(&json)?)
+    crate::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);
     Ok(FitRun { fit, files, wall_s })

@@ -19,7 +19,7 @@ use ellipso_sim::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
 use super::data::{GateCounts, SampleSet, VertexFit};
-use super::observe::{ObserveConfig, ObserveError, extract};
+use super::observe::{ObserveConfig, ObserveError, ObserveReport, extract};
 use super::pipeline::{FitConfig, FitOutcome, fit_sample_set};
 use super::shape::{
     ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
@@ -63,6 +63,50 @@ pub enum SessionFitError {
     /// No posed frame.
     #[error("no frame of the session has a pose: track poses first")]
     NoPoses,
+    /// Not one vertex has a sample: a fit would report the prior everywhere.
+    #[error(
+        "no vertex of the mesh has a single sample, so nothing can be fitted: {}",
+        describe_empty(.0)
+    )]
+    NoSamples(Box<ObserveReport>),
+}
+
+/// Why an extraction gave no samples, in words: frames read and skipped (by reason), gates.
+fn describe_empty(r: &ObserveReport) -> String {
+    let mut reasons: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for s in &r.skipped {
+        // the reason up to its first detail (frame paths differ per frame)
+        let key = s.reason.split(": ").last().unwrap_or(&s.reason);
+        *reasons.entry(key).or_insert(0) += 1;
+    }
+    let mut skipped: Vec<String> = reasons
+        .iter()
+        .take(5)
+        .map(|(k, n)| format!("{n} × {k}"))
+        .collect();
+    if reasons.len() > 5 {
+        skipped.push("…".into());
+    }
+    let g = &r.gates;
+    format!(
+        "{} of {} posed frames read{}; per (vertex, frame): {} not in view, {} occluded, {} in \
+         shadow, {} grazing, {} saturated, {} dark, {} non-finite — check that the mesh is in the \
+         boards' frame in metres and that the frames are readable",
+        r.frames_used,
+        r.frames_posed,
+        if skipped.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} skipped: {})", r.skipped.len(), skipped.join("; "))
+        },
+        g.not_in_view,
+        g.occluded,
+        g.shadowed,
+        g.grazing,
+        g.saturated,
+        g.dark,
+        g.non_finite
+    )
 }
 
 /// A session fit's results.
@@ -77,6 +121,8 @@ pub struct SessionFit {
     pub shape_updates: Vec<ShapeUpdate>,
     /// Gate counts of the last extraction, summed over vertices.
     pub gates: GateCounts,
+    /// The last extraction's report (frames read, frames skipped and why).
+    pub observe: ObserveReport,
 }
 
 /// Fits `mesh` to `session` seen from `poses` (frame id, `world_from_camera`).
@@ -101,22 +147,26 @@ pub fn fit_session(
     // re-derived mesh normals) once there are any; with the seconds it took.
     let observe = |mesh: &TriangleMesh, previous: Option<&[VertexFit]>| {
         let started = Instant::now();
-        let mut set = extract(session, mesh, poses, &config.observe, &|_, _| {})?.samples;
+        let extraction = extract(session, mesh, poses, &config.observe, &|_, _| {})?;
+        if extraction.report.samples == 0 {
+            return Err(SessionFitError::NoSamples(Box::new(extraction.report)));
+        }
+        let (mut set, report) = (extraction.samples, extraction.report);
         for (v, f) in set.vertices.iter_mut().zip(previous.unwrap_or_default()) {
             v.normal_world = f.normal_world;
         }
-        Ok::<_, SessionFitError>((set, started.elapsed().as_secs_f64()))
+        Ok::<_, SessionFitError>((set, report, started.elapsed().as_secs_f64()))
     };
     let announce = |k: usize, mesh: &TriangleMesh| {
         format!(
-            "outer iteration {k}/{iterations}: observations from {} frames of {} vertices",
+            "outer iteration {k}/{iterations}: observations from {} posed frames of {} vertices",
             poses.len(),
             mesh.positions().len()
         )
     };
     for k in 1..iterations {
         progress(&announce(k, &mesh));
-        let (set, seconds) = observe(&mesh, previous.as_deref())?;
+        let (set, _, seconds) = observe(&mesh, previous.as_deref())?;
         observe_s += seconds;
         progress(&format!(
             "outer iteration {k}/{iterations}: joint per-vertex solve"
@@ -141,7 +191,7 @@ pub fn fit_session(
         previous = Some(fits);
     }
     progress(&announce(iterations, &mesh));
-    let (set, seconds) = observe(&mesh, previous.as_deref())?;
+    let (set, report, seconds) = observe(&mesh, previous.as_deref())?;
     observe_s += seconds;
     let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
     outcome.times.observe_s = observe_s;
@@ -157,5 +207,6 @@ pub fn fit_session(
         outcome,
         shape_updates,
         gates,
+        observe: report,
     })
 }
