@@ -268,3 +268,38 @@ fn pose_appends_start_on_a_fresh_line_and_untracked_frames_are_retracked() {
         serde_json::from_slice(&std::fs::read(out.join("fit-summary.json")).unwrap()).unwrap();
     assert!(summary["frames_posed"].as_u64().unwrap() > 2, "{summary}");
 }
+
+#[test]
+fn a_closed_stdout_stops_the_printing_not_the_fit() {
+    // `ellipso fit … | head -1`: the reader goes away after the first line
+    let tmp = tempfile::tempdir().unwrap();
+    let session = session_copy(tmp.path(), "s");
+    let mesh = sphere_mesh(tmp.path(), "sphere.ply", [0.0, 0.0, 0.04]);
+    let out = tmp.path().join("fit");
+    let mut child = Command::new(ellipso_bin())
+        .arg("fit")
+        .arg(&session)
+        .arg("--mesh")
+        .arg(&mesh)
+        .args(["--outer", "1", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        use std::io::BufRead;
+        let mut first = String::new();
+        let mut reader = std::io::BufReader::new(child.stdout.take().unwrap());
+        reader.read_line(&mut first).unwrap();
+        assert!(!first.is_empty());
+        // the read end closes here
+    }
+    let o = child.wait_with_output().unwrap();
+    let err = stderr(&o);
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(o.status.success(), "{err}");
+    for f in ["fit.ply", "fit-summary.json", "relit.png"] {
+        assert!(out.join(f).is_file(), "{f} not written: {err}");
+    }
+}

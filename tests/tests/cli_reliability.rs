@@ -234,3 +234,177 @@ fn a_killed_capture_leaves_no_end_key_at_all() {
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     assert!(v.get("end").is_none(), "{text}");
 }
+
+#[test]
+fn numeric_flags_are_checked_against_the_files_limits() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sphere = scene("sphere.toml");
+    let sphere = sphere.to_str().unwrap();
+    let out = tmp.path().join("o");
+    let out = out.to_str().unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec![
+                "sim", "render", sphere, "--out", out, "--width", "100000", "--height", "100000",
+            ],
+            "2..=16384",
+        ),
+        (
+            vec!["sim", "render", sphere, "--out", out, "--frames", "0"],
+            "1..=",
+        ),
+        (
+            vec![
+                "sim", "render", sphere, "--out", out, "--width", "321", "--height", "256",
+            ],
+            "odd",
+        ),
+        (
+            vec![
+                "sim",
+                "render",
+                sphere,
+                "--out",
+                out,
+                "--supersampling",
+                "9",
+            ],
+            "1..=8",
+        ),
+        (
+            vec![
+                "capture",
+                "--sim",
+                sphere,
+                "--out",
+                out,
+                "--resolution",
+                "100000x100000",
+            ],
+            "2..=16384",
+        ),
+        (
+            vec!["capture", "--sim", sphere, "--out", out, "--photos", "0"],
+            "1..=",
+        ),
+        (
+            vec![
+                "capture",
+                "--sim",
+                sphere,
+                "--out",
+                out,
+                "--interval-ms",
+                "0",
+            ],
+            "longer than 0",
+        ),
+        (
+            vec![
+                "capture",
+                "--sim",
+                sphere,
+                "--out",
+                out,
+                "--interval-ms",
+                "nan",
+            ],
+            "outside",
+        ),
+        (
+            vec!["capture", "--sim", sphere, "--out", out, "--interval-ms=-5"],
+            "outside",
+        ),
+        // shorter than the scene's 8 ms exposure: the board's own rule, before anything is recorded
+        (
+            vec![
+                "capture",
+                "--sim",
+                sphere,
+                "--out",
+                out,
+                "--interval-ms",
+                "1",
+            ],
+            "would refuse",
+        ),
+        (
+            vec!["fit", out, "--mesh", sphere, "--outer", "4294967295"],
+            "1..=20",
+        ),
+        (vec!["fit", out, "--mesh", sphere, "--outer", "0"], "1..=20"),
+        (vec!["bench", "pose", sphere, "--frames", "0"], "1..="),
+        (
+            vec!["model", "dop", "--eta", "1e78", "--theta-deg", "30"],
+            "[1, 5]",
+        ),
+        (
+            vec!["model", "fresnel", "--eta", "1e155", "--theta-deg", "30"],
+            "[1, 5]",
+        ),
+        (
+            vec!["polar", "x.png", "--out", out, "--dark-intensity", "nan"],
+            "outside",
+        ),
+        (
+            vec!["sim", "serve", sphere, "--pty", "--ber", "2"],
+            "outside",
+        ),
+    ];
+    for (args, needle) in cases {
+        let started = Instant::now();
+        let o = ellipso(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} exited 0");
+        assert!(
+            o.status.code().is_some()
+                && !err.contains("panicked")
+                && !err.contains("memory allocation"),
+            "{args:?} died: {err}"
+        );
+        assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "{args:?} took long"
+        );
+    }
+    assert!(
+        !Path::new(out).exists(),
+        "a refused command left output behind"
+    );
+}
+
+#[test]
+fn model_on_absurd_input_says_the_range_and_never_prints_nan() {
+    let base = [
+        "model",
+        "mueller",
+        "--sigma-s",
+        "0.2",
+        "--sigma-ss",
+        "0.5",
+        "--rho-ss",
+        "0.1,0.1,0.1",
+        "--rho-d",
+        "0.5,0.4,0.3",
+        "--to-light",
+        "0.1,0,1",
+        "--to-camera",
+        "-0.1,0,1",
+        "--json",
+    ];
+    let run = |extra: &[&str]| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        ellipso(&args)
+    };
+    let o = run(&["--eta", "1e200", "--rho-s", "1", "--normal", "0,0,1"]);
+    assert!(!o.status.success() && stderr(&o).contains("--eta must be in [1, 5]"));
+    let o = run(&["--eta", "1.5", "--rho-s", "1e308", "--normal", "0,0,1"]);
+    assert!(!o.status.success() && stderr(&o).contains("--rho-s must be in [0, 1000]"));
+    // a valid direction of any length is a direction
+    let o = run(&["--eta", "1.5", "--rho-s", "1", "--normal", "0,0,1e300"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(!text.contains("null") && !text.contains("NaN"), "{text}");
+}

@@ -237,7 +237,7 @@ fn one_run(
         fit_over_forward: fit_s / forward_s,
         scores,
     };
-    println!(
+    crate::outln!(
         "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}",
         r.scene,
         r.sweep,
@@ -294,7 +294,7 @@ fn write_report(
         .with_context(|| format!("writing {}", json.display()))?;
     let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
     crate::atomic_file::write(path, md).with_context(|| format!("writing {}", path.display()))?;
-    println!(
+    crate::outln!(
         "\nreport  {}\nplots   {}\n        {}\ndata    {}",
         path.display(),
         eta_png.display(),

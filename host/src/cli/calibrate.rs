@@ -77,7 +77,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let layout = layout_of(&session.manifest)?;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
-    println!(
+    crate::outln!(
         "detecting tags on {} frames ({:?} image)…",
         frames.len(),
         args.image
@@ -102,13 +102,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     let views: Vec<_> = detected.iter().map(|(v, _)| v.clone()).collect();
     let usable = views.iter().filter(|v| v.len() >= 8).count();
-    println!("{usable} frames with ≥ 2 tags of one board");
+    crate::outln!("{usable} frames with ≥ 2 tags of one board");
     let config = CalibConfig {
         fix_k3: !args.free_k3,
         ..CalibConfig::default()
     };
     let cal = calibrate(&views, (s.width, s.height), &config)?;
-    println!(
+    crate::outln!(
         "reprojection RMS {:.4} px over {} views ({} rejected)",
         cal.rms_px,
         cal.views.len(),
@@ -117,16 +117,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = cal.camera.params();
     for (k, name) in CAMERA_PARAM_NAMES.iter().enumerate() {
         if cal.estimated[k] {
-            println!(
+            crate::outln!(
                 "  {name:<3} = {:>14.6} ± {:.6}",
-                params[k], cal.std_errors[k]
+                params[k],
+                cal.std_errors[k]
             );
         } else {
-            println!("  {name:<3} = {:>14.6}   (fixed)", params[k]);
+            crate::outln!("  {name:<3} = {:>14.6}   (fixed)", params[k]);
         }
     }
     for r in &cal.rejected {
-        println!("  view {} rejected: {}", r.index, r.reason);
+        crate::outln!("  view {} rejected: {}", r.index, r.reason);
     }
     let out = args
         .out
@@ -170,7 +171,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         highlight_px: h.pixel,
                     }),
                     Err(why) => {
-                        println!("  frame {}: no highlight: {why}", entry.frame_id);
+                        crate::outln!("  frame {}: no highlight: {why}", entry.frame_id);
                         None
                     }
                 }
@@ -180,7 +181,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("estimating the flash position")?;
         let p = flash.flash_camera_m.coords * 1e3;
         let sd = flash.std_m.map(|v| v * 1e3);
-        println!(
+        crate::outln!(
             "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
             p.x,
             sd[0],
@@ -195,6 +196,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push_str(&flash.to_toml_flash_section());
     }
     crate::atomic_file::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
-    println!("rig sections written to {}", out.display());
+    crate::outln!("rig sections written to {}", out.display());
     Ok(())
 }

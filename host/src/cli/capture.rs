@@ -56,29 +56,28 @@ pub struct Args {
     /// Trigger-wire socket of `ellipso sim serve --wire` (with `--trigger`).
     #[arg(long, requires = "trigger")]
     pub wire: Option<PathBuf>,
-    /// Take only this many photos (default: the scene's capture path).
-    #[arg(long)]
+    /// Take only this many photos, ≥ 1 (default: the scene's capture path).
+    #[arg(long, value_parser = super::limits::count::<u32>)]
     pub photos: Option<u32>,
-    /// Render at WIDTHxHEIGHT instead of the scene's resolution (intrinsics scaled).
-    #[arg(long, value_parser = parse_resolution)]
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution (intrinsics scaled): even
+    /// sides in 2..=16384, as in scene files.
+    #[arg(long, value_parser = super::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
-    /// Rays per raw pixel per axis (N×N).
-    #[arg(long, default_value_t = 2)]
+    /// Rays per raw pixel per axis (N×N), 1..=8.
+    #[arg(long, default_value_t = 2, value_parser = super::limits::supersampling)]
     pub supersampling: u32,
-    /// Time between photos, ms (default: the scene's `capture.interval_ms`).
-    #[arg(long)]
+    /// Time between photos, ms, in (0, 3600000] (default: the scene's `capture.interval_ms`);
+    /// the board checks it against the exposure before anything is recorded.
+    #[arg(long, value_parser = super::limits::interval_ms)]
     pub interval_ms: Option<f64>,
     /// Skip pose tracking after recording.
     #[arg(long)]
     pub no_track: bool,
 }
 
+/// `WIDTHxHEIGHT` with even sides in 2..=16384 (see [`super::limits::resolution`]).
 pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or("expected WIDTHxHEIGHT, e.g. 1224x1024")?;
-    let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("'{v}': {e}"));
-    Ok([p(w)?, p(h)?])
+    super::limits::resolution(s)
 }
 
 /// Renders capture poses for the simulated camera.
@@ -241,9 +240,10 @@ pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
         .iter()
         .map(|b| serde_json::to_value(TrackedBoard::from_placed(b)))
         .collect::<Result<_, _>>()?;
+    let board_cfg = board_config(scene, photos, args.interval_ms);
+    check_plan(&link, board_cfg)?;
     let session = SessionWriter::create(&args.out, manifest)?;
 
-    let board_cfg = board_config(scene, photos, args.interval_ms);
     let settings = CameraSettings {
         exposure_us: board_cfg.exposure_us,
         gain_db: scene.rig.camera.gain_db as f32,
@@ -292,6 +292,20 @@ pub struct Interrupted {
     pub signal: i32,
     /// The session directory.
     pub dir: PathBuf,
+}
+
+/// Refuses a board timing the connected board would refuse, before anything is recorded (the
+/// board checks it again when configured).
+fn check_plan(link: &TriggerLink, config: CaptureConfig) -> anyhow::Result<()> {
+    ellipso_firmware::CapturePlan::new(config, &link.board().limits).map_err(|reason| {
+        anyhow::anyhow!(
+            "the trigger board would refuse this capture (exposure {} µs, interval {} µs): {}",
+            config.exposure_us,
+            config.frame_period_us,
+            crate::link::describe_reject(&reason)
+        )
+    })?;
+    Ok(())
 }
 
 /// The capture plan for a board timing: 20 clock pings, a 150 ms transfer budget for pairing,
@@ -451,8 +465,9 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
         .iter()
         .map(serde_json::to_value)
         .collect::<Result<_, _>>()?;
-    let session = SessionWriter::create(&args.out, manifest)?;
     let board_cfg = rig.board_config();
+    check_plan(&link, board_cfg)?;
+    let session = SessionWriter::create(&args.out, manifest)?;
     let settings = CameraSettings {
         exposure_us: rig.sensor.exposure_us,
         gain_db: rig.sensor.gain_db,
@@ -528,26 +543,28 @@ pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>
 
 /// Prints the capture summary.
 pub fn print_report(r: &CaptureReport) {
-    println!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
-    println!(
+    crate::outln!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
+    crate::outln!(
         "frames       {} written ({} flagged), {} pulses",
-        r.frames, r.flagged, r.pulses
+        r.frames,
+        r.flagged,
+        r.pulses
     );
     let p = &r.pairing;
-    println!(
+    crate::outln!(
         "pairing      {} paired · {} frames without pulse · {} pulses without frame · {} duplicates",
         p.paired,
         p.frame_without_pulse,
         p.pulse_without_frame,
         p.duplicate_frames + p.duplicate_pulses
     );
-    println!(
+    crate::outln!(
         "link         {} frames ok · {} bad frames dropped",
         r.link.frames_ok,
         r.link.bad_frames()
     );
     if let Some(c) = &r.clock {
-        println!(
+        crate::outln!(
             "clock        drift {:+.1} ppm · residual rms {:.0} µs",
             c.drift_ppm(),
             c.rms_us
@@ -567,7 +584,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let summary = crate::cli::replay::report(&captured.dir, Some(tracked))?;
         crate::cli::replay::print_summary(&summary);
     }
-    println!("session      {}", captured.dir.display());
+    crate::outln!("session      {}", captured.dir.display());
     if let Some(signal) = captured.signal {
         return Err(Interrupted {
             signal,

@@ -31,8 +31,8 @@ pub struct Args {
     /// Frame id of the view the pictures are rendered from (default: the first posed frame).
     #[arg(long)]
     pub view: Option<u64>,
-    /// Outer iterations (solve ↔ shape update); 1 keeps the input geometry.
-    #[arg(long, default_value_t = 2)]
+    /// Outer iterations (solve ↔ shape update), 1..=20; 1 keeps the input geometry.
+    #[arg(long, default_value_t = 2, value_parser = super::limits::outer_iterations)]
     pub outer: usize,
     /// Add the paper's specular augmentation (clusters, virtual samples, 3 final passes); off
     /// by default: on the shipped scenes it costs 3–10× the time and measured worse
@@ -57,9 +57,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         };
     }
     let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
-    println!("\nresults in {}:", args.out.display());
+    crate::outln!("\nresults in {}:", args.out.display());
     for f in &result.files {
-        println!("  {}", f.display());
+        crate::outln!("  {}", f.display());
     }
     Ok(())
 }
@@ -80,7 +80,7 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
     let untracked = crate::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
     if !untracked.is_empty() {
-        println!(
+        crate::outln!(
             "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
             untracked.len(),
             session.frames.iter().filter(|f| f.complete).count()
@@ -123,7 +123,7 @@ pub fn fit_and_export(
         config.fit.solver.sensor = crate::fit::accuracy::sensor_model(&scene);
     }
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
-        println!("  {stage}…")
+        crate::outln!("  {stage}…")
     })?;
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
     for s in &fit.observe.skipped {
@@ -147,7 +147,7 @@ pub fn fit_and_export(
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
-    println!("  pictures from frame {frame_id}…");
+    crate::outln!("  pictures from frame {frame_id}…");
     let captured_s0 = crate::export::captured_s0(session, frame_id, world_from_camera).ok();
     let report = crate::export::export_all(
         out,

@@ -69,18 +69,19 @@ pub struct Args {
     /// bilinear (full resolution; for viewing).
     #[arg(long, value_enum, default_value = "superpixel")]
     pub demosaic: DemosaicMethod,
-    /// Black level subtracted from every raw sample, in DN.
-    #[arg(long, default_value_t = 0.0)]
+    /// Black level subtracted from every raw sample, in DN (0..=65535).
+    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::limits::dn_level)]
     pub dark_level: f32,
     /// Raw samples at or above this DN are saturated [default: full scale of the bit depth].
     #[arg(long)]
     pub saturation: Option<u16>,
     /// Pixels whose mean analyser intensity (s0/2, normalised to full scale) is below this are
     /// masked dark.
-    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY)]
+    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY, value_parser = crate::cli::limits::unit_f32)]
     pub dark_intensity: f32,
-    /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this (off by default).
-    #[arg(long)]
+    /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this, in [0, 2] (off by
+    /// default).
+    #[arg(long, value_parser = |s: &str| crate::cli::limits::real_in(s, 0.0_f32, 2.0))]
     pub max_residual: Option<f32>,
     /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
     #[arg(long)]
@@ -150,7 +151,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "layout, method, levels, statistics, encodings".into(),
     ));
 
-    println!(
+    crate::outln!(
         "{name}: {}×{} {}-bit {:?}, demosaic {} → {}×{} × {} band(s)",
         loaded.frame.width(),
         loaded.frame.height(),
@@ -162,7 +163,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         image.bands.len()
     );
     for (file, what) in &files {
-        println!("  wrote {}  ({what})", args.out.join(file).display());
+        crate::outln!("  wrote {}  ({what})", args.out.join(file).display());
     }
     Ok(())
 }
