@@ -13,8 +13,8 @@ use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
 
 use crate::calibrate::views::{View, board_view};
 use crate::calibrate::{CalibConfig, Calibration, calibrate};
-use crate::pose::{DetectorConfig, TagDetector};
-use crate::track::DetectImage;
+use crate::pose::DetectorConfig;
+use crate::track::{DetectImage, FamilyDetectors};
 
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;
@@ -235,7 +235,7 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
     let (renderer, boards) = super::renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let truth = *renderer.camera();
     let indices = super::spread(scene.camera_poses.len(), args.frames);
-    let mut detector = TagDetector::new(DetectorConfig::default())?;
+    let mut detector = FamilyDetectors::new(&boards, DetectorConfig::default())?;
     let mut views: Vec<View> = Vec::new();
     let mut truth_views = Vec::new();
     for &k in &indices {
