@@ -303,3 +303,23 @@ fn a_closed_stdout_stops_the_printing_not_the_fit() {
         assert!(out.join(f).is_file(), "{f} not written: {err}");
     }
 }
+
+#[test]
+fn calibrate_says_why_no_view_is_usable() {
+    // it said "only 0 usable views" and nothing about the frames
+    let tmp = tempfile::tempdir().unwrap();
+    let session = session_copy(tmp.path(), "s");
+    for f in reader::open(&session).unwrap().frames {
+        let bytes = std::fs::read(&f.path).unwrap();
+        std::fs::write(&f.path, &bytes[..bytes.len() / 2]).unwrap();
+    }
+    let o = Command::new(ellipso_bin())
+        .arg("calibrate")
+        .arg(&session)
+        .output()
+        .unwrap();
+    let err = stderr(&o);
+    assert!(!o.status.success());
+    assert!(err.contains("12 unreadable"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+}

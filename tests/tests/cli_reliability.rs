@@ -408,3 +408,152 @@ fn model_on_absurd_input_says_the_range_and_never_prints_nan() {
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(!text.contains("null") && !text.contains("NaN"), "{text}");
 }
+
+#[test]
+fn boards_of_every_family_the_scenes_accept_are_tracked() {
+    // tag16h5 and tag25h9 boards validated and rendered, but tracking only knew tag36h11: every
+    // frame was rejected with "no tag of a known board detected"
+    let tmp = tempfile::tempdir().unwrap();
+    let base = std::fs::read_to_string(scene("../boards/base_a4.toml")).unwrap();
+    let sphere = std::fs::read_to_string(scene("sphere.toml")).unwrap();
+    for family in ["tag25h9", "tag16h5"] {
+        let board = tmp.path().join(format!("{family}.toml"));
+        std::fs::write(
+            &board,
+            base.replace("\"tag36h11\"", &format!("\"{family}\"")),
+        )
+        .unwrap();
+        let scene_file = tmp.path().join(format!("{family}-scene.toml"));
+        std::fs::write(
+            &scene_file,
+            sphere.replace(
+                "file = \"../boards/base_a4.toml\"",
+                &format!("file = \"{}\"", board.display()),
+            ),
+        )
+        .unwrap();
+        let out = tmp.path().join(family);
+        let o = Command::new(ellipso_bin())
+            .args(["capture", "--sim"])
+            .arg(&scene_file)
+            .arg("--out")
+            .arg(&out)
+            .args([
+                "--photos",
+                "6",
+                "--resolution",
+                "612x512",
+                "--supersampling",
+                "1",
+            ])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{family}: {}", stderr(&o));
+        let s = reader::open(&out).unwrap();
+        let posed = s
+            .events
+            .iter()
+            .filter(|e| matches!(e, SessionEvent::Pose { .. }))
+            .count();
+        assert!(posed >= 4, "{family}: only {posed} of 6 frames posed");
+        assert_eq!(s.manifest.boards[0]["family"].as_str(), Some(family));
+    }
+}
+
+/// Lines of the docs and README that show an `ellipso` command (continuation lines joined).
+fn documented_commands() -> Vec<(String, String)> {
+    let root = scene("..").join("..");
+    let mut files: Vec<_> = std::fs::read_dir(root.join("docs"))
+        .unwrap()
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .collect();
+    files.push(root.join("README.md"));
+    let mut out = Vec::new();
+    for f in files {
+        let text = std::fs::read_to_string(&f).unwrap();
+        let mut joined = String::new();
+        for line in text.lines() {
+            joined.push_str(line.trim_end_matches('\\'));
+            if line.ends_with('\\') {
+                joined.push(' ');
+                continue;
+            }
+            let name = f.file_name().unwrap().to_string_lossy().into_owned();
+            out.push((name, std::mem::take(&mut joined)));
+        }
+    }
+    out
+}
+
+#[test]
+fn every_flag_the_docs_show_exists() {
+    // docs/fit.md showed `--no-augment`, which the CLI rejects
+    const SUBCOMMANDS: [&str; 10] = [
+        "demo",
+        "capture",
+        "model",
+        "polar",
+        "calibrate",
+        "fit",
+        "bench",
+        "devices",
+        "replay",
+        "sim",
+    ];
+    let mut help: std::collections::BTreeMap<String, String> = Default::default();
+    let mut checked = 0;
+    let mut missing = Vec::new();
+    for (file, line) in documented_commands() {
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        for (i, t) in tokens.iter().enumerate() {
+            let t = t.trim_start_matches('`');
+            let after_cargo = t == "--" && i > 0 && tokens[i - 1] == "--release";
+            if t != "ellipso" && !after_cargo {
+                continue;
+            }
+            let Some(sub) = tokens.get(i + 1).map(|s| s.trim_end_matches('`')) else {
+                continue;
+            };
+            if !SUBCOMMANDS.contains(&sub) {
+                continue;
+            }
+            let mut path = vec![sub];
+            // `pose\|calibration` (a table's alternatives): the first one
+            if let Some(next) = tokens
+                .get(i + 2)
+                .and_then(|s| s.trim_end_matches('`').split("\\|").next())
+                && ["model", "sim", "bench"].contains(&sub)
+                && next.chars().all(|c| c.is_ascii_lowercase())
+            {
+                path.push(next);
+            }
+            let key = path.join(" ");
+            let text = help.entry(key.clone()).or_insert_with(|| {
+                let mut args = path.clone();
+                args.push("--help");
+                let o = ellipso(&args);
+                assert!(o.status.success(), "ellipso {key} --help failed ({file})");
+                String::from_utf8_lossy(&o.stdout).into_owned()
+            });
+            // every --flag on the rest of the line, comments included
+            for flag in tokens[i + 1..].iter().filter_map(|t| {
+                let t = t.trim_start_matches(['[', '(', '`']);
+                let t = t.split(['=', ']', ')', ',', '`', '|']).next().unwrap_or("");
+                (t.starts_with("--") && t.len() > 2).then_some(t)
+            }) {
+                checked += 1;
+                if !text.contains(&format!("{flag} ")) && !text.contains(&format!("{flag}\n")) {
+                    missing.push(format!("{file}: ellipso {key} {flag}"));
+                }
+            }
+            break;
+        }
+    }
+    assert!(checked > 20, "only {checked} documented flags found");
+    assert!(
+        missing.is_empty(),
+        "documented flags the CLI rejects: {missing:#?}"
+    );
+}
