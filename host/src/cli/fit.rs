@@ -46,6 +46,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mesh = TriangleMesh::load(&args.mesh)
         .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
     let session = crate::session::reader::open(&args.session)?;
+    let read = session.report.summary();
+    if read != "intact" {
+        eprintln!("warning: {}: {read}", args.session.display());
+    }
     let mut config = SessionFitConfig {
         outer_iterations: args.outer.max(1),
         ..SessionFitConfig::default()
@@ -94,7 +98,10 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
             &tracked,
             crate::link::time::HostClock::new().now(),
         )
-        .context("recording the new poses (nothing recorded was changed)")?;
+        .context(
+            "recording the new poses failed part-way (every line written is whole; the next \
+             fit tracks the frames still without one)",
+        )?;
         poses = poses_from_session(&crate::session::reader::open(&session.dir)?);
     }
     anyhow::ensure!(
