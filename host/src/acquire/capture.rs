@@ -316,7 +316,7 @@ fn record(
     for l in &latches {
         state.pairer.add_camera_clock_sample(l);
     }
-    let end_reason = state.run(
+    let ended = state.run(
         link,
         session,
         &written_rx,
@@ -325,8 +325,9 @@ fn record(
         started,
         &in_flight,
         &mut progress,
-    )?;
-    // wind down: stop the board (idempotent), then the camera, then drain what is in flight
+    );
+    // wind down — also after an error (a full disk): stop the board (idempotent), then the
+    // camera, then drain what is in flight
     if link.is_connected()
         && let Err(e) = link.stop()
     {
@@ -337,6 +338,7 @@ fn record(
     for w in writers {
         let _ = w.join();
     }
+    let end_reason = ended?;
     for w in written_rx.try_iter() {
         state.on_written(w?, session)?;
     }

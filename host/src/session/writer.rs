@@ -127,7 +127,11 @@ impl SessionWriter {
     ) -> Result<PreparedFrame, SessionError> {
         let name = paths::frame_file(f.frame_id);
         let tmp = frames_dir.join(format!(".{name}.partial"));
-        frame_png::write(&tmp, f.width, f.height, f.pixels)?;
+        if let Err(e) = frame_png::write(&tmp, f.width, f.height, f.pixels) {
+            // a full disk must not be left fuller by the half-written frame
+            let _ = fs::remove_file(&tmp);
+            return Err(e);
+        }
         let event = SessionEvent::Frame {
             t_host_us: f.t_host_us,
             frame_id: f.frame_id,
@@ -224,7 +228,10 @@ fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
         path: path.clone(),
         error: std::io::Error::other(e),
     })?;
-    fs::write(&tmp, json).map_err(SessionError::io(&tmp))?;
+    if let Err(e) = fs::write(&tmp, json) {
+        let _ = fs::remove_file(&tmp);
+        return Err(SessionError::io(&tmp)(e));
+    }
     fs::rename(&tmp, &path).map_err(SessionError::io(&path))
 }
 
