@@ -42,8 +42,11 @@ fn capture_cmd(out: &Path, photos: u32, interval_ms: u32) -> Command {
     c
 }
 
-/// (frame id, seq) of every pairing, and the frame ids and pulse seqs of the session.
-fn pairs_of(dir: &Path) -> (Vec<(u64, u64, Option<String>)>, Vec<u64>, Vec<u64>) {
+/// A pairing event: frame id, pulse seq, basis.
+type Pair = (u64, u64, Option<String>);
+
+/// Every pairing, and the frame ids and pulse seqs of the session.
+fn pairs_of(dir: &Path) -> (Vec<Pair>, Vec<u64>, Vec<u64>) {
     let s = reader::open(dir).expect("session opens");
     let mut pairs = Vec::new();
     let mut pulses = Vec::new();

@@ -189,7 +189,7 @@ pub const MAX_ETA: f64 = 5.0;
 pub const MAX_LOBE_ALBEDO: f64 = ellipso_sim::scene::spec::MAX_LOBE_ALBEDO;
 
 fn check_eta(eta: f64) -> Result<()> {
-    if !(eta >= 1.0 && eta <= MAX_ETA) {
+    if !(1.0..=MAX_ETA).contains(&eta) {
         bail!(
             "--eta must be in [1, {MAX_ETA}] (a dielectric in air; none exceeds {MAX_ETA}), got {eta}"
         );

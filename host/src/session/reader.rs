@@ -226,10 +226,8 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
                     logged.insert(*frame_id, e.clone());
                 }
             }
-            SessionEvent::Pulse { seq, .. } => {
-                if !pulses.insert(*seq) {
-                    report.duplicate_pulses.push(*seq);
-                }
+            SessionEvent::Pulse { seq, .. } if !pulses.insert(*seq) => {
+                report.duplicate_pulses.push(*seq);
             }
             SessionEvent::Pairing { frame_id, seq, .. } => {
                 pairs.insert(*frame_id, *seq);

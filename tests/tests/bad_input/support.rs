@@ -20,6 +20,9 @@ pub enum Expect {
     Warn(&'static str),
 }
 
+/// Prepares a case's input in its own directory; returns the command and what it must not change.
+pub type Setup = Box<dyn Fn(&Path) -> (Command, Vec<PathBuf>) + Send + Sync>;
+
 /// One tried input.
 pub struct Case {
     pub category: &'static str,
@@ -27,7 +30,7 @@ pub struct Case {
     pub expect: Expect,
     /// Prepares the input in its own directory and returns the command and what it must not
     /// change.
-    pub setup: Box<dyn Fn(&Path) -> (Command, Vec<PathBuf>) + Send + Sync>,
+    pub setup: Setup,
 }
 
 pub fn case(
