@@ -76,6 +76,9 @@ fn a_20_fps_capture_pairs_every_frame_with_its_own_pulse() {
         let out = tmp.path().join(format!("s{interval_ms}"));
         let o = capture_cmd(&out, 10, interval_ms).output().unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
+        // the layout as docs/session-format.md names it (it was written `monopolar`)
+        let manifest = reader::open(&out).unwrap().manifest;
+        assert_eq!(manifest.sensor.layout, "mono_polar");
         let (pairs, mut frames, mut pulses) = pairs_of(&out);
         frames.sort_unstable();
         pulses.sort_unstable();

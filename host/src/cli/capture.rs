@@ -594,3 +594,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use ellipso_sim::mosaic::SensorLayout;
+
+    #[test]
+    fn manifests_name_layouts_as_the_session_format_does() {
+        assert_eq!(super::layout_name(SensorLayout::MonoPolar), "mono_polar");
+        assert_eq!(
+            super::layout_name(SensorLayout::ColourPolar),
+            "colour_polar"
+        );
+    }
+}
