@@ -13,12 +13,14 @@
 //! - [`short_pulse_poses`]: poses for short-pulse frames of a bracketed capture that tracking
 //!   refused, from their tracked neighbours.
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
+//! - [`atomic_file`]: result files written whole or not at all (temporary name + rename).
 //! - [`cli`]: the subcommands of the `ellipso` binary, one module each.
 //!
 //! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, augmentation, shape).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit).
 
 pub mod acquire;
+pub mod atomic_file;
 pub mod calibrate;
 pub mod camera;
 pub mod cli;

@@ -54,6 +54,13 @@ fn main() -> std::process::ExitCode {
     match run(cli.command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
+            // a capture stopped by SIGINT/SIGTERM: the shell's 128 + signal
+            if let Some(i) = e.downcast_ref::<cli::capture::Interrupted>() {
+                eprintln!("{i}");
+                return std::process::ExitCode::from(
+                    u8::try_from(128 + i.signal).unwrap_or(u8::MAX),
+                );
+            }
             eprintln!("error: {e:#}");
             std::process::ExitCode::FAILURE
         }

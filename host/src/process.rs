@@ -108,10 +108,42 @@ pub fn track_session(
     session: &Session,
     config: &TrackConfig,
 ) -> Result<Vec<TrackedFrame>, ProcessError> {
+    track_frames(session, config, |_| true)
+}
+
+/// Complete frames of `session` with neither a `pose` nor a `pose_rejected` event: frames a
+/// tracking run never reached (it was stopped, or its appends failed on a full disk).
+pub fn untracked_frames(session: &Session) -> std::collections::BTreeSet<u64> {
+    let mut done = std::collections::BTreeSet::new();
+    for e in &session.events {
+        if let SessionEvent::Pose { frame_id, .. } | SessionEvent::PoseRejected { frame_id, .. } = e
+        {
+            done.insert(*frame_id);
+        }
+    }
+    session
+        .frames
+        .iter()
+        .filter(|f| f.complete && !done.contains(&f.frame_id))
+        .map(|f| f.frame_id)
+        .collect()
+}
+
+/// Tracks the complete frames of `session` for which `select(frame_id)` holds, in parallel,
+/// ordered by frame id.
+pub fn track_frames(
+    session: &Session,
+    config: &TrackConfig,
+    select: impl Fn(u64) -> bool,
+) -> Result<Vec<TrackedFrame>, ProcessError> {
     let (camera, boards) = rig_of(session)?;
     let layout = layout_of(&session.manifest)?;
     let bit_depth = session.manifest.sensor.bit_depth;
-    let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
+    let frames: Vec<_> = session
+        .frames
+        .iter()
+        .filter(|f| f.complete && select(f.frame_id))
+        .collect();
     let results = frames
         .par_iter()
         .map_init(
@@ -138,7 +170,9 @@ pub fn track_session(
     Ok(results)
 }
 
-/// Appends `pose` / `pose_rejected` events for `tracked` to the session's log.
+/// Appends `pose` / `pose_rejected` events for `tracked` to the session's log, one whole line
+/// per frame (a failed append leaves no partial line; frames not reached are found again by
+/// [`untracked_frames`]).
 pub fn append_poses(
     dir: &Path,
     tracked: &[TrackedFrame],

@@ -383,6 +383,7 @@ mod tests {
                     frame_id: id,
                     seq,
                     latency_us: None,
+                    basis: None,
                     bracket_step: Some((id % 3) as u8),
                     flash_on_us: Some(10),
                     flash_energy_rel: Some([1.0, 0.25, 0.0625][id as usize]),

@@ -28,7 +28,7 @@ use crate::polar::demosaic::{DemosaicMethod, demosaic};
 use crate::polar::frame::RawFrame;
 use crate::pose::{
     BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetection, TagDetector,
-    assemble_correspondences, estimate_board_pose,
+    TagFamily, assemble_correspondences, estimate_board_pose,
 };
 
 /// Which analyser image tags are detected on.
@@ -97,6 +97,10 @@ pub struct TrackedBoard {
     /// Board name, if any.
     #[serde(default)]
     pub name: Option<String>,
+    /// Tag family (`tag36h11`, `tag25h9`, `tag16h5`); sessions written before it was recorded
+    /// used tag36h11, the only family tracked then.
+    #[serde(default = "default_family")]
+    pub family: String,
     /// Tag id → its four corners in the board frame, metres, AprilTag detection order.
     pub corners_board_m: BTreeMap<u32, [[f64; 3]; 4]>,
     /// Board origin in the world, metres.
@@ -105,7 +109,24 @@ pub struct TrackedBoard {
     pub world_from_board_rotation: [f64; 3],
 }
 
+fn default_family() -> String {
+    "tag36h11".into()
+}
+
 impl TrackedBoard {
+    /// The detector family of this board's tags.
+    pub fn tag_family(&self) -> Result<TagFamily, DetectError> {
+        match self.family.as_str() {
+            "tag36h11" => Ok(TagFamily::Tag36h11),
+            "tag25h9" => Ok(TagFamily::Tag25h9),
+            "tag16h5" => Ok(TagFamily::Tag16h5),
+            other => Err(DetectError::InvalidSetting {
+                name: "board tag family",
+                value: format!("'{other}' (tracked families: tag36h11, tag25h9, tag16h5)"),
+            }),
+        }
+    }
+
     /// From a scene's placed board.
     pub fn from_placed(placed: &PlacedBoard) -> Self {
         let corners_board_m = placed
@@ -118,6 +139,7 @@ impl TrackedBoard {
         let r = placed.world_from_board.rotation.scaled_axis();
         Self {
             name: placed.board.name.clone(),
+            family: placed.board.family.name().to_string(),
             corners_board_m,
             world_from_board_translation_m: [t.x, t.y, t.z],
             world_from_board_rotation: [r.x, r.y, r.z],
@@ -143,11 +165,62 @@ impl BoardCorners for TrackedBoard {
     }
 }
 
+/// One AprilTag detector per tag family a set of boards uses, so every board is detected in
+/// its own family (tag36h11, tag25h9 and tag16h5 boards alike).
+pub struct FamilyDetectors {
+    detectors: Vec<(TagFamily, TagDetector)>,
+    families: Vec<TagFamily>,
+}
+
+impl FamilyDetectors {
+    /// Detectors for the families of `boards` (`config.family` is replaced per family).
+    pub fn new(boards: &[TrackedBoard], config: DetectorConfig) -> Result<Self, DetectError> {
+        let families = boards
+            .iter()
+            .map(TrackedBoard::tag_family)
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut detectors: Vec<(TagFamily, TagDetector)> = Vec::new();
+        for &family in &families {
+            if !detectors.iter().any(|(f, _)| *f == family) {
+                let detector = TagDetector::new(DetectorConfig { family, ..config })?;
+                detectors.push((family, detector));
+            }
+        }
+        Ok(Self {
+            detectors,
+            families,
+        })
+    }
+
+    /// Every family's detections in `frame` (see [`detect_frame`]).
+    pub fn detect(
+        &mut self,
+        frame: &RawFrame,
+        image: DetectImage,
+    ) -> Result<Vec<TagDetection>, TrackRejection> {
+        let mut all = Vec::new();
+        for (_, detector) in &mut self.detectors {
+            all.extend(detect_frame(detector, frame, image)?);
+        }
+        Ok(all)
+    }
+
+    /// The detections of board `index`'s family.
+    pub fn of_board(&self, detections: &[TagDetection], index: usize) -> Vec<TagDetection> {
+        let family = self.families[index];
+        detections
+            .iter()
+            .filter(|d| d.family == family)
+            .cloned()
+            .collect()
+    }
+}
+
 /// Tracks frames of one rig against a set of boards.
 pub struct Tracker {
     camera: CameraModel,
     boards: Vec<TrackedBoard>,
-    detector: TagDetector,
+    detectors: FamilyDetectors,
     config: TrackConfig,
 }
 
@@ -158,21 +231,22 @@ impl Tracker {
         boards: Vec<TrackedBoard>,
         config: TrackConfig,
     ) -> Result<Self, DetectError> {
-        let detector = TagDetector::new(config.detector)?;
+        let detectors = FamilyDetectors::new(&boards, config.detector)?;
         Ok(Self {
             camera,
             boards,
-            detector,
+            detectors,
             config,
         })
     }
 
     /// The pose of one frame.
     pub fn track(&mut self, frame: &RawFrame) -> Result<FramePose, TrackRejection> {
-        let detections = detect_frame(&mut self.detector, frame, self.config.image)?;
+        let detections = self.detectors.detect(frame, self.config.image)?;
         let mut best: Option<(usize, usize, Result<BoardPose, String>)> = None;
         for (i, placed) in self.boards.iter().enumerate() {
-            let assembly = assemble_correspondences(&detections, placed);
+            let assembly =
+                assemble_correspondences(&self.detectors.of_board(&detections, i), placed);
             let n = assembly.correspondences.len();
             if n == 0 || best.as_ref().is_some_and(|(_, m, _)| *m >= n) {
                 continue;

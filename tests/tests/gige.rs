@@ -14,7 +14,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use ellipso_host::acquire::pairing::{Pairer, PairingConfig, PairingOutcome};
+use ellipso_host::acquire::pairing::{FrameArrival, Pairer, PairingConfig, PairingOutcome, Pulse};
 use ellipso_host::camera::aravis::fake::{FakeGigeCamera, FakeGigeOptions};
 use ellipso_host::camera::aravis::format::{PFNC_MONO12, PFNC_MONO12_PACKED};
 use ellipso_host::camera::aravis::{AravisCamera, AravisOptions};
@@ -218,6 +218,8 @@ fn gige_frames_pair_with_their_own_pulses() {
     let config = PairingConfig {
         min_latency_us: 0.0,
         max_latency_us,
+        min_pulse_spacing_us: period_us,
+        max_exposure_delay_us: 2_000.0,
         pulse_timeout_us: period_us * 4.0,
         // host scheduling puts frame arrivals 1–10 ms after their trigger here
         latency_tolerance_us: 12_000.0,
@@ -226,13 +228,28 @@ fn gige_frames_pair_with_their_own_pulses() {
     let mut outcomes = Vec::new();
     let by_id = |id: u64| frames.iter().find(|f| f.meta.frame_id == id).unwrap();
     for (t_host, frame, seq, t_dev) in events {
-        outcomes.extend(pairer.expire(HostTimeUs(t_host), Some(&fit)));
+        outcomes.extend(pairer.expire(Some(&fit)));
         outcomes.extend(match frame {
-            Some(f) => pairer.add_frame(f.meta.frame_id, f.meta.t_host_us, Some(&fit)),
-            None => pairer.add_pulse(seq, DeviceTimeUs(t_dev), HostTimeUs(t_host), Some(&fit)),
+            Some(f) => pairer.add_frame(
+                FrameArrival {
+                    frame_id: f.meta.frame_id,
+                    t_host_arrival: f.meta.t_host_us,
+                    // no latch of the fake camera's counter: pairing on arrival time
+                    t_camera_ns: None,
+                },
+                Some(&fit),
+            ),
+            None => pairer.add_pulse(
+                Pulse {
+                    seq,
+                    t_trigger: DeviceTimeUs(t_dev),
+                    t_host_recv: HostTimeUs(t_host),
+                },
+                Some(&fit),
+            ),
         });
     }
-    outcomes.extend(pairer.finish());
+    outcomes.extend(pairer.finish(Some(&fit)));
     // The pairer's contract holds while every frame arrives within [min, max] latency of its
     // trigger. Outside it the timing evidence itself is wrong: a host stall longer than that
     // makes a frame look like the next pulse's, and the fake camera occasionally shifts its
@@ -250,7 +267,11 @@ fn gige_frames_pair_with_their_own_pulses() {
     let mut paired = 0;
     let mut wrong = Vec::new();
     for o in &outcomes {
-        if let PairingOutcome::Paired { frame_id, seq, .. } = *o {
+        if let PairingOutcome::Paired {
+            frame_id, pulse, ..
+        } = *o
+        {
+            let seq = pulse.seq;
             let k = index(by_id(frame_id));
             if seq != truth_seq(k) {
                 wrong.push((k, seq));

@@ -32,8 +32,10 @@ use std::time::{Duration, Instant};
 use crossbeam_channel::{Receiver, bounded, select, unbounded};
 use ellipso_protocol::{BoardState, CaptureConfig, PulseCount};
 
-use super::pairing::{Pairer, PairingConfig, PairingCounts, PairingOutcome};
-use crate::camera::{Camera, CameraCounters, CameraError, CameraSettings, Frame, FrameStatus};
+use super::pairing::{FrameArrival, Pairer, PairingConfig, PairingCounts, PairingOutcome, Pulse};
+use crate::camera::{
+    Camera, CameraClockSample, CameraCounters, CameraError, CameraSettings, Frame, FrameStatus,
+};
 use crate::link::clock::ClockFit;
 use crate::link::time::{DeviceTimeUs, HostTimeUs};
 use crate::link::{LinkCounters, LinkError, LinkEvent, TriggerLink, describe_reject};
@@ -128,20 +130,49 @@ pub enum CaptureError {
 
 struct Written {
     prepared: PreparedFrame,
-    frame_id: u64,
-    t_host_us: HostTimeUs,
+    arrival: FrameArrival,
     flagged: bool,
 }
 
+/// Latch readings of the camera's counter taken before streaming; the tightest brackets win.
+const CAMERA_CLOCK_SAMPLES: usize = 8;
+
 /// Runs one capture into `session`; returns the report and the session directory.
+///
+/// The session always ends with an end record: a capture that fails after the session was
+/// created (the board refuses the configuration, the camera fails to start, the disk fills)
+/// records `failed: <why>` rather than looking like a crash.
 pub fn capture(
     link: &TriggerLink,
-    mut camera: Box<dyn Camera>,
+    camera: Box<dyn Camera>,
     mut session: SessionWriter,
     plan: &CapturePlan,
     stop: &AtomicBool,
-    mut progress: impl FnMut(&CaptureProgress),
+    progress: impl FnMut(&CaptureProgress),
 ) -> Result<(CaptureReport, std::path::PathBuf), CaptureError> {
+    match record(link, camera, &mut session, plan, stop, progress) {
+        Ok(report) => {
+            let dir = session.finish(link.host_clock().now(), &report.end_reason)?;
+            Ok((report, dir))
+        }
+        Err(e) => {
+            let reason = format!("failed: {e}");
+            if let Err(finish) = session.finish(link.host_clock().now(), &reason) {
+                tracing::warn!("recording why the capture failed: {finish}");
+            }
+            Err(e)
+        }
+    }
+}
+
+fn record(
+    link: &TriggerLink,
+    mut camera: Box<dyn Camera>,
+    session: &mut SessionWriter,
+    plan: &CapturePlan,
+    stop: &AtomicBool,
+    mut progress: impl FnMut(&CaptureProgress),
+) -> Result<CaptureReport, CaptureError> {
     let clock_now = || link.host_clock().now();
     let started = Instant::now();
     let board = link.board();
@@ -170,6 +201,20 @@ pub fn capture(
     })?;
 
     camera.configure(&plan.camera)?;
+    // the camera's clock model: exposure timestamps then pair frames at any frame rate
+    let mut latches: Vec<CameraClockSample> = (0..CAMERA_CLOCK_SAMPLES)
+        .filter_map(|_| camera.clock_sample())
+        .collect();
+    latches.sort_by_key(|s| s.t_host_after.0.saturating_sub(s.t_host_before.0));
+    latches.truncate(2);
+    for l in &latches {
+        session.log(&SessionEvent::CameraClock {
+            t_host_us: clock_now(),
+            t_camera_ns: l.t_camera_ns,
+            t_host_before_us: l.t_host_before,
+            t_host_after_us: l.t_host_after,
+        })?;
+    }
     camera.start()?;
     link.configure(plan.board).map_err(|e| match e {
         LinkError::Rejected { reason, .. } => {
@@ -243,8 +288,11 @@ pub fn capture(
                         let r =
                             SessionWriter::prepare_frame(&dir, record).map(|prepared| Written {
                                 prepared,
-                                frame_id: m.frame_id,
-                                t_host_us: m.t_host_us,
+                                arrival: FrameArrival {
+                                    frame_id: m.frame_id,
+                                    t_host_arrival: m.t_host_us,
+                                    t_camera_ns: m.t_camera_ns,
+                                },
                                 flagged: flagged.is_some(),
                             });
                         if tx.send(r).is_err() {
@@ -260,25 +308,35 @@ pub fn capture(
         })?;
     drop((frame_rx, written_tx));
 
-    link.arm()?;
-    link.start()?;
+    if let Err(e) = link.arm().and_then(|()| link.start()) {
+        camera_stop.store(true, Ordering::Release);
+        let _ = camera_thread.join();
+        for w in writers {
+            let _ = w.join();
+        }
+        return Err(e.into());
+    }
 
     let expected = match plan.board.pulses {
         PulseCount::Count(n) => Some(u64::from(n)),
         PulseCount::Continuous => None,
     };
     let mut state = LoopState::new(plan, expected, clock.clone());
-    let end_reason = state.run(
+    for l in &latches {
+        state.pairer.add_camera_clock_sample(l);
+    }
+    let ended = state.run(
         link,
-        &mut session,
+        session,
         &written_rx,
         plan,
         stop,
         started,
         &in_flight,
         &mut progress,
-    )?;
-    // wind down: stop the board (idempotent), then the camera, then drain what is in flight
+    );
+    // wind down — also after an error (a full disk): stop the board (idempotent), then the
+    // camera, then drain what is in flight
     if link.is_connected()
         && let Err(e) = link.stop()
     {
@@ -289,11 +347,12 @@ pub fn capture(
     for w in writers {
         let _ = w.join();
     }
+    let end_reason = ended?;
     for w in written_rx.try_iter() {
-        state.on_written(w?, &mut session)?;
+        state.on_written(w?, session)?;
     }
-    let outcomes = state.pairer.finish();
-    state.log_outcomes(&outcomes, &mut session, clock_now())?;
+    let outcomes = state.pairer.finish(Some(&state.clock));
+    state.log_outcomes(&outcomes, session, clock_now())?;
     let counters = link.counters();
     session.log(&SessionEvent::Link {
         t_host_us: clock_now(),
@@ -312,8 +371,7 @@ pub fn capture(
         clock: Some(state.clock.clone()),
         paired_per_step: state.paired_per_step.clone(),
     };
-    let dir = session.finish(clock_now(), &end_reason)?;
-    Ok((report, dir))
+    Ok(report)
 }
 
 struct LoopState {
@@ -463,7 +521,7 @@ impl LoopState {
                 },
                 default(Duration::from_millis(50)) => {}
             }
-            let outcomes = self.pairer.expire(now(), Some(&self.clock));
+            let outcomes = self.pairer.expire(Some(&self.clock));
             // keep the clock model current: a short initial fit extrapolates badly over a
             // capture of minutes; a ping every 250 ms slides it along
             if ending.is_none() && last_ping.elapsed() > Duration::from_millis(250) {
@@ -532,12 +590,12 @@ impl LoopState {
                         flash_on_us: event.flash_on_us,
                     },
                 );
-                let out = self.pairer.add_pulse(
-                    event.seq,
-                    DeviceTimeUs(event.t_trigger_us),
+                let pulse = Pulse {
+                    seq: event.seq,
+                    t_trigger: DeviceTimeUs(event.t_trigger_us),
                     t_host_recv,
-                    Some(&self.clock),
-                );
+                };
+                let out = self.pairer.add_pulse(pulse, Some(&self.clock));
                 self.log_outcomes(&out, session, t)?;
                 if self.expected.is_some_and(|n| self.pulses >= n) {
                     self.mark_done();
@@ -579,10 +637,8 @@ impl LoopState {
         if w.flagged {
             self.flagged += 1;
         }
-        let out = self
-            .pairer
-            .add_frame(w.frame_id, w.t_host_us, Some(&self.clock));
-        self.log_outcomes(&out, session, w.t_host_us)
+        let out = self.pairer.add_frame(w.arrival, Some(&self.clock));
+        self.log_outcomes(&out, session, w.arrival.t_host_arrival)
     }
 
     fn log_outcomes(
@@ -592,13 +648,14 @@ impl LoopState {
         t: HostTimeUs,
     ) -> Result<(), SessionError> {
         for o in outcomes {
-            let (kind, frame_id, seq) = match *o {
+            let (kind, frame_id, seq, reason) = match *o {
                 PairingOutcome::Paired {
                     frame_id,
-                    seq,
+                    pulse,
                     latency_us,
+                    basis,
                 } => {
-                    let light = self.light.remove(&seq);
+                    let light = self.light.remove(&pulse.seq);
                     if let Some(n) = light
                         .and_then(|l| self.paired_per_step.get_mut(usize::from(l.bracket_step)))
                     {
@@ -607,31 +664,40 @@ impl LoopState {
                     session.log(&SessionEvent::Pairing {
                         t_host_us: t,
                         frame_id,
-                        seq,
-                        latency_us,
+                        seq: pulse.seq,
+                        latency_us: Some(latency_us),
+                        basis: serde_json::to_value(basis)
+                            .ok()
+                            .and_then(|v| v.as_str().map(str::to_string)),
                         bracket_step: light.map(|l| l.bracket_step),
                         flash_on_us: light.map(|l| l.flash_on_us),
                         flash_energy_rel: light.map(|l| l.energy_rel(self.full_on_us)),
                     })?;
                     continue;
                 }
-                PairingOutcome::FrameWithoutPulse { frame_id } => {
-                    ("frame_without_pulse", Some(frame_id), None)
-                }
+                PairingOutcome::FrameWithoutPulse { frame_id, reason } => (
+                    "frame_without_pulse",
+                    Some(frame_id),
+                    None,
+                    Some(reason.as_str().to_string()),
+                ),
                 PairingOutcome::PulseWithoutFrame { seq } => {
                     self.light.remove(&seq);
-                    ("pulse_without_frame", None, Some(seq))
+                    ("pulse_without_frame", None, Some(seq), None)
                 }
                 PairingOutcome::DuplicateFrame { frame_id } => {
-                    ("duplicate_frame", Some(frame_id), None)
+                    ("duplicate_frame", Some(frame_id), None, None)
                 }
-                PairingOutcome::DuplicatePulse { seq } => ("duplicate_pulse", None, Some(seq)),
+                PairingOutcome::DuplicatePulse { seq } => {
+                    ("duplicate_pulse", None, Some(seq), None)
+                }
             };
             session.log(&SessionEvent::PairingError {
                 t_host_us: t,
                 kind: kind.into(),
                 frame_id,
                 seq,
+                reason,
             })?;
         }
         Ok(())

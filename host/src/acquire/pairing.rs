@@ -1,68 +1,145 @@
 //! Pairs camera frames with the flash pulses that lit them — or says why it cannot. Never guesses.
 //!
-//! Frames (64-bit frame id, host arrival time) and pulses (sequence number, trigger time on the
-//! device clock) arrive in any order. Two pieces of evidence link them:
-//! - **ids**: while nothing is lost between trigger and frame, `seq − frame_id` is a constant
-//!   offset;
-//! - **time**: with a device→host [`ClockFit`], a frame's arrival minus its pulse's trigger (mapped
-//!   to host time) must lie in `[min_latency_us, max_latency_us]` (exposure + readout + transfer).
+//! Frames ([`FrameArrival`]: 64-bit id, host arrival time, the camera's exposure timestamp if it
+//! has one) and pulses ([`Pulse`]: sequence number, trigger time on the board's clock) arrive in
+//! any order. A device→host [`ClockFit`] puts every trigger on the host clock; without one no
+//! timing can be checked and nothing is paired. Two kinds of timing evidence exist:
 //!
-//! The latency window narrows as pairs are confirmed: it is the range of the last 32 confirmed
-//! latencies widened by `latency_tolerance_us` on each side, clipped to the configured window, so
-//! a spurious frame arriving at an unusual delay cannot take a pulse whose own frame was lost.
+//! - **Exposure time** (`basis: camera_time`). When the camera stamps its frames and its counter
+//!   has been latched against the host clock ([`Pairer::add_camera_clock_sample`]), a frame's
+//!   exposure start maps to host time within a small, known uncertainty
+//!   ([`camera_time::CameraTimeMap`]). Its pulse is the one pulse whose trigger lies in
+//!   `[exposure − tol − max_exposure_delay, exposure + tol]`. This is used only while that
+//!   interval is shorter than half the pulse spacing, so at most one pulse can fall in it whatever
+//!   the frame rate or delivery delay. Each pair re-anchors the map on the pulse's trigger.
+//! - **Arrival time** (`basis: arrival_time`). Otherwise the frame's arrival minus a trigger must
+//!   lie in the latency window: the range of the last 32 **measured** latencies (of confirmed
+//!   pairs) widened by a tolerance, or before any measurement the configured a-priori bounds
+//!   (exposure/2 … exposure + transfer budget, never derived from the interval). The window is used
+//!   only while it is **narrower than the pulse spacing**, so at most one pulse — received or
+//!   lost — can fall in it; when it is wider, frames are reported `ambiguous`, never guessed.
+//!   Ids back the timing up: a frame pairs with the unique pulse in the window when
+//!   `seq − frame_id` equals the current id offset, or when another pending frame independently
+//!   implies the same new offset (a missed trigger shifts every later frame; a frame delayed on
+//!   the host shifts only itself, which then stays unpaired).
 //!
-//! Rules:
-//! 1. With a known offset, a frame pairs with pulse `frame_id + offset` if that pulse's timing is
-//!    consistent (or no clock fit exists yet).
-//! 2. With no offset yet, a frame pairs with the **unique** pending pulse inside the window
-//!    (learned once any latency is known, configured before), which sets the offset. When the timing contradicts a known offset (the camera missed
-//!    a trigger or fired a spurious frame), the offset is re-learned only from the unique pulse
-//!    inside the *learned* window. Several candidates: ambiguous, no pair. After three unpaired
-//!    frames in a row the offset and the learned window are forgotten and learned afresh.
-//! 3. Without any clock fit, the first frame and first pulse define the offset (the acquisition
-//!    syncs the clock before starting, so this is a fallback; missed triggers are then undetectable
-//!    and the outcome says so by carrying no latency).
-//! 4. Before any pair is confirmed, the configured window is the only timing evidence: a spurious
-//!    frame inside it at the very start of a capture, while the real frame of that pulse is lost,
-//!    cannot be told from a real one. Keep the configured window realistic (`for_capture`).
-//! 5. A frame still unpaired `max_latency_us` after arriving is a `FrameWithoutPulse`; a pulse
-//!    still unpaired when the camera has delivered frames from `pulse_timeout_us` after its
-//!    trigger is a `PulseWithoutFrame` (so a camera lagging behind real time loses nothing); a repeated id
-//!    or sequence number is a duplicate. Every such outcome is reported, none silently dropped.
+//! Outcomes: a frame still unpaired once frames from `4 × spacing` later have arrived is a
+//! [`PairingOutcome::FrameWithoutPulse`] with its [`Unpaired`] reason; a pulse still unpaired once
+//! frames from `pulse_timeout_us` after its trigger have arrived is a
+//! [`PairingOutcome::PulseWithoutFrame`] (the camera's own arrival stamps are the clock, so a
+//! camera lagging behind real time loses nothing); a repeated id or sequence number is a
+//! duplicate; [`Pairer::finish`] reports everything still pending. Every frame and every pulse is
+//! accounted for exactly once.
+//!
+//! API: a [`Pulse`] goes in whole and comes back whole in [`PairingOutcome::Paired`], so a field
+//! added to it reaches the session without touching the pairing rules.
+
+pub mod camera_time;
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 
+use camera_time::CameraTimeMap;
+
+use crate::camera::CameraClockSample;
 use crate::link::clock::ClockFit;
 use crate::link::time::{DeviceTimeUs, HostTimeUs};
 
-/// Timing windows of the pairing.
+/// Timing bounds of the pairing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PairingConfig {
-    /// Shortest trigger→frame-arrival delay, µs (≥ the exposure).
+    /// A-priori shortest trigger → frame-arrival delay, µs (≤ the exposure).
     pub min_latency_us: f64,
-    /// Longest trigger→frame-arrival delay, µs (exposure + readout + transfer + jitter). Keep it
-    /// below one frame period so at most one pulse fits a frame.
+    /// A-priori longest trigger → frame-arrival delay, µs (exposure + readout + transfer +
+    /// jitter): an honest bound for the camera and link, independent of the frame rate.
     pub max_latency_us: f64,
-    /// How long after its trigger a pulse may wait for its frame, µs.
+    /// Closest two pulses can be, µs (the board's frame period).
+    pub min_pulse_spacing_us: f64,
+    /// Longest trigger edge → exposure start, µs (camera trigger delay and jitter).
+    pub max_exposure_delay_us: f64,
+    /// How long after its trigger a pulse may wait for its frame, µs (≥ `max_latency_us`).
     pub pulse_timeout_us: f64,
-    /// Smallest half-width of the learned latency window, µs.
+    /// Margin around the measured latencies, µs (capped at a fifth of the pulse spacing).
     pub latency_tolerance_us: f64,
 }
 
 impl PairingConfig {
-    /// Windows for a capture: a frame arrives between half the exposure and
+    /// Bounds for a capture: a frame arrives between half the exposure and
     /// `exposure + transfer_budget_us` after its trigger (readout + link transfer + host jitter;
-    /// e.g. ~150 ms for a 5 MP 12-bit frame over GigE), capped below one frame period.
+    /// e.g. ~150 ms for a 5 MP 12-bit frame over GigE), pulses are `frame_period_us` apart, and
+    /// an exposure starts within 2 ms of its trigger edge.
     pub fn for_capture(exposure_us: u32, frame_period_us: u32, transfer_budget_us: u32) -> Self {
-        let period = f64::from(frame_period_us);
+        let period = f64::from(frame_period_us.max(1));
         let exposure = f64::from(exposure_us);
+        let max_latency_us = exposure + f64::from(transfer_budget_us).max(1_000.0);
         Self {
             min_latency_us: exposure * 0.5,
-            max_latency_us: (exposure + f64::from(transfer_budget_us))
-                .min(period * 0.9)
-                .max(exposure + 1_000.0),
-            pulse_timeout_us: (period * 4.0).max(2_000_000.0),
+            max_latency_us,
+            min_pulse_spacing_us: period,
+            max_exposure_delay_us: 2_000.0,
+            pulse_timeout_us: (period * 4.0).max(2.0 * max_latency_us).max(2_000_000.0),
             latency_tolerance_us: 10_000.0,
+        }
+    }
+}
+
+/// One flash pulse as the board reported it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Pulse {
+    /// Sequence number.
+    pub seq: u64,
+    /// Trigger rising edge, board clock.
+    pub t_trigger: DeviceTimeUs,
+    /// When its report was decoded on the host.
+    pub t_host_recv: HostTimeUs,
+}
+
+/// One frame as the camera delivered it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameArrival {
+    /// Monotonic frame id.
+    pub frame_id: u64,
+    /// When it was complete on the host.
+    pub t_host_arrival: HostTimeUs,
+    /// Exposure start on the camera's own counter, ns, if the camera stamps frames.
+    pub t_camera_ns: Option<u64>,
+}
+
+/// Which evidence a pair rests on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PairBasis {
+    /// The frame's exposure timestamp, through the camera clock map.
+    CameraTime,
+    /// The frame's arrival time inside the latency window, backed by ids.
+    ArrivalTime,
+}
+
+/// Why a frame was not paired.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Unpaired {
+    /// No clock model of the trigger board: no timing can be checked.
+    NoClock,
+    /// No pulse was triggered at its exposure (or within its latency window).
+    NoPulse,
+    /// Its timing fits several pulses: no usable exposure timestamp, and the latency window is
+    /// not narrower than the pulse spacing.
+    Ambiguous,
+    /// The one pulse at its time already has a frame (a duplicate or stray exposure).
+    PulseTaken,
+    /// Its arrival time points at one pulse, but the id offset that implies was not confirmed
+    /// by a second frame (a frame delayed on the host, or too few frames).
+    Unconfirmed,
+}
+
+impl Unpaired {
+    /// Stable snake_case name (session logs).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Unpaired::NoClock => "no_clock",
+            Unpaired::NoPulse => "no_pulse",
+            Unpaired::Ambiguous => "ambiguous",
+            Unpaired::PulseTaken => "pulse_taken",
+            Unpaired::Unconfirmed => "unconfirmed",
         }
     }
 }
@@ -74,15 +151,19 @@ pub enum PairingOutcome {
     Paired {
         /// Frame id.
         frame_id: u64,
-        /// Pulse sequence number.
-        seq: u64,
-        /// Arrival minus trigger (host µs), when a clock fit exists.
-        latency_us: Option<f64>,
+        /// The pulse, as it was added.
+        pulse: Pulse,
+        /// Arrival minus trigger (host µs).
+        latency_us: f64,
+        /// The evidence.
+        basis: PairBasis,
     },
     /// The frame matches no pulse.
     FrameWithoutPulse {
         /// Frame id.
         frame_id: u64,
+        /// Why.
+        reason: Unpaired,
     },
     /// The pulse produced no frame.
     PulseWithoutFrame {
@@ -101,17 +182,13 @@ pub enum PairingOutcome {
     },
 }
 
-#[derive(Debug, Clone, Copy)]
-struct PendingPulse {
-    t_trigger: DeviceTimeUs,
-    t_host_recv: HostTimeUs,
-}
-
 /// Counts of every outcome so far.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
 pub struct PairingCounts {
     /// Frames paired.
     pub paired: u64,
+    /// Of those, on exposure timestamps.
+    pub paired_on_camera_time: u64,
     /// Frames without pulse.
     pub frame_without_pulse: u64,
     /// Pulses without frame.
@@ -122,26 +199,53 @@ pub struct PairingCounts {
     pub duplicate_pulses: u64,
 }
 
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum PulseStatus {
+    Pending,
+    Paired,
+    Expired,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct KnownPulse {
+    pulse: Pulse,
+    status: PulseStatus,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct PendingFrame {
+    frame: FrameArrival,
+    why: Unpaired,
+}
+
+enum Decision {
+    Pair(u64, PairBasis),
+    Wait(Unpaired),
+    Reject(Unpaired),
+}
+
+/// Confirmed latencies kept for the measured window.
+const LATENCY_HISTORY: usize = 32;
+/// Floor of the exposure-time tolerance, µs (clock-fit bias the residuals cannot show).
+const EXPOSURE_TOLERANCE_FLOOR_US: f64 = 500.0;
+/// A frame waits for its pulse (or a confirming frame) until frames this many pulse spacings
+/// later have arrived.
+const HOLD_SPACINGS: f64 = 4.0;
+
 /// The pairing state machine.
 #[derive(Debug, Clone)]
 pub struct Pairer {
     config: PairingConfig,
-    pulses: BTreeMap<u64, PendingPulse>,
-    frames: BTreeMap<u64, HostTimeUs>,
+    pulses: BTreeMap<u64, KnownPulse>,
     seen_pulses: BTreeSet<u64>,
+    frames: BTreeMap<u64, PendingFrame>,
     seen_frames: BTreeSet<u64>,
     offset: Option<i128>,
     latencies: VecDeque<f64>,
-    expired_in_a_row: u32,
+    camera: CameraTimeMap,
     frontier: Option<HostTimeUs>,
     counts: PairingCounts,
 }
-
-/// Consecutive unpaired frames after which the id offset is forgotten and re-learned from timing.
-const RESET_AFTER_UNPAIRED: u32 = 3;
-
-/// Confirmed latencies kept for the learned window.
-const LATENCY_HISTORY: usize = 32;
 
 impl Pairer {
     /// An empty pairer.
@@ -149,12 +253,12 @@ impl Pairer {
         Self {
             config,
             pulses: BTreeMap::new(),
-            frames: BTreeMap::new(),
             seen_pulses: BTreeSet::new(),
+            frames: BTreeMap::new(),
             seen_frames: BTreeSet::new(),
             offset: None,
             latencies: VecDeque::with_capacity(LATENCY_HISTORY),
-            expired_in_a_row: 0,
+            camera: CameraTimeMap::default(),
             frontier: None,
             counts: PairingCounts::default(),
         }
@@ -165,22 +269,39 @@ impl Pairer {
         self.counts
     }
 
+    /// The latency window in force, µs: measured (see the module doc) or a-priori.
+    pub fn latency_window_us(&self) -> (f64, f64) {
+        if self.latencies.is_empty() {
+            return (self.config.min_latency_us, self.config.max_latency_us);
+        }
+        let seen_lo = self.latencies.iter().copied().fold(f64::INFINITY, f64::min);
+        let seen_hi = self
+            .latencies
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, f64::max);
+        let tol = self
+            .config
+            .latency_tolerance_us
+            .min(0.2 * self.config.min_pulse_spacing_us);
+        ((seen_lo - tol).max(0.0), seen_hi + tol)
+    }
+
+    /// A reading of the camera's timestamp counter against the host clock.
+    pub fn add_camera_clock_sample(&mut self, sample: &CameraClockSample) {
+        self.camera.add_latch(sample);
+    }
+
     /// A pulse arrived.
-    pub fn add_pulse(
-        &mut self,
-        seq: u64,
-        t_trigger: DeviceTimeUs,
-        t_host_recv: HostTimeUs,
-        clock: Option<&ClockFit>,
-    ) -> Vec<PairingOutcome> {
-        if !self.seen_pulses.insert(seq) {
-            return self.record(vec![PairingOutcome::DuplicatePulse { seq }]);
+    pub fn add_pulse(&mut self, pulse: Pulse, clock: Option<&ClockFit>) -> Vec<PairingOutcome> {
+        if !self.seen_pulses.insert(pulse.seq) {
+            return self.record(vec![PairingOutcome::DuplicatePulse { seq: pulse.seq }]);
         }
         self.pulses.insert(
-            seq,
-            PendingPulse {
-                t_trigger,
-                t_host_recv,
+            pulse.seq,
+            KnownPulse {
+                pulse,
+                status: PulseStatus::Pending,
             },
         );
         self.match_pending(clock)
@@ -189,178 +310,188 @@ impl Pairer {
     /// A frame arrived.
     pub fn add_frame(
         &mut self,
-        frame_id: u64,
-        t_host_arrival: HostTimeUs,
+        frame: FrameArrival,
         clock: Option<&ClockFit>,
     ) -> Vec<PairingOutcome> {
-        if !self.seen_frames.insert(frame_id) {
-            return self.record(vec![PairingOutcome::DuplicateFrame { frame_id }]);
+        if !self.seen_frames.insert(frame.frame_id) {
+            return self.record(vec![PairingOutcome::DuplicateFrame {
+                frame_id: frame.frame_id,
+            }]);
         }
-        self.frames.insert(frame_id, t_host_arrival);
+        self.frames.insert(
+            frame.frame_id,
+            PendingFrame {
+                frame,
+                why: Unpaired::NoPulse,
+            },
+        );
         self.frontier = Some(
             self.frontier
-                .map_or(t_host_arrival, |f| f.max(t_host_arrival)),
+                .map_or(frame.t_host_arrival, |f| f.max(frame.t_host_arrival)),
         );
         self.match_pending(clock)
     }
 
-    /// Declares frames and pulses that waited too long as unpaired.
-    pub fn expire(&mut self, now: HostTimeUs, clock: Option<&ClockFit>) -> Vec<PairingOutcome> {
+    /// Declares frames and pulses that waited too long as unpaired (see the module doc).
+    pub fn expire(&mut self, clock: Option<&ClockFit>) -> Vec<PairingOutcome> {
         let mut out = Vec::new();
-        let now_f = now.0 as f64;
-        let max_latency = self.config.max_latency_us;
-        let stale_frames: Vec<u64> = self
+        let Some(frontier) = self.frontier.map(|t| t.0 as f64) else {
+            return out;
+        };
+        let hold = HOLD_SPACINGS * self.config.min_pulse_spacing_us;
+        let stale: Vec<u64> = self
             .frames
             .iter()
-            .filter(|(_, t)| now_f - t.0 as f64 > max_latency)
+            .filter(|(_, f)| frontier - f.frame.t_host_arrival.0 as f64 > hold)
             .map(|(&id, _)| id)
             .collect();
-        for frame_id in stale_frames {
-            self.frames.remove(&frame_id);
-            out.push(PairingOutcome::FrameWithoutPulse { frame_id });
-            self.expired_in_a_row += 1;
+        for frame_id in stale {
+            if let Some(f) = self.frames.remove(&frame_id) {
+                out.push(PairingOutcome::FrameWithoutPulse {
+                    frame_id,
+                    reason: f.why,
+                });
+            }
         }
-        if self.expired_in_a_row >= RESET_AFTER_UNPAIRED {
-            // ids and timing keep disagreeing: start over — the learned window too, since an
-            // outlier among the first confirmed latencies would otherwise exclude every frame
-            self.offset = None;
-            self.latencies.clear();
-            self.expired_in_a_row = 0;
-        }
-        // A pulse is frameless once the camera has delivered frames from well after it: the
-        // frontier is the latest frame arrival seen (cameras deliver in order). Using it rather
-        // than `now` keeps a camera that lags behind real time (a slow USB stack, a simulator
-        // rendering) from having its pulses expired before their frames arrive. If the camera
-        // delivers nothing more, `finish` reports the pulses still pending.
         let timeout = self.config.pulse_timeout_us;
-        let frontier = self.frontier.map_or(f64::NEG_INFINITY, |t| t.0 as f64);
-        let stale_pulses: Vec<u64> = self
-            .pulses
-            .iter()
-            .filter(|(_, p)| {
-                let t0 = clock.map_or(p.t_host_recv.0 as f64, |c| c.host_us(p.t_trigger));
-                frontier - t0 > timeout
-            })
-            .map(|(&s, _)| s)
-            .collect();
-        for seq in stale_pulses {
-            self.pulses.remove(&seq);
-            out.push(PairingOutcome::PulseWithoutFrame { seq });
+        for p in self.pulses.values_mut() {
+            if p.status == PulseStatus::Pending
+                && frontier - host_trigger(&p.pulse, clock) > timeout
+            {
+                p.status = PulseStatus::Expired;
+                out.push(PairingOutcome::PulseWithoutFrame { seq: p.pulse.seq });
+            }
         }
+        // pulses long settled are only needed for duplicate detection (`seen_pulses`)
+        let keep_after = frontier - 4.0 * timeout;
+        self.pulses.retain(|_, p| {
+            p.status == PulseStatus::Pending || host_trigger(&p.pulse, clock) > keep_after
+        });
         self.record(out)
     }
 
-    /// Ends the capture: everything still pending is unpaired.
-    pub fn finish(&mut self) -> Vec<PairingOutcome> {
-        let mut out: Vec<PairingOutcome> = std::mem::take(&mut self.frames)
-            .into_keys()
-            .map(|frame_id| PairingOutcome::FrameWithoutPulse { frame_id })
+    /// Ends the capture: a last matching pass, then everything still pending is unpaired.
+    pub fn finish(&mut self, clock: Option<&ClockFit>) -> Vec<PairingOutcome> {
+        let mut out = self.match_pending(clock);
+        let mut rest: Vec<PairingOutcome> = std::mem::take(&mut self.frames)
+            .into_iter()
+            .map(|(frame_id, f)| PairingOutcome::FrameWithoutPulse {
+                frame_id,
+                reason: f.why,
+            })
             .collect();
-        out.extend(
-            std::mem::take(&mut self.pulses)
-                .into_keys()
-                .map(|seq| PairingOutcome::PulseWithoutFrame { seq }),
+        for p in self.pulses.values_mut() {
+            if p.status == PulseStatus::Pending {
+                p.status = PulseStatus::Expired;
+                rest.push(PairingOutcome::PulseWithoutFrame { seq: p.pulse.seq });
+            }
+        }
+        out.extend(self.record(rest));
+        out
+    }
+
+    /// Pulses (any status) whose mapped trigger lies in `[lo, hi]`, host µs.
+    fn triggered_in(&self, lo: f64, hi: f64, clock: &ClockFit) -> Vec<KnownPulse> {
+        self.pulses
+            .values()
+            .filter(|p| {
+                let t = clock.host_us(p.pulse.t_trigger);
+                t >= lo && t <= hi
+            })
+            .copied()
+            .collect()
+    }
+
+    /// The exposure-time decision, `None` when the frame has no usable exposure timestamp.
+    fn decide_on_camera_time(&self, frame: &FrameArrival, clock: &ClockFit) -> Option<Decision> {
+        let (exposure, uncertainty) = self.camera.host_us(frame.t_camera_ns?)?;
+        let tol = uncertainty + 3.0 * clock.rms_us + EXPOSURE_TOLERANCE_FLOOR_US;
+        let (lo, hi) = (
+            exposure - tol - self.config.max_exposure_delay_us,
+            exposure + tol,
         );
-        self.record(out)
-    }
-
-    fn latency(
-        &self,
-        arrival: HostTimeUs,
-        pulse: &PendingPulse,
-        clock: Option<&ClockFit>,
-    ) -> Option<f64> {
-        clock.map(|c| arrival.0 as f64 - c.host_us(pulse.t_trigger))
-    }
-
-    /// The configured latency window.
-    fn configured(&self) -> (f64, f64) {
-        (self.config.min_latency_us, self.config.max_latency_us)
-    }
-
-    /// The window learned from confirmed pairs: their range widened by the tolerance, clipped to
-    /// the configured window; `None` before any pair carried a latency.
-    fn learned(&self) -> Option<(f64, f64)> {
-        if self.latencies.is_empty() {
+        if hi - lo >= 0.5 * self.config.min_pulse_spacing_us {
             return None;
         }
-        let (lo, hi) = self.configured();
-        let seen_lo = self.latencies.iter().copied().fold(f64::INFINITY, f64::min);
-        let seen_hi = self
-            .latencies
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
-        let tol = self.config.latency_tolerance_us;
-        Some(((seen_lo - tol).max(lo), (seen_hi + tol).min(hi)))
+        Some(match self.triggered_in(lo, hi, clock)[..] {
+            [] => Decision::Wait(Unpaired::NoPulse),
+            [p] if p.status == PulseStatus::Pending => {
+                Decision::Pair(p.pulse.seq, PairBasis::CameraTime)
+            }
+            [p] if p.status == PulseStatus::Paired => Decision::Reject(Unpaired::PulseTaken),
+            [_] => Decision::Reject(Unpaired::NoPulse),
+            _ => Decision::Reject(Unpaired::Ambiguous),
+        })
     }
 
-    fn inside(latency: Option<f64>, (lo, hi): (f64, f64)) -> bool {
-        latency.is_none_or(|l| l >= lo && l <= hi)
+    /// The unique pending pulse inside the latency window of `frame`, or why there is none.
+    fn arrival_candidate(&self, frame: &FrameArrival, clock: &ClockFit) -> Result<u64, Decision> {
+        let (wlo, whi) = self.latency_window_us();
+        if whi - wlo >= self.config.min_pulse_spacing_us {
+            return Err(Decision::Wait(Unpaired::Ambiguous));
+        }
+        let arrival = frame.t_host_arrival.0 as f64;
+        match self.triggered_in(arrival - whi, arrival - wlo, clock)[..] {
+            [] => Err(Decision::Wait(Unpaired::NoPulse)),
+            [p] if p.status == PulseStatus::Pending => Ok(p.pulse.seq),
+            [p] if p.status == PulseStatus::Paired => Err(Decision::Reject(Unpaired::PulseTaken)),
+            [_] => Err(Decision::Reject(Unpaired::NoPulse)),
+            _ => Err(Decision::Wait(Unpaired::Ambiguous)),
+        }
     }
 
-    /// Pending pulses whose timing puts them inside `window` for a frame arriving at `arrival`.
-    fn candidates(
-        &self,
-        arrival: HostTimeUs,
-        clock: Option<&ClockFit>,
-        window: (f64, f64),
-    ) -> Vec<(u64, Option<f64>)> {
-        self.pulses
-            .iter()
-            .map(|(&s, p)| (s, self.latency(arrival, p, clock)))
-            .filter(|(_, l)| Self::inside(*l, window))
-            .collect()
+    fn decide(&self, frame: &FrameArrival, clock: Option<&ClockFit>) -> Decision {
+        let Some(clock) = clock else {
+            return Decision::Wait(Unpaired::NoClock);
+        };
+        if let Some(d) = self.decide_on_camera_time(frame, clock) {
+            return d;
+        }
+        let seq = match self.arrival_candidate(frame, clock) {
+            Ok(seq) => seq,
+            Err(d) => return d,
+        };
+        let implied = seq as i128 - frame.frame_id as i128;
+        if self.offset == Some(implied) {
+            return Decision::Pair(seq, PairBasis::ArrivalTime);
+        }
+        // a new offset needs a second frame that implies it independently
+        let confirmed = self.frames.values().any(|g| {
+            g.frame.frame_id != frame.frame_id
+                && self
+                    .arrival_candidate(&g.frame, clock)
+                    .is_ok_and(|s| s as i128 - g.frame.frame_id as i128 == implied)
+        });
+        if confirmed {
+            Decision::Pair(seq, PairBasis::ArrivalTime)
+        } else {
+            Decision::Wait(Unpaired::Unconfirmed)
+        }
     }
 
     /// Pairs whatever can be paired now.
     fn match_pending(&mut self, clock: Option<&ClockFit>) -> Vec<PairingOutcome> {
         let mut out = Vec::new();
-        let frame_ids: Vec<u64> = self.frames.keys().copied().collect();
-        for frame_id in frame_ids {
-            let Some(&arrival) = self.frames.get(&frame_id) else {
+        let ids: Vec<u64> = self.frames.keys().copied().collect();
+        for frame_id in ids {
+            let Some(pending) = self.frames.get(&frame_id).copied() else {
                 continue;
             };
-            let window = self.learned().unwrap_or(self.configured());
-            let Some(off) = self.offset else {
-                // no offset yet: the unique pulse inside the window — learned if any latency is
-                // known, else configured (rule 2) — or without a clock the first pulse (rule 3)
-                let first = match clock {
-                    Some(_) => match self.candidates(arrival, clock, window)[..] {
-                        [one] => Some(one),
-                        _ => None,
-                    },
-                    None => self.pulses.keys().next().map(|&s| (s, None)),
-                };
-                if let Some((seq, latency)) = first {
-                    self.offset = Some(seq as i128 - frame_id as i128);
-                    self.pair(frame_id, seq, latency, &mut out);
-                }
-                continue;
-            };
-            // rule 1: the offset's pulse, if its timing agrees
-            if let Ok(seq) = u64::try_from(frame_id as i128 + off) {
-                match self.pulses.get(&seq) {
-                    Some(p) => {
-                        let latency = self.latency(arrival, p, clock);
-                        if Self::inside(latency, window) {
-                            self.pair(frame_id, seq, latency, &mut out);
-                            continue;
-                        }
+            match self.decide(&pending.frame, clock) {
+                Decision::Pair(seq, basis) => {
+                    if let Some(clock) = clock {
+                        self.pair(&pending.frame, seq, basis, clock, &mut out);
                     }
-                    // not here yet: wait for it rather than take another pulse
-                    None if !self.seen_pulses.contains(&seq) => continue,
-                    None => {}
                 }
-            }
-            // the ids contradict the timing (a missed trigger or a spurious frame): re-learn the
-            // offset from the unique pulse inside the *learned* window only; before any latency
-            // is known, never re-learn (the frame will expire unpaired instead)
-            if let Some(learned) = self.learned()
-                && let [(seq, latency)] = self.candidates(arrival, clock, learned)[..]
-            {
-                self.offset = Some(seq as i128 - frame_id as i128);
-                self.pair(frame_id, seq, latency, &mut out);
+                Decision::Wait(why) => {
+                    if let Some(f) = self.frames.get_mut(&frame_id) {
+                        f.why = why;
+                    }
+                }
+                Decision::Reject(reason) => {
+                    self.frames.remove(&frame_id);
+                    out.push(PairingOutcome::FrameWithoutPulse { frame_id, reason });
+                }
             }
         }
         self.record(out)
@@ -368,31 +499,54 @@ impl Pairer {
 
     fn pair(
         &mut self,
-        frame_id: u64,
+        frame: &FrameArrival,
         seq: u64,
-        latency_us: Option<f64>,
+        basis: PairBasis,
+        clock: &ClockFit,
         out: &mut Vec<PairingOutcome>,
     ) {
-        if let Some(l) = latency_us {
-            if self.latencies.len() == LATENCY_HISTORY {
-                self.latencies.pop_front();
-            }
-            self.latencies.push_back(l);
+        let Some(known) = self.pulses.get_mut(&seq) else {
+            return;
+        };
+        known.status = PulseStatus::Paired;
+        let pulse = known.pulse;
+        let trigger = clock.host_us(pulse.t_trigger);
+        let latency_us = frame.t_host_arrival.0 as f64 - trigger;
+        if self.latencies.len() == LATENCY_HISTORY {
+            self.latencies.pop_front();
         }
-        self.expired_in_a_row = 0;
-        self.frames.remove(&frame_id);
-        self.pulses.remove(&seq);
+        self.latencies.push_back(latency_us);
+        self.offset = Some(seq as i128 - frame.frame_id as i128);
+        // Only exposure-time pairs re-anchor the camera clock: they are derived from the map
+        // itself, so an error can never exceed the tolerance (module doc).
+        if basis == PairBasis::CameraTime
+            && let Some(ns) = frame.t_camera_ns
+        {
+            let half_delay = 0.5 * self.config.max_exposure_delay_us;
+            self.camera.add_exposure(
+                ns,
+                trigger + half_delay,
+                half_delay + 3.0 * clock.rms_us + EXPOSURE_TOLERANCE_FLOOR_US * 0.5,
+            );
+        }
+        self.frames.remove(&frame.frame_id);
         out.push(PairingOutcome::Paired {
-            frame_id,
-            seq,
+            frame_id: frame.frame_id,
+            pulse,
             latency_us,
+            basis,
         });
     }
 
     fn record(&mut self, out: Vec<PairingOutcome>) -> Vec<PairingOutcome> {
         for o in &out {
             match o {
-                PairingOutcome::Paired { .. } => self.counts.paired += 1,
+                PairingOutcome::Paired { basis, .. } => {
+                    self.counts.paired += 1;
+                    if *basis == PairBasis::CameraTime {
+                        self.counts.paired_on_camera_time += 1;
+                    }
+                }
                 PairingOutcome::FrameWithoutPulse { .. } => self.counts.frame_without_pulse += 1,
                 PairingOutcome::PulseWithoutFrame { .. } => self.counts.pulse_without_frame += 1,
                 PairingOutcome::DuplicateFrame { .. } => self.counts.duplicate_frames += 1,
@@ -401,6 +555,11 @@ impl Pairer {
         }
         out
     }
+}
+
+/// A pulse's trigger on the host clock (its receive time without a clock fit).
+fn host_trigger(p: &Pulse, clock: Option<&ClockFit>) -> f64 {
+    clock.map_or(p.t_host_recv.0 as f64, |c| c.host_us(p.t_trigger))
 }
 
 #[cfg(test)]

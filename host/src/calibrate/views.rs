@@ -11,8 +11,8 @@
 use nalgebra::{Point2, Point3};
 
 use crate::polar::frame::RawFrame;
-use crate::pose::{BoardCorners, TagDetector, assemble_correspondences};
-use crate::track::{DetectImage, TrackRejection, TrackedBoard, detect_frame};
+use crate::pose::{BoardCorners, assemble_correspondences};
+use crate::track::{DetectImage, FamilyDetectors, TrackRejection, TrackedBoard};
 
 /// One calibration view: board point (m) ↔ observed pixel.
 pub type View = Vec<(Point3<f64>, Point2<f64>)>;
@@ -20,19 +20,23 @@ pub type View = Vec<(Point3<f64>, Point2<f64>)>;
 /// The view of one frame: the corners of the board with the most detected corners, and that
 /// board's index (`None` when no tag of any board was seen).
 pub fn board_view(
-    detector: &mut TagDetector,
+    detectors: &mut FamilyDetectors,
     frame: &RawFrame,
     boards: &[TrackedBoard],
     image: DetectImage,
 ) -> Result<(View, Option<usize>), TrackRejection> {
-    let detections = detect_frame(detector, frame, image)?;
+    let detections = detectors.detect(frame, image)?;
     let best = boards
         .iter()
         .enumerate()
         .map(|(i, b)| {
             (
                 i,
-                assemble_correspondences(&detections, b as &dyn BoardCorners).correspondences,
+                assemble_correspondences(
+                    &detectors.of_board(&detections, i),
+                    b as &dyn BoardCorners,
+                )
+                .correspondences,
             )
         })
         .filter(|(_, c)| !c.is_empty())

@@ -97,6 +97,27 @@ pub struct CameraSettings {
     pub external_trigger: bool,
 }
 
+/// One reading of the camera's timestamp counter, bracketed by host times: the camera-side
+/// half of a camera→host clock model (GigE Vision's `GevTimestampControlLatch` /
+/// `GevTimestampValue`, SFNC's `TimestampLatch` / `TimestampLatchValue`). The counter was read
+/// somewhere between `t_host_before` and `t_host_after`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct CameraClockSample {
+    /// The camera's timestamp counter, ns (the clock of [`FrameMeta::t_camera_ns`]).
+    pub t_camera_ns: u64,
+    /// Host time just before the latch was requested.
+    pub t_host_before: HostTimeUs,
+    /// Host time just after its value was read back.
+    pub t_host_after: HostTimeUs,
+}
+
+impl CameraClockSample {
+    /// Half the bracket, µs: how far the latch may lie from the bracket's midpoint.
+    pub fn half_width_us(&self) -> f64 {
+        self.t_host_after.0.saturating_sub(self.t_host_before.0) as f64 / 2.0
+    }
+}
+
 /// Counters of a stream, each failure mode apart.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct CameraCounters {
@@ -166,5 +187,11 @@ pub trait Camera: Send {
     /// behind real time); the capture waits for them before it ends. Default: 0.
     fn frames_in_flight(&self) -> u64 {
         0
+    }
+    /// Latches and reads the camera's timestamp counter, where the backend can (before `start`
+    /// or while streaming); `None` where it cannot. Frames are then paired on their exposure
+    /// timestamps rather than their arrival (`acquire::pairing`). Default: `None`.
+    fn clock_sample(&mut self) -> Option<CameraClockSample> {
+        None
     }
 }

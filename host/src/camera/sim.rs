@@ -5,7 +5,9 @@
 //! does with them: unwraps the 16-bit block ids into monotonic 64-bit ids (gaps are frames lost
 //! in transfer, counted), drops duplicated block ids (counted), flags frames with missing packets,
 //! and stamps the host arrival time in the capture's [`HostClock`] from the simulated arrival
-//! instant (the camera's latency, not the simulator's render time).
+//! instant (the camera's latency, not the simulator's render time). Its timestamp latch
+//! ([`Camera::clock_sample`]) reads the simulated camera's own counter, as a GigE camera's
+//! `GevTimestampControlLatch` does.
 
 use std::time::Duration;
 
@@ -130,6 +132,17 @@ impl Camera for SimCameraBackend {
 
     fn counters(&self) -> CameraCounters {
         self.counters
+    }
+
+    fn clock_sample(&mut self) -> Option<super::CameraClockSample> {
+        let t_host_before = self.clock.now();
+        let t_camera_ns = self.camera.latch_timestamp_ns();
+        let t_host_after = self.clock.now();
+        Some(super::CameraClockSample {
+            t_camera_ns,
+            t_host_before,
+            t_host_after,
+        })
     }
 
     fn frames_in_flight(&self) -> u64 {

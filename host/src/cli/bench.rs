@@ -39,11 +39,11 @@ pub enum Args {
 pub struct PoseArgs {
     /// Scene file.
     pub scene: PathBuf,
-    /// Frames to render (spread over the capture path).
-    #[arg(long, default_value_t = 20)]
+    /// Frames to render (spread over the capture path), ≥ 1.
+    #[arg(long, default_value_t = 20, value_parser = super::limits::count::<usize>)]
     pub frames: usize,
-    /// Render at WIDTHxHEIGHT instead of the scene's resolution.
-    #[arg(long, value_parser = super::capture::parse_resolution)]
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
+    #[arg(long, value_parser = super::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
     #[arg(long)]
@@ -144,7 +144,7 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
     let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let camera = *renderer.camera();
     let indices = spread(scene.camera_poses.len(), Some(args.frames));
-    println!(
+    crate::outln!(
         "rendering {} frames of {} at {}×{}, seed {}…",
         indices.len(),
         args.scene.display(),
@@ -197,12 +197,12 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             rejected,
         });
     }
-    println!(
+    crate::outln!(
         "| image | posed | median rot (°) | p90 rot (°) | median trans (mm) | p90 trans (mm) | flipped | ms/frame |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    crate::outln!("|---|---|---|---|---|---|---|---|");
     for r in &results {
-        println!(
+        crate::outln!(
             "| {:?} | {}/{} | {:.4} | {:.4} | {:.3} | {:.3} | {} | {:.1} |",
             r.image,
             r.posed,
@@ -215,12 +215,12 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             r.ms_per_frame
         );
         for (why, count) in &r.rejected {
-            println!("|   rejected: {why} ({count}) |||||||");
+            crate::outln!("|   rejected: {why} ({count}) |||||||");
         }
     }
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("pose-bench.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&results)?)?;
-    println!("written {}", path.display());
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    crate::outln!("written {}", path.display());
     Ok(())
 }

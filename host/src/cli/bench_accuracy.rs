@@ -290,7 +290,7 @@ fn one_run(
             .as_ref()
             .map(|a| (a.vertices_with_virtual_samples, a.vertices_with_eta_prior)),
     };
-    println!(
+    crate::outln!(
         "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
         r.scene,
         r.sweep,
@@ -313,7 +313,7 @@ fn one_run(
             .map_or("n/a".into(), |h| format!("{:.4}", h.s0.relative_rmse))
     );
     if let (Some(p), Some((virt, prior))) = (&r.pooling, r.guided) {
-        println!(
+        crate::outln!(
             "    {} clusters, {virt} vertices with virtual samples, {prior} with a pooled η prior; median η se {:.4} → {:.4}",
             r.clusters.len(),
             p.median_eta_se_before,
@@ -321,7 +321,7 @@ fn one_run(
         );
     }
     for c in &r.clusters {
-        println!(
+        crate::outln!(
             "    cluster ({} members): η {:.4} (pooled {:.4} ± {:.4}, median {:.4}, τ {:.4}, {} used, {} trimmed)  σs {:.3}  σss {:.3}  ρs {:.3}",
             c.members,
             c.eta,
@@ -337,7 +337,7 @@ fn one_run(
         );
     }
     for m in &r.scores.materials {
-        println!(
+        crate::outln!(
             "    {:<16} η {:.4} (true {:.3}, {:+.3} %; vertex median {:.2} %)  σs {:.3}  σss {:.3}  normal {:.2}°",
             m.name,
             m.eta_median,
@@ -384,11 +384,11 @@ fn write_report(
         |s| s.normal_median_deg,
     )?;
     let json = dir.join(format!("{stem}.json"));
-    std::fs::write(&json, serde_json::to_vec_pretty(results)?)
+    crate::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
-    std::fs::write(path, md).with_context(|| format!("writing {}", path.display()))?;
-    println!(
+    crate::atomic_file::write(path, md).with_context(|| format!("writing {}", path.display()))?;
+    crate::outln!(
         "\nreport  {}\nplots   {}\n        {}\ndata    {}",
         path.display(),
         eta_png.display(),

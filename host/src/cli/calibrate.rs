@@ -24,10 +24,10 @@ use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
 use crate::calibrate::views::board_view;
 use crate::calibrate::{CalibConfig, calibrate};
 use crate::polar::frame::RawFrame;
-use crate::pose::{DetectorConfig, TagDetector};
+use crate::pose::DetectorConfig;
 use crate::process::layout_of;
 use crate::session::reader;
-use crate::track::DetectImage;
+use crate::track::{DetectImage, FamilyDetectors};
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
@@ -69,6 +69,46 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
     })
 }
 
+/// What the frames gave, in words: unreadable frames by reason, frames without a board's tag,
+/// frames with too few corners.
+fn frame_causes(
+    detected: &[Result<(crate::calibrate::views::View, Option<usize>), String>],
+) -> String {
+    let mut unreadable: std::collections::BTreeMap<&str, usize> = Default::default();
+    let (mut no_tags, mut few, mut good) = (0, 0, 0);
+    for d in detected {
+        match d {
+            // the reason up to its first detail (file paths differ per frame)
+            Err(e) => {
+                *unreadable
+                    .entry(e.split(": ").last().unwrap_or(e))
+                    .or_insert(0) += 1
+            }
+            Ok((v, _)) if v.is_empty() => no_tags += 1,
+            Ok((v, _)) if v.len() < 8 => few += 1,
+            Ok(_) => good += 1,
+        }
+    }
+    let mut parts = Vec::new();
+    if !unreadable.is_empty() {
+        let n: usize = unreadable.values().sum();
+        let why: Vec<String> = unreadable
+            .iter()
+            .take(3)
+            .map(|(k, n)| format!("{n} × {k}"))
+            .collect();
+        parts.push(format!("{n} unreadable: {}", why.join("; ")));
+    }
+    if no_tags > 0 {
+        parts.push(format!("{no_tags} without a tag of the session's boards"));
+    }
+    if few > 0 {
+        parts.push(format!("{few} with fewer than 2 tags of one board"));
+    }
+    parts.push(format!("{good} usable"));
+    parts.join(", ")
+}
+
 /// Runs `ellipso calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let session = reader::open(&args.session)?;
@@ -77,38 +117,50 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let layout = layout_of(&session.manifest)?;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
-    println!(
+    anyhow::ensure!(
+        !frames.is_empty(),
+        "{}: no complete frame to calibrate from ({} frames on disk, {} flagged incomplete)",
+        args.session.display(),
+        session.frames.len(),
+        session.frames.iter().filter(|f| !f.complete).count()
+    );
+    crate::outln!(
         "detecting tags on {} frames ({:?} image)…",
         frames.len(),
         args.image
     );
-    let detected: Vec<(crate::calibrate::views::View, Option<usize>)> = frames
+    // per frame: its view, or why it has none (kept, so a failed calibration can say why)
+    let detected: Vec<Result<(crate::calibrate::views::View, Option<usize>), String>> = frames
         .par_iter()
         .map_init(
-            || TagDetector::new(DetectorConfig::default()),
-            |detector, entry| {
-                let Ok(detector) = detector else {
-                    return (Vec::new(), None);
-                };
-                let Ok((w, h, px)) = session.load_frame(entry) else {
-                    return (Vec::new(), None);
-                };
-                let Ok(raw) = RawFrame::new(w, h, s.bit_depth, layout, px) else {
-                    return (Vec::new(), None);
-                };
-                board_view(detector, &raw, &boards, args.image).unwrap_or_default()
+            || FamilyDetectors::new(&boards, DetectorConfig::default()),
+            |detectors, entry| {
+                let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
+                let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
+                let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
+                    .map_err(|e| format!("{}: {e}", entry.path.display()))?;
+                board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
             },
         )
         .collect();
-    let views: Vec<_> = detected.iter().map(|(v, _)| v.clone()).collect();
+    let views: Vec<_> = detected
+        .iter()
+        .map(|d| d.as_ref().map(|(v, _)| v.clone()).unwrap_or_default())
+        .collect();
     let usable = views.iter().filter(|v| v.len() >= 8).count();
-    println!("{usable} frames with ≥ 2 tags of one board");
+    let causes = frame_causes(&detected);
+    crate::outln!("{usable} frames with ≥ 2 tags of one board ({causes})");
     let config = CalibConfig {
         fix_k3: !args.free_k3,
         ..CalibConfig::default()
     };
-    let cal = calibrate(&views, (s.width, s.height), &config)?;
-    println!(
+    let cal = calibrate(&views, (s.width, s.height), &config)
+        .with_context(|| format!("{} frames: {causes}", frames.len()))?;
+    let detected: Vec<_> = detected
+        .into_iter()
+        .map(|d| d.unwrap_or_default())
+        .collect();
+    crate::outln!(
         "reprojection RMS {:.4} px over {} views ({} rejected)",
         cal.rms_px,
         cal.views.len(),
@@ -117,16 +169,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = cal.camera.params();
     for (k, name) in CAMERA_PARAM_NAMES.iter().enumerate() {
         if cal.estimated[k] {
-            println!(
+            crate::outln!(
                 "  {name:<3} = {:>14.6} ± {:.6}",
-                params[k], cal.std_errors[k]
+                params[k],
+                cal.std_errors[k]
             );
         } else {
-            println!("  {name:<3} = {:>14.6}   (fixed)", params[k]);
+            crate::outln!("  {name:<3} = {:>14.6}   (fixed)", params[k]);
         }
     }
     for r in &cal.rejected {
-        println!("  view {} rejected: {}", r.index, r.reason);
+        crate::outln!("  view {} rejected: {}", r.index, r.reason);
     }
     let out = args
         .out
@@ -170,7 +223,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         highlight_px: h.pixel,
                     }),
                     Err(why) => {
-                        println!("  frame {}: no highlight: {why}", entry.frame_id);
+                        crate::outln!("  frame {}: no highlight: {why}", entry.frame_id);
                         None
                     }
                 }
@@ -180,7 +233,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("estimating the flash position")?;
         let p = flash.flash_camera_m.coords * 1e3;
         let sd = flash.std_m.map(|v| v * 1e3);
-        println!(
+        crate::outln!(
             "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
             p.x,
             sd[0],
@@ -194,7 +247,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push('\n');
         text.push_str(&flash.to_toml_flash_section());
     }
-    std::fs::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
-    println!("rig sections written to {}", out.display());
+    crate::atomic_file::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+    crate::outln!("rig sections written to {}", out.display());
     Ok(())
 }

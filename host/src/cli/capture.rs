@@ -18,7 +18,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use anyhow::Context;
@@ -63,17 +63,19 @@ pub struct Args {
     /// Trigger-wire socket of `ellipso sim serve --wire` (with `--trigger`).
     #[arg(long, requires = "trigger")]
     pub wire: Option<PathBuf>,
-    /// Take only this many photos (default: the scene's capture path).
-    #[arg(long)]
+    /// Take only this many photos, ≥ 1 (default: the scene's capture path).
+    #[arg(long, value_parser = super::limits::count::<u32>)]
     pub photos: Option<u32>,
-    /// Render at WIDTHxHEIGHT instead of the scene's resolution (intrinsics scaled).
-    #[arg(long, value_parser = parse_resolution)]
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution (intrinsics scaled): even
+    /// sides in 2..=16384, as in scene files.
+    #[arg(long, value_parser = super::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
-    /// Rays per raw pixel per axis (N×N).
-    #[arg(long, default_value_t = 2)]
+    /// Rays per raw pixel per axis (N×N), 1..=8.
+    #[arg(long, default_value_t = 2, value_parser = super::limits::supersampling)]
     pub supersampling: u32,
-    /// Time between photos, ms (default: the scene's `capture.interval_ms`).
-    #[arg(long)]
+    /// Time between photos, ms, in (0, 3600000] (default: the scene's `capture.interval_ms`);
+    /// the board checks it against the exposure before anything is recorded.
+    #[arg(long, value_parser = super::limits::interval_ms)]
     pub interval_ms: Option<f64>,
     /// Skip pose tracking after recording.
     #[arg(long)]
@@ -101,12 +103,9 @@ pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
     Ok(bracket)
 }
 
+/// `WIDTHxHEIGHT` with even sides in 2..=16384 (see [`super::limits::resolution`]).
 pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .ok_or("expected WIDTHxHEIGHT, e.g. 1224x1024")?;
-    let p = |v: &str| v.trim().parse::<u32>().map_err(|e| format!("'{v}': {e}"));
-    Ok([p(w)?, p(h)?])
+    super::limits::resolution(s)
 }
 
 /// Renders capture poses for the simulated camera.
@@ -161,15 +160,13 @@ pub fn board_config(
 }
 
 /// Records a simulated capture into `args.out`; returns the report and the session directory.
-pub fn capture_sim(
-    args: &Args,
-    quiet: bool,
-) -> anyhow::Result<(CaptureReport, PathBuf, Option<Vec<process::TrackedFrame>>)> {
+pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
     let scene_path = args
         .sim
         .as_ref()
         .context("--sim SCENE is required for a simulated capture")?;
     let scene = Scene::load(scene_path)?;
+    crate::session::writer::check_fresh(&args.out)?;
     // The renderer borrows the scene for the whole process (the capture threads outlive scopes).
     let scene: &'static Scene = Box::leak(Box::new(scene));
     let options = RenderOptions {
@@ -255,17 +252,18 @@ pub fn capture_sim(
             .unwrap_or_else(|| "simulated IMX250MZR".into()),
         width: size.0,
         height: size.1,
-        layout: serde_json::to_value(layout)?
-            .as_str()
-            .unwrap_or_default()
-            .to_string(),
+        layout: layout_name(layout).to_string(),
         bit_depth: scene.rig.camera.bit_depth,
     };
     let camera = Box::new(SimCameraBackend::new(sim_camera, clock, info.clone()));
 
     let mut manifest = Manifest::new(
         SessionSource::Simulator {
-            scene: scene_path.display().to_string(),
+            // resolved, so the session's fit finds the scene from any working directory
+            scene: std::fs::canonicalize(scene_path)
+                .unwrap_or_else(|_| scene_path.clone())
+                .display()
+                .to_string(),
             seed: scene.seed,
         },
         SensorInfo {
@@ -285,6 +283,7 @@ pub fn capture_sim(
         .iter()
         .map(|b| serde_json::to_value(TrackedBoard::from_placed(b)))
         .collect::<Result<_, _>>()?;
+    check_plan(&link, board_cfg)?;
     let session = SessionWriter::create(&args.out, manifest)?;
 
     let settings = CameraSettings {
@@ -299,13 +298,56 @@ pub fn capture_sim(
     if let Some(board) = board {
         board.shutdown();
     }
-    let (report, dir) = result?;
-    let tracked = if args.no_track {
+    let (report, dir, signal) = result?;
+    // after a stop by signal the user wants the process to end: poses can be tracked later
+    let tracked = if args.no_track || signal.is_some() {
         None
     } else {
         Some(track_and_append(&dir)?)
     };
-    Ok((report, dir, tracked))
+    Ok(Captured {
+        report,
+        dir,
+        tracked,
+        signal,
+    })
+}
+
+/// A finished capture.
+pub struct Captured {
+    /// What happened.
+    pub report: CaptureReport,
+    /// The session directory.
+    pub dir: PathBuf,
+    /// Poses tracked after recording (unless `--no-track` or stopped by a signal).
+    pub tracked: Option<Vec<process::TrackedFrame>>,
+    /// The signal (SIGINT, SIGTERM) that stopped the capture, if one did.
+    pub signal: Option<i32>,
+}
+
+/// A capture stopped by SIGINT or SIGTERM (the session is complete up to the stop); the process
+/// exits with 128 + the signal number.
+#[derive(Debug, thiserror::Error)]
+#[error("capture stopped by signal {signal}; the session in {} is complete up to the stop (poses not tracked: run `ellipso replay` on it)", dir.display())]
+pub struct Interrupted {
+    /// The signal number.
+    pub signal: i32,
+    /// The session directory.
+    pub dir: PathBuf,
+}
+
+/// Refuses a board timing the connected board would refuse, before anything is recorded (the
+/// board checks it again when configured).
+fn check_plan(link: &TriggerLink, config: CaptureConfig) -> anyhow::Result<()> {
+    ellipso_firmware::CapturePlan::new(config, &link.board().limits).map_err(|reason| {
+        anyhow::anyhow!(
+            "the trigger board would refuse this capture (exposure {} µs, interval {} µs): {}",
+            config.exposure_us,
+            config.frame_period_us,
+            crate::link::describe_reject(&reason)
+        )
+    })?;
+    Ok(())
 }
 
 /// The capture plan for a board timing: 20 clock pings, a 150 ms transfer budget for pairing,
@@ -332,7 +374,7 @@ fn run_with_progress(
     plan: &CapturePlan,
     photos: u32,
     quiet: bool,
-) -> Result<(CaptureReport, PathBuf), crate::acquire::capture::CaptureError> {
+) -> anyhow::Result<(CaptureReport, PathBuf, Option<i32>)> {
     let bar = if quiet {
         ProgressBar::hidden()
     } else {
@@ -342,8 +384,8 @@ fn run_with_progress(
         ProgressStyle::with_template("{spinner} capture [{bar:30}] {pos}/{len} frames · {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let stop = AtomicBool::new(false);
-    let result = capture(link, camera, session, plan, &stop, |p| {
+    let stop = StopOnSignal::install()?;
+    let result = capture(link, camera, session, plan, stop.flag(), |p| {
         bar.set_position(p.frames);
         bar.set_message(format!(
             "{:.1} fps · paired {} · pairing errors {} · flagged {}",
@@ -351,18 +393,80 @@ fn run_with_progress(
         ));
     });
     bar.finish_and_clear();
-    result
+    let signal = stop.signal();
+    drop(stop);
+    let (report, dir) = result?;
+    Ok((report, dir, signal))
+}
+
+/// SIGINT and SIGTERM stop a running capture cleanly: the stop flag is set, the board is told
+/// to stop, frames in flight are drained and the end record written. A second SIGINT while it
+/// winds down ends the process at once. Dropping this restores the default handling.
+struct StopOnSignal {
+    stop: Arc<AtomicBool>,
+    signal: Arc<AtomicUsize>,
+    ids: Vec<signal_hook::SigId>,
+}
+
+impl StopOnSignal {
+    fn install() -> anyhow::Result<Self> {
+        use signal_hook::consts::{SIGINT, SIGTERM};
+        let stop = Arc::new(AtomicBool::new(false));
+        let signal = Arc::new(AtomicUsize::new(0));
+        let mut ids = Vec::new();
+        for sig in [SIGINT, SIGTERM] {
+            let context = || format!("cannot install the handler for signal {sig}");
+            // registered first, so it sees the flag as it was before this signal
+            ids.push(
+                signal_hook::flag::register_conditional_shutdown(sig, 130, stop.clone())
+                    .with_context(context)?,
+            );
+            ids.push(
+                signal_hook::flag::register_usize(sig, signal.clone(), sig as usize)
+                    .with_context(context)?,
+            );
+            ids.push(signal_hook::flag::register(sig, stop.clone()).with_context(context)?);
+        }
+        Ok(Self { stop, signal, ids })
+    }
+
+    fn flag(&self) -> &AtomicBool {
+        &self.stop
+    }
+
+    /// The signal that stopped the capture, if one did.
+    fn signal(&self) -> Option<i32> {
+        match self.signal.load(Ordering::Acquire) {
+            0 => None,
+            s => i32::try_from(s).ok(),
+        }
+    }
+}
+
+impl Drop for StopOnSignal {
+    fn drop(&mut self) {
+        for id in self.ids.drain(..) {
+            signal_hook::low_level::unregister(id);
+        }
+    }
+}
+
+/// The manifest's name of a sensor layout (docs/session-format.md).
+pub fn layout_name(layout: ellipso_sim::mosaic::SensorLayout) -> &'static str {
+    match layout {
+        ellipso_sim::mosaic::SensorLayout::MonoPolar => "mono_polar",
+        ellipso_sim::mosaic::SensorLayout::ColourPolar => "colour_polar",
+    }
 }
 
 /// Records a capture on the physical rig described by `--rig`.
-pub fn capture_hw(
-    args: &Args,
-) -> anyhow::Result<(CaptureReport, PathBuf, Option<Vec<process::TrackedFrame>>)> {
+pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
     let rig_path = args
         .rig
         .as_ref()
         .context("--rig RIG.toml is required for a hardware capture")?;
     let rig = crate::rig_file::RigFile::load(rig_path)?;
+    crate::session::writer::check_fresh(&args.out)?;
     let boards = rig.boards()?;
     let clock = HostClock::new();
     let camera = open_camera(&rig, clock)?;
@@ -383,10 +487,7 @@ pub fn capture_hw(
             camera: format!("{}:{}", info.backend, rig.sensor.address),
         },
         SensorInfo {
-            layout: serde_json::to_value(rig.sensor.layout)?
-                .as_str()
-                .unwrap_or_default()
-                .to_string(),
+            layout: layout_name(rig.sensor.layout).to_string(),
             width: info.width,
             height: info.height,
             bit_depth: rig.sensor.bit_depth,
@@ -406,11 +507,12 @@ pub fn capture_hw(
         .iter()
         .map(serde_json::to_value)
         .collect::<Result<_, _>>()?;
-    let session = SessionWriter::create(&args.out, manifest)?;
     let mut board_cfg = rig.board_config();
     if let Some(bracket) = args.bracket {
         board_cfg.bracket = bracket;
     }
+    check_plan(&link, board_cfg)?;
+    let session = SessionWriter::create(&args.out, manifest)?;
     let settings = CameraSettings {
         exposure_us: rig.sensor.exposure_us,
         gain_db: rig.sensor.gain_db,
@@ -418,14 +520,19 @@ pub fn capture_hw(
         external_trigger: true,
     };
     let plan = capture_plan(board_cfg, settings, rig.capture.photos);
-    let (report, dir) =
+    let (report, dir, signal) =
         run_with_progress(&link, camera, session, &plan, rig.capture.photos, false)?;
-    let tracked = if args.no_track || boards.is_empty() {
+    let tracked = if args.no_track || boards.is_empty() || signal.is_some() {
         None
     } else {
         Some(track_and_append(&dir)?)
     };
-    Ok((report, dir, tracked))
+    Ok(Captured {
+        report,
+        dir,
+        tracked,
+        signal,
+    })
 }
 
 /// Opens the rig's camera through its backend (features permitting).
@@ -438,10 +545,7 @@ fn open_camera(
         #[cfg(feature = "aravis")]
         Backend::Aravis => {
             let options = crate::camera::aravis::AravisOptions {
-                layout: serde_json::to_value(rig.sensor.layout)?
-                    .as_str()
-                    .unwrap_or_default()
-                    .to_string(),
+                layout: layout_name(rig.sensor.layout).to_string(),
                 ..Default::default()
             };
             Ok(Box::new(crate::camera::aravis::AravisCamera::open(
@@ -485,7 +589,7 @@ pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>
     let borrowed = crate::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
     crate::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
     if !borrowed.is_empty() {
-        println!(
+        crate::outln!(
             "poses        {} short-pulse frames posed from their tracked neighbours",
             borrowed.len()
         );
@@ -495,26 +599,28 @@ pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>
 
 /// Prints the capture summary.
 pub fn print_report(r: &CaptureReport) {
-    println!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
-    println!(
+    crate::outln!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
+    crate::outln!(
         "frames       {} written ({} flagged), {} pulses",
-        r.frames, r.flagged, r.pulses
+        r.frames,
+        r.flagged,
+        r.pulses
     );
     let p = &r.pairing;
-    println!(
+    crate::outln!(
         "pairing      {} paired · {} frames without pulse · {} pulses without frame · {} duplicates",
         p.paired,
         p.frame_without_pulse,
         p.pulse_without_frame,
         p.duplicate_frames + p.duplicate_pulses
     );
-    println!(
+    crate::outln!(
         "link         {} frames ok · {} bad frames dropped",
         r.link.frames_ok,
         r.link.bad_frames()
     );
     if let Some(c) = &r.clock {
-        println!(
+        crate::outln!(
             "clock        drift {:+.1} ppm · residual rms {:.0} µs",
             c.drift_ppm(),
             c.rms_us
@@ -522,23 +628,30 @@ pub fn print_report(r: &CaptureReport) {
     }
     if r.paired_per_step.len() > 1 {
         let steps: Vec<String> = r.paired_per_step.iter().map(u64::to_string).collect();
-        println!("bracket      paired frames per step {}", steps.join(" / "));
+        crate::outln!("bracket      paired frames per step {}", steps.join(" / "));
     }
 }
 
 /// Runs `ellipso capture`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (report, dir, tracked) = if args.rig.is_some() {
+    let captured = if args.rig.is_some() {
         capture_hw(&args)?
     } else {
         capture_sim(&args, false)?
     };
-    print_report(&report);
-    if let Some(tracked) = tracked {
-        let summary = crate::cli::replay::report(&dir, Some(&tracked))?;
+    print_report(&captured.report);
+    if let Some(tracked) = &captured.tracked {
+        let summary = crate::cli::replay::report(&captured.dir, Some(tracked))?;
         crate::cli::replay::print_summary(&summary);
     }
-    println!("session      {}", dir.display());
+    crate::outln!("session      {}", captured.dir.display());
+    if let Some(signal) = captured.signal {
+        return Err(Interrupted {
+            signal,
+            dir: captured.dir,
+        }
+        .into());
+    }
     Ok(())
 }
 
@@ -566,5 +679,16 @@ mod tests {
             let e = parse_bracket(bad).unwrap_err();
             assert!(e.contains(fragment), "{bad:?}: {e}");
         }
+    }
+
+    use ellipso_sim::mosaic::SensorLayout;
+
+    #[test]
+    fn manifests_name_layouts_as_the_session_format_does() {
+        assert_eq!(super::layout_name(SensorLayout::MonoPolar), "mono_polar");
+        assert_eq!(
+            super::layout_name(SensorLayout::ColourPolar),
+            "colour_polar"
+        );
     }
 }

@@ -133,13 +133,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("clearing {}", args.out.display()))?;
     }
     let session_dir = args.out.join("session");
-    println!(
+    crate::outln!(
         "ellipso demo: scene {} at {}×{}",
         scene_path.display(),
         resolution[0],
         resolution[1]
     );
-    println!(
+    crate::outln!(
         "[1/4] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
     );
     let capture_args = capture::Args {
@@ -156,10 +156,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         // The demo scene's own bracket, if it has one.
         bracket: None,
     };
-    let (report, dir, _) = capture::capture_sim(&capture_args, false)?;
+    let captured = capture::capture_sim(&capture_args, false)?;
+    let (report, dir) = (captured.report, captured.dir);
     print_report(&report);
+    if let Some(signal) = captured.signal {
+        return Err(capture::Interrupted { signal, dir }.into());
+    }
 
-    println!("[2/4] tracking camera poses from the AprilTags…");
+    crate::outln!("[2/4] tracking camera poses from the AprilTags…");
     let tracked = capture::track_and_append(&dir)?;
     let session = crate::session::reader::open(&dir)?;
     let pairs: std::collections::BTreeMap<u64, u64> = session
@@ -171,7 +175,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let accuracy = pose_accuracy(&scene, &tracked, &|id| {
         pairs.get(&id).map(|s| (s - first_seq) as usize)
     });
-    println!(
+    crate::outln!(
         "poses        {}/{} frames · median error {:.3}° / {:.3} mm (90th percentile {:.3}° / {:.3} mm)",
         accuracy.posed,
         accuracy.frames,
@@ -181,10 +185,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         accuracy.p90_translation_mm
     );
 
-    println!("[3/4] fitting the polarimetric SVBRDF and shape per vertex…");
+    crate::outln!("[3/4] fitting the polarimetric SVBRDF and shape per vertex…");
     let fit = fit_and_score(&scene, &session, &args.out, args.quick)?;
 
-    println!("[4/4] pictures…");
+    crate::outln!("[4/4] pictures…");
     let pictures = args.out.join("pictures");
     std::fs::create_dir_all(&pictures)?;
     let first = session
@@ -211,7 +215,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     let path_plot = pictures.join("camera-path.png");
     plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
-    println!("  {}", path_plot.display());
+    crate::outln!("  {}", path_plot.display());
 
     let summary = serde_json::json!({
         "scene": scene_path.display().to_string(),
@@ -221,23 +225,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "fit": fit.summary,
     });
     let summary_path = args.out.join("summary.json");
-    std::fs::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
-    println!("\nresults in {}:", args.out.display());
-    println!("  session (raw frames + event log)  {}", dir.display());
-    println!(
+    crate::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
+    crate::outln!("\nresults in {}:", args.out.display());
+    crate::outln!("  session (raw frames + event log)  {}", dir.display());
+    crate::outln!(
         "  polarisation images of frame 0    {}",
         pictures.join("frame0-polarisation").display()
     );
-    println!(
+    crate::outln!(
         "  camera path plot                  {}",
         path_plot.display()
     );
-    println!("  fitted model (PLY, per vertex)    {}", fit.ply.display());
-    println!(
+    crate::outln!("  fitted model (PLY, per vertex)    {}", fit.ply.display());
+    crate::outln!(
         "  fit pictures (maps, Mueller grid, relit, novel view)  {}",
         fit.dir.display()
     );
-    println!(
+    crate::outln!(
         "  summary                           {}",
         summary_path.display()
     );
@@ -298,7 +302,7 @@ fn fit_and_score(
     // A scanned mesh is never exact: smooth noise of 0.3 mm along the normals.
     let input = crate::fit::shape::perturb_mesh(&truth.mesh, 3e-4, scene.seed);
     let mesh_path = out.join("input-mesh.ply");
-    std::fs::write(
+    crate::atomic_file::write(
         &mesh_path,
         ellipso_sim::geometry::ply::write_ply(
             &input,
@@ -343,7 +347,7 @@ fn fit_and_score(
         "rho_d_median_error_pct": median(&mut rho_d_err),
         "input_mesh": mesh_path.display().to_string(),
     });
-    println!(
+    crate::outln!(
         "fit          {fitted}/{} vertices in {:.1} s · η error median {:.2} % · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
         fits.len(),
         run.wall_s,

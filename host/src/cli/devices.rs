@@ -15,10 +15,10 @@ pub struct Args {
 
 /// Runs `ellipso devices`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    println!("serial ports (trigger boards):");
+    crate::outln!("serial ports (trigger boards):");
     match serialport::available_ports() {
         Ok(ports) if ports.is_empty() => {
-            println!("  none found (pseudo-terminals are not listed; open them by path)")
+            crate::outln!("  none found (pseudo-terminals are not listed; open them by path)")
         }
         Ok(ports) => {
             for p in ports {
@@ -33,12 +33,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     serialport::SerialPortType::BluetoothPort => "Bluetooth".into(),
                     serialport::SerialPortType::Unknown => "unknown".into(),
                 };
-                println!("  {}  {kind}", p.port_name);
+                crate::outln!("  {}  {kind}", p.port_name);
             }
         }
-        Err(e) => println!("  cannot list serial ports: {e}"),
+        Err(e) => crate::outln!("  cannot list serial ports: {e}"),
     }
-    println!("video devices (V4L2):");
+    crate::outln!("video devices (V4L2):");
     let mut videos: Vec<_> = std::fs::read_dir("/dev")
         .map(|d| {
             d.filter_map(Result::ok)
@@ -53,15 +53,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .unwrap_or_default();
     videos.sort();
     if videos.is_empty() {
-        println!("  none found");
+        crate::outln!("  none found");
     }
     for v in videos {
-        println!("  {}", v.display());
+        crate::outln!("  {}", v.display());
     }
     if args.gige {
         gige()?;
     } else {
-        println!(
+        crate::outln!(
             "GigE Vision cameras: not searched (discovery broadcasts on every interface; pass --gige)"
         );
     }
@@ -77,15 +77,18 @@ fn gige() -> anyhow::Result<()> {
 
 #[cfg(feature = "aravis")]
 fn gige() -> anyhow::Result<()> {
-    println!("GigE Vision / USB3 Vision cameras (discovery broadcast sent):");
+    crate::outln!("GigE Vision / USB3 Vision cameras (discovery broadcast sent):");
     let cameras = crate::camera::aravis::discover_gige_cameras();
     if cameras.is_empty() {
-        println!("  none answered");
+        crate::outln!("  none answered");
     }
     for c in cameras {
-        println!(
+        crate::outln!(
             "  {}  {} {}  (id {}; open it by this address)",
-            c.address, c.vendor, c.model, c.id
+            c.address,
+            c.vendor,
+            c.model,
+            c.id
         );
     }
     Ok(())

@@ -31,8 +31,8 @@ pub struct Args {
     /// Frame id of the view the pictures are rendered from (default: the first posed frame).
     #[arg(long)]
     pub view: Option<u64>,
-    /// Outer iterations (solve ↔ shape update); 1 keeps the input geometry.
-    #[arg(long, default_value_t = 2)]
+    /// Outer iterations (solve ↔ shape update), 1..=20; 1 keeps the input geometry.
+    #[arg(long, default_value_t = 2, value_parser = super::limits::outer_iterations)]
     pub outer: usize,
     /// Step A alone: no clusters, virtual samples or pooled η (the paper's shared steps are
     /// on by default; docs/fit.md).
@@ -61,6 +61,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--holdout {}: must be a fraction in [0, 0.5]",
         args.holdout
     );
+    let read = session.report.summary();
+    if read != "intact" {
+        eprintln!("warning: {}: {read}", args.session.display());
+    }
     let mut config = SessionFitConfig {
         outer_iterations: args.outer.max(1),
         holdout_fraction: args.holdout,
@@ -82,9 +86,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     config.observe.gate.grazing_cutoff_deg = args.grazing_cutoff_deg;
     let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
-    println!("\nresults in {}:", args.out.display());
+    crate::outln!("\nresults in {}:", args.out.display());
     for f in &result.files {
-        println!("  {}", f.display());
+        crate::outln!("  {}", f.display());
     }
     Ok(())
 }
@@ -99,12 +103,30 @@ pub struct FitRun {
     pub wall_s: f64,
 }
 
-/// The session's recorded poses (`pose` events), tracking them first when there are none.
+/// The session's recorded poses (`pose` events), tracking first every complete frame that has
+/// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
+    let untracked = crate::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
-    if poses.is_empty() {
-        println!("no poses recorded: tracking the AprilTags first…");
-        super::capture::track_and_append(&session.dir)?;
+    if !untracked.is_empty() {
+        crate::outln!(
+            "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
+            untracked.len(),
+            session.frames.iter().filter(|f| f.complete).count()
+        );
+        let tracked =
+            crate::process::track_frames(session, &crate::track::TrackConfig::default(), |id| {
+                untracked.contains(&id)
+            })?;
+        crate::process::append_poses(
+            &session.dir,
+            &tracked,
+            crate::link::time::HostClock::new().now(),
+        )
+        .context(
+            "recording the new poses failed part-way (every line written is whole; the next \
+             fit tracks the frames still without one)",
+        )?;
         poses = poses_from_session(&crate::session::reader::open(&session.dir)?);
     }
     anyhow::ensure!(
@@ -133,8 +155,19 @@ pub fn fit_and_export(
         config.fit.solver.sensor = crate::fit::accuracy::sensor_model(&scene);
     }
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
-        println!("  {stage}…")
+        crate::outln!("  {stage}…")
     })?;
+    // every posed frame that gave nothing is said, with its reason, and counted in the summary
+    for s in &fit.observe.skipped {
+        tracing::warn!("frame {} skipped: {}", s.frame_id, s.reason);
+    }
+    if !fit.observe.skipped.is_empty() {
+        eprintln!(
+            "warning: {} of {} posed frames skipped (reasons above and in fit-summary.json)",
+            fit.observe.skipped.len(),
+            fit.observe.frames_posed
+        );
+    }
     let (frame_id, world_from_camera) = match view {
         Some(id) => *poses
             .iter()
@@ -153,7 +186,7 @@ pub fn fit_and_export(
         .map(|p| (p.0, p.1, true))
         .unwrap_or((frame_id, world_from_camera, false));
     if let Some(h) = &fit.holdout {
-        println!(
+        crate::outln!(
             "  held-out views: {} frames, {} samples: s0 relative RMSE {:.3} (PSNR {:.1} dB), I^s {:.3}, I^alpha {:.3}",
             h.per_frame.len(),
             h.overall.samples,
@@ -167,12 +200,12 @@ pub fn fit_and_export(
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
-    println!("  pictures from frame {frame_id}…");
+    crate::outln!("  pictures from frame {frame_id}…");
     let captured_s0 =
         match crate::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
             Ok(c) => Some(c),
             Err(e) => {
-                println!("  no comparison picture: frame {}: {e}", comparison.0);
+                crate::outln!("  no comparison picture: frame {}: {e}", comparison.0);
                 None
             }
         };
@@ -198,6 +231,7 @@ pub fn fit_and_export(
         "held_out": fit.holdout,
         "pooling": fit.outcome.pooling,
         "observe": fit.observe,
+        "session_report": session.report.summary(),
         "view_frame_id": frame_id,
         "times_s": fit.outcome.times,
         "wall_s": wall_s,
@@ -206,7 +240,7 @@ pub fn fit_and_export(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
-    std::fs::write(&summary, serde_json::to_vec_pretty(&json)?)
+    crate::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);
     Ok(FitRun { fit, files, wall_s })

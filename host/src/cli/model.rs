@@ -1,8 +1,13 @@
 //! `ellipso model …`: inspect the polarimetric model (Fresnel, diffuse DoP, Mueller matrices)
 //! and plot the degree of polarisation.
 //!
-//! Contract: every subcommand validates its flags and reports a bad one in a single error line
-//! naming the flag; `--json` prints one JSON object on stdout, otherwise readable tables. The
+//! Contract: every subcommand validates its flags against documented ranges and reports a bad
+//! one in a single error line naming the flag and the range; `--json` prints one JSON object on
+//! stdout, otherwise readable tables. Ranges (the scene files' where they have one):
+//! η ∈ [1, 5]; θ ∈ [0°, 90°]; σ_s, σ_ss ∈ [0, 1] with σ_s ≤ σ_ss; ρ_s and each ρ_ss ∈ [0, 1000];
+//! each ρ_d ∈ [0, 1]; direction vectors finite and non-zero, of any length (they are normalised
+//! after scaling by their largest component, so 1e-300 and 1e300 both work). A result that is
+//! not finite anyway is an error, never printed. The
 //! numbers come from `ellipso_sim::optics`, the same code the simulator and the fit use.
 //! Frames of `mueller`: light frame z = −to_light, camera frame z = to_camera, y = the given up
 //! vector (default world +y) orthogonalised against z, x = y × z; when the up vector is parallel
@@ -41,7 +46,7 @@ enum ModelCommand {
 /// `--eta`, `--theta-deg`, `--json`.
 #[derive(Debug, clap::Args)]
 struct AngleArgs {
-    /// Refractive index relative to air (≥ 1).
+    /// Refractive index relative to air, [1, 5].
     #[arg(long)]
     eta: f64,
     /// Angle to the surface normal in degrees, [0, 90].
@@ -55,7 +60,7 @@ struct AngleArgs {
 /// Arguments of `ellipso model mueller`.
 #[derive(Debug, clap::Args)]
 pub struct MuellerArgs {
-    /// Refractive index relative to air (≥ 1).
+    /// Refractive index relative to air, [1, 5].
     #[arg(long)]
     pub eta: f64,
     /// Specular GGX roughness σ_s ∈ [0, 1].
@@ -64,13 +69,13 @@ pub struct MuellerArgs {
     /// Single-scattering GGX roughness σ_ss ∈ [σ_s, 1].
     #[arg(long = "sigma-ss")]
     pub sigma_ss: f64,
-    /// Specular albedo ρ_s (monochrome, ≥ 0).
+    /// Specular albedo ρ_s (monochrome), [0, 1000].
     #[arg(long = "rho-s")]
     pub rho_s: f64,
-    /// Single-scattering albedo R,G,B (each ≥ 0).
+    /// Single-scattering albedo R,G,B, each in [0, 1000].
     #[arg(long = "rho-ss", value_parser = parse_triple, value_name = "R,G,B")]
     pub rho_ss: [f64; 3],
-    /// Diffuse albedo R,G,B (each ≥ 0).
+    /// Diffuse albedo R,G,B, each in [0, 1].
     #[arg(long = "rho-d", value_parser = parse_triple, value_name = "R,G,B")]
     pub rho_d: [f64; 3],
     /// Surface normal (world, any non-zero length).
@@ -129,9 +134,9 @@ pub fn run(args: Args) -> Result<()> {
         ModelCommand::Fresnel(a) => {
             let v = fresnel_json(a.eta, a.theta_deg)?;
             if a.json {
-                println!("{v}");
+                crate::outln!("{v}");
             } else {
-                println!(
+                crate::outln!(
                     "Fresnel, dielectric η = {} at θ = {}° (Brewster {:.4}°)",
                     a.eta,
                     a.theta_deg,
@@ -140,21 +145,21 @@ pub fn run(args: Args) -> Result<()> {
                 for key in [
                     "rs", "rp", "r_plus", "r_minus", "r_cross", "t_plus", "t_minus",
                 ] {
-                    println!("  {key:<8} {:>12.6}", v[key].as_f64().unwrap_or(f64::NAN));
+                    crate::outln!("  {key:<8} {:>12.6}", v[key].as_f64().unwrap_or(f64::NAN));
                 }
             }
         }
         ModelCommand::Dop(a) => {
             let v = dop_json(a.eta, a.theta_deg)?;
             if a.json {
-                println!("{v}");
+                crate::outln!("{v}");
             } else {
-                println!("Diffuse DoP at η = {}, θ_o = {}°", a.eta, a.theta_deg);
-                println!(
+                crate::outln!("Diffuse DoP at η = {}, θ_o = {}°", a.eta, a.theta_deg);
+                crate::outln!(
                     "  dop        {:>12.6}",
                     v["dop"].as_f64().unwrap_or(f64::NAN)
                 );
-                println!(
+                crate::outln!(
                     "  d_dop_d_eta {:>11.6}",
                     v["d_dop_d_eta"].as_f64().unwrap_or(f64::NAN)
                 );
@@ -163,7 +168,7 @@ pub fn run(args: Args) -> Result<()> {
         ModelCommand::Mueller(a) => {
             let v = mueller_json(&a)?;
             if a.json {
-                println!("{v}");
+                crate::outln!("{v}");
             } else {
                 print_mueller_tables(&v);
             }
@@ -172,17 +177,53 @@ pub fn run(args: Args) -> Result<()> {
             dop_plot()
                 .save_png(&a.out)
                 .with_context(|| format!("--out {}", a.out.display()))?;
-            println!("wrote {}", a.out.display());
+            crate::outln!("wrote {}", a.out.display());
         }
     }
     Ok(())
 }
 
+/// Largest refractive index (the scene files' limit: no dielectric exceeds it).
+pub const MAX_ETA: f64 = 5.0;
+/// Largest specular and single-scattering albedo (the scene files' limit).
+pub const MAX_LOBE_ALBEDO: f64 = ellipso_sim::scene::spec::MAX_LOBE_ALBEDO;
+
 fn check_eta(eta: f64) -> Result<()> {
-    if !eta.is_finite() || eta < 1.0 {
-        bail!("--eta must be a finite number >= 1 (dielectric in air), got {eta}");
+    if !(1.0..=MAX_ETA).contains(&eta) {
+        bail!(
+            "--eta must be in [1, {MAX_ETA}] (a dielectric in air; none exceeds {MAX_ETA}), got {eta}"
+        );
     }
     Ok(())
+}
+
+/// Every number of `v` is finite (serde_json writes NaN and ±inf as null).
+fn check_finite(v: &Value) -> Result<()> {
+    let ok = match v {
+        Value::Null => false,
+        Value::Array(a) => return a.iter().try_for_each(check_finite),
+        Value::Object(o) => return o.values().try_for_each(check_finite),
+        _ => true,
+    };
+    if !ok {
+        bail!("the model has no finite value for these inputs");
+    }
+    Ok(())
+}
+
+/// A direction flag: finite, non-zero, any length; normalised after scaling by the largest
+/// component so neither 1e300 nor 1e-300 overflows.
+fn direction(flag: &str, v: [f64; 3]) -> Result<Vec3<f64>> {
+    let largest = v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+    if !largest.is_finite() {
+        bail!("{flag} must be finite, got {v:?}");
+    }
+    if largest == 0.0 {
+        bail!("{flag} must be a non-zero vector, got {v:?}");
+    }
+    Vec3::from_f64(v.map(|x| x / largest))
+        .normalized_or_none(1e-24)
+        .with_context(|| format!("{flag} must be a non-zero vector, got {v:?}"))
 }
 
 fn check_theta(theta_deg: f64) -> Result<()> {
@@ -197,10 +238,12 @@ pub fn fresnel_json(eta: f64, theta_deg: f64) -> Result<Value> {
     check_eta(eta)?;
     check_theta(theta_deg)?;
     let f = FresnelTerms::dielectric(theta_deg.to_radians().cos(), eta);
-    Ok(json!({
+    let v = json!({
         "rs": f.r_s, "rp": f.r_p, "r_plus": f.r_plus(), "r_minus": f.r_minus(),
         "r_cross": f.r_cross(), "t_plus": f.t_plus(), "t_minus": f.t_minus(),
-    }))
+    });
+    check_finite(&v)?;
+    Ok(v)
 }
 
 /// `ellipso model dop --json`: {"dop", "d_dop_d_eta"}.
@@ -208,7 +251,9 @@ pub fn dop_json(eta: f64, theta_deg: f64) -> Result<Value> {
     check_eta(eta)?;
     check_theta(theta_deg)?;
     let (dop, d) = dop_diffuse_with_d_eta(theta_deg.to_radians().cos(), eta);
-    Ok(json!({ "dop": dop, "d_dop_d_eta": d }))
+    let v = json!({ "dop": dop, "d_dop_d_eta": d });
+    check_finite(&v)?;
+    Ok(v)
 }
 
 fn matrix_json(m: &Mueller<f64>) -> Value {
@@ -230,29 +275,25 @@ pub fn mueller_json(a: &MuellerArgs) -> Result<Value> {
             a.sigma_ss
         );
     }
-    if !a.rho_s.is_finite() || a.rho_s < 0.0 {
-        bail!("--rho-s must be a finite number >= 0, got {}", a.rho_s);
+    if !(a.rho_s >= 0.0 && a.rho_s <= MAX_LOBE_ALBEDO) {
+        bail!("--rho-s must be in [0, {MAX_LOBE_ALBEDO}], got {}", a.rho_s);
     }
-    for (flag, v) in [("--rho-ss", a.rho_ss), ("--rho-d", a.rho_d)] {
-        if v.iter().any(|x| *x < 0.0) {
-            bail!(
-                "--{} components must be >= 0, got {:?}",
-                flag.trim_start_matches('-'),
-                v
-            );
+    for (flag, v, max) in [
+        ("--rho-ss", a.rho_ss, MAX_LOBE_ALBEDO),
+        ("--rho-d", a.rho_d, 1.0),
+    ] {
+        if v.iter().any(|x| !(*x >= 0.0 && *x <= max)) {
+            bail!("{flag} components must be in [0, {max}], got {v:?}");
         }
     }
-    let direction = |flag: &str, v: [f64; 3]| -> Result<Vec3<f64>> {
-        Vec3::from_f64(v)
-            .normalized_or_none(1e-24)
-            .with_context(|| format!("{flag} must be a non-zero vector, got {v:?}"))
-    };
     let normal = direction("--normal", a.normal)?;
     let to_light = direction("--to-light", a.to_light)?;
     let to_camera = direction("--to-camera", a.to_camera)?;
     let default_up = [0.0, 1.0, 0.0];
-    let light_frame = Frame::light(to_light, Vec3::from_f64(a.light_up.unwrap_or(default_up)))?;
-    let camera_frame = Frame::camera(to_camera, Vec3::from_f64(a.camera_up.unwrap_or(default_up)))?;
+    let light_up = direction("--light-up", a.light_up.unwrap_or(default_up))?;
+    let camera_up = direction("--camera-up", a.camera_up.unwrap_or(default_up))?;
+    let light_frame = Frame::light(to_light, light_up)?;
+    let camera_frame = Frame::camera(to_camera, camera_up)?;
     let g = Geometry::new(normal, to_light, to_camera, light_frame, camera_frame)?;
     let p = PbrdfParams {
         eta: a.eta,
@@ -265,7 +306,7 @@ pub fn mueller_json(a: &MuellerArgs) -> Result<Value> {
     p.validate()?;
     let lobes = evaluate(&g, &p);
     let frame = |f: &Frame<f64>| json!({ "x": f.x.re(), "y": f.y.re(), "z": f.z.re() });
-    Ok(json!({
+    let v = json!({
         "diffuse": lobes.diffuse.iter().map(matrix_json).collect::<Vec<_>>(),
         "specular": matrix_json(&lobes.specular),
         "single_scattering": lobes.single_scattering.iter().map(matrix_json).collect::<Vec<_>>(),
@@ -274,11 +315,13 @@ pub fn mueller_json(a: &MuellerArgs) -> Result<Value> {
         "camera_frame": frame(&g.camera_frame),
         "cos_theta": { "i": g.cos_theta_i, "o": g.cos_theta_o, "h": g.cos_theta_h, "d": g.cos_theta_d },
         "front_facing": g.front_facing,
-    }))
+    });
+    check_finite(&v)?;
+    Ok(v)
 }
 
 fn print_matrix(title: &str, m: &Value) {
-    println!("  {title}");
+    crate::outln!("  {title}");
     for row in m.as_array().into_iter().flatten() {
         let cells: Vec<String> = row
             .as_array()
@@ -286,19 +329,23 @@ fn print_matrix(title: &str, m: &Value) {
             .flatten()
             .map(|x| format!("{:>13.6e}", x.as_f64().unwrap_or(f64::NAN) + 0.0))
             .collect();
-        println!("    [{}]", cells.join(" "));
+        crate::outln!("    [{}]", cells.join(" "));
     }
 }
 
 fn print_mueller_tables(v: &Value) {
-    println!("Mueller matrices, light frame → camera frame, row-major (s_cam = P·s_light / d²)");
+    crate::outln!(
+        "Mueller matrices, light frame → camera frame, row-major (s_cam = P·s_light / d²)"
+    );
     for key in ["light_frame", "camera_frame"] {
-        println!(
+        crate::outln!(
             "  {key}: x {} y {} z {}",
-            v[key]["x"], v[key]["y"], v[key]["z"]
+            v[key]["x"],
+            v[key]["y"],
+            v[key]["z"]
         );
     }
-    println!("  cosθ: {}", v["cos_theta"]);
+    crate::outln!("  cosθ: {}", v["cos_theta"]);
     let channels = ["R", "G", "B"];
     for (key, name) in [
         ("diffuse", "diffuse P^d"),
@@ -467,6 +514,45 @@ mod tests {
         assert!(err(&["--sigma-s", "1.5"]).contains("--sigma-s"));
         assert!(err(&["--sigma-s", "0.6"]).contains("--sigma-ss"));
         assert!(err(&["--rho-d", "0.1,-1,0"]).contains("--rho-d"));
+        // absurd magnitudes: refused with the range, never NaN
+        let with = |f: &dyn Fn(&mut MuellerArgs)| {
+            let mut a = mueller_args(&[]).unwrap();
+            f(&mut a);
+            mueller_json(&a)
+        };
+        let msg = |r: Result<Value>| r.unwrap_err().to_string();
+        assert!(msg(with(&|a| a.eta = 1e200)).contains("[1, 5]"));
+        assert!(msg(with(&|a| a.rho_s = 1e308)).contains("--rho-s must be in [0, 1000]"));
+        assert!(msg(with(&|a| a.rho_ss[1] = 1e308)).contains("--rho-ss"));
+        assert!(msg(with(&|a| a.rho_d = [0.1, 2.0, 0.0])).contains("--rho-d"));
+        assert!(msg(with(&|a| a.light_up = Some([0.0; 3]))).contains("--light-up"));
+        // a huge or tiny but valid direction is a direction
+        for n in [[0.0, 0.0, 1e300], [0.0, 0.0, 1e-300], [1e300, 0.0, 1e300]] {
+            let v = with(&|a| a.normal = n).unwrap_or_else(|e| panic!("{n:?}: {e}"));
+            check_finite(&v).unwrap();
+        }
+    }
+
+    #[test]
+    fn absurd_eta_is_refused_not_nan() {
+        for eta in [1e78, 1e155, 5.000_001, f64::INFINITY] {
+            assert!(
+                dop_json(eta, 30.0)
+                    .unwrap_err()
+                    .to_string()
+                    .contains("[1, 5]")
+            );
+            assert!(
+                fresnel_json(eta, 30.0)
+                    .unwrap_err()
+                    .to_string()
+                    .contains("[1, 5]")
+            );
+        }
+        for theta in [0.0, 30.0, 89.999, 90.0] {
+            check_finite(&dop_json(5.0, theta).unwrap()).unwrap();
+            check_finite(&fresnel_json(5.0, theta).unwrap()).unwrap();
+        }
     }
 
     #[test]

@@ -69,18 +69,19 @@ pub struct Args {
     /// bilinear (full resolution; for viewing).
     #[arg(long, value_enum, default_value = "superpixel")]
     pub demosaic: DemosaicMethod,
-    /// Black level subtracted from every raw sample, in DN.
-    #[arg(long, default_value_t = 0.0)]
+    /// Black level subtracted from every raw sample, in DN (0..=65535).
+    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::limits::dn_level)]
     pub dark_level: f32,
     /// Raw samples at or above this DN are saturated [default: full scale of the bit depth].
     #[arg(long)]
     pub saturation: Option<u16>,
     /// Pixels whose mean analyser intensity (s0/2, normalised to full scale) is below this are
     /// masked dark.
-    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY)]
+    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY, value_parser = crate::cli::limits::unit_f32)]
     pub dark_intensity: f32,
-    /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this (off by default).
-    #[arg(long)]
+    /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this, in [0, 2] (off by
+    /// default).
+    #[arg(long, value_parser = |s: &str| crate::cli::limits::real_in(s, 0.0_f32, 2.0))]
     pub max_residual: Option<f32>,
     /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
     #[arg(long)]
@@ -143,14 +144,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
-    fs::write(&summary_path, text + "\n")
+    crate::atomic_file::write(&summary_path, text + "\n")
         .with_context(|| format!("cannot write {}", summary_path.display()))?;
     files.push((
         "summary.json".into(),
         "layout, method, levels, statistics, encodings".into(),
     ));
 
-    println!(
+    crate::outln!(
         "{name}: {}×{} {}-bit {:?}, demosaic {} → {}×{} × {} band(s)",
         loaded.frame.width(),
         loaded.frame.height(),
@@ -162,7 +163,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         image.bands.len()
     );
     for (file, what) in &files {
-        println!("  wrote {}  ({what})", args.out.join(file).display());
+        crate::outln!("  wrote {}  ({what})", args.out.join(file).display());
     }
     Ok(())
 }
@@ -437,7 +438,7 @@ fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> a
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb)
         .ok_or_else(|| anyhow!("internal: s0_rgb buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), "s0/2 of R, G, B as 16-bit RGB".into()));
     Ok(())
@@ -455,7 +456,7 @@ fn save_gray16(
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data)
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -472,7 +473,7 @@ fn save_gray8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::GrayImage::from_raw(w, h, canvas.to_gray())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -489,7 +490,7 @@ fn save_rgb8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    buf.save(&path)
+    crate::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())

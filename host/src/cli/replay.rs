@@ -134,22 +134,23 @@ pub fn report(
 
 /// Prints the human summary of a report.
 pub fn print_summary(r: &ReplayReport) {
-    println!("session      {}", r.session);
-    println!("read         {}", r.read);
-    println!("frames       {} ({} complete)", r.frames, r.complete);
-    println!("pulses       {}   paired {}", r.pulses, r.paired);
+    crate::outln!("session      {}", r.session);
+    crate::outln!("read         {}", r.read);
+    crate::outln!("frames       {} ({} complete)", r.frames, r.complete);
+    crate::outln!("pulses       {}   paired {}", r.pulses, r.paired);
     for (k, n) in &r.pairing_errors {
-        println!("  {k:<22} {n}");
+        crate::outln!("  {k:<22} {n}");
     }
     match r.median_pose_rms_px {
-        Some(rms) => println!(
+        Some(rms) => crate::outln!(
             "poses        {} of {} frames (median reprojection {rms:.3} px)",
-            r.posed, r.complete
+            r.posed,
+            r.complete
         ),
-        None => println!("poses        {} of {} frames", r.posed, r.complete),
+        None => crate::outln!("poses        {} of {} frames", r.posed, r.complete),
     }
     for (k, n) in &r.pose_rejected {
-        println!("  rejected: {k} ({n})");
+        crate::outln!("  rejected: {k} ({n})");
     }
 }
 
@@ -160,8 +161,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| args.session.join("replay"));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("replay.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&r)?)
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
         .with_context(|| format!("writing {}", path.display()))?;
-    println!("report       {}", path.display());
+    crate::outln!("report       {}", path.display());
     Ok(())
 }

@@ -42,8 +42,8 @@ pub struct RenderArgs {
     /// Output directory (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Render only the first N frames.
-    #[arg(long, conflicts_with = "frame")]
+    /// Render only the first N frames, N ≥ 1.
+    #[arg(long, conflicts_with = "frame", value_parser = super::limits::count::<usize>)]
     pub frames: Option<usize>,
     /// Render only frame I.
     #[arg(long)]
@@ -51,14 +51,14 @@ pub struct RenderArgs {
     /// Also write per-pixel truth (normal, depth, material) as .npy.
     #[arg(long)]
     pub truth: bool,
-    /// Render width in pixels (intrinsics scaled; needs --height too).
-    #[arg(long, requires = "height")]
+    /// Render width in pixels, even, 2..=16384 (intrinsics scaled; needs --height too).
+    #[arg(long, requires = "height", value_parser = super::limits::side_px)]
     pub width: Option<u32>,
-    /// Render height in pixels (intrinsics scaled; needs --width too).
-    #[arg(long, requires = "width")]
+    /// Render height in pixels, even, 2..=16384 (intrinsics scaled; needs --width too).
+    #[arg(long, requires = "width", value_parser = super::limits::side_px)]
     pub height: Option<u32>,
     /// N×N rays per raw pixel (anti-aliasing), 1..=8.
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = 2, value_parser = super::limits::supersampling)]
     pub supersampling: u32,
     /// Noise seed (default: the scene's seed).
     #[arg(long)]
@@ -92,9 +92,9 @@ fn plan(args: PlanArgs) -> anyhow::Result<()> {
     let scene = load(&args.scene)?;
     let plan = EffectPlan::from_scene(&scene);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&plan)?);
+        crate::outln!("{}", serde_json::to_string_pretty(&plan)?);
     } else {
-        print!("{}", plan.to_table());
+        crate::out!("{}", plan.to_table());
     }
     Ok(())
 }
@@ -172,10 +172,10 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frames,
     };
     let path = args.out.join("truth.json");
-    fs::write(&path, serde_json::to_string_pretty(&truth)?)
+    crate::atomic_file::write(&path, serde_json::to_string_pretty(&truth)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let c = renderer.camera();
-    println!(
+    crate::outln!(
         "rendered {} frame(s) of '{}' at {}×{} into {} (frame_NNNNN.png, truth.json{})",
         indices.len(),
         truth.scene,
@@ -197,7 +197,7 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
     let path = out.join(&file);
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(f.width, f.height, f.raw())
         .ok_or_else(|| anyhow!("frame {k}: buffer does not match {}×{}", f.width, f.height))?;
-    img.save(&path)
+    crate::atomic_file::write_png(&path, &img)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let mut pixel_truth_files = Vec::new();
     if let Some(p) = &f.pixels {
@@ -218,7 +218,8 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
             ),
         ] {
             let path = out.join(&name);
-            fs::write(&path, bytes).with_context(|| format!("cannot write {}", path.display()))?;
+            crate::atomic_file::write(&path, bytes)
+                .with_context(|| format!("cannot write {}", path.display()))?;
             pixel_truth_files.push(name);
         }
     }

@@ -40,10 +40,10 @@ pub struct ServeArgs {
     #[arg(long, value_name = "PATH")]
     pub wire: Option<PathBuf>,
     /// Board → host bit error rate in [0, 0.5], overriding the scene's `link_corruption`.
-    #[arg(long, value_name = "X")]
+    #[arg(long, value_name = "X", value_parser = |s: &str| super::limits::real_in(s, 0.0, 0.5))]
     pub ber: Option<f64>,
     /// Device clock rate error against the host, ppm.
-    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true)]
+    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::limits::drift_ppm)]
     pub drift_ppm: f64,
     /// Device clock reading when serving starts, µs (default ≈ 11.6 days of uptime).
     #[arg(long, default_value_t = 1_000_000_000_000)]

@@ -128,7 +128,7 @@ pub fn write_fit_ply(path: &Path, mesh: &TriangleMesh, fits: &[VertexFit]) -> Re
             bytes.extend((i as i32).to_le_bytes());
         }
     }
-    std::fs::write(path, bytes).map_err(|source| PlyError::Io {
+    crate::atomic_file::write(path, bytes).map_err(|source| PlyError::Io {
         path: path.display().to_string(),
         source,
     })

@@ -72,6 +72,50 @@ pub enum SessionFitError {
     /// No posed frame.
     #[error("no frame of the session has a pose: track poses first")]
     NoPoses,
+    /// Not one vertex has a sample: a fit would report the prior everywhere.
+    #[error(
+        "no vertex of the mesh has a single sample, so nothing can be fitted: {}",
+        describe_empty(.0)
+    )]
+    NoSamples(Box<ObserveReport>),
+}
+
+/// Why an extraction gave no samples, in words: frames read and skipped (by reason), gates.
+fn describe_empty(r: &ObserveReport) -> String {
+    let mut reasons: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for s in &r.skipped {
+        // the reason up to its first detail (frame paths differ per frame)
+        let key = s.reason.split(": ").last().unwrap_or(&s.reason);
+        *reasons.entry(key).or_insert(0) += 1;
+    }
+    let mut skipped: Vec<String> = reasons
+        .iter()
+        .take(5)
+        .map(|(k, n)| format!("{n} × {k}"))
+        .collect();
+    if reasons.len() > 5 {
+        skipped.push("…".into());
+    }
+    let g = &r.gates;
+    format!(
+        "{} of {} posed frames read{}; per (vertex, frame): {} not in view, {} occluded, {} in \
+         shadow, {} grazing, {} saturated, {} dark, {} non-finite — check that the mesh is in the \
+         boards' frame in metres and that the frames are readable",
+        r.frames_used,
+        r.frames_posed,
+        if skipped.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} skipped: {})", r.skipped.len(), skipped.join("; "))
+        },
+        g.not_in_view,
+        g.occluded,
+        g.shadowed,
+        g.grazing,
+        g.saturated,
+        g.dark,
+        g.non_finite
+    )
 }
 
 /// A session fit's results.
@@ -129,18 +173,19 @@ pub fn fit_session(
     let mut joint_s = 0.0;
     let mut shape_s = 0.0;
     let iterations = config.outer_iterations.max(1);
-    // Observations of the current mesh, the solve starting from the refined normals (not the
-    // re-derived mesh normals) once there are any; with the seconds it took.
     // (The solve starts from the previous iteration's normals through its warm start; the
     // samples keep the mesh normal, the centre of the normal prior.)
     let observe = |mesh: &TriangleMesh| {
         let started = Instant::now();
         let e = extract(session, mesh, poses, &config.observe, &|_, _| {})?;
+        if e.report.samples == 0 {
+            return Err(SessionFitError::NoSamples(Box::new(e.report)));
+        }
         Ok::<_, SessionFitError>((e, started.elapsed().as_secs_f64()))
     };
     let announce = |k: usize, mesh: &TriangleMesh| {
         format!(
-            "outer iteration {k}/{iterations}: observations from {} frames of {} vertices",
+            "outer iteration {k}/{iterations}: observations from {} posed frames of {} vertices",
             poses.len(),
             mesh.positions().len()
         )

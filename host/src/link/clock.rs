@@ -7,7 +7,9 @@
 //! of the last [`ClockModelConfig::window`] accepted samples the model fits
 //! `host_us = gain · device_us + offset` by least squares on centred values, and exposes the
 //! residuals so nobody has to trust an unsettled fit: [`ClockModel::fit`] is `None` until
-//! [`ClockModelConfig::min_samples`] samples are in.
+//! [`ClockModelConfig::min_samples`] samples are in. A slope the window does not resolve to
+//! 20 ppm (a short window of noisy pings), or beyond 1000 ppm, is not used: the fit is then
+//! offset-only (gain 1).
 //!
 //! Re-synchronising is idempotent: adding samples only slides the window.
 
@@ -109,6 +111,12 @@ pub enum SampleRejected {
     },
 }
 
+/// Largest standard error of the fitted slope that counts as a measured drift (20 ppm, the
+/// tolerance of a good crystal); a vaguer slope is replaced by gain 1.
+const MAX_SLOPE_ERROR: f64 = 20e-6;
+/// Largest drift any real clock has (1000 ppm); a fitted gain beyond it is replaced by 1.
+const MAX_DRIFT: f64 = 1e-3;
+
 /// The sliding-window clock model.
 #[derive(Debug, Clone)]
 pub struct ClockModel {
@@ -188,7 +196,23 @@ impl ClockModel {
         let sdh: f64 = pts.iter().map(|p| (p.0 - mean_d) * (p.1 - mean_h)).sum();
         // All samples at one device time (or a single sample): the slope is undetermined; assume
         // no drift (gain 1) rather than divide by zero.
-        let gain = if sdd > 1e-6 { sdh / sdd } else { 1.0 };
+        let mut gain = if sdd > 1e-6 { sdh / sdd } else { 1.0 };
+        // A slope the window cannot resolve better than a crystal's tolerance is no measurement:
+        // 20 pings over 20 ms on a loaded host gave gains of 0.95 and 1.014 (5 % — 15 ms of error
+        // 300 ms later, enough to pair a 20 fps frame with the wrong pulse). Then fit the offset
+        // only: over such a short window the true drift moves nothing.
+        let slope_error = if n > 2 && sdd > 1e-6 {
+            let ss: f64 = pts
+                .iter()
+                .map(|p| (p.1 - mean_h - gain * (p.0 - mean_d)).powi(2))
+                .sum();
+            (ss / (n - 2) as f64 / sdd).sqrt()
+        } else {
+            f64::INFINITY
+        };
+        if !(slope_error <= MAX_SLOPE_ERROR && (gain - 1.0).abs() <= MAX_DRIFT) {
+            gain = 1.0;
+        }
         let offset_c = mean_h - gain * mean_d;
         let residuals_us: Vec<f64> = pts.iter().map(|p| p.1 - (gain * p.0 + offset_c)).collect();
         let rms_us = (residuals_us.iter().map(|r| r * r).sum::<f64>() / n as f64).sqrt();
@@ -315,5 +339,27 @@ mod tests {
         let fit = m.fit().unwrap();
         assert!(fit.rms_us < 200.0, "rms {}", fit.rms_us);
         assert!((fit.host_us(DeviceTimeUs(2_000_777)) - 2_000_000.0).abs() < 100.0);
+    }
+
+    #[test]
+    fn a_short_noisy_window_gives_an_offset_not_an_absurd_gain() {
+        // 20 pings in 20 ms with ±150 µs of host scheduling noise: the least-squares slope is off
+        // by percent; the fit must keep gain 1 and the offset
+        let mut m = ClockModel::new(ClockModelConfig::default());
+        for i in 0..20u64 {
+            let host_mid = 10_000 + i * 1_000;
+            let noise = [0, 150, -120, 90, -150, 60][i as usize % 6];
+            let dev = (host_mid as i64 + 1_000_000 + noise) as u64;
+            m.add(sample(host_mid - 100, dev, 200)).unwrap();
+        }
+        let fit = m.fit().unwrap();
+        assert_eq!(fit.gain, 1.0);
+        // 300 ms later the mapping is still right to the noise
+        let t = DeviceTimeUs(1_000_000 + 310_000);
+        assert!(
+            (fit.host_us(t) - 310_000.0).abs() < 200.0,
+            "{}",
+            fit.host_us(t)
+        );
     }
 }

@@ -226,11 +226,11 @@ impl Canvas {
     pub fn save_png(&self, path: &Path) -> Result<(), ReportError> {
         let img = image::RgbImage::from_raw(self.width, self.height, self.pixels.clone())
             .ok_or(ReportError::EmptyCanvas)?;
-        img.save_with_format(path, image::ImageFormat::Png)
-            .map_err(|source| ReportError::Write {
-                path: path.display().to_string(),
-                source,
-            })
+        // whole or not at all: a full disk leaves no empty picture behind
+        crate::atomic_file::write_png(path, &img).map_err(|e| ReportError::Write {
+            path: path.display().to_string(),
+            source: image::ImageError::IoError(e),
+        })
     }
     /// The raw RGB8 bytes, row-major.
     pub fn as_bytes(&self) -> &[u8] {

@@ -2,7 +2,6 @@
 //! shape in C order, little-endian, header padded so the data starts on a 64-byte boundary
 //! (format spec: numpy.lib.format). Used by `ellipso polar --npy` and `ellipso sim render --truth`.
 
-use std::io::Write;
 use std::path::Path;
 
 /// Element types we write.
@@ -63,7 +62,7 @@ pub fn encode<T: NpyElement>(shape: &[usize], data: &[T]) -> Vec<u8> {
 
 /// Writes `data` with `shape` to `path`.
 pub fn write<T: NpyElement>(path: &Path, shape: &[usize], data: &[T]) -> std::io::Result<()> {
-    std::fs::File::create(path)?.write_all(&encode(shape, data))
+    crate::atomic_file::write(path, encode(shape, data))
 }
 
 #[cfg(test)]

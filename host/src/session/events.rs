@@ -120,6 +120,9 @@ pub enum SessionEvent {
         /// sessions: 1).
         #[serde(default)]
         flash_energy_rel: Option<f64>,
+        /// The evidence: `camera_time` (the frame's exposure timestamp) or `arrival_time`.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        basis: Option<String>,
     },
     /// A frame or pulse that could not be paired; never silently dropped.
     PairingError {
@@ -133,6 +136,22 @@ pub enum SessionEvent {
         /// Pulse sequence number, if a pulse is involved.
         #[serde(default)]
         seq: Option<u64>,
+        /// Why a frame found no pulse: `no_clock`, `no_pulse`, `ambiguous`, `pulse_taken`,
+        /// `unconfirmed` (see `acquire::pairing::Unpaired`).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        reason: Option<String>,
+    },
+    /// The camera's timestamp counter read between two host times (its clock model for pairing
+    /// on exposure times).
+    CameraClock {
+        /// Host time.
+        t_host_us: HostTimeUs,
+        /// The camera's counter, ns.
+        t_camera_ns: u64,
+        /// Host time before the latch.
+        t_host_before_us: HostTimeUs,
+        /// Host time after the read-back.
+        t_host_after_us: HostTimeUs,
     },
     /// A fault reported by the board or seen by the host.
     Fault {

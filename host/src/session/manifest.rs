@@ -21,6 +21,47 @@ pub struct SensorInfo {
     pub bit_depth: u8,
 }
 
+/// Largest frame side a session may record, px (the scene files' limit).
+pub const MAX_SIDE_PX: u32 = 16_384;
+
+impl SensorInfo {
+    /// Checks the fields against what a raw mosaic frame can be: a known layout, even sides in
+    /// `2..=16384` (2×2 polariser blocks), 1–16 significant bits in the 16-bit container.
+    /// `Err((field, what))` names the field.
+    pub fn check(&self) -> Result<(), (&'static str, String)> {
+        const LAYOUTS: [&str; 4] = ["mono_polar", "colour_polar", "monopolar", "colourpolar"];
+        if !LAYOUTS.contains(&self.layout.as_str()) {
+            return Err((
+                "sensor.layout",
+                format!(
+                    "'{}' is not a sensor layout (mono_polar or colour_polar)",
+                    self.layout
+                ),
+            ));
+        }
+        for (field, v) in [("sensor.width", self.width), ("sensor.height", self.height)] {
+            if !(2..=MAX_SIDE_PX).contains(&v) || v % 2 != 0 {
+                return Err((
+                    field,
+                    format!(
+                        "{v} px: need an even size in 2..={MAX_SIDE_PX} (2×2 polariser blocks)"
+                    ),
+                ));
+            }
+        }
+        if !(1..=16).contains(&self.bit_depth) {
+            return Err((
+                "sensor.bit_depth",
+                format!(
+                    "{} bits: need 1..=16 significant bits in the 16-bit PNG container",
+                    self.bit_depth
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Where the frames came from.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
@@ -81,8 +122,8 @@ pub struct Manifest {
     /// AprilTag boards of the capture.
     #[serde(default)]
     pub boards: Vec<serde_json::Value>,
-    /// Set when the session ended cleanly.
-    #[serde(default)]
+    /// Set when the session ended cleanly; absent (not `null`) otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub end: Option<EndRecord>,
 }
 

@@ -70,6 +70,16 @@ pub enum SessionError {
         /// What serde said.
         message: String,
     },
+    /// A manifest field holds an impossible value.
+    #[error("{path}: `{field}`: {what}")]
+    InvalidManifest {
+        /// The manifest file.
+        path: std::path::PathBuf,
+        /// The field, e.g. `sensor.bit_depth`.
+        field: &'static str,
+        /// What is wrong.
+        what: String,
+    },
     /// The session was written by a newer, incompatible schema.
     #[error(
         "{path}: session schema v{found} is not supported by this ellipso (reads v{supported})"
@@ -95,6 +105,18 @@ pub enum SessionError {
     AlreadyExists {
         /// The directory.
         path: std::path::PathBuf,
+    },
+    /// The directory is not a fresh one: a new session is never written among other files
+    /// (an older recording's `frames/` or `events.jsonl` above all).
+    #[error(
+        "{path}: {what}; a capture writes only into a new or empty directory, never over \
+         another recording — choose a new --out"
+    )]
+    NotFresh {
+        /// The directory.
+        path: std::path::PathBuf,
+        /// What is there.
+        what: String,
     },
 }
 

@@ -2,7 +2,9 @@
 //!
 //! - A missing or unparsable manifest is an error naming the file, line and column.
 //! - A truncated last line of the log (a write cut by SIGKILL) is dropped and reported.
-//! - A corrupt line elsewhere is skipped and reported with its line number; the rest is kept.
+//! - A corrupt line elsewhere is skipped and reported with its line number (in
+//!   [`ReadReport::summary`] too); the rest is kept.
+//! - A frame id with two `frame` events, or a pulse logged twice, is reported (never "intact").
 //! - The `frames/` directory is the truth for which frames exist: a frame whose event was never
 //!   written (killed between rename and log) is still listed, without metadata; a `frame` event
 //!   whose file is missing is reported. Temporary `.partial` files are ignored.
@@ -55,6 +57,10 @@ pub struct ReadReport {
     pub events_without_frame: Vec<u64>,
     /// The manifest has an end record (the capture ended cleanly).
     pub ended_cleanly: bool,
+    /// Frame ids with more than one `frame` event (the first is kept).
+    pub duplicate_frame_events: Vec<u64>,
+    /// Pulse sequence numbers with more than one `pulse` event.
+    pub duplicate_pulses: Vec<u64>,
 }
 
 impl ReadReport {
@@ -68,9 +74,36 @@ impl ReadReport {
             parts.push("last log line truncated".to_string());
         }
         if !self.bad_lines.is_empty() {
+            let lines: Vec<String> = self
+                .bad_lines
+                .iter()
+                .take(10)
+                .map(|(n, _)| n.to_string())
+                .collect();
+            let more = if self.bad_lines.len() > 10 {
+                ", …"
+            } else {
+                ""
+            };
             parts.push(format!(
-                "{} corrupt log lines skipped",
-                self.bad_lines.len()
+                "{} corrupt log lines skipped (line{} {}{more})",
+                self.bad_lines.len(),
+                if self.bad_lines.len() == 1 { "" } else { "s" },
+                lines.join(", ")
+            ));
+        }
+        if !self.duplicate_frame_events.is_empty() {
+            parts.push(format!(
+                "{} frame ids logged twice ({})",
+                self.duplicate_frame_events.len(),
+                list(&self.duplicate_frame_events)
+            ));
+        }
+        if !self.duplicate_pulses.is_empty() {
+            parts.push(format!(
+                "{} pulses logged twice (seq {})",
+                self.duplicate_pulses.len(),
+                list(&self.duplicate_pulses)
             ));
         }
         if !self.frames_without_event.is_empty() {
@@ -91,6 +124,15 @@ impl ReadReport {
             parts.join("; ")
         }
     }
+}
+
+/// Up to 10 ids, comma-separated.
+fn list(ids: &[u64]) -> String {
+    let mut s: Vec<String> = ids.iter().take(10).map(u64::to_string).collect();
+    if ids.len() > 10 {
+        s.push("…".into());
+    }
+    s.join(", ")
 }
 
 /// A session opened for reading.
@@ -153,6 +195,14 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
             column: e.column(),
             message: e.to_string(),
         })?;
+    manifest
+        .sensor
+        .check()
+        .map_err(|(field, what)| SessionError::InvalidManifest {
+            path: manifest_path.clone(),
+            field,
+            what,
+        })?;
     let mut report = ReadReport {
         ended_cleanly: manifest.end.is_some(),
         ..ReadReport::default()
@@ -186,10 +236,18 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
 
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
+    let mut pulses = std::collections::BTreeSet::new();
     for e in &events {
         match e {
             SessionEvent::Frame { frame_id, .. } => {
-                logged.insert(*frame_id, e.clone());
+                if logged.contains_key(frame_id) {
+                    report.duplicate_frame_events.push(*frame_id);
+                } else {
+                    logged.insert(*frame_id, e.clone());
+                }
+            }
+            SessionEvent::Pulse { seq, .. } if !pulses.insert(*seq) => {
+                report.duplicate_pulses.push(*seq);
             }
             SessionEvent::Pairing {
                 frame_id,

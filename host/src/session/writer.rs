@@ -57,19 +57,27 @@ pub struct FrameRecord<'a> {
 }
 
 impl SessionWriter {
-    /// Creates `dir` (which must not already hold a session) and writes the manifest.
+    /// Creates `dir`, which must be new or an empty directory ([`check_fresh`]), and writes the
+    /// manifest.
     pub fn create(dir: &Path, manifest: Manifest) -> Result<Self, SessionError> {
-        if dir.join(paths::MANIFEST).exists() {
-            return Err(SessionError::AlreadyExists {
-                path: dir.to_path_buf(),
-            });
+        check_fresh(dir)?;
+        if let Some(parent) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+            fs::create_dir_all(parent).map_err(SessionError::io(parent))?;
         }
+        match fs::create_dir(dir) {
+            Ok(()) => {}
+            // an empty directory (checked above) is fine
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir() => {}
+            Err(e) => return Err(SessionError::io(dir)(e)),
+        }
+        // `create_dir`, `create_new`: if another process raced us into `dir`, fail rather than
+        // share it
         let frames = dir.join(paths::FRAMES);
-        fs::create_dir_all(&frames).map_err(SessionError::io(&frames))?;
+        fs::create_dir(&frames).map_err(SessionError::io(&frames))?;
         write_manifest(dir, &manifest)?;
         let log = dir.join(paths::EVENTS);
         let events = OpenOptions::new()
-            .create(true)
+            .create_new(true)
             .append(true)
             .open(&log)
             .map_err(SessionError::io(&log))?;
@@ -119,7 +127,11 @@ impl SessionWriter {
     ) -> Result<PreparedFrame, SessionError> {
         let name = paths::frame_file(f.frame_id);
         let tmp = frames_dir.join(format!(".{name}.partial"));
-        frame_png::write(&tmp, f.width, f.height, f.pixels)?;
+        if let Err(e) = frame_png::write(&tmp, f.width, f.height, f.pixels) {
+            // a full disk must not be left fuller by the half-written frame
+            let _ = fs::remove_file(&tmp);
+            return Err(e);
+        }
         let event = SessionEvent::Frame {
             t_host_us: f.t_host_us,
             frame_id: f.frame_id,
@@ -172,6 +184,43 @@ impl SessionWriter {
     }
 }
 
+/// Refuses a `dir` that is not new or an empty directory: it must never be another session
+/// (even one whose manifest is gone), nor a file.
+pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
+    if dir.join(paths::MANIFEST).exists() {
+        return Err(SessionError::AlreadyExists {
+            path: dir.to_path_buf(),
+        });
+    }
+    let not_fresh = |what: String| SessionError::NotFresh {
+        path: dir.to_path_buf(),
+        what,
+    };
+    match fs::symlink_metadata(dir) {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
+        Err(e) => Err(SessionError::io(dir)(e)),
+        Ok(m) if !m.is_dir() => Err(not_fresh("exists and is not a directory".into())),
+        Ok(_) => {
+            let mut names: Vec<String> = fs::read_dir(dir)
+                .map_err(SessionError::io(dir))?
+                .filter_map(Result::ok)
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect();
+            if names.is_empty() {
+                return Ok(());
+            }
+            names.sort();
+            let n = names.len();
+            names.truncate(3);
+            let more = if n > 3 { ", …" } else { "" };
+            Err(not_fresh(format!(
+                "is not empty ({n} entries: {}{more})",
+                names.join(", ")
+            )))
+        }
+    }
+}
+
 fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
     let path = dir.join(paths::MANIFEST);
     let tmp = dir.join(".manifest.json.partial");
@@ -179,7 +228,10 @@ fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
         path: path.clone(),
         error: std::io::Error::other(e),
     })?;
-    fs::write(&tmp, json).map_err(SessionError::io(&tmp))?;
+    if let Err(e) = fs::write(&tmp, json) {
+        let _ = fs::remove_file(&tmp);
+        return Err(SessionError::io(&tmp)(e));
+    }
     fs::rename(&tmp, &path).map_err(SessionError::io(&path))
 }
 
@@ -191,7 +243,9 @@ pub struct SessionAppender {
 }
 
 impl SessionAppender {
-    /// Opens the log of the session in `dir` for appending; the session must exist.
+    /// Opens the log of the session in `dir` for appending; the session must exist. A log whose
+    /// last line was cut short (a killed writer) is first ended with a newline, so appended
+    /// events start on a line of their own and the cut line stays a (reported) corrupt line.
     pub fn open(dir: &Path) -> Result<Self, SessionError> {
         let manifest = dir.join(paths::MANIFEST);
         if !manifest.is_file() {
@@ -201,11 +255,15 @@ impl SessionAppender {
             });
         }
         let path = dir.join(paths::EVENTS);
-        let events = OpenOptions::new()
+        let mut events = OpenOptions::new()
+            .read(true)
             .append(true)
             .create(true)
             .open(&path)
             .map_err(SessionError::io(&path))?;
+        if !ends_with_newline(&mut events).map_err(SessionError::io(&path))? {
+            write_all_or_nothing(&mut events, b"\n").map_err(SessionError::io(&path))?;
+        }
         Ok(Self { path, events })
     }
 
@@ -216,12 +274,41 @@ impl SessionAppender {
 }
 
 /// Appends `event` to the log `file` (at `path`, for errors) as one line, in one write: the
-/// crash-safety contract of the event log.
+/// crash-safety contract of the event log. All or nothing: a write cut short (a full disk) is
+/// truncated away again, so no partial line is ever left behind by an error.
 fn append_line(file: &mut File, path: &Path, event: &SessionEvent) -> Result<(), SessionError> {
     let mut line = serde_json::to_vec(event).map_err(|e| SessionError::Io {
         path: path.to_path_buf(),
         error: std::io::Error::other(e),
     })?;
     line.push(b'\n');
-    file.write_all(&line).map_err(SessionError::io(path))
+    write_all_or_nothing(file, &line).map_err(SessionError::io(path))
+}
+
+/// Writes `bytes` at the end of `file` (opened for appending) completely, or restores the
+/// file's previous length and returns the error.
+fn write_all_or_nothing(file: &mut File, bytes: &[u8]) -> std::io::Result<()> {
+    let before = file.metadata()?.len();
+    match file.write_all(bytes) {
+        Ok(()) => Ok(()),
+        Err(e) => {
+            if let Err(undo) = file.set_len(before) {
+                tracing::error!("could not remove a partly written log line: {undo}");
+            }
+            Err(e)
+        }
+    }
+}
+
+/// Whether `file` is empty or its last byte is a newline.
+fn ends_with_newline(file: &mut File) -> std::io::Result<bool> {
+    use std::io::{Read, Seek, SeekFrom};
+    let len = file.metadata()?.len();
+    if len == 0 {
+        return Ok(true);
+    }
+    file.seek(SeekFrom::Start(len - 1))?;
+    let mut last = [0u8; 1];
+    file.read_exact(&mut last)?;
+    Ok(last[0] == b'\n')
 }

@@ -117,6 +117,17 @@ pub enum RenderError {
         /// Frame height.
         height: u32,
     },
+    /// A side above the scene files' limit.
+    #[error(
+        "resolution {width}×{height}: sides above {max} px are refused, as in scene files",
+        max = crate::scene::rig::MAX_SIDE_PX
+    )]
+    TooLarge {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+    },
     /// Supersampling outside 1..=MAX_SUPERSAMPLING.
     #[error("supersampling {0} must be in 1..={MAX_SUPERSAMPLING}")]
     Supersampling(u32),
@@ -223,6 +234,12 @@ impl<'s> Renderer<'s> {
         let layout = sensor_layout(scene.rig.camera.sensor);
         let mut camera = scene.rig.camera.camera_model();
         if let Some([w, h]) = options.resolution_px {
+            if w > crate::scene::rig::MAX_SIDE_PX || h > crate::scene::rig::MAX_SIDE_PX {
+                return Err(RenderError::TooLarge {
+                    width: w,
+                    height: h,
+                });
+            }
             let sx = f64::from(w) / f64::from(camera.width);
             let sy = f64::from(h) / f64::from(camera.height);
             let i = &mut camera.intrinsics;

@@ -137,6 +137,7 @@ pub struct SimCamera {
     frames: Receiver<SimFrame>,
     counters: Arc<Mutex<CameraCounters>>,
     threads: Vec<JoinHandle<()>>,
+    camera_clock: super::clock::LinearClock,
 }
 
 fn lock(c: &Mutex<CameraCounters>) -> MutexGuard<'_, CameraCounters> {
@@ -228,7 +229,14 @@ impl SimCamera {
             frames,
             counters,
             threads,
+            camera_clock: config.camera_clock,
         })
+    }
+
+    /// The camera's timestamp counter now, ns (the clock of [`SimFrame::t_camera_ns`]): what a
+    /// GigE camera's `GevTimestampControlLatch` + `GevTimestampValue` read back.
+    pub fn latch_timestamp_ns(&self) -> u64 {
+        self.camera_clock.at_ns(std::time::Instant::now())
     }
 
     /// Delivered frames, in exposure order; disconnects after the last one.

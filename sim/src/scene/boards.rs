@@ -53,7 +53,7 @@ pub fn build_boards(
                 if !path.is_file() {
                     return Err(loc.invalid(
                         format!("{key}.file"),
-                        format!("board file {} does not exist", path.display()),
+                        super::not_a_file("board file", &path),
                     ));
                 }
                 (load_board_file(&path)?, None)

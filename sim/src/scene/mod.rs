@@ -40,6 +40,19 @@ use error::Located;
 use nalgebra::Unit;
 use std::path::{Path, PathBuf};
 
+/// Why `path`, which should be a readable file, is not one: a directory, something else, or
+/// nothing at all (`what` names it, e.g. "mesh file").
+pub(crate) fn not_a_file(what: &str, path: &Path) -> String {
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => format!("{what} {} is a directory, not a file", path.display()),
+        Ok(_) => format!("{what} {} is not a regular file", path.display()),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            format!("{what} {} does not exist", path.display())
+        }
+        Err(e) => format!("{what} {}: {e}", path.display()),
+    }
+}
+
 /// A named material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NamedMaterial {

@@ -206,10 +206,7 @@ pub fn build_objects(
                     .ok_or_else(|| loc.invalid(k("mesh"), "required for a mesh"))?;
                 let path = base.join(rel);
                 if !path.is_file() {
-                    return Err(loc.invalid(
-                        k("mesh"),
-                        format!("mesh file {} does not exist", path.display()),
-                    ));
+                    return Err(loc.invalid(k("mesh"), super::not_a_file("mesh file", &path)));
                 }
                 let canonical = path.canonicalize().unwrap_or_else(|_| path.clone());
                 let mesh = match meshes.get(&canonical) {

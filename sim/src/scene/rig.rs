@@ -35,6 +35,10 @@ pub struct RigSpec {
     pub flash: FlashSpec,
 }
 
+/// Largest frame side, px, a scene (or a resolution override) may ask for: 16384 × 16384 raw
+/// pixels is already 1 GiB of f32 DN per frame.
+pub const MAX_SIDE_PX: u32 = 16_384;
+
 fn default_bit_depth() -> u8 {
     12
 }
@@ -289,10 +293,12 @@ impl RigSpec {
         let c = &self.camera;
         let k = |f: &str| format!("rig.camera.{f}");
         let [w, h] = c.resolution_px;
-        if w < 2 || h < 2 || w % 2 != 0 || h % 2 != 0 || w > 16_384 || h > 16_384 {
+        if w < 2 || h < 2 || w % 2 != 0 || h % 2 != 0 || w > MAX_SIDE_PX || h > MAX_SIDE_PX {
             return Err(loc.invalid(
                 k("resolution_px"),
-                format!("{w}×{h}: need even sizes in 2..=16384 for the 2×2 polariser mosaic"),
+                format!(
+                    "{w}×{h}: need even sizes in 2..={MAX_SIDE_PX} for the 2×2 polariser mosaic"
+                ),
             ));
         }
         for (f, v) in [("fx_px", c.fx_px), ("fy_px", c.fy_px)] {

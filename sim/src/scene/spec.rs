@@ -44,6 +44,10 @@ pub struct SceneFile {
     pub effects: EffectsSpec,
 }
 
+/// Largest specular and single-scattering albedo a material may have (far above any real
+/// surface; it keeps every rendered value finite).
+pub const MAX_LOBE_ALBEDO: f64 = 1_000.0;
+
 /// Polarimetric BRDF parameters of one material ([`MaterialSpec::to_pbrdf`] gives the optics
 /// model's `PbrdfParams`).
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
@@ -132,12 +136,18 @@ impl MaterialSpec {
                 ),
             ));
         }
-        if !(self.rho_s.is_finite() && self.rho_s >= 0.0) {
-            return Err(loc.invalid(k("rho_s"), format!("must be ≥ 0, got {}", self.rho_s)));
+        if !(self.rho_s >= 0.0 && self.rho_s <= MAX_LOBE_ALBEDO) {
+            return Err(loc.invalid(
+                k("rho_s"),
+                format!("must be in [0, {MAX_LOBE_ALBEDO}], got {}", self.rho_s),
+            ));
         }
         for c in 0..3 {
-            if !(self.rho_ss[c].is_finite() && self.rho_ss[c] >= 0.0) {
-                return Err(loc.invalid(k(&format!("rho_ss[{c}]")), "must be finite and ≥ 0"));
+            if !(self.rho_ss[c] >= 0.0 && self.rho_ss[c] <= MAX_LOBE_ALBEDO) {
+                return Err(loc.invalid(
+                    k(&format!("rho_ss[{c}]")),
+                    format!("must be in [0, {MAX_LOBE_ALBEDO}], got {}", self.rho_ss[c]),
+                ));
             }
             if !(0.0..=1.0).contains(&self.rho_d[c]) {
                 return Err(loc.invalid(

@@ -167,6 +167,7 @@ fn bad_inputs_name_key_and_line() {
         (edit("shot_noise = {}", "frame_drops = { probability = 1.5 }"), "effects.frame_drops.probability", "probability = 1.5", "p < 1"),
         (edit("pose = { translation_m = [0.0, 0.0, 0.04] }", "pose = { quaternion_wxyz = [0.0, 0.0, 0.0, 0.0] }"), "objects[0].pose.quaternion_wxyz", "quaternion_wxyz", "normalised"),
         (edit("shape = \"sphere\"\nradius_m = 0.04", "shape = \"mesh\"\nmesh = \"../assets/missing.ply\""), "objects[0].mesh", "missing.ply", "does not exist"),
+        (edit("shape = \"sphere\"\nradius_m = 0.04", "shape = \"mesh\"\nmesh = \".\""), "objects[0].mesh", "mesh = \".\"", "is a directory, not a file"),
         (edit("[capture]", "[capture\n"), "", "[capture", "unclosed table"),
         (edit("photo_count = 50", "photo_count = 50\ninterval_ms = 2.0"), "capture.interval_ms", "interval_ms = 2.0", "shorter than the 5000 µs exposure"),
         (edit("photo_count = 50", "photo_count = 50\nbracket = [1.0, 0.0]"), "capture.bracket", "bracket = [1.0, 0.0]", "step 1 is 0; relative energies must be in (0, 1]"),

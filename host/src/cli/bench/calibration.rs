@@ -13,8 +13,8 @@ use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
 
 use crate::calibrate::views::{View, board_view};
 use crate::calibrate::{CalibConfig, Calibration, calibrate};
-use crate::pose::{DetectorConfig, TagDetector};
-use crate::track::DetectImage;
+use crate::pose::DetectorConfig;
+use crate::track::{DetectImage, FamilyDetectors};
 
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;
@@ -27,11 +27,11 @@ pub struct CalibrationArgs {
     /// Scene file (a board-only calibration capture).
     #[arg(default_value = "sim/scenes/calibration.toml")]
     pub scene: PathBuf,
-    /// Frames to use (spread over the capture path; default all).
-    #[arg(long)]
+    /// Frames to use (spread over the capture path; default all), ≥ 1.
+    #[arg(long, value_parser = crate::cli::limits::count::<usize>)]
     pub frames: Option<usize>,
-    /// Render at WIDTHxHEIGHT instead of the scene's resolution.
-    #[arg(long, value_parser = crate::cli::capture::parse_resolution)]
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
+    #[arg(long, value_parser = crate::cli::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
     #[arg(long)]
@@ -235,7 +235,7 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
     let (renderer, boards) = super::renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let truth = *renderer.camera();
     let indices = super::spread(scene.camera_poses.len(), args.frames);
-    let mut detector = TagDetector::new(DetectorConfig::default())?;
+    let mut detector = FamilyDetectors::new(&boards, DetectorConfig::default())?;
     let mut views: Vec<View> = Vec::new();
     let mut truth_views = Vec::new();
     for &k in &indices {
@@ -274,17 +274,23 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
 
 /// Runs `ellipso bench calibration`.
 pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
-    println!(
+    crate::outln!(
         "calibrating from rendered frames of {}…",
         args.scene.display()
     );
     let b = run_bench(&args)?;
-    println!(
+    crate::outln!(
         "{} frames at {}×{}, seed {}: {} views kept, {} corners, reprojection RMS {:.4} px",
-        b.frames, b.resolution[0], b.resolution[1], b.seed, b.views_used, b.points, b.rms_px
+        b.frames,
+        b.resolution[0],
+        b.resolution[1],
+        b.seed,
+        b.views_used,
+        b.points,
+        b.rms_px
     );
-    println!("| param | true | estimated | relative error | std error | error/σ |");
-    println!("|---|---|---|---|---|---|");
+    crate::outln!("| param | true | estimated | relative error | std error | error/σ |");
+    crate::outln!("|---|---|---|---|---|---|");
     for r in &b.params {
         let rel = if r.relative_error.is_finite() {
             format!("{:.2e}", r.relative_error)
@@ -292,27 +298,38 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
             "—".into()
         };
         if r.estimated {
-            println!(
+            crate::outln!(
                 "| {} | {:.6} | {:.6} | {rel} | {:.2e} | {:.2} |",
-                r.name, r.truth, r.estimate, r.std_error, r.error_sigmas
+                r.name,
+                r.truth,
+                r.estimate,
+                r.std_error,
+                r.error_sigmas
             );
         } else {
-            println!(
+            crate::outln!(
                 "| {} | {:.6} | {:.6} (fixed) | {rel} | — | — |",
-                r.name, r.truth, r.estimate
+                r.name,
+                r.truth,
+                r.estimate
             );
         }
     }
     let c = &b.corner_error;
-    println!(
+    crate::outln!(
         "corners vs truth ({}): mean ({:+.3}, {:+.3}) px, RMS {:.3} px, mean radial {:+.3} px, \
          mean outward from tag centre {:+.3} px",
-        c.count, c.mean_px[0], c.mean_px[1], c.rms_px, c.mean_radial_px, c.mean_outward_px
+        c.count,
+        c.mean_px[0],
+        c.mean_px[1],
+        c.rms_px,
+        c.mean_radial_px,
+        c.mean_outward_px
     );
     for why in &b.rejected {
-        println!("  rejected: {why}");
+        crate::outln!("  rejected: {why}");
     }
-    println!(
+    crate::outln!(
         "targets (fx, fy, cx, cy ≤ {:.1} %, k1 ≤ {:.0} %): {}",
         INTRINSIC_TARGET * 100.0,
         K1_TARGET * 100.0,
@@ -320,8 +337,8 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
     );
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("calibration-bench.json");
-    std::fs::write(&path, serde_json::to_vec_pretty(&b)?)?;
-    println!("written {}", path.display());
+    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&b)?)?;
+    crate::outln!("written {}", path.display());
     Ok(())
 }
 

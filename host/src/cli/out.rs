@@ -1,0 +1,49 @@
+//! Standard output that a closed reader cannot kill.
+//!
+//! `ellipso fit … | head -1` closed the pipe after one line, and the next `println!` panicked
+//! before any result was written. Every subcommand prints through [`outln!`](crate::outln) and
+//! [`out!`](crate::out) instead: the first failed write (a broken pipe, a full disk behind a
+//! redirection) stops all further printing — noted once on stderr — and the work goes on, so
+//! results are still written and the exit status still says how the work went.
+
+use std::fmt;
+use std::io::Write;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+static CLOSED: AtomicBool = AtomicBool::new(false);
+
+/// Writes `args` to stdout unless an earlier write failed; a failing write closes the output.
+pub fn write(args: fmt::Arguments<'_>) {
+    if CLOSED.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut stdout = std::io::stdout().lock();
+    if let Err(e) = stdout.write_fmt(args).and_then(|()| stdout.flush()) {
+        if !CLOSED.swap(true, Ordering::Relaxed) && e.kind() != std::io::ErrorKind::BrokenPipe {
+            // a reader that went away needs no note; anything else (a full disk) does
+            let _ = writeln!(
+                std::io::stderr(),
+                "note: standard output failed ({e}); printing stopped"
+            );
+        }
+    }
+}
+
+/// `println!` that stops printing, instead of panicking, once stdout is closed.
+#[macro_export]
+macro_rules! outln {
+    () => {
+        $crate::cli::out::write(format_args!("\n"))
+    };
+    ($($arg:tt)*) => {
+        $crate::cli::out::write(format_args!("{}\n", format_args!($($arg)*)))
+    };
+}
+
+/// `print!` that stops printing, instead of panicking, once stdout is closed.
+#[macro_export]
+macro_rules! out {
+    ($($arg:tt)*) => {
+        $crate::cli::out::write(format_args!($($arg)*))
+    };
+}
