@@ -230,6 +230,8 @@ pub fn fit_and_export(
         "frames_held_out": fit.poses_held_out.iter().map(|p| p.0).collect::<Vec<_>>(),
         "held_out": fit.holdout,
         "pooling": fit.outcome.pooling,
+        "frames_used": fit.observe.frames_used,
+        "frames_skipped": fit.observe.skipped,
         "observe": fit.observe,
         "session_report": session.report.summary(),
         "view_frame_id": frame_id,

@@ -1,8 +1,8 @@
-//! AprilTag families and their code tables, read from the C library through `apriltag-sys`.
+//! AprilTag families and their code tables.
 //!
-//! Contract: [`TagFamily::code_table`] copies the family's code words and bit layout out of the C
-//! `apriltag_family_t` once per process (then frees it with the matching `*_destroy`), so rendering
-//! uses exactly the bits the detector decodes. [`TagCodeTable::cells`] reproduces
+//! Contract: [`TagFamily::code_table`] returns the family's code words and bit layout, the
+//! AprilTag library's own tables held as data (`codes.rs`; a test checks them field by field
+//! against the C library), so rendering uses exactly the bits the detector decodes. [`TagCodeTable::cells`] reproduces
 //! `apriltag_to_image` cell for cell: a `total_width × total_width` grid, row-major, row 0 at the
 //! top, `true` = white; for classic families that is a one-cell white ring, a one-cell black
 //! ring, then the data bits.
@@ -38,7 +38,7 @@ impl TagFamily {
         }
     }
 
-    /// The family's code table (loaded from the C library on first use).
+    /// The family's code table (built from the embedded data on first use).
     pub fn code_table(self) -> &'static TagCodeTable {
         static TABLES: [OnceLock<TagCodeTable>; 3] =
             [OnceLock::new(), OnceLock::new(), OnceLock::new()];
@@ -47,7 +47,7 @@ impl TagFamily {
             Self::Tag25h9 => 1,
             Self::Tag16h5 => 2,
         };
-        TABLES[slot].get_or_init(|| TagCodeTable::from_c(self))
+        TABLES[slot].get_or_init(|| TagCodeTable::embedded(self))
     }
 }
 
@@ -92,39 +92,21 @@ impl TagCells {
 }
 
 impl TagCodeTable {
-    fn from_c(family: TagFamily) -> Self {
-        use apriltag_sys as sys;
-        // SAFETY: the `*_create` functions return a heap-allocated, fully initialised family (or
-        // null on allocation failure, handled below). We only read its fields, copy `nbits`
-        // entries of bit_x/bit_y and `ncodes` codes (the lengths the C code allocated), and free it
-        // once with the matching `*_destroy`, which is the only owner.
-        unsafe {
-            let (fam, destroy): (*mut sys::apriltag_family_t, unsafe extern "C" fn(_)) =
-                match family {
-                    TagFamily::Tag36h11 => (sys::tag36h11_create(), sys::tag36h11_destroy),
-                    TagFamily::Tag25h9 => (sys::tag25h9_create(), sys::tag25h9_destroy),
-                    TagFamily::Tag16h5 => (sys::tag16h5_create(), sys::tag16h5_destroy),
-                };
-            assert!(
-                !fam.is_null(),
-                "AprilTag C library failed to allocate family {family:?}"
-            );
-            let f = &*fam;
-            let codes = std::slice::from_raw_parts(f.codes, f.ncodes as usize).to_vec();
-            let bit_x = std::slice::from_raw_parts(f.bit_x, f.nbits as usize).to_vec();
-            let bit_y = std::slice::from_raw_parts(f.bit_y, f.nbits as usize).to_vec();
-            let table = Self {
-                family,
-                codes,
-                nbits: f.nbits,
-                bit_x,
-                bit_y,
-                width_at_border: f.width_at_border as u32,
-                total_width: f.total_width as u32,
-                reversed_border: f.reversed_border,
-            };
-            destroy(fam);
-            table
+    fn embedded(family: TagFamily) -> Self {
+        let raw = match family {
+            TagFamily::Tag36h11 => &super::codes::TAG36H11,
+            TagFamily::Tag25h9 => &super::codes::TAG25H9,
+            TagFamily::Tag16h5 => &super::codes::TAG16H5,
+        };
+        Self {
+            family,
+            codes: raw.codes.to_vec(),
+            nbits: raw.nbits,
+            bit_x: raw.bit_x.to_vec(),
+            bit_y: raw.bit_y.to_vec(),
+            width_at_border: raw.width_at_border,
+            total_width: raw.total_width,
+            reversed_border: raw.reversed_border,
         }
     }
 
@@ -173,6 +155,46 @@ impl TagCodeTable {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The embedded tables against the C library's `apriltag_family_t`, field by field.
+    #[test]
+    fn tables_match_the_c_library() {
+        use apriltag_sys as sys;
+        for family in TagFamily::ALL {
+            let ours = family.code_table();
+            // SAFETY: the `*_create` functions return a heap-allocated, fully initialised family
+            // (null on allocation failure, asserted); we read `nbits` entries of bit_x/bit_y and
+            // `ncodes` codes (the lengths the C code allocated) and free it once with the
+            // matching `*_destroy`, its only owner.
+            unsafe {
+                let (fam, destroy): (*mut sys::apriltag_family_t, unsafe extern "C" fn(_)) =
+                    match family {
+                        TagFamily::Tag36h11 => (sys::tag36h11_create(), sys::tag36h11_destroy),
+                        TagFamily::Tag25h9 => (sys::tag25h9_create(), sys::tag25h9_destroy),
+                        TagFamily::Tag16h5 => (sys::tag16h5_create(), sys::tag16h5_destroy),
+                    };
+                assert!(!fam.is_null());
+                let f = &*fam;
+                assert_eq!(
+                    ours.codes,
+                    std::slice::from_raw_parts(f.codes, f.ncodes as usize)
+                );
+                assert_eq!(
+                    ours.bit_x,
+                    std::slice::from_raw_parts(f.bit_x, f.nbits as usize)
+                );
+                assert_eq!(
+                    ours.bit_y,
+                    std::slice::from_raw_parts(f.bit_y, f.nbits as usize)
+                );
+                assert_eq!(ours.nbits, f.nbits);
+                assert_eq!(ours.width_at_border, f.width_at_border as u32);
+                assert_eq!(ours.total_width, f.total_width as u32);
+                assert_eq!(ours.reversed_border, f.reversed_border);
+                destroy(fam);
+            }
+        }
+    }
 
     /// Our renderer against the C library's `apriltag_to_image`, cell for cell.
     #[test]

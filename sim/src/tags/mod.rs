@@ -9,6 +9,7 @@
 //! Frame conventions and the corner order are documented in [`board`].
 
 pub mod board;
+mod codes;
 pub mod family;
 pub mod placed;
 pub mod spec;
