@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 
 use ellipso_host::polar::synthetic::mosaic_from_stokes;
 use ellipso_host::polar::{DemosaicMethod, PolarConfig, PolarImage, RawFrame, process_into};
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::mosaic::SensorLayout;
 
 const WIDTH: u32 = 2448;
 const HEIGHT: u32 = 2048;

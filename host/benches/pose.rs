@@ -11,7 +11,7 @@ use ellipso_host::calibrate::{CalibConfig, calibrate};
 use ellipso_host::pose::{
     BoardCorners, Correspondence, PoseConfig, TagGridBoard, estimate_board_pose,
 };
-use ellipso_sim::camera::{CameraModel, Distortion, Intrinsics, Pose};
+use ellipso_model::camera::{CameraModel, Distortion, Intrinsics, Pose};
 use nalgebra::{Point2, Translation3, UnitQuaternion};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -9,8 +9,8 @@
 use std::time::Instant;
 
 use ellipso_host::fit::shape::{ShapeConfig, mesh_with_positions, perturb_mesh, refine_positions};
-use ellipso_sim::geometry::TriangleMesh;
-use ellipso_sim::geometry::procedural::icosphere;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::procedural::icosphere;
 use nalgebra::Point3;
 
 fn radial_rms(positions: &[Point3<f64>]) -> f64 {

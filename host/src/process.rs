@@ -8,8 +8,8 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use ellipso_sim::camera::CameraModel;
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::camera::CameraModel;
+use ellipso_model::mosaic::SensorLayout;
 use rayon::prelude::*;
 
 use crate::link::time::HostTimeUs;

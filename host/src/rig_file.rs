@@ -38,9 +38,9 @@
 
 use std::path::{Path, PathBuf};
 
+use ellipso_model::camera::CameraModel;
+use ellipso_model::mosaic::SensorLayout;
 use ellipso_protocol::{CaptureConfig, PulseCount, TriggerSource};
-use ellipso_sim::camera::CameraModel;
-use ellipso_sim::mosaic::SensorLayout;
 use ellipso_sim::tags::PlacedBoard;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Deserialize;

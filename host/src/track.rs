@@ -19,7 +19,7 @@
 
 use std::collections::BTreeMap;
 
-use ellipso_sim::camera::CameraModel;
+use ellipso_model::camera::CameraModel;
 use ellipso_sim::tags::PlacedBoard;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 

@@ -3,8 +3,8 @@
 //!
 //! Run: `cargo bench -p ellipso-sim --bench geometry`
 
-use ellipso_sim::geometry::procedural::bumpy_icosphere;
-use ellipso_sim::geometry::{Intersect, Ray, TriangleMesh};
+use ellipso_model::geometry::procedural::bumpy_icosphere;
+use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
 use ellipso_sim::scene::Scene;
 use nalgebra::{Point2, Point3, Vector3};
 use rand::{Rng, SeedableRng};

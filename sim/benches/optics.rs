@@ -6,11 +6,11 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use ellipso_sim::optics::coaxial::{self, CoaxialGeometry};
-use ellipso_sim::optics::fit::{FitDual, observe_with_jacobian, seed_normal, seed_params};
-use ellipso_sim::optics::measure::{FlashPolariser, observe};
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams, evaluate, scalar_brdf};
-use ellipso_sim::optics::{Frame, Vec3};
+use ellipso_model::optics::coaxial::{self, CoaxialGeometry};
+use ellipso_model::optics::fit::{FitDual, observe_with_jacobian, seed_normal, seed_params};
+use ellipso_model::optics::measure::{FlashPolariser, observe};
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, evaluate, scalar_brdf};
+use ellipso_model::optics::{Frame, Vec3};
 
 /// One prepared sample: geometry in f64 and the raw inputs.
 struct Sample {
@@ -83,7 +83,7 @@ fn rate(samples: &[Sample], budget: Duration, mut f: impl FnMut(&Sample) -> f64)
     evals as f64 / start.elapsed().as_secs_f64()
 }
 
-fn geometry<T: ellipso_sim::optics::Real>(s: &Sample) -> Geometry<T> {
+fn geometry<T: ellipso_model::optics::Real>(s: &Sample) -> Geometry<T> {
     Geometry::new(
         Vec3::from_f64(s.normal),
         s.to_light.cast(),

@@ -16,9 +16,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use ellipso_host::session::reader;
-use ellipso_sim::geometry::TriangleMesh;
-use ellipso_sim::geometry::ply::{PlyFormat, write_ply};
-use ellipso_sim::geometry::procedural::icosphere;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::ply::{PlyFormat, write_ply};
+use ellipso_model::geometry::procedural::icosphere;
 use ellipso_tests::{ellipso_bin, shipped_scene};
 use nalgebra::Point3;
 

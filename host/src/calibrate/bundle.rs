@@ -1,6 +1,6 @@
 //! Joint Levenberg–Marquardt over the camera parameters `[fx, fy, cx, cy, k1, k2, p1, p2, k3]`
 //! and one 6-dof pose per view, on pixel reprojection error, with the analytic Jacobians of
-//! [`ellipso_sim::camera`] and the left pose update of [`crate::pose::refine`].
+//! [`ellipso_model::camera`] and the left pose update of [`crate::pose::refine`].
 //!
 //! The normal equations have the arrow structure [[U, W], [Wᵀ, V]] with U 9×9 (camera), V
 //! block-diagonal 6×6 (one block per view) and W 9×6n. They are never formed densely: each LM
@@ -11,7 +11,7 @@
 //! unit diagonals, so their steps are exactly 0. At the solution, σ²·S⁻¹ (undamped) is the
 //! marginal covariance of the camera parameters.
 
-use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CameraModel, Pose};
+use ellipso_model::camera::{CAMERA_PARAM_COUNT, CameraModel, Pose};
 use nalgebra::{Matrix6, Point3, SMatrix, SVector, Vector2, Vector6};
 
 use crate::pose::refine::{apply_left_update, d_point_d_left_update};

@@ -21,7 +21,7 @@
 //! Uncertainty: σ² = Σ wᵢ‖eᵢ‖² / (2n − 3) (two residual components per ray, three unknowns),
 //! covariance σ²·(Σ wᵢ(I − mᵢmᵢᵀ))⁻¹ — the Gauss–Markov estimate under isotropic angular noise.
 
-use ellipso_sim::camera::{CameraError, CameraModel, Pose};
+use ellipso_model::camera::{CameraError, CameraModel, Pose};
 use nalgebra::{Matrix3, Point3, Vector3};
 
 /// Smallest accepted largest angle between a reflected ray and the mean ray direction, rad

@@ -22,8 +22,8 @@
 //! out of the background, or the blob touches the disc edge (a highlight near the limb is clipped
 //! by the silhouette, so its centroid is biased).
 
-use ellipso_sim::camera::{CameraModel, Pose};
-use ellipso_sim::mosaic::{Analyser, SensorLayout};
+use ellipso_model::camera::{CameraModel, Pose};
+use ellipso_model::mosaic::{Analyser, SensorLayout};
 use nalgebra::{Point3, Vector3};
 
 use crate::polar::PolarConfig;

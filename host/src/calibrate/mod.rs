@@ -21,7 +21,7 @@ pub mod report;
 pub mod views;
 pub mod zhang;
 
-use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CameraModel, Distortion, Pose};
+use ellipso_model::camera::{CAMERA_PARAM_COUNT, CameraModel, Distortion, Pose};
 use nalgebra::{Point2, Point3, SMatrix};
 
 use crate::pose::estimate::{Correspondence, PoseConfig, PoseRejection, estimate_board_pose};

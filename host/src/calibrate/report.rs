@@ -1,12 +1,12 @@
 //! The rig file's `[camera]` table from a [`Calibration`]: the keys
-//! [`ellipso_sim::camera::CameraModel`] deserialises (width, height, fx, fy, cx, cy, k1, k2, k3,
+//! [`ellipso_model::camera::CameraModel`] deserialises (width, height, fx, fy, cx, cy, k1, k2, k3,
 //! p1, p2), each estimated value followed by its 1σ standard error in a comment, fixed ones
 //! marked `# fixed`. Floats are written in Rust's shortest round-trip form, so reading the table
 //! back gives the identical model.
 
 use std::fmt::Write as _;
 
-use ellipso_sim::camera::CAMERA_PARAM_NAMES;
+use ellipso_model::camera::CAMERA_PARAM_NAMES;
 
 use super::Calibration;
 

@@ -8,7 +8,7 @@
 //! stacked 2n×5 system. For conditioning the pixels are first mapped by
 //! T: u ↦ (u − (w−1)/2)/s, s = (w + h)/2, and K = T⁻¹K'.
 
-use ellipso_sim::camera::Intrinsics;
+use ellipso_model::camera::Intrinsics;
 use nalgebra::{DMatrix, Matrix3};
 
 /// Why the closed form failed.

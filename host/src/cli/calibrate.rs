@@ -16,7 +16,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use ellipso_sim::camera::CAMERA_PARAM_NAMES;
+use ellipso_model::camera::CAMERA_PARAM_NAMES;
 use rayon::prelude::*;
 
 use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};

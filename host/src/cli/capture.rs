@@ -452,10 +452,10 @@ impl Drop for StopOnSignal {
 }
 
 /// The manifest's name of a sensor layout (docs/session-format.md).
-pub fn layout_name(layout: ellipso_sim::mosaic::SensorLayout) -> &'static str {
+pub fn layout_name(layout: ellipso_model::mosaic::SensorLayout) -> &'static str {
     match layout {
-        ellipso_sim::mosaic::SensorLayout::MonoPolar => "mono_polar",
-        ellipso_sim::mosaic::SensorLayout::ColourPolar => "colour_polar",
+        ellipso_model::mosaic::SensorLayout::MonoPolar => "mono_polar",
+        ellipso_model::mosaic::SensorLayout::ColourPolar => "colour_polar",
     }
 }
 
@@ -681,7 +681,7 @@ mod tests {
         }
     }
 
-    use ellipso_sim::mosaic::SensorLayout;
+    use ellipso_model::mosaic::SensorLayout;
 
     #[test]
     fn manifests_name_layouts_as_the_session_format_does() {

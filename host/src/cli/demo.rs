@@ -304,9 +304,9 @@ fn fit_and_score(
     let mesh_path = out.join("input-mesh.ply");
     crate::atomic_file::write(
         &mesh_path,
-        ellipso_sim::geometry::ply::write_ply(
+        ellipso_model::geometry::ply::write_ply(
             &input,
-            ellipso_sim::geometry::ply::PlyFormat::BinaryLittleEndian,
+            ellipso_model::geometry::ply::PlyFormat::BinaryLittleEndian,
             false,
         ),
     )

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
-use ellipso_sim::geometry::TriangleMesh;
+use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
 use crate::fit::observe::poses_from_session;

@@ -8,7 +8,7 @@
 //! each ρ_d ∈ [0, 1]; direction vectors finite and non-zero, of any length (they are normalised
 //! after scaling by their largest component, so 1e-300 and 1e300 both work). A result that is
 //! not finite anyway is an error, never printed. The
-//! numbers come from `ellipso_sim::optics`, the same code the simulator and the fit use.
+//! numbers come from `ellipso_model::optics`, the same code the simulator and the fit use.
 //! Frames of `mueller`: light frame z = −to_light, camera frame z = to_camera, y = the given up
 //! vector (default world +y) orthogonalised against z, x = y × z; when the up vector is parallel
 //! to z the world axis least aligned with z is used instead.
@@ -16,10 +16,10 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use ellipso_sim::optics::fresnel::brewster_angle_rad;
-use ellipso_sim::optics::measure::dop_diffuse_with_d_eta;
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams, evaluate};
-use ellipso_sim::optics::{Frame, FresnelTerms, Mueller, Vec3};
+use ellipso_model::optics::fresnel::brewster_angle_rad;
+use ellipso_model::optics::measure::dop_diffuse_with_d_eta;
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, evaluate};
+use ellipso_model::optics::{Frame, FresnelTerms, Mueller, Vec3};
 use serde_json::{Value, json};
 
 use crate::report::{LegendPosition, LinePlot, Stroke, plot::PALETTE};

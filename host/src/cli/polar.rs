@@ -25,7 +25,7 @@ use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow};
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::mosaic::SensorLayout;
 
 use crate::polar::{
     AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,

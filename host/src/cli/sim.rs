@@ -162,8 +162,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let truth = TruthFile {
         scene: renderer.plan().scene.clone(),
         sensor: match renderer.layout() {
-            ellipso_sim::mosaic::SensorLayout::MonoPolar => "mono_polar",
-            ellipso_sim::mosaic::SensorLayout::ColourPolar => "colour_polar",
+            ellipso_model::mosaic::SensorLayout::MonoPolar => "mono_polar",
+            ellipso_model::mosaic::SensorLayout::ColourPolar => "colour_polar",
         },
         bit_depth: camera.bit_depth,
         exposure_us: camera.exposure_us,

@@ -1,5 +1,5 @@
 //! The fit's pictures, rendered from the fitted model through the same optics the simulator
-//! renders with (`ellipso_sim::optics`).
+//! renders with (`ellipso_model::optics`).
 //!
 //! Contract (per picture, one PNG each; see docs/fit-outputs.md for how to read them):
 //! - parameter maps: η, σs, σss, ρs, η standard error (viridis, robust range, colour bar), ρd and
@@ -18,10 +18,10 @@
 //! (reliable weight < ½), are grey: one bad vertex is drawn as a small grey patch, never as a
 //! fan of its lobe over its neighbours' triangles.
 
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::FlashPolariser;
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams, apply, evaluate, evaluate_s0};
-use ellipso_sim::optics::{Frame, Stokes};
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::FlashPolariser;
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, apply, evaluate, evaluate_s0};
+use ellipso_model::optics::{Frame, Stokes};
 use ellipso_sim::scene::FlashSpec;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
@@ -30,7 +30,7 @@ use super::colour::{Bar, ColourMap, Panel, figure, robust_range, srgb};
 use super::raster::{Hit, ViewCamera, rasterise};
 use crate::fit::data::{FitFlag, VertexFit, ViewGeometry};
 use crate::report::Canvas;
-use ellipso_sim::geometry::TriangleMesh;
+use ellipso_model::geometry::TriangleMesh;
 
 /// Per-vertex arrays interpolated over pixels.
 struct Field {

@@ -20,10 +20,10 @@ mod tests;
 
 use std::path::{Path, PathBuf};
 
-use ellipso_sim::camera::CameraModel;
-use ellipso_sim::geometry::TriangleMesh;
-use ellipso_sim::optics::measure::FlashPolariser;
-use ellipso_sim::optics::pbrdf::apply;
+use ellipso_model::camera::CameraModel;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::optics::measure::FlashPolariser;
+use ellipso_model::optics::pbrdf::apply;
 use ellipso_sim::scene::FlashSpec;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
@@ -177,7 +177,7 @@ pub fn captured_s0(
 
 /// The mesh's bounding sphere (centre of the bounding box, farthest vertex).
 fn bounding_sphere(mesh: &TriangleMesh) -> (Point3<f64>, f64) {
-    let b = ellipso_sim::geometry::Aabb::from_points(mesh.positions());
+    let b = ellipso_model::geometry::Aabb::from_points(mesh.positions());
     let c = b.centre();
     let r = mesh
         .positions()
@@ -297,7 +297,7 @@ fn comparison(
             let observed = captured.at_raw(px[0], px[1])?;
             let g = rig_view
                 .geometry_at(point)?
-                .model::<f64>(ellipso_sim::optics::Vec3::from_f64(*n))
+                .model::<f64>(ellipso_model::optics::Vec3::from_f64(*n))
                 .ok()?;
             let normaliser = captured.normaliser.at(point);
             if !(normaliser.is_finite() && normaliser >= 0.0) {

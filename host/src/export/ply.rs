@@ -10,7 +10,7 @@
 
 use std::path::Path;
 
-use ellipso_sim::geometry::TriangleMesh;
+use ellipso_model::geometry::TriangleMesh;
 
 use crate::fit::data::{FitFlag, VertexFit};
 
@@ -210,9 +210,9 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_sim::geometry::ply::parse_ply;
-    use ellipso_sim::geometry::procedural::icosphere;
-    use ellipso_sim::optics::pbrdf::PbrdfParams;
+    use ellipso_model::geometry::ply::parse_ply;
+    use ellipso_model::geometry::procedural::icosphere;
+    use ellipso_model::optics::pbrdf::PbrdfParams;
     use nalgebra::Point3;
 
     #[test]

@@ -10,7 +10,7 @@
 //!   weights, the world point and the camera-frame depth, or `None` for background.
 //! - Values are interpolated with [`Hit::interpolate`]; normals are renormalised by the caller.
 
-use ellipso_sim::geometry::{Intersect, Ray, TriangleMesh};
+use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
 use nalgebra::{Isometry3, Point3, Vector3};
 use rayon::prelude::*;
 
@@ -117,7 +117,7 @@ pub fn rasterise(mesh: &TriangleMesh, camera: &ViewCamera) -> Vec<Option<Hit>> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_sim::geometry::procedural::icosphere;
+    use ellipso_model::geometry::procedural::icosphere;
     use nalgebra::{Translation3, UnitQuaternion};
 
     fn sphere() -> TriangleMesh {

@@ -2,8 +2,8 @@
 
 use super::*;
 use crate::fit::data::FitFlag;
-use ellipso_sim::geometry::procedural::icosphere;
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::geometry::procedural::icosphere;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::scene::Scene;
 
 fn sphere() -> TriangleMesh {

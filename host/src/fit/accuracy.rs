@@ -23,10 +23,10 @@
 
 use std::collections::BTreeMap;
 
-use ellipso_sim::geometry::{Intersect, Ray};
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::observe;
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::geometry::{Intersect, Ray};
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::observe;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::render::radiometry::Radiometry;
 use ellipso_sim::scene::Scene;
 use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
@@ -267,7 +267,7 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
 
 /// Whether the object blocks the segment from `from` (on the surface) to `to`.
 fn blocked(
-    mesh: &ellipso_sim::geometry::TriangleMesh,
+    mesh: &ellipso_model::geometry::TriangleMesh,
     from: &Point3<f64>,
     to: &Point3<f64>,
 ) -> bool {

@@ -58,9 +58,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use self::cluster::{ClusterConfig, Feature, FeatureScaling};
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::FlashPolariser;
-use ellipso_sim::optics::pbrdf::Geometry;
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::FlashPolariser;
+use ellipso_model::optics::pbrdf::Geometry;
 use nalgebra::Point3;
 
 use self::eta_fit::DopSample;

@@ -11,17 +11,17 @@
 //!   `[1, 0, 0, 0]` ([`ViewGeometry::flash_polariser`]).
 //! - A [`Sample`] holds the observation channels (I^d, I^s, I^α and I^t = I45 + I135 per RGB
 //!   channel, docs/model.md "Measurement") already divided by the radiometric normaliser N (`ellipso_sim::render::radiometry`), i.e. in
-//!   the units of `ellipso_sim::optics::measure::observe` with a unit flash. On a monochrome
+//!   the units of `ellipso_model::optics::measure::observe` with a unit flash. On a monochrome
 //!   sensor all three colour entries are equal and [`SampleSet::colour`] is false.
 //! - `normaliser` (DN per model unit) is kept so the solver can weight by expected noise; it is
 //!   always > 0 and finite in a valid sample.
 //! - Samples reference their view by index into [`SampleSet::views`]; per sample only 56 bytes
 //!   are stored, so 100 000 vertices × 150 views fit in well under 1 GB.
 
-use ellipso_sim::optics::OpticsError;
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::{AnalyserAngles, FlashPolariser};
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
+use ellipso_model::optics::OpticsError;
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::{AnalyserAngles, FlashPolariser};
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams};
 use nalgebra::{Point3, Vector3};
 
 /// One view: where the camera and the flash were, in the world.
@@ -39,7 +39,7 @@ pub struct ViewGeometry {
     pub polariser_axis_world: Option<[f64; 3]>,
     /// Optical axis of the camera (+z of the OpenCV camera frame), world, unit. With it the
     /// analysers' effective angles of an off-axis ray follow the wire-grid model
-    /// ([`ellipso_sim::optics::measure::AnalyserAngles::for_ray`]); `None` takes the on-axis
+    /// ([`ellipso_model::optics::measure::AnalyserAngles::for_ray`]); `None` takes the on-axis
     /// (ideal 0/45/90/135°) angles for every ray.
     #[serde(default)]
     pub camera_axis_world: Option<[f64; 3]>,
@@ -65,7 +65,7 @@ pub struct SampleGeometry {
 
 impl SampleGeometry {
     /// The optics model's [`Geometry`] for a `normal` (any scalar, e.g. dual numbers).
-    pub fn model<T: ellipso_sim::optics::Real>(
+    pub fn model<T: ellipso_model::optics::Real>(
         &self,
         normal: Vec3<T>,
     ) -> Result<Geometry<T>, OpticsError> {

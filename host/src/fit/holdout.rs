@@ -17,7 +17,7 @@
 
 use std::collections::BTreeMap;
 
-use ellipso_sim::optics::Vec3;
+use ellipso_model::optics::Vec3;
 
 use super::data::{SampleSet, VertexFit};
 use super::model::{SampleFrames, observed_pixels, predicted_pixels, unit_sample};

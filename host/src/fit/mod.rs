@@ -1,6 +1,6 @@
 //! The per-vertex polarimetric SVBRDF fit: Sparse Ellipsometry's reconstruction
 //! (optics.md §7), inverting the same optics the simulator renders with
-//! (`ellipso_sim::optics`; never a copy). `docs/fit.md` describes the whole chain.
+//! (`ellipso_model::optics`; never a copy). `docs/fit.md` describes the whole chain.
 //!
 //! The chain, one module each:
 //! - [`data`]: the contract between stages — per-view geometry ([`data::ViewGeometry`]),

@@ -6,7 +6,7 @@
 //!   `[I^d, I^s, I^α]_c = ρ_d,c·A + ρ_ss,c·B(σ_ss) + ρ_s·C(σ_s)`, where A, B, C are the
 //!   observation channels of the diffuse, single-scattering and specular lobes with unit albedo
 //!   ([`UnitSample`]). They come from the optics module's own functions
-//!   (`ellipso_sim::optics::measure::observe_unit_lobes`, i.e. `pbrdf::apply_unit_lobes`): no
+//!   (`ellipso_model::optics::measure::observe_unit_lobes`, i.e. `pbrdf::apply_unit_lobes`): no
 //!   formula is restated here.
 //! - Everything is generic over [`Real`]: `f64` for cost-only evaluations, [`Dual`] over only the
 //!   nonlinear unknowns (η, σ_s, σ_ss, the normal's two tangent coordinates; the solver also
@@ -16,19 +16,19 @@
 //!   coordinates (radians to first order).
 //! - Virtual samples (optics.md §7.7): [`coaxial_unit_specular`] gives the two reflection lobes at
 //!   an exactly coaxial geometry (θ_i = θ_o = θ_h, Fresnel R(0)), through
-//!   `ellipso_sim::optics::coaxial::specular_term`.
+//!   `ellipso_model::optics::coaxial::specular_term`.
 //! - A sample whose geometry is degenerate or back-facing has no prediction (`None`).
 
-use ellipso_sim::optics::coaxial::unit_specular_terms;
-use ellipso_sim::optics::measure::{
+use ellipso_model::optics::coaxial::unit_specular_terms;
+use ellipso_model::optics::measure::{
     AnalyserAngles, ObservationChannels, dop_diffuse, observe_unit_lobes,
 };
-use ellipso_sim::optics::pbrdf::Geometry;
-use ellipso_sim::optics::{Frame, Real, Stokes, Vec3};
+use ellipso_model::optics::pbrdf::Geometry;
+use ellipso_model::optics::{Frame, Real, Stokes, Vec3};
 use nalgebra::Point3;
 
 #[cfg(doc)]
-use ellipso_sim::optics::Dual;
+use ellipso_model::optics::Dual;
 
 use super::data::ViewGeometry;
 
@@ -213,10 +213,10 @@ pub fn coaxial_unit_specular<T: Real>(cos_theta_h: f64, eta: T, sigma_s: T, sigm
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_sim::optics::Dual;
-    use ellipso_sim::optics::coaxial::specular_term;
-    use ellipso_sim::optics::measure::{FlashPolariser, observe};
-    use ellipso_sim::optics::pbrdf::PbrdfParams;
+    use ellipso_model::optics::Dual;
+    use ellipso_model::optics::coaxial::specular_term;
+    use ellipso_model::optics::measure::{FlashPolariser, observe};
+    use ellipso_model::optics::pbrdf::PbrdfParams;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

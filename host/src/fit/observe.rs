@@ -39,9 +39,9 @@ mod tests;
 
 use std::path::PathBuf;
 
-use ellipso_sim::camera::CameraModel;
-use ellipso_sim::geometry::TriangleMesh;
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::camera::CameraModel;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::mosaic::SensorLayout;
 use ellipso_sim::scene::FlashSpec;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;

@@ -20,7 +20,7 @@
 
 use std::time::Instant;
 
-use ellipso_sim::geometry::TriangleMesh;
+use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
 use super::data::{GateCounts, SampleSet, VertexFit};

@@ -75,7 +75,7 @@ mod tests;
 pub use perturb::perturb_mesh;
 
 use super::data::{FitFlag, VertexFit};
-use ellipso_sim::geometry::{MeshError, TriangleMesh};
+use ellipso_model::geometry::{MeshError, TriangleMesh};
 use energy::{MeshGraph, Problem, anchor_weights, usable_normals};
 use nalgebra::{Point3, Vector3};
 use sparse::{Block, BlockCsr, IDENTITY, pcg};

@@ -68,8 +68,8 @@ mod tests;
 
 use std::cmp::Ordering;
 
-use ellipso_sim::optics::measure::dop_diffuse_with_d_eta;
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::optics::measure::dop_diffuse_with_d_eta;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use rayon::prelude::*;
 
 use super::data::{FitFlag, SampleSet, VertexFit, VertexGuide, VertexSamples, ViewGeometry};
@@ -705,7 +705,7 @@ pub fn forward_cost_all(set: &SampleSet, fits: &[VertexFit]) -> ForwardCost {
         .par_iter()
         .zip(fits.par_iter())
         .map(|(v, fit)| {
-            let normal = ellipso_sim::optics::Vec3::from_f64(fit.normal_world);
+            let normal = ellipso_model::optics::Vec3::from_f64(fit.normal_world);
             let p = &fit.params;
             let mut sum = 0.0;
             let mut count = 0u64;

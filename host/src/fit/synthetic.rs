@@ -17,10 +17,10 @@
 //!   offset in the camera frame and its polariser along the camera's x axis (image right), i.e.
 //!   parallel to the 0° analyser as on the rig (optics.md §5.3).
 
-use ellipso_sim::optics::Stokes;
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::SensorIntensities;
-use ellipso_sim::optics::pbrdf::{PbrdfParams, apply};
+use ellipso_model::optics::Stokes;
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::SensorIntensities;
+use ellipso_model::optics::pbrdf::{PbrdfParams, apply};
 use ellipso_sim::render::radiometry::Radiometry;
 use nalgebra::{Point3, Vector3};
 use rand_distr::{Distribution, StandardNormal};
@@ -296,7 +296,7 @@ mod tests {
             let view = &views[s.view as usize];
             let g = view.geometry_at(&Point3::origin()).unwrap();
             let m = g.model::<f64>(Vec3::from_f64(normal)).unwrap();
-            let o = ellipso_sim::optics::measure::observe(&m, &truth(), view.flash_polariser());
+            let o = ellipso_model::optics::measure::observe(&m, &truth(), view.flash_polariser());
             for c in 0..3 {
                 // I^t = I45 + I135 = s0 = I^d + I^s for ideal analysers (on the axis).
                 let want = [

@@ -12,11 +12,11 @@
 //! - [`views_of_scene`] turns the scene's camera poses into [`ViewGeometry`]s exactly as the
 //!   renderer places camera, flash and flash polariser.
 
-use ellipso_sim::geometry::procedural::{
+use ellipso_model::geometry::procedural::{
     BLOB_AMPLITUDE, BLOB_REGIONS, BLOB_SEED, bumpy_icosphere, icosphere,
 };
-use ellipso_sim::geometry::{MeshError, TriangleMesh};
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::geometry::{MeshError, TriangleMesh};
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::scene::{CameraPose, MaterialBinding, ObjectGeometry, Scene};
 use nalgebra::{Point3, Vector3};
 

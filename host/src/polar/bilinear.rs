@@ -12,7 +12,7 @@
 //! Rectangular lattices run as two separable passes (scatter along rows, gather along columns);
 //! the G lattice and the fallback use per-pixel tap lists. Both compute the same sums (tested).
 
-use ellipso_sim::mosaic::{Analyser, Channel, SensorLayout};
+use ellipso_model::mosaic::{Analyser, Channel, SensorLayout};
 
 use super::demosaic::{AnalyserBand, Levels, RowBuf};
 use super::frame::RawFrame;

@@ -285,7 +285,7 @@ mod tests {
 mod pipeline_tests {
     use std::f64::consts::PI;
 
-    use ellipso_sim::mosaic::SensorLayout;
+    use ellipso_model::mosaic::SensorLayout;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
 

@@ -25,7 +25,7 @@
 //! still interpolated from the unsaturated ones, for display), and [`MaskReason::NoSamples`] when
 //! some analyser had no sample in reach.
 
-use ellipso_sim::mosaic::{Analyser, Channel, SensorLayout};
+use ellipso_model::mosaic::{Analyser, Channel, SensorLayout};
 use serde::Serialize;
 
 use super::bilinear;

@@ -6,7 +6,7 @@
 //! re-checks it. Samples are right-aligned DN (a 12-bit camera's values lie in 0..=4095); data
 //! left-aligned in a 16-bit container is 16-bit data as far as this type is concerned.
 
-use ellipso_sim::mosaic::{MosaicError, SensorLayout};
+use ellipso_model::mosaic::{MosaicError, SensorLayout};
 
 /// Why raw data cannot be a mosaic frame.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

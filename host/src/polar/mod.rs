@@ -1,6 +1,6 @@
 //! Polarisation-mosaic processing for Sony IMX250MZR (mono) / IMX250MYR (colour) sensors.
 //!
-//! A raw mosaic frame ([`RawFrame`], pattern from [`ellipso_sim::mosaic`]) becomes, per colour
+//! A raw mosaic frame ([`RawFrame`], pattern from [`ellipso_model::mosaic`]) becomes, per colour
 //! band, f32 planes of s0, s1, s2, DoLP, AoLP, the consistency residual and the rig's
 //! observation channels I^d, I^s, I^α, plus a validity mask with reasons ([`PixelMask`]).
 //!
@@ -11,7 +11,7 @@
 //!
 //! ```
 //! use ellipso_host::polar::{PolarConfig, process, synthetic::mosaic_from_stokes};
-//! use ellipso_sim::mosaic::SensorLayout;
+//! use ellipso_model::mosaic::SensorLayout;
 //!
 //! // A 12-bit IMX250MZR frame of light polarised at 30° (DoLP 0.5); s in DN.
 //! let phi = 30f64.to_radians();
@@ -44,7 +44,7 @@
 //! - Units: normalised, `I = (DN − dark) / (full scale − dark)`; s0 ∈ [0, 2] for unclipped data.
 //! - Handedness check: a linear polariser in front of the lens at +30° counter-clockwise from
 //!   image-right must read AoLP = 30°, not 150°. If it reads 150°, the camera's 45°/135° labels
-//!   are mirrored; the fix is one place, [`ellipso_sim::mosaic`], with a test.
+//!   are mirrored; the fix is one place, [`ellipso_model::mosaic`], with a test.
 //!
 //! # Masking (never averaged in)
 //!
@@ -62,7 +62,7 @@ pub mod plane;
 pub mod stokes;
 pub mod synthetic;
 
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::mosaic::SensorLayout;
 
 pub use calibration::{AnalyserCalibration, CalibrationError, StokesMatrix};
 pub use channels::ObservationChannels;

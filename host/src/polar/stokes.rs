@@ -23,9 +23,9 @@
 
 use std::f32::consts::{FRAC_PI_2, PI};
 
-use ellipso_sim::mosaic::Channel;
-use ellipso_sim::optics::Stokes as SimStokes;
-use ellipso_sim::optics::measure::Analyser as SimAnalyser;
+use ellipso_model::mosaic::Channel;
+use ellipso_model::optics::Stokes as SimStokes;
+use ellipso_model::optics::measure::Analyser as SimAnalyser;
 
 use super::calibration::StokesMatrix;
 use super::channels::ObservationChannels;
@@ -60,7 +60,7 @@ pub fn aolp_rad(s1: f32, s2: f32) -> f32 {
 
 /// Intensity behind an ideal linear analyser at `theta_rad` for linear Stokes `[s0, s1, s2]`:
 /// `I_θ = ½(s0 + s1 cos2θ + s2 sin2θ)`. Not a second copy of the model: this delegates to the
-/// simulator's measurement model ([`ellipso_sim::optics::measure::Analyser::intensity`]), the
+/// simulator's measurement model ([`ellipso_model::optics::measure::Analyser::intensity`]), the
 /// one the renderer uses and this module inverts.
 pub fn intensity_behind_analyser(stokes: [f64; 3], theta_rad: f64) -> f64 {
     let [s0, s1, s2] = stokes;
@@ -436,11 +436,11 @@ mod tests {
 
     #[test]
     fn row_kernel_agrees_with_the_simulator_measurement_model() {
-        use ellipso_sim::optics::measure::SensorIntensities;
+        use ellipso_model::optics::measure::SensorIntensities;
         use rand::{Rng, SeedableRng};
         // one model: the sensor angles and the Stokes/DoLP/AoLP/channel definitions of the
         // simulator are exactly what this module inverts
-        let mosaic_deg = ellipso_sim::mosaic::Analyser::ALL.map(|a| a.angle_deg());
+        let mosaic_deg = ellipso_model::mosaic::Analyser::ALL.map(|a| a.angle_deg());
         assert_eq!(mosaic_deg, SimAnalyser::SENSOR_ANGLES_DEG);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
         let n = 64;

@@ -1,11 +1,11 @@
 //! Synthetic raw mosaics from known Stokes fields, for tests and benchmarks.
 //!
 //! Each raw pixel gets `I_θ = ½(s0 + s1 cos2θ + s2 sin2θ)` for its analyser θ (from
-//! [`ellipso_sim::mosaic`]), in DN, rounded to the nearest integer and clamped to
+//! [`ellipso_model::mosaic`]), in DN, rounded to the nearest integer and clamped to
 //! `[0, 2^bit_depth − 1]` (clamping is how a real sensor saturates). Choose Stokes values whose
 //! intensities are whole DN to make round-trips exact.
 
-use ellipso_sim::mosaic::{Channel, SensorLayout};
+use ellipso_model::mosaic::{Channel, SensorLayout};
 
 use super::frame::{FrameError, RawFrame, full_scale_dn};
 use super::stokes::intensity_behind_analyser;

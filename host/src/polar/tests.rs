@@ -2,7 +2,7 @@
 
 use std::f64::consts::PI;
 
-use ellipso_sim::mosaic::{Channel, SensorLayout};
+use ellipso_model::mosaic::{Channel, SensorLayout};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

@@ -3,7 +3,7 @@
 //!
 //! Contract:
 //! - **Pixel convention.** AprilTag puts pixel centres at (i + 0.5, j + 0.5); ellipso (like
-//!   OpenCV and [`ellipso_sim::camera`]) puts them at (i, j). Every corner and centre returned
+//!   OpenCV and [`ellipso_model::camera`]) puts them at (i, j). Every corner and centre returned
 //!   here has had **0.5 px subtracted** in x and y, so it can go straight into the PnP. Without
 //!   the shift a 600 mm pose is biased ≈0.09 mm sideways (reference notes, host-stack §3).
 //! - **Corner order** is the library's: for a tag seen upright, corner 0 is bottom-left, then

@@ -8,7 +8,7 @@
 //! degenerate configuration. Only an initial guess: the caller refines it by LM.
 
 use super::exceeds;
-use ellipso_sim::camera::Pose;
+use ellipso_model::camera::Pose;
 use nalgebra::{DMatrix, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 /// Linear pose from ≥ 6 non-coplanar points; see the module doc.

@@ -8,7 +8,7 @@
 
 use std::collections::BTreeSet;
 
-use ellipso_sim::camera::{CameraModel, Pose};
+use ellipso_model::camera::{CameraModel, Pose};
 use nalgebra::{Matrix3, Matrix6, Point3, SMatrix, Vector3};
 
 use super::dlt::dlt_pose;

@@ -20,7 +20,7 @@ use super::exceeds;
 use nalgebra::{Matrix2, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector2, Vector3};
 
 use super::homography::{HomographyError, homography_dlt};
-use ellipso_sim::camera::Pose;
+use ellipso_model::camera::Pose;
 
 /// Why IPPE could not produce poses.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]

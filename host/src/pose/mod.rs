@@ -9,7 +9,7 @@
 //! - [`estimate`]: the joint PnP over all corners of all tags of a board, with flip margin,
 //!   covariance and typed frame rejection ([`PoseRejection`]).
 //!
-//! Frames and conventions are those of [`ellipso_sim::camera`]: OpenCV camera frame, pixel
+//! Frames and conventions are those of [`ellipso_model::camera`]: OpenCV camera frame, pixel
 //! centres at integer coordinates, poses named `camera_from_board`. See `docs/pose.md`.
 
 pub mod board;

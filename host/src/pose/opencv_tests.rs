@@ -8,7 +8,7 @@
 //! same minimum: the differences measure the two LM implementations' stopping points, far below
 //! the pose's own noise (≈0.01°, ≈0.01 mm at σ = 0.15 px).
 
-use ellipso_sim::camera::{CameraModel, Pose};
+use ellipso_model::camera::{CameraModel, Pose};
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 use opencv::calib3d;
 use opencv::core::{Mat, Point2d, Point3d, Vector};

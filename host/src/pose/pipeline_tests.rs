@@ -6,7 +6,7 @@
 use super::detect::tests::tag36h11_cells;
 use super::synthetic::{look_at, pose_error};
 use super::*;
-use ellipso_sim::camera::{CameraModel, Distortion, Intrinsics, Pose};
+use ellipso_model::camera::{CameraModel, Distortion, Intrinsics, Pose};
 use nalgebra::Vector3;
 
 /// Intensity of the board at a board-frame point: tags on white.

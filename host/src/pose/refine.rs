@@ -12,7 +12,7 @@
 //! Converged when an accepted step lowers the cost by < 1e-10 relatively or ‖δ‖ < 1e-12
 //! (rad, m).
 
-use ellipso_sim::camera::{CameraModel, Pose};
+use ellipso_model::camera::{CameraModel, Pose};
 use nalgebra::{
     Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector3, Vector6,
 };
@@ -183,7 +183,7 @@ pub fn refine_pose(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_sim::camera::{Distortion, Intrinsics};
+    use ellipso_model::camera::{Distortion, Intrinsics};
 
     #[test]
     fn pose_jacobian_matches_central_differences() {

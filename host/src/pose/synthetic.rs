@@ -2,7 +2,7 @@
 //! around the board, projected tag corners with seeded Gaussian pixel noise. Shared by the pose
 //! and calibration tests.
 
-use ellipso_sim::camera::{CameraModel, Distortion, Intrinsics, Pose};
+use ellipso_model::camera::{CameraModel, Distortion, Intrinsics, Pose};
 use nalgebra::{Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;

@@ -161,7 +161,7 @@ fn single_small_tag_is_rejected_as_ambiguous_rather_than_flipped() {
     );
 }
 
-fn good_frame(seed: u64) -> (Vec<Correspondence>, ellipso_sim::camera::Pose) {
+fn good_frame(seed: u64) -> (Vec<Correspondence>, ellipso_model::camera::Pose) {
     let cam = camera_5mp();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let truth = super::synthetic::look_at(nalgebra::Vector3::zeros(), 0.5, 0.5, 1.0, 0.2);

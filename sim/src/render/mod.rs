@@ -3,9 +3,9 @@
 //! # What it does
 //! Ray casting from the camera through every raw pixel (each raw pixel is its own ray through
 //! its own centre, N×N stratified sub-samples when supersampling, which models the mosaic's
-//! instantaneous field of view), shadow rays to the flash, the pBRDF of [`crate::optics`] for
+//! instantaneous field of view), shadow rays to the flash, the pBRDF of [`ellipso_model::optics`] for
 //! the flash's polarised light, the analyser and colour filter of that pixel's mosaic position
-//! ([`crate::mosaic::SensorLayout`]), radiometry ([`radiometry`]), then the sensor chain (shot and
+//! ([`ellipso_model::mosaic::SensorLayout`]), radiometry ([`radiometry`]), then the sensor chain (shot and
 //! read noise, saturation, quantisation). Only the stages of the scene's
 //! [`EffectPlan`] run; each execution is counted per frame.
 //!
@@ -43,13 +43,13 @@ mod tests_invariants;
 
 pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
 
-use crate::camera::CameraModel;
 use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams, StageSet};
-use crate::geometry::Ray;
-use crate::mosaic::{MosaicError, SensorLayout};
-use crate::optics::OpticsError;
-use crate::optics::pbrdf::PbrdfParams;
 use crate::scene::{Scene, SensorKind};
+use ellipso_model::camera::CameraModel;
+use ellipso_model::geometry::Ray;
+use ellipso_model::mosaic::{MosaicError, SensorLayout};
+use ellipso_model::optics::OpticsError;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use radiometry::Radiometry;
 use rand::SeedableRng;

@@ -4,7 +4,7 @@
 //!
 //! # Units
 //! - **Model intensity** `m` (dimensionless): the analysed intensity of `P·s_light` for a unit
-//!   flash Stokes vector (s0 = 1), with P the pBRDF of [`crate::optics::pbrdf`] (foreshortening
+//!   flash Stokes vector (s0 = 1), with P the pBRDF of [`ellipso_model::optics::pbrdf`] (foreshortening
 //!   included, no 1/d²). A pixel with an analyser at θ measures `m = ½(s0 + s1 cos2θ + s2 sin2θ)`
 //!   of `s = P·s_light`; a camera without analysers measures `m = s0`. Boards (matte paper) give
 //!   `m = albedo · cosθ_i · (½ or 1)`.

@@ -5,7 +5,7 @@
 //! Contract:
 //! - Only the stages in the plan's [`StageSet`] run, each counted in [`StageCounts`] once per
 //!   execution; lobes whose albedo is zero at the hit are skipped and not counted.
-//! - Objects use the pBRDF of [`crate::optics::pbrdf`] lobe by lobe, on the cheapest exact path
+//! - Objects use the pBRDF of [`ellipso_model::optics::pbrdf`] lobe by lobe, on the cheapest exact path
 //!   of the plan's [`LightTransport`]:
 //!   - `Stokes`: [`pbrdf::diffuse_unit`] and [`pbrdf::reflection_unit`] (Mueller matrices) applied
 //!     to the flash Stokes vector, then the pixel's analyser;
@@ -25,11 +25,11 @@
 //!   camera without analysers measures s0.
 
 use crate::effects::{LightTransport, Stage, StageCounts, StageSet};
-use crate::geometry::Ray;
-use crate::optics::fresnel::FresnelTerms;
-use crate::optics::pbrdf::{self, Geometry, PbrdfParams};
-use crate::optics::{Rotator, Stokes, Vec3};
 use crate::scene::{MaterialSample, Scene, SceneHit, SurfaceKind};
+use ellipso_model::geometry::Ray;
+use ellipso_model::optics::fresnel::FresnelTerms;
+use ellipso_model::optics::pbrdf::{self, Geometry, PbrdfParams};
+use ellipso_model::optics::{Rotator, Stokes, Vec3};
 use nalgebra::{Isometry3, Point3, Unit, Vector3};
 
 use super::radiometry::Radiometry;
@@ -95,11 +95,11 @@ impl PixelSensor {
 
     /// The pixel for a primary ray along `dir_camera` (OpenCV camera frame, unit): its wire-grid
     /// analyser's effective axis in the ray's camera frame
-    /// ([`crate::optics::measure::effective_cos_sin_2`], docs/model.md "Analysers off the
+    /// ([`ellipso_model::optics::measure::effective_cos_sin_2`], docs/model.md "Analysers off the
     /// optical axis") — the same model the fit inverts.
     pub fn for_ray(&self, dir_camera: &Vector3<f64>) -> Self {
         let to_camera = [-dir_camera.x, -dir_camera.y, -dir_camera.z];
-        let (cos2, sin2) = crate::optics::measure::effective_cos_sin_2(
+        let (cos2, sin2) = ellipso_model::optics::measure::effective_cos_sin_2(
             self.angle_rad,
             [1.0, 0.0, 0.0],
             [0.0, -1.0, 0.0],

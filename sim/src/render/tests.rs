@@ -2,8 +2,8 @@
 //! saturation, shadows, the radiometry contract, and real AprilTag detection on a render.
 
 use super::*;
-use crate::mosaic::SensorLayout;
 use crate::scene::Scene;
+use ellipso_model::mosaic::SensorLayout;
 use std::path::{Path, PathBuf};
 
 pub(super) fn scene_path(name: &str) -> PathBuf {

@@ -7,10 +7,10 @@ use super::shade::{PixelSensor, PoseContext};
 use super::tests::{scene_edited, scene_path, small, without_effects};
 use super::*;
 use crate::effects::LightTransport;
-use crate::optics::measure::Analyser;
-use crate::optics::pbrdf::{self, Geometry};
-use crate::optics::{Stokes, Vec3};
 use crate::scene::{Scene, SurfaceKind};
+use ellipso_model::optics::measure::Analyser;
+use ellipso_model::optics::pbrdf::{self, Geometry};
+use ellipso_model::optics::{Stokes, Vec3};
 use rand::Rng;
 
 const MONO: [f64; 3] = [1.0 / 3.0; 3];

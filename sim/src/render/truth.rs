@@ -9,8 +9,8 @@
 //! its heaviest material), [`BOARD_MATERIAL_BASE`] + board index for boards,
 //! [`NO_HIT_MATERIAL`] for background.
 
-use crate::camera::CameraModel;
 use crate::scene::{CameraPose, MaterialSample, Scene, SurfaceKind};
+use ellipso_model::camera::CameraModel;
 use nalgebra::Isometry3;
 use serde::Serialize;
 

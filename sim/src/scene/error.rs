@@ -7,7 +7,7 @@
 //! are raised with a key path and located by walking the spanned document ([`toml::de::DeTable`]).
 //! A key that is absent (a missing required field) is located at its nearest existing parent.
 
-use crate::geometry::MeshError;
+use ellipso_model::geometry::MeshError;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 use toml::Spanned;

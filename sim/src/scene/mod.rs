@@ -11,7 +11,7 @@
 //! - World frame: right-handed, `capture.up` (default `+z`) up. Camera frame: OpenCV (x right,
 //!   y down, z forward). Board and tag frames: see [`crate::tags::board`].
 //! - Ray queries ([`Scene::intersect`], [`Scene::occluded`]) are in world space with the
-//!   conventions of [`crate::geometry`].
+//!   conventions of [`ellipso_model::geometry`].
 
 pub mod boards;
 pub mod capture;
@@ -34,8 +34,8 @@ pub use spec::{
     BoardRefSpec, MaterialSpec, ObjectSpec, PoseSpec, RegionBlend, ScaleSpec, SceneFile, ShapeKind,
 };
 
-use crate::geometry::{Ray, SurfaceHit};
 use crate::tags::PlacedBoard;
+use ellipso_model::geometry::{Ray, SurfaceHit};
 use error::Located;
 use nalgebra::Unit;
 use std::path::{Path, PathBuf};

@@ -7,7 +7,9 @@
 
 use super::error::{Located, SceneError};
 use super::spec::{MaterialSpec, ObjectSpec, RegionBlend, ScaleSpec, ShapeKind, positive};
-use crate::geometry::{Intersect, ObjectTransform, Plane, Ray, Sphere, SurfaceHit, TriangleMesh};
+use ellipso_model::geometry::{
+    Intersect, ObjectTransform, Plane, Ray, Sphere, SurfaceHit, TriangleMesh,
+};
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};

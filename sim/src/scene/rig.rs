@@ -116,10 +116,10 @@ pub struct CameraSpec {
 }
 
 impl CameraSpec {
-    /// The shared pinhole + Brown–Conrady model ([`crate::camera::CameraModel`]) with this
+    /// The shared pinhole + Brown–Conrady model ([`ellipso_model::camera::CameraModel`]) with this
     /// camera's resolution, intrinsics and distortion.
-    pub fn camera_model(&self) -> crate::camera::CameraModel {
-        use crate::camera::{CameraModel, Distortion, Intrinsics};
+    pub fn camera_model(&self) -> ellipso_model::camera::CameraModel {
+        use ellipso_model::camera::{CameraModel, Distortion, Intrinsics};
         CameraModel {
             width: self.resolution_px[0],
             height: self.resolution_px[1],

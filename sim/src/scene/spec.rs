@@ -69,8 +69,8 @@ pub struct MaterialSpec {
 
 impl MaterialSpec {
     /// The optics model's parameter struct (same fields, same units).
-    pub fn to_pbrdf(&self) -> crate::optics::pbrdf::PbrdfParams<f64> {
-        crate::optics::pbrdf::PbrdfParams {
+    pub fn to_pbrdf(&self) -> ellipso_model::optics::pbrdf::PbrdfParams<f64> {
+        ellipso_model::optics::pbrdf::PbrdfParams {
             eta: self.eta,
             sigma_s: self.sigma_s,
             sigma_ss: self.sigma_ss,

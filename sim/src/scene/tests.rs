@@ -3,7 +3,7 @@
 //! queries return the right surfaces and materials.
 
 use super::*;
-use crate::geometry::Ray;
+use ellipso_model::geometry::Ray;
 use nalgebra::{Point3, Vector3};
 use std::path::PathBuf;
 
@@ -335,11 +335,11 @@ fn mesh_regions_resolve_to_materials_and_blend() {
 
 #[test]
 fn shipped_blob_matches_its_generator() {
-    use crate::geometry::procedural::*;
+    use ellipso_model::geometry::procedural::*;
     let path = sim_dir().join("assets/bumpy_blob.ply");
     let bytes = std::fs::metadata(&path).expect("asset exists").len();
     assert!(bytes < 200 * 1024, "asset is {bytes} bytes");
-    let shipped = crate::geometry::TriangleMesh::load(&path).expect("loads");
+    let shipped = ellipso_model::geometry::TriangleMesh::load(&path).expect("loads");
     let fresh = bumpy_icosphere(BLOB_SUBDIVISIONS, BLOB_AMPLITUDE, BLOB_REGIONS, BLOB_SEED);
     assert_eq!(shipped.triangles(), fresh.triangles());
     assert_eq!(shipped.regions(), fresh.regions());

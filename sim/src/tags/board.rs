@@ -444,7 +444,7 @@ impl Board {
     /// Ray (in board frame) against the sheet rectangle; both sides are solid.
     pub fn intersect(
         &self,
-        ray: &crate::geometry::Ray,
+        ray: &ellipso_model::geometry::Ray,
         t_min: f64,
         t_max: f64,
     ) -> Option<BoardHit> {

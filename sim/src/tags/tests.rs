@@ -2,7 +2,7 @@
 //! of a rendered board by the real AprilTag detector.
 
 use super::*;
-use crate::geometry::Ray;
+use ellipso_model::geometry::Ray;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
 
 fn grid_spec(cols: u32, rows: u32, size: f64, spacing: f64) -> BoardSpec {

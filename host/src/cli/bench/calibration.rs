@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 
-use ellipso_sim::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
+use ellipso_model::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
 
 use crate::calibrate::views::{View, board_view};
 use crate::calibrate::{CalibConfig, Calibration, calibrate};

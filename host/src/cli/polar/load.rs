@@ -8,7 +8,7 @@
 
 use std::path::Path;
 
-use ellipso_sim::mosaic::SensorLayout;
+use ellipso_model::mosaic::SensorLayout;
 
 use crate::polar::{FrameError, RawFrame, frame::full_scale_dn};
 

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use ellipso_sim::mosaic::{Channel, SensorLayout};
+use ellipso_model::mosaic::{Channel, SensorLayout};
 
 use super::*;
 use crate::polar::synthetic::mosaic_from_stokes;

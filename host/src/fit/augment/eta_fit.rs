@@ -18,8 +18,10 @@
 //! - η ∈ [1, 3] minimises Σ(DoP − DoP_d(θ_o, η))²: a grid (step 0.01), then Gauss–Newton with
 //!   the closed-form ∂DoP/∂η (`measure::dop_diffuse_with_d_eta`) and step halving.
 
-use ellipso_sim::optics::measure::{FlashPolariser, dop_diffuse, dop_diffuse_with_d_eta, observe};
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams};
+use ellipso_model::optics::measure::{
+    FlashPolariser, dop_diffuse, dop_diffuse_with_d_eta, observe,
+};
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams};
 
 use crate::fit::data::{Sample, VertexFit};
 

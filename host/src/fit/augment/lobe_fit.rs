@@ -36,10 +36,10 @@
 //!     virtual samples then dragged every member to the σ floor. Grid starts whose exact NNLS
 //!     albedos exceed the cap are scored at the clipped albedos.
 
-use ellipso_sim::optics::measure::{FlashPolariser, SensorIntensities, observe};
-use ellipso_sim::optics::microfacet::microfacet_weight;
-use ellipso_sim::optics::pbrdf::{Geometry, PbrdfParams, reflection_unit};
-use ellipso_sim::optics::{Dual, Real};
+use ellipso_model::optics::measure::{FlashPolariser, SensorIntensities, observe};
+use ellipso_model::optics::microfacet::microfacet_weight;
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, reflection_unit};
+use ellipso_model::optics::{Dual, Real};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use crate::fit::data::{Sample, VertexFit};

@@ -1,9 +1,9 @@
 //! End-to-end tests of the augmentation on synthetic spheres: vertices on a sphere seen from an
 //! orbit of near-coaxial polarised-flash views, observations from `measure::observe`.
 
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::observe;
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::observe;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::{Point3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -24,8 +24,8 @@
 //!   cosθ_h decreases along the grid, the kept samples are a prefix of the profile; a vertex
 //!   whose kernel value is ≤ 0.01 gets none (an empty vector).
 
-use ellipso_sim::optics::coaxial::specular_term;
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::optics::coaxial::specular_term;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 
 use crate::fit::data::VirtualSample;
 
@@ -122,8 +122,8 @@ pub fn weighted(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_sim::optics::fresnel::normal_incidence_reflectance;
-    use ellipso_sim::optics::microfacet::{ggx_d, smith_g1};
+    use ellipso_model::optics::fresnel::normal_incidence_reflectance;
+    use ellipso_model::optics::microfacet::{ggx_d, smith_g1};
 
     #[test]
     fn profile_grid_and_values() {

@@ -8,7 +8,7 @@
 //!   exponent, polariser extinction). N is then exactly the renderer's
 //!   [`ellipso_sim::render::radiometry::Radiometry::normaliser`] with the frame's recorded
 //!   exposure and gain in place of the scene's, so a noise-free render divided by N gives
-//!   `ellipso_sim::optics::measure::observe` of the true material.
+//!   `ellipso_model::optics::measure::observe` of the true material.
 //!   The scene's flash must equal the flash recorded in the manifest (an edited scene file
 //!   would silently change the units otherwise).
 //! - **Hardware and replayed sessions** (relative): no absolute radiometric calibration exists,

@@ -20,9 +20,9 @@
 //!   [`RAY_T_EPS`] of either end (relative to the segment length: 50 nm at 0.5 m), which absorbs
 //!   coincident duplicate vertices of unwelded meshes.
 
-use ellipso_sim::camera::CameraModel;
-use ellipso_sim::geometry::{Intersect, Ray, TriangleMesh};
-use ellipso_sim::mosaic::{Analyser, SensorLayout};
+use ellipso_model::camera::CameraModel;
+use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
+use ellipso_model::mosaic::{Analyser, SensorLayout};
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::SamplePoint;

@@ -12,7 +12,7 @@
 //! - The result depends only on the mesh, `amplitude_m` and `seed` (ChaCha8).
 //! - A zero or non-finite amplitude, or a mesh whose offsets all vanish, gives an unchanged copy.
 
-use ellipso_sim::geometry::TriangleMesh;
+use ellipso_model::geometry::TriangleMesh;
 use nalgebra::{Point3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -86,7 +86,7 @@ pub fn perturb_mesh(mesh: &TriangleMesh, amplitude_m: f64, seed: u64) -> Triangl
 
 #[cfg(test)]
 mod tests {
-    use ellipso_sim::geometry::procedural::bumpy_icosphere;
+    use ellipso_model::geometry::procedural::bumpy_icosphere;
 
     /// The perturbation is seeded, moves along the normals with the requested RMS and zero mean, and
     /// is smooth (neighbouring offsets differ by a small fraction of the amplitude).

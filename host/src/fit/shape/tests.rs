@@ -4,8 +4,8 @@
 
 use super::*;
 use crate::fit::data::FitFlag;
-use ellipso_sim::geometry::procedural::{bumpy_icosphere, icosphere};
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::geometry::procedural::{bumpy_icosphere, icosphere};
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -2,7 +2,7 @@
 //! exact Jacobians from dual numbers and the bounds removed by reparameterisation
 //! (optics.md §8.2; formulas in the `solve` module doc).
 
-use ellipso_sim::optics::{Dual, Real};
+use ellipso_model::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
 use super::super::model::{tangent_basis, unit_tangent_normal};

@@ -21,7 +21,7 @@
 //!   centre (the solver's weak default or the cluster's pooled value), ln σs and ln σss about
 //!   theirs, and the normal's two tangent components about the mesh normal (the prior cone).
 
-use ellipso_sim::optics::Real;
+use ellipso_model::optics::Real;
 
 use super::super::data::{
     OBSERVATION_CHANNELS, VertexGuide, VertexSamples, ViewGeometry, VirtualSample,
@@ -563,7 +563,7 @@ impl<'a> Problem<'a> {
     fn prior_rows<T: Real>(
         &self,
         x: &Nonlinear<T>,
-        normal: ellipso_sim::optics::Vec3<T>,
+        normal: ellipso_model::optics::Vec3<T>,
         sink: &mut impl FnMut(T),
     ) {
         let p = &self.priors;

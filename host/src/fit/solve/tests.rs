@@ -4,7 +4,7 @@
 use std::path::Path;
 use std::sync::OnceLock;
 
-use ellipso_sim::optics::pbrdf::PbrdfParams;
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::render::radiometry::Radiometry;
 use ellipso_sim::scene::Scene;
 use rand::SeedableRng;

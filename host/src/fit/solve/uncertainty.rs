@@ -9,7 +9,7 @@
 //! [`NULL_RELATIVE`]·λ_max are null, and any parameter with a non-negligible component
 //! (squared loading > 1e-6) in a null direction, or a zero column, gets `f64::INFINITY`.
 
-use ellipso_sim::optics::Dual;
+use ellipso_model::optics::Dual;
 use nalgebra::{DMatrix, SMatrix, SVector};
 
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};

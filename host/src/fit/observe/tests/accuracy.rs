@@ -1,9 +1,9 @@
 //! Samples against the model: a noise-free render divided by N must give
 //! `optics::measure::observe` of the true material at the vertex's geometry.
 
-use ellipso_sim::geometry::Ray;
-use ellipso_sim::optics::Vec3;
-use ellipso_sim::optics::measure::observe;
+use ellipso_model::geometry::Ray;
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::observe;
 use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::{Scene, SurfaceKind};
 use nalgebra::{Point3, Vector3};

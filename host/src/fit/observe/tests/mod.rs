@@ -7,8 +7,8 @@ mod robustness;
 
 use std::path::{Path, PathBuf};
 
-use ellipso_sim::geometry::TriangleMesh;
-use ellipso_sim::geometry::procedural::icosphere;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::procedural::icosphere;
 use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
 use nalgebra::{Isometry3, Point3, Vector3};

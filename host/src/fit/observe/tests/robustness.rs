@@ -3,9 +3,9 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use ellipso_sim::optics::Stokes;
-use ellipso_sim::optics::camera_up_from_opencv;
-use ellipso_sim::optics::measure::SensorIntensities;
+use ellipso_model::optics::Stokes;
+use ellipso_model::optics::camera_up_from_opencv;
+use ellipso_model::optics::measure::SensorIntensities;
 use ellipso_sim::scene::FlashSpec;
 use nalgebra::Vector3;
 

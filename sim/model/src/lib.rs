@@ -1,0 +1,17 @@
+//! `ellipso-model`: the shared core of ellipso — the physics and geometry the simulator renders
+//! with and the fit inverts (one model, never two copies). It depends on no C library, so the fit
+//! and anything that only reads sessions build from the Rust registry alone.
+//!
+//! - [`optics`]: Stokes vectors, Mueller matrices, Fresnel, GGX, the polarimetric BRDF
+//!   (diffuse, specular, single scattering) and the polarisation-camera measurement model, each
+//!   equation with its source in `docs/model.md`.
+//! - [`camera`]: the pinhole + Brown–Conrady camera model (OpenCV conventions) with analytic
+//!   Jacobians, shared by the renderer, pose estimation, calibration and the fit.
+//! - [`geometry`]: rays, BVH, triangle meshes (PLY/OBJ), analytic shapes, object transforms.
+//! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
+//!   pixel.
+
+pub mod camera;
+pub mod geometry;
+pub mod mosaic;
+pub mod optics;
