@@ -1,7 +1,7 @@
 //! `ellipso`: capture a polarimetric SVBRDF with a hand-held flash rig, or with its simulator.
 
 use clap::{Parser, Subcommand};
-use ellipso_host::cli;
+mod cli;
 
 /// ellipso: Sparse Ellipsometry on a hand-held polarisation camera and flash.
 #[derive(Debug, Parser)]

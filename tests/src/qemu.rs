@@ -23,9 +23,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use ellipso_host::link::time::HostClock;
-use ellipso_host::link::{LinkConfig, TriggerLink};
 use ellipso_protocol::{BoardMessage, BoardState, Decoder};
+use ellipso_rig::link::{LinkConfig, TriggerLink};
+use ellipso_session::time::HostClock;
 
 /// The emulator binary.
 pub const QEMU_BIN: &str = "qemu-system-arm";

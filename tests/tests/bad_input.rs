@@ -235,7 +235,7 @@ fn signal_case(dir: &Path, what: &str, signal: i32) -> Verdict {
             Verdict::Unexpected
         };
     }
-    let Ok(s) = ellipso_host::session::reader::open(&session) else {
+    let Ok(s) = ellipso_session::reader::open(&session) else {
         return Verdict::DataChanged;
     };
     let frames_load = s.frames.iter().all(|f| s.load_frame(f).is_ok());

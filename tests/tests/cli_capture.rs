@@ -10,8 +10,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use ellipso_host::session::events::SessionEvent;
-use ellipso_host::session::reader;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader;
 use ellipso_tests::{ellipso_bin, shipped_scene as scene};
 
 /// Kills the child on drop (tests must not leave servers behind).

@@ -12,11 +12,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use ellipso_host::session::events::SessionEvent;
-use ellipso_host::session::reader;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::procedural::icosphere;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader;
 use ellipso_tests::{ellipso_bin, shipped_scene};
 use nalgebra::Point3;
 

@@ -14,8 +14,8 @@ use std::path::Path;
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
-use ellipso_host::session::events::SessionEvent;
-use ellipso_host::session::reader;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader;
 use ellipso_tests::{ellipso_bin, shipped_scene as scene};
 
 fn ellipso(args: &[&str]) -> Output {

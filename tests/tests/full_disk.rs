@@ -15,10 +15,10 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use ellipso_host::session::reader;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::procedural::icosphere;
+use ellipso_session::reader;
 use ellipso_tests::{ellipso_bin, shipped_scene};
 use nalgebra::Point3;
 
@@ -340,7 +340,7 @@ fn a_full_disk_changes_nothing_recorded_and_leaves_nothing_half_written() {
         if o.status.success() {
             unchanged("freed").and_then(|()| {
                 let s = reader::open(&session).unwrap();
-                let tracked = ellipso_host::process::untracked_frames(&s);
+                let tracked = ellipso_vision::process::untracked_frames(&s);
                 if tracked.is_empty() {
                     Ok(())
                 } else {

@@ -1,5 +1,5 @@
 //! The GigE Vision camera backend end to end: libaravis' fake camera serving real GVCP/GVSP on
-//! 127.0.0.1, read through `ellipso_host::camera::aravis::AravisCamera` opened by IP.
+//! 127.0.0.1, read through `ellipso_rig::camera::aravis::AravisCamera` opened by IP.
 //!
 //! Network safety: every test re-executes itself inside `unshare -rn` (a private network
 //! namespace whose only interface is `lo`, brought up first) and **fails** if that is impossible;
@@ -14,13 +14,13 @@
 use std::process::Command;
 use std::time::Duration;
 
-use ellipso_host::acquire::pairing::{FrameArrival, Pairer, PairingConfig, PairingOutcome, Pulse};
-use ellipso_host::camera::aravis::fake::{FakeGigeCamera, FakeGigeOptions};
-use ellipso_host::camera::aravis::format::{PFNC_MONO12, PFNC_MONO12_PACKED};
-use ellipso_host::camera::aravis::{AravisCamera, AravisOptions};
-use ellipso_host::camera::{Camera, CameraSettings, Frame, FrameStatus};
-use ellipso_host::link::clock::ClockFit;
-use ellipso_host::link::time::{DeviceTimeUs, HostClock, HostTimeUs};
+use ellipso_rig::acquire::pairing::{FrameArrival, Pairer, PairingConfig, PairingOutcome, Pulse};
+use ellipso_rig::camera::aravis::fake::{FakeGigeCamera, FakeGigeOptions};
+use ellipso_rig::camera::aravis::format::{PFNC_MONO12, PFNC_MONO12_PACKED};
+use ellipso_rig::camera::aravis::{AravisCamera, AravisOptions};
+use ellipso_rig::camera::{Camera, CameraSettings, Frame, FrameStatus};
+use ellipso_rig::link::clock::ClockFit;
+use ellipso_session::time::{DeviceTimeUs, HostClock, HostTimeUs};
 
 #[path = "gige/support.rs"]
 mod support;
@@ -69,7 +69,7 @@ fn gige_mono12_packed_stream_unpacks_exactly() {
     let mut rig = rig(256, 192, PFNC_MONO12_PACKED, 1400, 500.0);
     assert_eq!(
         rig.camera.encoding(),
-        ellipso_host::camera::unpack::RawEncoding::Mono12Packed
+        ellipso_rig::camera::unpack::RawEncoding::Mono12Packed
     );
     let frames = grab(&mut rig.camera, 40);
     assert_clean(&frames);

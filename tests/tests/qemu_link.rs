@@ -19,12 +19,12 @@
 use std::time::{Duration, Instant};
 
 use ellipso_firmware::{LED_RIG_LIMITS, SequencerTiming};
-use ellipso_host::link::clock::ClockModelConfig;
-use ellipso_host::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_protocol::{
     BoardState, Bracket, CaptureConfig, CommandKind, Edge, Output, PROTOCOL_VERSION, PulseCount,
     PulseEvent, RejectReason, TriggerSource,
 };
+use ellipso_rig::link::clock::ClockModelConfig;
+use ellipso_rig::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_tests::qemu::{QemuBoard, Serial, firmware_or_skip};
 
 const PULSES: u32 = 8;

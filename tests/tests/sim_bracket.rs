@@ -11,17 +11,17 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use ellipso_host::acquire::capture::{CapturePlan, capture};
-use ellipso_host::acquire::pairing::PairingConfig;
-use ellipso_host::camera::sim::SimCameraBackend;
-use ellipso_host::camera::{CameraInfo, CameraSettings};
-use ellipso_host::link::time::HostClock;
-use ellipso_host::link::{LinkConfig, TriggerLink};
-use ellipso_host::session::events::SessionEvent;
-use ellipso_host::session::manifest::{Manifest, SensorInfo, SessionSource};
-use ellipso_host::session::reader;
-use ellipso_host::session::writer::SessionWriter;
 use ellipso_protocol::{BoardLimits, Bracket, CaptureConfig, PulseCount, TriggerSource};
+use ellipso_rig::acquire::capture::{CapturePlan, capture};
+use ellipso_rig::acquire::pairing::PairingConfig;
+use ellipso_rig::camera::sim::SimCameraBackend;
+use ellipso_rig::camera::{CameraInfo, CameraSettings};
+use ellipso_rig::link::{LinkConfig, TriggerLink};
+use ellipso_session::events::SessionEvent;
+use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
+use ellipso_session::reader;
+use ellipso_session::time::HostClock;
+use ellipso_session::writer::SessionWriter;
 use ellipso_sim::rig::{
     PoseIndexSource, SimCamera, SimCameraConfig, VirtualBoard, VirtualBoardConfig, wire,
 };

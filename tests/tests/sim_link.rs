@@ -9,14 +9,14 @@
 
 use std::time::{Duration, Instant};
 
-use ellipso_host::camera::FrameIdUnwrapper;
-use ellipso_host::camera::frame_id::Unwrapped;
-use ellipso_host::link::clock::ClockModelConfig;
-use ellipso_host::link::time::HostClock;
-use ellipso_host::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
 use ellipso_protocol::{
     BoardLimits, CaptureConfig, CommandKind, PulseCount, PulseEvent, RejectReason, TriggerSource,
 };
+use ellipso_rig::camera::FrameIdUnwrapper;
+use ellipso_rig::camera::frame_id::Unwrapped;
+use ellipso_rig::link::clock::ClockModelConfig;
+use ellipso_rig::link::{LinkConfig, LinkError, LinkEvent, TriggerLink};
+use ellipso_session::time::HostClock;
 use ellipso_sim::rig::{
     CameraFaults, Disconnect, PoseIndexSource, SimCamera, SimCameraConfig, SimFrame, VirtualBoard,
     VirtualBoardConfig, wire,
@@ -200,7 +200,7 @@ fn host_link_captures_fifty_pulses_from_the_virtual_board_over_a_pty() {
             .duration_since(host_epoch)
             .as_secs_f64()
             * 1e6;
-        let fitted = fit.host_us(ellipso_host::link::time::DeviceTimeUs(p.t_trigger_us));
+        let fitted = fit.host_us(ellipso_session::time::DeviceTimeUs(p.t_trigger_us));
         worst_us = worst_us.max((fitted - truth_host_us).abs());
     }
     println!(

@@ -19,8 +19,8 @@ use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
 use ellipso_sim::scene::error::Located;
 
-use crate::polar::frame::RawFrame;
-use crate::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
+use ellipso_polar::frame::RawFrame;
+use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
 
 /// `ellipso bench` subcommands.
 #[derive(Debug, clap::Subcommand)]
@@ -188,10 +188,10 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             image,
             frames: frames.len(),
             posed: rot.len(),
-            median_rotation_deg: crate::report::percentile(&mut rot, 0.5),
-            p90_rotation_deg: crate::report::percentile(&mut rot, 0.9),
-            median_translation_mm: crate::report::percentile(&mut trans, 0.5),
-            p90_translation_mm: crate::report::percentile(&mut trans, 0.9),
+            median_rotation_deg: ellipso_report::percentile(&mut rot, 0.5),
+            p90_rotation_deg: ellipso_report::percentile(&mut rot, 0.9),
+            median_translation_mm: ellipso_report::percentile(&mut trans, 0.5),
+            p90_translation_mm: ellipso_report::percentile(&mut trans, 0.9),
             flipped,
             ms_per_frame: ms,
             rejected,
@@ -220,7 +220,7 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
     }
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("pose-bench.json");
-    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
     crate::outln!("written {}", path.display());
     Ok(())
 }

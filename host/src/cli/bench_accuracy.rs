@@ -15,9 +15,9 @@ use std::time::Instant;
 use anyhow::Context;
 use ellipso_sim::scene::Scene;
 
-use crate::fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
-use crate::fit::pipeline::{FitConfig, fit_sample_set};
-use crate::report::plot::{LegendPosition, LinePlot};
+use ellipso_fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
+use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
+use ellipso_report::plot::{LegendPosition, LinePlot};
 
 /// Arguments of `ellipso bench accuracy`.
 #[derive(Debug, clap::Args)]
@@ -66,7 +66,7 @@ pub struct RunResult {
     /// Fit wall time (steps A + B + C), s.
     pub fit_s: f64,
     /// Stage times.
-    pub times: crate::fit::pipeline::StageTimes,
+    pub times: ellipso_fit::pipeline::StageTimes,
     /// One forward evaluation of every observation, s.
     pub forward_s: f64,
     /// fit_s / forward_s.
@@ -74,11 +74,11 @@ pub struct RunResult {
     /// Scores against the truth.
     pub scores: Scores,
     /// Re-render errors on the held-out views (`None` when none were held out).
-    pub holdout: Option<crate::fit::holdout::FrameScore>,
+    pub holdout: Option<ellipso_fit::holdout::FrameScore>,
     /// The clusters (when step B ran).
-    pub clusters: Vec<crate::fit::augment::ClusterModel>,
+    pub clusters: Vec<ellipso_fit::augment::ClusterModel>,
     /// The uncertainty of η before and after pooling (when step B ran).
-    pub pooling: Option<crate::fit::pipeline::PoolingSummary>,
+    pub pooling: Option<ellipso_fit::pipeline::PoolingSummary>,
     /// Vertices with virtual samples / with a pooled η prior (when step B ran).
     pub guided: Option<(usize, usize)>,
 }
@@ -107,7 +107,7 @@ fn solver_settings() -> Vec<SolverSetting> {
         SolverSetting {
             label: "A, fast preset",
             config: FitConfig {
-                solver: crate::fit::solve::SolverConfig::fast(),
+                solver: ellipso_fit::solve::SolverConfig::fast(),
                 ..FitConfig::joint_only()
             },
         },
@@ -246,17 +246,17 @@ fn one_run(
     let full = simulate(scene, case)?;
     let simulate_s = t.elapsed().as_secs_f64();
     // The held-out views are taken out before the fit sees anything.
-    let (train, held) = crate::fit::holdout::split_set(&full.set, holdout);
-    let capture = crate::fit::accuracy::SimulatedCapture {
+    let (train, held) = ellipso_fit::holdout::split_set(&full.set, holdout);
+    let capture = ellipso_fit::accuracy::SimulatedCapture {
         truth: full.truth,
         set: train,
     };
     let mut config = config.clone();
-    config.solver.sensor = crate::fit::accuracy::sensor_model(scene);
+    config.solver.sensor = ellipso_fit::accuracy::sensor_model(scene);
     let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
-    let full_scale = crate::fit::accuracy::full_scale_dn(scene);
+    let full_scale = ellipso_fit::accuracy::full_scale_dn(scene);
     let holdout = (!held.views.is_empty())
-        .then(|| crate::fit::holdout::score(&held, &outcome.fits, full_scale).overall);
+        .then(|| ellipso_fit::holdout::score(&held, &outcome.fits, full_scale).overall);
     let fit_s = outcome.times.fit_s();
     let t = Instant::now();
     let checksum = forward_all(&capture.set, &outcome.fits);
@@ -384,10 +384,11 @@ fn write_report(
         |s| s.normal_median_deg,
     )?;
     let json = dir.join(format!("{stem}.json"));
-    crate::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
+    ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
         .with_context(|| format!("writing {}", json.display()))?;
     let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
-    crate::atomic_file::write(path, md).with_context(|| format!("writing {}", path.display()))?;
+    ellipso_report::atomic_file::write(path, md)
+        .with_context(|| format!("writing {}", path.display()))?;
     crate::outln!(
         "\nreport  {}\nplots   {}\n        {}\ndata    {}",
         path.display(),

@@ -9,8 +9,8 @@
 //! With `--sphere R,X,Y,Z` (a glossy sphere of radius R m centred at (X, Y, Z) m in the world
 //! frame of the session's boards — the base board's frame when it sits at the world origin) it
 //! also finds the flash's specular highlight on the sphere in every calibrated frame
-//! ([`crate::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
-//! position in the camera frame ([`crate::calibrate::flash`]) and writes the `[flash]` section
+//! ([`ellipso_vision::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
+//! position in the camera frame ([`ellipso_vision::calibrate::flash`]) and writes the `[flash]` section
 //! below the camera section. Frames whose highlight is rejected are listed with the reason.
 
 use std::path::PathBuf;
@@ -19,15 +19,15 @@ use anyhow::Context;
 use ellipso_model::camera::CAMERA_PARAM_NAMES;
 use rayon::prelude::*;
 
-use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};
-use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
-use crate::calibrate::views::board_view;
-use crate::calibrate::{CalibConfig, calibrate};
-use crate::polar::frame::RawFrame;
-use crate::pose::DetectorConfig;
-use crate::process::layout_of;
-use crate::session::reader;
-use crate::track::{DetectImage, FamilyDetectors};
+use ellipso_polar::frame::RawFrame;
+use ellipso_session::reader;
+use ellipso_session::rig::layout_of;
+use ellipso_vision::calibrate::flash::{HighlightObservation, estimate_flash_position};
+use ellipso_vision::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
+use ellipso_vision::calibrate::views::board_view;
+use ellipso_vision::calibrate::{CalibConfig, calibrate};
+use ellipso_vision::pose::DetectorConfig;
+use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
@@ -72,7 +72,7 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
 /// What the frames gave, in words: unreadable frames by reason, frames without a board's tag,
 /// frames with too few corners.
 fn frame_causes(
-    detected: &[Result<(crate::calibrate::views::View, Option<usize>), String>],
+    detected: &[Result<(ellipso_vision::calibrate::views::View, Option<usize>), String>],
 ) -> String {
     let mut unreadable: std::collections::BTreeMap<&str, usize> = Default::default();
     let (mut no_tags, mut few, mut good) = (0, 0, 0);
@@ -113,7 +113,7 @@ fn frame_causes(
 pub fn run(args: Args) -> anyhow::Result<()> {
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
-    let boards = crate::process::boards_of(&session)?;
+    let boards = ellipso_vision::process::boards_of(&session)?;
     let layout = layout_of(&session.manifest)?;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
@@ -130,19 +130,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.image
     );
     // per frame: its view, or why it has none (kept, so a failed calibration can say why)
-    let detected: Vec<Result<(crate::calibrate::views::View, Option<usize>), String>> = frames
-        .par_iter()
-        .map_init(
-            || FamilyDetectors::new(&boards, DetectorConfig::default()),
-            |detectors, entry| {
-                let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
-                let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
-                let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
-                    .map_err(|e| format!("{}: {e}", entry.path.display()))?;
-                board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
-            },
-        )
-        .collect();
+    let detected: Vec<Result<(ellipso_vision::calibrate::views::View, Option<usize>), String>> =
+        frames
+            .par_iter()
+            .map_init(
+                || FamilyDetectors::new(&boards, DetectorConfig::default()),
+                |detectors, entry| {
+                    let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
+                    let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
+                    let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
+                        .map_err(|e| format!("{}: {e}", entry.path.display()))?;
+                    board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
+                },
+            )
+            .collect();
     let views: Vec<_> = detected
         .iter()
         .map(|d| d.as_ref().map(|(v, _)| v.clone()).unwrap_or_default())
@@ -247,7 +248,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push('\n');
         text.push_str(&flash.to_toml_flash_section());
     }
-    crate::atomic_file::write(&out, text).with_context(|| format!("writing {}", out.display()))?;
+    ellipso_report::atomic_file::write(&out, text)
+        .with_context(|| format!("writing {}", out.display()))?;
     crate::outln!("rig sections written to {}", out.display());
     Ok(())
 }

@@ -14,7 +14,7 @@
 //! a 3-step bracket are 200 per step. A simulated capture takes the scene's `capture.bracket`
 //! unless `--bracket` is given; its camera renders every frame at the energy it really received.
 //!
-//! [`Camera`]: crate::camera::Camera
+//! [`Camera`]: ellipso_rig::camera::Camera
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -31,16 +31,17 @@ use ellipso_sim::scene::Scene;
 use indicatif::{ProgressBar, ProgressStyle};
 use serialport::{SerialPort, TTYPort};
 
-use crate::acquire::capture::{CapturePlan, CaptureReport, capture};
-use crate::acquire::pairing::PairingConfig;
-use crate::camera::sim::SimCameraBackend;
-use crate::camera::{CameraInfo, CameraSettings};
-use crate::link::time::HostClock;
-use crate::link::{LinkConfig, TriggerLink};
-use crate::process::{self, RigRecord};
-use crate::session::manifest::{Manifest, SensorInfo, SessionSource};
-use crate::session::writer::SessionWriter;
-use crate::track::{TrackConfig, TrackedBoard};
+use ellipso_rig::acquire::capture::{CapturePlan, CaptureReport, capture};
+use ellipso_rig::acquire::pairing::PairingConfig;
+use ellipso_rig::camera::sim::SimCameraBackend;
+use ellipso_rig::camera::{CameraInfo, CameraSettings};
+use ellipso_rig::link::{LinkConfig, TriggerLink};
+use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
+use ellipso_session::rig::RigRecord;
+use ellipso_session::time::HostClock;
+use ellipso_session::writer::SessionWriter;
+use ellipso_vision::process;
+use ellipso_vision::track::{TrackConfig, TrackedBoard};
 
 /// Arguments of `ellipso capture`.
 #[derive(Debug, Clone, clap::Args)]
@@ -103,11 +104,6 @@ pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
     Ok(bracket)
 }
 
-/// `WIDTHxHEIGHT` with even sides in 2..=16384 (see [`super::limits::resolution`]).
-pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
-    super::limits::resolution(s)
-}
-
 /// Renders capture poses for the simulated camera.
 struct RenderSource {
     renderer: Renderer<'static>,
@@ -166,7 +162,7 @@ pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
         .as_ref()
         .context("--sim SCENE is required for a simulated capture")?;
     let scene = Scene::load(scene_path)?;
-    crate::session::writer::check_fresh(&args.out)?;
+    ellipso_session::writer::check_fresh(&args.out)?;
     // The renderer borrows the scene for the whole process (the capture threads outlive scopes).
     let scene: &'static Scene = Box::leak(Box::new(scene));
     let options = RenderOptions {
@@ -344,7 +340,7 @@ fn check_plan(link: &TriggerLink, config: CaptureConfig) -> anyhow::Result<()> {
             "the trigger board would refuse this capture (exposure {} µs, interval {} µs): {}",
             config.exposure_us,
             config.frame_period_us,
-            crate::link::describe_reject(&reason)
+            ellipso_rig::link::describe_reject(&reason)
         )
     })?;
     Ok(())
@@ -369,7 +365,7 @@ fn capture_plan(board: CaptureConfig, camera: CameraSettings, photos: u32) -> Ca
 /// Runs the capture with a progress bar (hidden when quiet or not on a terminal).
 fn run_with_progress(
     link: &TriggerLink,
-    camera: Box<dyn crate::camera::Camera>,
+    camera: Box<dyn ellipso_rig::camera::Camera>,
     session: SessionWriter,
     plan: &CapturePlan,
     photos: u32,
@@ -465,8 +461,8 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
         .rig
         .as_ref()
         .context("--rig RIG.toml is required for a hardware capture")?;
-    let rig = crate::rig_file::RigFile::load(rig_path)?;
-    crate::session::writer::check_fresh(&args.out)?;
+    let rig = ellipso_vision::rig_file::RigFile::load(rig_path)?;
+    ellipso_session::writer::check_fresh(&args.out)?;
     let boards = rig.boards()?;
     let clock = HostClock::new();
     let camera = open_camera(&rig, clock)?;
@@ -537,25 +533,25 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
 
 /// Opens the rig's camera through its backend (features permitting).
 fn open_camera(
-    rig: &crate::rig_file::RigFile,
+    rig: &ellipso_vision::rig_file::RigFile,
     clock: HostClock,
-) -> anyhow::Result<Box<dyn crate::camera::Camera>> {
-    use crate::rig_file::Backend;
+) -> anyhow::Result<Box<dyn ellipso_rig::camera::Camera>> {
+    use ellipso_vision::rig_file::Backend;
     match rig.sensor.backend {
         #[cfg(feature = "aravis")]
         Backend::Aravis => {
-            let options = crate::camera::aravis::AravisOptions {
+            let options = ellipso_rig::camera::aravis::AravisOptions {
                 layout: layout_name(rig.sensor.layout).to_string(),
                 ..Default::default()
             };
-            Ok(Box::new(crate::camera::aravis::AravisCamera::open(
+            Ok(Box::new(ellipso_rig::camera::aravis::AravisCamera::open(
                 &rig.sensor.address,
                 options,
                 clock,
             )?))
         }
         #[cfg(feature = "v4l")]
-        Backend::V4l => Ok(Box::new(crate::camera::v4l::V4lCamera::open(
+        Backend::V4l => Ok(Box::new(ellipso_rig::camera::v4l::V4lCamera::open(
             &rig.sensor.address,
             clock,
         )?)),
@@ -568,10 +564,10 @@ fn open_camera(
 
 #[cfg(not(all(feature = "aravis", feature = "v4l")))]
 fn missing_backend(
-    rig: &crate::rig_file::RigFile,
+    rig: &ellipso_vision::rig_file::RigFile,
     feature: &str,
     _clock: HostClock,
-) -> anyhow::Result<Box<dyn crate::camera::Camera>> {
+) -> anyhow::Result<Box<dyn ellipso_rig::camera::Camera>> {
     anyhow::bail!(
         "{}: camera backend `{feature}` is not in this build; rebuild with `--features {feature}`",
         rig.path.display()
@@ -580,14 +576,14 @@ fn missing_backend(
 
 /// Tracks the poses of a recorded session and appends them to its log; short-pulse frames of a
 /// bracketed capture that tracking refused borrow a pose from their tracked neighbours
-/// ([`crate::short_pulse_poses`]), logged as `pose_interpolated`.
+/// ([`ellipso_vision::short_pulse_poses`]), logged as `pose_interpolated`.
 pub fn track_and_append(dir: &Path) -> anyhow::Result<Vec<process::TrackedFrame>> {
-    let session = crate::session::reader::open(dir)?;
+    let session = ellipso_session::reader::open(dir)?;
     let tracked = process::track_session(&session, &TrackConfig::default())?;
     let now = HostClock::new().now();
     process::append_poses(dir, &tracked, now)?;
-    let borrowed = crate::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
-    crate::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
+    let borrowed = ellipso_vision::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
+    ellipso_vision::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
     if !borrowed.is_empty() {
         crate::outln!(
             "poses        {} short-pulse frames posed from their tracked neighbours",

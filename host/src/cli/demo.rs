@@ -17,8 +17,8 @@ use anyhow::Context;
 use ellipso_sim::scene::Scene;
 
 use super::capture::{self, print_report};
-use crate::process::TrackedFrame;
-use crate::report::plot::{LegendPosition, LinePlot};
+use ellipso_report::plot::{LegendPosition, LinePlot};
+use ellipso_vision::process::TrackedFrame;
 
 /// Arguments of `ellipso demo`.
 #[derive(Debug, clap::Args)]
@@ -35,14 +35,7 @@ pub struct Args {
     pub quick: bool,
 }
 
-/// The shipped scenes, found from the source tree this binary was built in.
-pub fn shipped_scene(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("sim")
-        .join("scenes")
-        .join(name)
-}
+pub use ellipso_sim::scene::shipped_scene;
 
 /// Pose error statistics against the simulator's truth.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -84,10 +77,10 @@ pub fn pose_accuracy(
     PoseAccuracy {
         posed: rot.len(),
         frames: tracked.len(),
-        median_rotation_deg: crate::report::percentile(&mut rot, 0.5),
-        median_translation_mm: crate::report::percentile(&mut trans, 0.5),
-        p90_rotation_deg: crate::report::percentile(&mut rot, 0.9),
-        p90_translation_mm: crate::report::percentile(&mut trans, 0.9),
+        median_rotation_deg: ellipso_report::percentile(&mut rot, 0.5),
+        median_translation_mm: ellipso_report::percentile(&mut trans, 0.5),
+        p90_rotation_deg: ellipso_report::percentile(&mut rot, 0.9),
+        p90_translation_mm: ellipso_report::percentile(&mut trans, 0.9),
     }
 }
 
@@ -165,7 +158,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 
     crate::outln!("[2/4] tracking camera poses from the AprilTags…");
     let tracked = capture::track_and_append(&dir)?;
-    let session = crate::session::reader::open(&dir)?;
+    let session = ellipso_session::reader::open(&dir)?;
     let pairs: std::collections::BTreeMap<u64, u64> = session
         .frames
         .iter()
@@ -204,10 +197,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ellipso_sim::scene::SensorKind::ColourPolar => crate::cli::polar::LayoutArg::Colour,
         },
         bit_depth: Some(session.manifest.sensor.bit_depth),
-        demosaic: crate::polar::demosaic::DemosaicMethod::Superpixel,
+        demosaic: ellipso_polar::demosaic::DemosaicMethod::Superpixel,
         dark_level: 0.0,
         saturation: None,
-        dark_intensity: crate::polar::DEFAULT_DARK_INTENSITY,
+        dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
         aolp_dolp_weighted: true,
         npy: false,
@@ -225,7 +218,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "fit": fit.summary,
     });
     let summary_path = args.out.join("summary.json");
-    crate::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
+    ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
     crate::outln!("\nresults in {}:", args.out.display());
     crate::outln!("  session (raw frames + event log)  {}", dir.display());
     crate::outln!(
@@ -293,16 +286,16 @@ struct DemoFit {
 /// simulator's truth (same vertices as the truth mesh, so errors are per vertex).
 fn fit_and_score(
     scene: &Scene,
-    session: &crate::session::reader::Session,
+    session: &ellipso_session::reader::Session,
     out: &Path,
     quick: bool,
 ) -> anyhow::Result<DemoFit> {
-    use crate::fit::truth::TruthObject;
+    use ellipso_fit::truth::TruthObject;
     let truth = TruthObject::from_scene(scene, Some(if quick { 3 } else { 4 }))?;
     // A scanned mesh is never exact: smooth noise of 0.3 mm along the normals.
-    let input = crate::fit::shape::perturb_mesh(&truth.mesh, 3e-4, scene.seed);
+    let input = ellipso_fit::shape::perturb_mesh(&truth.mesh, 3e-4, scene.seed);
     let mesh_path = out.join("input-mesh.ply");
-    crate::atomic_file::write(
+    ellipso_report::atomic_file::write(
         &mesh_path,
         ellipso_model::geometry::ply::write_ply(
             &input,
@@ -312,7 +305,7 @@ fn fit_and_score(
     )
     .with_context(|| format!("writing {}", mesh_path.display()))?;
     let dir = out.join("fit");
-    let config = crate::fit::session::SessionFitConfig {
+    let config = ellipso_fit::session::SessionFitConfig {
         outer_iterations: if quick { 1 } else { 2 },
         ..Default::default()
     };
@@ -322,7 +315,7 @@ fn fit_and_score(
     let mut normal_err = Vec::new();
     let mut rho_d_err = Vec::new();
     for (v, f) in fits.iter().enumerate() {
-        if f.flags.contains(&crate::fit::data::FitFlag::TooFewViews) {
+        if f.flags.contains(&ellipso_fit::data::FitFlag::TooFewViews) {
             continue;
         }
         let t = &truth.params[v];
@@ -335,7 +328,7 @@ fn fit_and_score(
         rho_d_err.push(100.0 * (f.params.rho_d[0] - t.rho_d[0]).abs() / t.rho_d[0].max(1e-6));
     }
     let fitted = eta_err.len();
-    let median = |v: &mut Vec<f64>| crate::report::percentile(v, 0.5);
+    let median = |v: &mut Vec<f64>| ellipso_report::percentile(v, 0.5);
     let summary = serde_json::json!({
         "vertices": fits.len(),
         "fitted": fitted,
@@ -343,7 +336,7 @@ fn fit_and_score(
         "times_s": run.fit.outcome.times,
         "eta_median_error_pct": median(&mut eta_err),
         "normal_median_error_deg": median(&mut normal_err),
-        "normal_p90_error_deg": crate::report::percentile(&mut normal_err, 0.9),
+        "normal_p90_error_deg": ellipso_report::percentile(&mut normal_err, 0.9),
         "rho_d_median_error_pct": median(&mut rho_d_err),
         "input_mesh": mesh_path.display().to_string(),
     });

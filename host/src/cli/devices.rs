@@ -78,7 +78,7 @@ fn gige() -> anyhow::Result<()> {
 #[cfg(feature = "aravis")]
 fn gige() -> anyhow::Result<()> {
     crate::outln!("GigE Vision / USB3 Vision cameras (discovery broadcast sent):");
-    let cameras = crate::camera::aravis::discover_gige_cameras();
+    let cameras = ellipso_rig::camera::aravis::discover_gige_cameras();
     if cameras.is_empty() {
         crate::outln!("  none answered");
     }

@@ -13,9 +13,9 @@ use anyhow::Context;
 use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
-use crate::fit::observe::poses_from_session;
-use crate::fit::session::{SessionFit, SessionFitConfig, fit_session};
-use crate::session::reader::Session;
+use ellipso_fit::observe::poses_from_session;
+use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session};
+use ellipso_session::reader::Session;
 
 /// Arguments of `ellipso fit`.
 #[derive(Debug, clap::Args)]
@@ -43,7 +43,7 @@ pub struct Args {
     #[arg(long, default_value_t = 10.0)]
     pub normal_prior_deg: f64,
     /// Samples seen more obliquely than this from the mesh normal are gated out, degrees.
-    #[arg(long, default_value_t = crate::fit::gate::GateConfig::default().grazing_cutoff_deg)]
+    #[arg(long, default_value_t = ellipso_fit::gate::GateConfig::default().grazing_cutoff_deg)]
     pub grazing_cutoff_deg: f64,
     /// Fraction of the posed frames held out of the fit and scored as a re-render (0 fits all;
     /// default 0.1).
@@ -55,7 +55,7 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let mesh = TriangleMesh::load(&args.mesh)
         .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
-    let session = crate::session::reader::open(&args.session)?;
+    let session = ellipso_session::reader::open(&args.session)?;
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.holdout),
         "--holdout {}: must be a fraction in [0, 0.5]",
@@ -76,7 +76,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.normal_prior_deg
     );
     if args.joint_only {
-        config.fit = crate::fit::pipeline::FitConfig::joint_only();
+        config.fit = ellipso_fit::pipeline::FitConfig::joint_only();
     }
     config.fit.solver.normal_prior_deg = args.normal_prior_deg;
     anyhow::ensure!(
@@ -106,7 +106,7 @@ pub struct FitRun {
 /// The session's recorded poses (`pose` events), tracking first every complete frame that has
 /// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
-    let untracked = crate::process::untracked_frames(session);
+    let untracked = ellipso_vision::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
     if !untracked.is_empty() {
         crate::outln!(
@@ -114,20 +114,21 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
             untracked.len(),
             session.frames.iter().filter(|f| f.complete).count()
         );
-        let tracked =
-            crate::process::track_frames(session, &crate::track::TrackConfig::default(), |id| {
-                untracked.contains(&id)
-            })?;
-        crate::process::append_poses(
+        let tracked = ellipso_vision::process::track_frames(
+            session,
+            &ellipso_vision::track::TrackConfig::default(),
+            |id| untracked.contains(&id),
+        )?;
+        ellipso_vision::process::append_poses(
             &session.dir,
             &tracked,
-            crate::link::time::HostClock::new().now(),
+            ellipso_session::time::HostClock::new().now(),
         )
         .context(
             "recording the new poses failed part-way (every line written is whole; the next \
              fit tracks the frames still without one)",
         )?;
-        poses = poses_from_session(&crate::session::reader::open(&session.dir)?);
+        poses = poses_from_session(&ellipso_session::reader::open(&session.dir)?);
     }
     anyhow::ensure!(
         !poses.is_empty(),
@@ -151,8 +152,8 @@ pub fn fit_and_export(
     // The solver weights samples by their expected noise: the sensor's gain and read noise
     // where the session says them (simulator sessions), the documented default otherwise.
     let mut config = config.clone();
-    if let Some(scene) = crate::fit::observe::radiometry::scene_of(session) {
-        config.fit.solver.sensor = crate::fit::accuracy::sensor_model(&scene);
+    if let Some(scene) = ellipso_fit::observe::radiometry::scene_of(session) {
+        config.fit.solver.sensor = ellipso_fit::accuracy::sensor_model(&scene);
     }
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
         crate::outln!("  {stage}…")
@@ -196,27 +197,27 @@ pub fn fit_and_export(
             h.overall.alpha.relative_rmse
         );
     }
-    let rig: crate::process::RigRecord = serde_json::from_value(session.manifest.rig.clone())
+    let rig: ellipso_session::rig::RigRecord = serde_json::from_value(session.manifest.rig.clone())
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
     crate::outln!("  pictures from frame {frame_id}…");
     let captured_s0 =
-        match crate::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
+        match ellipso_fit::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
             Ok(c) => Some(c),
             Err(e) => {
                 crate::outln!("  no comparison picture: frame {}: {e}", comparison.0);
                 None
             }
         };
-    let report = crate::export::export_all(
+    let report = ellipso_fit::export::export_all(
         out,
         &fit.mesh,
         &fit.outcome.fits,
         &rig.camera,
         &world_from_camera,
         &flash,
-        &crate::export::ExportConfig::default(),
+        &ellipso_fit::export::ExportConfig::default(),
         captured_s0.as_ref(),
     )?;
     let wall_s = started.elapsed().as_secs_f64();
@@ -242,7 +243,7 @@ pub fn fit_and_export(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
-    crate::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
+    ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);
     Ok(FitRun { fit, files, wall_s })

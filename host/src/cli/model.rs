@@ -22,7 +22,7 @@ use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, evaluate};
 use ellipso_model::optics::{Frame, FresnelTerms, Mueller, Vec3};
 use serde_json::{Value, json};
 
-use crate::report::{LegendPosition, LinePlot, Stroke, plot::PALETTE};
+use ellipso_report::{LegendPosition, LinePlot, Stroke, plot::PALETTE};
 
 /// Arguments of `ellipso model`.
 #[derive(Debug, clap::Args)]

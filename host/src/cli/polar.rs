@@ -1,7 +1,7 @@
 //! `ellipso polar FRAME.png --out DIR`: one raw mosaic frame to s0, DoLP, AoLP and I^d/I^s/I^α images.
 //!
 //! Reads a raw IMX250MZR/MYR mosaic (grayscale PNG as the camera delivered it), runs
-//! [`crate::polar::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
+//! [`ellipso_polar::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
 //!
 //! | file | content | encoding |
 //! |---|---|---|
@@ -27,7 +27,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, anyhow};
 use ellipso_model::mosaic::SensorLayout;
 
-use crate::polar::{
+use ellipso_polar::{
     AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
     StokesBand, process,
 };
@@ -77,7 +77,7 @@ pub struct Args {
     pub saturation: Option<u16>,
     /// Pixels whose mean analyser intensity (s0/2, normalised to full scale) is below this are
     /// masked dark.
-    #[arg(long, default_value_t = crate::polar::DEFAULT_DARK_INTENSITY, value_parser = crate::cli::limits::unit_f32)]
+    #[arg(long, default_value_t = ellipso_polar::DEFAULT_DARK_INTENSITY, value_parser = crate::cli::limits::unit_f32)]
     pub dark_intensity: f32,
     /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this, in [0, 2] (off by
     /// default).
@@ -144,7 +144,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
-    crate::atomic_file::write(&summary_path, text + "\n")
+    ellipso_report::atomic_file::write(&summary_path, text + "\n")
         .with_context(|| format!("cannot write {}", summary_path.display()))?;
     files.push((
         "summary.json".into(),
@@ -380,14 +380,14 @@ fn write_npy(
     ] {
         let name = format!("{stem}{suffix}.npy");
         let path = out.join(&name);
-        crate::report::npy::write(&path, &[h, w], plane.data())
+        ellipso_report::npy::write(&path, &[h, w], plane.data())
             .with_context(|| format!("cannot write {}", path.display()))?;
         files.push((name, what.into()));
     }
     let name = format!("mask{suffix}.npy");
     let path = out.join(&name);
     let bits: Vec<u8> = band.mask.data().iter().map(|m| m.0).collect();
-    crate::report::npy::write(&path, &[h, w], &bits)
+    ellipso_report::npy::write(&path, &[h, w], &bits)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name, "mask reason bits, u8, 0 = valid".into()));
     Ok(())
@@ -438,7 +438,7 @@ fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> a
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb)
         .ok_or_else(|| anyhow!("internal: s0_rgb buffer size"))?;
-    crate::atomic_file::write_png(&path, &buf)
+    ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), "s0/2 of R, G, B as 16-bit RGB".into()));
     Ok(())
@@ -456,7 +456,7 @@ fn save_gray16(
     let path = out.join(name);
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data)
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    crate::atomic_file::write_png(&path, &buf)
+    ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -473,7 +473,7 @@ fn save_gray8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::GrayImage::from_raw(w, h, canvas.to_gray())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    crate::atomic_file::write_png(&path, &buf)
+    ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
@@ -490,7 +490,7 @@ fn save_rgb8(
     let (w, h) = (canvas.width as u32, canvas.height as u32);
     let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes())
         .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    crate::atomic_file::write_png(&path, &buf)
+    ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())

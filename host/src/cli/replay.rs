@@ -10,10 +10,10 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use crate::process::{self, TrackedFrame};
-use crate::session::events::SessionEvent;
-use crate::session::reader;
-use crate::track::TrackConfig;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader;
+use ellipso_vision::process::{self, TrackedFrame};
+use ellipso_vision::track::TrackConfig;
 
 /// Arguments of `ellipso replay`.
 #[derive(Debug, clap::Args)]
@@ -161,7 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = args.out.unwrap_or_else(|| args.session.join("replay"));
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let path = out.join("replay.json");
-    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
+    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
         .with_context(|| format!("writing {}", path.display()))?;
     crate::outln!("report       {}", path.display());
     Ok(())

@@ -172,7 +172,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         frames,
     };
     let path = args.out.join("truth.json");
-    crate::atomic_file::write(&path, serde_json::to_string_pretty(&truth)?)
+    ellipso_report::atomic_file::write(&path, serde_json::to_string_pretty(&truth)?)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let c = renderer.camera();
     crate::outln!(
@@ -197,7 +197,7 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
     let path = out.join(&file);
     let img = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(f.width, f.height, f.raw())
         .ok_or_else(|| anyhow!("frame {k}: buffer does not match {}×{}", f.width, f.height))?;
-    crate::atomic_file::write_png(&path, &img)
+    ellipso_report::atomic_file::write_png(&path, &img)
         .with_context(|| format!("cannot write {}", path.display()))?;
     let mut pixel_truth_files = Vec::new();
     if let Some(p) = &f.pixels {
@@ -206,19 +206,19 @@ fn write_frame(out: &Path, k: usize, f: &RenderedFrame) -> anyhow::Result<FrameE
         for (name, bytes) in [
             (
                 format!("normal_{k:05}.npy"),
-                crate::report::npy::encode(&[h, w, 3], &normals),
+                ellipso_report::npy::encode(&[h, w, 3], &normals),
             ),
             (
                 format!("depth_{k:05}.npy"),
-                crate::report::npy::encode(&[h, w], &p.depth_m),
+                ellipso_report::npy::encode(&[h, w], &p.depth_m),
             ),
             (
                 format!("material_{k:05}.npy"),
-                crate::report::npy::encode(&[h, w], &p.material),
+                ellipso_report::npy::encode(&[h, w], &p.material),
             ),
         ] {
             let path = out.join(&name);
-            crate::atomic_file::write(&path, bytes)
+            ellipso_report::atomic_file::write(&path, bytes)
                 .with_context(|| format!("cannot write {}", path.display()))?;
             pixel_truth_files.push(name);
         }

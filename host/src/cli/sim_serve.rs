@@ -143,8 +143,8 @@ pub fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::link::time::HostClock;
-    use crate::link::{LinkConfig, TriggerLink};
+    use ellipso_rig::link::{LinkConfig, TriggerLink};
+    use ellipso_session::time::HostClock;
 
     fn scene_file(dir: &std::path::Path) -> PathBuf {
         let path = dir.join("scene.toml");
@@ -238,10 +238,10 @@ elevation_deg = [30.0, 60.0]
                 let mut triggers = Vec::new();
                 while triggers.len() < 3 {
                     match link.events().recv_timeout(Duration::from_secs(5)).unwrap() {
-                        crate::link::LinkEvent::Pulse { event, .. } => {
+                        ellipso_rig::link::LinkEvent::Pulse { event, .. } => {
                             triggers.push(event.t_trigger_us)
                         }
-                        crate::link::LinkEvent::Disconnected { reason } => panic!("{reason}"),
+                        ellipso_rig::link::LinkEvent::Disconnected { reason } => panic!("{reason}"),
                         _ => {}
                     }
                 }

@@ -19,7 +19,10 @@ pub mod effects;
 pub mod error;
 pub mod objects;
 pub mod rig;
+pub mod shipped;
 pub mod spec;
+
+pub use shipped::shipped_scene;
 
 #[cfg(test)]
 mod tests;

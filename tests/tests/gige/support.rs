@@ -5,11 +5,11 @@
 use std::process::Command;
 use std::time::Duration;
 
-use ellipso_host::camera::aravis::fake::{FakeGigeCamera, FakeGigeOptions, FillRequest};
-use ellipso_host::camera::aravis::format::{PFNC_MONO12, PFNC_MONO12_PACKED};
-use ellipso_host::camera::aravis::{AravisCamera, AravisOptions};
-use ellipso_host::camera::{Camera, CameraSettings, Frame, FrameStatus};
-use ellipso_host::link::time::HostClock;
+use ellipso_rig::camera::aravis::fake::{FakeGigeCamera, FakeGigeOptions, FillRequest};
+use ellipso_rig::camera::aravis::format::{PFNC_MONO12, PFNC_MONO12_PACKED};
+use ellipso_rig::camera::aravis::{AravisCamera, AravisOptions};
+use ellipso_rig::camera::{Camera, CameraSettings, Frame, FrameStatus};
+use ellipso_session::time::HostClock;
 
 pub const IN_NETNS: &str = "ELLIPSO_IN_NETNS";
 pub const CHILD: &str = "ELLIPSO_GIGE_CHILD";

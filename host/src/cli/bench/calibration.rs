@@ -2,7 +2,7 @@
 //!
 //! Renders the scene's capture (default `sim/scenes/calibration.toml`: the tag grid from listed
 //! poses through a distorting lens), detects the tags on each frame's detection image, runs
-//! [`crate::calibrate::calibrate`] and compares every camera parameter with the renderer's true
+//! [`ellipso_vision::calibrate::calibrate`] and compares every camera parameter with the renderer's true
 //! camera (at the rendered resolution): true value, estimate, relative error, 1σ standard error
 //! and |error|/σ, plus the reprojection RMS. The issue's targets — fx, fy, cx, cy within 0.1 %
 //! and k1 within 2 % — are checked and printed. Writes `calibration-bench.json`.
@@ -11,10 +11,10 @@ use std::path::PathBuf;
 
 use ellipso_model::camera::{CAMERA_PARAM_COUNT, CAMERA_PARAM_NAMES, CameraModel};
 
-use crate::calibrate::views::{View, board_view};
-use crate::calibrate::{CalibConfig, Calibration, calibrate};
-use crate::pose::DetectorConfig;
-use crate::track::{DetectImage, FamilyDetectors};
+use ellipso_vision::calibrate::views::{View, board_view};
+use ellipso_vision::calibrate::{CalibConfig, Calibration, calibrate};
+use ellipso_vision::pose::DetectorConfig;
+use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;
@@ -337,7 +337,7 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
     );
     std::fs::create_dir_all(&args.out)?;
     let path = args.out.join("calibration-bench.json");
-    crate::atomic_file::write(&path, serde_json::to_vec_pretty(&b)?)?;
+    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&b)?)?;
     crate::outln!("written {}", path.display());
     Ok(())
 }

@@ -10,7 +10,7 @@ use std::path::Path;
 
 use ellipso_model::mosaic::SensorLayout;
 
-use crate::polar::{FrameError, RawFrame, frame::full_scale_dn};
+use ellipso_polar::{FrameError, RawFrame, frame::full_scale_dn};
 
 /// Bit depth assumed for 16-bit PNG containers when `--bit-depth` is not given.
 pub(super) const DEFAULT_BIT_DEPTH_16_BIT_CONTAINER: u8 = 12;

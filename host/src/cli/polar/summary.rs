@@ -4,7 +4,7 @@
 use serde_json::json;
 
 use super::{Args, FileEntry, load};
-use crate::polar::{MaskReason, MaskSummary, PolarConfig, PolarImage, StokesBand};
+use ellipso_polar::{MaskReason, MaskSummary, PolarConfig, PolarImage, StokesBand};
 
 pub(super) fn band_statistics(
     band: &StokesBand,

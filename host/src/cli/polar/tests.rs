@@ -6,7 +6,7 @@ use std::path::Path;
 use ellipso_model::mosaic::{Channel, SensorLayout};
 
 use super::*;
-use crate::polar::synthetic::mosaic_from_stokes;
+use ellipso_polar::synthetic::mosaic_from_stokes;
 
 fn args(frame: &Path, out: &Path) -> Args {
     Args {
@@ -17,7 +17,7 @@ fn args(frame: &Path, out: &Path) -> Args {
         demosaic: DemosaicMethod::Superpixel,
         dark_level: 0.0,
         saturation: None,
-        dark_intensity: crate::polar::DEFAULT_DARK_INTENSITY,
+        dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
         aolp_dolp_weighted: false,
         calibration: None,

@@ -1,0 +1,528 @@
+//! Accuracy against the simulator's truth: simulated captures at the observation level and
+//! the error metrics of a fit (the engine behind `ellipso bench accuracy`).
+//!
+//! Contract:
+//! - [`simulate`] builds a capture of a scene's object with known truth without rendering
+//!   whole frames: for every vertex of the [`TruthObject`] and every view of the scene's capture
+//!   path (with `photos` poses), the four analyser intensities come from the same optics the
+//!   renderer uses, through the scene's radiometry (the renderer's normaliser N) and sensor
+//!   (full well, read noise, bit depth: 12-bit shot + read noise for the shipped scenes),
+//!   quantised and clipped, then gated by the shared rules ([`super::gate`]) —
+//!   [`super::synthetic::synthesize_vertex`] does one vertex. Visibility: the view must see
+//!   the vertex's front side, and no other part of the object may block the camera or the flash
+//!   (ray cast against the truth mesh). The fit starts from normals perturbed by
+//!   `normal_noise_deg` (an imperfect scanned mesh).
+//! - [`evaluate`] scores fitted vertices against the truth: η error (mean % per material and
+//!   overall), normal error (median, 90th percentile, degrees), ρd error (mean relative %, RGB),
+//!   roughness errors (mean absolute σs, σss), and the re-render RMSE: the model with the fitted
+//!   parameters re-evaluated at every kept observation, RMS of (model − observed) over the RMS of
+//!   the observations, all channels. Vertices flagged `TooFewViews` are left out of the errors
+//!   and counted.
+//! - [`forward_all`] evaluates the model once at every observation (no derivatives): the unit
+//!   against which the fit's time is reported.
+
+use std::collections::BTreeMap;
+
+use ellipso_model::geometry::{Intersect, Ray};
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::observe;
+use ellipso_model::optics::pbrdf::PbrdfParams;
+use ellipso_sim::render::radiometry::Radiometry;
+use ellipso_sim::scene::Scene;
+use nalgebra::{Point3, Unit, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use super::data::{FitFlag, SampleGeometry, SampleSet, VertexFit, VertexSamples, ViewGeometry};
+use super::gate::GateConfig;
+use super::synthetic::{SensorNoise, synthesize_vertex};
+use super::truth::{TruthObject, views_of_scene};
+
+/// Relative offset along a ray before occlusion tests (avoids self-hits on the start triangle).
+const RAY_EPS_M: f64 = 1e-6;
+
+/// One simulated capture's settings.
+#[derive(Clone, Debug)]
+pub struct CaptureCase {
+    /// Photos along the scene's capture path.
+    pub photos: usize,
+    /// Sphere / blob refinement (None: the scene's own mesh, icosphere 4 for spheres).
+    pub subdivisions: Option<u32>,
+    /// Keep only the first N vertices (large timing runs on a sphere).
+    pub max_vertices: Option<usize>,
+    /// Per-vertex random tilt of the initial normals, degrees.
+    pub normal_noise_deg: f64,
+    /// Sensor noise on (shot + read, as the scene's camera) or off.
+    pub noise: bool,
+    /// Seed of the noise and the normal tilts.
+    pub seed: u64,
+    /// Sample gates.
+    pub gate: GateConfig,
+}
+
+impl Default for CaptureCase {
+    fn default() -> Self {
+        Self {
+            photos: 100,
+            subdivisions: None,
+            max_vertices: None,
+            normal_noise_deg: 5.0,
+            noise: true,
+            seed: 7,
+            gate: GateConfig::default(),
+        }
+    }
+}
+
+/// A simulated capture with its truth.
+pub struct SimulatedCapture {
+    /// The object with true parameters (its mesh normals are the true normals).
+    pub truth: TruthObject,
+    /// The observations the fit sees (initial normals perturbed).
+    pub set: SampleSet,
+}
+
+/// Errors of one material.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct MaterialErrors {
+    /// Material name.
+    pub name: String,
+    /// True η.
+    pub eta_true: f64,
+    /// Vertices scored.
+    pub vertices: usize,
+    /// Mean |η − η_true| / η_true, %.
+    pub eta_mean_pct: f64,
+    /// Median fitted η.
+    pub eta_median: f64,
+    /// Median over the material's vertices of |η − η_true| / η_true, %.
+    pub eta_vertex_median_pct: f64,
+    /// Median fitted σs.
+    pub sigma_s_median: f64,
+    /// Median fitted σss.
+    pub sigma_ss_median: f64,
+    /// Mean relative ρd error over RGB, %.
+    pub rho_d_mean_pct: f64,
+    /// Mean |σs − σs_true|.
+    pub sigma_s_abs: f64,
+    /// Mean |σss − σss_true|.
+    pub sigma_ss_abs: f64,
+    /// Median normal error, degrees.
+    pub normal_median_deg: f64,
+}
+
+/// The scores of one fit.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Scores {
+    /// Vertices in the object.
+    pub vertices: usize,
+    /// Vertices scored (not `TooFewViews`).
+    pub scored: usize,
+    /// Kept observations.
+    pub samples: usize,
+    /// Mean η error over scored vertices, %.
+    pub eta_mean_pct: f64,
+    /// Median η error over scored vertices, %.
+    pub eta_median_pct: f64,
+    /// Mean over materials of the error of the material's η (median over its vertices), % —
+    /// the paper's measure (one η per object, 1.49 % on real objects).
+    pub eta_material_pct: f64,
+    /// Median normal error, degrees.
+    pub normal_median_deg: f64,
+    /// 90th percentile normal error, degrees.
+    pub normal_p90_deg: f64,
+    /// Median initial (input) normal error, degrees.
+    pub normal_input_median_deg: f64,
+    /// Mean relative ρd error, %.
+    pub rho_d_mean_pct: f64,
+    /// Median relative ρd error, % (robust to the few vertices whose ρd absorbs a highlight).
+    pub rho_d_median_pct: f64,
+    /// Mean |σs − σs_true|.
+    pub sigma_s_abs: f64,
+    /// Mean |σss − σss_true|.
+    pub sigma_ss_abs: f64,
+    /// Relative re-render RMSE over all observation channels.
+    pub rerender_rmse: f64,
+    /// Per material.
+    pub materials: Vec<MaterialErrors>,
+    /// Flag histogram.
+    pub flags: BTreeMap<String, usize>,
+}
+
+/// The solver's noise model for a scene's camera (DN per electron with its gain, read noise).
+pub fn sensor_model(scene: &Scene) -> super::solve::SensorNoiseModel {
+    let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
+    let r = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
+    super::solve::SensorNoiseModel {
+        dn_per_electron: r.dn_per_electron(),
+        read_noise_dn: read_noise_e(scene) * r.dn_per_electron(),
+    }
+}
+
+/// The scene camera's largest code, DN.
+pub fn full_scale_dn(scene: &Scene) -> f64 {
+    let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
+    Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting).full_scale_dn()
+}
+
+/// The scene camera's read noise, electrons RMS (0 when the scene simulates none).
+fn read_noise_e(scene: &Scene) -> f64 {
+    scene.effects.read_noise.as_ref().map_or(0.0, |n| n.sigma_e)
+}
+
+/// Simulates `case` on `scene` (see the module doc).
+pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCapture> {
+    let scene = with_photo_count(scene, case.photos)?;
+    let mut truth = TruthObject::from_scene(&scene, case.subdivisions)?;
+    let views = views_of_scene(&scene, &scene.camera_poses);
+    let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
+    let radiometry = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
+    let noise = case.noise.then(|| {
+        SensorNoise::from_radiometry(
+            &radiometry,
+            read_noise_e(&scene),
+            scene.effects.shot_noise.is_some(),
+        )
+    });
+    let camera = scene.rig.camera.camera_model();
+    let flash = scene.rig.flash.clone();
+    let poses: Vec<_> = scene
+        .camera_poses
+        .iter()
+        .map(|p| p.world_from_camera)
+        .collect();
+    let normaliser = |view: &ViewGeometry, g: &SampleGeometry| -> f64 {
+        let pose = &poses[view.frame_id as usize];
+        let axis = flash.axis_world(pose);
+        let cos_flash = -Vector3::from(g.to_light).dot(&axis);
+        let to_point_cam = pose.inverse_transform_vector(&-Vector3::from(g.to_camera));
+        let cos_field = to_point_cam.z.clamp(-1.0, 1.0);
+        radiometry.normaliser(
+            g.light_distance_m,
+            cos_flash.clamp(-1.0, 1.0).acos(),
+            cos_field.acos(),
+        )
+    };
+    let colour = scene.rig.camera.sensor == ellipso_sim::scene::SensorKind::ColourPolar;
+    let n_vertices = case
+        .max_vertices
+        .map_or(truth.len(), |m| m.min(truth.len()));
+    truth.params.truncate(n_vertices);
+    truth.material.truncate(n_vertices);
+    let mesh = &truth.mesh;
+    let vertices: Vec<VertexSamples> = (0..n_vertices)
+        .into_par_iter()
+        .map(|v| {
+            let mut rng = ChaCha8Rng::seed_from_u64(
+                case.seed ^ (v as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            let p = mesh.positions()[v];
+            let n = mesh.normals()[v];
+            // Views that see the front side unblocked by the object, flash unblocked too.
+            let visible: Vec<usize> = (0..views.len())
+                .filter(|&k| {
+                    let cam = Point3::from(views[k].camera_position_world);
+                    let flash_p = Point3::from(views[k].flash_position_world);
+                    let in_image = camera
+                        .project(&poses[k].inverse_transform_point(&p))
+                        .is_some_and(|px| camera.contains_pixel(px));
+                    in_image
+                        && n.dot(&(cam - p)) > 0.0
+                        && n.dot(&(flash_p - p)) > 0.0
+                        && (truth.convex
+                            || (!blocked(mesh, &p, &cam) && !blocked(mesh, &p, &flash_p)))
+                })
+                .collect();
+            let subset: Vec<ViewGeometry> = visible.iter().map(|&k| views[k].clone()).collect();
+            let mut vs = synthesize_vertex(
+                &subset,
+                v as u32,
+                p.coords.into(),
+                n.into_inner().into(),
+                &truth.params[v],
+                &normaliser,
+                noise.as_ref(),
+                colour,
+                &case.gate,
+                &mut rng,
+            );
+            for s in &mut vs.samples {
+                s.view = visible[s.view as usize] as u32;
+            }
+            vs.gates.not_in_view += (views.len() - visible.len()) as u64;
+            vs.normal_world = tilt(n.into_inner(), case.normal_noise_deg, &mut rng).into();
+            vs
+        })
+        .collect();
+    Ok(SimulatedCapture {
+        truth,
+        set: SampleSet {
+            views,
+            colour,
+            vertices,
+        },
+    })
+}
+
+/// Whether the object blocks the segment from `from` (on the surface) to `to`.
+fn blocked(
+    mesh: &ellipso_model::geometry::TriangleMesh,
+    from: &Point3<f64>,
+    to: &Point3<f64>,
+) -> bool {
+    let d = to - from;
+    let len = d.norm();
+    // A zero-length segment is blocked by nothing.
+    if len < RAY_EPS_M {
+        return false;
+    }
+    let dir = d / len;
+    let scale = from.coords.norm().max(1.0);
+    let start = from + dir * (RAY_EPS_M * scale * 10.0);
+    mesh.occluded(&Ray::new(start, dir), 0.0, len - RAY_EPS_M * 20.0)
+}
+
+/// `n` turned by `deg` degrees about a random axis perpendicular to it.
+fn tilt(n: Vector3<f64>, deg: f64, rng: &mut ChaCha8Rng) -> Vector3<f64> {
+    if deg <= 0.0 {
+        return n;
+    }
+    let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+    let helper = if n.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let t1 = n.cross(&helper).normalize();
+    let t2 = n.cross(&t1);
+    let axis = Unit::new_normalize(t1 * a.cos() + t2 * a.sin());
+    UnitQuaternion::from_axis_angle(&axis, deg.to_radians()) * n
+}
+
+/// The scene with `photos` poses along its capture path (same path, denser or sparser).
+pub fn with_photo_count(scene: &Scene, photos: usize) -> anyhow::Result<Scene> {
+    if photos == scene.camera_poses.len() {
+        return Ok(scene.clone());
+    }
+    let text = std::fs::read_to_string(&scene.source)?;
+    let mut table: toml::Table = toml::from_str(&text)?;
+    let capture = table
+        .get_mut("capture")
+        .and_then(|c| c.as_table_mut())
+        .ok_or_else(|| anyhow::anyhow!("{}: no [capture] table", scene.source.display()))?;
+    capture.insert("photo_count".into(), toml::Value::Integer(photos as i64));
+    // Link faults are indexed by frame and play no part in observation-level captures.
+    if let Some(effects) = table.get_mut("effects").and_then(|e| e.as_table_mut()) {
+        effects.remove("link_disconnect");
+        effects.remove("link_corruption");
+        effects.remove("frame_drops");
+    }
+    Ok(Scene::from_toml_str(
+        &toml::to_string(&table)?,
+        &scene.source,
+    )?)
+}
+
+/// Angle between two vectors, degrees (the cosine clamped into acos's domain).
+fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
+    let c = a.dot(b) / (a.norm() * b.norm()).max(1e-300);
+    c.clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// Model prediction at every kept observation of `vertex` with `params`/`normal`: one
+/// `[I^d, I^s, I^α]` per colour channel per sample (`None` where the geometry degenerates).
+pub fn predict_vertex(
+    views: &[ViewGeometry],
+    vertex: &VertexSamples,
+    params: &PbrdfParams<f64>,
+    normal: [f64; 3],
+) -> Vec<Option<[[f64; 3]; 3]>> {
+    let position = Point3::from(vertex.position_world);
+    vertex
+        .samples
+        .iter()
+        .map(|s| {
+            let view = &views[s.view as usize];
+            let g = view.geometry_at(&position)?;
+            let model = g.model::<f64>(Vec3::from_f64(normal)).ok()?;
+            let obs = observe(&model, params, view.flash_polariser());
+            Some(obs.map(|o| [o.diffuse, o.specular, o.alpha]))
+        })
+        .collect()
+}
+
+/// One forward evaluation of every observation with the fitted parameters; returns the sum of
+/// predicted channels (so the work cannot be optimised away).
+pub fn forward_all(set: &SampleSet, fits: &[VertexFit]) -> f64 {
+    set.vertices
+        .par_iter()
+        .zip(fits)
+        .map(|(v, f)| {
+            predict_vertex(&set.views, v, &f.params, f.normal_world)
+                .into_iter()
+                .flatten()
+                .map(|p| p.iter().flatten().sum::<f64>())
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// Scores `fits` against `capture`'s truth (see the module doc).
+pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
+    let truth = &capture.truth;
+    let set = &capture.set;
+    let mut flags = BTreeMap::new();
+    for f in fits {
+        for flag in &f.flags {
+            *flags.entry(format!("{flag:?}")).or_insert(0) += 1;
+        }
+    }
+    let mut per_material: Vec<Vec<usize>> = vec![Vec::new(); truth.material_names.len()];
+    for (v, f) in fits.iter().enumerate() {
+        if !f.flags.contains(&FitFlag::TooFewViews) {
+            per_material[truth.material[v]].push(v);
+        }
+    }
+    let normal_err = |v: usize| {
+        angle_deg(
+            &Vector3::from(fits[v].normal_world),
+            &truth.mesh.normals()[v].into_inner(),
+        )
+    };
+    let input_err = |v: usize| {
+        angle_deg(
+            &Vector3::from(set.vertices[v].normal_world),
+            &truth.mesh.normals()[v].into_inner(),
+        )
+    };
+    let eta_pct =
+        |v: usize| 100.0 * (fits[v].params.eta - truth.params[v].eta).abs() / truth.params[v].eta;
+    // A monochrome sensor sees the mean of the colour channels.
+    let true_rho_d = |v: usize, c: usize| {
+        let rho = truth.params[v].rho_d;
+        if set.colour {
+            rho[c]
+        } else {
+            rho.iter().sum::<f64>() / 3.0
+        }
+    };
+    let rho_d_pct = |v: usize| {
+        (0..3)
+            .map(|c| {
+                let t = true_rho_d(v, c);
+                100.0 * (fits[v].params.rho_d[c] - t).abs() / t.max(1e-6)
+            })
+            .sum::<f64>()
+            / 3.0
+    };
+    let mean = |xs: &[f64]| {
+        if xs.is_empty() {
+            f64::NAN
+        } else {
+            xs.iter().sum::<f64>() / xs.len() as f64
+        }
+    };
+    let mut materials = Vec::new();
+    for (m, members) in per_material.iter().enumerate() {
+        if members.is_empty() {
+            continue;
+        }
+        let tp = &truth.params[members[0]];
+        let mut etas: Vec<f64> = members.iter().map(|&v| fits[v].params.eta).collect();
+        let mut normals: Vec<f64> = members.iter().map(|&v| normal_err(v)).collect();
+        let mut sigma_s: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_s).collect();
+        let mut sigma_ss: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_ss).collect();
+        materials.push(MaterialErrors {
+            name: truth.material_names[m].clone(),
+            eta_true: tp.eta,
+            vertices: members.len(),
+            eta_mean_pct: mean(&members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
+            eta_median: ellipso_report::percentile(&mut etas, 0.5),
+            eta_vertex_median_pct: ellipso_report::percentile(
+                &mut members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
+                0.5,
+            ),
+            sigma_s_median: ellipso_report::percentile(&mut sigma_s, 0.5),
+            sigma_ss_median: ellipso_report::percentile(&mut sigma_ss, 0.5),
+            rho_d_mean_pct: mean(&members.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
+            sigma_s_abs: mean(
+                &members
+                    .iter()
+                    .map(|&v| (fits[v].params.sigma_s - truth.params[v].sigma_s).abs())
+                    .collect::<Vec<_>>(),
+            ),
+            sigma_ss_abs: mean(
+                &members
+                    .iter()
+                    .map(|&v| (fits[v].params.sigma_ss - truth.params[v].sigma_ss).abs())
+                    .collect::<Vec<_>>(),
+            ),
+            normal_median_deg: ellipso_report::percentile(&mut normals, 0.5),
+        });
+    }
+    let scored: Vec<usize> = per_material.iter().flatten().copied().collect();
+    let mut normals: Vec<f64> = scored.iter().map(|&v| normal_err(v)).collect();
+    let mut inputs: Vec<f64> = scored.iter().map(|&v| input_err(v)).collect();
+    // Re-render RMSE over every kept observation of scored vertices.
+    let (sq_err, sq_obs) = scored
+        .par_iter()
+        .map(|&v| {
+            let vs = &set.vertices[v];
+            let pred = predict_vertex(&set.views, vs, &fits[v].params, fits[v].normal_world);
+            let mut e = 0.0;
+            let mut o = 0.0;
+            for (s, p) in vs.samples.iter().zip(pred) {
+                let Some(p) = p else { continue };
+                for (pc, sc) in p.iter().zip(&s.channels) {
+                    for (pk, sk) in pc.iter().zip(sc) {
+                        let obs = f64::from(*sk);
+                        e += (pk - obs).powi(2);
+                        o += obs * obs;
+                    }
+                }
+            }
+            (e, o)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let eta_material_pct = mean(
+        &materials
+            .iter()
+            .map(|m| 100.0 * (m.eta_median - m.eta_true).abs() / m.eta_true)
+            .collect::<Vec<_>>(),
+    );
+    Scores {
+        eta_material_pct,
+        vertices: fits.len(),
+        scored: scored.len(),
+        samples: set.vertices.iter().map(|v| v.samples.len()).sum(),
+        eta_mean_pct: mean(&scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
+        eta_median_pct: ellipso_report::percentile(
+            &mut scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
+            0.5,
+        ),
+        normal_median_deg: ellipso_report::percentile(&mut normals, 0.5),
+        normal_p90_deg: ellipso_report::percentile(&mut normals, 0.9),
+        normal_input_median_deg: ellipso_report::percentile(&mut inputs, 0.5),
+        rho_d_mean_pct: mean(&scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
+        rho_d_median_pct: ellipso_report::percentile(
+            &mut scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>(),
+            0.5,
+        ),
+        sigma_s_abs: mean(
+            &scored
+                .iter()
+                .map(|&v| (fits[v].params.sigma_s - truth.params[v].sigma_s).abs())
+                .collect::<Vec<_>>(),
+        ),
+        sigma_ss_abs: mean(
+            &scored
+                .iter()
+                .map(|&v| (fits[v].params.sigma_ss - truth.params[v].sigma_ss).abs())
+                .collect::<Vec<_>>(),
+        ),
+        rerender_rmse: (sq_err / sq_obs.max(1e-300)).sqrt(),
+        materials,
+        flags,
+    }
+}

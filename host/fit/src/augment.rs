@@ -1,0 +1,541 @@
+//! Specular augmentation (optics.md §7.7–§7.8, the paper's Step B): cluster the vertices of
+//! the joint solve by material, fit one two-lobe specular model per cluster, and give every
+//! vertex "virtual" coaxial specular samples from its nearest cluster, which regularise the
+//! sharp lobes that sparse views constrain poorly in the final per-vertex passes.
+//!
+//! API:
+//! - [`augment`]`(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation`.
+//!   `fits` are the joint solve's results (any order, matched to `set.vertices` by
+//!   [`VertexFit::vertex`]; out-of-range, duplicate (the first wins) and non-finite fits are
+//!   ignored).
+//! - [`Augmentation`]: `clusters` (only clusters that got a model), per vertex `assignment`
+//!   (index into `clusters` of the nearest model cluster in feature space; `None` without a
+//!   usable fit or when no cluster has a model) and `guides` (for `fit::solve::fit_vertex`):
+//!   the virtual samples (empty when the vertex is outside the kernel), the σ_s floor
+//!   (σ_s,cluster/2 for the final pass, §7.8; 0 — no floor — for a vertex without virtual
+//!   samples: a cluster it is not close to says nothing about its lobe), the cluster's lobe as
+//!   a start, and the pooled η prior ([`pool`]).
+//!
+//! Steps:
+//! 1. [`cluster`]: features (ρ_d RGB clipped and PCA-scaled, 2·min(η, 3) with η shrunk towards
+//!    the members' median by its own reliability, so a vertex whose η its data cannot fix is
+//!    placed by its colour) of the members — vertices with a fit and none of `exclude_flags`
+//!    (by default only the prior-valued `TooFewViews` and `UnderDetermined`: a dark or
+//!    η-unidentifiable vertex still belongs to a material) — then k-means (fixed or automatic k).
+//! 2. For each cluster with ≥ the minimum size, on real samples drawn by [`draw_pairs`] and
+//!    evaluated by [`sample_geometry`] (the vertex's fitted normal; unpolarised-flash views
+//!    skipped): [`eta_fit`] η_cluster from the diffuse DoP of ≤ `max_eta_samples` samples, then
+//!    [`lobe_fit`] (σ_s, σ_ss, ρ_s, ρ_ss) from I^s of ≤ `max_lobe_samples` samples at their
+//!    real geometry, in model units.
+//! 3. [`virtual_samples`]: every vertex with a fit gets its nearest model cluster's coaxial
+//!    profile (unclipped: virtual samples are model values, not pixels), kernel-weighted and
+//!    renormalised to λ_g.
+//! 4. [`pool_eta`]: per cluster the vertices' step-A η and standard errors give the material's
+//!    η (a robust centre) and the between-vertex spread ([`pool`], DerSimonian & Laird 1986); a
+//!    vertex inside the kernel whose own η agrees with it gets it as a prior for the final
+//!    passes.
+//!
+//! Determinism: every random choice comes from `ChaCha8Rng` seeded by [`stream_seed`] (the
+//! config seed, a purpose, an index); parallel loops (rayon) only map independent items and
+//! every reduction is serial in index order, so the result is bit-identical for any number of
+//! threads.
+//!
+//! Memory: the guides hold up to `profile_samples` × 40 bytes of virtual samples per vertex
+//! (1.3 kB at 32), i.e. ~130 MB for 100 000 vertices; the values are shared per cluster and the
+//! kept samples are a prefix of its profile, so a compact form is possible if that matters.
+
+pub mod cluster;
+pub mod eta_fit;
+pub mod lobe_fit;
+pub mod pool;
+pub mod virtual_samples;
+
+#[cfg(test)]
+mod tests;
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+use self::cluster::{ClusterConfig, Feature, FeatureScaling};
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::FlashPolariser;
+use ellipso_model::optics::pbrdf::Geometry;
+use nalgebra::Point3;
+
+use self::eta_fit::DopSample;
+use self::lobe_fit::LobeSample;
+use crate::data::{Sample, SampleSet, VertexFit, VertexGuide};
+
+/// Everything the augmentation can be told.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AugmentConfig {
+    /// Features and k-means.
+    pub cluster: ClusterConfig,
+    /// Total weight of a vertex's virtual samples, λ_g (paper: 0.1).
+    pub lambda_g: f64,
+    /// Points of the coaxial profile (default 32 on a squared grid carrying the paper's 180
+    /// uniform samples' weight, `virtual_samples`).
+    pub profile_samples: usize,
+    /// σ of the feature-distance kernel (paper: 0.1).
+    pub kernel_sigma: f64,
+    /// Virtual samples with a raw weight at or below this are dropped (paper: 0.01).
+    pub min_raw_weight: f64,
+    /// Samples per cluster for η_cluster (paper: 4096).
+    pub max_eta_samples: usize,
+    /// Samples per cluster for the two-lobe fit (paper: 65 536).
+    pub max_lobe_samples: usize,
+    /// Smallest σ_s of a cluster model (optics.md §9: 0.01–0.05).
+    pub sigma_min: f64,
+    /// Upper bound of the cluster lobes' albedos (the solver's cap, default 5).
+    pub albedo_cap: f64,
+    /// Seed of the sample draws.
+    pub seed: u64,
+}
+
+impl Default for AugmentConfig {
+    fn default() -> Self {
+        Self {
+            cluster: ClusterConfig::default(),
+            lambda_g: 0.1,
+            profile_samples: 32,
+            kernel_sigma: 0.1,
+            min_raw_weight: 0.01,
+            max_eta_samples: 4096,
+            max_lobe_samples: 65_536,
+            sigma_min: 0.02,
+            albedo_cap: crate::solve::SolverConfig::default().albedo_cap,
+            seed: 0xa06_0e47,
+        }
+    }
+}
+
+/// The model of one cluster.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ClusterModel {
+    /// Centroid in feature space ([`cluster::FEATURE_DIM`] values).
+    pub centroid: Vec<f64>,
+    /// Member vertices.
+    pub members: usize,
+    /// η_cluster ∈ [1, 3].
+    pub eta: f64,
+    /// σ_s ∈ [`AugmentConfig::sigma_min`], 1].
+    pub sigma_s: f64,
+    /// σ_ss ∈ [σ_s, 1].
+    pub sigma_ss: f64,
+    /// ρ_s ≥ 0.
+    pub rho_s: f64,
+    /// ρ_ss ≥ 0 per channel.
+    pub rho_ss: [f64; 3],
+    /// RMS I^s residual of the two-lobe fit, model units.
+    pub fit_rms: f64,
+    /// DoP samples η was fitted to (0: too few, η is the members' median η).
+    pub eta_samples: usize,
+    /// Samples of the two-lobe fit.
+    pub lobe_samples: usize,
+    /// The members' pooled η (random-effects mean, [`pool`]).
+    pub eta_pooled: pool::Pooled,
+}
+
+/// How the vertices were partitioned.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PartitionSummary {
+    /// Vertices clustered (fitted and not excluded by a flag).
+    pub members: usize,
+    /// Number of k-means clusters.
+    pub k: usize,
+    /// Members per k-means cluster.
+    pub sizes: Vec<usize>,
+    /// k-means inertia (sum of squared feature distances).
+    pub inertia: f64,
+    /// Mean silhouette of the partition (None for k ≤ 1).
+    pub silhouette: Option<f64>,
+    /// Automatic choice: (k, silhouette or None when a cluster was too small).
+    pub tried: Vec<(usize, Option<f64>)>,
+    /// Minimum members for a cluster model.
+    pub min_cluster_vertices: usize,
+    /// Feature normalisation.
+    pub scaling: FeatureScaling,
+}
+
+/// The result of [`augment`] (module doc). Serialises as a compact summary: the per-vertex
+/// vectors are skipped, their counts kept.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Augmentation {
+    /// Clusters with a model.
+    pub clusters: Vec<ClusterModel>,
+    /// Per vertex: index into `clusters` of its nearest model cluster.
+    #[serde(skip)]
+    pub assignment: Vec<Option<usize>>,
+    /// Per vertex: virtual samples (weights sum to λ_g, or empty), σ_s floor (0: none), the
+    /// cluster lobe as a start and the pooled η prior, for the final pass.
+    #[serde(skip)]
+    pub guides: Vec<VertexGuide>,
+    /// Vertices with at least one virtual sample.
+    pub vertices_with_virtual_samples: usize,
+    /// Vertices with a pooled η prior.
+    pub vertices_with_eta_prior: usize,
+    /// The partition.
+    pub partition: PartitionSummary,
+}
+
+/// A seed for one purpose (`stream`) and item (`index`), decorrelated by SplitMix64
+/// (Steele, Lea & Flood 2014).
+pub fn stream_seed(seed: u64, stream: u64, index: u64) -> u64 {
+    let mut z = seed
+        ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ index.wrapping_add(1).wrapping_mul(0xD1B5_4A32_D192_ED03);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Draws up to `max` (vertex, sample index) pairs uniformly without replacement from the
+/// samples of `members` (ascending), in ascending order.
+pub fn draw_pairs(
+    set: &SampleSet,
+    members: &[usize],
+    max: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<(usize, usize)> {
+    let mut starts = Vec::with_capacity(members.len() + 1);
+    let mut total = 0usize;
+    for &v in members {
+        starts.push(total);
+        total += set.vertices[v].samples.len();
+    }
+    starts.push(total);
+    let picks: Vec<usize> = if total <= max {
+        (0..total).collect()
+    } else {
+        let mut v = rand::seq::index::sample(rng, total, max).into_vec();
+        v.sort_unstable();
+        v
+    };
+    picks
+        .into_iter()
+        .map(|i| {
+            let m = starts.partition_point(|&s| s <= i) - 1;
+            (members[m], i - starts[m])
+        })
+        .collect()
+}
+
+/// The model geometry of one real sample with the vertex's fitted normal and the view's flash,
+/// or `None` (unpolarised flash, undefined geometry, or back-facing).
+pub fn sample_geometry(
+    set: &SampleSet,
+    vertex: usize,
+    sample: &Sample,
+    fit: &VertexFit,
+) -> Option<(Geometry<f64>, FlashPolariser)> {
+    let view = set.views.get(sample.view as usize)?;
+    if !view.polarised() {
+        return None;
+    }
+    let sg = view.geometry_at(&Point3::from(set.vertices[vertex].position_world))?;
+    let g = sg.model(Vec3::from_f64(fit.normal_world)).ok()?;
+    g.front_facing.then_some((g, view.flash_polariser()))
+}
+
+/// Clusters whose colour centroids are closer than this pool η together: the virtual-sample
+/// kernel's reach, 0.1·√(2 ln 100) ≈ 0.30 (`virtual_samples` module doc) — colours that share
+/// virtual samples share a material.
+pub const POOL_COLOUR_DISTANCE: f64 = 0.3035;
+
+/// Whether a vertex's step-A η is its data's (not flagged `EtaUnidentifiable`, `GrazingOnly`
+/// or `AtBound`): only then does it place the vertex in η and decide whether the pooled η
+/// applies to it.
+fn eta_trusted(f: &VertexFit) -> bool {
+    use crate::data::FitFlag;
+    !f.flags.iter().any(|flag| {
+        matches!(
+            flag,
+            FitFlag::EtaUnidentifiable | FitFlag::GrazingOnly | FitFlag::AtBound
+        )
+    })
+}
+
+fn fit_is_finite(f: &VertexFit) -> bool {
+    let p = &f.params;
+    [p.eta, p.sigma_s, p.sigma_ss, p.rho_s]
+        .iter()
+        .chain(&p.rho_ss)
+        .chain(&p.rho_d)
+        .chain(&f.normal_world)
+        .all(|v| v.is_finite())
+}
+
+/// Fits η_cluster and the two-lobe model of one cluster; `None` when the lobe fit has too few
+/// usable samples.
+fn fit_cluster(
+    set: &SampleSet,
+    by_vertex: &[Option<&VertexFit>],
+    members: &[usize],
+    centroid: &Feature,
+    index: usize,
+    config: &AugmentConfig,
+) -> Option<ClusterModel> {
+    let fit_of = |v: usize| by_vertex[v].expect("members have fits");
+    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 10, index as u64));
+    let pairs = draw_pairs(set, members, config.max_eta_samples, &mut rng);
+    let dop: Vec<DopSample> = pairs
+        .par_iter()
+        .filter_map(|&(v, s)| {
+            let sample = &set.vertices[v].samples[s];
+            let (g, flash) = sample_geometry(set, v, sample, fit_of(v))?;
+            eta_fit::dop_sample(&g, flash, sample, fit_of(v))
+        })
+        .collect();
+    let (eta, eta_samples) = match eta_fit::fit_eta(&dop) {
+        Some(eta) => (eta, dop.len()),
+        None => {
+            let mut etas: Vec<f64> = members.iter().map(|&v| fit_of(v).params.eta).collect();
+            etas.sort_by(f64::total_cmp);
+            let (lo, hi) = eta_fit::ETA_RANGE;
+            (etas[etas.len() / 2].clamp(lo, hi), 0)
+        }
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 11, index as u64));
+    let pairs = draw_pairs(set, members, config.max_lobe_samples, &mut rng);
+    // Shot-noise weights, normalised to mean 1 over the drawn samples (`lobe_fit` module doc).
+    let weights: Vec<f64> = pairs
+        .iter()
+        .map(|&(v, s)| lobe_fit::noise_weight(&set.vertices[v].samples[s]))
+        .collect();
+    let mean_weight = weights.iter().sum::<f64>() / weights.len().max(1) as f64;
+    let lobe: Vec<LobeSample> = pairs
+        .par_iter()
+        .zip(weights.par_iter())
+        .filter_map(|(&(v, s), &w)| {
+            let sample = &set.vertices[v].samples[s];
+            let (g, flash) = sample_geometry(set, v, sample, fit_of(v))?;
+            LobeSample::new(&g, flash, sample, fit_of(v), eta, w / mean_weight)
+        })
+        .collect();
+    let fit = lobe_fit::fit_lobes(&lobe, config.sigma_min, config.albedo_cap)?;
+    Some(ClusterModel {
+        eta_pooled: pool::Pooled::default(),
+        centroid: centroid.to_vec(),
+        members: members.len(),
+        eta,
+        sigma_s: fit.sigma_s,
+        sigma_ss: fit.sigma_ss,
+        rho_s: fit.rho_s,
+        rho_ss: fit.rho_ss,
+        fit_rms: fit.rms,
+        eta_samples,
+        lobe_samples: lobe.len(),
+    })
+}
+
+/// Pools η per cluster from `fits` (indexed like the set's vertices: step A's results) and
+/// gives each vertex inside its cluster's kernel whose own η agrees the pooled
+/// prior ([`pool`]); the cluster's `eta_pooled` and `vertices_with_eta_prior` are updated.
+/// Members are the vertices with virtual samples from the cluster and a finite η standard
+/// error (a vertex returned at its prior has an infinite one).
+///
+/// Clusters whose colour (the ρ_d part of their centroids) lies within the kernel's reach of
+/// each other ([`POOL_COLOUR_DISTANCE`]) pool together: k-means may split one material by the
+/// noise of its η, and pooling each half alone would return the bias that split selected.
+pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
+    let k = a.clusters.len();
+    // Union-find over clusters by colour distance.
+    let mut group: Vec<usize> = (0..k).collect();
+    fn root(group: &mut [usize], mut i: usize) -> usize {
+        while group[i] != i {
+            group[i] = group[group[i]];
+            i = group[i];
+        }
+        i
+    }
+    for i in 0..k {
+        for j in i + 1..k {
+            let (ci, cj) = (&a.clusters[i].centroid, &a.clusters[j].centroid);
+            let d2: f64 = (0..3).map(|c| (ci[c] - cj[c]).powi(2)).sum();
+            if d2.sqrt() < POOL_COLOUR_DISTANCE {
+                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
+                group[ri.max(rj)] = ri.min(rj);
+            }
+        }
+    }
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
+    for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
+        if let Some(j) = j
+            && !g.virtual_samples.is_empty()
+            && v < fits.len()
+        {
+            members[root(&mut group, *j)].push(v);
+        }
+    }
+    for (j, list) in members.iter().enumerate() {
+        if list.is_empty() {
+            continue;
+        }
+        let points: Vec<(f64, f64)> = list
+            .iter()
+            .map(|&v| (fits[v].params.eta, fits[v].std_error[0]))
+            .collect();
+        let pooled = pool::random_effects(&points);
+        for c in 0..k {
+            if root(&mut group, c) == j {
+                a.clusters[c].eta_pooled = pooled;
+            }
+        }
+        for &v in list {
+            let f = &fits[v];
+            // A vertex whose η its own flags disown takes the material's η without the
+            // agreement test.
+            let se = if eta_trusted(f) {
+                f.std_error[0]
+            } else {
+                f64::INFINITY
+            };
+            a.guides[v].eta_prior = pooled.prior_for(f.params.eta, se);
+        }
+    }
+    a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
+}
+
+/// Clusters the joint solve's vertices, fits the cluster models and builds every vertex's
+/// virtual specular samples (module doc).
+pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation {
+    let n = set.vertices.len();
+    let mut by_vertex: Vec<Option<&VertexFit>> = vec![None; n];
+    for f in fits {
+        if let Some(slot) = by_vertex.get_mut(f.vertex as usize)
+            && slot.is_none()
+            && fit_is_finite(f)
+        {
+            *slot = Some(f);
+        }
+    }
+    let excluded = |f: &VertexFit| {
+        f.flags
+            .iter()
+            .any(|flag| config.cluster.exclude_flags.contains(flag))
+    };
+    let members: Vec<usize> = (0..n)
+        .filter(|&v| by_vertex[v].is_some_and(|f| !excluded(f)))
+        .collect();
+    let member_rho_d: Vec<[f64; 3]> = members
+        .iter()
+        .map(|&v| by_vertex[v].expect("member").params.rho_d)
+        .collect();
+    let scaling = FeatureScaling::from_members(&member_rho_d);
+    let shrink = pool::EtaShrink::from_members(
+        &members
+            .iter()
+            .map(|&v| {
+                let f = by_vertex[v].expect("member");
+                (f.params.eta, f.std_error[0])
+            })
+            .collect::<Vec<_>>(),
+    );
+    let features: Vec<Option<Feature>> = by_vertex
+        .iter()
+        .map(|f| {
+            f.map(|f| {
+                // A vertex whose own η its flags disown is placed by its colour alone.
+                let se = if eta_trusted(f) {
+                    f.std_error[0]
+                } else {
+                    f64::INFINITY
+                };
+                scaling.feature(f.params.rho_d, shrink.apply(f.params.eta, se))
+            })
+        })
+        .collect();
+    let member_features: Vec<Feature> = members
+        .iter()
+        .map(|&v| features[v].expect("member"))
+        .collect();
+    let selection = cluster::select(&member_features, &config.cluster);
+    let partition = &selection.partition;
+    let mut lists = vec![Vec::new(); partition.centroids.len()];
+    for (i, &label) in partition.labels.iter().enumerate() {
+        lists[label].push(members[i]);
+    }
+    let clusters: Vec<ClusterModel> = lists
+        .par_iter()
+        .enumerate()
+        .map(|(j, list)| {
+            (list.len() >= selection.min_cluster_vertices)
+                .then(|| fit_cluster(set, &by_vertex, list, &partition.centroids[j], j, config))
+                .flatten()
+        })
+        .collect::<Vec<_>>()
+        .into_iter()
+        .flatten()
+        .collect();
+    let centroids: Vec<Feature> = clusters
+        .iter()
+        .map(|c| core::array::from_fn(|i| c.centroid[i]))
+        .collect();
+    let profiles: Vec<Vec<virtual_samples::ProfilePoint>> = clusters
+        .iter()
+        .map(|c| {
+            virtual_samples::coaxial_profile(
+                c.eta,
+                c.sigma_s,
+                c.sigma_ss,
+                c.rho_s,
+                c.rho_ss,
+                config.profile_samples,
+            )
+        })
+        .collect();
+    let per_vertex: Vec<(Option<usize>, VertexGuide)> = features
+        .par_iter()
+        .map(|f| {
+            let Some(f) = f.filter(|_| !centroids.is_empty()) else {
+                return (None, VertexGuide::default());
+            };
+            let (j, d2) = cluster::nearest(&f, &centroids);
+            let samples = virtual_samples::weighted(
+                &profiles[j],
+                d2.sqrt(),
+                config.kernel_sigma,
+                config.min_raw_weight,
+                config.lambda_g,
+            );
+            if samples.is_empty() {
+                return (Some(j), VertexGuide::default());
+            }
+            let c = &clusters[j];
+            let guide = VertexGuide {
+                virtual_samples: samples,
+                sigma_s_floor: c.sigma_s / 2.0,
+                eta_prior: None,
+                lobe_start: Some([c.sigma_s, c.sigma_ss, c.rho_s]),
+            };
+            (Some(j), guide)
+        })
+        .collect();
+    let mut assignment = Vec::with_capacity(n);
+    let mut guides = Vec::with_capacity(n);
+    for (a, g) in per_vertex {
+        assignment.push(a);
+        guides.push(g);
+    }
+    Augmentation {
+        vertices_with_virtual_samples: guides
+            .iter()
+            .filter(|g| !g.virtual_samples.is_empty())
+            .count(),
+        vertices_with_eta_prior: 0,
+        partition: PartitionSummary {
+            members: members.len(),
+            k: partition.centroids.len(),
+            sizes: partition.sizes.clone(),
+            inertia: partition.inertia,
+            silhouette: selection.silhouette,
+            tried: selection.tried.clone(),
+            min_cluster_vertices: selection.min_cluster_vertices,
+            scaling,
+        },
+        clusters,
+        assignment,
+        guides,
+    }
+}

@@ -1,0 +1,543 @@
+//! The fit's pictures, rendered from the fitted model through the same optics the simulator
+//! renders with (`ellipso_model::optics`).
+//!
+//! Contract (per picture, one PNG each; see docs/fit-outputs.md for how to read them):
+//! - parameter maps: η, σs, σss, ρs, η standard error (viridis, robust range, colour bar), ρd and
+//!   ρss as RGB (linear albedo × display gain, sRGB), the normal map (camera frame, n·½ + ½);
+//! - the 3×3 Mueller grid: per pixel the linear 3×3 block of the full pBRDF (`pbrdf::evaluate`,
+//!   mean of the colour channels) for the rig's own camera/flash geometry at that view, M00 in
+//!   viridis (log10) and every other element as M_ij/M00 in a diverging map over [−1, 1];
+//! - DoLP and AoLP of the light the camera receives under the rig's polarised flash;
+//! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), exposed and
+//!   tone-mapped by Reinhard's global operator ([`tone_map`]), sRGB; the novel view: the same
+//!   light from another camera pose.
+//!
+//! Parameters are interpolated over a triangle from its reliable vertices only (barycentric
+//! weights renormalised); a vertex is unreliable when flagged `TooFewViews`, `NotConverged` or
+//! `AtBound`. Pixels where the mesh is not hit, or nearer unreliable vertices than reliable ones
+//! (reliable weight < ½), are grey: one bad vertex is drawn as a small grey patch, never as a
+//! fan of its lobe over its neighbours' triangles.
+
+use ellipso_model::optics::Vec3;
+use ellipso_model::optics::measure::FlashPolariser;
+use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, apply, evaluate, evaluate_s0};
+use ellipso_model::optics::{Frame, Stokes};
+use ellipso_sim::scene::FlashSpec;
+use nalgebra::{Point3, Vector3};
+use rayon::prelude::*;
+
+use super::colour::{Bar, ColourMap, Panel, figure, robust_range, srgb};
+use super::raster::{Hit, ViewCamera, rasterise};
+use crate::data::{FitFlag, VertexFit, ViewGeometry};
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_report::Canvas;
+
+/// Per-vertex arrays interpolated over pixels.
+struct Field {
+    params: Vec<[f64; 10]>,
+    normals: Vec<[f64; 3]>,
+    eta_std: Vec<[f64; 1]>,
+    reliable: Vec<bool>,
+    eta_unidentified: Vec<bool>,
+}
+
+/// Whether a vertex's parameters are drawn (module doc).
+fn reliable(f: &VertexFit, albedo_cap: f64) -> bool {
+    let p = &f.params;
+    let capped = [p.rho_s]
+        .iter()
+        .chain(&p.rho_ss)
+        .chain(&p.rho_d)
+        .any(|v| *v >= albedo_cap * (1.0 - 1e-3));
+    !capped && !f.flags.contains(&FitFlag::TooFewViews)
+}
+
+impl Field {
+    fn new(fits: &[VertexFit]) -> Self {
+        Self {
+            params: fits.iter().map(super::ply::params_of).collect(),
+            normals: fits.iter().map(|f| f.normal_world).collect(),
+            eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
+            reliable: fits
+                .iter()
+                .map(|f| reliable(f, crate::solve::SolverConfig::default().albedo_cap))
+                .collect(),
+            eta_unidentified: fits
+                .iter()
+                .map(|f| f.flags.contains(&FitFlag::EtaUnidentifiable))
+                .collect(),
+        }
+    }
+
+    /// `hit` with its barycentric weights restricted to the reliable vertices and renormalised;
+    /// `None` when they carry less than half the weight (module doc).
+    fn reliable_hit(&self, hit: &Hit) -> Option<Hit> {
+        let mut h = *hit;
+        for (w, &v) in h.barycentric.iter_mut().zip(&hit.vertices) {
+            if !self.reliable[v as usize] {
+                *w = 0.0;
+            }
+        }
+        let total: f64 = h.barycentric.iter().sum();
+        if total.is_nan() || total < 0.5 {
+            return None;
+        }
+        h.barycentric.iter_mut().for_each(|w| *w /= total);
+        Some(h)
+    }
+
+    /// Parameters and unit normal at a hit, from its reliable vertices (module doc).
+    fn at(&self, hit: &Hit) -> Option<(PbrdfParams<f64>, [f64; 3])> {
+        let hit = self.reliable_hit(hit)?;
+        let p = hit.interpolate(&self.params);
+        let n = Vector3::from(hit.interpolate(&self.normals));
+        let n = n.try_normalize(1e-12)?;
+        // Interpolating valid parameters keeps them valid (a convex combination), except for
+        // rounding at σs = σss: restore the order.
+        let params = PbrdfParams {
+            eta: p[0].max(1.0),
+            sigma_s: p[1].clamp(0.0, 1.0),
+            sigma_ss: p[2].clamp(p[1].clamp(0.0, 1.0), 1.0),
+            rho_s: p[3].max(0.0),
+            rho_ss: [p[4].max(0.0), p[5].max(0.0), p[6].max(0.0)],
+            rho_d: [p[7].max(0.0), p[8].max(0.0), p[9].max(0.0)],
+        };
+        Some((params, n.into()))
+    }
+}
+
+/// One rendered picture.
+pub struct Picture {
+    /// File stem, e.g. `map-eta`.
+    pub name: &'static str,
+    /// The framed figure.
+    pub canvas: Canvas,
+}
+
+/// The model's geometry at a surface point for a view (camera + flash as the rig places them).
+fn model_geometry(
+    view: &ViewGeometry,
+    point: &Point3<f64>,
+    normal: [f64; 3],
+) -> Option<Geometry<f64>> {
+    let g = view.geometry_at(point)?;
+    g.model::<f64>(Vec3::from_f64(normal)).ok()
+}
+
+/// The maps, Mueller grid, DoLP/AoLP and relit pictures of one view.
+pub fn pictures(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+    flash: &FlashSpec,
+    light_world: &Point3<f64>,
+) -> Vec<Picture> {
+    let field = Field::new(fits);
+    let (w, h) = (camera.width, camera.height);
+    let at = models_of(mesh, &field, camera);
+    let mut out = Vec::new();
+    let scalar =
+        |name: &'static str, title: &str, label: &str, f: &dyn Fn(&PbrdfParams<f64>) -> f64| {
+            let values: Vec<Option<f64>> =
+                at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
+            scalar_picture(name, title, label, w, h, &values)
+        };
+    // η where it is identifiable; grey where any vertex of the triangle says it is not.
+    let eta: Vec<Option<f64>> = at
+        .iter()
+        .map(|a| {
+            let (p, _, _, hit) = a.as_ref()?;
+            let unidentified = hit
+                .vertices
+                .iter()
+                .any(|&v| field.eta_unidentified[v as usize]);
+            (!unidentified).then_some(p.eta)
+        })
+        .collect();
+    out.push(scalar_picture(
+        "map-eta",
+        "refractive index eta (grey: not identifiable)",
+        "eta",
+        w,
+        h,
+        &eta,
+    ));
+    out.push(scalar(
+        "map-sigma-s",
+        "specular roughness sigma_s (GGX)",
+        "sigma_s",
+        &|p| p.sigma_s,
+    ));
+    out.push(scalar(
+        "map-sigma-ss",
+        "single-scattering roughness sigma_ss",
+        "sigma_ss",
+        &|p| p.sigma_ss,
+    ));
+    out.push(scalar(
+        "map-rho-s",
+        "specular albedo rho_s",
+        "rho_s",
+        &|p| p.rho_s,
+    ));
+    // η standard error (per vertex, interpolated).
+    let eta_std: Vec<Option<f64>> = at
+        .iter()
+        .map(|a| {
+            let s = a.as_ref()?.3.interpolate(&field.eta_std)[0];
+            s.is_finite().then_some(s)
+        })
+        .collect();
+    out.push(scalar_picture(
+        "map-eta-std",
+        "eta standard error (grey: not identifiable)",
+        "std(eta)",
+        w,
+        h,
+        &eta_std,
+    ));
+    let rgb = |name: &'static str, title: &str, f: &dyn Fn(&PbrdfParams<f64>) -> [f64; 3]| {
+        let values: Vec<Option<[f64; 3]>> =
+            at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
+        // Display gain from the 95th percentile: a few specular-contaminated vertices must not
+        // darken the whole map.
+        let mut all: Vec<f64> = values
+            .iter()
+            .flatten()
+            .flatten()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
+        let gain = 0.9 / ellipso_report::percentile(&mut all, 0.95).max(1e-9);
+        let panel = Panel {
+            width: w,
+            height: h,
+            pixels: values
+                .iter()
+                .map(|v| v.map(|c| c.map(|x| srgb(x * gain))))
+                .collect(),
+        };
+        Picture {
+            name,
+            canvas: figure(&format!("{title} (x{gain:.2} for display)"), &panel, None),
+        }
+    };
+    out.push(rgb("map-rho-d", "diffuse albedo rho_d (RGB)", &|p| p.rho_d));
+    out.push(rgb(
+        "map-rho-ss",
+        "single-scattering albedo rho_ss (RGB)",
+        &|p| p.rho_ss,
+    ));
+    let camera_from_world = camera.world_from_camera.inverse();
+    let normal_panel = Panel {
+        width: w,
+        height: h,
+        pixels: at
+            .iter()
+            .map(|a| {
+                a.as_ref().map(|(_, n, ..)| {
+                    // Camera frame with y up and z toward the viewer (the usual normal-map colours).
+                    let c = camera_from_world.transform_vector(&Vector3::from(*n));
+                    let v = [c.x, -c.y, -c.z];
+                    v.map(|x| ((x * 0.5 + 0.5) * 255.0).clamp(0.0, 255.0) as u8)
+                })
+            })
+            .collect(),
+    };
+    out.push(Picture {
+        name: "map-normal",
+        canvas: figure(
+            "refined normals (camera frame: x red, y-up green, toward viewer blue)",
+            &normal_panel,
+            None,
+        ),
+    });
+    let view = ViewGeometry::from_rig(0, &camera.world_from_camera, flash);
+    out.push(mueller_grid(&at, w, h, &view));
+    out.extend(polarisation(&at, w, h, &view));
+    out.push(relit(
+        &at,
+        w,
+        h,
+        camera,
+        light_world,
+        "relit",
+        "relit under a key light (unpolarised)",
+    ));
+    out
+}
+
+type PixelModel = Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>;
+
+/// The linear 3×3 block of the full pBRDF (mean over colour channels) at a surface point seen
+/// by `view` with its flash; `None` where the geometry degenerates or nothing is reflected.
+pub fn mueller_at(
+    view: &ViewGeometry,
+    params: &PbrdfParams<f64>,
+    normal: [f64; 3],
+    point: &Point3<f64>,
+) -> Option<[[f64; 3]; 3]> {
+    let g = model_geometry(view, point, normal)?;
+    let lobes = evaluate(&g, params);
+    let mut sum = [[0.0; 3]; 3];
+    for c in 0..3 {
+        let l = lobes.total(c).linear3();
+        for i in 0..3 {
+            for j in 0..3 {
+                sum[i][j] += l[i][j] / 3.0;
+            }
+        }
+    }
+    (sum[0][0] > 0.0 && sum[0][0].is_finite()).then_some(sum)
+}
+
+/// The 3×3 Mueller grid (see the module doc).
+fn mueller_grid(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Picture {
+    let m: Vec<Option<[[f64; 3]; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            mueller_at(view, p, *n, point)
+        })
+        .collect();
+    let cell_w = w;
+    let cell_h = h;
+    let title_px = 14;
+    let mut canvas = Canvas::new(3 * cell_w + 8, 3 * (cell_h + title_px) + 40, [24, 24, 24]);
+    let m00: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[0][0].log10())).collect();
+    let (lo, hi) = robust_range(&m00);
+    for i in 0..3 {
+        for j in 0..3 {
+            let panel = if i == 0 && j == 0 {
+                Panel::scalar(w, h, &m00, ColourMap::Viridis, lo, hi)
+            } else {
+                let v: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[i][j] / x[0][0])).collect();
+                Panel::scalar(w, h, &v, ColourMap::Diverging, -1.0, 1.0)
+            };
+            let (iu, ju) = (i as u32, j as u32);
+            let x = i64::from(ju * (cell_w + 4));
+            let y = i64::from(iu * (cell_h + title_px));
+            let label = if i == 0 && j == 0 {
+                "log10 M00".to_string()
+            } else {
+                format!("M{i}{j}/M00")
+            };
+            canvas.text(x + 2, y + 3, &label, [240, 240, 240], 1);
+            super::colour::blit(&mut canvas, &panel, x, y + i64::from(title_px));
+        }
+    }
+    let bar_y = i64::from(3 * (cell_h + title_px) + 4);
+    let half = (3 * cell_w) / 2 - 8;
+    super::colour::draw_bar(
+        &mut canvas,
+        &Bar {
+            map: ColourMap::Viridis,
+            lo,
+            hi,
+            label: "log10 M00".into(),
+        },
+        4,
+        bar_y,
+        half,
+    );
+    super::colour::draw_bar(
+        &mut canvas,
+        &Bar {
+            map: ColourMap::Diverging,
+            lo: -1.0,
+            hi: 1.0,
+            label: "Mij/M00".into(),
+        },
+        i64::from(half + 12),
+        bar_y,
+        half,
+    );
+    Picture {
+        name: "mueller-grid",
+        canvas,
+    }
+}
+
+/// DoLP and AoLP under the rig's polarised flash.
+fn polarisation(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Vec<Picture> {
+    let stokes: Vec<Option<[f64; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            let g = model_geometry(view, point, *n)?;
+            let s = apply(&g, p, FlashPolariser::default().stokes(1.0));
+            let mean = |f: fn(&Stokes<f64>) -> f64| s.iter().map(f).sum::<f64>() / 3.0;
+            let s0 = mean(|s| s.s0);
+            (s0 > 1e-12).then(|| [s0, mean(|s| s.s1), mean(|s| s.s2)])
+        })
+        .collect();
+    let dolp: Vec<Option<f64>> = stokes
+        .iter()
+        .map(|s| s.map(|s| s[1].hypot(s[2]) / s[0]))
+        .collect();
+    let aolp: Vec<Option<f64>> = stokes
+        .iter()
+        .map(|s| s.map(|s| (0.5 * s[2].atan2(s[1])).rem_euclid(std::f64::consts::PI)))
+        .collect();
+    let (_, hi) = robust_range(&dolp);
+    vec![
+        Picture {
+            name: "dolp",
+            canvas: figure(
+                "degree of linear polarisation under the rig's flash",
+                &Panel::scalar(w, h, &dolp, ColourMap::Viridis, 0.0, hi.max(1e-3)),
+                Some(&Bar {
+                    map: ColourMap::Viridis,
+                    lo: 0.0,
+                    hi: hi.max(1e-3),
+                    label: "DoLP".into(),
+                }),
+            ),
+        },
+        Picture {
+            name: "aolp",
+            canvas: figure(
+                "angle of linear polarisation (camera x = 0, counter-clockwise)",
+                &Panel::scalar(w, h, &aolp, ColourMap::Cyclic, 0.0, std::f64::consts::PI),
+                Some(&Bar {
+                    map: ColourMap::Cyclic,
+                    lo: 0.0,
+                    hi: 180.0,
+                    label: "AoLP (deg)".into(),
+                }),
+            ),
+        },
+    ]
+}
+
+/// s0 under an unpolarised point light at `light_world`, seen by `camera`.
+pub fn relit(
+    at: &[PixelModel],
+    w: u32,
+    h: u32,
+    camera: &ViewCamera,
+    light_world: &Point3<f64>,
+    name: &'static str,
+    title: &str,
+) -> Picture {
+    let eye = camera.centre_world();
+    let rgb: Vec<Option<[f64; 3]>> = at
+        .par_iter()
+        .map(|a| {
+            let (p, n, point, _) = a.as_ref()?;
+            let to_light = light_world - point;
+            let d2 = to_light.norm_squared().max(1e-12);
+            let to_light = Vec3::from_f64(to_light.normalize().into());
+            let to_camera = Vec3::from_f64((eye - point).normalize().into());
+            let up = Vec3::from_f64([0.0, 0.0, 1.0]);
+            let alt = Vec3::from_f64([1.0, 0.0, 0.0]);
+            // Any frame serves for unpolarised light; pick an up not parallel to the beam.
+            let light = Frame::light(to_light, up)
+                .or_else(|_| Frame::light(to_light, alt))
+                .ok()?;
+            let cam = Frame::camera(to_camera, up)
+                .or_else(|_| Frame::camera(to_camera, alt))
+                .ok()?;
+            let g = Geometry::new(Vec3::from_f64(*n), to_light, to_camera, light, cam).ok()?;
+            let s0 = evaluate_s0(&g, p, Stokes::unpolarised(1.0));
+            Some(s0.map(|v| v / d2))
+        })
+        .collect();
+    let mapped = tone_map(&rgb);
+    let panel = Panel {
+        width: w,
+        height: h,
+        pixels: mapped.iter().map(|v| v.map(|c| c.map(srgb))).collect(),
+    };
+    Picture {
+        name,
+        canvas: figure(title, &panel, None),
+    }
+}
+
+/// Reinhard's global photographic operator (Reinhard, Stark, Shirley & Ferwerda,
+/// "Photographic tone reproduction for digital images", SIGGRAPH 2002, eqs. 1–4) on linear RGB:
+/// luminance L = 0.2126 R + 0.7152 G + 0.0722 B (Rec. 709) is scaled so its log-average over
+/// the object maps to the key 0.18, then L_d = L(1 + L/L_white²)/(1 + L) with L_white the 99.5th
+/// percentile of the scaled luminance, and every channel is scaled by L_d/L. The exposure comes
+/// from the whole object (not its brightest pixel), and highlights are compressed, not clipped:
+/// a sharp highlight stays bright without turning the rest of the object black.
+pub fn tone_map(rgb: &[Option<[f64; 3]>]) -> Vec<Option<[f64; 3]>> {
+    let lum = |c: &[f64; 3]| 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+    let lums: Vec<f64> = rgb
+        .iter()
+        .flatten()
+        .map(lum)
+        .filter(|l| l.is_finite() && *l > 0.0)
+        .collect();
+    if lums.is_empty() {
+        return rgb.iter().map(|v| v.map(|_| [0.0; 3])).collect();
+    }
+    // δ keeps the log finite for black pixels (Reinhard's eq. 1), relative to the median.
+    let mut sorted = lums.clone();
+    let median = ellipso_report::percentile(&mut sorted, 0.5);
+    let delta = 1e-4 * median.max(1e-300);
+    let log_average =
+        (lums.iter().map(|l| (delta + l).ln()).sum::<f64>() / lums.len() as f64).exp();
+    let scale = 0.18 / log_average.max(1e-300);
+    let white = (scale * ellipso_report::percentile(&mut sorted, 0.995)).max(1e-9);
+    rgb.iter()
+        .map(|v| {
+            v.map(|c| {
+                let l = scale * lum(&c).max(0.0);
+                if l.is_nan() || l <= 0.0 || !l.is_finite() {
+                    return [0.0; 3];
+                }
+                let ld = l * (1.0 + l / (white * white)) / (1.0 + l);
+                c.map(|x| (x.max(0.0) * scale * ld / l).min(1.0))
+            })
+        })
+        .collect()
+}
+
+/// The per-pixel model of a view (for the novel view and tests).
+pub fn pixel_models(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+) -> Vec<PixelModel> {
+    models_of(mesh, &Field::new(fits), camera)
+}
+
+/// Rasterises `mesh` and interpolates `field` at every hit.
+fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<PixelModel> {
+    rasterise(mesh, camera)
+        .into_iter()
+        .map(|hit| {
+            let hit = hit?;
+            let (p, n) = field.at(&hit)?;
+            Some((p, n, hit.point_world, hit))
+        })
+        .collect()
+}
+
+/// A scalar map (viridis over the robust range, with its colour bar).
+fn scalar_picture(
+    name: &'static str,
+    title: &str,
+    label: &str,
+    w: u32,
+    h: u32,
+    values: &[Option<f64>],
+) -> Picture {
+    let (lo, hi) = robust_range(values);
+    let bar = Bar {
+        map: ColourMap::Viridis,
+        lo,
+        hi,
+        label: label.into(),
+    };
+    Picture {
+        name,
+        canvas: figure(
+            title,
+            &Panel::scalar(w, h, values, ColourMap::Viridis, lo, hi),
+            Some(&bar),
+        ),
+    }
+}

@@ -1,0 +1,42 @@
+//! `ellipso-fit`: the per-vertex polarimetric SVBRDF fit of a recorded session, and its outputs.
+//!
+//! The fit is Sparse Ellipsometry's reconstruction
+//! (optics.md §7), inverting the same optics the simulator renders with
+//! (`ellipso_model::optics`; never a copy). `docs/fit.md` describes the whole chain.
+//!
+//! The chain, one module each:
+//! - [`data`]: the contract between stages — per-view geometry ([`data::ViewGeometry`]),
+//!   per-(vertex, view) samples in model units ([`data::Sample`]), the per-vertex bundle
+//!   ([`data::VertexSamples`]) and the per-vertex result ([`data::VertexFit`]). The one place
+//!   that turns a view and a vertex position into the model's geometry
+//!   ([`data::ViewGeometry::geometry_at`]).
+//! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
+//!   extraction from real frames and the synthetic generator.
+//! - [`observe`]: a recorded session + a mesh → samples (projection, occlusion, flash shadow,
+//!   demosaiced analyser sampling, normaliser, gates), streaming one frame at a time.
+//! - [`model`]: per-sample prediction (unit-albedo lobes) with exact dual-number derivatives.
+//! - [`solve`]: per-vertex Levenberg–Marquardt with variable projection, uncertainty and flags.
+//! - [`augment`]: clusters, per-cluster two-lobe models and virtual specular samples.
+//! - [`shape`]: vertex positions updated towards the refined normals.
+//! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
+//! - [`holdout`]: the held-out views no step sees, and the re-render error on them.
+//! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
+//! - [`truth`], [`synthetic`], [`accuracy`]: the simulator's truth as the fit sees it, synthetic
+//!   samples, simulated captures and error metrics (benchmarks and tests).
+//! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit and
+//!   novel views, the re-render comparison).
+
+pub mod accuracy;
+pub mod augment;
+pub mod data;
+pub mod export;
+pub mod gate;
+pub mod holdout;
+pub mod model;
+pub mod observe;
+pub mod pipeline;
+pub mod session;
+pub mod shape;
+pub mod solve;
+pub mod synthetic;
+pub mod truth;

@@ -1,0 +1,547 @@
+//! Observation extraction: a recorded session + camera poses + a triangle mesh → the fit's
+//! [`SampleSet`] (optics.md §7.2–§7.3): per (vertex, view) the observation channels
+//! `[I^d, I^s, I^α]` per colour channel divided by the normaliser N, with visibility and the
+//! shared sample gates applied.
+//!
+//! Contract:
+//! - **Inputs.** The session (`ellipso_session::reader::open`), poses `(frame id,
+//!   world_from_camera)` (from [`poses_from_session`], tracking, or ground truth), a mesh in the
+//!   world (= board) frame in metres with unit vertex normals. The camera model is the
+//!   manifest's `rig.camera`, the flash `rig.flash` ([`radiometry::flash_of`]); exposure and gain
+//!   are each frame's recorded values.
+//! - **Views** ([`views_of`]) are built exactly as the renderer builds its shading frames
+//!   (sim/src/render/shade.rs): camera centre, image up = −(camera y) in the world, flash at
+//!   `FlashSpec::position_world`, polariser axis `FlashSpec::polariser_axis_world`.
+//! - **Per (vertex, view)**, in this order ([`sampler::FrameSampler::observe`]): projection with
+//!   distortion (behind the camera, outside the image or back-facing: `not_in_view`); a ray from
+//!   the camera centre to the vertex (`occluded`); facing away from the flash or a ray from the
+//!   vertex to the flash blocked (`shadowed`); bilinear sampling of the superpixel demosaic; the
+//!   shared gates (`GateConfig::check_sample`, saturation over the bilinear footprint); N from
+//!   [`radiometry::SessionRadiometry`]. After all views, `GateConfig::reject_colour_outliers`.
+//! - **Streaming.** Frames are read, demosaiced, sampled and dropped; at most
+//!   [`ObserveConfig::frames_in_flight`] frames are held at once, vertices of a frame are sampled
+//!   in parallel. Every (vertex, view) result is a pure function of its inputs and results are
+//!   merged in frame-id order, so the output is identical for any thread count.
+//! - **Robustness.** A posed frame that is missing, flagged incomplete at capture, without its
+//!   `frame` event (exposure unknown), or unreadable (corrupt PNG, wrong size, values beyond the
+//!   bit depth) is skipped and reported in [`ObserveReport::skipped`]; it never aborts the
+//!   extraction. Nothing in the session is written.
+//! - **Output.** [`SampleSet::views`] holds the views of the frames actually read, in frame-id
+//!   order; [`SampleSet::vertices`] one entry per mesh vertex in mesh order with samples ordered
+//!   by view. [`ObserveReport::peak_bytes`] accounts the largest memory held at once (samples +
+//!   frames in flight + per-frame results + mesh rings).
+
+pub mod radiometry;
+pub mod sampler;
+
+#[cfg(test)]
+mod tests;
+
+use std::path::PathBuf;
+
+use ellipso_model::camera::CameraModel;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::mosaic::SensorLayout;
+use ellipso_sim::scene::FlashSpec;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
+
+use crate::data::{GateCounts, Sample, SampleSet, VertexSamples, ViewGeometry};
+use crate::gate::GateConfig;
+use ellipso_polar::PolarConfig;
+use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
+use ellipso_polar::frame::RawFrame;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader::{FrameEntry, Session};
+use ellipso_session::rig::RigRecord;
+
+pub use radiometry::{PointNormaliser, SessionRadiometry, flash_of, radiometry_of};
+use sampler::{DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
+
+/// Where in its superpixel tile each analyser sample is taken to sit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SamplePoint {
+    /// At its real raw position (per colour and analyser lattice): no misregistration between
+    /// the four analysers for smooth shading.
+    #[default]
+    Lattice,
+    /// At the tile centre `t·u + (t − 1)/2` for all samples (the plain superpixel convention).
+    SuperpixelCentre,
+}
+
+/// Settings of an extraction.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObserveConfig {
+    /// The sample gates (shared with the synthetic generator).
+    pub gate: GateConfig,
+    /// Worker threads (`None`: rayon's global pool).
+    pub threads: Option<usize>,
+    /// Frames held at once (≥ 1; each costs about 5.6 × its raw size on a mono sensor: raw,
+    /// demosaic and DN planes, see docs/fit-observe.md).
+    pub frames_in_flight: usize,
+    /// Sample positions inside a superpixel.
+    pub sample_point: SamplePoint,
+    /// Black level subtracted from every raw sample, DN.
+    pub dark_level_dn: f32,
+}
+
+impl Default for ObserveConfig {
+    fn default() -> Self {
+        Self {
+            gate: GateConfig::default(),
+            threads: None,
+            frames_in_flight: 2,
+            sample_point: SamplePoint::Lattice,
+            dark_level_dn: 0.0,
+        }
+    }
+}
+
+/// Why an extraction cannot run at all (per-frame problems are skipped, not errors).
+#[derive(Debug, thiserror::Error)]
+pub enum ObserveError {
+    /// The manifest lacks something or holds it malformed.
+    #[error("{}: {what}", path.display())]
+    Manifest {
+        /// The manifest file.
+        path: PathBuf,
+        /// What is missing or wrong.
+        what: String,
+    },
+    /// The manifest records no flash, so light positions and polarisation are unknown.
+    #[error(
+        "{}: `rig.flash` is empty: the flash position and polariser are unknown, so no sample \
+         geometry can be built; record the flash in the rig description",
+        path.display()
+    )]
+    MissingFlash {
+        /// The manifest file.
+        path: PathBuf,
+    },
+    /// The scene file of a simulator session cannot be used.
+    #[error("scene {}: {what}", path.display())]
+    Scene {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+    /// A pose is not a finite rigid transform, or a frame has two poses.
+    #[error("pose of frame {frame_id}: {what}")]
+    Pose {
+        /// The frame.
+        frame_id: u64,
+        /// What is wrong.
+        what: String,
+    },
+    /// The mesh cannot be indexed by the sample format.
+    #[error("mesh: {0}")]
+    Mesh(String),
+    /// The worker pool could not start.
+    #[error("thread pool: {0}")]
+    Threads(String),
+}
+
+/// A posed frame that gave no samples, and why.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SkippedFrame {
+    /// Frame id.
+    pub frame_id: u64,
+    /// What was wrong.
+    pub reason: String,
+}
+
+/// What an extraction did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ObserveReport {
+    /// Poses given.
+    pub frames_posed: usize,
+    /// Frames read and sampled.
+    pub frames_used: usize,
+    /// Posed frames skipped, by frame id.
+    pub skipped: Vec<SkippedFrame>,
+    /// Gate counts over all vertices.
+    pub gates: GateCounts,
+    /// Samples kept.
+    pub samples: u64,
+    /// Largest memory held at once, bytes (accounted, see the module doc).
+    pub peak_bytes: u64,
+    /// Bytes of the kept samples.
+    pub sample_bytes: u64,
+}
+
+/// The samples and the report of one extraction.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Extraction {
+    /// The fit's input.
+    pub samples: SampleSet,
+    /// What happened.
+    pub report: ObserveReport,
+}
+
+fn manifest_path(session: &Session) -> PathBuf {
+    session.dir.join(ellipso_session::paths::MANIFEST)
+}
+
+/// The camera model recorded in the session (`rig.camera`), checked against the frame size.
+pub fn camera_of(session: &Session) -> Result<CameraModel, ObserveError> {
+    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone()).map_err(|e| {
+        ObserveError::Manifest {
+            path: manifest_path(session),
+            what: format!("`rig` has no usable camera model: {e}"),
+        }
+    })?;
+    let s = &session.manifest.sensor;
+    if (rig.camera.width, rig.camera.height) != (s.width, s.height) {
+        return Err(ObserveError::Manifest {
+            path: manifest_path(session),
+            what: format!(
+                "the camera model is {}×{} but the sensor records {}×{} frames",
+                rig.camera.width, rig.camera.height, s.width, s.height
+            ),
+        });
+    }
+    Ok(rig.camera)
+}
+
+/// The view of a camera pose with `flash` (see the module doc).
+pub fn view_of(
+    flash: &FlashSpec,
+    frame_id: u64,
+    world_from_camera: &Isometry3<f64>,
+) -> ViewGeometry {
+    ViewGeometry::from_rig(frame_id, world_from_camera, flash)
+}
+
+/// One view per pose, in the order given, with the session's recorded flash.
+pub fn views_of(
+    session: &Session,
+    poses: &[(u64, Isometry3<f64>)],
+) -> Result<Vec<ViewGeometry>, ObserveError> {
+    let flash = flash_of(session)?;
+    Ok(poses
+        .iter()
+        .map(|(id, p)| view_of(&flash, *id, p))
+        .collect())
+}
+
+/// The poses recorded in the session log (`pose` events, as appended by
+/// `ellipso_vision::process::append_poses`), sorted by frame id. When a frame has several pose or
+/// `pose_rejected` events the last one counts (a later tracking run supersedes an earlier one);
+/// non-finite poses are dropped.
+pub fn poses_from_session(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
+    let mut latest = std::collections::BTreeMap::new();
+    for e in &session.events {
+        match e {
+            SessionEvent::Pose {
+                frame_id,
+                rotation_camera_from_world: r,
+                translation_camera_from_world_m: t,
+                ..
+            } => {
+                let camera_from_world = Isometry3::from_parts(
+                    Translation3::new(t[0], t[1], t[2]),
+                    UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
+                );
+                let finite = r.iter().chain(t).all(|v| v.is_finite());
+                latest.insert(*frame_id, finite.then(|| camera_from_world.inverse()));
+            }
+            SessionEvent::PoseRejected { frame_id, .. } => {
+                latest.insert(*frame_id, None);
+            }
+            _ => {}
+        }
+    }
+    latest
+        .into_iter()
+        .filter_map(|(id, p)| p.map(|p| (id, p)))
+        .collect()
+}
+
+/// The normaliser of recorded frame `frame_id` seen from `world_from_camera` at any world point
+/// (its exposure and gain from its `frame` event), for pictures of that frame.
+pub fn point_normaliser(
+    session: &Session,
+    frame_id: u64,
+    world_from_camera: &Isometry3<f64>,
+) -> Result<PointNormaliser, ObserveError> {
+    let radiometry = radiometry_of(session)?;
+    let event = session
+        .frames
+        .iter()
+        .find(|f| f.frame_id == frame_id)
+        .and_then(|f| f.event.as_ref());
+    let Some(SessionEvent::Frame {
+        exposure_us,
+        gain_db,
+        ..
+    }) = event
+    else {
+        return Err(ObserveError::Manifest {
+            path: session.dir.join(ellipso_session::paths::EVENTS),
+            what: format!("frame {frame_id} has no `frame` event: exposure and gain unknown"),
+        });
+    };
+    Ok(PointNormaliser::new(
+        radiometry.for_frame(f64::from(*exposure_us), f64::from(*gain_db)),
+        &radiometry.flash,
+        world_from_camera,
+    ))
+}
+
+/// A posed frame to read.
+struct Job<'a> {
+    frame_id: u64,
+    pose: Isometry3<f64>,
+    entry: &'a FrameEntry,
+    exposure_us: f64,
+    gain_db: f64,
+}
+
+/// Result of one frame: the view and per-vertex outcomes, and the bytes it held.
+type FrameResult = Result<(ViewGeometry, Vec<Outcome>, usize), String>;
+
+/// Extracts the samples of `mesh` from `session` seen from `poses` with the session's own
+/// radiometry ([`radiometry_of`]). `progress(frames done, frames total)` is called on the
+/// calling thread.
+pub fn extract(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &ObserveConfig,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Extraction, ObserveError> {
+    let radiometry = radiometry_of(session)?;
+    extract_with(session, &radiometry, mesh, poses, config, progress)
+}
+
+/// [`extract`] with an explicit radiometry (e.g. a scene loaded from another path).
+pub fn extract_with(
+    session: &Session,
+    radiometry: &SessionRadiometry,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &ObserveConfig,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Extraction, ObserveError> {
+    let camera = camera_of(session)?;
+    let layout =
+        ellipso_session::rig::layout_of(&session.manifest).map_err(|e| ObserveError::Manifest {
+            path: manifest_path(session),
+            what: e.to_string(),
+        })?;
+    if u32::try_from(mesh.positions().len()).is_err() {
+        return Err(ObserveError::Mesh(format!(
+            "{} vertices exceed the sample format's u32 index",
+            mesh.positions().len()
+        )));
+    }
+    let mut poses = poses.to_vec();
+    poses.sort_by_key(|p| p.0);
+    for w in poses.windows(2) {
+        if w[0].0 == w[1].0 {
+            return Err(ObserveError::Pose {
+                frame_id: w[0].0,
+                what: "given twice".into(),
+            });
+        }
+    }
+    for (id, p) in &poses {
+        let finite = p.translation.vector.iter().all(|v| v.is_finite())
+            && p.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(ObserveError::Pose {
+                frame_id: *id,
+                what: "not finite".into(),
+            });
+        }
+    }
+
+    let mut report = ObserveReport {
+        frames_posed: poses.len(),
+        ..ObserveReport::default()
+    };
+    let mut jobs = Vec::new();
+    for (frame_id, pose) in &poses {
+        let skip = |reason: &str| SkippedFrame {
+            frame_id: *frame_id,
+            reason: reason.into(),
+        };
+        let Ok(k) = session
+            .frames
+            .binary_search_by_key(frame_id, |f| f.frame_id)
+        else {
+            report.skipped.push(skip("no frame file in the session"));
+            continue;
+        };
+        let entry = &session.frames[k];
+        if !entry.complete {
+            report.skipped.push(skip("flagged incomplete at capture"));
+            continue;
+        }
+        let Some(SessionEvent::Frame {
+            exposure_us,
+            gain_db,
+            ..
+        }) = &entry.event
+        else {
+            report
+                .skipped
+                .push(skip("no `frame` event: exposure and gain unknown"));
+            continue;
+        };
+        jobs.push(Job {
+            frame_id: *frame_id,
+            pose: *pose,
+            entry,
+            exposure_us: f64::from(*exposure_us),
+            gain_db: f64::from(*gain_db),
+        });
+    }
+
+    let rings = VertexRings::new(mesh);
+    let polar = PolarConfig {
+        demosaic: DemosaicMethod::Superpixel,
+        dark_level_dn: config.dark_level_dn,
+        ..PolarConfig::default()
+    };
+    let context = SessionContext {
+        mesh,
+        rings: &rings,
+        camera: &camera,
+        max_radius_sq: sampler::max_radius_sq(&camera),
+        radiometry,
+        gate: &config.gate,
+        full_scale_dn: (radiometry.full_scale_dn - f64::from(config.dark_level_dn)).max(1.0),
+    };
+    let bit_depth = session.manifest.sensor.bit_depth;
+    let run_frame = |job: &Job<'_>| -> FrameResult {
+        let (w, h, px) = session.load_frame(job.entry).map_err(|e| e.to_string())?;
+        let raw = RawFrame::new(w, h, bit_depth, layout, px)
+            .map_err(|e| format!("{}: {e}", job.entry.path.display()))?;
+        let levels = polar.levels(&raw).map_err(|e| e.to_string())?;
+        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+        let image = DnImage::new(&raw, &analysers, &levels, config.sample_point);
+        // Held together at this point: the raw frame, the demosaic (4 f32 planes and a mask
+        // byte per band and superpixel) and its DN copy.
+        let superpixels = analysers.bands.first().map_or(0, |b| b.mask.data().len());
+        let bytes = raw.data_dn().len() * 2
+            + analysers.bands.len() * superpixels * (4 * 4 + 1)
+            + image.bytes();
+        drop(analysers);
+        drop(raw);
+        let view = view_of(&radiometry.flash, job.frame_id, &job.pose);
+        let sampler = FrameSampler::new(
+            &context,
+            &view,
+            &job.pose,
+            &image,
+            job.exposure_us,
+            job.gain_db,
+        );
+        let outcomes: Vec<Outcome> = (0..mesh.positions().len())
+            .into_par_iter()
+            .map(|v| sampler.observe(v))
+            .collect();
+        let bytes = bytes + outcomes.len() * std::mem::size_of::<Outcome>();
+        Ok((view, outcomes, bytes))
+    };
+
+    let mut vertices: Vec<VertexSamples> = mesh
+        .positions()
+        .iter()
+        .zip(mesh.normals())
+        .enumerate()
+        .map(|(v, (p, n))| VertexSamples {
+            vertex: v as u32,
+            position_world: p.coords.into(),
+            normal_world: n.into_inner().into(),
+            samples: Vec::new(),
+            gates: GateCounts::default(),
+        })
+        .collect();
+    let mut views = Vec::new();
+    let mut kept: u64 = 0;
+    let sample_size = std::mem::size_of::<Sample>() as u64;
+    let base_bytes = rings.bytes() as u64;
+    let in_flight = config.frames_in_flight.max(1);
+    let total = jobs.len();
+    let pool = match config.threads {
+        None => None,
+        Some(n) => Some(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| ObserveError::Threads(e.to_string()))?,
+        ),
+    };
+    progress(0, total);
+    for (c, chunk) in jobs.chunks(in_flight).enumerate() {
+        let work = || {
+            chunk
+                .par_iter()
+                .map(&run_frame)
+                .collect::<Vec<FrameResult>>()
+        };
+        let results = match &pool {
+            Some(pool) => pool.install(work),
+            None => work(),
+        };
+        let held: usize = results.iter().map(|r| r.as_ref().map_or(0, |r| r.2)).sum();
+        report.peak_bytes = report
+            .peak_bytes
+            .max(base_bytes + kept * sample_size + held as u64);
+        for (job, result) in chunk.iter().zip(results) {
+            let (view, outcomes) = match result {
+                Ok((view, outcomes, _)) => (view, outcomes),
+                Err(reason) => {
+                    report.skipped.push(SkippedFrame {
+                        frame_id: job.frame_id,
+                        reason,
+                    });
+                    continue;
+                }
+            };
+            let index = views.len() as u32;
+            views.push(view);
+            for (vs, outcome) in vertices.iter_mut().zip(outcomes) {
+                let g = &mut vs.gates;
+                match outcome {
+                    Outcome::Kept(mut s) => {
+                        s.view = index;
+                        vs.samples.push(s);
+                        g.kept += 1;
+                        kept += 1;
+                    }
+                    Outcome::NotInView => g.not_in_view += 1,
+                    Outcome::Occluded => g.occluded += 1,
+                    Outcome::Shadowed => g.shadowed += 1,
+                    Outcome::Gate(r) => r.count(g),
+                }
+            }
+        }
+        progress(((c + 1) * in_flight).min(total), total);
+    }
+
+    let colour = layout == SensorLayout::ColourPolar;
+    for vs in &mut vertices {
+        config
+            .gate
+            .reject_colour_outliers(&mut vs.samples, colour, &mut vs.gates);
+        report.gates.add(&vs.gates);
+    }
+    report.skipped.sort_by_key(|s| s.frame_id);
+    report.frames_used = views.len();
+    report.samples = report.gates.kept;
+    report.sample_bytes = report.samples * sample_size;
+    report.peak_bytes = report.peak_bytes.max(base_bytes + kept * sample_size);
+    Ok(Extraction {
+        samples: SampleSet {
+            views,
+            colour,
+            vertices,
+        },
+        report,
+    })
+}

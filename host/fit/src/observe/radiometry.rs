@@ -1,0 +1,313 @@
+//! The radiometry of a recorded session: how raw digital numbers become model units, i.e. the
+//! normaliser N of optics.md §7.2 per (vertex, view), and the analyser model the observation
+//! channels are computed with. One place, [`radiometry_of`], decides it from the manifest.
+//!
+//! Contract:
+//! - **Simulator sessions** (absolute): the manifest names the scene file; it is loaded for the
+//!   `CameraSpec` (f-number, QE, pitch, full well, bit depth) and the effect plan (vignetting
+//!   exponent, polariser extinction). N is then exactly the renderer's
+//!   [`ellipso_sim::render::radiometry::Radiometry::normaliser`] with the frame's recorded
+//!   exposure and gain in place of the scene's, so a noise-free render divided by N gives
+//!   `ellipso_model::optics::measure::observe` of the true material.
+//!   The scene's flash must equal the flash recorded in the manifest (an edited scene file
+//!   would silently change the units otherwise).
+//! - **Hardware and replayed sessions** (relative): no absolute radiometric calibration exists,
+//!   so N is a documented relative normaliser
+//!   `N_rel = full_scale_dn · (t / 10 ms) · 10^(gain_dB/20) · profile(θ_flash) · (0.5 m / d)²`:
+//!   model intensity 1 is full scale at a 10 ms, 0 dB exposure of a point on the flash axis
+//!   0.5 m away. Albedos fitted with it are relative (one unknown global scale per session),
+//!   consistent across views, exposures, gains and distances. Vignetting is not modelled.
+//! - **Analyser extinction**: with a finite extinction ratio ER (e = 1/ER) an analyser at θ
+//!   measures `½[(1+e)s0 + (1−e)(s1 cos2θ + s2 sin2θ)]` (the renderer's model). The observation
+//!   channels undo it exactly: `I^s = (I0 − I90)/(1−e)`, `I^α = (I135 − I45)/(1−e)`,
+//!   `I^d = (I0 + I90)/(1+e) − I^s`; with e = 0 these are optics.md §5.3's `I0 − I90`,
+//!   `I135 − I45` and `2·I90`, bit for bit.
+//! - Distances are clamped to ≥ 1 mm exactly as the renderer clamps them.
+
+use std::path::{Path, PathBuf};
+
+use ellipso_sim::effects::{EffectPlan, Stage, StageParams};
+use ellipso_sim::render::radiometry::Radiometry;
+use ellipso_sim::scene::{CameraSpec, FlashSpec, Scene};
+
+use super::ObserveError;
+use ellipso_session::manifest::SessionSource;
+use ellipso_session::reader::Session;
+
+/// Exposure at which the relative normaliser maps model intensity 1 to full scale, µs.
+pub const RELATIVE_REFERENCE_EXPOSURE_US: f64 = 10_000.0;
+/// Flash distance at which the relative normaliser maps model intensity 1 to full scale, m.
+pub const RELATIVE_REFERENCE_DISTANCE_M: f64 = 0.5;
+/// Closest flash distance the normaliser evaluates, m (the renderer's clamp: a point flash has
+/// no meaning closer than its own size).
+const MIN_FLASH_DISTANCE_M: f64 = 1e-3;
+
+/// Where the normaliser's absolute scale comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum NormaliserKind {
+    /// The renderer's camera equation (simulator sessions).
+    Absolute {
+        /// The scene's camera (exposure and gain are replaced per frame).
+        camera: CameraSpec,
+        /// Vignetting exponent n of cos^n(field angle), when the scene plans vignetting.
+        vignetting_exponent: Option<f64>,
+    },
+    /// The relative normaliser of the module doc (hardware sessions).
+    Relative,
+}
+
+/// The radiometric model of one session (see the module doc).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionRadiometry {
+    /// The flash as recorded (position, polariser, intensity, angular profile).
+    pub flash: FlashSpec,
+    /// Absolute or relative scale.
+    pub kind: NormaliserKind,
+    /// e = 1/ER of the on-chip analysers (0: ideal).
+    pub analyser_extinction: f64,
+    /// 2^bits − 1 of the recorded frames.
+    pub full_scale_dn: f64,
+}
+
+/// The normaliser of one frame (its exposure and gain fixed).
+#[derive(Clone, Debug)]
+pub enum FrameRadiometry {
+    /// The renderer's chain with the frame's exposure and gain.
+    Absolute(Radiometry),
+    /// The relative normaliser.
+    Relative {
+        /// The flash (angular profile).
+        flash: FlashSpec,
+        /// full_scale · (t / 10 ms) · 10^(gain/20).
+        scale: f64,
+    },
+}
+
+impl FrameRadiometry {
+    /// N, DN per unit model intensity, at a point `flash_distance_m` from the flash,
+    /// `angle_from_flash_axis_rad` off its axis and `field_angle_rad` off the optical axis.
+    pub fn normaliser(
+        &self,
+        flash_distance_m: f64,
+        angle_from_flash_axis_rad: f64,
+        field_angle_rad: f64,
+    ) -> f64 {
+        match self {
+            FrameRadiometry::Absolute(r) => {
+                r.normaliser(flash_distance_m, angle_from_flash_axis_rad, field_angle_rad)
+            }
+            FrameRadiometry::Relative { flash, scale } => {
+                let d = flash_distance_m.max(MIN_FLASH_DISTANCE_M);
+                let r = RELATIVE_REFERENCE_DISTANCE_M / d;
+                scale * flash.relative_intensity(angle_from_flash_axis_rad.to_degrees()) * r * r
+            }
+        }
+    }
+}
+
+/// N at any world point of one frame: the frame's radiometry with the sampler's geometry — the
+/// flash aimed along the optical axis, the angle off it of the beam to the point, the field
+/// angle of the point's ray off the optical axis (what `sampler::FrameSampler` evaluates per
+/// vertex, and what a picture of that frame needs per pixel).
+#[derive(Clone, Debug)]
+pub struct PointNormaliser {
+    /// The frame's radiometry.
+    pub radiometry: FrameRadiometry,
+    /// Flash position, world.
+    pub flash_world: nalgebra::Point3<f64>,
+    /// Flash axis (= optical axis), world, unit.
+    pub flash_axis_world: nalgebra::Vector3<f64>,
+    /// World → camera of the frame.
+    pub camera_from_world: nalgebra::Isometry3<f64>,
+}
+
+impl PointNormaliser {
+    /// The normaliser of a frame taken at `world_from_camera` with `radiometry`.
+    pub fn new(
+        radiometry: FrameRadiometry,
+        flash: &FlashSpec,
+        world_from_camera: &nalgebra::Isometry3<f64>,
+    ) -> Self {
+        Self {
+            radiometry,
+            flash_world: flash.position_world(world_from_camera),
+            flash_axis_world: world_from_camera.rotation * nalgebra::Vector3::z(),
+            camera_from_world: world_from_camera.inverse(),
+        }
+    }
+
+    /// N at `point` (DN per model unit); 0 outside the flash's emission, not finite for a
+    /// point on the flash or the camera centre.
+    pub fn at(&self, point: &nalgebra::Point3<f64>) -> f64 {
+        let beam = point - self.flash_world;
+        let d = beam.norm();
+        let cos_axis = (beam / d).dot(&self.flash_axis_world).clamp(-1.0, 1.0);
+        let p_cam = self.camera_from_world * point;
+        // |p_cam| > 0 for any point the camera can see.
+        let cos_field = (p_cam.z / p_cam.coords.norm()).clamp(-1.0, 1.0);
+        self.radiometry
+            .normaliser(d, cos_axis.acos(), cos_field.acos())
+    }
+}
+
+impl SessionRadiometry {
+    /// The absolute radiometry of a scene's rig, as its renderer uses it.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let plan = EffectPlan::from_scene(scene);
+        let vignetting_exponent = match plan.params(Stage::Vignetting) {
+            Some(StageParams::Vignetting(v)) => Some(v.exponent),
+            _ => None,
+        };
+        let analyser_extinction = match plan.params(Stage::PolariserExtinction) {
+            Some(StageParams::PolariserExtinction(x)) if x.ratio >= 1.0 => 1.0 / x.ratio,
+            _ => 0.0,
+        };
+        let camera = scene.rig.camera.clone();
+        Self {
+            flash: scene.rig.flash.clone(),
+            full_scale_dn: full_scale(camera.bit_depth),
+            kind: NormaliserKind::Absolute {
+                camera,
+                vignetting_exponent,
+            },
+            analyser_extinction,
+        }
+    }
+
+    /// The relative radiometry of a rig without absolute calibration.
+    pub fn relative(flash: FlashSpec, bit_depth: u8) -> Self {
+        Self {
+            flash,
+            kind: NormaliserKind::Relative,
+            analyser_extinction: 0.0,
+            full_scale_dn: full_scale(bit_depth),
+        }
+    }
+
+    /// The normaliser of a frame exposed for `exposure_us` at `gain_db`.
+    pub fn for_frame(&self, exposure_us: f64, gain_db: f64) -> FrameRadiometry {
+        match &self.kind {
+            NormaliserKind::Absolute {
+                camera,
+                vignetting_exponent,
+            } => {
+                let camera = CameraSpec {
+                    exposure_us,
+                    gain_db,
+                    ..camera.clone()
+                };
+                FrameRadiometry::Absolute(Radiometry::new(
+                    &camera,
+                    &self.flash,
+                    *vignetting_exponent,
+                ))
+            }
+            NormaliserKind::Relative => FrameRadiometry::Relative {
+                flash: self.flash.clone(),
+                scale: self.full_scale_dn * exposure_us / RELATIVE_REFERENCE_EXPOSURE_US
+                    * 10f64.powf(gain_db / 20.0),
+            },
+        }
+    }
+
+    /// Observation channels `[I^d, I^s, I^α, I^t]` from analyser intensities `[I0, I45, I90, I135]`
+    /// with this session's analyser extinction undone (module doc).
+    pub fn channels(&self, analysers: [f64; 4]) -> [f64; 4] {
+        let [i0, i45, i90, i135] = analysers;
+        let e = self.analyser_extinction;
+        if e == 0.0 {
+            return [i90 + i90, i0 - i90, i135 - i45, i45 + i135];
+        }
+        // e = 1/ER ≤ 1 (ER ≥ 1 is enforced where e is set); 1 − e > 0 unless ER = 1 (no
+        // polariser), which no camera with analysers has. The max keeps the division finite.
+        let cross = (1.0 - e).max(1e-6);
+        let specular = (i0 - i90) / cross;
+        let alpha = (i135 - i45) / cross;
+        let s0 = (i0 + i90) / (1.0 + e);
+        [s0 - specular, specular, alpha, (i45 + i135) / (1.0 + e)]
+    }
+}
+
+fn full_scale(bit_depth: u8) -> f64 {
+    // bit depths are 1..=16 wherever a frame was readable; clamp keeps the shift defined.
+    f64::from((1u32 << u32::from(bit_depth).clamp(1, 16)) - 1)
+}
+
+fn manifest_path(session: &Session) -> PathBuf {
+    session.dir.join(ellipso_session::paths::MANIFEST)
+}
+
+/// The flash recorded in the session's manifest (`rig.flash`).
+pub fn flash_of(session: &Session) -> Result<FlashSpec, ObserveError> {
+    let flash = session
+        .manifest
+        .rig
+        .get("flash")
+        .cloned()
+        .unwrap_or(serde_json::Value::Null);
+    if flash.is_null() {
+        return Err(ObserveError::MissingFlash {
+            path: manifest_path(session),
+        });
+    }
+    serde_json::from_value(flash).map_err(|e| ObserveError::Manifest {
+        path: manifest_path(session),
+        what: format!("`rig.flash` is not a flash description: {e}"),
+    })
+}
+
+/// The scene file a simulator session names, resolved: as recorded, else relative to the
+/// session directory's parent and the session directory.
+fn resolve_scene(session: &Session, recorded: &str) -> Option<PathBuf> {
+    let p = Path::new(recorded);
+    if p.is_file() {
+        return Some(p.to_path_buf());
+    }
+    if p.is_relative() {
+        let parent = session.dir.parent().map(|d| d.join(p));
+        let inside = Some(session.dir.join(p));
+        return [parent, inside].into_iter().flatten().find(|c| c.is_file());
+    }
+    None
+}
+
+/// The scene a simulator session was captured from, when its file is still found.
+pub fn scene_of(session: &Session) -> Option<Scene> {
+    match &session.manifest.source {
+        SessionSource::Simulator { scene, .. } => Scene::load(&resolve_scene(session, scene)?).ok(),
+        _ => None,
+    }
+}
+
+/// The radiometry of `session` (see the module doc for the rules per source).
+pub fn radiometry_of(session: &Session) -> Result<SessionRadiometry, ObserveError> {
+    let flash = flash_of(session)?;
+    match &session.manifest.source {
+        SessionSource::Simulator { scene, .. } => {
+            let path = resolve_scene(session, scene).ok_or_else(|| ObserveError::Scene {
+                path: PathBuf::from(scene),
+                what: "the scene file of this simulator session is not found (needed for the \
+                       camera's f-number, QE, pixel pitch and full well)"
+                    .into(),
+            })?;
+            let loaded = Scene::load(&path).map_err(|e| ObserveError::Scene {
+                path: path.clone(),
+                what: e.to_string(),
+            })?;
+            if loaded.rig.flash != flash {
+                return Err(ObserveError::Scene {
+                    path,
+                    what: "its flash differs from the flash recorded in the session: the scene \
+                           was edited after the capture"
+                        .into(),
+                });
+            }
+            let mut r = SessionRadiometry::from_scene(&loaded);
+            r.full_scale_dn = full_scale(session.manifest.sensor.bit_depth);
+            Ok(r)
+        }
+        SessionSource::Hardware { .. } | SessionSource::Replay { .. } => Ok(
+            SessionRadiometry::relative(flash, session.manifest.sensor.bit_depth),
+        ),
+    }
+}

@@ -1,0 +1,158 @@
+//! Visibility and gates: each rejected (vertex, view) is counted under its own reason, checked
+//! against analytic sphere geometry independent of the mesh and its BVH.
+
+use nalgebra::{Point3, Vector3};
+
+use super::{CENTRE, RADIUS_M, SceneSpec, make_session, open, segment_distance, sphere_and_board};
+use crate::observe::{ObserveConfig, camera_of, extract};
+
+#[test]
+fn hidden_back_facing_and_shadowed_vertices_are_gated_with_their_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    // One view, flash 8 cm to the side so the sphere's shadow on the board is in view.
+    let spec = SceneSpec {
+        flash_offset_m: [0.08, 0.0, 0.0],
+        cameras: vec![[0.21, 0.0, 0.25]],
+        k1: 0.0,
+        ..SceneSpec::paint_mono()
+    };
+    let (session_dir, _, poses) = make_session(dir.path(), &spec);
+    let session = open(&session_dir);
+    let (mesh, sphere) = sphere_and_board(3, 0.1, 81);
+    let out = extract(
+        &session,
+        &mesh,
+        &poses,
+        &ObserveConfig::default(),
+        &|_, _| {},
+    )
+    .unwrap();
+    let set = &out.samples;
+    assert_eq!(set.views.len(), 1);
+    let view = &set.views[0];
+    let camera = camera_of(&session).unwrap();
+    let pose = poses[0].1;
+    let cam = Point3::from(view.camera_position_world);
+    let flash = Point3::from(view.flash_position_world);
+    let centre = Point3::from(CENTRE);
+    let (w, h, raw) = session.load_frame(&session.frames[0]).unwrap();
+
+    // Sphere: the far side is back-facing.
+    let mut back = 0;
+    for vs in &set.vertices[..sphere] {
+        let p = Point3::from(vs.position_world);
+        let cos_view = Vector3::from(vs.normal_world).dot(&(cam - p).normalize());
+        if cos_view < -0.05 {
+            assert_eq!(vs.gates.not_in_view, 1, "vertex {}", vs.vertex);
+            back += 1;
+        } else if cos_view > 0.05 {
+            assert_eq!(vs.gates.not_in_view, 0, "vertex {}", vs.vertex);
+        }
+    }
+    // Board: occluded by the sphere, in its flash shadow, or seen and lit.
+    let (mut occluded, mut shadowed, mut seen) = (0, 0, 0);
+    for vs in &set.vertices[sphere..] {
+        let p = Point3::from(vs.position_world);
+        let Some(px) = camera.project(&(pose.inverse() * p)) else {
+            continue;
+        };
+        let margin = 4.0;
+        if !(px[0] > margin
+            && px[1] > margin
+            && px[0] < f64::from(w) - margin
+            && px[1] < f64::from(h) - margin)
+        {
+            continue;
+        }
+        let to_camera = segment_distance(&cam, &p, &centre) / RADIUS_M;
+        let to_flash = segment_distance(&p, &flash, &centre) / RADIUS_M;
+        let g = &vs.gates;
+        if to_camera < 0.9 {
+            assert_eq!((g.occluded, g.kept), (1, 0), "vertex {}", vs.vertex);
+            occluded += 1;
+        } else if to_camera > 1.1 && to_flash < 0.9 {
+            assert_eq!((g.shadowed, g.kept), (1, 0), "vertex {}", vs.vertex);
+            // The renderer agrees: no light reaches the raw pixels there.
+            let (x, y) = (px[0].round() as usize, px[1].round() as usize);
+            assert_eq!(raw[y * w as usize + x], 0, "lit shadow at {px:?}");
+            shadowed += 1;
+        } else if to_camera > 1.1 && to_flash > 1.1 {
+            assert_eq!(g.kept, 1, "vertex {} gates {g:?}", vs.vertex);
+            seen += 1;
+        }
+    }
+    eprintln!("back-facing {back}, occluded {occluded}, shadowed {shadowed}, seen {seen}");
+    assert!(back > 100 && occluded > 20 && shadowed > 20 && seen > 1000);
+    let total = &out.report.gates;
+    assert_eq!(
+        total.not_in_view
+            + total.occluded
+            + total.shadowed
+            + total.grazing
+            + total.saturated
+            + total.dark
+            + total.non_finite
+            + total.colour_outlier
+            + total.kept,
+        mesh.positions().len() as u64,
+        "one view: every vertex counted exactly once"
+    );
+}
+
+#[test]
+fn saturated_highlights_are_gated_as_saturated() {
+    let dir = tempfile::tempdir().unwrap();
+    // The shipped sphere scene's glass: a sharp, bright highlight that clips.
+    let spec = SceneSpec {
+        material: "eta = 1.5\nsigma_s = 0.05\nsigma_ss = 0.15\nrho_s = 1.0\n\
+                   rho_ss = [0.05, 0.05, 0.05]\nrho_d = [0.02, 0.02, 0.02]",
+        exposure_us: 8000.0,
+        cameras: vec![[0.21, 0.0, 0.25], [0.0, 0.21, 0.25]],
+        k1: 0.0,
+        ..SceneSpec::paint_mono()
+    };
+    let (session_dir, _, poses) = make_session(dir.path(), &spec);
+    let session = open(&session_dir);
+    let (mesh, sphere) = sphere_and_board(4, 0.1, 5);
+    let out = extract(
+        &session,
+        &mesh,
+        &poses,
+        &ObserveConfig::default(),
+        &|_, _| {},
+    )
+    .unwrap();
+    let set = &out.samples;
+    for (k, view) in set.views.iter().enumerate() {
+        // The vertex whose normal is closest to the half vector carries the highlight peak.
+        let peak = set.vertices[..sphere]
+            .iter()
+            .max_by(|a, b| {
+                let cos_h = |vs: &crate::data::VertexSamples| {
+                    let g = view.geometry_at(&Point3::from(vs.position_world)).unwrap();
+                    let h = (Vector3::from(g.to_light) + Vector3::from(g.to_camera)).normalize();
+                    Vector3::from(vs.normal_world).dot(&h)
+                };
+                cos_h(a).total_cmp(&cos_h(b))
+            })
+            .unwrap();
+        assert!(
+            peak.samples.iter().all(|s| s.view as usize != k),
+            "view {k}: highlight vertex {} kept",
+            peak.vertex
+        );
+        assert!(peak.gates.saturated >= 1, "{:?}", peak.gates);
+    }
+    assert!(
+        out.report.gates.saturated >= 2 * 3,
+        "{:?}",
+        out.report.gates
+    );
+    let kept_max = set
+        .vertices
+        .iter()
+        .flat_map(|vs| &vs.samples)
+        .map(|s| s.channels[0][0] * s.normaliser)
+        .fold(0f32, f32::max);
+    assert!(f64::from(kept_max) < 2.0 * 0.98 * 4095.0);
+}

@@ -1,0 +1,259 @@
+//! The fit of a recorded session: observations from the frames, the per-vertex solve, the shape
+//! update, repeated for a few outer iterations, then the augmentation and final passes
+//! (optics.md §7.6: the paper alternates solve and Poisson reconstruction; we alternate solve
+//! and a normal-guided vertex update on the fixed connectivity, [`super::shape`]).
+//!
+//! Contract:
+//! - **Held-out views.** A deterministic `holdout_fraction` of the posed frames
+//!   ([`super::holdout::split`]) is set aside before anything else: no observation, solve,
+//!   cluster or shape step sees them. After the last iteration their observations are extracted
+//!   on the final mesh and the fitted model is scored on them ([`super::holdout::score`]).
+//! - Outer iteration k = 1…K: extract observations of the current mesh from every posed frame
+//!   ([`super::observe::extract`], visibility and shadows recomputed on the current geometry),
+//!   run step A warm-started from iteration k − 1 (same vertices: the connectivity never
+//!   changes, so results carry over by index; the mesh normal stays the centre of the normal
+//!   prior), and — except after the last iteration — move the vertices towards the refined
+//!   normals. The last iteration runs the whole pipeline
+//!   ([`super::pipeline::fit_sample_set`]: step A, and B + C when enabled).
+//! - The session is only read; nothing recorded is changed.
+//! - Deterministic for a given input on any thread count.
+
+use std::time::Instant;
+
+use ellipso_model::geometry::TriangleMesh;
+use nalgebra::Isometry3;
+
+use super::data::{GateCounts, SampleSet, VertexFit};
+use super::holdout::{HoldoutReport, score, split};
+use super::observe::{ObserveConfig, ObserveError, ObserveReport, extract, radiometry_of};
+use super::pipeline::{FitConfig, FitOutcome, fit_sample_set};
+use super::shape::{
+    ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
+};
+use super::solve::fit_all;
+use ellipso_session::reader::Session;
+
+/// Settings of a session fit.
+#[derive(Clone, Debug)]
+pub struct SessionFitConfig {
+    /// Observation extraction (gates, sampling).
+    pub observe: ObserveConfig,
+    /// The per-vertex fit.
+    pub fit: FitConfig,
+    /// Outer iterations (solve ↔ shape); 1 = no shape update.
+    pub outer_iterations: usize,
+    /// The shape update between outer iterations.
+    pub shape: ShapeConfig,
+    /// Fraction of the posed frames held out for validation (default 0.1; 0 fits all).
+    pub holdout_fraction: f64,
+}
+
+impl Default for SessionFitConfig {
+    fn default() -> Self {
+        Self {
+            observe: ObserveConfig::default(),
+            fit: FitConfig::default(),
+            outer_iterations: 2,
+            shape: ShapeConfig::default(),
+            holdout_fraction: 0.1,
+        }
+    }
+}
+
+/// Errors of a session fit.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionFitError {
+    /// Reading observations failed.
+    #[error(transparent)]
+    Observe(#[from] ObserveError),
+    /// The shape update failed.
+    #[error("shape update: {0}")]
+    Shape(#[from] ShapeError),
+    /// No posed frame.
+    #[error("no frame of the session has a pose: track poses first")]
+    NoPoses,
+    /// Not one vertex has a sample: a fit would report the prior everywhere.
+    #[error(
+        "no vertex of the mesh has a single sample, so nothing can be fitted: {}",
+        describe_empty(.0)
+    )]
+    NoSamples(Box<ObserveReport>),
+}
+
+/// Why an extraction gave no samples, in words: frames read and skipped (by reason), gates.
+fn describe_empty(r: &ObserveReport) -> String {
+    let mut reasons: std::collections::BTreeMap<&str, usize> = std::collections::BTreeMap::new();
+    for s in &r.skipped {
+        // the reason up to its first detail (frame paths differ per frame)
+        let key = s.reason.split(": ").last().unwrap_or(&s.reason);
+        *reasons.entry(key).or_insert(0) += 1;
+    }
+    let mut skipped: Vec<String> = reasons
+        .iter()
+        .take(5)
+        .map(|(k, n)| format!("{n} × {k}"))
+        .collect();
+    if reasons.len() > 5 {
+        skipped.push("…".into());
+    }
+    let g = &r.gates;
+    format!(
+        "{} of {} posed frames read{}; per (vertex, frame): {} not in view, {} occluded, {} in \
+         shadow, {} grazing, {} saturated, {} dark, {} non-finite — check that the mesh is in the \
+         boards' frame in metres and that the frames are readable",
+        r.frames_used,
+        r.frames_posed,
+        if skipped.is_empty() {
+            String::new()
+        } else {
+            format!(" ({} skipped: {})", r.skipped.len(), skipped.join("; "))
+        },
+        g.not_in_view,
+        g.occluded,
+        g.shadowed,
+        g.grazing,
+        g.saturated,
+        g.dark,
+        g.non_finite
+    )
+}
+
+/// A session fit's results.
+pub struct SessionFit {
+    /// The refined mesh (input connectivity, updated positions and normals).
+    pub mesh: TriangleMesh,
+    /// The observations of the last outer iteration.
+    pub set: SampleSet,
+    /// The last iteration's fit (steps A, B, C) with stage timings summed over iterations.
+    pub outcome: FitOutcome,
+    /// One entry per shape update.
+    pub shape_updates: Vec<ShapeUpdate>,
+    /// Gate counts of the last extraction, summed over vertices.
+    pub gates: GateCounts,
+    /// The last extraction's report (frames used and skipped, with reasons).
+    pub observe: ObserveReport,
+    /// The poses the fit used (the held-out ones excluded), by frame id.
+    pub poses_fitted: Vec<(u64, Isometry3<f64>)>,
+    /// The held-out frames' poses.
+    pub poses_held_out: Vec<(u64, Isometry3<f64>)>,
+    /// The re-render errors on the held-out frames (`None` when none were held out or none
+    /// gave samples).
+    pub holdout: Option<HoldoutReport>,
+    /// The held-out observations on the final mesh (empty when none were held out).
+    pub held_out_set: Option<SampleSet>,
+}
+
+/// Fits `mesh` to `session` seen from `poses` (frame id, `world_from_camera`).
+pub fn fit_session(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &SessionFitConfig,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SessionFit, SessionFitError> {
+    if poses.is_empty() {
+        return Err(SessionFitError::NoPoses);
+    }
+    let ids: Vec<u64> = poses.iter().map(|p| p.0).collect();
+    let held_idx = split(&ids, config.holdout_fraction);
+    let mut poses_held_out = Vec::with_capacity(held_idx.len());
+    let mut fitted = Vec::with_capacity(poses.len());
+    for (i, p) in poses.iter().enumerate() {
+        if held_idx.binary_search(&i).is_ok() {
+            poses_held_out.push(*p);
+        } else {
+            fitted.push(*p);
+        }
+    }
+    let poses = fitted.as_slice();
+    let mut mesh = mesh.clone();
+    let mut previous: Option<Vec<VertexFit>> = None;
+    let mut shape_updates = Vec::new();
+    let mut observe_s = 0.0;
+    let mut joint_s = 0.0;
+    let mut shape_s = 0.0;
+    let iterations = config.outer_iterations.max(1);
+    // (The solve starts from the previous iteration's normals through its warm start; the
+    // samples keep the mesh normal, the centre of the normal prior.)
+    let observe = |mesh: &TriangleMesh| {
+        let started = Instant::now();
+        let e = extract(session, mesh, poses, &config.observe, &|_, _| {})?;
+        if e.report.samples == 0 {
+            return Err(SessionFitError::NoSamples(Box::new(e.report)));
+        }
+        Ok::<_, SessionFitError>((e, started.elapsed().as_secs_f64()))
+    };
+    let announce = |k: usize, mesh: &TriangleMesh| {
+        format!(
+            "outer iteration {k}/{iterations}: observations from {} posed frames of {} vertices",
+            poses.len(),
+            mesh.positions().len()
+        )
+    };
+    for k in 1..iterations {
+        progress(&announce(k, &mesh));
+        let (extraction, seconds) = observe(&mesh)?;
+        let set = extraction.samples;
+        observe_s += seconds;
+        progress(&format!(
+            "outer iteration {k}/{iterations}: joint per-vertex solve"
+        ));
+        let started = Instant::now();
+        let fits = fit_all(&set, previous.as_deref(), None, &config.fit.solver);
+        joint_s += started.elapsed().as_secs_f64();
+        progress(&format!(
+            "outer iteration {k}/{iterations}: shape update from refined normals"
+        ));
+        let started = Instant::now();
+        let targets = normal_targets(&mesh, &fits, &config.shape)?;
+        let update = refine_positions(
+            &mesh,
+            &targets.normals_world,
+            &targets.confidence,
+            &config.shape,
+        )?;
+        mesh = mesh_with_positions(&mesh, update.positions.clone())?;
+        shape_updates.push(update);
+        shape_s += started.elapsed().as_secs_f64();
+        previous = Some(fits);
+    }
+    progress(&announce(iterations, &mesh));
+    let (extraction, seconds) = observe(&mesh)?;
+    let set = extraction.samples;
+    observe_s += seconds;
+    let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
+    outcome.times.observe_s = observe_s;
+    outcome.times.joint_s += joint_s;
+    outcome.times.shape_s = shape_s;
+    let mut gates = GateCounts::default();
+    for v in &set.vertices {
+        gates.add(&v.gates);
+    }
+    let (holdout, held_out_set) = if poses_held_out.is_empty() {
+        (None, None)
+    } else {
+        progress(&format!(
+            "re-rendering {} held-out frames",
+            poses_held_out.len()
+        ));
+        let held = extract(session, &mesh, &poses_held_out, &config.observe, &|_, _| {})?;
+        let full_scale = radiometry_of(session)?.full_scale_dn;
+        let report = score(&held.samples, &outcome.fits, full_scale);
+        (
+            (report.overall.samples > 0).then_some(report),
+            Some(held.samples),
+        )
+    };
+    Ok(SessionFit {
+        mesh,
+        set,
+        outcome,
+        shape_updates,
+        gates,
+        observe: extraction.report,
+        poses_fitted: fitted,
+        poses_held_out,
+        holdout,
+        held_out_set,
+    })
+}

@@ -1,0 +1,12 @@
+//! `ellipso-rig`: the driver of the physical (or simulated) rig — the trigger link to the board,
+//! the cameras, and capture orchestration with frame ↔ pulse pairing. Everything it records goes
+//! through `ellipso-session`.
+//!
+//! - [`link`]: the trigger link (serial/pty/socket), version handshake, pulse events, clock model.
+//! - [`camera`]: the camera trait, frame ids, counters; backends (simulated; aravis and V4L2
+//!   behind cargo features).
+//! - [`acquire`]: capture orchestration and frame ↔ pulse pairing.
+
+pub mod acquire;
+pub mod camera;
+pub mod link;

@@ -1,0 +1,19 @@
+//! `ellipso-vision`: what the host sees in a session's frames — AprilTag detection and board
+//! poses, pose tracking of recorded frames, camera and flash calibration, and the rig files that
+//! carry a calibration. It is the one crate (with the binary) that links the AprilTag C library.
+//!
+//! - [`pose`]: AprilTag detection and joint board pose (IPPE + LM with distortion, flip checks).
+//! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
+//! - [`process`]: the stages after capture on a recorded session (pose tracking, appended poses).
+//! - [`short_pulse_poses`]: poses for short-pulse frames of a bracketed capture that tracking
+//!   refused, from their tracked neighbours.
+//! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere
+//!   highlights.
+//! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
+
+pub mod calibrate;
+pub mod pose;
+pub mod process;
+pub mod rig_file;
+pub mod short_pulse_poses;
+pub mod track;

@@ -1,0 +1,202 @@
+//! The stages after capture, run on a recorded session (live capture and replay alike).
+//!
+//! Contract: the same session gives the same results, frame by frame, on any thread count —
+//! frames are processed independently (one [`Tracker`] per worker) and results are ordered by
+//! frame id. Nothing here changes recorded frames; results are appended to the session log as
+//! `pose` / `pose_rejected` events (by [`append_poses`]) or returned for a report.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use ellipso_model::camera::CameraModel;
+use rayon::prelude::*;
+
+use crate::track::{FramePose, TrackConfig, TrackRejection, TrackedBoard, Tracker};
+use ellipso_polar::frame::RawFrame;
+use ellipso_session::SessionError;
+use ellipso_session::events::SessionEvent;
+use ellipso_session::reader::Session;
+use ellipso_session::time::HostTimeUs;
+use ellipso_session::writer::SessionAppender;
+
+pub use ellipso_session::rig::{RigRecord, layout_of};
+
+/// Errors of the processing stages.
+#[derive(Debug, thiserror::Error)]
+pub enum ProcessError {
+    /// The session's manifest lacks what a stage needs.
+    #[error("{path}: {what}")]
+    Manifest {
+        /// The manifest.
+        path: String,
+        /// What is missing or wrong.
+        what: String,
+    },
+    /// Reading or appending to the session failed.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// The manifest's sensor section names no known layout.
+    #[error(transparent)]
+    Layout(#[from] ellipso_session::rig::LayoutError),
+}
+
+fn manifest_error(session: &Session, what: String) -> ProcessError {
+    let path = session
+        .dir
+        .join(ellipso_session::paths::MANIFEST)
+        .display()
+        .to_string();
+    ProcessError::Manifest { path, what }
+}
+
+/// The AprilTag boards recorded in a session's manifest (at least one).
+pub fn boards_of(session: &Session) -> Result<Vec<TrackedBoard>, ProcessError> {
+    let boards = session
+        .manifest
+        .boards
+        .iter()
+        .enumerate()
+        .map(|(i, b)| {
+            serde_json::from_value::<TrackedBoard>(b.clone())
+                .map_err(|e| manifest_error(session, format!("`boards[{i}]`: {e}")))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    if boards.is_empty() {
+        return Err(manifest_error(
+            session,
+            "no AprilTag boards recorded: poses cannot be tracked".into(),
+        ));
+    }
+    Ok(boards)
+}
+
+/// The camera model and boards recorded in a session's manifest.
+pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), ProcessError> {
+    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone())
+        .map_err(|e| manifest_error(session, format!("`rig` has no usable camera model: {e}")))?;
+    Ok((rig.camera, boards_of(session)?))
+}
+
+/// One frame's tracking result.
+#[derive(Debug, Clone)]
+pub struct TrackedFrame {
+    /// Frame id.
+    pub frame_id: u64,
+    /// Pose or rejection.
+    pub result: Result<FramePose, TrackRejection>,
+}
+
+/// Tracks every complete frame of `session`, in parallel, ordered by frame id.
+pub fn track_session(
+    session: &Session,
+    config: &TrackConfig,
+) -> Result<Vec<TrackedFrame>, ProcessError> {
+    track_frames(session, config, |_| true)
+}
+
+/// Complete frames of `session` with neither a `pose` nor a `pose_rejected` event: frames a
+/// tracking run never reached (it was stopped, or its appends failed on a full disk).
+pub fn untracked_frames(session: &Session) -> std::collections::BTreeSet<u64> {
+    let mut done = std::collections::BTreeSet::new();
+    for e in &session.events {
+        if let SessionEvent::Pose { frame_id, .. } | SessionEvent::PoseRejected { frame_id, .. } = e
+        {
+            done.insert(*frame_id);
+        }
+    }
+    session
+        .frames
+        .iter()
+        .filter(|f| f.complete && !done.contains(&f.frame_id))
+        .map(|f| f.frame_id)
+        .collect()
+}
+
+/// Tracks the complete frames of `session` for which `select(frame_id)` holds, in parallel,
+/// ordered by frame id.
+pub fn track_frames(
+    session: &Session,
+    config: &TrackConfig,
+    select: impl Fn(u64) -> bool,
+) -> Result<Vec<TrackedFrame>, ProcessError> {
+    let (camera, boards) = rig_of(session)?;
+    let layout = layout_of(&session.manifest)?;
+    let bit_depth = session.manifest.sensor.bit_depth;
+    let frames: Vec<_> = session
+        .frames
+        .iter()
+        .filter(|f| f.complete && select(f.frame_id))
+        .collect();
+    let results = frames
+        .par_iter()
+        .map_init(
+            || Tracker::new(camera, boards.clone(), config.clone()),
+            |tracker, entry| {
+                let result = match tracker {
+                    Err(e) => Err(TrackRejection::Frame(e.to_string())),
+                    Ok(tracker) => session
+                        .load_frame(entry)
+                        .map_err(|e| TrackRejection::Frame(e.to_string()))
+                        .and_then(|(w, h, px)| {
+                            RawFrame::new(w, h, bit_depth, layout, px)
+                                .map_err(|e| TrackRejection::Frame(e.to_string()))
+                        })
+                        .and_then(|raw| tracker.track(&raw)),
+                };
+                TrackedFrame {
+                    frame_id: entry.frame_id,
+                    result,
+                }
+            },
+        )
+        .collect();
+    Ok(results)
+}
+
+/// Appends `pose` / `pose_rejected` events for `tracked` to the session's log, one whole line
+/// per frame (a failed append leaves no partial line; frames not reached are found again by
+/// [`untracked_frames`]).
+pub fn append_poses(
+    dir: &Path,
+    tracked: &[TrackedFrame],
+    t_host_us: HostTimeUs,
+) -> Result<(), ProcessError> {
+    let mut log = SessionAppender::open(dir)?;
+    for t in tracked {
+        let event = match &t.result {
+            Ok(p) => {
+                let camera_from_world = p.world_from_camera.inverse();
+                let r = camera_from_world.rotation.scaled_axis();
+                let tr = camera_from_world.translation.vector;
+                SessionEvent::Pose {
+                    t_host_us,
+                    frame_id: t.frame_id,
+                    rotation_camera_from_world: [r.x, r.y, r.z],
+                    translation_camera_from_world_m: [tr.x, tr.y, tr.z],
+                    rms_px: p.board_pose.rms_px,
+                    tags: p.board_pose.tag_count as u32,
+                }
+            }
+            Err(reason) => SessionEvent::PoseRejected {
+                t_host_us,
+                frame_id: t.frame_id,
+                reason: reason.to_string(),
+            },
+        };
+        log.log(&event)?;
+    }
+    Ok(())
+}
+
+/// Counts of tracking outcomes: posed, and rejections by reason.
+pub fn tally(tracked: &[TrackedFrame]) -> (usize, BTreeMap<String, usize>) {
+    let mut rejected = BTreeMap::new();
+    let mut posed = 0;
+    for t in tracked {
+        match &t.result {
+            Ok(_) => posed += 1,
+            Err(r) => *rejected.entry(r.to_string()).or_insert(0) += 1,
+        }
+    }
+    (posed, rejected)
+}

@@ -1,0 +1,337 @@
+//! Pose tracking: each raw frame → the camera's pose in the world, or a typed rejection.
+//!
+//! Runs behind the recorder (on a recorded session or a replay), never on the acquisition path,
+//! so a slow detector cannot drop frames.
+//!
+//! Per frame:
+//! 1. Superpixel demosaic (no interpolation) and pick the detection image ([`DetectImage`]):
+//!    `s0` by default — on matte paper boards it has twice the signal of one analyser and gave
+//!    ~5× smaller rotation errors than `I90` or `I0` in `ellipso bench pose` (docs/pose.md).
+//!    `I90` (cross-polarised) is the choice for glossy or laminated boards, where the flash's
+//!    specular glare lives in the co-polarised `I0` and `s0`.
+//! 2. Scale to 8 bits by the 99.5th percentile (AprilTag thresholds locally; the scaling only
+//!    keeps the dynamic range) and detect tags.
+//! 3. Superpixel corners back to raw pixels: a superpixel of a `t × t` tile at integer coordinate
+//!    `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw `t·u + (t − 1)/2`.
+//! 4. Joint PnP per board over all its detected corners (IPPE + LM with distortion, flip check),
+//!    keep the board with the most corners, and express the pose in the world through that
+//!    board's `world_from_board`.
+
+use std::collections::BTreeMap;
+
+use ellipso_model::camera::CameraModel;
+use ellipso_sim::tags::PlacedBoard;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+
+use crate::pose::{
+    BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetection, TagDetector,
+    TagFamily, assemble_correspondences, estimate_board_pose,
+};
+use ellipso_polar::frame::RawFrame;
+use ellipso_polar::intensity::{IntensityPlane, intensity_plane};
+
+/// Which analyser image tags are detected on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum DetectImage {
+    /// Total intensity s0 (all four analysers): most signal; the default for matte boards.
+    #[default]
+    S0,
+    /// Cross-polarised I90: diffuse only, the flash's specular glare suppressed (glossy boards).
+    I90,
+    /// Co-polarised I0: carries the specular glare.
+    I0,
+}
+
+/// Settings of the tracker.
+#[derive(Debug, Clone, Default)]
+pub struct TrackConfig {
+    /// Detection image.
+    pub image: DetectImage,
+    /// AprilTag detector settings.
+    pub detector: DetectorConfig,
+    /// Pose estimation and rejection thresholds.
+    pub pose: PoseConfig,
+}
+
+/// A frame's pose.
+#[derive(Debug, Clone)]
+pub struct FramePose {
+    /// Camera frame → world frame.
+    pub world_from_camera: Isometry3<f64>,
+    /// Index of the board the pose came from.
+    pub board: usize,
+    /// The board pose (residuals, covariance, flip margin).
+    pub board_pose: BoardPose,
+}
+
+/// Why a frame has no pose.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TrackRejection {
+    /// No tag of any known board was detected.
+    #[error("no tag of a known board detected")]
+    NoTags,
+    /// Every board's pose was rejected; the reason of the board with most corners.
+    #[error("{0}")]
+    Pose(String),
+    /// The frame could not be processed.
+    #[error("frame not processable: {0}")]
+    Frame(String),
+}
+
+/// What tracking needs of a board — its tag corners and its place in the world — in the form a
+/// session manifest records (`boards`), so a recorded session can be tracked without its scene.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrackedBoard {
+    /// Board name, if any.
+    #[serde(default)]
+    pub name: Option<String>,
+    /// Tag family (`tag36h11`, `tag25h9`, `tag16h5`); sessions written before it was recorded
+    /// used tag36h11, the only family tracked then.
+    #[serde(default = "default_family")]
+    pub family: String,
+    /// Tag id → its four corners in the board frame, metres, AprilTag detection order.
+    pub corners_board_m: BTreeMap<u32, [[f64; 3]; 4]>,
+    /// Board origin in the world, metres.
+    pub world_from_board_translation_m: [f64; 3],
+    /// Board rotation into the world, axis-angle, radians.
+    pub world_from_board_rotation: [f64; 3],
+}
+
+fn default_family() -> String {
+    "tag36h11".into()
+}
+
+impl TrackedBoard {
+    /// The detector family of this board's tags.
+    pub fn tag_family(&self) -> Result<TagFamily, DetectError> {
+        match self.family.as_str() {
+            "tag36h11" => Ok(TagFamily::Tag36h11),
+            "tag25h9" => Ok(TagFamily::Tag25h9),
+            "tag16h5" => Ok(TagFamily::Tag16h5),
+            other => Err(DetectError::InvalidSetting {
+                name: "board tag family",
+                value: format!("'{other}' (tracked families: tag36h11, tag25h9, tag16h5)"),
+            }),
+        }
+    }
+
+    /// From a scene's placed board.
+    pub fn from_placed(placed: &PlacedBoard) -> Self {
+        let corners_board_m = placed
+            .board
+            .tags
+            .iter()
+            .map(|t| (t.id, t.corners_board_m.map(|p| [p.x, p.y, p.z])))
+            .collect();
+        let t = placed.world_from_board.translation.vector;
+        let r = placed.world_from_board.rotation.scaled_axis();
+        Self {
+            name: placed.board.name.clone(),
+            family: placed.board.family.name().to_string(),
+            corners_board_m,
+            world_from_board_translation_m: [t.x, t.y, t.z],
+            world_from_board_rotation: [r.x, r.y, r.z],
+        }
+    }
+
+    /// Board frame → world frame.
+    pub fn world_from_board(&self) -> Isometry3<f64> {
+        let [tx, ty, tz] = self.world_from_board_translation_m;
+        let [rx, ry, rz] = self.world_from_board_rotation;
+        Isometry3::from_parts(
+            Translation3::new(tx, ty, tz),
+            UnitQuaternion::from_scaled_axis(Vector3::new(rx, ry, rz)),
+        )
+    }
+}
+
+impl BoardCorners for TrackedBoard {
+    fn corners_board_m(&self, tag_id: u32) -> Option<[Point3<f64>; 4]> {
+        self.corners_board_m
+            .get(&tag_id)
+            .map(|c| c.map(|[x, y, z]| Point3::new(x, y, z)))
+    }
+}
+
+/// One AprilTag detector per tag family a set of boards uses, so every board is detected in
+/// its own family (tag36h11, tag25h9 and tag16h5 boards alike).
+pub struct FamilyDetectors {
+    detectors: Vec<(TagFamily, TagDetector)>,
+    families: Vec<TagFamily>,
+}
+
+impl FamilyDetectors {
+    /// Detectors for the families of `boards` (`config.family` is replaced per family).
+    pub fn new(boards: &[TrackedBoard], config: DetectorConfig) -> Result<Self, DetectError> {
+        let families = boards
+            .iter()
+            .map(TrackedBoard::tag_family)
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut detectors: Vec<(TagFamily, TagDetector)> = Vec::new();
+        for &family in &families {
+            if !detectors.iter().any(|(f, _)| *f == family) {
+                let detector = TagDetector::new(DetectorConfig { family, ..config })?;
+                detectors.push((family, detector));
+            }
+        }
+        Ok(Self {
+            detectors,
+            families,
+        })
+    }
+
+    /// Every family's detections in `frame` (see [`detect_frame`]).
+    pub fn detect(
+        &mut self,
+        frame: &RawFrame,
+        image: DetectImage,
+    ) -> Result<Vec<TagDetection>, TrackRejection> {
+        let mut all = Vec::new();
+        for (_, detector) in &mut self.detectors {
+            all.extend(detect_frame(detector, frame, image)?);
+        }
+        Ok(all)
+    }
+
+    /// The detections of board `index`'s family.
+    pub fn of_board(&self, detections: &[TagDetection], index: usize) -> Vec<TagDetection> {
+        let family = self.families[index];
+        detections
+            .iter()
+            .filter(|d| d.family == family)
+            .cloned()
+            .collect()
+    }
+}
+
+/// Tracks frames of one rig against a set of boards.
+pub struct Tracker {
+    camera: CameraModel,
+    boards: Vec<TrackedBoard>,
+    detectors: FamilyDetectors,
+    config: TrackConfig,
+}
+
+impl Tracker {
+    /// A tracker for `camera` (full raw resolution) and `boards`.
+    pub fn new(
+        camera: CameraModel,
+        boards: Vec<TrackedBoard>,
+        config: TrackConfig,
+    ) -> Result<Self, DetectError> {
+        let detectors = FamilyDetectors::new(&boards, config.detector)?;
+        Ok(Self {
+            camera,
+            boards,
+            detectors,
+            config,
+        })
+    }
+
+    /// The pose of one frame.
+    pub fn track(&mut self, frame: &RawFrame) -> Result<FramePose, TrackRejection> {
+        let detections = self.detectors.detect(frame, self.config.image)?;
+        let mut best: Option<(usize, usize, Result<BoardPose, String>)> = None;
+        for (i, placed) in self.boards.iter().enumerate() {
+            let assembly =
+                assemble_correspondences(&self.detectors.of_board(&detections, i), placed);
+            let n = assembly.correspondences.len();
+            if n == 0 || best.as_ref().is_some_and(|(_, m, _)| *m >= n) {
+                continue;
+            }
+            let r = estimate_board_pose(&self.camera, &assembly.correspondences, &self.config.pose)
+                .map_err(|e| e.to_string());
+            best = Some((i, n, r));
+        }
+        match best {
+            None => Err(TrackRejection::NoTags),
+            Some((_, _, Err(reason))) => Err(TrackRejection::Pose(reason)),
+            Some((board, _, Ok(board_pose))) => {
+                let world_from_board = self.boards[board].world_from_board();
+                let world_from_camera = world_from_board * board_pose.camera_from_board.inverse();
+                Ok(FramePose {
+                    world_from_camera,
+                    board,
+                    board_pose,
+                })
+            }
+        }
+    }
+}
+
+/// The detection image of a frame in linear DN (superpixel resolution, colour bands summed):
+/// `(plane, width, height)`.
+pub fn detection_plane(
+    frame: &RawFrame,
+    kind: DetectImage,
+) -> Result<(Vec<f32>, usize, usize), TrackRejection> {
+    let plane = match kind {
+        DetectImage::S0 => IntensityPlane::S0,
+        DetectImage::I90 => IntensityPlane::I90,
+        DetectImage::I0 => IntensityPlane::I0,
+    };
+    intensity_plane(frame, plane).map_err(|e| TrackRejection::Frame(e.to_string()))
+}
+
+/// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
+pub fn detection_image(
+    frame: &RawFrame,
+    kind: DetectImage,
+) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
+    let (plane, w, h) = detection_plane(frame, kind)?;
+    let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
+    sorted.sort_by(f32::total_cmp);
+    let p995 = sorted
+        .get(sorted.len().saturating_sub(1) * 995 / 1000)
+        .copied()
+        .unwrap_or(1.0);
+    // guard: an all-dark frame maps to zeros rather than dividing by ~0
+    let scale = if p995 > 1e-6 { 255.0 / p995 } else { 0.0 };
+    let gray = plane
+        .iter()
+        .map(|v| (v * scale).clamp(0.0, 255.0) as u8)
+        .collect();
+    Ok((gray, w, h, frame.layout().tile_px() as usize))
+}
+
+/// Detections with a corner closer than this to the detection image's border (detection-image
+/// pixels; outside counts as closer) are dropped. A tag cut by the border is still decoded when
+/// its bits are visible, but the quad's edge fit then runs into the frame edge: on the rendered
+/// calibration capture such corners were off by 2–27 px (`ellipso bench calibration`, docs/pose.md
+/// §3) and made whole views outliers.
+pub const BORDER_MARGIN_PX: f64 = 3.0;
+
+/// Detects tags in a raw frame; corners and centres in raw-pixel coordinates (integer-centre
+/// convention), ready for the full-resolution camera model. Tags with a corner within
+/// [`BORDER_MARGIN_PX`] of the image border are left out.
+pub fn detect_frame(
+    detector: &mut TagDetector,
+    frame: &RawFrame,
+    image: DetectImage,
+) -> Result<Vec<TagDetection>, TrackRejection> {
+    let (gray, w, h, tile) = detection_image(frame, image)?;
+    let mut detections = detector
+        .detect(&gray, w, h)
+        .map_err(|e| TrackRejection::Frame(e.to_string()))?;
+    let (max_x, max_y) = (
+        w as f64 - 1.0 - BORDER_MARGIN_PX,
+        h as f64 - 1.0 - BORDER_MARGIN_PX,
+    );
+    detections.retain(|d| {
+        d.corners_px.iter().all(|c| {
+            (BORDER_MARGIN_PX..=max_x).contains(&c[0]) && (BORDER_MARGIN_PX..=max_y).contains(&c[1])
+        })
+    });
+    let t = tile as f64;
+    let to_raw = |c: &mut [f64; 2]| {
+        c[0] = t * c[0] + (t - 1.0) / 2.0;
+        c[1] = t * c[1] + (t - 1.0) / 2.0;
+    };
+    for d in &mut detections {
+        d.corners_px.iter_mut().for_each(to_raw);
+        to_raw(&mut d.centre_px);
+    }
+    Ok(detections)
+}
