@@ -2,7 +2,7 @@
 //! shipped sphere scene (noise on) at two resolutions, for a sphere + board mesh: ms per view
 //! per 1000 vertices, samples per second, and the accounted peak memory, on 1 and 2 threads.
 //!
-//! Run: `cargo bench -p ellipso-host --bench observe`. Prints a table; no assertions.
+//! Run: `cargo bench -p ellipso-fit --bench observe`. Prints a table; no assertions.
 
 use std::path::Path;
 use std::time::Instant;

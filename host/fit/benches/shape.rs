@@ -3,7 +3,7 @@
 //! wall time per update, CG iterations and the radial-error reduction of one and two updates,
 //! plus the mesh rebuild (normals + BVH) per update.
 //!
-//! Run: `cargo bench -p ellipso-host --bench shape` (release) or add `--profile dev` for the
+//! Run: `cargo bench -p ellipso-fit --bench shape` (release) or add `--profile dev` for the
 //! test profile. Prints a table; no assertions.
 
 use std::time::Instant;

@@ -10,7 +10,7 @@
 //! The paths are measured in interleaved rounds and each is reported as the median over rounds,
 //! so a burst of load from other processes hits all of them alike; the ratio to memcpy is the
 //! figure to compare across machines. Target: superpixel ≥ 75 frames/s (USB3 line rate of the
-//! IMX250MZR at 5 MP). Run: `cargo bench -p ellipso-host --bench polar`.
+//! IMX250MZR at 5 MP). Run: `cargo bench -p ellipso-polar --bench polar`.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -2,7 +2,7 @@
 //! loopback inside a private network namespace (re-executes itself under `unshare -rn`; never
 //! touches a real interface), plus the cost of unpacking a full 2448×2048 frame to `u16`.
 //!
-//! `cargo bench -p ellipso-host --features aravis --bench gige`
+//! `cargo bench -p ellipso-rig --features aravis --bench gige`
 //!
 //! Rows: pixel format × GVSP packet size × link (`lo` unshaped, and `lo` shaped to 1 Gbit/s with
 //! `tc tbf` to model a GigE link). Prints frames per second and payload rate.

@@ -434,13 +434,34 @@ fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> a
             rgb.push(render::unit_to_u16(band.s0.data()[i] / 2.0));
         }
     }
-    let name = "s0_rgb.png";
+    let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb);
+    save_png(
+        out,
+        "s0_rgb.png",
+        buf,
+        files,
+        "s0/2 of R, G, B as 16-bit RGB",
+    )
+}
+
+/// Writes `buf` (absent: the pixels did not fill a `w × h` image) as PNG `name` under `out`
+/// and lists it in `files` with `what` — the one writer behind every picture of this command.
+fn save_png<P>(
+    out: &Path,
+    name: &str,
+    buf: Option<image::ImageBuffer<P, Vec<P::Subpixel>>>,
+    files: &mut Vec<FileEntry>,
+    what: &str,
+) -> anyhow::Result<()>
+where
+    P: image::PixelWithColorType,
+    [P::Subpixel]: image::EncodableLayout,
+{
     let path = out.join(name);
-    let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb)
-        .ok_or_else(|| anyhow!("internal: s0_rgb buffer size"))?;
+    let buf = buf.ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
     ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
-    files.push((name.into(), "s0/2 of R, G, B as 16-bit RGB".into()));
+    files.push((name.into(), what.into()));
     Ok(())
 }
 
@@ -453,13 +474,8 @@ fn save_gray16(
     files: &mut Vec<FileEntry>,
     what: &str,
 ) -> anyhow::Result<()> {
-    let path = out.join(name);
-    let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data)
-        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    ellipso_report::atomic_file::write_png(&path, &buf)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    files.push((name.into(), what.into()));
-    Ok(())
+    let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data);
+    save_png(out, name, buf, files, what)
 }
 
 fn save_gray8(
@@ -469,14 +485,14 @@ fn save_gray8(
     files: &mut Vec<FileEntry>,
     what: &str,
 ) -> anyhow::Result<()> {
-    let path = out.join(name);
     let (w, h) = (canvas.width as u32, canvas.height as u32);
-    let buf = image::GrayImage::from_raw(w, h, canvas.to_gray())
-        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    ellipso_report::atomic_file::write_png(&path, &buf)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    files.push((name.into(), what.into()));
-    Ok(())
+    save_png(
+        out,
+        name,
+        image::GrayImage::from_raw(w, h, canvas.to_gray()),
+        files,
+        what,
+    )
 }
 
 fn save_rgb8(
@@ -486,14 +502,9 @@ fn save_rgb8(
     files: &mut Vec<FileEntry>,
     what: &str,
 ) -> anyhow::Result<()> {
-    let path = out.join(name);
     let (w, h) = (canvas.width as u32, canvas.height as u32);
-    let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes())
-        .ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
-    ellipso_report::atomic_file::write_png(&path, &buf)
-        .with_context(|| format!("cannot write {}", path.display()))?;
-    files.push((name.into(), what.into()));
-    Ok(())
+    let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes());
+    save_png(out, name, buf, files, what)
 }
 
 #[cfg(test)]

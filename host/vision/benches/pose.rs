@@ -2,7 +2,7 @@
 //! refinements with distortion, covariance) for 4–16 visible tags on a 5 MP camera, plus one
 //! full calibration from 20 views.
 //!
-//! Run: `cargo bench -p ellipso-host --bench pose`. Prints a table; no assertions.
+//! Run: `cargo bench -p ellipso-vision --bench pose`. Prints a table; no assertions.
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -5,7 +5,7 @@
 //! - **Camera frame**: OpenCV — x right, y down, z forward (along the optical axis). Metres.
 //! - **Pixel coordinates**: OpenCV — the *centre* of pixel (col i, row j) is at (i, j); the image
 //!   covers [-0.5, width-0.5] × [-0.5, height-0.5]. (AprilTag puts pixel centres at i + 0.5; the
-//!   detector wrapper in `ellipso-host` converts.)
+//!   detector wrapper in `ellipso-vision` converts.)
 //! - **Poses** are [`Pose`] = `Isometry3<f64>` named `b_from_a` (`camera_from_board` maps a
 //!   board-frame point into the camera frame), so chains read right to left.
 //! - **Lens model** (OpenCV `calib3d`, Brown 1966 / Conrady 1919): with normalised coordinates

@@ -456,7 +456,7 @@ proptest! {
 }
 
 /// A fixed sweep so the numbers in docs/reliability.md are reproducible:
-/// `cargo test -p ellipso-host --lib pairing_sweep -- --nocapture`.
+/// `cargo test -p ellipso-rig --lib pairing_sweep -- --nocapture`.
 #[test]
 fn pairing_sweep() {
     let mut rows = Vec::new();
