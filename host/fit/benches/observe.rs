@@ -23,7 +23,7 @@ const VIEWS: usize = 8;
 
 /// Renders the first `VIEWS` poses of the sphere scene at `resolution` into a session.
 fn session(dir: &Path, resolution: [u32; 2]) -> Vec<(u64, Isometry3<f64>)> {
-    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/sphere.toml");
+    let scene_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/sphere.toml");
     let scene = Scene::load(&scene_path).expect("sphere scene");
     let options = RenderOptions {
         supersampling: 1,

@@ -120,7 +120,7 @@ fn case(scene: &Scene, view_count: usize) -> Case {
 }
 
 fn main() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/multi_material.toml");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/multi_material.toml");
     let scene = Scene::load(&path).expect("multi_material scene loads");
     for view_count in [77, 154] {
         let c = case(&scene, view_count);

@@ -325,7 +325,7 @@ mod tests {
     }
 
     fn good() -> String {
-        let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/boards/base_a4.toml");
+        let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
         format!(
             r#"
 [trigger]

@@ -59,7 +59,7 @@ impl SceneSpec {
 /// Renders `spec` into a new session under `dir`; returns the session directory, the scene
 /// and the truth poses `(frame id, world_from_camera)` (frame ids start at 100).
 pub fn make_session(dir: &Path, spec: &SceneSpec) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
-    let boards = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/boards/base_a4.toml");
+    let boards = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
     let poses: String = spec
         .cameras
         .iter()

@@ -7,7 +7,7 @@ use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
 
 fn sphere_scene_path() -> std::path::PathBuf {
-    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/sphere.toml")
+    std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/sphere.toml")
 }
 
 fn sphere_scene() -> Scene {
