@@ -15,6 +15,8 @@
 //!
 //! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, augmentation, shape).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit).
+//! - [`mesh`]: the object's mesh carved from the posed frames (board-consistency visual hull),
+//!   mesh distances, and the COLMAP export.
 
 pub mod acquire;
 pub mod calibrate;
@@ -23,6 +25,7 @@ pub mod cli;
 pub mod export;
 pub mod fit;
 pub mod link;
+pub mod mesh;
 pub mod polar;
 pub mod pose;
 pub mod process;

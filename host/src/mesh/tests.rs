@@ -1,0 +1,252 @@
+//! Tests of the carving on small sessions rendered by the simulator (low resolution, a ring of
+//! explicit views), of each bad input, and of the COLMAP files.
+
+use std::path::{Path, PathBuf};
+
+use ellipso_sim::geometry::TriangleMesh;
+use ellipso_sim::geometry::procedural::icosphere;
+use ellipso_sim::render::{RenderOptions, Renderer};
+use ellipso_sim::scene::Scene;
+use nalgebra::{Isometry3, Point3};
+
+use super::distance::mesh_distance;
+use super::halfedge::HalfEdgeMesh;
+use super::{MeshConfig, MeshError, build_mesh};
+use crate::link::time::HostTimeUs;
+use crate::process::RigRecord;
+use crate::session::manifest::{Manifest, SensorInfo, SessionSource};
+use crate::session::reader::{self, Session};
+use crate::session::writer::{FrameRecord, SessionWriter};
+
+/// A white-ish matte material: close to the board's white paper (albedo 0.85), the case a naive
+/// "looks like the board" test gets wrong.
+pub const WHITE: &str = "eta = 1.5\nsigma_s = 0.3\nsigma_ss = 0.45\nrho_s = 0.2\n\
+                         rho_ss = [0.02, 0.02, 0.02]\nrho_d = [0.7, 0.7, 0.7]";
+
+/// Sphere objects `(centre, radius)` in a scene with `views` cameras on two rings around
+/// `(0, 0, 0.03)` at 0.32 m, rendered at `width × height` into a new session under `dir`.
+/// Returns the session directory, the scene and the true poses.
+pub fn render_session(
+    dir: &Path,
+    spheres: &[([f64; 3], f64)],
+    views: usize,
+    width: u32,
+    height: u32,
+) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
+    let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../sim/boards/base_a4.toml");
+    let objects: String = spheres
+        .iter()
+        .enumerate()
+        .map(|(i, (c, r))| {
+            format!(
+                "[[objects]]\nname = \"s{i}\"\nshape = \"sphere\"\nradius_m = {r}\n\
+                 pose = {{ translation_m = [{}, {}, {}] }}\nmaterial = \"white\"\n",
+                c[0], c[1], c[2]
+            )
+        })
+        .collect();
+    let poses: String = (0..views)
+        .map(|k| {
+            let az = k as f64 * std::f64::consts::TAU / views as f64 + 0.3;
+            let el = if k % 2 == 0 { 30f64 } else { 55f64 }.to_radians();
+            let d = 0.32;
+            format!(
+                "[[capture.poses]]\nposition_m = [{}, {}, {}]\nlook_at_m = [0.0, 0.0, 0.03]\n",
+                d * el.cos() * az.cos(),
+                d * el.cos() * az.sin(),
+                0.03 + d * el.sin()
+            )
+        })
+        .collect();
+    let f = 1.9 * f64::from(width);
+    let text = format!(
+        "seed = 5\nname = \"mesh_test\"\n[materials.white]\n{WHITE}\n{objects}\
+         [[boards]]\nfile = \"{board}\"\npose = {{}}\n\
+         [rig.camera]\nresolution_px = [{width}, {height}]\nfx_px = {f}\nfy_px = {f}\n\
+         cx_px = {cx}\ncy_px = {cy}\nsensor = \"mono_polar\"\nbit_depth = 12\nexposure_us = 2500.0\n\
+         [rig.flash]\noffset_m = [0.0, -0.03, 0.0]\n\
+         [capture]\npath = \"explicit\"\n{poses}\n\
+         [effects]\nshot_noise = {{}}\nread_noise = {{ sigma_e = 2.3 }}\nquantisation = {{}}\nsaturation = {{}}\n",
+        board = board.display(),
+        cx = f64::from(width) / 2.0 - 0.5,
+        cy = f64::from(height) / 2.0 - 0.5,
+    );
+    std::fs::create_dir_all(dir).unwrap();
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, text).unwrap();
+    let scene = Scene::load(&scene_path).unwrap();
+    let renderer = Renderer::new(
+        &scene,
+        RenderOptions {
+            supersampling: 1,
+            ..RenderOptions::default()
+        },
+    )
+    .unwrap();
+    let camera = *renderer.camera();
+    let mut manifest = Manifest::new(
+        SessionSource::Simulator {
+            scene: scene_path.display().to_string(),
+            seed: scene.seed,
+        },
+        SensorInfo {
+            layout: "mono_polar".into(),
+            width: camera.width,
+            height: camera.height,
+            bit_depth: 12,
+        },
+        0,
+    );
+    manifest.rig = serde_json::to_value(RigRecord {
+        camera,
+        flash: serde_json::to_value(&scene.rig.flash).unwrap(),
+    })
+    .unwrap();
+    manifest.boards = scene
+        .boards
+        .iter()
+        .map(|b| serde_json::to_value(crate::track::TrackedBoard::from_placed(b)).unwrap())
+        .collect();
+    let session_dir = dir.join("session");
+    let mut writer = SessionWriter::create(&session_dir, manifest).unwrap();
+    let mut poses = Vec::new();
+    for k in 0..renderer.frame_count() {
+        let frame = renderer.render_frame(k).unwrap();
+        let frame_id = 100 + k as u64;
+        writer
+            .write_frame(FrameRecord {
+                t_host_us: HostTimeUs(k as u64 * 1000),
+                frame_id,
+                t_camera_ns: None,
+                exposure_us: scene.rig.camera.exposure_us as u32,
+                gain_db: scene.rig.camera.gain_db as f32,
+                width: frame.width,
+                height: frame.height,
+                pixels: &frame.raw(),
+                flagged: None,
+            })
+            .unwrap();
+        poses.push((frame_id, scene.camera_poses[k].world_from_camera));
+    }
+    writer.finish(HostTimeUs(1_000_000), "completed").unwrap();
+    (session_dir, scene, poses)
+}
+
+fn open(dir: &Path) -> Session {
+    reader::open(dir).unwrap()
+}
+
+fn sphere_mesh(centre: [f64; 3], radius: f64) -> TriangleMesh {
+    let (dirs, tris) = icosphere(5);
+    let pos = dirs
+        .iter()
+        .map(|d| Point3::from(centre) + d.into_inner() * radius)
+        .collect();
+    TriangleMesh::new(pos, None, None, tris).unwrap()
+}
+
+fn small_config() -> MeshConfig {
+    let mut c = MeshConfig {
+        fine_cells: 90,
+        ..MeshConfig::default()
+    };
+    c.remesh.target_vertices = 600;
+    c
+}
+
+#[test]
+fn carves_a_white_sphere_on_white_paper_into_a_closed_mesh_near_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (centre, radius) = ([0.0, 0.0, 0.03], 0.03);
+    let (dir, _, poses) = render_session(tmp.path(), &[(centre, radius)], 16, 480, 384);
+    let session = open(&dir);
+    let config = small_config();
+    let result = build_mesh(&session, &poses, &config, &mut |_| {}).unwrap();
+    let r = &result.report;
+    assert_eq!(r.frames_used, 16);
+    assert!(r.texels_learned > 0.5, "{r:?}");
+    // closed 2-manifold, near the target size
+    let he = HalfEdgeMesh::new(
+        result.mesh.positions().iter().map(|p| p.coords).collect(),
+        result.mesh.triangles(),
+    );
+    assert!(he.is_ok(), "not a closed manifold: {he:?}");
+    assert!((r.vertices as f64 / 600.0 - 1.0).abs() < 0.2, "{} vertices", r.vertices);
+    // near the truth: the pixel footprint here is ~0.7 mm, 16 views leave the hull's corners
+    let d = mesh_distance(&result.mesh, &sphere_mesh(centre, radius), 4000, 1);
+    println!("16 views 480×384: {d:?}, report {r:?}");
+    assert!(d.chamfer_m < 1.5e-3, "{d:?}");
+    assert!(r.volume_m3 > 0.0);
+    // every vertex on or above the board
+    assert!(result.mesh.positions().iter().all(|p| p.z >= -1e-9));
+
+    // the naive test — anything within 60 % of the board's value counts as board — carves
+    // into the white sphere: its volume or its distance to the truth gets much worse
+    let mut naive = config.clone();
+    naive.appearance.tolerance_rel = 0.6;
+    naive.appearance.tolerance_polarisation = 1.0;
+    match build_mesh(&session, &poses, &naive, &mut |_| {}) {
+        Ok(bad) => {
+            let dn = mesh_distance(&bad.mesh, &sphere_mesh(centre, radius), 4000, 1);
+            println!("naive: {dn:?}, volume {}", bad.report.volume_m3);
+            assert!(dn.chamfer_m > 1.5 * d.chamfer_m, "{dn:?} vs {d:?}");
+        }
+        Err(e) => println!("naive: {e}"),
+    }
+}
+
+#[test]
+fn too_few_posed_frames_is_an_error_naming_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 4, 160, 128);
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses[..3], &MeshConfig::default(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, MeshError::TooFewPosedFrames { usable: 3, .. }), "{text}");
+    assert!(text.contains("100, 101, 102"), "{text}");
+    // a pose of a frame that is not in the session is named with its reason
+    let mut more = poses.clone();
+    more.push((999, poses[0].1));
+    let e = build_mesh(&session, &more, &MeshConfig::default(), &mut |_| {}).unwrap_err();
+    assert!(e.to_string().contains("999 (no frame file in the session)"), "{e}");
+}
+
+#[test]
+fn an_object_off_the_board_is_an_error_naming_the_face_and_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    // the base board's tags span x ±0.1335 m: a sphere at x = 0.12 reaches past it
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.12, 0.0, 0.03], 0.03)], 12, 320, 256);
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, MeshError::ObjectOffBoard { .. }), "{text}");
+    assert!(text.contains("+x"), "{text}");
+    assert!(text.contains("frames 1"), "{text}");
+}
+
+#[test]
+fn a_bare_board_is_an_empty_hull() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[], 12, 320, 256);
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    assert!(matches!(e, MeshError::HullEmpty { views: 12, .. }), "{e}");
+    assert!(e.to_string().contains("100, 101"), "{e}");
+}
+
+#[test]
+fn two_objects_are_a_disconnected_hull() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(
+        tmp.path(),
+        &[([-0.05, 0.0, 0.02], 0.02), ([0.05, 0.0, 0.02], 0.02)],
+        12,
+        320,
+        256,
+    );
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, MeshError::HullDisconnected { .. }), "{text}");
+    assert!(text.contains("frames 10"), "{text}");
+}
