@@ -14,7 +14,11 @@
 //!   a few hundredths of a millimetre with 100+ views; docs/mesh.md). With k = 1 this is the
 //!   classic visual hull's distance bound.
 //! - Nodes seen by fewer than k views cannot be carved by votes; they are reported and counted
-//!   as outside (carved), so a poorly covered corner of the box never becomes an object.
+//!   as outside (carved), so a poorly covered corner of the box never becomes an object. So
+//!   are nodes that are not carved but that fewer than k views, or fewer than half of the views
+//!   that see them, see *something other than the board* through (pixels that disagree with a
+//!   learned texel): where views show unknown board (beyond the learned region, blurred tag
+//!   edges), there is no evidence of an object either. This rule runs on the coarse grid only.
 //! - Views stream past: only the k largest values per node are kept (`k × 4` bytes per node),
 //!   updated in parallel over nodes in view order, so results do not depend on the thread count.
 
@@ -89,6 +93,7 @@ pub struct TopK {
     k: usize,
     values: Vec<f32>,
     seen: Vec<u16>,
+    solid: Vec<u16>,
 }
 
 impl TopK {
@@ -99,12 +104,18 @@ impl TopK {
             k,
             values: vec![f32::NEG_INFINITY; nodes * k],
             seen: vec![0; nodes],
+            solid: vec![0; nodes],
         }
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.values.len() * 4 + self.seen.len() * 2
+        self.values.len() * 4 + self.seen.len() * 4
+    }
+
+    /// Views in which a node projects onto a pixel that disagrees with the board.
+    pub fn solid(&self, node: usize) -> usize {
+        self.solid[node] as usize
     }
 
     /// The k-th largest value of a node, `None` when fewer than k views saw it.
@@ -222,9 +233,10 @@ pub fn vote(
     top.values
         .par_chunks_mut(chunk * k)
         .zip(top.seen.par_chunks_mut(chunk))
+        .zip(top.solid.par_chunks_mut(chunk))
         .enumerate()
-        .for_each(|(c, (values, seen))| {
-            for (o, seen) in seen.iter_mut().enumerate() {
+        .for_each(|(c, ((values, seen), solid))| {
+            for (o, (seen, solid)) in seen.iter_mut().zip(solid.iter_mut()).enumerate() {
                 let node = c * chunk + o;
                 if active.is_some_and(|a| !a[node]) {
                     continue;
@@ -242,6 +254,9 @@ pub fn vote(
                     let Some(s) = voter.distance.sample(u, v) else {
                         continue;
                     };
+                    if voter.distance.disagrees_at(u, v) {
+                        *solid = solid.saturating_add(1);
+                    }
                     let metres = (f64::from(s) * pc.z / f_sp) as f32;
                     push(
                         &mut values[o * k..(o + 1) * k],
@@ -253,14 +268,17 @@ pub fn vote(
         });
 }
 
-/// The field of a carving: per node the k-th largest vote, `+truncation` where fewer than k
-/// views saw it; and how many such nodes there were.
+/// The field of a carving: per node the k-th largest vote; `+truncation` where fewer than k
+/// views saw it, or where it is not carved but fewer than k views — and fewer than half of
+/// those that saw it — saw something other than the board through it (no evidence of an
+/// object: the region beyond the learned board, residue at tag edges); and how many such nodes
+/// there were.
 pub fn field(top: &TopK, truncation_m: f64) -> (Vec<f32>, usize) {
     let mut unseen = 0;
     let values = (0..top.seen.len())
         .map(|n| match top.kth(n) {
-            Some(v) => v,
-            None => {
+            Some(v) if v >= 0.0 || top.solid(n) >= top.k.max(top.seen(n) / 2) => v,
+            _ => {
                 unseen += 1;
                 truncation_m as f32
             }

@@ -109,41 +109,45 @@ pub fn marching_tetrahedra(grid: &Grid, field: &[f32], outside: f32) -> Surface 
                             (surface.positions.len() - 1) as u32
                         })
                     };
-                    let mut tris: Vec<[u32; 3]> = Vec::with_capacity(2);
+                    // triangles as crossed edges; oriented on the edges' midpoints, which never
+                    // make a degenerate triangle (a crossing at a node would)
+                    let mut tris: Vec<[(usize, usize); 3]> = Vec::with_capacity(2);
                     match (neg.len(), pos.len()) {
                         (1, 3) => tris.push([
-                            vertex(neg[0], pos[0]),
-                            vertex(neg[0], pos[1]),
-                            vertex(neg[0], pos[2]),
+                            (neg[0], pos[0]),
+                            (neg[0], pos[1]),
+                            (neg[0], pos[2]),
                         ]),
                         (3, 1) => tris.push([
-                            vertex(neg[0], pos[0]),
-                            vertex(neg[1], pos[0]),
-                            vertex(neg[2], pos[0]),
+                            (neg[0], pos[0]),
+                            (neg[1], pos[0]),
+                            (neg[2], pos[0]),
                         ]),
                         _ => {
                             // quad: n0p0, n0p1, n1p1, n1p0 around the cut
                             let q = [
-                                vertex(neg[0], pos[0]),
-                                vertex(neg[0], pos[1]),
-                                vertex(neg[1], pos[1]),
-                                vertex(neg[1], pos[0]),
+                                (neg[0], pos[0]),
+                                (neg[0], pos[1]),
+                                (neg[1], pos[1]),
+                                (neg[1], pos[0]),
                             ];
                             tris.push([q[0], q[1], q[2]]);
                             tris.push([q[0], q[2], q[3]]);
                         }
                     }
-                    let (pc, nc) = (corner(pos[0]), corner(neg[0]));
-                    let outward = point(pc.0, pc.1, pc.2) - point(nc.0, nc.1, nc.2);
-                    for mut t in tris {
-                        let [a, b, c] = t.map(|v| surface.positions[v as usize]);
+                    let at = |c: usize| {
+                        let (a, b, d) = corner(c);
+                        point(a, b, d)
+                    };
+                    let outward = at(pos[0]) - at(neg[0]);
+                    for mut edges in tris {
+                        let [a, b, c] = edges.map(|(x, y)| nalgebra::center(&at(x), &at(y)));
                         let normal: Vector3<f64> = (b - a).cross(&(c - a));
                         if normal.dot(&outward) < 0.0 {
-                            t.swap(1, 2);
+                            edges.swap(1, 2);
                         }
-                        if t[0] != t[1] && t[1] != t[2] && t[0] != t[2] {
-                            surface.triangles.push(t);
-                        }
+                        let t = edges.map(|(x, y)| vertex(x, y));
+                        surface.triangles.push(t);
                     }
                 }
             }

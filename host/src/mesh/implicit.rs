@@ -104,12 +104,13 @@ mod tests {
     #[test]
     fn projects_onto_a_sphere_field_and_onto_the_board() {
         let grid = Grid::covering(Point3::new(-0.05, -0.05, -0.005), Point3::new(0.05, 0.05, 0.08), 0.002);
-        let centre = Vector3::new(0.0, 0.0, 0.03);
+        // a sphere cut by the board: its field is negative just below the contact
+        let centre = Vector3::new(0.0, 0.0, 0.02);
         let field: Vec<f32> = (0..grid.len())
             .map(|n| ((grid.point(grid.ijk(n)).coords - centre).norm() - 0.03) as f32)
             .collect();
         let s = Implicit::new(&grid, &field, 1.0);
-        let p = s.project(centre + Vector3::new(0.031, 0.004, 0.01));
+        let p = s.project(centre + Vector3::new(0.031, 0.004, 0.005));
         assert!(((p - centre).norm() - 0.03).abs() < 2e-5, "{}", (p - centre).norm());
         // the gradient of a distance field is a unit vector
         let (_, g) = s.value(centre + Vector3::new(0.0, 0.02, 0.0));

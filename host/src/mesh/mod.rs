@@ -27,6 +27,7 @@ pub mod appearance;
 pub mod carve;
 pub mod colmap;
 pub mod components;
+pub mod debug;
 pub mod distance;
 pub mod error;
 pub mod extract;
@@ -66,6 +67,12 @@ pub struct MeshConfig {
     pub min_fine_spacing_m: f64,
     /// Board islands smaller than this (superpixels) do not carve.
     pub min_island_px: usize,
+    /// Enclosed board islands (not reaching the image border) with less than this fraction of a
+    /// view's board pixels do not carve.
+    pub max_enclosed_board: f64,
+    /// Parts lower than this many coarse grid spacings are board-level residue (tag edges,
+    /// glints), not objects: dropped.
+    pub min_part_layers: usize,
     /// Frames read at once.
     pub frames_in_flight: usize,
     /// Worker threads (`None`: rayon's global pool).
@@ -73,6 +80,10 @@ pub struct MeshConfig {
     /// A second part with at least this fraction of the main part's volume is an error; smaller
     /// ones are dropped and counted.
     pub max_second_part: f64,
+    /// Where to write diagnostic pictures (each view's board pixels, slices of the coarse and
+    /// fine fields), if anywhere.
+    #[serde(skip)]
+    pub debug_dir: Option<std::path::PathBuf>,
 }
 
 impl Default for MeshConfig {
@@ -86,9 +97,12 @@ impl Default for MeshConfig {
             fine_cells: 140,
             min_fine_spacing_m: 2e-4,
             min_island_px: 12,
+            max_enclosed_board: 0.1,
+            min_part_layers: 3,
             frames_in_flight: 4,
             threads: None,
             max_second_part: 0.02,
+            debug_dir: None,
         }
     }
 }

@@ -255,10 +255,27 @@ fn stream<T: Send>(
     }
 }
 
+/// 1.5 × the median length of a superpixel's footprint on the board (along the slope, where it
+/// is longest), so every texel is hit by a pixel of most views that see it.
+fn texel_from_footprint(setup: &Setup<'_>) -> f64 {
+    let f = setup.camera.intrinsics.fx.min(setup.camera.intrinsics.fy) / setup.rays.tile as f64;
+    let centre = nalgebra::center(&setup.volume.min_m, &setup.volume.max_m);
+    let mut lengths: Vec<f64> = setup
+        .views
+        .iter()
+        .map(|v| {
+            let d = (v.centre - Point3::new(centre.x, centre.y, 0.0)).norm();
+            // sin(elevation) ≥ 0.1: a grazing view's footprint is unbounded
+            d / f / (v.centre.z / d).max(0.1)
+        })
+        .collect();
+    1.5 * crate::report::percentile(&mut lengths, 0.5)
+}
+
 fn learn_board(setup: &Setup<'_>, config: &MeshConfig, report: &mut MeshReport) -> Board {
     let (lo, hi) = texel_region(setup);
     let a = &config.appearance;
-    let grid = TexelGrid::covering(lo, hi, a.min_texel_m, a.max_texels);
+    let grid = TexelGrid::covering(lo, hi, a.min_texel_m.max(texel_from_footprint(setup)), a.max_texels);
     let mut reservoirs = Reservoirs::new(grid, a.reservoir);
     let bands = match setup.layout {
         ellipso_sim::mosaic::SensorLayout::MonoPolar => 1,
@@ -277,6 +294,10 @@ fn learn_board(setup: &Setup<'_>, config: &MeshConfig, report: &mut MeshReport) 
     });
     report.peak_bytes = report.peak_bytes.max((reservoirs.bytes() + held) as u64);
     let board = reservoirs.learn(&rule, a.min_support);
+    if let Some(dir) = &config.debug_dir {
+        let _ = std::fs::create_dir_all(dir);
+        let _ = super::debug::write_board(dir, &board);
+    }
     report.texel_m = grid.texel_m;
     report.texels = grid.len();
     report.texels_learned = board.learned as f64 / grid.len().max(1) as f64;
@@ -304,10 +325,17 @@ fn silhouettes(
             image,
             setup.floor_dn,
             config.min_island_px,
+            config.max_enclosed_board,
         )
     };
     let mut out = Vec::new();
     stream(setup, config, report, &each, &mut |i, s| out.push((i, s)));
+    if let Some(dir) = &config.debug_dir {
+        let _ = std::fs::create_dir_all(dir);
+        for (_, s) in &out {
+            let _ = super::debug::write_silhouette(dir, s);
+        }
+    }
     let mut fractions: Vec<f64> = out
         .iter()
         .map(|(_, s)| s.board_px as f64 / (s.width * s.height).max(1) as f64)
@@ -378,8 +406,17 @@ fn coarse_pass(
     drop(top);
     report.nodes_unseen = unseen;
     report.coarse = Some(grid);
+    if let Some(dir) = &config.debug_dir {
+        let _ = super::debug::write_slices(dir, "coarse", &grid, &field, truncation as f32, 6);
+    }
     let occupied: Vec<bool> = field.iter().map(|v| *v < 0.0).collect();
-    let (labels, parts) = components::label(&grid, &occupied);
+    let (labels, all_parts) = components::label(&grid, &occupied);
+    // parts that do not rise above the first layers are board-level residue
+    let (parts, residue): (Vec<Part>, Vec<Part>) = all_parts
+        .into_iter()
+        .partition(|p| p.max[2] + 1 >= config.min_part_layers.max(1));
+    report.parts_dropped = residue.len();
+    report.parts_dropped_m3 = residue.iter().map(|p| p.volume_m3(&grid)).sum();
     let Some(main) = parts.first().cloned() else {
         let ids: Vec<u64> = silhouettes.iter().map(|(i, _)| setup.views[*i].frame_id).collect();
         return Err(MeshError::HullEmpty {
@@ -432,9 +469,9 @@ fn coarse_pass(
             frames: frame_list(&frames_seeing(setup, silhouettes, components::centroid(second)), 10),
         });
     }
-    report.parts_dropped = parts.len() - 1;
-    report.parts_dropped_m3 = parts[1..].iter().map(|p| p.volume_m3(&grid)).sum();
-    components::keep_only(&grid, &mut field, &labels, 0, truncation as f32, -truncation as f32);
+    report.parts_dropped += parts.len() - 1;
+    report.parts_dropped_m3 += parts[1..].iter().map(|p| p.volume_m3(&grid)).sum::<f64>();
+    components::keep_only(&grid, &mut field, &labels, main.label, truncation as f32, -truncation as f32);
     Ok((grid, field, main))
 }
 
@@ -469,6 +506,9 @@ fn fine_pass(
     let mut field: Vec<f32> = (0..grid.len())
         .map(|n| {
             let z = grid.point(grid.ijk(n)).z;
+            // the fine pass is near the object, where the coarse pass found evidence of it:
+            // the k-th vote alone decides (no solid-evidence rule, which white-on-white views
+            // would riddle with holes)
             let v = if active[n] {
                 top.kth(n).unwrap_or(tau)
             } else if coarse_value[n] < 0.0 {
@@ -482,6 +522,9 @@ fn fine_pass(
         .collect();
     drop(top);
     report.fine = Some(grid);
+    if let Some(dir) = &config.debug_dir {
+        let _ = super::debug::write_slices(dir, "fine", &grid, &field, tau, 8);
+    }
     let occupied: Vec<bool> = field.iter().map(|v| *v < 0.0).collect();
     let (labels, parts) = components::label(&grid, &occupied);
     if !parts.is_empty() {

@@ -3,12 +3,19 @@
 //!
 //! Contract:
 //! - A pixel is *board* when its ray meets a learned texel and agrees with it
-//!   (`appearance::Agreement`); a pixel that disagrees, whose texel is unknown, that is
-//!   saturated or whose ray misses the board plane is *not board*. Only board pixels carve.
-//! - Board islands smaller than `min_island_px` (4-connected) are made not-board: a few pixels
-//!   of an object that happen to match the board behind them (a white object in front of white
-//!   paper, at one distance and tilt) form small patches; the board around an object is one
-//!   large region.
+//!   (`appearance::Agreement`); where its own texel is unknown, when it agrees with one of the
+//!   learned texels around it. A pixel that disagrees, whose texel and neighbours are unknown,
+//!   that is saturated or whose ray misses the board plane is *not board*. Only board pixels
+//!   carve.
+//! - Pixels that disagree are kept as a second mask: a voxel is solid only where views see
+//!   something other than the board through it, not merely no board (`carve`).
+//! - Board islands are made not-board (4-connected): those smaller than `min_island_px`, and
+//!   those *enclosed* (not reaching the image border) with less than `max_enclosed_fraction` of
+//!   the view's board pixels. Pixels of an object that happen to match the board behind them
+//!   (a white object in front of white paper, where its shading and distance happen to equal
+//!   the paper's) form patches inside the object's silhouette, ringed by its dark rim; the board
+//!   around an object is one large region reaching the image border. The price: board seen
+//!   through a small hole in the object (a mug's handle) does not carve.
 //! - [`SignedDistance`]: Euclidean distance transform (Felzenszwalb & Huttenlocher, "Distance
 //!   Transforms of Sampled Functions", Theory of Computing 8, 2012), exact, in pixels:
 //!   `d − ½` to the nearest not-board pixel for board pixels (> 0), `−(d − ½)` to the nearest
@@ -16,7 +23,7 @@
 //!   outside the image or the crop count as not board; values within `margin` px of a crop
 //!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
 
-use super::appearance::{Agreement, Board, pixel_sample};
+use super::appearance::{Agreement, Board, TexelGrid, pixel_sample};
 use super::frames::{FeatureImage, RayTable, View};
 
 /// A view's board pixels as a bit mask, with counts.
@@ -29,6 +36,8 @@ pub struct Silhouette {
     /// Rows.
     pub height: usize,
     bits: Vec<u64>,
+    /// Pixels that disagree with the learned board (they show something else: the object).
+    disagree: Vec<u64>,
     /// Board pixels.
     pub board_px: usize,
     /// Pixels that disagree with a learned texel.
@@ -47,6 +56,15 @@ impl Silhouette {
         self.bits[k / 64] >> (k % 64) & 1 == 1
     }
 
+    /// Whether pixel `(x, y)` disagrees with the learned board (false outside the image).
+    pub fn disagrees(&self, x: isize, y: isize) -> bool {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return false;
+        }
+        let k = y as usize * self.width + x as usize;
+        self.disagree[k / 64] >> (k % 64) & 1 == 1
+    }
+
     fn set(&mut self, k: usize, on: bool) {
         if on {
             self.bits[k / 64] |= 1 << (k % 64);
@@ -57,7 +75,7 @@ impl Silhouette {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.bits.len() * 8
+        (self.bits.len() + self.disagree.len()) * 8
     }
 }
 
@@ -70,6 +88,7 @@ pub fn classify(
     image: &FeatureImage,
     floor_dn: f64,
     min_island_px: usize,
+    max_enclosed_fraction: f64,
 ) -> Silhouette {
     // The caller checks that the image and the ray table have the same size.
     let (w, h) = (image.width, image.height);
@@ -78,6 +97,7 @@ pub fn classify(
         width: w,
         height: h,
         bits: vec![0; (w * h).div_ceil(64)],
+        disagree: vec![0; (w * h).div_ceil(64)],
         board_px: 0,
         disagree_px: 0,
         removed_island_px: 0,
@@ -87,25 +107,49 @@ pub fn classify(
         else {
             continue;
         };
-        match &board.texels[texel] {
-            Some(learned) if rule.agree(&sample, learned) => {
+        let verdict = match &board.texels[texel] {
+            Some(learned) => Some(rule.agree(&sample, learned)),
+            // an unknown texel: its learned neighbours speak for it (texels far from the
+            // cameras are hit by fewer pixels than texels)
+            None => neighbours(&board.grid, texel)
+                .filter_map(|n| board.texels[n].as_ref())
+                .fold(None, |v, learned| {
+                    Some(v.unwrap_or(false) || rule.agree(&sample, learned))
+                }),
+        };
+        match verdict {
+            Some(true) => {
                 s.set(k, true);
                 s.board_px += 1;
             }
-            Some(_) => s.disagree_px += 1,
+            Some(false) => {
+                s.disagree[k / 64] |= 1 << (k % 64);
+                s.disagree_px += 1;
+            }
             None => {}
         }
     }
-    remove_small_islands(&mut s, min_island_px);
+    remove_islands(&mut s, min_island_px, max_enclosed_fraction);
     s
 }
 
-/// Makes board islands smaller than `min_px` not-board (4-connected components).
-fn remove_small_islands(s: &mut Silhouette, min_px: usize) {
-    if min_px <= 1 {
-        return;
-    }
+/// The 8 neighbours of a texel inside the grid.
+fn neighbours(grid: &TexelGrid, texel: usize) -> impl Iterator<Item = usize> + '_ {
+    let (i, j) = ((texel % grid.nx) as isize, (texel / grid.nx) as isize);
+    (-1..=1)
+        .flat_map(move |dj| (-1..=1).map(move |di| (i + di, j + dj)))
+        .filter(move |&(x, y)| {
+            (x, y) != (i, j) && x >= 0 && y >= 0 && x < grid.nx as isize && y < grid.ny as isize
+        })
+        .map(move |(x, y)| y as usize * grid.nx + x as usize)
+}
+
+/// Makes board islands not-board (4-connected components): those smaller than `min_px`, and
+/// those that do not reach the image border and hold less than `max_enclosed_fraction` of the
+/// view's board pixels.
+fn remove_islands(s: &mut Silhouette, min_px: usize, max_enclosed_fraction: f64) {
     let (w, h) = (s.width, s.height);
+    let enclosed_limit = (max_enclosed_fraction * s.board_px as f64) as usize;
     let mut visited = vec![false; w * h];
     let mut stack = Vec::new();
     let mut component = Vec::new();
@@ -116,9 +160,11 @@ fn remove_small_islands(s: &mut Silhouette, min_px: usize) {
         component.clear();
         stack.push(start);
         visited[start] = true;
+        let mut border = false;
         while let Some(k) = stack.pop() {
             component.push(k);
             let (x, y) = ((k % w) as isize, (k / w) as isize);
+            border |= x == 0 || y == 0 || x as usize + 1 == w || y as usize + 1 == h;
             for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
                 let (nx, ny) = (x + dx, y + dy);
                 if s.is_board(nx, ny) {
@@ -130,7 +176,7 @@ fn remove_small_islands(s: &mut Silhouette, min_px: usize) {
                 }
             }
         }
-        if component.len() < min_px {
+        if component.len() < min_px || (!border && component.len() < enclosed_limit) {
             for &k in &component {
                 s.set(k, false);
             }
@@ -160,6 +206,8 @@ pub struct SignedDistance {
     pub crop: Crop,
     /// Pixels, row-major over the crop.
     pub values: Vec<f32>,
+    /// Per pixel of the crop: it disagrees with the learned board.
+    pub disagree: Vec<bool>,
 }
 
 /// Large finite stand-in for "no feature pixel" (keeps the parabola arithmetic finite).
@@ -258,7 +306,27 @@ impl SignedDistance {
                 }
             })
             .collect();
-        Self { crop, values }
+        let disagree = (0..w * h)
+            .map(|k| s.disagrees(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
+            .collect();
+        Self {
+            crop,
+            values,
+            disagree,
+        }
+    }
+
+    /// Whether the pixel nearest superpixel coordinate `(x, y)` disagrees with the board.
+    pub fn disagrees_at(&self, x: f64, y: f64) -> bool {
+        let (u, v) = (
+            (x - self.crop.x0 as f64).round(),
+            (y - self.crop.y0 as f64).round(),
+        );
+        u >= 0.0
+            && v >= 0.0
+            && (u as usize) < self.crop.width
+            && (v as usize) < self.crop.height
+            && self.disagree[v as usize * self.crop.width + u as usize]
     }
 
     /// Bilinear value at superpixel coordinate `(x, y)`, `None` outside the crop.
@@ -310,6 +378,7 @@ mod tests {
             width: w,
             height: h,
             bits: vec![0; (w * h).div_ceil(64)],
+            disagree: vec![0; (w * h).div_ceil(64)],
             board_px: 0,
             disagree_px: 0,
             removed_island_px: 0,
@@ -324,7 +393,7 @@ mod tests {
                 }
             }
         }
-        remove_small_islands(&mut s, 4);
+        remove_islands(&mut s, 4, 0.0);
         assert_eq!(s.removed_island_px, 2);
         assert!(!s.is_board(14, 15));
         let crop = Crop {

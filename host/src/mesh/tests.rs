@@ -160,7 +160,8 @@ fn carves_a_white_sphere_on_white_paper_into_a_closed_mesh_near_the_truth() {
     let (centre, radius) = ([0.0, 0.0, 0.03], 0.03);
     let (dir, _, poses) = render_session(tmp.path(), &[(centre, radius)], 16, 480, 384);
     let session = open(&dir);
-    let config = small_config();
+    let mut config = small_config();
+    config.debug_dir = std::env::var_os("MESH_TEST_DEBUG").map(PathBuf::from);
     let result = build_mesh(&session, &poses, &config, &mut |_| {}).unwrap();
     let r = &result.report;
     assert_eq!(r.frames_used, 16);
@@ -171,6 +172,8 @@ fn carves_a_white_sphere_on_white_paper_into_a_closed_mesh_near_the_truth() {
         result.mesh.triangles(),
     );
     assert!(he.is_ok(), "not a closed manifold: {he:?}");
+    let genus = 1 - (r.vertices as i64 - r.triangles as i64 / 2) / 2;
+    assert_eq!(genus, 0, "a sphere's hull has no handles: {r:?}");
     assert!((r.vertices as f64 / 600.0 - 1.0).abs() < 0.2, "{} vertices", r.vertices);
     // near the truth: the pixel footprint here is ~0.7 mm, 16 views leave the hull's corners
     let d = mesh_distance(&result.mesh, &sphere_mesh(centre, radius), 4000, 1);
@@ -229,7 +232,9 @@ fn a_bare_board_is_an_empty_hull() {
     let tmp = tempfile::tempdir().unwrap();
     let (dir, _, poses) = render_session(tmp.path(), &[], 12, 320, 256);
     let session = open(&dir);
-    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    let mut config = small_config();
+    config.debug_dir = std::env::var_os("MESH_TEST_DEBUG").map(PathBuf::from);
+    let e = build_mesh(&session, &poses, &config, &mut |_| {}).unwrap_err();
     assert!(matches!(e, MeshError::HullEmpty { views: 12, .. }), "{e}");
     assert!(e.to_string().contains("100, 101"), "{e}");
 }
@@ -249,4 +254,144 @@ fn two_objects_are_a_disconnected_hull() {
     let text = e.to_string();
     assert!(matches!(e, MeshError::HullDisconnected { .. }), "{text}");
     assert!(text.contains("frames 10"), "{text}");
+}
+
+/// A minimal reader of COLMAP's text model: the camera line and, per image, its id, pose and
+/// name (the format the writer must meet).
+fn read_colmap(sparse: &Path) -> (Vec<String>, Vec<(usize, [f64; 7], String)>, usize) {
+    let data_lines = |name: &str| -> Vec<String> {
+        std::fs::read_to_string(sparse.join(name))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(str::to_string)
+            .collect()
+    };
+    let cameras: Vec<String> = data_lines("cameras.txt")
+        .into_iter()
+        .filter(|l| !l.trim().is_empty())
+        .collect();
+    let lines = data_lines("images.txt");
+    // two lines per image: the pose line, then the (here empty) 2-D points line
+    assert_eq!(lines.len() % 2, 0, "images.txt needs two lines per image");
+    let images = lines
+        .chunks(2)
+        .map(|pair| {
+            assert!(pair[1].trim().is_empty(), "points line not empty: {}", pair[1]);
+            let f: Vec<&str> = pair[0].split_whitespace().collect();
+            assert_eq!(f.len(), 10, "{}", pair[0]);
+            let v: [f64; 7] = std::array::from_fn(|k| f[1 + k].parse().unwrap());
+            assert_eq!(f[8], "1");
+            (f[0].parse().unwrap(), v, f[9].to_string())
+        })
+        .collect();
+    let points = data_lines("points3D.txt")
+        .iter()
+        .filter(|l| !l.trim().is_empty())
+        .count();
+    (cameras, images, points)
+}
+
+#[test]
+fn colmap_files_round_trip_with_the_poses_and_the_pixel_centre_convention() {
+    use super::colmap::{ColmapOptions, export_colmap};
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, scene, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 4, 160, 128);
+    let session = open(&dir);
+    let out = tmp.path().join("colmap");
+    let report = export_colmap(&session, &poses, &out, ColmapOptions::default()).unwrap();
+    assert_eq!(report.images, 4);
+    let (cameras, images, points) = read_colmap(&out.join("sparse"));
+    assert_eq!(points, 0);
+    assert_eq!(cameras.len(), 1);
+    let c: Vec<&str> = cameras[0].split_whitespace().collect();
+    assert_eq!(&c[..4], ["1", "PINHOLE", "80", "64"], "{}", cameras[0]);
+    let p: Vec<f64> = c[4..].iter().map(|x| x.parse().unwrap()).collect();
+    let camera = scene.rig.camera.camera_model();
+    assert_eq!(images.len(), 4);
+    for ((id, v, name), (frame_id, world_from_camera)) in images.iter().zip(&poses) {
+        assert_eq!(name, &format!("{frame_id:08}.png"));
+        assert!(out.join("images").join(name).is_file());
+        assert!(*id >= 1);
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            v[0], v[1], v[2], v[3],
+        ));
+        assert!(v[0] >= 0.0);
+        let camera_from_world = Isometry3::from_parts(
+            nalgebra::Translation3::new(v[4], v[5], v[6]),
+            q,
+        );
+        let expected = world_from_camera.inverse();
+        assert!((camera_from_world.to_homogeneous() - expected.to_homogeneous()).norm() < 1e-9);
+        // a board point projected COLMAP's way (pixel centres at +0.5) lands 0.5 px from our
+        // superpixel projection of the same ray
+        for x in [Point3::new(0.05, -0.02, 0.0), Point3::new(-0.03, 0.04, 0.01)] {
+            let pc = camera_from_world * x;
+            let colmap = [p[0] * pc.x / pc.z + p[2], p[1] * pc.y / pc.z + p[3]];
+            let i = camera.intrinsics;
+            let raw = [i.fx * pc.x / pc.z + i.cx, i.fy * pc.y / pc.z + i.cy];
+            let ours = [(raw[0] - 0.5) / 2.0, (raw[1] - 0.5) / 2.0];
+            assert!((colmap[0] - ours[0] - 0.5).abs() < 1e-9 && (colmap[1] - ours[1] - 0.5).abs() < 1e-9);
+        }
+    }
+    // with the lens kept, the model is OpenCV's with the calibration's coefficients
+    let kept = tmp.path().join("kept");
+    let r = export_colmap(&session, &poses, &kept, ColmapOptions { keep_distortion: true }).unwrap();
+    assert!(r.camera.starts_with("1 OPENCV 80 64 "), "{}", r.camera);
+}
+
+#[test]
+fn colmap_model_converter_reads_the_files() {
+    let Ok(o) = std::process::Command::new("colmap").arg("help").output() else {
+        // CI installs it and sets ELLIPSO_REQUIRE_COLMAP, so there a missing program fails
+        assert!(
+            std::env::var_os("ELLIPSO_REQUIRE_COLMAP").is_none(),
+            "ELLIPSO_REQUIRE_COLMAP is set but the `colmap` program is not installed"
+        );
+        println!("skipped: the `colmap` program is not installed (apt-get install colmap)");
+        return;
+    };
+    assert!(o.status.success() || !o.stdout.is_empty());
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 3, 160, 128);
+    let session = open(&dir);
+    let out = tmp.path().join("colmap");
+    super::colmap::export_colmap(&session, &poses, &out, Default::default()).unwrap();
+    let convert = |input: &Path, output: &Path, kind: &str| {
+        std::fs::create_dir_all(output).unwrap();
+        let o = std::process::Command::new("colmap")
+            .env("QT_QPA_PLATFORM", "offscreen")
+            .args(["model_converter", "--input_path"])
+            .arg(input)
+            .arg("--output_path")
+            .arg(output)
+            .args(["--output_type", kind])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "colmap model_converter: {}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    // text → binary → text: COLMAP parsed every field and writes the same model back
+    let bin = tmp.path().join("bin");
+    let txt = tmp.path().join("txt");
+    convert(&out.join("sparse"), &bin, "BIN");
+    convert(&bin, &txt, "TXT");
+    let (c0, i0, _) = read_colmap(&out.join("sparse"));
+    let (c1, i1, p1) = read_colmap(&txt);
+    assert_eq!(p1, 0);
+    let fields = |l: &str| -> Vec<f64> {
+        l.split_whitespace().filter_map(|x| x.parse().ok()).collect()
+    };
+    assert_eq!(fields(&c0[0]), fields(&c1[0]));
+    assert_eq!(i0.len(), i1.len());
+    for (a, b) in i0.iter().zip(&i1) {
+        assert_eq!(a.2, b.2);
+        for k in 0..7 {
+            assert!((a.1[k] - b.1[k]).abs() < 1e-9, "{a:?} vs {b:?}");
+        }
+    }
 }

@@ -8,10 +8,11 @@
 //!   own −z is turned over, decided by the median camera height), so "above the board" is
 //!   z > 0 whatever the board file's axes.
 //! - The footprint is the bounding rectangle of the board's tag corners. The box is the
-//!   footprint × `[0, H]` with `H` the footprint's shorter side, capped at 80 % of the median
-//!   camera height (an object taller than the board is wide cannot be carved from cameras that
-//!   look down on it). The box is everything the carving ever looks at, so its size bounds the
-//!   memory (see `docs/mesh.md`).
+//!   footprint × `[0, H]` with `H` the footprint's shorter side, capped at half the height of
+//!   the lowest cameras (10th percentile): a ray can only carve a voxel if it goes on down to
+//!   the board near the footprint, so space as high as the cameras cannot be carved from them.
+//!   The box is everything the carving ever looks at, so its size bounds the memory (see
+//!   `docs/mesh.md`).
 //! - Rays meet the plane only going down (toward −z in the volume frame); a ray parallel to
 //!   the plane or going up never meets it.
 
@@ -42,13 +43,13 @@ pub enum VolumeError {
     NoBoard,
     /// The cameras are not above the board.
     #[error(
-        "board {board}: the cameras' median height above its plane is {height_m:.3} m; they must \
-         look down on the board from one side"
+        "board {board}: cameras {height_m:.3} m above its plane (median, or 10th percentile); \
+         they must look down on the board from one side"
     )]
     CamerasNotAbove {
         /// Board index.
         board: usize,
-        /// Median camera height, metres.
+        /// Camera height (median, or 10th percentile), metres.
         height_m: f64,
     },
 }
@@ -87,8 +88,9 @@ impl Volume {
             .map(|c| (world_from_board.inverse() * c).translation.vector.z)
             .collect();
         let median = crate::report::percentile(&mut heights, 0.5);
+        let low = crate::report::percentile(&mut heights, 0.1);
         // Turned over (x kept, y and z flipped) when the cameras are on the board's −z side.
-        let (world_from_volume, lo, hi, median) = if median < 0.0 {
+        let (world_from_volume, lo, hi, median, low) = if median < 0.0 {
             let flip = Isometry3::from_parts(
                 nalgebra::Translation3::identity(),
                 UnitQuaternion::from_rotation_matrix(&Rotation3::from_axis_angle(
@@ -101,9 +103,10 @@ impl Volume {
                 [lo[0], -hi[1]],
                 [hi[0], -lo[1]],
                 -median,
+                -crate::report::percentile(&mut heights, 0.9),
             )
         } else {
-            (world_from_board, lo, hi, median)
+            (world_from_board, lo, hi, median, low)
         };
         if !(median > 0.0) {
             return Err(VolumeError::CamerasNotAbove {
@@ -111,7 +114,13 @@ impl Volume {
                 height_m: median,
             });
         }
-        let height = (hi[0] - lo[0]).min(hi[1] - lo[1]).min(0.8 * median);
+        let height = (hi[0] - lo[0]).min(hi[1] - lo[1]).min(0.5 * low.max(0.0));
+        if !(height > 0.0) {
+            return Err(VolumeError::CamerasNotAbove {
+                board,
+                height_m: low,
+            });
+        }
         Ok(Volume {
             board,
             board_name: boards[board].name.clone(),
