@@ -26,7 +26,11 @@ use crate::mesh::distance::{MeshDistance, mesh_distance};
 #[derive(Debug, clap::Args)]
 pub struct MeshArgs {
     /// Shipped scenes (`sim/scenes/NAME.toml`).
-    #[arg(long, value_delimiter = ',', default_value = "sphere,multi_material,demo")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "sphere,multi_material,demo"
+    )]
     pub scenes: Vec<String>,
     /// Capture resolution (the demo's: half the scenes' 2448×2048).
     #[arg(long, value_parser = super::capture::parse_resolution, default_value = "1224x1024")]
@@ -77,11 +81,18 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let mut results = Vec::new();
     for name in &args.scenes {
         let scene_path = shipped_scene(&format!("{name}.toml"));
-        anyhow::ensure!(scene_path.is_file(), "scene {} not found", scene_path.display());
+        anyhow::ensure!(
+            scene_path.is_file(),
+            "scene {} not found",
+            scene_path.display()
+        );
         let scene = Scene::load(&scene_path)?;
         let session_dir = args.work.join(name);
         if !session_dir.join("manifest.json").is_file() {
-            println!("[{name}] capturing at {}×{}…", args.resolution[0], args.resolution[1]);
+            println!(
+                "[{name}] capturing at {}×{}…",
+                args.resolution[0], args.resolution[1]
+            );
             capture_session(&scene_path, &session_dir, &args)?;
         } else {
             println!("[{name}] reusing {}", session_dir.display());
@@ -94,8 +105,11 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     if let Some(dir) = args.report.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
     }
-    std::fs::write(&args.report, markdown(&results, &args, started.elapsed().as_secs_f64()))
-        .with_context(|| format!("writing {}", args.report.display()))?;
+    std::fs::write(
+        &args.report,
+        markdown(&results, &args, started.elapsed().as_secs_f64()),
+    )
+    .with_context(|| format!("writing {}", args.report.display()))?;
     println!("written {} and {}", args.report.display(), json.display());
     Ok(())
 }
@@ -201,7 +215,10 @@ fn fit_and_score(
     config.fit.solver.sensor = crate::fit::accuracy::sensor_model(scene);
     let t0 = Instant::now();
     let fit = crate::fit::session::fit_session(&session, mesh, &poses, &config, &mut |_| {})?;
-    Ok((mesh_distance(&fit.mesh, truth, 50_000, 1), t0.elapsed().as_secs_f64()))
+    Ok((
+        mesh_distance(&fit.mesh, truth, 50_000, 1),
+        t0.elapsed().as_secs_f64(),
+    ))
 }
 
 fn markdown(results: &[SceneResult], args: &MeshArgs, total_s: f64) -> String {

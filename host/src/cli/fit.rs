@@ -48,8 +48,9 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let session = crate::session::reader::open(&args.session)?;
     let mesh = match &args.mesh {
-        Some(path) => TriangleMesh::load(path)
-            .with_context(|| format!("loading mesh {}", path.display()))?,
+        Some(path) => {
+            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))?
+        }
         None => {
             println!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =

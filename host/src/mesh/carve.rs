@@ -304,7 +304,11 @@ mod tests {
 
     #[test]
     fn grid_indices_round_trip() {
-        let g = Grid::covering(Point3::new(0.0, 0.0, 0.0), Point3::new(0.1, 0.05, 0.02), 0.01);
+        let g = Grid::covering(
+            Point3::new(0.0, 0.0, 0.0),
+            Point3::new(0.1, 0.05, 0.02),
+            0.01,
+        );
         assert_eq!(g.n, [11, 6, 3]);
         for n in [0, 17, g.len() - 1] {
             assert_eq!(g.index(g.ijk(n)[0], g.ijk(n)[1], g.ijk(n)[2]), n);

@@ -82,7 +82,10 @@ pub fn camera_line(camera: &CameraModel, tile: usize, keep_distortion: bool) -> 
     let params = if !keep_distortion {
         format!("PINHOLE {w} {h} {fx} {fy} {cx} {cy}")
     } else if d.k3 == 0.0 {
-        format!("OPENCV {w} {h} {fx} {fy} {cx} {cy} {} {} {} {}", d.k1, d.k2, d.p1, d.p2)
+        format!(
+            "OPENCV {w} {h} {fx} {fy} {cx} {cy} {} {} {} {}",
+            d.k1, d.k2, d.p1, d.p2
+        )
     } else {
         format!(
             "FULL_OPENCV {w} {h} {fx} {fy} {cx} {cy} {} {} {} {} {} 0 0 0",
@@ -140,7 +143,10 @@ fn render(
             if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
                 return 0;
             }
-            let (x0, y0) = ((x as usize).min(w.saturating_sub(2)), (y as usize).min(h.saturating_sub(2)));
+            let (x0, y0) = (
+                (x as usize).min(w.saturating_sub(2)),
+                (y as usize).min(h.saturating_sub(2)),
+            );
             let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
             let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
             let value = (1.0 - fy) * ((1.0 - fx) * at(x0, y0) + fx * at(x1, y0))
@@ -165,8 +171,8 @@ pub fn export_colmap(
     options: ColmapOptions,
 ) -> Result<ColmapReport, ColmapError> {
     let camera = camera_of(session).map_err(|e| ColmapError::Session(e.to_string()))?;
-    let layout =
-        crate::process::layout_of(&session.manifest).map_err(|e| ColmapError::Session(e.to_string()))?;
+    let layout = crate::process::layout_of(&session.manifest)
+        .map_err(|e| ColmapError::Session(e.to_string()))?;
     let tile = layout.tile_px() as usize;
     let (frames, mut skipped) = posed_frames(session, poses);
     let images_dir = out.join("images");
@@ -202,22 +208,33 @@ pub fn export_colmap(
         let scale = *scale.get_or_insert_with(|| {
             let mut v: Vec<f32> = s0.iter().copied().filter(|x| x.is_finite()).collect();
             v.sort_by(f32::total_cmp);
-            let p = v.get(v.len().saturating_sub(1) * 995 / 1000).copied().unwrap_or(1.0);
+            let p = v
+                .get(v.len().saturating_sub(1) * 995 / 1000)
+                .copied()
+                .unwrap_or(1.0);
             if p > 1e-6 { 1.0 / p } else { 1.0 }
         });
         let pixels = render(&s0, w, h, &camera, tile, scale, options.keep_distortion);
         let name = format!("{:08}.png", frame.frame_id);
         let path = images_dir.join(&name);
-        image::save_buffer(&path, &pixels, w as u32, h as u32, image::ExtendedColorType::L8)
-            .map_err(|e| ColmapError::Io {
-                path: path.clone(),
-                error: std::io::Error::other(e.to_string()),
-            })?;
+        image::save_buffer(
+            &path,
+            &pixels,
+            w as u32,
+            h as u32,
+            image::ExtendedColorType::L8,
+        )
+        .map_err(|e| ColmapError::Io {
+            path: path.clone(),
+            error: std::io::Error::other(e.to_string()),
+        })?;
         files.push(path);
         lines.push(image_line(lines.len() + 1, &frame.world_from_camera, &name));
     }
     if lines.is_empty() {
-        return Err(ColmapError::NoImages(super::error::skipped_list(&skipped, 6)));
+        return Err(ColmapError::NoImages(super::error::skipped_list(
+            &skipped, 6,
+        )));
     }
     let camera_line = camera_line(&camera, tile, options.keep_distortion);
     let mut cameras = String::new();
@@ -227,9 +244,16 @@ pub fn export_colmap(
     let _ = writeln!(cameras, "{camera_line}");
     let mut images = String::new();
     let _ = writeln!(images, "# Image list with two lines of data per image:");
-    let _ = writeln!(images, "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME");
+    let _ = writeln!(
+        images,
+        "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME"
+    );
     let _ = writeln!(images, "#   POINTS2D[] as (X, Y, POINT3D_ID)");
-    let _ = writeln!(images, "# Number of images: {}, mean observations per image: 0", lines.len());
+    let _ = writeln!(
+        images,
+        "# Number of images: {}, mean observations per image: 0",
+        lines.len()
+    );
     for l in &lines {
         let _ = writeln!(images, "{l}\n");
     }

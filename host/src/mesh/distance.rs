@@ -94,7 +94,8 @@ impl<'a> TriangleGrid<'a> {
         }
         let extent = (hi - lo).max().max(1e-9);
         // about 4 triangles per cell on a surface
-        let cells_per_axis = ((mesh.triangles().len() as f64 / 4.0).sqrt().ceil()).clamp(1.0, 256.0);
+        let cells_per_axis =
+            ((mesh.triangles().len() as f64 / 4.0).sqrt().ceil()).clamp(1.0, 256.0);
         let cell = extent / cells_per_axis;
         let n: [usize; 3] = std::array::from_fn(|a| ((hi[a] - lo[a]) / cell).floor() as usize + 1);
         let mut cells = vec![Vec::new(); n[0] * n[1] * n[2]];
@@ -102,8 +103,10 @@ impl<'a> TriangleGrid<'a> {
             let ps = tri.map(|i| pos[i as usize].coords);
             let tlo = ps[0].inf(&ps[1]).inf(&ps[2]);
             let thi = ps[0].sup(&ps[1]).sup(&ps[2]);
-            let a: [usize; 3] = std::array::from_fn(|k| (((tlo[k] - lo[k]) / cell) as usize).min(n[k] - 1));
-            let b: [usize; 3] = std::array::from_fn(|k| (((thi[k] - lo[k]) / cell) as usize).min(n[k] - 1));
+            let a: [usize; 3] =
+                std::array::from_fn(|k| (((tlo[k] - lo[k]) / cell) as usize).min(n[k] - 1));
+            let b: [usize; 3] =
+                std::array::from_fn(|k| (((thi[k] - lo[k]) / cell) as usize).min(n[k] - 1));
             for z in a[2]..=b[2] {
                 for y in a[1]..=b[1] {
                     for x in a[0]..=b[0] {
@@ -155,7 +158,8 @@ impl<'a> TriangleGrid<'a> {
                         }
                         let cell = (z as usize * self.n[1] + y as usize) * self.n[0] + x as usize;
                         for &t in &self.cells[cell] {
-                            let [a, b, cc] = self.mesh.triangles()[t as usize].map(|i| pos[i as usize]);
+                            let [a, b, cc] =
+                                self.mesh.triangles()[t as usize].map(|i| pos[i as usize]);
                             best = best.min((p - closest_on_triangle(p, a, b, cc)).norm());
                         }
                     }
@@ -200,7 +204,12 @@ fn surface_samples(mesh: &TriangleMesh, samples: usize, seed: u64) -> Vec<Point3
 }
 
 /// Chamfer and Hausdorff distances between `a` and `b` (module contract).
-pub fn mesh_distance(a: &TriangleMesh, b: &TriangleMesh, samples: usize, seed: u64) -> MeshDistance {
+pub fn mesh_distance(
+    a: &TriangleMesh,
+    b: &TriangleMesh,
+    samples: usize,
+    seed: u64,
+) -> MeshDistance {
     use rayon::prelude::*;
     let one_sided = |from: &TriangleMesh, to: &TriangleMesh, seed: u64| -> Vec<f64> {
         let grid = TriangleGrid::new(to);
@@ -230,7 +239,10 @@ mod tests {
 
     fn sphere(radius: f64, subdivisions: u32) -> TriangleMesh {
         let (dirs, tris) = icosphere(subdivisions);
-        let pos = dirs.iter().map(|d| Point3::from(d.into_inner() * radius)).collect();
+        let pos = dirs
+            .iter()
+            .map(|d| Point3::from(d.into_inner() * radius))
+            .collect();
         TriangleMesh::new(pos, None, None, tris).unwrap()
     }
 

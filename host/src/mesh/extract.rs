@@ -90,8 +90,10 @@ pub fn marching_tetrahedra(grid: &Grid, field: &[f32], outside: f32) -> Surface 
                     continue;
                 }
                 for tet in TETS {
-                    let neg: Vec<usize> = tet.iter().copied().filter(|&c| values[c] < 0.0).collect();
-                    let pos: Vec<usize> = tet.iter().copied().filter(|&c| values[c] >= 0.0).collect();
+                    let neg: Vec<usize> =
+                        tet.iter().copied().filter(|&c| values[c] < 0.0).collect();
+                    let pos: Vec<usize> =
+                        tet.iter().copied().filter(|&c| values[c] >= 0.0).collect();
                     if neg.is_empty() || pos.is_empty() {
                         continue;
                     }
@@ -113,16 +115,8 @@ pub fn marching_tetrahedra(grid: &Grid, field: &[f32], outside: f32) -> Surface 
                     // make a degenerate triangle (a crossing at a node would)
                     let mut tris: Vec<[(usize, usize); 3]> = Vec::with_capacity(2);
                     match (neg.len(), pos.len()) {
-                        (1, 3) => tris.push([
-                            (neg[0], pos[0]),
-                            (neg[0], pos[1]),
-                            (neg[0], pos[2]),
-                        ]),
-                        (3, 1) => tris.push([
-                            (neg[0], pos[0]),
-                            (neg[1], pos[0]),
-                            (neg[2], pos[0]),
-                        ]),
+                        (1, 3) => tris.push([(neg[0], pos[0]), (neg[0], pos[1]), (neg[0], pos[2])]),
+                        (3, 1) => tris.push([(neg[0], pos[0]), (neg[1], pos[0]), (neg[2], pos[0])]),
                         _ => {
                             // quad: n0p0, n0p1, n1p1, n1p0 around the cut
                             let q = [
@@ -200,7 +194,10 @@ mod tests {
                 a.dot(&b.cross(&c)) / 6.0
             })
             .sum();
-        assert!((volume - 4.0 * std::f64::consts::PI / 3.0).abs() < 0.05, "{volume}");
+        assert!(
+            (volume - 4.0 * std::f64::consts::PI / 3.0).abs() < 0.05,
+            "{volume}"
+        );
     }
 
     #[test]

@@ -246,7 +246,10 @@ pub fn load_features(
             features[k][b] = 0.5 * (i0[k] + i45[k] + i90[k] + i135[k]) * dn_per_unit;
             co[k] += i0[k] - i90[k];
             total[k] += i0[k] + i90[k];
-            if band.mask.data()[k].reasons().any(|r| r == MaskReason::Saturated) {
+            if band.mask.data()[k]
+                .reasons()
+                .any(|r| r == MaskReason::Saturated)
+            {
                 saturated[k] = true;
             }
         }

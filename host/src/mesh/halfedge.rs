@@ -144,7 +144,10 @@ impl HalfEdgeMesh {
     pub fn face_normal(&self, h: u32) -> Vector3<f64> {
         let f = h - h % 3;
         let [a, b, c] = [f, f + 1, f + 2].map(|x| self.pos[self.to(x) as usize]);
-        (b - a).cross(&(c - a)).try_normalize(0.0).unwrap_or_default()
+        (b - a)
+            .cross(&(c - a))
+            .try_normalize(0.0)
+            .unwrap_or_default()
     }
 
     fn link(&mut self, a: u32, b: u32) {
@@ -161,7 +164,8 @@ impl HalfEdgeMesh {
         let (tw_bc, tw_ca) = (self.twin(next(h)), self.twin(prev(h)));
         let (tw_ad, tw_db) = (self.twin(next(t)), self.twin(prev(t)));
         let m = self.pos.len() as u32;
-        self.pos.push((self.pos[a as usize] + self.pos[b as usize]) / 2.0);
+        self.pos
+            .push((self.pos[a as usize] + self.pos[b as usize]) / 2.0);
         self.out.push(NONE);
         // face of h becomes (a, m, c); face of t becomes (b, m, d); new (m, b, c), (m, a, d)
         let f0 = h - h % 3;
@@ -294,7 +298,11 @@ mod tests {
     fn check(m: &HalfEdgeMesh) {
         let (pos, tris) = m.compact();
         let again = HalfEdgeMesh::new(pos.clone(), &tris).expect("closed manifold");
-        assert_eq!(pos.len() as i64 - tris.len() as i64 / 2, 2, "Euler characteristic");
+        assert_eq!(
+            pos.len() as i64 - tris.len() as i64 / 2,
+            2,
+            "Euler characteristic"
+        );
         drop(again);
     }
 

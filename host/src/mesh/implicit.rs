@@ -41,8 +41,9 @@ impl<'a> Implicit<'a> {
         let at = |di: usize, dj: usize, dk: usize| {
             f64::from(self.field[g.index(i[0] + di, i[1] + dj, i[2] + dk)])
         };
-        let c: [[[f64; 2]; 2]; 2] =
-            std::array::from_fn(|di| std::array::from_fn(|dj| std::array::from_fn(|dk| at(di, dj, dk))));
+        let c: [[[f64; 2]; 2]; 2] = std::array::from_fn(|di| {
+            std::array::from_fn(|dj| std::array::from_fn(|dk| at(di, dj, dk)))
+        });
         let w = |d: usize, t: f64| if d == 0 { 1.0 - t } else { t };
         let mut value = 0.0;
         let mut grad = Vector3::zeros();
@@ -103,7 +104,11 @@ mod tests {
 
     #[test]
     fn projects_onto_a_sphere_field_and_onto_the_board() {
-        let grid = Grid::covering(Point3::new(-0.05, -0.05, -0.005), Point3::new(0.05, 0.05, 0.08), 0.002);
+        let grid = Grid::covering(
+            Point3::new(-0.05, -0.05, -0.005),
+            Point3::new(0.05, 0.05, 0.08),
+            0.002,
+        );
         // a sphere cut by the board: its field is negative just below the contact
         let centre = Vector3::new(0.0, 0.0, 0.02);
         let field: Vec<f32> = (0..grid.len())
@@ -111,7 +116,11 @@ mod tests {
             .collect();
         let s = Implicit::new(&grid, &field, 1.0);
         let p = s.project(centre + Vector3::new(0.031, 0.004, 0.005));
-        assert!(((p - centre).norm() - 0.03).abs() < 2e-5, "{}", (p - centre).norm());
+        assert!(
+            ((p - centre).norm() - 0.03).abs() < 2e-5,
+            "{}",
+            (p - centre).norm()
+        );
         // the gradient of a distance field is a unit vector
         let (_, g) = s.value(centre + Vector3::new(0.0, 0.02, 0.0));
         assert!((g.norm() - 1.0).abs() < 0.05, "{}", g.norm());

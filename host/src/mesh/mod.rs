@@ -98,7 +98,7 @@ impl Default for MeshConfig {
             min_fine_spacing_m: 2e-4,
             min_island_px: 12,
             max_enclosed_board: 0.1,
-            min_part_layers: 3,
+            min_part_layers: 4,
             frames_in_flight: 4,
             threads: None,
             max_second_part: 0.02,

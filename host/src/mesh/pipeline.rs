@@ -108,7 +108,15 @@ fn run(
     lap(&mut report, "coarse carving");
 
     progress("carving (fine)");
-    let (fine, field) = fine_pass(&setup, &silhouettes, &coarse, &coarse_field, &main, config, &mut report);
+    let (fine, field) = fine_pass(
+        &setup,
+        &silhouettes,
+        &coarse,
+        &coarse_field,
+        &main,
+        config,
+        &mut report,
+    );
     drop(silhouettes);
     lap(&mut report, "fine carving");
 
@@ -132,7 +140,13 @@ fn setup<'a>(
     report.skipped = skipped;
     let needed = config.min_posed_frames.max(config.votes);
     if frames.len() < needed {
-        return Err(too_few(session, &frames, &report.skipped, needed, config.votes));
+        return Err(too_few(
+            session,
+            &frames,
+            &report.skipped,
+            needed,
+            config.votes,
+        ));
     }
     let cameras: Vec<Isometry3<f64>> = frames.iter().map(|f| f.world_from_camera).collect();
     let volume = Volume::new(&boards, &cameras).map_err(session_error)?;
@@ -275,7 +289,12 @@ fn texel_from_footprint(setup: &Setup<'_>) -> f64 {
 fn learn_board(setup: &Setup<'_>, config: &MeshConfig, report: &mut MeshReport) -> Board {
     let (lo, hi) = texel_region(setup);
     let a = &config.appearance;
-    let grid = TexelGrid::covering(lo, hi, a.min_texel_m.max(texel_from_footprint(setup)), a.max_texels);
+    let grid = TexelGrid::covering(
+        lo,
+        hi,
+        a.min_texel_m.max(texel_from_footprint(setup)),
+        a.max_texels,
+    );
     let mut reservoirs = Reservoirs::new(grid, a.reservoir);
     let bands = match setup.layout {
         ellipso_sim::mosaic::SensorLayout::MonoPolar => 1,
@@ -284,7 +303,16 @@ fn learn_board(setup: &Setup<'_>, config: &MeshConfig, report: &mut MeshReport) 
     let rule = Agreement::new(a, bands, setup.full_scale_dn);
     let each = |i: usize, image: &super::frames::FeatureImage| {
         (0..image.width * image.height)
-            .filter_map(|k| pixel_sample(&grid, &setup.rays, &setup.views[i], image, k, setup.floor_dn))
+            .filter_map(|k| {
+                pixel_sample(
+                    &grid,
+                    &setup.rays,
+                    &setup.views[i],
+                    image,
+                    k,
+                    setup.floor_dn,
+                )
+            })
             .collect::<Vec<_>>()
     };
     let mut held = 0usize;
@@ -364,18 +392,38 @@ fn carve_grid(
         let voters: Vec<Voter> = chunk
             .par_iter()
             .filter_map(|(i, s)| {
-                carve::voter(&setup.camera, &setup.rays, setup.views[*i].clone(), s, lo, hi, truncation_m)
+                carve::voter(
+                    &setup.camera,
+                    &setup.rays,
+                    setup.views[*i].clone(),
+                    s,
+                    lo,
+                    hi,
+                    truncation_m,
+                )
             })
             .collect();
         let held: usize = voters.iter().map(|v| v.distance.values.len() * 4).sum();
         report.peak_bytes = report.peak_bytes.max((held + top.bytes()) as u64);
-        carve::vote(grid, &setup.camera, &setup.rays, &voters, active, truncation_m, &mut top);
+        carve::vote(
+            grid,
+            &setup.camera,
+            &setup.rays,
+            &voters,
+            active,
+            truncation_m,
+            &mut top,
+        );
     }
     top
 }
 
 /// The views in which `p` (volume frame) projects inside the image.
-fn frames_seeing(setup: &Setup<'_>, silhouettes: &[(usize, Silhouette)], p: Point3<f64>) -> Vec<u64> {
+fn frames_seeing(
+    setup: &Setup<'_>,
+    silhouettes: &[(usize, Silhouette)],
+    p: Point3<f64>,
+) -> Vec<u64> {
     silhouettes
         .iter()
         .filter(|(i, _)| {
@@ -418,7 +466,10 @@ fn coarse_pass(
     report.parts_dropped = residue.len();
     report.parts_dropped_m3 = residue.iter().map(|p| p.volume_m3(&grid)).sum();
     let Some(main) = parts.first().cloned() else {
-        let ids: Vec<u64> = silhouettes.iter().map(|(i, _)| setup.views[*i].frame_id).collect();
+        let ids: Vec<u64> = silhouettes
+            .iter()
+            .map(|(i, _)| setup.views[*i].frame_id)
+            .collect();
         return Err(MeshError::HullEmpty {
             board: setup.volume.board,
             views: ids.len(),
@@ -466,12 +517,22 @@ fn coarse_pass(
             main_at: mm(&main),
             second_cm3: second.volume_m3(&grid) * 1e6,
             second_at: mm(second),
-            frames: frame_list(&frames_seeing(setup, silhouettes, components::centroid(second)), 10),
+            frames: frame_list(
+                &frames_seeing(setup, silhouettes, components::centroid(second)),
+                10,
+            ),
         });
     }
     report.parts_dropped += parts.len() - 1;
     report.parts_dropped_m3 += parts[1..].iter().map(|p| p.volume_m3(&grid)).sum::<f64>();
-    components::keep_only(&grid, &mut field, &labels, main.label, truncation as f32, -truncation as f32);
+    components::keep_only(
+        &grid,
+        &mut field,
+        &labels,
+        main.label,
+        truncation as f32,
+        -truncation as f32,
+    );
     Ok((grid, field, main))
 }
 
@@ -501,7 +562,15 @@ fn fine_pass(
         .map(|n| grid.point(grid.ijk(n)).z > 0.0 && coarse_value[n].abs() < 2.0 * hc)
         .collect();
     report.fine_nodes_voted = active.iter().filter(|a| **a).count();
-    let top = carve_grid(setup, silhouettes, &grid, Some(&active), truncation, config, report);
+    let top = carve_grid(
+        setup,
+        silhouettes,
+        &grid,
+        Some(&active),
+        truncation,
+        config,
+        report,
+    );
     let tau = truncation as f32;
     let mut field: Vec<f32> = (0..grid.len())
         .map(|n| {
@@ -521,6 +590,11 @@ fn fine_pass(
         })
         .collect();
     drop(top);
+    // two passes of a 3-tap box filter per axis: single-node specks and one-node tunnels of
+    // the vote field go, the zero crossing of a smooth surface stays within a node
+    for _ in 0..2 {
+        field = box_filter(&grid, &field);
+    }
     report.fine = Some(grid);
     if let Some(dir) = &config.debug_dir {
         let _ = super::debug::write_slices(dir, "fine", &grid, &field, tau, 8);
@@ -534,6 +608,25 @@ fn fine_pass(
         report.cavity_nodes_filled = filled;
     }
     (grid, field)
+}
+
+/// A separable 3-tap box filter of a grid field (edges clamped).
+fn box_filter(grid: &Grid, field: &[f32]) -> Vec<f32> {
+    let mut out = field.to_vec();
+    for axis in 0..3 {
+        let src = out.clone();
+        for (n, v) in out.iter_mut().enumerate() {
+            let ijk = grid.ijk(n);
+            let mut sum = src[n];
+            for d in [-1isize, 1] {
+                let mut m = ijk;
+                m[axis] = (ijk[axis] as isize + d).clamp(0, grid.n[axis] as isize - 1) as usize;
+                sum += src[grid.index(m[0], m[1], m[2])];
+            }
+            *v = sum / 3.0;
+        }
+    }
+    out
 }
 
 fn surface(
@@ -578,5 +671,6 @@ fn surface(
         .sum();
     report.vertices = positions.len();
     report.triangles = triangles.len();
-    TriangleMesh::new(positions, None, None, triangles).map_err(|e| MeshError::Surface(e.to_string()))
+    TriangleMesh::new(positions, None, None, triangles)
+        .map_err(|e| MeshError::Surface(e.to_string()))
 }

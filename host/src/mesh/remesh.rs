@@ -92,7 +92,13 @@ fn collapse_is_safe(m: &HalfEdgeMesh, h: u32, p: Vector3<f64>, high: f64) -> boo
             let f = o - o % 3;
             let corners = [f, f + 1, f + 2].map(|x| m.to(x));
             let old = corners.map(|c| m.pos[c as usize]);
-            let new = corners.map(|c| if c == a || c == b { p } else { m.pos[c as usize] });
+            let new = corners.map(|c| {
+                if c == a || c == b {
+                    p
+                } else {
+                    m.pos[c as usize]
+                }
+            });
             let n_old = (old[1] - old[0]).cross(&(old[2] - old[0]));
             let n_new = (new[1] - new[0]).cross(&(new[2] - new[0]));
             // cos 60° = 0.5 between the face's old and new normal
@@ -190,8 +196,11 @@ fn relax_tangentially(m: &mut HalfEdgeMesh) {
                 return None;
             }
             let ring = m.neighbours(v);
-            let centroid =
-                ring.iter().map(|&u| m.pos[u as usize]).sum::<Vector3<f64>>() / ring.len() as f64;
+            let centroid = ring
+                .iter()
+                .map(|&u| m.pos[u as usize])
+                .sum::<Vector3<f64>>()
+                / ring.len() as f64;
             let n = normals[v as usize];
             let tangent = Matrix3::identity() - n * n.transpose();
             Some(m.pos[v as usize] + tangent * (centroid - m.pos[v as usize]))
@@ -212,8 +221,11 @@ fn laplacian_step(m: &mut HalfEdgeMesh, lambda: f64) {
                 return None;
             }
             let ring = m.neighbours(v);
-            let centroid =
-                ring.iter().map(|&u| m.pos[u as usize]).sum::<Vector3<f64>>() / ring.len() as f64;
+            let centroid = ring
+                .iter()
+                .map(|&u| m.pos[u as usize])
+                .sum::<Vector3<f64>>()
+                / ring.len() as f64;
             Some(m.pos[v as usize] + lambda * (centroid - m.pos[v as usize]))
         })
         .collect();

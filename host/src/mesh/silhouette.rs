@@ -333,8 +333,7 @@ impl SignedDistance {
     pub fn sample(&self, x: f64, y: f64) -> Option<f32> {
         let (u, v) = (x - self.crop.x0 as f64, y - self.crop.y0 as f64);
         let (w, h) = (self.crop.width, self.crop.height);
-        if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) || w < 2 || h < 2
-        {
+        if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) || w < 2 || h < 2 {
             return None;
         }
         let (i, j) = ((u as usize).min(w - 2), (v as usize).min(h - 2));
@@ -365,7 +364,11 @@ mod tests {
                     (a - x).powi(2) + (b - y).powi(2)
                 })
                 .fold(f32::INFINITY, f32::min);
-            assert!((d[k] - brute).abs() < 1e-3, "pixel {k}: {} vs {brute}", d[k]);
+            assert!(
+                (d[k] - brute).abs() < 1e-3,
+                "pixel {k}: {} vs {brute}",
+                d[k]
+            );
         }
     }
 
