@@ -28,6 +28,11 @@ enum Command {
     Calibrate(cli::calibrate::Args),
     /// Fit the per-vertex polarimetric SVBRDF and refined shape of a session to a mesh.
     Fit(cli::fit::Args),
+    /// Carve the object's watertight mesh from a session's posed frames.
+    Mesh(cli::mesh::Args),
+    /// Write a session for other tools (a COLMAP sparse model with undistorted images).
+    #[command(subcommand)]
+    Export(cli::export::Args),
     /// Benchmarks that write reports (pose accuracy and speed; the fit's accuracy vs time).
     #[command(subcommand)]
     Bench(cli::bench::Args),
@@ -78,6 +83,8 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Fit(args) => cli::fit::run(args),
+        Command::Mesh(args) => cli::mesh::run(args),
+        Command::Export(args) => cli::export::run(args),
         Command::Sim(args) => cli::sim::run(args),
     }
 }

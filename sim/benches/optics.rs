@@ -7,7 +7,6 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use ellipso_model::optics::coaxial::{self, CoaxialGeometry};
-use ellipso_model::optics::fit::{FitDual, observe_with_jacobian, seed_normal, seed_params};
 use ellipso_model::optics::measure::{FlashPolariser, observe};
 use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, evaluate, scalar_brdf};
 use ellipso_model::optics::{Frame, Vec3};
@@ -128,34 +127,10 @@ fn main() {
             }),
         ),
         (
-            "observation channels + Jacobian (Dual<13>)",
-            rate(&set, budget, |s| {
-                let o = observe_with_jacobian(
-                    s.normal,
-                    s.to_light,
-                    s.to_camera,
-                    &s.light_frame,
-                    &s.camera_frame,
-                    &s.params,
-                    flash,
-                )
-                .expect("valid");
-                o[0].alpha.du[10]
-            }),
-        ),
-        (
             "coaxial DS/SS/DPa/DPb (f64)",
             rate(&set, budget, |s| {
                 let g = CoaxialGeometry::from_world(Vec3::from_f64(s.normal), &s.camera_frame);
                 coaxial::terms(&g, &s.params)[0].dp_alpha
-            }),
-        ),
-        (
-            "coaxial + Jacobian (Dual<13>)",
-            rate(&set, budget, |s| {
-                let frame: Frame<FitDual> = s.camera_frame.cast();
-                let g = CoaxialGeometry::from_world(seed_normal(s.normal), &frame);
-                coaxial::terms(&g, &seed_params(&s.params))[0].dp_alpha.du[10]
             }),
         ),
     ];

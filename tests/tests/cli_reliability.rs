@@ -496,7 +496,7 @@ fn documented_commands() -> Vec<(String, String)> {
 #[test]
 fn every_flag_the_docs_show_exists() {
     // docs/fit.md showed `--no-augment`, which the CLI rejects
-    const SUBCOMMANDS: [&str; 10] = [
+    const SUBCOMMANDS: [&str; 12] = [
         "demo",
         "capture",
         "model",
@@ -507,6 +507,8 @@ fn every_flag_the_docs_show_exists() {
         "devices",
         "replay",
         "sim",
+        "mesh",
+        "export",
     ];
     let mut help: std::collections::BTreeMap<String, String> = Default::default();
     let mut checked = 0;
@@ -530,7 +532,7 @@ fn every_flag_the_docs_show_exists() {
             if let Some(next) = tokens
                 .get(i + 2)
                 .and_then(|s| s.trim_end_matches('`').split("\\|").next())
-                && ["model", "sim", "bench"].contains(&sub)
+                && ["model", "sim", "bench", "export"].contains(&sub)
                 && next.chars().all(|c| c.is_ascii_lowercase())
             {
                 path.push(next);

@@ -32,6 +32,9 @@ pub enum Args {
     Accuracy(super::bench_accuracy::AccuracyArgs),
     /// Camera calibration accuracy on a rendered calibration capture.
     Calibration(calibration::CalibrationArgs),
+    /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
+    /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
+    Mesh(super::bench_mesh::MeshArgs),
 }
 
 /// Arguments of `ellipso bench pose`.
@@ -84,6 +87,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Args::Pose(a) => pose(a),
         Args::Accuracy(a) => super::bench_accuracy::run(a),
         Args::Calibration(a) => calibration::run(a),
+        Args::Mesh(a) => super::bench_mesh::run(a),
     }
 }
 

@@ -3,8 +3,10 @@
 //!
 //! Poses come from the session's `pose` events (tracked now and appended when the log has
 //! none). The mesh is a triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from
-//! any scanner or photogrammetry. Writes `fit.ply` (per-vertex parameters and uncertainties),
-//! the pictures of the fitted model from one captured view, and `fit-summary.json`.
+//! any scanner or photogrammetry; without `--mesh` it is carved from the session's own frames
+//! first (`ellipso mesh`, written to `OUT/mesh.ply`). Writes `fit.ply` (per-vertex parameters
+//! and uncertainties), the pictures of the fitted model from one captured view, and
+//! `fit-summary.json`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -22,9 +24,10 @@ use ellipso_session::reader::Session;
 pub struct Args {
     /// The session directory.
     pub session: PathBuf,
-    /// Triangle mesh of the object (PLY or OBJ), board coordinates, metres.
+    /// Triangle mesh of the object (PLY or OBJ), board coordinates, metres (default: carved
+    /// from the session's frames, as `ellipso mesh` does).
     #[arg(long)]
-    pub mesh: PathBuf,
+    pub mesh: Option<PathBuf>,
     /// Output directory.
     #[arg(long, default_value = "ellipso-fit")]
     pub out: PathBuf,
@@ -53,8 +56,6 @@ pub struct Args {
 
 /// Runs `ellipso fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mesh = TriangleMesh::load(&args.mesh)
-        .with_context(|| format!("loading mesh {}", args.mesh.display()))?;
     let session = ellipso_session::reader::open(&args.session)?;
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.holdout),
@@ -65,6 +66,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if read != "intact" {
         eprintln!("warning: {}: {read}", args.session.display());
     }
+    let mesh = match &args.mesh {
+        Some(path) => {
+            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))?
+        }
+        None => {
+            crate::outln!("no --mesh: carving the object's mesh from the frames first…");
+            let (mesh, report) =
+                super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
+            let path = args.out.join("mesh.ply");
+            super::mesh::write_mesh(&mesh, &report, &path)?;
+            crate::outln!("  {} ({} vertices)", path.display(), report.vertices);
+            mesh
+        }
+    };
     let mut config = SessionFitConfig {
         outer_iterations: args.outer.max(1),
         holdout_fraction: args.holdout,

@@ -2,13 +2,16 @@
 
 pub mod bench;
 pub mod bench_accuracy;
+pub mod bench_mesh;
 pub mod bench_report;
 pub mod calibrate;
 pub mod capture;
 pub mod demo;
 pub mod devices;
+pub mod export;
 pub mod fit;
 pub mod limits;
+pub mod mesh;
 pub mod model;
 pub mod out;
 pub mod polar;

@@ -21,7 +21,8 @@ use super::*;
 pub(super) fn scene() -> &'static Scene {
     static SCENE: OnceLock<Scene> = OnceLock::new();
     SCENE.get_or_init(|| {
-        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/multi_material.toml");
+        let path =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/multi_material.toml");
         Scene::load(&path).expect("multi_material scene loads")
     })
 }

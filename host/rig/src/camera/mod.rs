@@ -10,13 +10,12 @@
 //!   slow) and timeouts apart, as aravis does: they have different causes and different cures.
 //! - `next_frame` returns `Ok(None)` on timeout (counted), never blocks forever.
 //!
-//! Backends: `sim` (in-process simulator, default), `replay` (a recorded session), `aravis`
+//! Backends: `sim` (in-process simulator, default), `aravis`
 //! (GigE/USB3 Vision, cargo feature), `v4l` (UVC, cargo feature).
 
 #[cfg(feature = "aravis")]
 pub mod aravis;
 pub mod frame_id;
-pub mod replay;
 pub mod sim;
 pub mod unpack;
 #[cfg(feature = "v4l")]
@@ -70,7 +69,7 @@ pub struct Frame {
 /// Static description of a camera.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraInfo {
-    /// Backend name: `sim`, `replay`, `aravis`, `v4l`.
+    /// Backend name: `sim`, `aravis`, `v4l`.
     pub backend: &'static str,
     /// Model / identifier.
     pub model: String,

@@ -25,13 +25,11 @@
 //! - [`measure::observe`]`(&g, &params, flash) -> [ObservationChannels; 3]` (I^d, I^s, I^α);
 //! - [`measure::observe_unit_lobes`] (the unit-albedo lobes: observations are linear in ρ_d,
 //!   ρ_ss, ρ_s);
-//! - [`fit::observe_with_jacobian`] with the slot layout of [`fit::slot`];
 //! - [`measure::dop_diffuse`] / [`measure::dop_diffuse_with_d_eta`] (closed-form ∂/∂η);
 //! - [`coaxial::terms`] (DS, SS, DPα, DPβ) for the coaxial approximation.
 
 pub mod coaxial;
 mod dual;
-pub mod fit;
 mod frame;
 pub mod fresnel;
 pub mod measure;

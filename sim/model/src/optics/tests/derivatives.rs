@@ -1,9 +1,9 @@
 //! The dual-number Jacobian against central differences, and the coaxial approximation
 //! against the full model at the rig's flash offset.
 
+use super::jacobian::{N_FIT_PARAMS, observe_with_jacobian, slot};
 use super::*;
 use crate::optics::coaxial::{self, CoaxialGeometry};
-use crate::optics::fit::{N_FIT_PARAMS, observe_with_jacobian, slot};
 use crate::optics::measure::{
     FlashPolariser, ObservationChannels, dop_diffuse_with_d_eta, observe,
 };
@@ -97,7 +97,7 @@ fn dual_jacobian_matches_central_differences_at_ten_thousand_points() {
 
 #[test]
 fn coaxial_dual_derivatives_match_central_differences() {
-    use crate::optics::fit::{seed_normal, seed_params};
+    use super::jacobian::{seed_normal, seed_params};
     use crate::optics::{Frame, Vec3};
     let mut r = rng(202);
     let camera = Frame::camera(

@@ -4,6 +4,7 @@
 
 mod derivatives;
 mod invariants;
+mod jacobian;
 mod properties;
 
 use rand::{Rng, SeedableRng};

@@ -1,4 +1,4 @@
-//! Exact Jacobians of the model's observations for the per-vertex fit.
+//! Exact Jacobians of the model's observations (test harness of the derivative tests).
 //!
 //! Contract: the fit's unknowns are laid out in one vector of [`N_FIT_PARAMS`] slots (see
 //! [`slot`]); [`seed_params`] and [`seed_normal`] turn `f64` values into [`FitDual`]s whose
@@ -8,9 +8,9 @@
 //! the fit can use any tangent-plane parameterisation by the chain rule.
 //! No finite differences anywhere.
 
-use super::measure::{FlashPolariser, ObservationChannels, observe};
-use super::pbrdf::{Geometry, PbrdfParams};
-use super::{Dual, Frame, OpticsError, Vec3};
+use super::super::measure::{FlashPolariser, ObservationChannels, observe};
+use super::super::pbrdf::{Geometry, PbrdfParams};
+use super::super::{Dual, Frame, OpticsError, Vec3};
 
 /// Number of differentiable fit inputs: η, σ_s, σ_ss, ρ_s, ρ_ss (3), ρ_d (3), normal (3).
 pub const N_FIT_PARAMS: usize = 13;

@@ -1,0 +1,131 @@
+//! The carved hull as an implicit surface: the grid field interpolated trilinearly, cut by the
+//! board plane, and the projection of a point onto its zero level.
+//!
+//! Contract: `value(p) = max(φ(p), −p.z)` (volume frame): outside where the hull's field says
+//! so or below the board, so the bottom of the object is the board plane. Outside the grid φ is
+//! the grid's outside value. [`Implicit::project`] takes up to 4 Newton steps along the
+//! gradient, each at most one grid spacing, and returns the point unchanged where the
+//! gradient vanishes.
+
+use nalgebra::Vector3;
+
+use super::carve::Grid;
+
+/// The implicit surface of a grid field.
+pub struct Implicit<'a> {
+    grid: &'a Grid,
+    field: &'a [f32],
+    outside: f64,
+}
+
+impl<'a> Implicit<'a> {
+    /// The surface of `field` on `grid`; `outside` beyond the grid.
+    pub fn new(grid: &'a Grid, field: &'a [f32], outside: f64) -> Self {
+        Self {
+            grid,
+            field,
+            outside,
+        }
+    }
+
+    /// φ and its gradient at `p` (trilinear).
+    fn hull(&self, p: Vector3<f64>) -> (f64, Vector3<f64>) {
+        let g = self.grid;
+        let h = g.spacing_m;
+        let u: [f64; 3] = std::array::from_fn(|a| (p[a] - g.origin_m[a]) / h);
+        if (0..3).any(|a| !(u[a] >= 0.0 && u[a] <= (g.n[a] - 1) as f64)) {
+            return (self.outside, Vector3::zeros());
+        }
+        let i: [usize; 3] = std::array::from_fn(|a| (u[a] as usize).min(g.n[a] - 2));
+        let f: [f64; 3] = std::array::from_fn(|a| u[a] - i[a] as f64);
+        let at = |di: usize, dj: usize, dk: usize| {
+            f64::from(self.field[g.index(i[0] + di, i[1] + dj, i[2] + dk)])
+        };
+        let c: [[[f64; 2]; 2]; 2] = std::array::from_fn(|di| {
+            std::array::from_fn(|dj| std::array::from_fn(|dk| at(di, dj, dk)))
+        });
+        let w = |d: usize, t: f64| if d == 0 { 1.0 - t } else { t };
+        let mut value = 0.0;
+        let mut grad = Vector3::zeros();
+        for di in 0..2 {
+            for dj in 0..2 {
+                for dk in 0..2 {
+                    let v = c[di][dj][dk];
+                    let (wx, wy, wz) = (w(di, f[0]), w(dj, f[1]), w(dk, f[2]));
+                    // d/du of (1 − u) is −1, of u is +1
+                    let s = |d: usize| if d == 0 { -1.0 } else { 1.0 };
+                    value += wx * wy * wz * v;
+                    grad.x += s(di) * wy * wz * v / h;
+                    grad.y += wx * s(dj) * wz * v / h;
+                    grad.z += wx * wy * s(dk) * v / h;
+                }
+            }
+        }
+        (value, grad)
+    }
+
+    /// The value and gradient of the implicit function (module contract).
+    pub fn value(&self, p: Vector3<f64>) -> (f64, Vector3<f64>) {
+        let (phi, grad) = self.hull(p);
+        if -p.z > phi {
+            (-p.z, -Vector3::z())
+        } else {
+            (phi, grad)
+        }
+    }
+
+    /// `p` moved onto the zero level (module contract).
+    pub fn project(&self, mut p: Vector3<f64>) -> Vector3<f64> {
+        let h = self.grid.spacing_m;
+        for _ in 0..4 {
+            let (v, g) = self.value(p);
+            let g2 = g.norm_squared();
+            if !(g2 > 1e-12) || !v.is_finite() {
+                return p;
+            }
+            let mut step = g * (v / g2);
+            let len = step.norm();
+            if len > h {
+                step *= h / len;
+            }
+            p -= step;
+            if v.abs() < 1e-7 * h {
+                break;
+            }
+        }
+        p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Point3;
+
+    #[test]
+    fn projects_onto_a_sphere_field_and_onto_the_board() {
+        let grid = Grid::covering(
+            Point3::new(-0.05, -0.05, -0.005),
+            Point3::new(0.05, 0.05, 0.08),
+            0.002,
+        );
+        // a sphere cut by the board: its field is negative just below the contact
+        let centre = Vector3::new(0.0, 0.0, 0.02);
+        let field: Vec<f32> = (0..grid.len())
+            .map(|n| ((grid.point(grid.ijk(n)).coords - centre).norm() - 0.03) as f32)
+            .collect();
+        let s = Implicit::new(&grid, &field, 1.0);
+        let p = s.project(centre + Vector3::new(0.031, 0.004, 0.005));
+        assert!(
+            ((p - centre).norm() - 0.03).abs() < 2e-5,
+            "{}",
+            (p - centre).norm()
+        );
+        // the gradient of a distance field is a unit vector
+        let (_, g) = s.value(centre + Vector3::new(0.0, 0.02, 0.0));
+        assert!((g.norm() - 1.0).abs() < 0.05, "{}", g.norm());
+        // a point just below the board goes up onto it
+        let q = s.project(Vector3::new(0.0, 0.0, -0.001));
+        assert!(q.z.abs() < 1e-9, "{}", q.z);
+    }
+}

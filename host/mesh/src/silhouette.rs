@@ -1,0 +1,416 @@
+//! One view's evidence: which of its pixels show the board as learned (they see past any
+//! object), and the signed distance to the boundary of that set.
+//!
+//! Contract:
+//! - A pixel is *board* when its ray meets a learned texel and agrees with it
+//!   (`appearance::Agreement`); where its own texel is unknown, when it agrees with one of the
+//!   learned texels around it. A pixel that disagrees, whose texel and neighbours are unknown,
+//!   that is saturated or whose ray misses the board plane is *not board*. Only board pixels
+//!   carve.
+//! - Pixels that disagree are kept as a second mask: a voxel is solid only where views see
+//!   something other than the board through it, not merely no board (`carve`).
+//! - Board islands are made not-board (4-connected): those smaller than `min_island_px`, and
+//!   those *enclosed* (not reaching the image border) with less than `max_enclosed_fraction` of
+//!   the view's board pixels. Pixels of an object that happen to match the board behind them
+//!   (a white object in front of white paper, where its shading and distance happen to equal
+//!   the paper's) form patches inside the object's silhouette, ringed by its dark rim; the board
+//!   around an object is one large region reaching the image border. The price: board seen
+//!   through a small hole in the object (a mug's handle) does not carve.
+//! - [`SignedDistance`]: Euclidean distance transform (Felzenszwalb & Huttenlocher, "Distance
+//!   Transforms of Sampled Functions", Theory of Computing 8, 2012), exact, in pixels:
+//!   `d − ½` to the nearest not-board pixel for board pixels (> 0), `−(d − ½)` to the nearest
+//!   board pixel for the others, so the zero crossing lies on the pixel boundary. Pixels
+//!   outside the image or the crop count as not board; values within `margin` px of a crop
+//!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
+
+use super::appearance::{Agreement, Board, TexelGrid, pixel_sample};
+use super::frames::{FeatureImage, RayTable, View};
+
+/// A view's board pixels as a bit mask, with counts.
+#[derive(Clone, Debug)]
+pub struct Silhouette {
+    /// Frame id.
+    pub frame_id: u64,
+    /// Superpixels per row.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+    bits: Vec<u64>,
+    /// Pixels that disagree with the learned board (they show something else: the object).
+    disagree: Vec<u64>,
+    /// Board pixels.
+    pub board_px: usize,
+    /// Pixels that disagree with a learned texel.
+    pub disagree_px: usize,
+    /// Board islands removed, pixels.
+    pub removed_island_px: usize,
+}
+
+impl Silhouette {
+    /// Whether pixel `(x, y)` shows the board (false outside the image).
+    pub fn is_board(&self, x: isize, y: isize) -> bool {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return false;
+        }
+        let k = y as usize * self.width + x as usize;
+        self.bits[k / 64] >> (k % 64) & 1 == 1
+    }
+
+    /// Whether pixel `(x, y)` disagrees with the learned board (false outside the image).
+    pub fn disagrees(&self, x: isize, y: isize) -> bool {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return false;
+        }
+        let k = y as usize * self.width + x as usize;
+        self.disagree[k / 64] >> (k % 64) & 1 == 1
+    }
+
+    fn set(&mut self, k: usize, on: bool) {
+        if on {
+            self.bits[k / 64] |= 1 << (k % 64);
+        } else {
+            self.bits[k / 64] &= !(1 << (k % 64));
+        }
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        (self.bits.len() + self.disagree.len()) * 8
+    }
+}
+
+/// Classifies every pixel of a view (see the module contract).
+pub fn classify(
+    board: &Board,
+    rule: &Agreement,
+    rays: &RayTable,
+    view: &View,
+    image: &FeatureImage,
+    floor_dn: f64,
+    min_island_px: usize,
+    max_enclosed_fraction: f64,
+) -> Silhouette {
+    // The caller checks that the image and the ray table have the same size.
+    let (w, h) = (image.width, image.height);
+    let mut s = Silhouette {
+        frame_id: view.frame_id,
+        width: w,
+        height: h,
+        bits: vec![0; (w * h).div_ceil(64)],
+        disagree: vec![0; (w * h).div_ceil(64)],
+        board_px: 0,
+        disagree_px: 0,
+        removed_island_px: 0,
+    };
+    for k in 0..w * h {
+        let Some((texel, sample)) = pixel_sample(&board.grid, rays, view, image, k, floor_dn)
+        else {
+            continue;
+        };
+        let verdict = match &board.texels[texel] {
+            Some(learned) => Some(rule.agree(&sample, learned)),
+            // an unknown texel: its learned neighbours speak for it (texels far from the
+            // cameras are hit by fewer pixels than texels)
+            None => neighbours(&board.grid, texel)
+                .filter_map(|n| board.texels[n].as_ref())
+                .fold(None, |v, learned| {
+                    Some(v.unwrap_or(false) || rule.agree(&sample, learned))
+                }),
+        };
+        match verdict {
+            Some(true) => {
+                s.set(k, true);
+                s.board_px += 1;
+            }
+            Some(false) => {
+                s.disagree[k / 64] |= 1 << (k % 64);
+                s.disagree_px += 1;
+            }
+            None => {}
+        }
+    }
+    remove_islands(&mut s, min_island_px, max_enclosed_fraction);
+    s
+}
+
+/// The 8 neighbours of a texel inside the grid.
+fn neighbours(grid: &TexelGrid, texel: usize) -> impl Iterator<Item = usize> + '_ {
+    let (i, j) = ((texel % grid.nx) as isize, (texel / grid.nx) as isize);
+    (-1..=1)
+        .flat_map(move |dj| (-1..=1).map(move |di| (i + di, j + dj)))
+        .filter(move |&(x, y)| {
+            (x, y) != (i, j) && x >= 0 && y >= 0 && x < grid.nx as isize && y < grid.ny as isize
+        })
+        .map(move |(x, y)| y as usize * grid.nx + x as usize)
+}
+
+/// Makes board islands not-board (4-connected components): those smaller than `min_px`, and
+/// those that do not reach the image border and hold less than `max_enclosed_fraction` of the
+/// view's board pixels.
+fn remove_islands(s: &mut Silhouette, min_px: usize, max_enclosed_fraction: f64) {
+    let (w, h) = (s.width, s.height);
+    let enclosed_limit = (max_enclosed_fraction * s.board_px as f64) as usize;
+    let mut visited = vec![false; w * h];
+    let mut stack = Vec::new();
+    let mut component = Vec::new();
+    for start in 0..w * h {
+        if visited[start] || !s.is_board((start % w) as isize, (start / w) as isize) {
+            continue;
+        }
+        component.clear();
+        stack.push(start);
+        visited[start] = true;
+        let mut border = false;
+        while let Some(k) = stack.pop() {
+            component.push(k);
+            let (x, y) = ((k % w) as isize, (k / w) as isize);
+            border |= x == 0 || y == 0 || x as usize + 1 == w || y as usize + 1 == h;
+            for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                let (nx, ny) = (x + dx, y + dy);
+                if s.is_board(nx, ny) {
+                    let n = ny as usize * w + nx as usize;
+                    if !visited[n] {
+                        visited[n] = true;
+                        stack.push(n);
+                    }
+                }
+            }
+        }
+        if component.len() < min_px || (!border && component.len() < enclosed_limit) {
+            for &k in &component {
+                s.set(k, false);
+            }
+            s.board_px -= component.len();
+            s.removed_island_px += component.len();
+        }
+    }
+}
+
+/// A rectangle of pixels `[x0, x1) × [y0, y1)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    /// First column.
+    pub x0: isize,
+    /// First row.
+    pub y0: isize,
+    /// Columns.
+    pub width: usize,
+    /// Rows.
+    pub height: usize,
+}
+
+/// The signed distance of a crop of a silhouette (see the module contract).
+#[derive(Clone, Debug)]
+pub struct SignedDistance {
+    /// The crop it covers.
+    pub crop: Crop,
+    /// Pixels, row-major over the crop.
+    pub values: Vec<f32>,
+    /// Per pixel of the crop: it disagrees with the learned board.
+    pub disagree: Vec<bool>,
+}
+
+/// Large finite stand-in for "no feature pixel" (keeps the parabola arithmetic finite).
+const FAR: f32 = 1e12;
+
+/// Squared 1-D distance transform of `f` into `d` (Felzenszwalb & Huttenlocher, Alg. 1).
+fn edt_1d(f: &[f32], d: &mut [f32], v: &mut [usize], z: &mut [f32]) {
+    let n = f.len();
+    if n == 0 {
+        return;
+    }
+    let mut k = 0usize;
+    v[0] = 0;
+    z[0] = f32::NEG_INFINITY;
+    z[1] = f32::INFINITY;
+    for q in 1..n {
+        let fq = f[q] + (q * q) as f32;
+        loop {
+            let p = v[k];
+            // q > p, so the denominator is ≥ 2
+            let s = (fq - (f[p] + (p * p) as f32)) / (2.0 * (q - p) as f32);
+            if s <= z[k] && k > 0 {
+                k -= 1;
+                continue;
+            }
+            if s <= z[k] {
+                // k == 0 and the new parabola wins everywhere
+                v[0] = q;
+                z[0] = f32::NEG_INFINITY;
+                z[1] = f32::INFINITY;
+            } else {
+                k += 1;
+                v[k] = q;
+                z[k] = s;
+                z[k + 1] = f32::INFINITY;
+            }
+            break;
+        }
+    }
+    let mut k = 0usize;
+    for (q, out) in d.iter_mut().enumerate() {
+        while z[k + 1] < q as f32 {
+            k += 1;
+        }
+        let p = v[k];
+        let dq = q as f32 - p as f32;
+        *out = dq * dq + f[p];
+    }
+}
+
+/// Squared Euclidean distance from every pixel to the nearest pixel where `feature` is true.
+fn edt_2d(feature: &[bool], w: usize, h: usize) -> Vec<f32> {
+    let mut g: Vec<f32> = feature.iter().map(|&b| if b { 0.0 } else { FAR }).collect();
+    let n = w.max(h);
+    let (mut f, mut d, mut v, mut z) = (
+        vec![0f32; n],
+        vec![0f32; n],
+        vec![0usize; n],
+        vec![0f32; n + 1],
+    );
+    for x in 0..w {
+        for y in 0..h {
+            f[y] = g[y * w + x];
+        }
+        edt_1d(&f[..h], &mut d[..h], &mut v, &mut z);
+        for y in 0..h {
+            g[y * w + x] = d[y].min(FAR);
+        }
+    }
+    for y in 0..h {
+        f[..w].copy_from_slice(&g[y * w..(y + 1) * w]);
+        edt_1d(&f[..w], &mut d[..w], &mut v, &mut z);
+        for x in 0..w {
+            g[y * w + x] = d[x].min(FAR);
+        }
+    }
+    g
+}
+
+impl SignedDistance {
+    /// The signed distance over `crop` of `s`.
+    pub fn new(s: &Silhouette, crop: Crop) -> Self {
+        let (w, h) = (crop.width, crop.height);
+        let board: Vec<bool> = (0..w * h)
+            .map(|k| s.is_board(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
+            .collect();
+        let not_board: Vec<bool> = board.iter().map(|b| !b).collect();
+        let to_not_board = edt_2d(&not_board, w, h);
+        let to_board = edt_2d(&board, w, h);
+        let values = (0..w * h)
+            .map(|k| {
+                if board[k] {
+                    to_not_board[k].sqrt() - 0.5
+                } else {
+                    -(to_board[k].sqrt() - 0.5)
+                }
+            })
+            .collect();
+        let disagree = (0..w * h)
+            .map(|k| s.disagrees(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
+            .collect();
+        Self {
+            crop,
+            values,
+            disagree,
+        }
+    }
+
+    /// Whether the pixel nearest superpixel coordinate `(x, y)` disagrees with the board.
+    pub fn disagrees_at(&self, x: f64, y: f64) -> bool {
+        let (u, v) = (
+            (x - self.crop.x0 as f64).round(),
+            (y - self.crop.y0 as f64).round(),
+        );
+        u >= 0.0
+            && v >= 0.0
+            && (u as usize) < self.crop.width
+            && (v as usize) < self.crop.height
+            && self.disagree[v as usize * self.crop.width + u as usize]
+    }
+
+    /// Bilinear value at superpixel coordinate `(x, y)`, `None` outside the crop.
+    pub fn sample(&self, x: f64, y: f64) -> Option<f32> {
+        let (u, v) = (x - self.crop.x0 as f64, y - self.crop.y0 as f64);
+        let (w, h) = (self.crop.width, self.crop.height);
+        if !(u >= 0.0 && v >= 0.0 && u <= (w - 1) as f64 && v <= (h - 1) as f64) || w < 2 || h < 2 {
+            return None;
+        }
+        let (i, j) = ((u as usize).min(w - 2), (v as usize).min(h - 2));
+        let (fx, fy) = ((u - i as f64) as f32, (v - j as f64) as f32);
+        let at = |a: usize, b: usize| self.values[b * w + a];
+        Some(
+            (1.0 - fy) * ((1.0 - fx) * at(i, j) + fx * at(i + 1, j))
+                + fy * ((1.0 - fx) * at(i, j + 1) + fx * at(i + 1, j + 1)),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distance_transform_matches_brute_force() {
+        let (w, h) = (13, 9);
+        let feature: Vec<bool> = (0..w * h).map(|k| (k * 7919) % 11 == 0).collect();
+        let d = edt_2d(&feature, w, h);
+        for k in 0..w * h {
+            let (x, y) = ((k % w) as f32, (k / w) as f32);
+            let brute = (0..w * h)
+                .filter(|&j| feature[j])
+                .map(|j| {
+                    let (a, b) = ((j % w) as f32, (j / w) as f32);
+                    (a - x).powi(2) + (b - y).powi(2)
+                })
+                .fold(f32::INFINITY, f32::min);
+            assert!(
+                (d[k] - brute).abs() < 1e-3,
+                "pixel {k}: {} vs {brute}",
+                d[k]
+            );
+        }
+    }
+
+    #[test]
+    fn signed_distance_crosses_zero_on_the_boundary_and_small_islands_go() {
+        // board everywhere except a 10×10 object; one 2-pixel board island inside it
+        let (w, h) = (40, 30);
+        let mut s = Silhouette {
+            frame_id: 0,
+            width: w,
+            height: h,
+            bits: vec![0; (w * h).div_ceil(64)],
+            disagree: vec![0; (w * h).div_ceil(64)],
+            board_px: 0,
+            disagree_px: 0,
+            removed_island_px: 0,
+        };
+        for y in 0..h {
+            for x in 0..w {
+                let object = (10..20).contains(&x) && (10..20).contains(&y);
+                let island = y == 15 && (14..16).contains(&x);
+                if !object || island {
+                    s.set(y * w + x, true);
+                    s.board_px += 1;
+                }
+            }
+        }
+        remove_islands(&mut s, 4, 0.0);
+        assert_eq!(s.removed_island_px, 2);
+        assert!(!s.is_board(14, 15));
+        let crop = Crop {
+            x0: 0,
+            y0: 0,
+            width: w,
+            height: h,
+        };
+        let d = SignedDistance::new(&s, crop);
+        // boundary between x = 9 (board) and x = 10 (object): zero at x = 9.5
+        let at = |x: f64| d.sample(x, 15.0).unwrap();
+        assert!(at(9.5).abs() < 1e-6, "{}", at(9.5));
+        assert!((at(7.0) - 2.5).abs() < 1e-6);
+        assert!((at(12.0) + 2.5).abs() < 1e-6);
+        assert!(d.sample(-1.0, 3.0).is_none());
+    }
+}

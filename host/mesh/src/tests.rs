@@ -1,0 +1,429 @@
+//! Tests of the carving on small sessions rendered by the simulator (low resolution, a ring of
+//! explicit views), of each bad input, and of the COLMAP files.
+
+use std::path::{Path, PathBuf};
+
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::procedural::icosphere;
+use ellipso_sim::render::{RenderOptions, Renderer};
+use ellipso_sim::scene::Scene;
+use nalgebra::{Isometry3, Point3};
+
+use super::distance::mesh_distance;
+use super::halfedge::HalfEdgeMesh;
+use super::{MeshConfig, MeshError, build_mesh};
+use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
+use ellipso_session::reader::{self, Session};
+use ellipso_session::rig::RigRecord;
+use ellipso_session::time::HostTimeUs;
+use ellipso_session::writer::{FrameRecord, SessionWriter};
+
+/// A white-ish matte material: close to the board's white paper (albedo 0.85), the case a naive
+/// "looks like the board" test gets wrong.
+pub const WHITE: &str = "eta = 1.5\nsigma_s = 0.3\nsigma_ss = 0.45\nrho_s = 0.2\n\
+                         rho_ss = [0.02, 0.02, 0.02]\nrho_d = [0.7, 0.7, 0.7]";
+
+/// Sphere objects `(centre, radius)` in a scene with `views` cameras on two rings around
+/// `(0, 0, 0.03)` at 0.32 m, rendered at `width × height` into a new session under `dir`.
+/// Returns the session directory, the scene and the true poses.
+pub fn render_session(
+    dir: &Path,
+    spheres: &[([f64; 3], f64)],
+    views: usize,
+    width: u32,
+    height: u32,
+) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
+    let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
+    let objects: String = spheres
+        .iter()
+        .enumerate()
+        .map(|(i, (c, r))| {
+            format!(
+                "[[objects]]\nname = \"s{i}\"\nshape = \"sphere\"\nradius_m = {r}\n\
+                 pose = {{ translation_m = [{}, {}, {}] }}\nmaterial = \"white\"\n",
+                c[0], c[1], c[2]
+            )
+        })
+        .collect();
+    let poses: String = (0..views)
+        .map(|k| {
+            let az = k as f64 * std::f64::consts::TAU / views as f64 + 0.3;
+            let el = if k % 2 == 0 { 30f64 } else { 55f64 }.to_radians();
+            let d = 0.32;
+            format!(
+                "[[capture.poses]]\nposition_m = [{}, {}, {}]\nlook_at_m = [0.0, 0.0, 0.03]\n",
+                d * el.cos() * az.cos(),
+                d * el.cos() * az.sin(),
+                0.03 + d * el.sin()
+            )
+        })
+        .collect();
+    let f = 1.9 * f64::from(width);
+    let text = format!(
+        "seed = 5\nname = \"mesh_test\"\n[materials.white]\n{WHITE}\n{objects}\
+         [[boards]]\nfile = \"{board}\"\npose = {{}}\n\
+         [rig.camera]\nresolution_px = [{width}, {height}]\nfx_px = {f}\nfy_px = {f}\n\
+         cx_px = {cx}\ncy_px = {cy}\nsensor = \"mono_polar\"\nbit_depth = 12\nexposure_us = 2500.0\n\
+         [rig.flash]\noffset_m = [0.0, -0.03, 0.0]\n\
+         [capture]\npath = \"explicit\"\n{poses}\n\
+         [effects]\nshot_noise = {{}}\nread_noise = {{ sigma_e = 2.3 }}\nquantisation = {{}}\nsaturation = {{}}\n",
+        board = board.display(),
+        cx = f64::from(width) / 2.0 - 0.5,
+        cy = f64::from(height) / 2.0 - 0.5,
+    );
+    std::fs::create_dir_all(dir).unwrap();
+    let scene_path = dir.join("scene.toml");
+    std::fs::write(&scene_path, text).unwrap();
+    let scene = Scene::load(&scene_path).unwrap();
+    let renderer = Renderer::new(
+        &scene,
+        RenderOptions {
+            supersampling: 1,
+            ..RenderOptions::default()
+        },
+    )
+    .unwrap();
+    let camera = *renderer.camera();
+    let mut manifest = Manifest::new(
+        SessionSource::Simulator {
+            scene: scene_path.display().to_string(),
+            seed: scene.seed,
+        },
+        SensorInfo {
+            layout: "mono_polar".into(),
+            width: camera.width,
+            height: camera.height,
+            bit_depth: 12,
+        },
+        0,
+    );
+    manifest.rig = serde_json::to_value(RigRecord {
+        camera,
+        flash: serde_json::to_value(&scene.rig.flash).unwrap(),
+    })
+    .unwrap();
+    manifest.boards = scene
+        .boards
+        .iter()
+        .map(|b| serde_json::to_value(ellipso_vision::track::TrackedBoard::from_placed(b)).unwrap())
+        .collect();
+    let session_dir = dir.join("session");
+    let mut writer = SessionWriter::create(&session_dir, manifest).unwrap();
+    let mut poses = Vec::new();
+    for k in 0..renderer.frame_count() {
+        let frame = renderer.render_frame(k).unwrap();
+        let frame_id = 100 + k as u64;
+        writer
+            .write_frame(FrameRecord {
+                t_host_us: HostTimeUs(k as u64 * 1000),
+                frame_id,
+                t_camera_ns: None,
+                exposure_us: scene.rig.camera.exposure_us as u32,
+                gain_db: scene.rig.camera.gain_db as f32,
+                width: frame.width,
+                height: frame.height,
+                pixels: &frame.raw(),
+                flagged: None,
+            })
+            .unwrap();
+        poses.push((frame_id, scene.camera_poses[k].world_from_camera));
+    }
+    writer.finish(HostTimeUs(1_000_000), "completed").unwrap();
+    (session_dir, scene, poses)
+}
+
+fn open(dir: &Path) -> Session {
+    reader::open(dir).unwrap()
+}
+
+fn sphere_mesh(centre: [f64; 3], radius: f64) -> TriangleMesh {
+    let (dirs, tris) = icosphere(5);
+    let pos = dirs
+        .iter()
+        .map(|d| Point3::from(centre) + d.into_inner() * radius)
+        .collect();
+    TriangleMesh::new(pos, None, None, tris).unwrap()
+}
+
+fn small_config() -> MeshConfig {
+    let mut c = MeshConfig {
+        fine_cells: 90,
+        ..MeshConfig::default()
+    };
+    c.remesh.target_vertices = 600;
+    c
+}
+
+#[test]
+fn carves_a_white_sphere_on_white_paper_into_a_closed_mesh_near_the_truth() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (centre, radius) = ([0.0, 0.0, 0.03], 0.03);
+    let (dir, _, poses) = render_session(tmp.path(), &[(centre, radius)], 16, 480, 384);
+    let session = open(&dir);
+    let mut config = small_config();
+    config.debug_dir = std::env::var_os("MESH_TEST_DEBUG").map(PathBuf::from);
+    let result = build_mesh(&session, &poses, &config, &mut |_| {}).unwrap();
+    let r = &result.report;
+    assert_eq!(r.frames_used, 16);
+    assert!(r.board_pixels_median > 0.5, "{r:?}");
+    // closed 2-manifold, near the target size
+    let he = HalfEdgeMesh::new(
+        result.mesh.positions().iter().map(|p| p.coords).collect(),
+        result.mesh.triangles(),
+    );
+    assert!(he.is_ok(), "not a closed manifold: {he:?}");
+    let genus = 1 - (r.vertices as i64 - r.triangles as i64 / 2) / 2;
+    assert_eq!(genus, 0, "a sphere's hull has no handles: {r:?}");
+    assert!(
+        (r.vertices as f64 / 600.0 - 1.0).abs() < 0.2,
+        "{} vertices",
+        r.vertices
+    );
+    // near the truth: the pixel footprint here is ~0.7 mm, 16 views leave the hull's corners
+    let d = mesh_distance(&result.mesh, &sphere_mesh(centre, radius), 4000, 1);
+    println!("16 views 480×384: {d:?}, report {r:?}");
+    assert!(d.chamfer_m < 1.5e-3, "{d:?}");
+    assert!(r.volume_m3 > 0.0);
+    // every vertex on or above the board
+    assert!(result.mesh.positions().iter().all(|p| p.z >= -1e-9));
+
+    // the naive test — anything within 60 % of the board's value counts as board — carves
+    // into the white sphere: its volume or its distance to the truth gets much worse
+    let mut naive = config.clone();
+    naive.appearance.tolerance_rel = 0.6;
+    naive.appearance.tolerance_polarisation = 1.0;
+    match build_mesh(&session, &poses, &naive, &mut |_| {}) {
+        Ok(bad) => {
+            let dn = mesh_distance(&bad.mesh, &sphere_mesh(centre, radius), 4000, 1);
+            println!("naive: {dn:?}, volume {}", bad.report.volume_m3);
+            assert!(dn.chamfer_m > 1.5 * d.chamfer_m, "{dn:?} vs {d:?}");
+        }
+        Err(e) => println!("naive: {e}"),
+    }
+}
+
+#[test]
+fn too_few_posed_frames_is_an_error_naming_them() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 4, 160, 128);
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses[..3], &MeshConfig::default(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(
+        matches!(e, MeshError::TooFewPosedFrames { usable: 3, .. }),
+        "{text}"
+    );
+    assert!(text.contains("100, 101, 102"), "{text}");
+    // a pose of a frame that is not in the session is named with its reason
+    let mut more = poses.clone();
+    more.push((999, poses[0].1));
+    let e = build_mesh(&session, &more, &MeshConfig::default(), &mut |_| {}).unwrap_err();
+    assert!(
+        e.to_string().contains("999 (no frame file in the session)"),
+        "{e}"
+    );
+}
+
+#[test]
+#[ignore = "known failure: the part of the sphere beyond the footprint edge is lost to the coarse \
+            solid-evidence rule, so no face is reached (docs/mesh.md, open problems)"]
+fn an_object_off_the_board_is_an_error_naming_the_face_and_frames() {
+    let tmp = tempfile::tempdir().unwrap();
+    // the base board's tags span x ±0.1335 m: a sphere at x = 0.12 reaches past it
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.12, 0.0, 0.03], 0.03)], 12, 320, 256);
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, MeshError::ObjectOffBoard { .. }), "{text}");
+    assert!(text.contains("+x"), "{text}");
+    assert!(text.contains("frames 1"), "{text}");
+}
+
+#[test]
+#[ignore = "known failure: blurred tag edges leave small residue parts above the tags, reported \
+            as a disconnected hull instead of an empty one (docs/mesh.md, open problems)"]
+fn a_bare_board_is_an_empty_hull() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[], 12, 320, 256);
+    let session = open(&dir);
+    let mut config = small_config();
+    config.debug_dir = std::env::var_os("MESH_TEST_DEBUG").map(PathBuf::from);
+    let e = build_mesh(&session, &poses, &config, &mut |_| {}).unwrap_err();
+    assert!(matches!(e, MeshError::HullEmpty { views: 12, .. }), "{e}");
+    assert!(e.to_string().contains("100, 101"), "{e}");
+}
+
+#[test]
+fn two_objects_are_a_disconnected_hull() {
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(
+        tmp.path(),
+        &[([-0.05, 0.0, 0.02], 0.02), ([0.05, 0.0, 0.02], 0.02)],
+        12,
+        320,
+        256,
+    );
+    let session = open(&dir);
+    let e = build_mesh(&session, &poses, &small_config(), &mut |_| {}).unwrap_err();
+    let text = e.to_string();
+    assert!(matches!(e, MeshError::HullDisconnected { .. }), "{text}");
+    assert!(text.contains("frames 10"), "{text}");
+}
+
+/// A minimal reader of COLMAP's text model: the camera line and, per image, its id, pose and
+/// name (the format the writer must meet).
+fn read_colmap(sparse: &Path) -> (Vec<String>, Vec<(usize, [f64; 7], String)>, usize) {
+    let data_lines = |name: &str| -> Vec<String> {
+        std::fs::read_to_string(sparse.join(name))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#'))
+            .map(str::to_string)
+            .collect()
+    };
+    let cameras: Vec<String> = data_lines("cameras.txt")
+        .into_iter()
+        .filter(|l| !l.trim().is_empty())
+        .collect();
+    let lines = data_lines("images.txt");
+    // two lines per image: the pose line, then the (here empty) 2-D points line
+    assert_eq!(lines.len() % 2, 0, "images.txt needs two lines per image");
+    let images = lines
+        .chunks(2)
+        .map(|pair| {
+            assert!(
+                pair[1].trim().is_empty(),
+                "points line not empty: {}",
+                pair[1]
+            );
+            let f: Vec<&str> = pair[0].split_whitespace().collect();
+            assert_eq!(f.len(), 10, "{}", pair[0]);
+            let v: [f64; 7] = std::array::from_fn(|k| f[1 + k].parse().unwrap());
+            assert_eq!(f[8], "1");
+            (f[0].parse().unwrap(), v, f[9].to_string())
+        })
+        .collect();
+    let points = data_lines("points3D.txt")
+        .iter()
+        .filter(|l| !l.trim().is_empty())
+        .count();
+    (cameras, images, points)
+}
+
+#[test]
+fn colmap_files_round_trip_with_the_poses_and_the_pixel_centre_convention() {
+    use super::colmap::{ColmapOptions, export_colmap};
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, scene, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 4, 160, 128);
+    let session = open(&dir);
+    let out = tmp.path().join("colmap");
+    let report = export_colmap(&session, &poses, &out, ColmapOptions::default()).unwrap();
+    assert_eq!(report.images, 4);
+    let (cameras, images, points) = read_colmap(&out.join("sparse"));
+    assert_eq!(points, 0);
+    assert_eq!(cameras.len(), 1);
+    let c: Vec<&str> = cameras[0].split_whitespace().collect();
+    assert_eq!(&c[..4], ["1", "PINHOLE", "80", "64"], "{}", cameras[0]);
+    let p: Vec<f64> = c[4..].iter().map(|x| x.parse().unwrap()).collect();
+    let camera = scene.rig.camera.camera_model();
+    assert_eq!(images.len(), 4);
+    for ((id, v, name), (frame_id, world_from_camera)) in images.iter().zip(&poses) {
+        assert_eq!(name, &format!("{frame_id:08}.png"));
+        assert!(out.join("images").join(name).is_file());
+        assert!(*id >= 1);
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            v[0], v[1], v[2], v[3],
+        ));
+        assert!(v[0] >= 0.0);
+        let camera_from_world =
+            Isometry3::from_parts(nalgebra::Translation3::new(v[4], v[5], v[6]), q);
+        let expected = world_from_camera.inverse();
+        assert!((camera_from_world.to_homogeneous() - expected.to_homogeneous()).norm() < 1e-9);
+        // a board point projected COLMAP's way (pixel centres at +0.5) lands 0.5 px from our
+        // superpixel projection of the same ray
+        for x in [
+            Point3::new(0.05, -0.02, 0.0),
+            Point3::new(-0.03, 0.04, 0.01),
+        ] {
+            let pc = camera_from_world * x;
+            let colmap = [p[0] * pc.x / pc.z + p[2], p[1] * pc.y / pc.z + p[3]];
+            let i = camera.intrinsics;
+            let raw = [i.fx * pc.x / pc.z + i.cx, i.fy * pc.y / pc.z + i.cy];
+            let ours = [(raw[0] - 0.5) / 2.0, (raw[1] - 0.5) / 2.0];
+            assert!(
+                (colmap[0] - ours[0] - 0.5).abs() < 1e-9
+                    && (colmap[1] - ours[1] - 0.5).abs() < 1e-9
+            );
+        }
+    }
+    // with the lens kept, the model is OpenCV's with the calibration's coefficients
+    let kept = tmp.path().join("kept");
+    let r = export_colmap(
+        &session,
+        &poses,
+        &kept,
+        ColmapOptions {
+            keep_distortion: true,
+        },
+    )
+    .unwrap();
+    assert!(r.camera.starts_with("1 OPENCV 80 64 "), "{}", r.camera);
+}
+
+#[test]
+fn colmap_model_converter_reads_the_files() {
+    let Ok(o) = std::process::Command::new("colmap").arg("help").output() else {
+        // CI installs it and sets ELLIPSO_REQUIRE_COLMAP, so there a missing program fails
+        assert!(
+            std::env::var_os("ELLIPSO_REQUIRE_COLMAP").is_none(),
+            "ELLIPSO_REQUIRE_COLMAP is set but the `colmap` program is not installed"
+        );
+        println!("skipped: the `colmap` program is not installed (apt-get install colmap)");
+        return;
+    };
+    assert!(o.status.success() || !o.stdout.is_empty());
+    let tmp = tempfile::tempdir().unwrap();
+    let (dir, _, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 3, 160, 128);
+    let session = open(&dir);
+    let out = tmp.path().join("colmap");
+    super::colmap::export_colmap(&session, &poses, &out, Default::default()).unwrap();
+    let convert = |input: &Path, output: &Path, kind: &str| {
+        std::fs::create_dir_all(output).unwrap();
+        let o = std::process::Command::new("colmap")
+            .env("QT_QPA_PLATFORM", "offscreen")
+            .args(["model_converter", "--input_path"])
+            .arg(input)
+            .arg("--output_path")
+            .arg(output)
+            .args(["--output_type", kind])
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "colmap model_converter: {}{}",
+            String::from_utf8_lossy(&o.stdout),
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    // text → binary → text: COLMAP parsed every field and writes the same model back
+    let bin = tmp.path().join("bin");
+    let txt = tmp.path().join("txt");
+    convert(&out.join("sparse"), &bin, "BIN");
+    convert(&bin, &txt, "TXT");
+    let (c0, i0, _) = read_colmap(&out.join("sparse"));
+    let (c1, i1, p1) = read_colmap(&txt);
+    assert_eq!(p1, 0);
+    let fields = |l: &str| -> Vec<f64> {
+        l.split_whitespace()
+            .filter_map(|x| x.parse().ok())
+            .collect()
+    };
+    assert_eq!(fields(&c0[0]), fields(&c1[0]));
+    assert_eq!(i0.len(), i1.len());
+    for (a, b) in i0.iter().zip(&i1) {
+        assert_eq!(a.2, b.2);
+        for k in 0..7 {
+            assert!((a.1[k] - b.1[k]).abs() < 1e-9, "{a:?} vs {b:?}");
+        }
+    }
+}

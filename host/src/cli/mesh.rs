@@ -1,0 +1,94 @@
+//! `ellipso mesh SESSION --out mesh.ply [--vertices N]`: the object's watertight mesh carved
+//! from the session's posed frames (`ellipso_mesh`), written as a binary PLY in board
+//! coordinates (metres), with `<out stem>-report.json` beside it.
+//!
+//! Poses come from the session's `pose` events (tracked now and appended when the log has none,
+//! as `ellipso fit` does).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::ply::{PlyFormat, write_ply};
+
+use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
+use ellipso_session::reader::Session;
+
+/// Arguments of `ellipso mesh`.
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The session directory.
+    pub session: PathBuf,
+    /// Output mesh (PLY).
+    #[arg(long, default_value = "mesh.ply")]
+    pub out: PathBuf,
+    /// Target vertex count of the mesh.
+    #[arg(long, default_value_t = 2500)]
+    pub vertices: usize,
+    /// Views that must see the board through a voxel to carve it.
+    #[arg(long, default_value_t = 3)]
+    pub votes: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// Runs `ellipso mesh`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let session = ellipso_session::reader::open(&args.session)?;
+    let mut config = MeshConfig {
+        votes: args.votes.max(1),
+        threads: args.threads,
+        ..MeshConfig::default()
+    };
+    config.remesh.target_vertices = args.vertices.max(16);
+    let started = Instant::now();
+    let (mesh, mut report) = mesh_of_session(&session, &config)?;
+    report.peak_rss_bytes = ellipso_mesh::peak_rss_bytes();
+    let json = write_mesh(&mesh, &report, &args.out)?;
+    crate::outln!(
+        "mesh         {} vertices, {} triangles, {:.1} cm³ from {} frames in {:.1} s",
+        report.vertices,
+        report.triangles,
+        report.volume_m3 * 1e6,
+        report.frames_used,
+        started.elapsed().as_secs_f64()
+    );
+    if !report.skipped.is_empty() {
+        crate::outln!(
+            "             {} posed frames not used: {}",
+            report.skipped.len(),
+            ellipso_mesh::error::skipped_list(&report.skipped, 4)
+        );
+    }
+    crate::outln!("  {}\n  {}", args.out.display(), json.display());
+    Ok(())
+}
+
+/// Tracks the session if it has no poses, then carves its mesh.
+pub fn mesh_of_session(
+    session: &Session,
+    config: &MeshConfig,
+) -> anyhow::Result<(TriangleMesh, MeshReport)> {
+    let poses = super::fit::poses_of(session)?;
+    let result = build_mesh(session, &poses, config, &mut |stage| {
+        crate::outln!("  {stage}…")
+    })
+    .with_context(|| format!("meshing {}", session.dir.display()))?;
+    Ok((result.mesh, result.report))
+}
+
+/// Writes the mesh (binary PLY) and its report (`<stem>-report.json`); returns the report path.
+pub fn write_mesh(mesh: &TriangleMesh, report: &MeshReport, out: &Path) -> anyhow::Result<PathBuf> {
+    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    std::fs::write(out, write_ply(mesh, PlyFormat::BinaryLittleEndian, false))
+        .with_context(|| format!("writing {}", out.display()))?;
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh");
+    let json = out.with_file_name(format!("{stem}-report.json"));
+    std::fs::write(&json, serde_json::to_vec_pretty(report)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    Ok(json)
+}
