@@ -46,7 +46,7 @@ fn model_fresnel_prints_the_reference_numbers() {
     ]);
     assert!(o.status.success());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
-    // optics.md §10.1, η = 1.5 at 45°
+    // docs/model.md §8 "Fresnel and diffuse DoP values", η = 1.5 at 45°
     assert!((v["rs"].as_f64().unwrap() + 0.303337).abs() < 1e-6);
     assert!((v["r_cross"].as_f64().unwrap() + 0.027911).abs() < 1e-6);
 }

@@ -1,7 +1,8 @@
-//! Specular augmentation (optics.md §7.7–§7.8, the paper's Step B): cluster the vertices of
-//! the joint solve by material, fit one two-lobe specular model per cluster, and give every
-//! vertex "virtual" coaxial specular samples from its nearest cluster, which regularise the
-//! sharp lobes that sparse views constrain poorly in the final per-vertex passes.
+//! Specular augmentation (the paper's Step B: docs/model.md §11 "Steps A, B, C and the outer
+//! loop", docs/fit-augment.md): cluster the vertices of the joint solve by material, fit one
+//! two-lobe specular model per cluster, and give every vertex "virtual" coaxial specular samples
+//! from its nearest cluster, which regularise the sharp lobes that sparse views constrain poorly
+//! in the final per-vertex passes.
 //!
 //! API:
 //! - [`augment`]`(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation`.
@@ -12,7 +13,7 @@
 //!   (index into `clusters` of the nearest model cluster in feature space; `None` without a
 //!   usable fit or when no cluster has a model) and `guides` (for `fit::solve::fit_vertex`):
 //!   the virtual samples (empty when the vertex is outside the kernel), the σ_s floor
-//!   (σ_s,cluster/2 for the final pass, §7.8; 0 — no floor — for a vertex without virtual
+//!   (σ_s,cluster/2 for the final pass, the paper's; 0 — no floor — for a vertex without virtual
 //!   samples: a cluster it is not close to says nothing about its lobe), the cluster's lobe as
 //!   a start, and the pooled η prior ([`pool`]).
 //!
@@ -85,7 +86,7 @@ pub struct AugmentConfig {
     pub max_eta_samples: usize,
     /// Samples per cluster for the two-lobe fit (paper: 65 536).
     pub max_lobe_samples: usize,
-    /// Smallest σ_s of a cluster model (optics.md §9: 0.01–0.05).
+    /// Smallest σ_s of a cluster model (docs/model.md §12, σ → 0: 0.01–0.05).
     pub sigma_min: f64,
     /// Upper bound of the cluster lobes' albedos (the solver's cap, default 5).
     pub albedo_cap: f64,

@@ -189,9 +189,10 @@ pub struct Sample {
     pub normaliser: f32,
 }
 
-/// One virtual specular sample of the paper's augmentation (optics.md §7.7–§7.8): the value of
-/// the vertex's cluster two-lobe model at an exactly coaxial geometry (θ_i = θ_o = θ_h, Fresnel
-/// at normal incidence), compared with the vertex's own model at the same geometry.
+/// One virtual specular sample of the paper's augmentation (docs/fit-augment.md "Virtual profile
+/// and kernel"): the value of the vertex's cluster two-lobe model at an exactly coaxial geometry
+/// (θ_i = θ_o = θ_h, Fresnel at normal incidence), compared with the vertex's own model at the
+/// same geometry.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VirtualSample {
     /// cos θ_h of the coaxial geometry (θ_h ∈ [0°, 89.5°]).
@@ -204,7 +205,8 @@ pub struct VirtualSample {
 }
 
 /// What the shared steps (clusters, docs/fit-augment.md) hand one vertex's final solve: the
-/// paper's virtual samples and σs floor (optics §7.8) and a pooled prior on η.
+/// paper's virtual samples and σs floor (docs/model.md §11 "Steps A, B, C and the outer loop")
+/// and a pooled prior on η.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct VertexGuide {
     /// Virtual coaxial specular samples (empty: none).
@@ -217,7 +219,8 @@ pub struct VertexGuide {
     pub lobe_start: Option<[f64; 3]>,
 }
 
-/// Why samples or vertices were gated out; counted per reason (optics.md §7.3).
+/// Why samples or vertices were gated out; counted per reason (docs/model.md §11 "Sample
+/// gating").
 #[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct GateCounts {
     /// Behind the camera, outside the image, or the vertex faces away.

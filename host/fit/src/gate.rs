@@ -1,6 +1,6 @@
-//! Sample gating (optics.md §7.3, §9): which (vertex, view) observations the fit may use, one
-//! rule set shared by observation extraction from real frames and by the synthetic sample
-//! generator, so both gate identically.
+//! Sample gating (docs/model.md §11 "Sample gating", §12): which (vertex, view) observations
+//! the fit may use, one rule set shared by observation extraction from real frames and by the
+//! synthetic sample generator, so both gate identically.
 //!
 //! Contract:
 //! - [`GateConfig::check_sample`] judges one sample from its raw analyser intensities in DN
@@ -23,8 +23,8 @@ use super::data::{GateCounts, Sample};
 /// Thresholds of the sample gates.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GateConfig {
-    /// Samples viewed more than this far from the normal are dropped, degrees (optics.md §9:
-    /// start near 80–85°).
+    /// Samples viewed more than this far from the normal are dropped, degrees (docs/model.md
+    /// §12, grazing: start near 80–85°).
     pub grazing_cutoff_deg: f64,
     /// A sample is saturated when any analyser intensity reaches this fraction of full scale.
     pub saturation_fraction: f64,

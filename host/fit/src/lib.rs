@@ -1,7 +1,7 @@
 //! `ellipso-fit`: the per-vertex polarimetric SVBRDF fit of a recorded session, and its outputs.
 //!
 //! The fit is Sparse Ellipsometry's reconstruction
-//! (optics.md §7), inverting the same optics the simulator renders with
+//! (docs/model.md §11), inverting the same optics the simulator renders with
 //! (`ellipso_model::optics`; never a copy). `docs/fit.md` describes the whole chain.
 //!
 //! The chain, one module each:

@@ -1,7 +1,7 @@
 //! Per-sample prediction for the fit: the observation channels of the unit-albedo lobes, with
 //! exact derivatives, cheap enough for 10⁵ vertices × 150 views.
 //!
-//! Contract (optics.md §3, §5.3, §7.1):
+//! Contract (docs/model.md §4, §6 "Observation channels", §11 "Unknowns"):
 //! - Observations are linear in the albedos. Per colour channel c,
 //!   `[I^d, I^s, I^α]_c = ρ_d,c·A + ρ_ss,c·B(σ_ss) + ρ_s·C(σ_s)`, where A, B, C are the
 //!   observation channels of the diffuse, single-scattering and specular lobes with unit albedo
@@ -14,9 +14,9 @@
 //! - The normal is `n0 + p·t1 + q·t2` with (t1, t2) an orthonormal tangent basis of the unit
 //!   `n0` ([`tangent_basis`]); the optics model normalises it, so (p, q) are tangent-plane
 //!   coordinates (radians to first order).
-//! - Virtual samples (optics.md §7.7): [`coaxial_unit_specular`] gives the two reflection lobes at
-//!   an exactly coaxial geometry (θ_i = θ_o = θ_h, Fresnel R(0)), through
-//!   `ellipso_model::optics::coaxial::specular_term`.
+//! - Virtual samples (docs/fit-augment.md "Virtual profile and kernel"):
+//!   [`coaxial_unit_specular`] gives the two reflection lobes at an exactly coaxial geometry
+//!   (θ_i = θ_o = θ_h, Fresnel R(0)), through `ellipso_model::optics::coaxial::specular_term`.
 //! - A sample whose geometry is degenerate or back-facing has no prediction (`None`).
 
 use ellipso_model::optics::coaxial::unit_specular_terms;
@@ -112,7 +112,7 @@ pub struct UnitSample<T> {
     pub specular: [T; 3],
     /// cos θ_o = n·ω_o clamped to [0, 1].
     pub cos_theta_o: T,
-    /// DoP_d(η, θ_o) (optics.md §6).
+    /// DoP_d(η, θ_o) (docs/model.md §6 "Diffuse DoP and its η-derivative").
     pub dop_diffuse: T,
 }
 
@@ -205,7 +205,8 @@ pub fn unit_sample<T: Real>(
 
 /// The coaxial specular I^s of the two unit-albedo reflection lobes at `cos_theta_h`
 /// (θ_i = θ_o = θ_h, Fresnel at normal incidence): `(single_scattering, specular)`, so a
-/// virtual sample predicts `ρ_ss,c·B_v + ρ_s·C_v` (optics.md §7.7).
+/// virtual sample predicts `ρ_ss,c·B_v + ρ_s·C_v` (docs/fit-augment.md "Virtual profile and
+/// kernel").
 pub fn coaxial_unit_specular<T: Real>(cos_theta_h: f64, eta: T, sigma_s: T, sigma_ss: T) -> (T, T) {
     unit_specular_terms(T::from_f64(cos_theta_h), eta, sigma_s, sigma_ss)
 }

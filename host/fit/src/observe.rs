@@ -1,7 +1,7 @@
 //! Observation extraction: a recorded session + camera poses + a triangle mesh → the fit's
-//! [`SampleSet`] (optics.md §7.2–§7.3): per (vertex, view) the observation channels
-//! `[I^d, I^s, I^α]` per colour channel divided by the normaliser N, with visibility and the
-//! shared sample gates applied.
+//! [`SampleSet`] (docs/model.md §11 "Inputs and the normaliser N", "Sample gating"): per
+//! (vertex, view) the observation channels `[I^d, I^s, I^α]` per colour channel divided by the
+//! normaliser N, with visibility and the shared sample gates applied.
 //!
 //! Contract:
 //! - **Inputs.** The session (`ellipso_session::reader::open`), poses `(frame id,

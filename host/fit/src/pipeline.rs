@@ -1,4 +1,5 @@
-//! The fit pipeline on a fixed set of observations (optics.md §7.5–§7.8):
+//! The fit pipeline on a fixed set of observations (docs/model.md §11 "Steps A, B, C and the
+//! outer loop"):
 //!
 //! 1. **Step A** — joint per-vertex solve (normal + pBRDF) of every vertex
 //!    ([`super::solve::fit_all`]), warm-started from a previous result when one is given;

@@ -1,7 +1,8 @@
 //! The fit of a recorded session: observations from the frames, the per-vertex solve, the shape
 //! update, repeated for a few outer iterations, then the augmentation and final passes
-//! (optics.md §7.6: the paper alternates solve and Poisson reconstruction; we alternate solve
-//! and a normal-guided vertex update on the fixed connectivity, [`super::shape`]).
+//! (docs/model.md §11 "Steps A, B, C and the outer loop": the paper alternates solve and
+//! Poisson reconstruction; we alternate solve and a normal-guided vertex update on the fixed
+//! connectivity, [`super::shape`]).
 //!
 //! Contract:
 //! - **Held-out views.** A deterministic `holdout_fraction` of the posed frames

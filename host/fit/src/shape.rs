@@ -1,9 +1,10 @@
-//! The shape update of the outer loop (optics.md §7.6, §8.8): move the mesh vertices so the
-//! surface agrees with the refined per-vertex normals, keeping the connectivity.
+//! The shape update of the outer loop (docs/model.md §11 "Steps A, B, C and the outer loop";
+//! docs/fit-shape.md): move the mesh vertices so the surface agrees with the refined per-vertex
+//! normals, keeping the connectivity.
 //!
 //! # Choice: normal-guided vertex optimisation, not screened Poisson
 //! The paper re-meshes with screened Poisson reconstruction from the refined oriented points and
-//! carries parameters to the new mesh by nearest-neighbour lookup (§7.6). We instead solve the
+//! carries parameters to the new mesh by nearest-neighbour lookup. We instead solve the
 //! positions+normals least squares of Nehab, Rusinkiewicz, Davis and Ramamoorthi ("Efficiently
 //! Combining Positions and Normals for Precise 3D Geometry", SIGGRAPH 2005) on the fixed
 //! connectivity:

@@ -1,6 +1,6 @@
 //! The per-vertex solver of the polarimetric SVBRDF fit: Levenberg–Marquardt with exact
 //! dual-number Jacobians, the albedos by variable projection, standard errors and honest flags
-//! (optics.md §7.4–§7.8, §8; docs/fit-solver.md has the derivations and measured numbers).
+//! (docs/model.md §11; docs/fit-solver.md has the derivations and measured numbers).
 //!
 //! # API
 //! - [`fit_vertex`]`(views, vertex, colour, init, guide, config) -> VertexFit`
@@ -26,7 +26,7 @@
 //! the final pass, which is how per-vertex η borrows strength from its material), and the
 //! normal's tilt from the mesh normal (a prior cone: dark vertices cannot swing 30°).
 //!
-//! # Residuals and weights (optics.md §7.4)
+//! # Residuals and weights (docs/model.md §11 "Loss terms")
 //! See `problem.rs`. Defaults λψ = 10, λd = λs = λφ = 1 (the released code's values). With
 //! virtual samples, real specular residuals weigh (1 − λg)·λs each and a virtual sample of weight
 //! w (weights sum to λg) weighs λs·N_real·w, i.e. the paper's (1 − λg)/N_real : w proportion,
@@ -89,7 +89,8 @@ static NO_GUIDE: VertexGuide = VertexGuide {
     lobe_start: None,
 };
 
-/// Which least-squares loss the solver minimises (docs/fit-solver.md, optics.md §7.4, §8.4).
+/// Which least-squares loss the solver minimises (docs/fit-solver.md, docs/model.md §11 "Loss
+/// terms").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum LossMode {
     /// The paper's four terms L_d, L_s, L_ψ (DoP ratio), L_φ (azimuth with the observed DP),
@@ -172,7 +173,7 @@ pub struct SolverConfig {
     pub lambda_phi: f64,
     /// λg: total weight of virtual samples relative to real specular ones (default 0.1).
     pub lambda_g: f64,
-    /// Floor of both roughnesses (default 0.01; docs/model.md, σ → 0).
+    /// Floor of both roughnesses (default 0.01; docs/model.md §12, σ → 0).
     pub sigma_min: f64,
     /// Range of η (default [1.1, 3], the paper's bounds; dielectrics of everyday materials lie
     /// in it, and η → 1 — no polarisation — is flagged at the lower end).
@@ -315,9 +316,9 @@ impl SolverConfig {
 }
 
 /// Fits one vertex (see the module doc). `init` warm-starts every parameter and the normal
-/// (η is not reset, optics §8.5); `guide` carries the shared steps' virtual samples, σ_s floor,
-/// pooled η prior and cluster lobe (a second start beside `init`; the better initial cost runs
-/// first).
+/// (η is not reset, unlike the released code's step A: docs/model.md §11 "Steps A, B, C and the
+/// outer loop"); `guide` carries the shared steps' virtual samples, σ_s floor, pooled η prior
+/// and cluster lobe (a second start beside `init`; the better initial cost runs first).
 pub fn fit_vertex(
     views: &[ViewGeometry],
     vertex: &VertexSamples,
@@ -548,8 +549,8 @@ fn finish(
         }
     }
     // Polarisation SNR: RMS of the (unweighted) DoP residuals against the mean model DoP. Below
-    // 1 the observed DoP is dominated by noise and its Rice bias (optics.md §9 dark pixels), so
-    // the std error (which assumes zero-mean noise) understates η's error.
+    // 1 the observed DoP is dominated by noise and its Rice bias (docs/model.md §12, dark
+    // pixels), so the std error (which assumes zero-mean noise) understates η's error.
     let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
     let _ = problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |_: f64| {});
     let dop_sq: f64 = problem

@@ -15,7 +15,7 @@
 //!   channel entries of a sample are then equal.
 //! - [`orbit_views`] places cameras on a spiral orbit around a point, with the flash rigidly
 //!   offset in the camera frame and its polariser along the camera's x axis (image right), i.e.
-//!   parallel to the 0° analyser as on the rig (optics.md §5.3).
+//!   parallel to the 0° analyser as on the rig (docs/model.md §6 "Observation channels").
 
 use ellipso_model::optics::Stokes;
 use ellipso_model::optics::Vec3;

@@ -1,4 +1,4 @@
-//! The rig's observation channels I^d, I^s, I^α (optics.md §5.3).
+//! The rig's observation channels I^d, I^s, I^α (docs/model.md §6 "Observation channels").
 //!
 //! With the flash polariser parallel to the 0° analyser (light Stokes [1, 1, 0] in the light
 //! frame), the four analyser images separate into:

@@ -37,7 +37,7 @@
 //! - Stokes (Hagen et al., Opt. Eng. 58(8) 080501, 2019; `elerac/polanalyser: polanalyser/stokes.py`):
 //!   `s0 = ½(I0+I45+I90+I135)`, `s1 = I0 − I90`, `s2 = I45 − I135`,
 //!   `DoLP = √(s1²+s2²)/s0`, `AoLP = ½·atan2(s2, s1) mod π`.
-//! - Observation channels (optics.md §5.3): `I^d = 2·I90`, `I^s = I0 − I90`, `I^α = I135 − I45`;
+//! - Observation channels (docs/model.md §6): `I^d = 2·I90`, `I^s = I0 − I90`, `I^α = I135 − I45`;
 //!   `s1 = I^s` and `s2 = −I^α` bit for bit; `s0 − s1 = I^d` when the residual is 0.
 //! - Non-ideal analysers: an optional [`AnalyserCalibration`] (angles, extinction ratios, gains)
 //!   replaces the formulas by the least-squares estimator ([`calibration`]).
@@ -76,7 +76,7 @@ pub use stokes::{StokesBand, aolp_rad, dolp, intensity_behind_analyser, stokes_f
 use demosaic::{RowBuf, band_colours, superpixel_row};
 use stokes::{AnalyserRow, Thresholds, stokes_row};
 
-/// Mean intensity below which a pixel is dark by default (optics.md §9: threshold 0.001).
+/// Mean intensity below which a pixel is dark by default (docs/model.md §12: threshold 0.001).
 pub const DEFAULT_DARK_INTENSITY: f32 = 0.001;
 
 /// How to turn a raw frame into Stokes images.

@@ -16,7 +16,7 @@
 //!   clamped to 1.
 //! - AoLP of unpolarised light (s1 = s2 = 0) is 0.
 //! - Mean intensity s0/2 below the dark threshold flags [`MaskReason::Dark`] (DoLP is biased
-//!   upward by noise there, optics.md §9).
+//!   upward by noise there, docs/model.md §12).
 //!
 //! AoLP uses a polynomial `atan2` (Abramowitz & Stegun 4.4.49, |error| ≤ 2·10⁻⁸ rad before f32
 //! rounding) so the row kernel vectorises; it is tested against `f64::atan2`.

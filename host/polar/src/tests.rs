@@ -454,7 +454,7 @@ fn stored_and_derived_channels_match_their_definitions() {
 
 #[test]
 fn handedness_polariser_at_plus_30_reads_30_not_150() {
-    // optics.md §5.2 check, on the ideal sensor: a linear polariser whose axis is 30°
+    // docs/polar.md "Handedness check", on the ideal sensor: a linear polariser whose axis is 30°
     // counter-clockwise from image-right (toward image-up). Malus per analyser θ:
     // I_θ = I·cos²(θ − 30°), with θ taken from the mosaic definition.
     let frame = mosaic_from_stokes(MONO, 4, 4, 12, |_, _, _| {

@@ -411,7 +411,7 @@ mod tests {
 
     #[test]
     fn fresnel_json_reproduces_the_reference_table() {
-        // optics.md §10.1, η = 1.5, θ = 60°.
+        // docs/model.md §8 "Fresnel and diffuse DoP values", η = 1.5, θ = 60°.
         let v = fresnel_json(1.5, 60.0).unwrap();
         let want = [
             ("rs", -0.420204),

@@ -1,6 +1,7 @@
 //! Radiometry: how a model intensity becomes electrons and digital numbers. Shared by the
 //! renderer (forward) and the host's fit (which divides raw DN by the same [`Radiometry::normaliser`],
-//! optics.md §7.2 "N"), so the two can never disagree about units.
+//! the normaliser N of docs/model.md §11 "Inputs and the normaliser N"), so the two can never
+//! disagree about units.
 //!
 //! # Units
 //! - **Model intensity** `m` (dimensionless): the analysed intensity of `P·s_light` for a unit

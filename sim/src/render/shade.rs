@@ -16,7 +16,8 @@
 //!   The three paths agree with `pbrdf::apply` / `evaluate_s0` / `scalar_brdf` (tested).
 //! - Flash light: s_light = [1, 1, 0, 0] in the light frame whose x is the flash polariser's
 //!   transmission axis ([`crate::scene::FlashSpec::polariser_axis_world`]); z = −ω_i, so the frame's
-//!   up is y = z × x (optics.md §1.2, §5.3). Unpolarised flash: [1, 0, 0, 0].
+//!   up is y = z × x (docs/model.md §1 "Frames", §6 "Observation channels"). Unpolarised flash:
+//!   [1, 0, 0, 0].
 //! - Boards are matte paper: a Lambertian depolariser with the print albedo (no specular), so
 //!   they never need Mueller work.
 //! - Analyser at nominal θ with extinction ratio ER (when planned; e = 1/ER, else 0):

@@ -1,7 +1,7 @@
 //! Physics invariants of the renderer: the per-lobe shading paths equal the optics module's
 //! reference functions, analyser consistency I0 + I90 = I45 + I135, the S0-only camera sees the
 //! same value behind every analyser, and the co-/cross-polarised highlight of a glossy sphere
-//! (optics.md §5.3 rig check).
+//! (docs/model.md §6 "Observation channels", rig check).
 
 use super::shade::{PixelSensor, PoseContext};
 use super::tests::{scene_edited, scene_path, small, without_effects};

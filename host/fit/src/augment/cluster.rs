@@ -1,4 +1,5 @@
-//! Vertex features and k-means clustering of the augmentation (optics.md §7.7).
+//! Vertex features and k-means clustering of the augmentation (docs/model.md §11 "Steps A, B,
+//! C and the outer loop"; docs/fit-augment.md "Features and clustering").
 //!
 //! Contract:
 //! - A vertex's feature is `[ρ_d,R, ρ_d,G, ρ_d,B, 2·min(η, 3)]` with ρ_d clipped at

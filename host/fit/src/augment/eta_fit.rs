@@ -1,17 +1,17 @@
-//! η_cluster of the augmentation (optics.md §7.7): the refractive index that best explains the
-//! diffuse degree of polarisation of a cluster's samples.
+//! η_cluster of the augmentation (docs/fit-augment.md "Cluster model"): the refractive index
+//! that best explains the diffuse degree of polarisation of a cluster's samples.
 //!
 //! Contract:
 //! - Each sample's diffuse-only Stokes vector is the observation minus the vertex's own
 //!   fitted specular + single-scattering prediction (`measure::observe` with ρ_d = 0). Channels
-//!   are combined with weights ρ_d/Σρ_d (optics.md §5.4), and DoP = (s1·u1 + s2·u2)/s0 with
-//!   s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part and (u1, u2) the unit direction of
-//!   the model's diffuse polarisation at the fitted normal: the polarised part projected on its
-//!   predicted direction is linear in the data, so unlike √(s1² + s2²) it carries no Rice bias
-//!   on dark samples (optics.md §9). Noiseless it is exactly |T−|/T+ of the rank-one diffuse
-//!   lobe, i.e. `dop_diffuse(θ_o, η)`, with no τ² bias. Deliberate difference:
-//!   the paper uses raw I^s as β and DP/I^d (biased by the specular and by the dropped τ²
-//!   terms, up to ~6 % of DoP at DoP 0.25).
+//!   are combined with weights ρ_d/Σρ_d (docs/model.md §11 "Monochrome projection"), and
+//!   DoP = (s1·u1 + s2·u2)/s0 with s0 = I^d + I^s, s1 = I^s, s2 = −I^α of that diffuse part and
+//!   (u1, u2) the unit direction of the model's diffuse polarisation at the fitted normal: the
+//!   polarised part projected on its predicted direction is linear in the data, so unlike
+//!   √(s1² + s2²) it carries no Rice bias on dark samples (docs/model.md §12, dark pixels).
+//!   Noiseless it is exactly |T−|/T+ of the rank-one diffuse lobe, i.e. `dop_diffuse(θ_o, η)`,
+//!   with no τ² bias. Deliberate difference: the paper uses raw I^s as β and DP/I^d (biased by
+//!   the specular and by the dropped τ² terms, up to ~6 % of DoP at DoP 0.25).
 //! - Samples with s0 ≤ 0, |DoP| > 2 (gross outliers only: a one-sided cut would bias), a
 //!   degenerate direction (normal incidence) or a specular prediction larger than the diffuse
 //!   s0 are dropped.
@@ -75,7 +75,7 @@ pub fn dop_sample(
         return None;
     }
     // The diffuse lobe's own polarisation direction in (I^s, I^α) at the fitted normal: the
-    // observed DP is projected on it (linear in the data, so no Rice bias, optics.md §9);
+    // observed DP is projected on it (linear in the data, so no Rice bias, docs/model.md §12);
     // √(I^s² + I^α²) is biased up by the noise on dark samples.
     let diffuse_params = PbrdfParams {
         rho_s: 0.0,

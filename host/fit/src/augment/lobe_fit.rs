@@ -1,5 +1,5 @@
-//! The two-lobe specular model of one cluster (optics.md §7.7): (σ_s ≤ σ_ss, ρ_s, ρ_ss RGB)
-//! from the I^s channel of real samples of the cluster's members.
+//! The two-lobe specular model of one cluster (docs/fit-augment.md "Cluster model"):
+//! (σ_s ≤ σ_ss, ρ_s, ρ_ss RGB) from the I^s channel of real samples of the cluster's members.
 //!
 //! Contract:
 //! - Samples come from `augment::draw_pairs` and are evaluated at their real geometry with the

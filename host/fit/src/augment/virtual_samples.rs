@@ -1,17 +1,17 @@
-//! Virtual specular samples (optics.md §7.7–§7.8): a cluster's two-lobe model evaluated on a
-//! grid of exactly coaxial half-angles, weighted per vertex by a Gaussian kernel of the
-//! vertex's feature distance to the cluster centroid.
+//! Virtual specular samples (docs/fit-augment.md "Virtual profile and kernel"): a cluster's
+//! two-lobe model evaluated on a grid of exactly coaxial half-angles, weighted per vertex by a
+//! Gaussian kernel of the vertex's feature distance to the cluster centroid.
 //!
 //! Contract:
 //! - Profile: M half-angles θ_h,m = 90°·(m/M)², m = 0…M−1 (M = 32: dense where lobes are
 //!   sharp — 0.09°, 0.35°, 0.79°, 1.4°, … — and sparse in the flat tail); each carries its
 //!   quadrature width Δθ_m = 90°·((m + ½)² − (m − ½)²)/M² (the first half as wide). The value
 //!   is `coaxial::specular_term(cosθ_h, params)` = R(0)(ρ_s D_s G_s + ρ_ss,c D_ss G_ss)/(4cosθ_h)
-//!   at θ_i = θ_o = θ_h with R(0) from η_cluster (optics §4), in model units (the cluster model
-//!   is fitted in model units, so no mean-N bridge is needed). Unlike the paper's ≤ 1 clip
-//!   (§7.7, which keeps raw pixel values in range) the values are not clipped: a virtual sample
-//!   is a model value, not a pixel, and glossy peaks reach ~3.4 model units — a clip there
-//!   would teach every vertex a flattened lobe.
+//!   at θ_i = θ_o = θ_h with R(0) from η_cluster (docs/model.md §5), in model units (the
+//!   cluster model is fitted in model units, so no mean-N bridge is needed). Unlike the paper's
+//!   ≤ 1 clip (docs/model.md §11, step B, which keeps raw pixel values in range) the values are
+//!   not clipped: a virtual sample is a model value, not a pixel, and glossy peaks reach ~3.4
+//!   model units — a clip there would teach every vertex a flattened lobe.
 //! - Weights: raw_m = exp(−d²/(2σ_k²))·cosθ_h,m with d the Euclidean (not squared) feature
 //!   distance to the centroid and σ_k = 0.1, as the paper's equation is written (the released
 //!   code's k-means returns squared distances, which would make the kernel exp(−d⁴/0.02), a
@@ -137,7 +137,7 @@ mod tests {
         // The widths tile [0, (M − ½)²/M²] of the squared grid: Σ width/M = ((M − ½)/M)².
         let total: f64 = p.iter().map(|q| q.width / 32.0).sum();
         assert!((total - (31.5f64 / 32.0).powi(2)).abs() < 1e-12, "{total}");
-        // Spot value against the coaxial formula of optics §4, built from D and G1.
+        // Spot value against the coaxial formula of docs/model.md §5, built from D and G1.
         let q = p[12];
         let c = q.cos_theta_h;
         let r0 = normal_incidence_reflectance(1.5);

@@ -143,7 +143,7 @@ fn mueller_block_has_the_coaxial_sign_pattern_head_on() {
     let mut glossy = material();
     glossy.rho_d = [0.0; 3];
     let m = images::mueller_at(&view, &glossy, [0.0, 0.0, 1.0], &top).unwrap();
-    // Specular + single scattering near coaxial: SS·diag(1, 1, −1) (optics.md §4).
+    // Specular + single scattering near coaxial: SS·diag(1, 1, −1) (docs/model.md §5).
     assert!(m[1][1] / m[0][0] > 0.95, "{m:?}");
     assert!(m[2][2] / m[0][0] < -0.95, "{m:?}");
     // Physical bounds of a Mueller matrix: |M0j|, |Mi0| ≤ M00.

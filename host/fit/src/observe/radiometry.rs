@@ -1,6 +1,7 @@
 //! The radiometry of a recorded session: how raw digital numbers become model units, i.e. the
-//! normaliser N of optics.md §7.2 per (vertex, view), and the analyser model the observation
-//! channels are computed with. One place, [`radiometry_of`], decides it from the manifest.
+//! normaliser N (docs/model.md §11 "Inputs and the normaliser N") per (vertex, view), and the
+//! analyser model the observation channels are computed with. One place, [`radiometry_of`],
+//! decides it from the manifest.
 //!
 //! Contract:
 //! - **Simulator sessions** (absolute): the manifest names the scene file; it is loaded for the
@@ -20,7 +21,7 @@
 //! - **Analyser extinction**: with a finite extinction ratio ER (e = 1/ER) an analyser at θ
 //!   measures `½[(1+e)s0 + (1−e)(s1 cos2θ + s2 sin2θ)]` (the renderer's model). The observation
 //!   channels undo it exactly: `I^s = (I0 − I90)/(1−e)`, `I^α = (I135 − I45)/(1−e)`,
-//!   `I^d = (I0 + I90)/(1+e) − I^s`; with e = 0 these are optics.md §5.3's `I0 − I90`,
+//!   `I^d = (I0 + I90)/(1+e) − I^s`; with e = 0 these are docs/model.md §6's `I0 − I90`,
 //!   `I135 − I45` and `2·I90`, bit for bit.
 //! - Distances are clamped to ≥ 1 mm exactly as the renderer clamps them.
 

@@ -1,6 +1,6 @@
 //! Levenberg–Marquardt over the six raw (unbounded) nonlinear unknowns of one vertex, with
 //! exact Jacobians from dual numbers and the bounds removed by reparameterisation
-//! (optics.md §8.2; formulas in the `solve` module doc).
+//! (docs/fit-solver.md "Bounds"; formulas in the `solve` module doc).
 
 use ellipso_model::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};

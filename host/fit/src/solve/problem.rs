@@ -130,7 +130,8 @@ pub(super) struct Problem<'a> {
     pub frames: Vec<SampleFrames>,
     /// Per sample, per colour channel: [I^d, I^s, I^α, I^t] (model units).
     pub obs: Vec<[[f64; OBSERVATION_CHANNELS]; 3]>,
-    /// Per sample: the monochrome projection of [I^d, I^s, I^α] (optics §5.4).
+    /// Per sample: the monochrome projection of [I^d, I^s, I^α] (docs/model.md §11
+    /// "Monochrome projection").
     pub mono: Vec<[f64; 3]>,
     /// Per-sample weight of the intensity and azimuth residuals (paper mode).
     pub w_int: Vec<f64>,
@@ -231,7 +232,8 @@ impl<'a> Problem<'a> {
             obs.push(s.channels.map(|c| c.map(f64::from)));
             normalisers.push(f64::from(s.normaliser));
         }
-        // Colour weights: the vertex's mean diffuse colour, normalised (optics §5.4).
+        // Colour weights: the vertex's mean diffuse colour, normalised (docs/model.md §11
+        // "Monochrome projection").
         let mut colour_weights = [1.0, 0.0, 0.0];
         if colour {
             let sums: [f64; 3] =
@@ -491,8 +493,8 @@ impl<'a> Problem<'a> {
     }
 
     /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
-    /// used: `given`, or the per-channel box-constrained least-squares projection (optics
-    /// §8.3) of the data (+ virtual) residuals when `given` is `None`.
+    /// used: `given`, or the per-channel box-constrained least-squares projection
+    /// (docs/model.md §11 "Unknowns") of the data (+ virtual) residuals when `given` is `None`.
     pub fn evaluate<T: Real>(
         &self,
         chart: &Chart,
@@ -588,8 +590,9 @@ impl<'a> Problem<'a> {
         }
     }
 
-    /// The diffuse-only observation of sample `i` (the data minus the model's reflection,
-    /// optics §7.5 generalised to all three channels, monochrome projection §5.4):
+    /// The diffuse-only observation of sample `i` (the data minus the model's reflection: the
+    /// paper's I^β = I^s − SS_model generalised to all three channels, docs/model.md §6
+    /// "Observation channels"; monochrome projection of §11 "Monochrome projection"):
     /// (I^d_D, I^β, I^α_D, DP = √(I^α_D² + I^β²)).
     fn diffuse_only<T: Real>(
         &self,

@@ -399,8 +399,8 @@ fn virtual_samples_pull_the_specular_lobe_and_keep_truth() {
     );
 }
 
-/// The Rice bias of the observed DoP (optics.md §9 dark pixels): on a dark material the paper's
-/// L_ψ, which compares DoP_d(η) with √(I^α² + I^β²)/s0 of noisy data, pulls η high; the
+/// The Rice bias of the observed DoP (docs/model.md §12, dark pixels): on a dark material the
+/// paper's L_ψ, which compares DoP_d(η) with √(I^α² + I^β²)/s0 of noisy data, pulls η high; the
 /// measurement-domain loss has no ratio of noisy quantities and stays centred on the truth.
 #[test]
 fn measurement_loss_recovers_eta_without_rice_bias_on_a_dark_material() {

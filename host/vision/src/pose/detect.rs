@@ -5,7 +5,7 @@
 //! - **Pixel convention.** AprilTag puts pixel centres at (i + 0.5, j + 0.5); ellipso (like
 //!   OpenCV and [`ellipso_model::camera`]) puts them at (i, j). Every corner and centre returned
 //!   here has had **0.5 px subtracted** in x and y, so it can go straight into the PnP. Without
-//!   the shift a 600 mm pose is biased ≈0.09 mm sideways (reference notes, host-stack §3).
+//!   the shift a 600 mm pose is biased ≈0.09 mm sideways (see docs/pose.md §1 "Conventions").
 //! - **Corner order** is the library's: for a tag seen upright, corner 0 is bottom-left, then
 //!   bottom-right, top-right, top-left — counter-clockwise on screen (y down). The corners are
 //!   those of the tag's outer black square. [`super::board::BoardCorners`] uses the same order.

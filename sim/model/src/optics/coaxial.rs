@@ -1,4 +1,4 @@
-//! The coaxial 3×3 form of the pBRDF (optics.md §4): DS, SS, DPα, DPβ.
+//! The coaxial 3×3 form of the pBRDF (docs/model.md §5): DS, SS, DPα, DPβ.
 //!
 //! Contract: for ω_i = ω_o (θ_i = θ_o = θ_h = θ, θ_d = 0) and the normal at azimuth φ in the
 //! camera frame (α = sin2φ, β = cos2φ), the talk's matrix
@@ -148,7 +148,8 @@ mod tests {
 
     #[test]
     fn worked_example_of_optics_md() {
-        // optics.md §10.3: η = 1.5, θ = 45°, φ = 30°, ρ_d = 0.5, SS = 0.02, s_light = [1, 1, 0].
+        // docs/model.md §8 "Coaxial worked example": η = 1.5, θ = 45°, φ = 30°, ρ_d = 0.5,
+        // SS = 0.02, s_light = [1, 1, 0].
         let (t, phi) = (45f64.to_radians(), 30f64.to_radians());
         let n = Vec3::new(t.sin() * phi.cos(), t.sin() * phi.sin(), t.cos());
         let g = CoaxialGeometry::from_normal_in_camera(n);

@@ -1,6 +1,6 @@
 //! Reference frames for Stokes vectors, and the rotations between them.
 //!
-//! Contract (optics.md §1.2, documented once here):
+//! Contract (docs/model.md §1 "Frames", documented once here):
 //! - A [`Frame`] is a right-handed orthonormal basis (x, y, z) with z the **propagation**
 //!   direction; Stokes vectors in it are seen looking back along z.
 //! - **Light frame** ([`Frame::light`]): z = −ω_i (light → surface), y = the flash "up"
@@ -141,7 +141,7 @@ mod tests {
         assert_eq!(f.x, v([1.0, 0.0, 0.0]));
         assert_eq!(f.y, v([0.0, 1.0, 0.0]));
         let l = Frame::light(v([0.0, 0.0, 1.0]), v([0.0, 1.0, 0.0])).unwrap();
-        // Coaxial: x_i = −x_o (optics.md §1.2).
+        // Coaxial: x_i = −x_o (docs/model.md §1 "Frames").
         assert_eq!(l.x, v([-1.0, 0.0, 0.0]));
         assert_orthonormal(&l);
     }

@@ -1,6 +1,6 @@
 //! Fresnel terms of a dielectric interface (light arriving from air), with signed amplitudes.
 //!
-//! Contract (optics.md §2; Born & Wolf, *Principles of Optics*, §1.5.2, Verdet sign for r_p;
+//! Contract (docs/model.md §2; Born & Wolf, *Principles of Optics*, §1.5.2, Verdet sign for r_p;
 //! Mitsuba 3 `fresnel.h` / `mueller.h` current convention):
 //! ```text
 //! q   = η·c_t = √(η² − 1 + c²)                 (c = cos θ, η ≥ 1)
@@ -16,8 +16,8 @@
 //! signed product, never ∓√(R_s R_p) (whose derivative is infinite at R_p = 0).
 //!
 //! Clamps: c is clamped to [0, 1]; η to ≥ 1 (this model has no total internal reflection,
-//! §2.3; callers validate η). At the single point η = 1, c = 0 the amplitudes are 0/0; they are
-//! defined as 0 (no interface, as Mitsuba does for η = 1).
+//! docs/model.md §2; callers validate η). At the single point η = 1, c = 0 the amplitudes are
+//! 0/0; they are defined as 0 (no interface, as Mitsuba does for η = 1).
 
 use super::{Mueller, Real};
 
@@ -42,7 +42,7 @@ pub struct FresnelTerms<T> {
 impl<T: Real> FresnelTerms<T> {
     /// Fresnel terms at incidence cosine `cos_theta` (to the interface normal) for relative
     /// index `eta` (air → material). Exit transmission (material → air) at exterior angle θ_o
-    /// has the same power transmittances (reciprocity, §2.3): call this with cos θ_o.
+    /// has the same power transmittances (reciprocity, docs/model.md §2): call this with cos θ_o.
     pub fn dielectric(cos_theta: T, eta: T) -> Self {
         let c = cos_theta.clamp_re(0.0, 1.0);
         let eta = eta.max_re(T::one());
@@ -110,11 +110,11 @@ impl<T: Real> FresnelTerms<T> {
     pub fn t_minus(&self) -> T {
         -self.r_minus
     }
-    /// F^R in the local (s, p) frame (optics.md §2.2).
+    /// F^R in the local (s, p) frame (docs/model.md §2).
     pub fn reflection_mueller(&self) -> Mueller<T> {
         symmetric_block(self.r_plus(), self.r_minus(), self.r_cross())
     }
-    /// F^T in the local (s, p) frame (optics.md §2.2).
+    /// F^T in the local (s, p) frame (docs/model.md §2).
     pub fn transmission_mueller(&self) -> Mueller<T> {
         symmetric_block(self.t_plus(), self.t_minus(), self.t_cross)
     }
@@ -148,7 +148,8 @@ mod tests {
 
     #[test]
     fn reproduces_the_eta_1_5_table() {
-        // optics.md §10.1: θ, r_s, r_p, R_s, R_p, R+, R−, T+, T−, R×.
+        // docs/model.md §8 "Fresnel and diffuse DoP values": θ, r_s, r_p, R_s, R_p, R+, R−, T+,
+        // T−, R×.
         let table = [
             [0.0, -0.2, 0.2, 0.04, 0.04, 0.04, 0.0, 0.96, 0.0, -0.04],
             [
@@ -181,7 +182,7 @@ mod tests {
                 assert!((g - w).abs() < 6e-7, "θ={}: {got:?} vs {row:?}", row[0]);
             }
         }
-        // r_p = r_s² at 45° for any η (§10.1).
+        // r_p = r_s² at 45° for any η (same section).
         for eta in [1.2, 1.5, 2.7] {
             let f = at_deg(45.0, eta);
             assert!((f.r_p - f.r_s * f.r_s).abs() < 1e-15);

@@ -1,13 +1,14 @@
 //! The polarisation-camera measurement model: analysers, the flash polariser, the four sensor
 //! intensities, the fit's observation channels, and the diffuse degree of polarisation.
 //!
-//! Contract (optics.md §5, §6):
+//! Contract (docs/model.md §6):
 //! - An ideal linear analyser at angle θ (from camera x toward camera y) measures
 //!   I_θ = ½(s0 + s1 cos2θ + s2 sin2θ) (Hagen et al. 2019; Malus' law).
 //! - The flash polariser at angle ψ in the light frame emits s_light = [1, cos2ψ, sin2ψ, 0]
 //!   (unit intensity after the polariser; ψ = 0 is parallel to the 0° analyser, the rig's setup).
 //! - Observation channels per RGB channel: I^d = 2·I90, I^s = I0 − I90, I^α = I135 − I45.
-//! - DoP_d(θ, η) in closed form (§6), rewritten without cancellation:
+//! - DoP_d(θ, η) in closed form (docs/model.md §6 "Diffuse DoP and its η-derivative"),
+//!   rewritten without cancellation:
 //!   f = (η² − 1)² sin²θ, g = (η² + 1)(2η² cos²θ + (η² − 1) sin²θ) + 4η² cosθ √(η² − sin²θ),
 //!   DoP = f/g, equal to |T−|/T+ at the exit angle; ∂DoP/∂η = (f′g − f g′)/g².
 
@@ -203,7 +204,7 @@ impl<T: Real> SensorIntensities<T> {
     }
 }
 
-/// Observation channels of one colour channel (optics.md §5.3).
+/// Observation channels of one colour channel (docs/model.md §6 "Observation channels").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ObservationChannels<T> {
     /// I^d = 2·I90 = s0 − s1 (≈ DS, diffuse shading).
@@ -226,7 +227,7 @@ pub fn observe<T: Real>(
 }
 
 /// Observation channels of the three lobes with unit albedo (ρ_d = ρ_ss = ρ_s = 1), for the
-/// fit's linear structure (optics.md §7.1): per colour channel c,
+/// fit's linear structure (docs/model.md §11 "Unknowns"): per colour channel c,
 /// `observe(g, p, flash)[c] = ρ_d[c]·diffuse + ρ_ss[c]·single_scattering + ρ_s·specular`
 /// (to rounding).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -298,7 +299,7 @@ pub fn dop_diffuse<T: Real>(cos_theta_o: T, eta: T) -> T {
     if g.re() > 0.0 { f / g } else { T::zero() }
 }
 
-/// (DoP_d, ∂DoP_d/∂η) in closed form (optics.md §6).
+/// (DoP_d, ∂DoP_d/∂η) in closed form (docs/model.md §6 "Diffuse DoP and its η-derivative").
 pub fn dop_diffuse_with_d_eta<T: Real>(cos_theta_o: T, eta: T) -> (T, T) {
     let [f, g, df, dg] = dop_parts(cos_theta_o, eta);
     if g.re() > 0.0 {
@@ -369,7 +370,7 @@ mod tests {
 
     #[test]
     fn dop_table_and_closed_form_equals_fresnel_ratio() {
-        // optics.md §10.1.
+        // docs/model.md §8 "Fresnel and diffuse DoP values".
         let table = [
             (1.3, [0.008319, 0.022271, 0.051436, 0.150383]),
             (1.5, [0.016978, 0.043983, 0.095941, 0.246434]),
@@ -395,7 +396,7 @@ mod tests {
 
     #[test]
     fn d_eta_matches_dual_and_sensitivity_table() {
-        // optics.md §6: ∂DoP/∂η at η = 1.464.
+        // docs/model.md §6 "Diffuse DoP and its η-derivative": ∂DoP/∂η at η = 1.464.
         for (deg, want) in [
             (30.0f64, 0.044),
             (45.0, 0.109),
@@ -420,7 +421,7 @@ mod tests {
 
     #[test]
     fn channel_identities() {
-        // optics.md §10.4.
+        // docs/model.md §8 "Camera channel identities".
         let s = Stokes::new(0.7, 0.2, -0.31, 0.05);
         let i = SensorIntensities::from_stokes(s);
         assert!((i.i0 + i.i90 - i.i45 - i.i135).abs() < 1e-15);

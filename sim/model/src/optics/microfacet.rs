@@ -1,6 +1,6 @@
 //! GGX microfacet distribution and separable Smith shadowing, in their cosine forms.
 //!
-//! Contract (optics.md §3.4; Walter, Marschner, Li, Torrance, "Microfacet Models for Refraction
+//! Contract (docs/model.md §3; Walter, Marschner, Li, Torrance, "Microfacet Models for Refraction
 //! through Rough Surfaces", EGSR 2007, eqs. 33–34), with α = σ the GGX roughness:
 //! ```text
 //! D(θ_h)  = α² / (π (α² cos²θ_h + sin²θ_h)²)
@@ -55,7 +55,7 @@ pub fn smith_g1_over_cos<T: Real>(cos_theta: T, alpha: T) -> T {
 }
 
 /// The microfacet weight of a reflection lobe with the foreshortening cosine folded in
-/// (optics.md §3.2): D(θ_h)·G1(θ_i)·G1(θ_o)/(4 cosθ_o) = κ·cosθ_i / ρ.
+/// (docs/model.md §4): D(θ_h)·G1(θ_i)·G1(θ_o)/(4 cosθ_o) = κ·cosθ_i / ρ.
 pub fn microfacet_weight<T: Real>(cos_theta_i: T, cos_theta_o: T, cos_theta_h: T, alpha: T) -> T {
     ggx_d(cos_theta_h, alpha)
         * smith_g1(cos_theta_i, alpha)
@@ -69,7 +69,7 @@ mod tests {
 
     #[test]
     fn reference_values() {
-        // optics.md §10.2.
+        // docs/model.md §8 "Microfacet values".
         assert!((ggx_d(1.0, 0.3) - 3.53678).abs() < 1e-5);
         assert!((ggx_d(10f64.to_radians().cos(), 0.3) - 2.07712).abs() < 1e-5);
         assert!((smith_g1(60f64.to_radians().cos(), 0.3) - 0.94032).abs() < 1e-5);

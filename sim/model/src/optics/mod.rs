@@ -2,7 +2,7 @@
 //!
 //! One model, never two copies: every function is generic over the scalar [`Real`]
 //! (`f32`, `f64`, or the dual number [`Dual<N>`] for exact derivatives). Equations and
-//! conventions follow `../shared/reference/optics.md`; `docs/model.md` restates them with sources.
+//! conventions, each with its published source, are in `docs/model.md`.
 //!
 //! # Conventions (documented once)
 //! - Stokes vectors `[s0, s1, s2, s3]` live in a right-handed [`Frame`] whose z is the

@@ -1,21 +1,22 @@
-//! The polarimetric BRDF P = P^d + P^s + P^ss for arbitrary ω_i, ω_o, n (optics.md §3).
+//! The polarimetric BRDF P = P^d + P^s + P^ss for arbitrary ω_i, ω_o, n (docs/model.md §4).
 //!
 //! Contract: [`evaluate`] returns the 4×4 Mueller matrices of the three lobes per RGB channel,
 //! mapping a Stokes vector in the light frame to one in the camera frame, with the
-//! foreshortening cosine n·ω_i folded in: s_cam = P·s_light / d² (optics.md §3). Each lobe is
+//! foreshortening cosine n·ω_i folded in: s_cam = P·s_light / d² (docs/model.md §4). Each lobe is
 //! also callable alone ([`diffuse_unit`], [`reflection_unit`] + [`microfacet_weight`],
 //! [`specular`], [`single_scattering`]) and [`evaluate_s0`] / [`scalar_brdf`] compute only the
 //! intensity row, so a caller pays only for what it uses.
 //!
-//! - Diffuse (talk; §3.1): P^d = ρ_d cosθ_i · C_{n→o} F^T(θ_o) D F^T(θ_i) C_{i→n}, D = diag(1,0,0,0),
+//! - Diffuse (talk): P^d = ρ_d cosθ_i · C_{n→o} F^T(θ_o) D F^T(θ_i) C_{i→n}, D = diag(1,0,0,0),
 //!   which is the rank-one product C_{n→o}[T_o+, T_o−, 0, 0]ᵀ [T_i+, T_i−, 0, 0] C_{i→n}.
-//! - Specular (§3.2): P^s = ρ_s D(θ_h; σ_s) G1(θ_i) G1(θ_o)/(4 cosθ_o) · C_{h→o} F^R(θ_d) C_{i→h}.
-//! - Single scattering (§3.3): same structure with σ_ss and RGB ρ_ss. The rotation frame is the
+//! - Specular: P^s = ρ_s D(θ_h; σ_s) G1(θ_i) G1(θ_o)/(4 cosθ_o) · C_{h→o} F^R(θ_d) C_{i→h}.
+//! - Single scattering: same structure with σ_ss and RGB ρ_ss. The rotation frame is the
 //!   half-vector frame (as the reference renderer does; the talk slide writes the normal frame;
 //!   the two agree under coaxial capture). The choice lives in [`reflection_axis`] only.
 //!
 //! Local s/p frames are built from 3-D s-axes (s ∝ ω_i × d on the way in, ω_o × d on the way
-//! out, d = n or h), which is C(φ + 90°) of §1.5 without any angle. Degenerate s-axes:
+//! out, d = n or h), which is C(φ + 90°) of docs/model.md §1 "Local s/p frames" without any
+//! angle. Degenerate s-axes:
 //! - diffuse, n ∥ ω: T− ∝ sin²θ vanishes there, so any rotation is correct; identity is used;
 //! - specular/SS, ω_i ∥ ω_o (exactly coaxial): F^R(θ_d = 0) composed with rotations about one
 //!   shared s-axis is SS·diag(1, 1, −1, −1) for every choice, so the camera x axis is used as s.
@@ -27,7 +28,7 @@ use super::fresnel::FresnelTerms;
 use super::microfacet::microfacet_weight;
 use super::{Frame, Mueller, OpticsError, Real, Rotator, Stokes, Vec3};
 
-/// Material parameters of one surface point (optics.md §7.1).
+/// Material parameters of one surface point (docs/model.md §4; as fit unknowns, §11 "Unknowns").
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PbrdfParams<T> {
     /// Refractive index relative to air, η ≥ 1 (wavelength-independent).
@@ -347,7 +348,7 @@ pub fn evaluate<T: Real>(g: &Geometry<T>, p: &PbrdfParams<T>) -> Lobes<T> {
 }
 
 /// The three lobes of [`apply`] with unit albedos, before they are combined: what the fit needs
-/// because observations are linear in ρ_d, ρ_ss and ρ_s (optics.md §7.1, §8.3).
+/// because observations are linear in ρ_d, ρ_ss and ρ_s (docs/model.md §11 "Unknowns").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UnitLobeStokes<T> {
     /// P^d·s_light with ρ_d = 1.

@@ -1,11 +1,11 @@
 //! Stokes vectors, Mueller matrices and the rotator C(θ).
 //!
-//! Contract (optics.md §1): a Stokes vector `[s0, s1, s2, s3]` is expressed in a frame
+//! Contract (docs/model.md §1): a Stokes vector `[s0, s1, s2, s3]` is expressed in a frame
 //! (x, y, z) with z the propagation direction, observed looking back along z (Mitsuba 3
 //! `mueller.h` convention). s1 > 0 is polarisation along x; s2 > 0 along +45° (x toward y).
-//! [`Rotator`] is C(θ) of optics.md §1.4, identical to Mitsuba's `rotator(θ)`: it re-expresses a
-//! Stokes vector in a frame rotated by +θ about z. It is stored as (cos 2θ, sin 2θ) so that
-//! frame-to-frame rotations never need an angle (no atan2).
+//! [`Rotator`] is C(θ) of docs/model.md §1 "The rotator C(θ)", identical to Mitsuba's
+//! `rotator(θ)`: it re-expresses a Stokes vector in a frame rotated by +θ about z. It is stored
+//! as (cos 2θ, sin 2θ) so that frame-to-frame rotations never need an angle (no atan2).
 
 use super::Real;
 
@@ -212,7 +212,8 @@ impl<T: Real> Mueller<T> {
         }
         Self { m }
     }
-    /// The linear (upper-left 3×3) block: what the rig observes (optics.md §1.1).
+    /// The linear (upper-left 3×3) block: what the rig observes (docs/model.md §1 "Scope: the
+    /// linear block").
     pub fn linear3(&self) -> [[T; 3]; 3] {
         let mut b = [[T::zero(); 3]; 3];
         for (i, row) in b.iter_mut().enumerate() {
@@ -230,7 +231,7 @@ impl<T: Real> Mueller<T> {
     }
 }
 
-/// The rotator C(θ) (optics.md §1.4), stored as (cos 2θ, sin 2θ).
+/// The rotator C(θ) (docs/model.md §1 "The rotator C(θ)"), stored as (cos 2θ, sin 2θ).
 ///
 /// ```text
 /// C(θ) = | 1    0      0     0 |
@@ -333,7 +334,7 @@ mod tests {
 
     #[test]
     fn rotator_matches_mitsuba_test_value() {
-        // optics.md §1.4: C(45°)·[1,1,0,0] = [1,0,−1,0].
+        // docs/model.md §1 "The rotator C(θ)": C(45°)·[1,1,0,0] = [1,0,−1,0].
         let s = Rotator::from_angle(PI / 4.0).apply(Stokes::new(1.0, 1.0, 0.0, 0.0));
         assert!((s.s1).abs() < 1e-15 && (s.s2 + 1.0).abs() < 1e-15);
         let m = Rotator::from_angle(PI / 4.0)
@@ -344,7 +345,8 @@ mod tests {
 
     #[test]
     fn rotation_shifts_aolp_and_keeps_dolp() {
-        // optics.md §10.4: AoLP(C(θ)s) = AoLP(s) − θ (mod π); DoLP invariant.
+        // docs/model.md §8 "Camera channel identities": AoLP(C(θ)s) = AoLP(s) − θ (mod π);
+        // DoLP invariant.
         let s = Stokes::linear(2.0, 0.3) + Stokes::unpolarised(1.0);
         for k in 0..12 {
             let theta = -1.4 + 0.27 * k as f64;

@@ -277,8 +277,8 @@ pub(crate) fn coaxial_deviation(
     (worst, sum.map(|x| x / count.max(1) as f64))
 }
 
-/// Documented worst-case bounds (docs/model.md, "Coaxial approximation"), θ_o ≤ 60°, 3.5°
-/// offset: (σ, [I^d, I^s, I^α] / (DS + SS), diffuse-only I^d / DS).
+/// Documented worst-case bounds (docs/model.md §5, "Coaxial approximation at the rig's offset"),
+/// θ_o ≤ 60°, 3.5° offset: (σ, [I^d, I^s, I^α] / (DS + SS), diffuse-only I^d / DS).
 const COAXIAL_BOUNDS_60: [(f64, [f64; 4]); 3] = [
     (0.1, [0.22, 0.80, 0.055, 0.22]),
     (0.3, [0.22, 0.21, 0.055, 0.22]),

@@ -148,7 +148,8 @@ fn specular_block_matches_3d_jones_calculus() {
 
 #[test]
 fn lobes_match_the_angle_based_formulas_of_the_reference() {
-    // optics.md §1.5: C_{i→d} = C(φ_i + 90°), C_{d→o} = C(−(φ_o + 90°)), φ by atan2.
+    // docs/model.md §1 "Local s/p frames": C_{i→d} = C(φ_i + 90°), C_{d→o} = C(−(φ_o + 90°)),
+    // φ by atan2.
     let mut r = rng(5);
     for _ in 0..2000 {
         let n = unit(&mut r);
@@ -295,7 +296,8 @@ fn back_facing_gives_zero_and_sensor_model_obeys_malus() {
 
 #[test]
 fn exact_coaxial_full_model_equals_talk_matrix_plus_tau_squared_terms() {
-    // optics.md §4: the talk matrix drops exactly τ²β² at (1,1), ±τ²αβ at (1,2)/(2,1), −τ²α² at (2,2).
+    // docs/model.md §5: the talk matrix drops exactly τ²β² at (1,1), ±τ²αβ at (1,2)/(2,1),
+    // −τ²α² at (2,2).
     let mut r = rng(9);
     for _ in 0..2000 {
         let n = unit(&mut r);
