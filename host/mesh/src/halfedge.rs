@@ -313,7 +313,7 @@ mod tests {
         m.split(0);
         check(&m);
         assert_eq!(m.pos.len(), v0 + 1);
-        let h = m.out[3] as u32;
+        let h = m.out[3];
         assert!(m.flip(h) || !m.alive(h));
         check(&m);
         let mut collapsed = 0;

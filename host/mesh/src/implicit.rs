@@ -47,10 +47,9 @@ impl<'a> Implicit<'a> {
         let w = |d: usize, t: f64| if d == 0 { 1.0 - t } else { t };
         let mut value = 0.0;
         let mut grad = Vector3::zeros();
-        for di in 0..2 {
-            for dj in 0..2 {
-                for dk in 0..2 {
-                    let v = c[di][dj][dk];
+        for (di, plane) in c.iter().enumerate() {
+            for (dj, row) in plane.iter().enumerate() {
+                for (dk, &v) in row.iter().enumerate() {
                     let (wx, wy, wz) = (w(di, f[0]), w(dj, f[1]), w(dk, f[2]));
                     // d/du of (1 − u) is −1, of u is +1
                     let s = |d: usize| if d == 0 { -1.0 } else { 1.0 };
@@ -80,7 +79,8 @@ impl<'a> Implicit<'a> {
         for _ in 0..4 {
             let (v, g) = self.value(p);
             let g2 = g.norm_squared();
-            if !(g2 > 1e-12) || !v.is_finite() {
+            // (a NaN gradient fails `g2 > 1e-12` too)
+            if g2.is_nan() || g2 <= 1e-12 || !v.is_finite() {
                 return p;
             }
             let mut step = g * (v / g2);

@@ -80,6 +80,10 @@ impl Silhouette {
 }
 
 /// Classifies every pixel of a view (see the module contract).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the view, its rays and image, and the three thresholds of one classification"
+)]
 pub fn classify(
     board: &Board,
     rule: &Agreement,
@@ -355,7 +359,7 @@ mod tests {
         let (w, h) = (13, 9);
         let feature: Vec<bool> = (0..w * h).map(|k| (k * 7919) % 11 == 0).collect();
         let d = edt_2d(&feature, w, h);
-        for k in 0..w * h {
+        for (k, &dk) in d.iter().enumerate() {
             let (x, y) = ((k % w) as f32, (k / w) as f32);
             let brute = (0..w * h)
                 .filter(|&j| feature[j])
@@ -364,11 +368,7 @@ mod tests {
                     (a - x).powi(2) + (b - y).powi(2)
                 })
                 .fold(f32::INFINITY, f32::min);
-            assert!(
-                (d[k] - brute).abs() < 1e-3,
-                "pixel {k}: {} vs {brute}",
-                d[k]
-            );
+            assert!((dk - brute).abs() < 1e-3, "pixel {k}: {} vs {brute}", d[k]);
         }
     }
 

@@ -270,9 +270,12 @@ fn two_objects_are_a_disconnected_hull() {
     assert!(text.contains("frames 10"), "{text}");
 }
 
+/// One image line of COLMAP's `images.txt`: id, pose (qw qx qy qz tx ty tz) and name.
+type ColmapImage = (usize, [f64; 7], String);
+
 /// A minimal reader of COLMAP's text model: the camera line and, per image, its id, pose and
 /// name (the format the writer must meet).
-fn read_colmap(sparse: &Path) -> (Vec<String>, Vec<(usize, [f64; 7], String)>, usize) {
+fn read_colmap(sparse: &Path) -> (Vec<String>, Vec<ColmapImage>, usize) {
     let data_lines = |name: &str| -> Vec<String> {
         std::fs::read_to_string(sparse.join(name))
             .unwrap()

@@ -108,14 +108,14 @@ impl Volume {
         } else {
             (world_from_board, lo, hi, median, low)
         };
-        if !(median > 0.0) {
+        if median.is_nan() || median <= 0.0 {
             return Err(VolumeError::CamerasNotAbove {
                 board,
                 height_m: median,
             });
         }
         let height = (hi[0] - lo[0]).min(hi[1] - lo[1]).min(0.5 * low.max(0.0));
-        if !(height > 0.0) {
+        if height.is_nan() || height <= 0.0 {
             return Err(VolumeError::CamerasNotAbove {
                 board,
                 height_m: low,
