@@ -56,6 +56,14 @@ pub struct Args {
 
 /// Runs `ellipso fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // A given mesh is read first: a bad mesh is refused before the session is opened.
+    let given_mesh = args
+        .mesh
+        .as_ref()
+        .map(|path| {
+            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))
+        })
+        .transpose()?;
     let session = ellipso_session::reader::open(&args.session)?;
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.holdout),
@@ -66,10 +74,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if read != "intact" {
         eprintln!("warning: {}: {read}", args.session.display());
     }
-    let mesh = match &args.mesh {
-        Some(path) => {
-            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))?
-        }
+    let mesh = match given_mesh {
+        Some(mesh) => mesh,
         None => {
             crate::outln!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =
