@@ -12,6 +12,12 @@
 //!   the vertex's front side, and no other part of the object may block the camera or the flash
 //!   (ray cast against the truth mesh). The fit starts from normals perturbed by
 //!   `normal_noise_deg` (an imperfect scanned mesh).
+//! - **Flash-energy bracket.** View k of a scene with a `capture.bracket` (or
+//!   [`CaptureCase::bracket`]) is lit by `bracket[k mod len]` of the full pulse, as the trigger
+//!   board fires the steps in turn: its normaliser is E·N, so its DN are E times the full
+//!   pulse's before noise, clipping and the gates, and its samples are divided by E·N — what
+//!   observation extraction does with a recorded frame's energy. [`specular`] scores what the
+//!   bracket is for: the clusters' σs per material and the samples kept at the lobe peak.
 //! - [`evaluate`] scores fitted vertices against the truth: η error (mean % per material and
 //!   overall), normal error (median, 90th percentile, degrees), ρd error (mean relative %, RGB),
 //!   roughness errors (mean absolute σs, σss), and the re-render RMSE: the model with the fitted
@@ -39,6 +45,8 @@ use super::gate::GateConfig;
 use super::synthetic::{SensorNoise, synthesize_vertex};
 use super::truth::{TruthObject, views_of_scene};
 
+pub mod specular;
+
 /// Relative offset along a ray before occlusion tests (avoids self-hits on the start triangle).
 const RAY_EPS_M: f64 = 1e-6;
 
@@ -59,6 +67,9 @@ pub struct CaptureCase {
     pub seed: u64,
     /// Sample gates.
     pub gate: GateConfig,
+    /// Relative flash energies fired in turn (`None`: the scene's `capture.bracket`; empty:
+    /// one exposure, every view at full energy).
+    pub bracket: Option<Vec<f64>>,
 }
 
 impl Default for CaptureCase {
@@ -71,6 +82,7 @@ impl Default for CaptureCase {
             noise: true,
             seed: 7,
             gate: GateConfig::default(),
+            bracket: None,
         }
     }
 }
@@ -81,6 +93,11 @@ pub struct SimulatedCapture {
     pub truth: TruthObject,
     /// The observations the fit sees (initial normals perturbed).
     pub set: SampleSet,
+    /// Relative flash energy of every view, by frame id (all 1 without a bracket).
+    pub flash_energy_rel: Vec<f64>,
+    /// Per vertex, the frame ids of its near-mirror views (visible, and the half vector inside
+    /// the true lobe's half maximum, [`specular::is_near_mirror`]), before any gate.
+    pub near_mirror: Vec<Vec<u64>>,
 }
 
 /// Errors of one material.
@@ -204,6 +221,22 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
             cos_field.acos(),
         )
     };
+    let bracket = case
+        .bracket
+        .clone()
+        .unwrap_or_else(|| scene.capture.bracket.clone());
+    let flash_energy_rel: Vec<f64> = (0..views.len())
+        .map(|k| {
+            if bracket.is_empty() {
+                1.0
+            } else {
+                bracket[k % bracket.len()]
+            }
+        })
+        .collect();
+    let lit_normaliser = |view: &ViewGeometry, g: &SampleGeometry| -> f64 {
+        flash_energy_rel[view.frame_id as usize] * normaliser(view, g)
+    };
     let colour = scene.rig.camera.sensor == ellipso_sim::scene::SensorKind::ColourPolar;
     let n_vertices = case
         .max_vertices
@@ -211,7 +244,7 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
     truth.params.truncate(n_vertices);
     truth.material.truncate(n_vertices);
     let mesh = &truth.mesh;
-    let vertices: Vec<VertexSamples> = (0..n_vertices)
+    let vertices: Vec<(VertexSamples, Vec<u64>)> = (0..n_vertices)
         .into_par_iter()
         .map(|v| {
             let mut rng = ChaCha8Rng::seed_from_u64(
@@ -234,6 +267,17 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
                             || (!blocked(mesh, &p, &cam) && !blocked(mesh, &p, &flash_p)))
                 })
                 .collect();
+            let near_mirror: Vec<u64> = visible
+                .iter()
+                .filter(|&&k| {
+                    views[k].geometry_at(&p).is_some_and(|g| {
+                        let half = Vector3::from(g.to_light) + Vector3::from(g.to_camera);
+                        let cos_h = n.dot(&half) / half.norm().max(1e-12);
+                        specular::is_near_mirror(cos_h, truth.params[v].sigma_s)
+                    })
+                })
+                .map(|&k| k as u64)
+                .collect();
             let subset: Vec<ViewGeometry> = visible.iter().map(|&k| views[k].clone()).collect();
             let mut vs = synthesize_vertex(
                 &subset,
@@ -241,7 +285,7 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
                 p.coords.into(),
                 n.into_inner().into(),
                 &truth.params[v],
-                &normaliser,
+                &lit_normaliser,
                 noise.as_ref(),
                 colour,
                 &case.gate,
@@ -252,9 +296,10 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
             }
             vs.gates.not_in_view += (views.len() - visible.len()) as u64;
             vs.normal_world = tilt(n.into_inner(), case.normal_noise_deg, &mut rng).into();
-            vs
+            (vs, near_mirror)
         })
         .collect();
+    let (vertices, near_mirror): (Vec<VertexSamples>, Vec<Vec<u64>>) = vertices.into_iter().unzip();
     Ok(SimulatedCapture {
         truth,
         set: SampleSet {
@@ -262,6 +307,8 @@ pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCa
             colour,
             vertices,
         },
+        flash_energy_rel,
+        near_mirror,
     })
 }
 

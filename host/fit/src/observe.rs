@@ -22,10 +22,18 @@
 //!   [`ObserveConfig::frames_in_flight`] frames are held at once, vertices of a frame are sampled
 //!   in parallel. Every (vertex, view) result is a pure function of its inputs and results are
 //!   merged in frame-id order, so the output is identical for any thread count.
+//! - **Flash energy.** Every sample of a frame is divided by `E·N`, `E` the frame's recorded
+//!   relative pulse energy ([`FrameEntry::flash_energy_rel`], 1 without a bracket), so frames
+//!   of every bracket step give samples in the same model units; the stored normaliser is `E·N`,
+//!   so the fit's noise model gives a short pulse's sample its larger relative noise
+//!   (`radiometry` module doc). Every unsaturated sample of every step is kept, each with its
+//!   own noise weight: no per-vertex exposure selection (docs/fit-observe.md says why).
 //! - **Robustness.** A posed frame that is missing, flagged incomplete at capture, without its
-//!   `frame` event (exposure unknown), or unreadable (corrupt PNG, wrong size, values beyond the
-//!   bit depth) is skipped and reported in [`ObserveReport::skipped`]; it never aborts the
-//!   extraction. Nothing in the session is written.
+//!   `frame` event (exposure unknown), unlit (recorded pulse energy 0: the flash did not fire,
+//!   [`NO_FLASH_REASON`], also counted in [`ObserveReport::frames_unlit`]) or unreadable
+//!   (corrupt PNG, wrong size, values beyond the bit depth) is skipped and reported in
+//!   [`ObserveReport::skipped`]; it never aborts the extraction. Nothing in the session is
+//!   written.
 //! - **Output.** [`SampleSet::views`] holds the views of the frames actually read, in frame-id
 //!   order; [`SampleSet::vertices`] one entry per mesh vertex in mesh order with samples ordered
 //!   by view. [`ObserveReport::peak_bytes`] accounts the largest memory held at once (samples +
@@ -152,6 +160,10 @@ pub struct SkippedFrame {
     pub reason: String,
 }
 
+/// The [`SkippedFrame::reason`] of a posed frame whose recorded pulse energy is 0.
+pub const NO_FLASH_REASON: &str =
+    "flash energy 0: the flash did not fire, the frame holds no flash signal";
+
 /// What an extraction did.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ObserveReport {
@@ -161,6 +173,10 @@ pub struct ObserveReport {
     pub frames_used: usize,
     /// Posed frames skipped, by frame id.
     pub skipped: Vec<SkippedFrame>,
+    /// Of the skipped frames, those unlit by the flash (recorded pulse energy 0,
+    /// [`NO_FLASH_REASON`]).
+    #[serde(default)]
+    pub frames_unlit: usize,
     /// Gate counts over all vertices.
     pub gates: GateCounts,
     /// Samples kept.
@@ -260,18 +276,24 @@ pub fn poses_from_session(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
 }
 
 /// The normaliser of recorded frame `frame_id` seen from `world_from_camera` at any world point
-/// (its exposure and gain from its `frame` event), for pictures of that frame.
+/// (its exposure and gain from its `frame` event, its recorded flash energy), for pictures of
+/// that frame. An unlit frame (energy 0) has none.
 pub fn point_normaliser(
     session: &Session,
     frame_id: u64,
     world_from_camera: &Isometry3<f64>,
 ) -> Result<PointNormaliser, ObserveError> {
     let radiometry = radiometry_of(session)?;
-    let event = session
-        .frames
-        .iter()
-        .find(|f| f.frame_id == frame_id)
-        .and_then(|f| f.event.as_ref());
+    let entry = session.frames.iter().find(|f| f.frame_id == frame_id);
+    let flash_energy_rel = entry.map_or(1.0, |f| f.flash_energy_rel);
+    let lit = flash_energy_rel > 0.0;
+    if !lit {
+        return Err(ObserveError::Manifest {
+            path: session.dir.join(ellipso_session::paths::EVENTS),
+            what: format!("frame {frame_id}: {NO_FLASH_REASON}"),
+        });
+    }
+    let event = entry.and_then(|f| f.event.as_ref());
     let Some(SessionEvent::Frame {
         exposure_us,
         gain_db,
@@ -287,7 +309,8 @@ pub fn point_normaliser(
         radiometry.for_frame(f64::from(*exposure_us), f64::from(*gain_db)),
         &radiometry.flash,
         world_from_camera,
-    ))
+    )
+    .with_flash_energy(flash_energy_rel))
 }
 
 /// A posed frame to read.
@@ -297,6 +320,8 @@ struct Job<'a> {
     entry: &'a FrameEntry,
     exposure_us: f64,
     gain_db: f64,
+    /// Relative pulse energy that lit the frame, > 0.
+    flash_energy_rel: f64,
 }
 
 /// Result of one frame: the view and per-vertex outcomes, and the bytes it held.
@@ -391,12 +416,21 @@ pub fn extract_with(
                 .push(skip("no `frame` event: exposure and gain unknown"));
             continue;
         };
+        // The reader turns a non-finite or negative recorded energy into "not recorded" (1.0),
+        // so anything not > 0 here is a pulse that did not light the frame.
+        let lit = entry.flash_energy_rel > 0.0;
+        if !lit {
+            report.skipped.push(skip(NO_FLASH_REASON));
+            report.frames_unlit += 1;
+            continue;
+        }
         jobs.push(Job {
             frame_id: *frame_id,
             pose: *pose,
             entry,
             exposure_us: f64::from(*exposure_us),
             gain_db: f64::from(*gain_db),
+            flash_energy_rel: entry.flash_energy_rel,
         });
     }
 
@@ -439,6 +473,7 @@ pub fn extract_with(
             &image,
             job.exposure_us,
             job.gain_db,
+            job.flash_energy_rel,
         );
         let outcomes: Vec<Outcome> = (0..mesh.positions().len())
             .into_par_iter()

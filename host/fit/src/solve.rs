@@ -65,6 +65,8 @@ mod uncertainty;
 mod hard_cases;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_energy;
 
 use std::cmp::Ordering;
 

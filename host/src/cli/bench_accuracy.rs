@@ -4,6 +4,12 @@
 //! run (100 000 vertices × 150 views) for throughput. Writes the report (Markdown table + two
 //! PNG plots of error against seconds + JSON) — by default to `docs/accuracy-vs-time.md`.
 //!
+//! The `bracket` sweep (issue 18) compares, on the four-material blob and one photo budget in
+//! seconds, one exposure (`multi_material.toml`, 200 photos at 500 ms) with the 3-step
+//! flash-energy bracket (`multi_material_bracket.toml`, 600 photos, 1, ¼, 1⁄16 in turn), plus
+//! the bracket scene's 600 views all at full energy (more views without the bracket), and scores
+//! the clusters' σs and the samples kept at the lobe peak ([`ellipso_fit::accuracy::specular`]).
+//!
 //! Every figure in one report comes from one run of this command on one machine, so ratios
 //! between rows are meaningful even on a shared, noisy machine; absolute seconds are not
 //! portable. The fit time is also reported divided by the time of one forward evaluation of
@@ -15,6 +21,7 @@ use std::time::Instant;
 use anyhow::Context;
 use ellipso_sim::scene::Scene;
 
+use ellipso_fit::accuracy::specular::LobeScores;
 use ellipso_fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
 use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
 use ellipso_report::plot::{LegendPosition, LinePlot};
@@ -37,7 +44,7 @@ pub struct AccuracyArgs {
     /// Noise and normal-tilt seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Which sweeps to run (default all): photos, solver, vertices.
+    /// Which sweeps to run (default all): photos, solver, vertices, bracket, large.
     #[arg(long, value_delimiter = ',')]
     pub sweeps: Vec<String>,
     /// Photos of the solver and vertex sweeps (default 100; 25 with --quick).
@@ -81,6 +88,10 @@ pub struct RunResult {
     pub pooling: Option<ellipso_fit::pipeline::PoolingSummary>,
     /// Vertices with virtual samples / with a pooled η prior (when step B ran).
     pub guided: Option<(usize, usize)>,
+    /// Flash energies fired in turn (empty: one exposure).
+    pub bracket: Vec<f64>,
+    /// Cluster σs per material and samples kept at the lobe peak.
+    pub lobes: LobeScores,
 }
 
 /// A solver setting of the effort sweep.
@@ -145,8 +156,8 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
     let wants = |sweep: &str| args.sweeps.is_empty() || args.sweeps.iter().any(|s| s == sweep);
     for s in &args.sweeps {
         anyhow::ensure!(
-            ["photos", "solver", "vertices", "large"].contains(&s.as_str()),
-            "--sweeps: unknown sweep `{s}` (photos, solver, vertices, large)"
+            ["photos", "solver", "vertices", "bracket", "large"].contains(&s.as_str()),
+            "--sweeps: unknown sweep `{s}` (photos, solver, vertices, bracket, large)"
         );
     }
     anyhow::ensure!(
@@ -205,6 +216,9 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
             )?);
         }
     }
+    if wants("bracket") {
+        results.extend(bracket_sweep(&args, base_subdivisions, holdout)?);
+    }
     if !args.quick && !args.no_large && wants("large") {
         let scene = Scene::load(&super::demo::shipped_scene("sphere.toml"))?;
         let case = CaptureCase {
@@ -228,9 +242,54 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
         &args.report,
         &results,
         started.elapsed().as_secs_f64(),
-        args.quick,
+        &command_line(&args),
     )?;
     Ok(())
+}
+
+/// The `bracket` sweep (module doc): one exposure against the 3-step bracket on the same photo
+/// budget in seconds, and the bracket scene's views at full energy. Each scene keeps its own
+/// photo count (a third of it with `--quick`).
+fn bracket_sweep(
+    args: &AccuracyArgs,
+    subdivisions: Option<u32>,
+    holdout: f64,
+) -> anyhow::Result<Vec<RunResult>> {
+    let load = |name: &str| -> anyhow::Result<Scene> {
+        let path = super::demo::shipped_scene(name);
+        Scene::load(&path).with_context(|| format!("loading {}", path.display()))
+    };
+    let single = load("multi_material.toml")?;
+    let bracketed = load("multi_material_bracket.toml")?;
+    let photos = |scene: &Scene| {
+        let n = scene.camera_poses.len();
+        if args.quick { n.div_ceil(3) } else { n }
+    };
+    let runs: [(&Scene, &str, Option<Vec<f64>>); 3] = [
+        (&single, "one exposure", None),
+        (&bracketed, "bracket", None),
+        (&bracketed, "same views, full energy", Some(Vec::new())),
+    ];
+    let mut results = Vec::new();
+    for (scene, label, bracket) in runs {
+        let case = CaptureCase {
+            photos: photos(scene),
+            subdivisions,
+            seed: args.seed,
+            bracket,
+            ..CaptureCase::default()
+        };
+        results.push(one_run(
+            scene,
+            "multi_material",
+            "bracket",
+            label,
+            &case,
+            &FitConfig::default(),
+            holdout,
+        )?);
+    }
+    Ok(results)
 }
 
 fn one_run(
@@ -250,6 +309,8 @@ fn one_run(
     let capture = ellipso_fit::accuracy::SimulatedCapture {
         truth: full.truth,
         set: train,
+        flash_energy_rel: full.flash_energy_rel,
+        near_mirror: full.near_mirror,
     };
     let mut config = config.clone();
     config.solver.sensor = ellipso_fit::accuracy::sensor_model(scene);
@@ -266,6 +327,11 @@ fn one_run(
         "forward evaluation produced a non-finite value"
     );
     let scores = evaluate(&capture, &outcome.fits);
+    let lobes = ellipso_fit::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
+    let bracket = case
+        .bracket
+        .clone()
+        .unwrap_or_else(|| scene.capture.bracket.clone());
     let r = RunResult {
         scene: name.to_string(),
         sweep: sweep.to_string(),
@@ -289,6 +355,8 @@ fn one_run(
             .augmentation
             .as_ref()
             .map(|a| (a.vertices_with_virtual_samples, a.vertices_with_eta_prior)),
+        bracket,
+        lobes,
     };
     crate::outln!(
         "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
@@ -336,6 +404,29 @@ fn one_run(
             c.rho_s
         );
     }
+    for c in &r.lobes.clusters {
+        crate::outln!(
+            "    {:<16} cluster σs {:.4} (true {:.3}, {:+.1} %, {:.0} % of its vertices in that cluster)",
+            c.material,
+            c.sigma_s_cluster,
+            c.sigma_s_true,
+            c.sigma_s_error_pct,
+            100.0 * c.share
+        );
+    }
+    for p in &r.lobes.peaks {
+        crate::outln!(
+            "    {:<16} lobe peak: {} of {} vertices with a near-mirror view kept a peak sample ({} of {} near-mirror samples kept)",
+            p.material,
+            p.vertices_with_peak_kept,
+            p.vertices_with_near_mirror_view,
+            p.peak_samples_kept,
+            p.near_mirror_views
+        );
+        for (energy, views, kept) in &p.by_energy {
+            crate::outln!("        at energy {energy}: {kept} of {views} kept");
+        }
+    }
     for m in &r.scores.materials {
         crate::outln!(
             "    {:<16} η {:.4} (true {:.3}, {:+.3} %; vertex median {:.2} %)  σs {:.3}  σss {:.3}  normal {:.2}°",
@@ -352,11 +443,47 @@ fn one_run(
     Ok(r)
 }
 
+/// The command that reproduces a report made with `args` (options at their defaults left out).
+fn command_line(args: &AccuracyArgs) -> String {
+    let mut c = String::from("bench accuracy");
+    let list = |v: &[String]| v.join(",");
+    if !args.scenes.is_empty() {
+        let scenes: Vec<String> = args
+            .scenes
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        c += &format!(" --scenes {}", list(&scenes));
+    }
+    if args.quick {
+        c += " --quick";
+    }
+    if args.no_large {
+        c += " --no-large";
+    }
+    if !args.sweeps.is_empty() {
+        c += &format!(" --sweeps {}", list(&args.sweeps));
+    }
+    if args.seed != 7 {
+        c += &format!(" --seed {}", args.seed);
+    }
+    if let Some(p) = args.photos {
+        c += &format!(" --photos {p}");
+    }
+    if args.holdout != 0.1 {
+        c += &format!(" --holdout {}", args.holdout);
+    }
+    if args.report != Path::new("docs/accuracy-vs-time.md") {
+        c += &format!(" --report {}", args.report.display());
+    }
+    c
+}
+
 fn write_report(
     path: &Path,
     results: &[RunResult],
     total_s: f64,
-    quick: bool,
+    command: &str,
 ) -> anyhow::Result<()> {
     let dir = path
         .parent()
@@ -386,7 +513,7 @@ fn write_report(
     let json = dir.join(format!("{stem}.json"));
     ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
         .with_context(|| format!("writing {}", json.display()))?;
-    let md = super::bench_report::markdown(results, total_s, quick, &eta_png, &normal_png, dir);
+    let md = super::bench_report::markdown(results, total_s, command, &eta_png, &normal_png, dir);
     ellipso_report::atomic_file::write(path, md)
         .with_context(|| format!("writing {}", path.display()))?;
     crate::outln!(

@@ -24,6 +24,13 @@
 //!   `I^d = (I0 + I90)/(1+e) − I^s`; with e = 0 these are docs/model.md §6's `I0 − I90`,
 //!   `I135 − I45` and `2·I90`, bit for bit.
 //! - Distances are clamped to ≥ 1 mm exactly as the renderer clamps them.
+//! - **Flash energy.** A frame lit by a bracketed (shorter) pulse collects `E` times the flash
+//!   light of a full pulse, `E` = the frame's recorded `FrameEntry::flash_energy_rel`. The
+//!   normaliser of that frame is `E·N` ([`PointNormaliser::with_flash_energy`]): dividing its DN
+//!   by `E·N` gives the same model units as a full-energy frame, and the fit's noise model,
+//!   which reads sensor noise in DN and converts it with the sample's normaliser, then gives the
+//!   short pulse's sample its larger relative noise (docs/fit-observe.md, "Flash-energy
+//!   bracket"). Frames with `E = 0` hold no flash signal and are never sampled.
 
 use std::path::{Path, PathBuf};
 
@@ -120,6 +127,9 @@ pub struct PointNormaliser {
     pub flash_axis_world: nalgebra::Vector3<f64>,
     /// World → camera of the frame.
     pub camera_from_world: nalgebra::Isometry3<f64>,
+    /// Flash energy that lit the frame relative to a full pulse (`FrameEntry::flash_energy_rel`;
+    /// 1 for an unbracketed frame). Multiplies N.
+    pub flash_energy_rel: f64,
 }
 
 impl PointNormaliser {
@@ -134,11 +144,21 @@ impl PointNormaliser {
             flash_world: flash.position_world(world_from_camera),
             flash_axis_world: world_from_camera.rotation * nalgebra::Vector3::z(),
             camera_from_world: world_from_camera.inverse(),
+            flash_energy_rel: 1.0,
         }
     }
 
-    /// N at `point` (DN per model unit); 0 outside the flash's emission, not finite for a
-    /// point on the flash or the camera centre.
+    /// The same normaliser for a frame lit by `flash_energy_rel` of a full flash pulse (the
+    /// frame's recorded relative pulse energy, ≥ 0; 0 makes N = 0: the frame is unlit).
+    pub fn with_flash_energy(self, flash_energy_rel: f64) -> Self {
+        Self {
+            flash_energy_rel,
+            ..self
+        }
+    }
+
+    /// N at `point` (DN per model unit), the flash energy included; 0 outside the flash's
+    /// emission or for an unlit frame, not finite for a point on the flash or the camera centre.
     pub fn at(&self, point: &nalgebra::Point3<f64>) -> f64 {
         let beam = point - self.flash_world;
         let d = beam.norm();
@@ -146,8 +166,10 @@ impl PointNormaliser {
         let p_cam = self.camera_from_world * point;
         // |p_cam| > 0 for any point the camera can see.
         let cos_field = (p_cam.z / p_cam.coords.norm()).clamp(-1.0, 1.0);
-        self.radiometry
-            .normaliser(d, cos_axis.acos(), cos_field.acos())
+        self.flash_energy_rel
+            * self
+                .radiometry
+                .normaliser(d, cos_axis.acos(), cos_field.acos())
     }
 }
 

@@ -14,7 +14,9 @@
 //!   clamped to the edge superpixels at the border.
 //! - A sample is saturated when any superpixel in its bilinear footprint has a raw DN at or
 //!   above the gate's saturation level, so a clipped neighbour never leaks into an interpolated
-//!   value that looks unclipped.
+//!   value that looks unclipped. Every gate judges the frame's own DN, before the division by
+//!   the (flash-energy-scaled) normaliser: a highlight that clips at full energy is dropped in
+//!   that frame and kept in a shorter-pulse frame where it does not clip.
 //! - Occlusion and shadow rays ignore the triangles incident to the vertex (a ray ending on a
 //!   vertex cannot be blocked by a triangle that contains it; this is exact) and hits within
 //!   [`RAY_T_EPS`] of either end (relative to the segment length: 50 nm at 0.5 m), which absorbs
@@ -290,7 +292,9 @@ pub fn max_radius_sq(camera: &CameraModel) -> f64 {
 }
 
 impl<'a> FrameSampler<'a> {
-    /// The sampler of one frame: its view and pose, its image, its exposure and gain.
+    /// The sampler of one frame: its view and pose, its image, its exposure and gain, and the
+    /// flash energy that lit it relative to a full pulse (> 0; the normaliser is scaled by it,
+    /// module `radiometry`).
     pub fn new(
         session: &'a SessionContext<'a>,
         view: &'a ViewGeometry,
@@ -298,6 +302,7 @@ impl<'a> FrameSampler<'a> {
         image: &'a DnImage,
         exposure_us: f64,
         gain_db: f64,
+        flash_energy_rel: f64,
     ) -> Self {
         Self {
             session,
@@ -308,7 +313,8 @@ impl<'a> FrameSampler<'a> {
                 session.radiometry.for_frame(exposure_us, gain_db),
                 &session.radiometry.flash,
                 world_from_camera,
-            ),
+            )
+            .with_flash_energy(flash_energy_rel),
         }
     }
 

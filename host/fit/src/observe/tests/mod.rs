@@ -2,6 +2,7 @@
 //! poses, materials and radiometry.
 
 mod accuracy;
+mod energy;
 mod gating;
 mod robustness;
 
@@ -13,6 +14,7 @@ use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
 use nalgebra::{Isometry3, Point3, Vector3};
 
+use ellipso_session::events::SessionEvent;
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader::{self, Session};
 use ellipso_session::rig::RigRecord;
@@ -59,6 +61,16 @@ impl SceneSpec {
 /// Renders `spec` into a new session under `dir`; returns the session directory, the scene
 /// and the truth poses `(frame id, world_from_camera)` (frame ids start at 100).
 pub fn make_session(dir: &Path, spec: &SceneSpec) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
+    make_session_lit(dir, spec, None)
+}
+
+/// [`make_session`] with frame `k` lit by `flash_energy_rel[k]` of the full flash pulse and a
+/// `pairing` event recording that energy (`None`: every frame at full energy, no pairing).
+pub fn make_session_lit(
+    dir: &Path,
+    spec: &SceneSpec,
+    flash_energy_rel: Option<&[f64]>,
+) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
     let boards = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
     let poses: String = spec
         .cameras
@@ -160,7 +172,8 @@ saturation = {{}}
     let mut writer = SessionWriter::create(&session_dir, manifest).unwrap();
     let mut poses = Vec::new();
     for k in 0..renderer.frame_count() {
-        let frame = renderer.render_frame(k).unwrap();
+        let energy = flash_energy_rel.map(|e| e[k]);
+        let frame = renderer.render_frame_lit(k, energy.unwrap_or(1.0)).unwrap();
         let frame_id = 100 + k as u64;
         writer
             .write_frame(FrameRecord {
@@ -175,6 +188,20 @@ saturation = {{}}
                 flagged: None,
             })
             .unwrap();
+        if let Some(energy) = energy {
+            writer
+                .log(&SessionEvent::Pairing {
+                    t_host_us: HostTimeUs(k as u64 * 1000 + 1),
+                    frame_id,
+                    seq: k as u64,
+                    latency_us: None,
+                    bracket_step: Some(k as u8),
+                    flash_on_us: Some((energy * 5000.0).round() as u32),
+                    flash_energy_rel: Some(energy),
+                    basis: None,
+                })
+                .unwrap();
+        }
         poses.push((frame_id, scene.camera_poses[k].world_from_camera));
     }
     writer.finish(HostTimeUs(1_000_000), "completed").unwrap();
