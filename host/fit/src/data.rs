@@ -334,6 +334,22 @@ pub struct VertexFit {
     pub flags: Vec<FitFlag>,
 }
 
+impl VertexFit {
+    /// Whether the fit trusts this vertex's parameters enough to draw or re-render them: seen
+    /// from enough views, and no albedo at the solver's cap `albedo_cap` (an albedo there
+    /// means the data fixed only a product like ρ·σ², not the lobe). The pictures interpolate
+    /// untrusted vertices from trusted neighbours; the held-out score reports them apart.
+    pub fn is_reliable(&self, albedo_cap: f64) -> bool {
+        let p = &self.params;
+        let capped = [p.rho_s]
+            .iter()
+            .chain(&p.rho_ss)
+            .chain(&p.rho_d)
+            .any(|v| *v >= albedo_cap * (1.0 - 1e-3));
+        !capped && !self.flags.contains(&FitFlag::TooFewViews)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

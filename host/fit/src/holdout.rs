@@ -14,6 +14,11 @@
 //!   and the PSNR 10·log10(peak²/MSE) with peak = the sensor's full scale (s0: twice it, the
 //!   largest s0 a pixel pair can hold), per frame and overall. Samples go through the same gates
 //!   as the fit's (saturated ones cannot be compared). Vertices without a fit are skipped.
+//! - `overall` and `per_frame` score the vertices the fit trusts
+//!   ([`VertexFit::is_reliable`](crate::data::VertexFit::is_reliable): the ones the pictures
+//!   draw); `all_vertices` scores every vertex, and `untrusted_samples` counts the samples on
+//!   the others — a vertex seen from too few views, or with an albedo at the cap, can predict a
+//!   highlight no view constrained, and one such sample can dominate an RMSE.
 
 use std::collections::BTreeMap;
 
@@ -75,6 +80,10 @@ pub struct HoldoutReport {
     pub overall: FrameScore,
     /// Per frame, in frame-id order.
     pub per_frame: Vec<FrameScore>,
+    /// All held-out frames together, every vertex included (trusted or not).
+    pub all_vertices: FrameScore,
+    /// Held-out samples on vertices the fit does not trust (left out of `overall`).
+    pub untrusted_samples: usize,
 }
 
 #[derive(Clone, Copy, Default)]
@@ -113,10 +122,17 @@ impl Sums {
 
 /// Scores `fits` (indexed like `held.vertices`) on the held-out samples `held` (module doc);
 /// `full_scale_dn` is the sensor's largest code.
-pub fn score(held: &SampleSet, fits: &[VertexFit], full_scale_dn: f64) -> HoldoutReport {
+pub fn score(
+    held: &SampleSet,
+    fits: &[VertexFit],
+    full_scale_dn: f64,
+    albedo_cap: f64,
+) -> HoldoutReport {
     let channels = if held.colour { 3 } else { 1 };
     let mut per_view: BTreeMap<u32, Sums> = BTreeMap::new();
+    let mut untrusted = Sums::default();
     for (v, fit) in held.vertices.iter().zip(fits) {
+        let trusted = fit.is_reliable(albedo_cap);
         let p = &fit.params;
         let normal = Vec3::from_f64(fit.normal_world);
         for s in &v.samples {
@@ -127,7 +143,11 @@ pub fn score(held: &SampleSet, fits: &[VertexFit], full_scale_dn: f64) -> Holdou
                 continue;
             };
             let n = f64::from(s.normaliser);
-            let sums = per_view.entry(s.view).or_default();
+            let sums = if trusted {
+                per_view.entry(s.view).or_default()
+            } else {
+                &mut untrusted
+            };
             sums.n += 1;
             let unit = unit_sample(&frames, normal, p.eta, p.sigma_s, p.sigma_ss);
             for c in 0..channels {
@@ -163,10 +183,14 @@ pub fn score(held: &SampleSet, fits: &[VertexFit], full_scale_dn: f64) -> Holdou
         per_frame.push(sums.score(id, full_scale_dn));
     }
     per_frame.sort_by_key(|f| f.frame_id);
+    let mut all = overall;
+    all.add(&untrusted);
     HoldoutReport {
         frames: held.views.iter().map(|v| v.frame_id).collect(),
         overall: overall.score(None, full_scale_dn),
         per_frame,
+        all_vertices: all.score(None, full_scale_dn),
+        untrusted_samples: untrusted.n,
     }
 }
 
@@ -242,5 +266,62 @@ mod tests {
         assert_eq!(split(&ids, 1.0).len(), 100);
         assert_eq!(split(&ids[..7], 0.1).len(), 0);
         assert_eq!(split(&ids[..15], 0.1).len(), 1);
+    }
+
+    /// A vertex the fit does not trust (an albedo at the cap) predicts a highlight no view
+    /// constrained; it is scored apart: `overall` is the trusted vertices' error, `all_vertices`
+    /// includes it, and its samples are counted.
+    #[test]
+    fn untrusted_vertices_are_scored_apart() {
+        use crate::solve::tests::{material, synth};
+        use crate::synthetic::orbit_views;
+        use ellipso_model::optics::pbrdf::PbrdfParams;
+        let views = orbit_views(40, 0.5, [20.0, 70.0], 1.0, [0.0; 3], [0.0, 0.03, 0.0]);
+        let up = [0.0, 0.0, 1.0];
+        let truth = material("ceramic");
+        let set = SampleSet {
+            vertices: vec![
+                synth(&views, up, &truth, None, 1.0, 0),
+                synth(&views, up, &truth, None, 1.0, 1),
+            ],
+            views,
+            colour: true,
+        };
+        let fit = |vertex: u32, params| VertexFit {
+            vertex,
+            params,
+            normal_world: up,
+            std_error: [0.0; 10],
+            normal_std_error_deg: 0.0,
+            samples_used: 0,
+            cost: 0.0,
+            iterations: 0,
+            flags: Vec::new(),
+        };
+        let cap = 5.0;
+        let runaway = PbrdfParams {
+            rho_s: cap,
+            sigma_s: 0.4,
+            sigma_ss: 0.6,
+            ..truth
+        };
+        let fits = [fit(0, truth), fit(1, runaway)];
+        let r = score(&set, &fits, 4095.0, cap);
+        assert_eq!(r.untrusted_samples, set.vertices[1].samples.len());
+        assert!(r.untrusted_samples > 0);
+        assert!(r.overall.s0.relative_rmse < 1e-3, "{:?}", r.overall);
+        assert!(
+            r.all_vertices.s0.relative_rmse > 0.01,
+            "{:?}",
+            r.all_vertices
+        );
+        assert_eq!(
+            r.overall.samples + r.untrusted_samples,
+            r.all_vertices.samples
+        );
+        // Every vertex trusted: both scores agree.
+        let r = score(&set, &[fit(0, truth), fit(1, truth)], 4095.0, cap);
+        assert_eq!(r.untrusted_samples, 0);
+        assert_eq!(r.overall, r.all_vertices);
     }
 }

@@ -239,7 +239,12 @@ pub fn fit_session(
         ));
         let held = extract(session, &mesh, &poses_held_out, &config.observe, &|_, _| {})?;
         let full_scale = radiometry_of(session)?.full_scale_dn;
-        let report = score(&held.samples, &outcome.fits, full_scale);
+        let report = score(
+            &held.samples,
+            &outcome.fits,
+            full_scale,
+            config.fit.solver.albedo_cap,
+        );
         (
             (report.overall.samples > 0).then_some(report),
             Some(held.samples),

@@ -64,7 +64,7 @@ mod uncertainty;
 #[cfg(test)]
 mod hard_cases;
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;
 #[cfg(test)]
 mod tests_energy;
 

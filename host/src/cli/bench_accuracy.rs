@@ -316,8 +316,10 @@ fn one_run(
     config.solver.sensor = ellipso_fit::accuracy::sensor_model(scene);
     let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
     let full_scale = ellipso_fit::accuracy::full_scale_dn(scene);
-    let holdout = (!held.views.is_empty())
-        .then(|| ellipso_fit::holdout::score(&held, &outcome.fits, full_scale).overall);
+    let holdout = (!held.views.is_empty()).then(|| {
+        ellipso_fit::holdout::score(&held, &outcome.fits, full_scale, config.solver.albedo_cap)
+            .overall
+    });
     let fit_s = outcome.times.fit_s();
     let t = Instant::now();
     let checksum = forward_all(&capture.set, &outcome.fits);

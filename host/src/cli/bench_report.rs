@@ -38,8 +38,8 @@ pub fn markdown(
          optics the renderer uses (no frames are rendered, so the sweep isolates the fit). The \
          fit starts from normals tilted 5° at random (an imperfect scan). A deterministic 10 % \
          of the views is held out of every fit and scored as a re-render (`held-out s0`: \
-         relative RMSE of s0 on those views, sensor noise included — the figure a user can \
-         check on a real capture). All rows come from one run on one machine, so compare \
+         relative RMSE of s0 on those views over the vertices the fit trusts, sensor noise \
+         included — the figure a user can check on a real capture; docs/fit-outputs.md). All rows come from one run on one machine, so compare \
          ratios, not absolute seconds. `fit` = steps A + B + C (joint solve; clusters, virtual \
          samples and pooled η; final pass); `×fwd` = fit time over one forward evaluation of \
          every observation measured right after it.\n"

@@ -41,17 +41,6 @@ struct Field {
     eta_unidentified: Vec<bool>,
 }
 
-/// Whether a vertex's parameters are drawn (module doc).
-fn reliable(f: &VertexFit, albedo_cap: f64) -> bool {
-    let p = &f.params;
-    let capped = [p.rho_s]
-        .iter()
-        .chain(&p.rho_ss)
-        .chain(&p.rho_d)
-        .any(|v| *v >= albedo_cap * (1.0 - 1e-3));
-    !capped && !f.flags.contains(&FitFlag::TooFewViews)
-}
-
 impl Field {
     fn new(fits: &[VertexFit]) -> Self {
         Self {
@@ -60,7 +49,7 @@ impl Field {
             eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
             reliable: fits
                 .iter()
-                .map(|f| reliable(f, crate::solve::SolverConfig::default().albedo_cap))
+                .map(|f| f.is_reliable(crate::solve::SolverConfig::default().albedo_cap))
                 .collect(),
             eta_unidentified: fits
                 .iter()

@@ -27,7 +27,7 @@ pub(super) fn scene() -> &'static Scene {
     })
 }
 
-pub(super) fn material(name: &str) -> PbrdfParams<f64> {
+pub(crate) fn material(name: &str) -> PbrdfParams<f64> {
     scene()
         .materials
         .iter()
@@ -61,7 +61,7 @@ pub(super) fn unit(v: [f64; 3]) -> [f64; 3] {
 
 /// N from the scene's radiometry (1/d² from the flash; on the flash axis, no vignetting),
 /// scaled by `gain`.
-pub(super) fn synth(
+pub(crate) fn synth(
     views: &[ViewGeometry],
     normal: [f64; 3],
     truth: &PbrdfParams<f64>,

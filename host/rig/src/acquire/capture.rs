@@ -121,7 +121,7 @@ pub enum CaptureError {
     #[error(transparent)]
     Session(#[from] SessionError),
     /// The clock model did not settle.
-    #[error("the trigger board's clock did not settle after {pings} pings; check the link")]
+    #[error("the trigger board's clock did not settle after up to {pings} pings; check the link")]
     ClockNotSettled {
         /// Pings sent.
         pings: usize,
@@ -190,7 +190,7 @@ fn record(
     let clock = link
         .sync_clock(plan.clock_sync_pings)?
         .ok_or(CaptureError::ClockNotSettled {
-            pings: plan.clock_sync_pings,
+            pings: plan.clock_sync_pings * (1 + crate::link::SYNC_EXTRA_PING_FACTOR),
         })?;
     session.log(&SessionEvent::ClockFit {
         t_host_us: clock_now(),

@@ -82,6 +82,10 @@ pub struct LinkStats {
 
 pub use ellipso_session::link_counters::LinkCounters;
 
+/// How many times the requested pings [`TriggerLink::sync_clock`] may send again while the clock
+/// fit has too few usable samples (round trips too long on a loaded host are rejected).
+pub const SYNC_EXTRA_PING_FACTOR: usize = 4;
+
 impl LinkStats {
     fn count_error(&self, e: &FrameError) {
         let c = match e {
@@ -454,10 +458,18 @@ impl TriggerLink {
         Ok(sample)
     }
 
-    /// Sends `n` pings and returns the clock fit (None if too few samples were accepted). A ping
-    /// lost on a noisy link is skipped, not fatal.
+    /// Sends `n` pings and returns the clock fit. A ping lost on a noisy link, or one whose round
+    /// trip was too long to use (a host busy with other work), is skipped, not fatal: while the
+    /// fit has too few accepted samples, up to [`SYNC_EXTRA_PING_FACTOR`]` × n` more pings are
+    /// sent. `None` only when even those did not settle it.
     pub fn sync_clock(&self, n: usize) -> Result<Option<clock::ClockFit>, LinkError> {
-        for _ in 0..n {
+        let budget = n.saturating_mul(1 + SYNC_EXTRA_PING_FACTOR);
+        for sent in 0..budget {
+            if sent >= n
+                && let Some(fit) = self.lock_clock().fit()
+            {
+                return Ok(Some(fit));
+            }
             match self.ping() {
                 Ok(_) | Err(LinkError::Timeout { .. }) => {}
                 Err(e) => return Err(e),
