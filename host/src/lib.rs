@@ -15,6 +15,7 @@
 //!
 //! - [`fit`]: the per-vertex polarimetric SVBRDF fit (observations, solver, augmentation, shape).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit).
+//! - [`view`]: `ellipso view`, the local web page (live capture follower, fitted material).
 
 pub mod acquire;
 pub mod calibrate;
@@ -30,3 +31,4 @@ pub mod report;
 pub mod rig_file;
 pub mod session;
 pub mod track;
+pub mod view;
