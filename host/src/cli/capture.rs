@@ -71,6 +71,12 @@ pub struct Args {
     /// Skip pose tracking after recording.
     #[arg(long)]
     pub no_track: bool,
+    /// Show the live view in the browser while capturing (prints its URL; `docs/view.md`).
+    #[arg(long)]
+    pub view: bool,
+    /// Object mesh for the live view's coverage (with `--view`; default: a dome proxy).
+    #[arg(long, value_name = "MESH", requires = "view")]
+    pub view_mesh: Option<PathBuf>,
 }
 
 pub fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
@@ -468,6 +474,19 @@ pub fn print_report(r: &CaptureReport) {
 
 /// Runs `ellipso capture`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // The live view follows the session directory from its own threads (read-only).
+    let view = if args.view {
+        let v = crate::cli::view::start_live(
+            args.out.clone(),
+            args.view_mesh.clone(),
+            true,
+            &Default::default(),
+        )?;
+        println!("live view    open {}", v.server.url());
+        Some(v)
+    } else {
+        None
+    };
     let (report, dir, tracked) = if args.rig.is_some() {
         capture_hw(&args)?
     } else {
@@ -479,5 +498,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         crate::cli::replay::print_summary(&summary);
     }
     println!("session      {}", dir.display());
+    if view.is_some() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+        println!("live view    still open; press Enter to close it");
+        let _ = std::io::stdin().read_line(&mut String::new());
+    }
     Ok(())
 }

@@ -153,6 +153,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         supersampling: 2,
         interval_ms: None,
         no_track: true,
+        view: false,
+        view_mesh: None,
     };
     let (report, dir, _) = capture::capture_sim(&capture_args, false)?;
     print_report(&report);

@@ -30,10 +30,13 @@ pub struct Args {
     /// Do not track poses of frames the session has none for (live mode).
     #[arg(long)]
     pub no_track: bool,
+    /// PATH is a session a capture is about to create: wait for it (live mode).
+    #[arg(long)]
+    pub wait: bool,
 }
 
 /// Where and to whom the page is served (shared with `ellipso capture --view`).
-#[derive(Debug, Clone, clap::Args)]
+#[derive(Debug, Clone, Default, clap::Args)]
 pub struct ServeArgs {
     /// Address to listen on, `IP` or `IP:PORT` (default 127.0.0.1 on a free port). Anything
     /// but loopback opens the page to the network: the token still guards it.
@@ -101,7 +104,7 @@ fn announce(what: &str, url: &str, addr: SocketAddr) {
 /// Runs `ellipso view`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = &args.path;
-    if follow::is_session(path) {
+    if follow::is_session(path) || (args.wait && !path.exists()) {
         let live = start_live(path.clone(), args.mesh.clone(), !args.no_track, &args.serve)?;
         announce(
             &format!("live session {}", path.display()),

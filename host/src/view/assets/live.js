@@ -53,6 +53,7 @@ window.runLive = async function () {
   let last = null, lastImage = -1, lastCoverage = -1, firstDone = false;
   async function update(s) {
     last = E.live = s;
+    (E.history = E.history || []).push({ state: s.state, frames: s.counters.frames });
     document.getElementById("title").textContent = `live · ${s.session}`;
     setStatus(s.state === "waiting" ? "waiting for the capture to start…" : s.state === "ended" ? `ended: ${s.end_reason}` : "capturing");
     const c = s.counters;
