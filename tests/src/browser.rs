@@ -166,10 +166,13 @@ impl Browser {
                     };
                 }
                 Ok(v) => events.push(v),
-                Err(RecvTimeoutError::Timeout) => return Err(format!("{method}: no reply in {timeout:?}")),
+                Err(RecvTimeoutError::Timeout) => {
+                    return Err(format!("{method}: no reply in {timeout:?}"));
+                }
                 Err(RecvTimeoutError::Disconnected) => {
                     let mut log = String::new();
-                    let _ = std::fs::File::open(&self.stderr_log).and_then(|mut f| f.read_to_string(&mut log));
+                    let _ = std::fs::File::open(&self.stderr_log)
+                        .and_then(|mut f| f.read_to_string(&mut log));
                     return Err(format!("{method}: chromium went away; its stderr:\n{log}"));
                 }
             }
@@ -181,7 +184,13 @@ impl Browser {
         let mut events = Vec::new();
         let t = Duration::from_secs(30);
         let target = self
-            .call(None, "Target.createTarget", json!({"url": "about:blank"}), &mut events, t)
+            .call(
+                None,
+                "Target.createTarget",
+                json!({"url": "about:blank"}),
+                &mut events,
+                t,
+            )
             .expect("createTarget");
         let target_id = target["targetId"].as_str().expect("targetId").to_string();
         let attached = self
@@ -193,7 +202,10 @@ impl Browser {
                 t,
             )
             .expect("attachToTarget");
-        let session = attached["sessionId"].as_str().expect("sessionId").to_string();
+        let session = attached["sessionId"]
+            .as_str()
+            .expect("sessionId")
+            .to_string();
         let mut page = Page {
             browser: self,
             session,
@@ -233,7 +245,13 @@ impl Page<'_> {
     pub fn cmd(&mut self, method: &str, params: Value) -> Value {
         let s = self.session.clone();
         self.browser
-            .call(Some(&s), method, params, &mut self.events, Duration::from_secs(60))
+            .call(
+                Some(&s),
+                method,
+                params,
+                &mut self.events,
+                Duration::from_secs(60),
+            )
             .unwrap_or_else(|e| panic!("{e}"))
     }
 
@@ -258,8 +276,11 @@ impl Page<'_> {
             }
             let errors = self.console_errors();
             if Instant::now() > deadline || !errors.is_empty() {
-                let page_errors = self.eval("window.__ellipso ? window.__ellipso.errors : 'no __ellipso'");
-                panic!("`{expression}` not true after {timeout:?}; console errors {errors:?}; page errors {page_errors}");
+                let page_errors =
+                    self.eval("window.__ellipso ? window.__ellipso.errors : 'no __ellipso'");
+                panic!(
+                    "`{expression}` not true after {timeout:?}; console errors {errors:?}; page errors {page_errors}"
+                );
             }
             std::thread::sleep(Duration::from_millis(200));
         }
@@ -277,9 +298,13 @@ impl Page<'_> {
             .filter_map(|e| {
                 let p = &e["params"];
                 match e["method"].as_str()? {
-                    "Runtime.consoleAPICalled" if p["type"] == json!("error") => Some(p["args"].to_string()),
+                    "Runtime.consoleAPICalled" if p["type"] == json!("error") => {
+                        Some(p["args"].to_string())
+                    }
                     "Runtime.exceptionThrown" => Some(p["exceptionDetails"].to_string()),
-                    "Log.entryAdded" if p["entry"]["level"] == json!("error") => Some(p["entry"]["text"].to_string()),
+                    "Log.entryAdded" if p["entry"]["level"] == json!("error") => {
+                        Some(p["entry"]["text"].to_string())
+                    }
                     _ => None,
                 }
             })
@@ -320,7 +345,10 @@ pub fn base64_decode(text: &str) -> Vec<u8> {
 
 /// Starts `ellipso ARGS…` and returns it with the page URL it prints (`open http://…`).
 pub fn spawn_with_url(mut command: Command) -> (Child, String) {
-    command.stdout(Stdio::piped()).stderr(Stdio::inherit()).process_group(0);
+    command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .process_group(0);
     let mut child = command.spawn().expect("spawn ellipso");
     let stdout = child.stdout.take().expect("stdout");
     let mut lines = BufReader::new(stdout).lines();
@@ -337,6 +365,15 @@ pub fn spawn_with_url(mut command: Command) -> (Child, String) {
     // keep draining stdout so the child never blocks on a full pipe
     std::thread::spawn(move || for _ in lines {});
     (child, url)
+}
+
+/// Kills its child's process group on drop (also when a test panics).
+pub struct ChildGuard(pub Child);
+
+impl Drop for ChildGuard {
+    fn drop(&mut self) {
+        kill_group(&mut self.0);
+    }
 }
 
 /// Kills a child started with its own process group.

@@ -16,7 +16,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use ellipso_host::view::check::{cases, reference, relative_error};
-use ellipso_tests::browser::{Browser, chromium_or_skip, kill_group, spawn_with_url};
+use ellipso_tests::browser::{Browser, ChildGuard, chromium_or_skip, spawn_with_url};
 use ellipso_tests::fit_fixture::write_fit_dir;
 use ellipso_tests::{ellipso_bin, shipped_scene};
 
@@ -55,11 +55,15 @@ fn material_mode_shows_the_object_and_moving_the_light_changes_it() {
     let fit = write_fit_dir(&tmp.path().join("fit"));
     let mut cmd = Command::new(ellipso_bin());
     cmd.arg("view").arg(&fit);
-    let (mut child, url) = spawn_with_url(cmd);
+    let (child, url) = spawn_with_url(cmd);
+    let _child = ChildGuard(child);
     let out = artefacts();
     let mut browser = Browser::launch(&chromium, &out);
     let mut page = browser.open(&url, 1200, 680);
-    page.wait_for("window.__ellipso && window.__ellipso.ready", Duration::from_secs(90));
+    page.wait_for(
+        "window.__ellipso && window.__ellipso.ready",
+        Duration::from_secs(90),
+    );
     page.eval("window.__ellipso.setLight(40, 35)");
     let first = page.screenshot();
     std::fs::write(out.join("material.png"), &first).unwrap();
@@ -86,10 +90,15 @@ fn material_mode_shows_the_object_and_moving_the_light_changes_it() {
         .filter(|(a, b)| a.iter().zip(b.iter()).any(|(x, y)| x.abs_diff(*y) > 20))
         .count() as f64
         / px.len() as f64;
-    assert!(changed > 0.03, "moving the light changed {changed:.3} of the view");
+    assert!(
+        changed > 0.03,
+        "moving the light changed {changed:.3} of the view"
+    );
 
     // every display renders without a GL error; the wild vertex reads as invalid in the picker
-    for d in ["mueller", "dolp", "aolp", "eta", "std_eta", "flags", "normal"] {
+    for d in [
+        "mueller", "dolp", "aolp", "eta", "std_eta", "flags", "normal",
+    ] {
         page.eval(&format!("window.__ellipso.setDisplay('{d}', 1, 1)"));
     }
     page.eval("window.__ellipso.setDisplay('dolp')");
@@ -99,9 +108,11 @@ fn material_mode_shows_the_object_and_moving_the_light_changes_it() {
     assert!(picked.as_str().unwrap().contains("Invalid"), "{picked}");
     let errors = page.console_errors();
     assert!(errors.is_empty(), "console errors: {errors:?}");
-    assert_eq!(page.eval("window.__ellipso.errors.length"), serde_json::json!(0));
+    assert_eq!(
+        page.eval("window.__ellipso.errors.length"),
+        serde_json::json!(0)
+    );
     drop(browser);
-    kill_group(&mut child);
 }
 
 #[test]
@@ -113,10 +124,14 @@ fn shader_port_matches_the_rust_model() {
     let fit = write_fit_dir(&tmp.path().join("fit"));
     let mut cmd = Command::new(ellipso_bin());
     cmd.arg("view").arg(&fit);
-    let (mut child, url) = spawn_with_url(cmd);
+    let (child, url) = spawn_with_url(cmd);
+    let _child = ChildGuard(child);
     let mut browser = Browser::launch(&chromium, &artefacts());
     let mut page = browser.open(&url.replace("/?token=", "/check?token="), 900, 300);
-    page.wait_for("window.__ellipso && window.__ellipso.ready", Duration::from_secs(90));
+    page.wait_for(
+        "window.__ellipso && window.__ellipso.ready",
+        Duration::from_secs(90),
+    );
     let results = page.eval("window.__ellipso.check.results");
     let grid = cases(250);
     let results = results.as_array().unwrap();
@@ -125,7 +140,12 @@ fn shader_port_matches_the_rust_model() {
     for (k, (case, got)) in grid.iter().zip(results).enumerate() {
         let want = reference(case);
         for c in 0..3 {
-            let got: Vec<f64> = got[c].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            let got: Vec<f64> = got[c]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|v| v.as_f64().unwrap())
+                .collect();
             let e = relative_error(&got.try_into().unwrap(), &want[c]);
             if e > worst.0 || e.is_nan() {
                 worst = (e, k);
@@ -144,7 +164,6 @@ fn shader_port_matches_the_rust_model() {
     assert!(worst.0 <= 1e-3, "{line}; case {:?}", grid[worst.1]);
     assert!(page.console_errors().is_empty());
     drop(browser);
-    kill_group(&mut child);
 }
 
 #[test]
@@ -156,45 +175,82 @@ fn live_mode_follows_a_capture_as_it_grows() {
     let session = tmp.path().join("session");
     let mut view = Command::new(ellipso_bin());
     view.arg("view").arg(&session).arg("--wait");
-    let (mut viewer, url) = spawn_with_url(view);
+    let (viewer, url) = spawn_with_url(view);
+    let _viewer = ChildGuard(viewer);
     let out = artefacts();
     let mut browser = Browser::launch(&chromium, &out);
     let mut page = browser.open(&url, 1280, 900);
-    page.wait_for("window.__ellipso && window.__ellipso.ready", Duration::from_secs(60));
-    assert_eq!(page.eval("window.__ellipso.live.state"), serde_json::json!("waiting"));
+    page.wait_for(
+        "window.__ellipso && window.__ellipso.ready",
+        Duration::from_secs(60),
+    );
+    assert_eq!(
+        page.eval("window.__ellipso.live.state"),
+        serde_json::json!("waiting")
+    );
     let photos = 16;
     let capture = Command::new(ellipso_bin())
         .args(["capture", "--sim"])
         .arg(shipped_scene("sphere.toml"))
-        .args(["--photos", &photos.to_string(), "--resolution", "612x512", "--supersampling", "1", "--interval-ms", "150"])
+        .args([
+            "--photos",
+            &photos.to_string(),
+            "--resolution",
+            "612x512",
+            "--supersampling",
+            "1",
+            "--interval-ms",
+            "150",
+        ])
         .arg("--out")
         .arg(&session)
         .output()
         .unwrap();
-    assert!(capture.status.success(), "{}", String::from_utf8_lossy(&capture.stderr));
+    assert!(
+        capture.status.success(),
+        "{}",
+        String::from_utf8_lossy(&capture.stderr)
+    );
     page.wait_for(
         &format!("window.__ellipso.live.state === 'ended' && window.__ellipso.live.counters.frames === {photos} && window.__ellipso.live.tracking.pending === 0 && window.__ellipso.coverage"),
         Duration::from_secs(120),
     );
     let history = page.eval("window.__ellipso.history.map(h => h.frames)");
-    let seen: Vec<u64> = history.as_array().unwrap().iter().map(|v| v.as_u64().unwrap()).collect();
-    assert!(seen.iter().any(|&f| f > 0 && f < photos), "the page saw the session grow: {seen:?}");
+    let seen: Vec<u64> = history
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_u64().unwrap())
+        .collect();
+    assert!(
+        seen.iter().any(|&f| f > 0 && f < photos),
+        "the page saw the session grow: {seen:?}"
+    );
     let s = page.eval("window.__ellipso.live");
     assert_eq!(s["counters"]["paired"], photos);
     assert_eq!(s["counters"]["dropped"], 0);
-    assert!(s["tracking"]["posed"].as_u64().unwrap() >= photos - 2, "{}", s["tracking"]);
+    assert!(
+        s["tracking"]["posed"].as_u64().unwrap() >= photos - 2,
+        "{}",
+        s["tracking"]
+    );
     let cov = &s["coverage"];
     assert_eq!(cov["proxy"], true);
     assert!(!cov["hints"].as_array().unwrap().is_empty());
     assert!(s["latest"]["saturated_fraction"].as_f64().is_some());
-    page.wait_for("document.querySelector('img[alt=aolp]').naturalWidth > 0", Duration::from_secs(20));
+    page.wait_for(
+        "document.querySelector('img[alt=aolp]').naturalWidth > 0",
+        Duration::from_secs(20),
+    );
     let shot = page.screenshot();
     std::fs::write(out.join("live.png"), &shot).unwrap();
     let (px, _, _) = crop(&shot, &rect_of(&mut page, "#dome"));
     let lit = px.iter().filter(|p| p.iter().any(|&v| v > 60)).count() as f64 / px.len() as f64;
-    assert!(lit > 0.05, "the dome shows coverage and the path ({lit:.3})");
+    assert!(
+        lit > 0.05,
+        "the dome shows coverage and the path ({lit:.3})"
+    );
     let errors = page.console_errors();
     assert!(errors.is_empty(), "console errors: {errors:?}");
     drop(browser);
-    kill_group(&mut viewer);
 }

@@ -94,7 +94,9 @@ pub fn start_live(
 fn announce(what: &str, url: &str, addr: SocketAddr) {
     println!("ellipso view: {what}");
     if !addr.ip().is_loopback() {
-        println!("  listening on {addr} (not loopback: reachable from the network, token required)");
+        println!(
+            "  listening on {addr} (not loopback: reachable from the network, token required)"
+        );
     }
     println!("  open {url}");
     use std::io::Write;

@@ -7,15 +7,51 @@
 //! no third-party code.
 
 const FILES: [(&str, &str, &str); 9] = [
-    ("index.html", include_str!("assets/index.html"), "text/html; charset=utf-8"),
-    ("check.html", include_str!("assets/check.html"), "text/html; charset=utf-8"),
-    ("style.css", include_str!("assets/style.css"), "text/css; charset=utf-8"),
-    ("common.js", include_str!("assets/common.js"), "text/javascript; charset=utf-8"),
-    ("material.js", include_str!("assets/material.js"), "text/javascript; charset=utf-8"),
-    ("live.js", include_str!("assets/live.js"), "text/javascript; charset=utf-8"),
-    ("check.js", include_str!("assets/check.js"), "text/javascript; charset=utf-8"),
-    ("pbrdf.glsl", include_str!("assets/pbrdf.glsl"), "text/plain; charset=utf-8"),
-    ("mesh.js", include_str!("assets/mesh.js"), "text/javascript; charset=utf-8"),
+    (
+        "index.html",
+        include_str!("assets/index.html"),
+        "text/html; charset=utf-8",
+    ),
+    (
+        "check.html",
+        include_str!("assets/check.html"),
+        "text/html; charset=utf-8",
+    ),
+    (
+        "style.css",
+        include_str!("assets/style.css"),
+        "text/css; charset=utf-8",
+    ),
+    (
+        "common.js",
+        include_str!("assets/common.js"),
+        "text/javascript; charset=utf-8",
+    ),
+    (
+        "material.js",
+        include_str!("assets/material.js"),
+        "text/javascript; charset=utf-8",
+    ),
+    (
+        "live.js",
+        include_str!("assets/live.js"),
+        "text/javascript; charset=utf-8",
+    ),
+    (
+        "check.js",
+        include_str!("assets/check.js"),
+        "text/javascript; charset=utf-8",
+    ),
+    (
+        "pbrdf.glsl",
+        include_str!("assets/pbrdf.glsl"),
+        "text/plain; charset=utf-8",
+    ),
+    (
+        "mesh.js",
+        include_str!("assets/mesh.js"),
+        "text/javascript; charset=utf-8",
+    ),
 ];
 
 /// A file by name: `(bytes, content type)`.
@@ -32,7 +68,9 @@ pub fn page(name: &str, mode: &str, token: &str) -> String {
         .iter()
         .find(|(n, _, _)| *n == name)
         .map_or("", |(_, body, _)| *body);
-    template.replace("{{MODE}}", mode).replace("{{TOKEN}}", token)
+    template
+        .replace("{{MODE}}", mode)
+        .replace("{{TOKEN}}", token)
 }
 
 #[cfg(test)]

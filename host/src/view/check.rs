@@ -64,7 +64,11 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 
 /// A direction at `theta` from +z with azimuth `phi` (radians).
 fn polar(theta: f64, phi: f64) -> [f64; 3] {
-    [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()]
+    [
+        theta.sin() * phi.cos(),
+        theta.sin() * phi.sin(),
+        theta.cos(),
+    ]
 }
 
 /// The grid: `n_random` random cases plus the fixed hard ones.

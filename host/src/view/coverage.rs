@@ -253,7 +253,9 @@ impl CoverageModel {
 
     /// One byte per element: its category.
     pub fn categories(&self) -> Vec<u8> {
-        (0..self.acc.len()).map(|i| self.category(i) as u8).collect()
+        (0..self.acc.len())
+            .map(|i| self.category(i) as u8)
+            .collect()
     }
 
     /// Elements per category, in [`Category::ALL`] order.
@@ -310,9 +312,7 @@ fn proxy_normals(count: usize) -> Vec<Unit<Vector3<f64>>> {
         .collect()
 }
 
-const SECTOR_NAMES: [&str; 8] = [
-    "+x", "+x+y", "+y", "−x+y", "−x", "−x−y", "−y", "+x−y",
-];
+const SECTOR_NAMES: [&str; 8] = ["+x", "+x+y", "+y", "−x+y", "−x", "−x−y", "−y", "+x−y"];
 
 fn sector_of(az_deg: f64) -> usize {
     (((az_deg + 22.5) / 45.0).floor() as i64).rem_euclid(8) as usize
@@ -449,7 +449,11 @@ mod tests {
         let forward = -eye.normalize();
         // OpenCV camera: z forward, y down (world -z projected)
         let down = (-Vector3::z() + forward * forward.z).normalize();
-        let down = if down.norm().is_finite() { down } else { Vector3::y() };
+        let down = if down.norm().is_finite() {
+            down
+        } else {
+            Vector3::y()
+        };
         let right = down.cross(&forward);
         let rot = nalgebra::Rotation3::from_basis_unchecked(&[right, down, forward]);
         PosedView {
@@ -484,11 +488,21 @@ mod tests {
                 })
                 .collect::<Vec<_>>()
         };
-        assert!(facing(180.0).iter().all(|&i| m.category(i) == Category::Unseen));
+        assert!(
+            facing(180.0)
+                .iter()
+                .all(|&i| m.category(i) == Category::Unseen)
+        );
         assert!(facing(0.0).iter().all(|&i| m.views_of(i) >= 15));
         let hints = m.hints().join("\n");
-        assert!(hints.contains("−x side (azimuth 180°±45°): no views yet"), "{hints}");
-        assert!(hints.contains("+x side: no views below 40° elevation"), "{hints}");
+        assert!(
+            hints.contains("−x side (azimuth 180°±45°): no views yet"),
+            "{hints}"
+        );
+        assert!(
+            hints.contains("+x side: no views below 40° elevation"),
+            "{hints}"
+        );
     }
 
     #[test]
@@ -508,7 +522,10 @@ mod tests {
     #[test]
     fn a_mesh_occludes_its_own_far_side() {
         let (dirs, faces) = ellipso_sim::geometry::procedural::icosphere(2);
-        let pos = dirs.iter().map(|d| Point3::from(d.into_inner() * 0.03)).collect();
+        let pos = dirs
+            .iter()
+            .map(|d| Point3::from(d.into_inner() * 0.03))
+            .collect();
         let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
         let mut m = CoverageModel::on_mesh(mesh, camera(), Vector3::new(0.0, -0.03, 0.0));
         m.add_view(view(0.0, 10.0));

@@ -183,7 +183,9 @@ fn mesh_to_bytes(mesh: &TriangleMesh) -> Vec<u8> {
     out.extend((mesh.positions().len() as u32).to_le_bytes());
     out.extend((mesh.triangles().len() as u32).to_le_bytes());
     for p in mesh.positions() {
-        p.coords.iter().for_each(|v| out.extend((*v as f32).to_le_bytes()));
+        p.coords
+            .iter()
+            .for_each(|v| out.extend((*v as f32).to_le_bytes()));
     }
     for n in mesh.normals() {
         n.iter().for_each(|v| out.extend((*v as f32).to_le_bytes()));
@@ -333,8 +335,10 @@ impl FollowState {
             self.tracker = Some(match (&rig, self.boards.is_empty()) {
                 (Err(e), _) => Err(format!("no camera model in the manifest: {e}")),
                 (_, true) => Err("no AprilTag boards in the manifest".into()),
-                (Ok(rig), false) => Tracker::new(rig.camera, self.boards.clone(), TrackConfig::default())
-                    .map_err(|e| e.to_string()),
+                (Ok(rig), false) => {
+                    Tracker::new(rig.camera, self.boards.clone(), TrackConfig::default())
+                        .map_err(|e| e.to_string())
+                }
             });
         }
     }
@@ -477,7 +481,10 @@ impl FollowState {
             return false;
         }
         self.last_render = Some(Instant::now());
-        match self.load_raw(id).and_then(|raw| frame_view::render(id, &raw)) {
+        match self
+            .load_raw(id)
+            .and_then(|raw| frame_view::render(id, &raw))
+        {
             Ok(v) => {
                 self.latest_view = Some(v);
                 self.latest_error = None;
@@ -647,9 +654,12 @@ impl FollowState {
                     (Some(r), _) => ("flagged", Some(r.clone()), None),
                     (None, PoseStatus::Pending) => ("pending", None, None),
                     (None, PoseStatus::Rejected(r)) => ("rejected", Some(r.clone()), None),
-                    (None, PoseStatus::Posed {
-                        world_from_camera, ..
-                    }) => (
+                    (
+                        None,
+                        PoseStatus::Posed {
+                            world_from_camera, ..
+                        },
+                    ) => (
                         "posed",
                         None,
                         coverage.map(|cv| {
@@ -687,7 +697,11 @@ impl FollowState {
             .collect();
         let fps = match (recent.iter().max(), recent.len()) {
             (Some(&last), n) if n >= 2 => {
-                let window: Vec<u64> = recent.iter().copied().filter(|&t| t + 2_000_000 >= last).collect();
+                let window: Vec<u64> = recent
+                    .iter()
+                    .copied()
+                    .filter(|&t| t + 2_000_000 >= last)
+                    .collect();
                 let first = window.iter().min().copied().unwrap_or(last);
                 if last > first {
                     (window.len() - 1) as f64 / ((last - first) as f64 * 1e-6)
@@ -704,7 +718,11 @@ impl FollowState {
         } else {
             "capturing"
         };
-        let without_frame = c.pairing_errors.get("pulse_without_frame").copied().unwrap_or(0);
+        let without_frame = c
+            .pairing_errors
+            .get("pulse_without_frame")
+            .copied()
+            .unwrap_or(0);
         json!({
             "version": version,
             "session": self.config.session.display().to_string(),

@@ -12,9 +12,9 @@
 
 use std::io::Cursor;
 
+use crate::polar::frame::RawFrame;
 use crate::polar::mask::MaskReason;
 use crate::polar::{PolarConfig, PolarImage, process};
-use crate::polar::frame::RawFrame;
 
 /// Widest picture sent to the page, px.
 pub const MAX_WIDTH_PX: usize = 480;
@@ -162,8 +162,8 @@ pub fn hsv(h_deg: f32, s: f32, v: f32) -> [u8; 3] {
 }
 
 fn png(w: usize, h: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {
-    let img = image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec())
-        .ok_or("picture buffer size")?;
+    let img =
+        image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec()).ok_or("picture buffer size")?;
     let mut out = Cursor::new(Vec::new());
     img.write_to(&mut out, image::ImageFormat::Png)
         .map_err(|e| e.to_string())?;

@@ -99,16 +99,18 @@ pub fn sanitise(params: &[f32; 10]) -> ([f32; 10], bool) {
 impl MaterialMesh {
     /// Loads `fit.ply` at `path` (a fit directory or the file).
     pub fn load(path: &Path) -> Result<Self, MaterialError> {
-        let file = locate(path).ok_or_else(|| MaterialError::NotFound(path.display().to_string()))?;
+        let file =
+            locate(path).ok_or_else(|| MaterialError::NotFound(path.display().to_string()))?;
         let vertices = read_fit_ply(&file)?;
         let bytes = std::fs::read(&file).map_err(|e| MaterialError::Mesh {
             path: file.display().to_string(),
             what: e.to_string(),
         })?;
-        let mesh = ellipso_sim::geometry::ply::parse_ply(&bytes).map_err(|e| MaterialError::Mesh {
-            path: file.display().to_string(),
-            what: e.to_string(),
-        })?;
+        let mesh =
+            ellipso_sim::geometry::ply::parse_ply(&bytes).map_err(|e| MaterialError::Mesh {
+                path: file.display().to_string(),
+                what: e.to_string(),
+            })?;
         if mesh.positions().len() != vertices.len() {
             return Err(MaterialError::Mesh {
                 path: file.display().to_string(),
@@ -233,7 +235,11 @@ fn percentile_range(values: impl Iterator<Item = f32>) -> [f32; 2] {
 
 /// Centre of the bounding box and the largest distance from it (finite vertices only).
 fn bounding_sphere(vertices: &[FitVertex]) -> ([f32; 3], f32) {
-    let finite = || vertices.iter().filter(|v| v.position.iter().all(|x| x.is_finite()));
+    let finite = || {
+        vertices
+            .iter()
+            .filter(|v| v.position.iter().all(|x| x.is_finite()))
+    };
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for v in finite() {
@@ -247,7 +253,12 @@ fn bounding_sphere(vertices: &[FitVertex]) -> ([f32; 3], f32) {
     }
     let c = [0, 1, 2].map(|k| 0.5 * (lo[k] + hi[k]));
     let r = finite()
-        .map(|v| (0..3).map(|k| (v.position[k] - c[k]).powi(2)).sum::<f32>().sqrt())
+        .map(|v| {
+            (0..3)
+                .map(|k| (v.position[k] - c[k]).powi(2))
+                .sum::<f32>()
+                .sqrt()
+        })
         .fold(0f32, f32::max);
     (c, r.max(1e-6))
 }

@@ -127,7 +127,10 @@ mod tests {
         assert!(!a.matches(""));
         assert!(!a.matches(&a.as_str()[..31]));
         assert!(!a.matches(&format!("{}0", a.as_str())));
-        assert!(!format!("{a:?}").contains(a.as_str()), "Debug must not leak it");
+        assert!(
+            !format!("{a:?}").contains(a.as_str()),
+            "Debug must not leak it"
+        );
     }
 
     #[test]

@@ -257,7 +257,10 @@ async fn guard(State(state): State<AppState>, request: Request, next: Next) -> R
     let mut response = next.run(request).await;
     let h = response.headers_mut();
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
-    h.insert(header::REFERRER_POLICY, HeaderValue::from_static("no-referrer"));
+    h.insert(
+        header::REFERRER_POLICY,
+        HeaderValue::from_static("no-referrer"),
+    );
     h.insert(
         header::X_CONTENT_TYPE_OPTIONS,
         HeaderValue::from_static("nosniff"),
@@ -265,7 +268,7 @@ async fn guard(State(state): State<AppState>, request: Request, next: Next) -> R
     h.insert(
         header::CONTENT_SECURITY_POLICY,
         HeaderValue::from_static(
-            "default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; connect-src 'self'; frame-ancestors 'none'",
+            "default-src 'self'; img-src 'self' data: blob:; style-src 'self' 'unsafe-inline'; script-src 'self'; connect-src 'self'; frame-ancestors 'none'",
         ),
     );
     response
@@ -287,7 +290,11 @@ fn mode_name(content: &Content) -> &'static str {
 }
 
 async fn index(State(state): State<AppState>) -> Response {
-    let page = assets::page("index.html", mode_name(&state.content), state.token.as_str());
+    let page = assets::page(
+        "index.html",
+        mode_name(&state.content),
+        state.token.as_str(),
+    );
     typed("text/html; charset=utf-8", page)
 }
 

@@ -124,7 +124,7 @@ function legendBar(canvas, fn) {
 
 // ---- orbit camera: drag to rotate, wheel to zoom, shift-drag (or right-drag) to move the light ----
 function orbit(canvas, centre, radius, onChange, onLightDrag, onClick) {
-  const o = { az: -60, el: 25, dist: 3.2 * radius, centre, radius };
+  const o = { az: -60, el: 25, dist: 4.6 * radius, centre, radius };
   let drag = null;
   canvas.addEventListener("contextmenu", (e) => e.preventDefault());
   canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, light: e.shiftKey || e.button === 2, moved: 0 }; canvas.setPointerCapture(e.pointerId); });

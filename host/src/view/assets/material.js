@@ -93,7 +93,7 @@ window.runMaterial = async function () {
   const prog = program(gl, MAT_VS, matFs(pbrdf));
   const n = mesh.n;
   const centre = info.centre, radius = info.radius;
-  const state = { display: "rendered", elem: [0, 0], polarised: false, psi: 0, exposure: 1.0, lightAz: 30, lightEl: 45, lightDist: 4 * radius, greyMask: 1 | 2 | 256, pick: -1 };
+  const state = { display: "rendered", elem: [0, 0], polarised: false, psi: 0, exposure: 1.0, lightAz: -25, lightEl: 40, lightDist: 4 * radius, greyMask: 1 | 2 | 256, pick: -1 };
 
   // attributes
   const p0 = new Float32Array(4 * n), ss = new Float32Array(3 * n), dd = new Float32Array(3 * n);
@@ -224,7 +224,8 @@ window.runMaterial = async function () {
     } else if (d === "mueller") { legendBar(legendCanvas, viridisJs); legendText.textContent = "log10 M00: −3 … 0.5"; }
     else if (d === "dolp") { legendBar(legendCanvas, viridisJs); legendText.textContent = "DoLP 0 … 1"; }
     else if (d === "aolp") { legendBar(legendCanvas, (t) => hsvJs(t)); legendText.textContent = "AoLP 0° … 180° (camera frame)"; }
-    else if (d === "rendered" || d === "normal") { legendText.textContent = d === "rendered" ? "s0 per channel × exposure, sRGB" : "n·½+½ (world)"; }
+    legendCanvas.hidden = d === "rendered" || d === "normal" || d === "flags";
+    if (d === "rendered" || d === "normal") { legendText.textContent = d === "rendered" ? "s0 per channel × exposure, sRGB" : "n·½+½ (world)"; }
     else if (d === "flags") { legendText.textContent = ""; }
     else { legendBar(legendCanvas, viridisJs); legendText.textContent = `${fmt(range[0])} … ${fmt(range[1])} (1st–99th pct)`; }
   }
