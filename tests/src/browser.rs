@@ -61,7 +61,7 @@ fn pipe() -> (OwnedFd, OwnedFd) {
 
 impl Browser {
     /// Starts Chromium (`bin`) headless, with artefacts (its stderr) under `artefacts`.
-    pub fn launch(bin: &PathBuf, artefacts: &std::path::Path) -> Self {
+    pub fn launch(bin: &std::path::Path, artefacts: &std::path::Path) -> Self {
         let profile = tempfile::tempdir().expect("profile dir");
         let (cmd_read, cmd_write) = pipe();
         let (resp_read, resp_write) = pipe();
@@ -115,7 +115,9 @@ impl Browser {
                 match r.read_until(0, &mut buf) {
                     Ok(0) | Err(_) => break,
                     Ok(_) => {
-                        buf.pop_if(|b| *b == 0);
+                        if buf.last() == Some(&0) {
+                            buf.pop();
+                        }
                         if let Ok(v) = serde_json::from_slice::<Value>(&buf)
                             && tx.send(v).is_err()
                         {

@@ -180,9 +180,13 @@ impl CoverageModel {
                 .extent()
                 .norm()
         });
-        for i in 0..self.positions.len() {
-            let p = self.positions[i];
-            let n = self.normals[i].into_inner();
+        let elements = self
+            .positions
+            .iter()
+            .zip(&self.normals)
+            .zip(self.acc.iter_mut());
+        for ((&p, n), a) in elements {
+            let n = n.into_inner();
             let to_eye = eye - p.coords;
             let dist = to_eye.norm();
             if dist <= 0.0 {
@@ -210,7 +214,6 @@ impl CoverageModel {
             let h = (wi + wo).normalize();
             let theta_h = n.dot(&h).clamp(-1.0, 1.0).acos().to_degrees();
             let theta_o = cos_o.clamp(-1.0, 1.0).acos().to_degrees();
-            let a = &mut self.acc[i];
             if a.views == 0 || theta_h < a.min_theta_h_deg {
                 a.min_theta_h_deg = theta_h;
             }

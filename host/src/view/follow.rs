@@ -50,12 +50,16 @@ pub struct FollowConfig {
     pub track: bool,
     /// Poll interval.
     pub poll: Duration,
-    /// Time per poll spent tracking at most.
+    /// Time per poll spent tracking at most once the capture has ended.
     pub track_budget: Duration,
+    /// Time per poll spent tracking at most while the capture runs (it must not starve the
+    /// capture's writers and pairing on a small machine).
+    pub track_budget_capturing: Duration,
 }
 
 impl FollowConfig {
-    /// Defaults for `session`: tracking on, 150 ms polls, 120 ms of tracking per poll.
+    /// Defaults for `session`: tracking on, 150 ms polls, 25 ms of tracking per poll while the
+    /// capture runs, 120 ms after it ended.
     pub fn new(session: PathBuf) -> Self {
         Self {
             session,
@@ -63,6 +67,7 @@ impl FollowConfig {
             track: true,
             poll: Duration::from_millis(150),
             track_budget: Duration::from_millis(120),
+            track_budget_capturing: Duration::from_millis(25),
         }
     }
 }
@@ -500,7 +505,12 @@ impl FollowState {
         };
         let started = Instant::now();
         let mut changed = false;
-        while started.elapsed() < self.config.track_budget {
+        let budget = if self.counters.ended.is_some() {
+            self.config.track_budget
+        } else {
+            self.config.track_budget_capturing
+        };
+        while started.elapsed() < budget {
             // newest pending frame first
             let Some(id) = self
                 .frames

@@ -243,9 +243,9 @@ fn bounding_sphere(vertices: &[FitVertex]) -> ([f32; 3], f32) {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
     for v in finite() {
-        for k in 0..3 {
-            lo[k] = lo[k].min(v.position[k]);
-            hi[k] = hi[k].max(v.position[k]);
+        for ((l, h), x) in lo.iter_mut().zip(hi.iter_mut()).zip(v.position) {
+            *l = l.min(x);
+            *h = h.max(x);
         }
     }
     if !lo[0].is_finite() {
