@@ -13,7 +13,7 @@
 //!   `/api/info`, `/api/check/cases`, `/api/material/info`, `/api/material/mesh.bin` (fitted-material
 //!   mode), `/api/live/state`, `/api/live/events` (server-sent events, at most
 //!   [`LIVE_MAX_HZ`] per second, only when something changed), `/api/live/image/{s0,dolp,aolp}`,
-//!   `/api/live/mesh.bin`, `/api/live/coverage.bin` (live mode).
+//!   `/api/live/mesh.bin` (empty without a mesh), `/api/live/coverage.bin` (live mode).
 
 use std::net::{SocketAddr, TcpListener};
 use std::sync::Arc;
@@ -394,10 +394,11 @@ async fn live_image(State(state): State<AppState>, Path(kind): Path<String>) -> 
 }
 
 async fn live_mesh(State(state): State<AppState>) -> Response {
-    match live_hub(&state).and_then(|h| h.mesh_bytes()) {
-        Some(bytes) => typed("application/octet-stream", bytes.as_ref().clone()),
-        None => (StatusCode::NOT_FOUND, "no mesh given (--mesh)\n").into_response(),
-    }
+    // no mesh (--mesh not given): an empty body, so the page needs no failing request to know
+    let bytes = live_hub(&state)
+        .and_then(|h| h.mesh_bytes())
+        .map_or_else(Vec::new, |b| b.as_ref().clone());
+    typed("application/octet-stream", bytes)
 }
 
 async fn live_coverage(State(state): State<AppState>) -> Response {

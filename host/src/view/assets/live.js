@@ -45,10 +45,8 @@ window.runLive = async function () {
 
   // optional mesh coverage view
   let meshView = null;
-  try {
-    const buf = await api("/api/live/mesh.bin", "bin");
-    meshView = makeMeshView(decodePlainMesh(buf), left);
-  } catch (e) { if (!String(e).includes("404")) throw e; }
+  const meshBuf = await api("/api/live/mesh.bin", "bin");
+  if (meshBuf.byteLength > 0) meshView = makeMeshView(decodePlainMesh(meshBuf), left);
 
   let last = null, lastImage = -1, lastCoverage = -1, firstDone = false;
   async function update(s) {
