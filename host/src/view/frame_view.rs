@@ -4,7 +4,7 @@
 //! demosaic, ideal analysers, default levels) on one raw frame and returns small PNGs, at most
 //! [`MAX_WIDTH_PX`] wide (nearest superpixel, no smoothing so that masked pixels stay visible):
 //! - `s0`: grey, s0/2 (the mean analyser intensity) with an sRGB curve; saturated pixels red;
-//! - `dolp`: grey DoLP·255 over [0, 1];
+//! - `dolp`: grey DoLP·255 over [0, 1]; dark pixels black (their DoLP is noise);
 //! - `aolp`: hue = AoLP (0° and 180° meet: hue = 2·AoLP), saturation = DoLP scaled so that
 //!   DoLP ≥ 0.5 is fully saturated, value 1 (dark pixels black);
 //! colour frames use the mean of the three bands. Statistics: the saturated and dark fractions
@@ -49,7 +49,11 @@ pub fn render(frame_id: u64, frame: &RawFrame) -> Result<FrameView, String> {
             let dark = px.mask & MaskReason::Dark.bit() != 0;
             let g = srgb((px.s0 / 2.0).clamp(0.0, 1.0));
             s0_rgb.extend(if saturated { [255, 40, 40] } else { [g, g, g] });
-            let d = (px.dolp.clamp(0.0, 1.0) * 255.0).round() as u8;
+            let d = if dark {
+                0
+            } else {
+                (px.dolp.clamp(0.0, 1.0) * 255.0).round() as u8
+            };
             dolp_rgb.extend([d, d, d]);
             aolp_rgb.extend(if dark {
                 [0, 0, 0]
@@ -212,5 +216,45 @@ mod tests {
         let sat = v.stats["saturated_fraction"].as_f64().unwrap();
         assert!((sat - 1.0 / 512.0).abs() < 1e-9, "{sat}");
         assert!(v.stats["mean_dolp_valid"].as_f64().unwrap() > 0.8);
+    }
+
+    fn decode(png: &[u8]) -> image::RgbImage {
+        image::load_from_memory(png).unwrap().to_rgb8()
+    }
+
+    #[test]
+    fn dark_pixels_are_black_in_dolp_and_aolp() {
+        let layout = ellipso_sim::mosaic::SensorLayout::MonoPolar;
+        // left half: a few DN of noise with a strongly polarised pattern (DoLP ≈ 1 computed, but
+        // the pixels are dark); right half: bright, DoLP ≈ 0.88
+        let (w, h) = (64u32, 32u32);
+        let mut px = vec![0u16; (w * h) as usize];
+        for y in 0..h {
+            for x in 0..w {
+                let i0 = (x % 2, y % 2) == (1, 1);
+                px[(y * w + x) as usize] = match (x < w / 2, i0) {
+                    (true, true) => 3,
+                    (true, false) => 0,
+                    (false, true) => 3000,
+                    (false, false) => 1600 - 1400 * u16::from((x % 2, y % 2) == (0, 0)),
+                };
+            }
+        }
+        let frame = RawFrame::new(w, h, 12, layout, px).unwrap();
+        let v = render(1, &frame).unwrap();
+        assert!((v.stats["dark_fraction"].as_f64().unwrap() - 0.5).abs() < 1e-9);
+        let [_, dolp, aolp] = v.pngs.each_ref().map(|p| decode(p));
+        let (ow, oh) = dolp.dimensions();
+        for y in 0..oh {
+            for x in 0..ow {
+                let (d, a) = (dolp.get_pixel(x, y).0, aolp.get_pixel(x, y).0);
+                if x < ow / 2 {
+                    assert_eq!(d, [0, 0, 0], "dark DoLP at {x},{y}");
+                    assert_eq!(a, [0, 0, 0], "dark AoLP at {x},{y}");
+                } else {
+                    assert!(d[0] > 200, "bright DoLP at {x},{y}: {d:?}");
+                }
+            }
+        }
     }
 }
