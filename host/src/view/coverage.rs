@@ -417,7 +417,7 @@ fn hints(model: &CoverageModel) -> Vec<String> {
         };
         weak.push((bad, format!("{region}: {need}")));
     }
-    weak.sort_by(|a, b| b.0.cmp(&a.0));
+    weak.sort_by_key(|w| std::cmp::Reverse(w.0));
     out.extend(weak.into_iter().map(|(_, h)| h));
     if out.is_empty() {
         out.push("every region is well constrained".into());

@@ -6,8 +6,9 @@
 //! - `s0`: grey, s0/2 (the mean analyser intensity) with an sRGB curve; saturated pixels red;
 //! - `dolp`: grey DoLP·255 over [0, 1]; dark pixels black (their DoLP is noise);
 //! - `aolp`: hue = AoLP (0° and 180° meet: hue = 2·AoLP), saturation = DoLP scaled so that
-//!   DoLP ≥ 0.5 is fully saturated, value 1 (dark pixels black);
-//! colour frames use the mean of the three bands. Statistics: the saturated and dark fractions
+//!   DoLP ≥ 0.5 is fully saturated, value 1 (dark pixels black).
+//!
+//! Colour frames use the mean of the three bands. Statistics: the saturated and dark fractions
 //! (polar's mask), the valid fraction, the mean s0 and DoLP over valid pixels.
 
 use std::io::Cursor;

@@ -88,7 +88,7 @@ impl HostPolicy {
             return ip == self.bound.ip() || self.bound.ip().is_unspecified();
         }
         (host == "localhost" && self.bound.ip().is_loopback())
-            || self.extra_names.iter().any(|n| *n == host)
+            || self.extra_names.contains(&host)
     }
 }
 
