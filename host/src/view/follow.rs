@@ -7,16 +7,18 @@
 //!   `events.jsonl` (complete lines only; a half-written last line waits for its end) and the
 //!   frame PNGs the log names, so it follows a capture in this process (`ellipso capture --view`)
 //!   or in another one (`ellipso view SESSION`) the same way, and shows a finished session too.
-//! - It never slows the capture beyond what it costs in CPU: it runs on its own thread, polls
-//!   every [`FollowConfig::poll`], renders only the newest frame and at most
-//!   [`FRAME_RENDERS_PER_S`] of them, and tracks poses within a per-poll time budget, newest
-//!   frame first (what the operator is pointing at now), catching up on older frames when the
-//!   capture pauses. Poses the session's log records (`pose`, `pose_rejected`) win over its own.
+//! - It stays out of the capture's way: it runs on its own thread at the lowest priority
+//!   ([`super::priority`]), polls every [`FollowConfig::poll`], and reads the log on every poll,
+//!   but while the capture runs its heavy work (the newest frame's pictures, at most
+//!   [`FRAME_RENDERS_PER_S`] a second; the newest frame's pose, one per poll; coverage) is paced
+//!   to [`FollowConfig::capture_share`] of wall time. Frames it skipped are tracked once the
+//!   capture has ended or paused (its log quiet for [`CAPTURE_QUIET`]: a crashed capture never
+//!   writes its end), newest first, within [`FollowConfig::track_budget`] per poll. Poses the
+//!   session's log records (`pose`, `pose_rejected`) win over its own.
 //! - Each change yields a new [`Snapshot`] through a `tokio::sync::watch` channel; the server
 //!   pushes it to pages at most `server::LIVE_MAX_HZ` times a second.
 
 use std::collections::{BTreeMap, HashMap};
-use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -24,20 +26,25 @@ use std::time::{Duration, Instant};
 
 use ellipso_sim::camera::CameraModel;
 use ellipso_sim::geometry::TriangleMesh;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-use serde_json::json;
+use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::coverage::{Category, CoverageModel, PosedView};
+use super::coverage::{CoverageModel, PosedView};
 use super::frame_view;
+use super::priority::{self, Pacer};
 use crate::polar::frame::RawFrame;
 use crate::process::{RigRecord, layout_of};
-use crate::session::events::{FrameStatus, SessionEvent};
 use crate::session::manifest::Manifest;
 use crate::session::{frame_png, paths};
 use crate::track::{TrackConfig, TrackedBoard, Tracker};
 
+mod json;
+mod log;
+
 /// Most latest-frame renders per second.
 pub const FRAME_RENDERS_PER_S: f64 = 4.0;
+
+/// A capture whose log has not grown for this long counts as paused: the follower catches up.
+pub const CAPTURE_QUIET: Duration = Duration::from_secs(2);
 
 /// What to follow and how.
 #[derive(Clone, Debug)]
@@ -52,14 +59,14 @@ pub struct FollowConfig {
     pub poll: Duration,
     /// Time per poll spent tracking at most once the capture has ended.
     pub track_budget: Duration,
-    /// Time per poll spent tracking at most while the capture runs (it must not starve the
-    /// capture's writers and pairing on a small machine).
-    pub track_budget_capturing: Duration,
+    /// Share of wall time the heavy work (pictures, tracking, coverage) may take while the
+    /// capture runs.
+    pub capture_share: f64,
 }
 
 impl FollowConfig {
-    /// Defaults for `session`: tracking on, 150 ms polls, 25 ms of tracking per poll while the
-    /// capture runs, 120 ms after it ended.
+    /// Defaults for `session`: tracking on, 150 ms polls, heavy work paced to 20 % of wall time
+    /// while the capture runs, 120 ms of tracking per poll after it ended.
     pub fn new(session: PathBuf) -> Self {
         Self {
             session,
@@ -67,7 +74,7 @@ impl FollowConfig {
             track: true,
             poll: Duration::from_millis(150),
             track_budget: Duration::from_millis(120),
-            track_budget_capturing: Duration::from_millis(25),
+            capture_share: 0.2,
         }
     }
 }
@@ -159,6 +166,7 @@ pub fn spawn(config: FollowConfig) -> Result<(Arc<LiveHub>, Follower), FollowErr
         std::thread::Builder::new()
             .name("view-follow".into())
             .spawn(move || {
+                priority::lower_this_thread_or_log("follower");
                 // built here: the tag detector it creates is not Send
                 let mut state = FollowState::new(config, mesh);
                 let mut version = 0u64;
@@ -253,10 +261,14 @@ struct FollowState {
     latest_view: Option<frame_view::FrameView>,
     latest_error: Option<String>,
     last_render: Option<Instant>,
+    /// When the log last grew.
+    log_grew: Option<Instant>,
+    pacer: Pacer,
 }
 
 impl FollowState {
     fn new(config: FollowConfig, mesh: Option<TriangleMesh>) -> Self {
+        let pacer = Pacer::new(config.capture_share);
         Self {
             config,
             manifest: None,
@@ -276,6 +288,8 @@ impl FollowState {
             latest_view: None,
             latest_error: None,
             last_render: None,
+            log_grew: None,
+            pacer,
         }
     }
 
@@ -286,10 +300,26 @@ impl FollowState {
             return changed;
         }
         changed |= self.read_log();
+        // the heavy work, paced while the capture runs
+        let capturing = self.capturing();
+        if capturing && !self.pacer.ready(Instant::now()) {
+            return changed;
+        }
+        let started = Instant::now();
         changed |= self.render_latest();
         changed |= self.track_some();
         changed |= self.update_coverage();
+        if capturing {
+            let now = Instant::now();
+            self.pacer.spent(now - started, now);
+        }
         changed
+    }
+
+    /// Whether the capture is still running: it has not logged its end, and its log grew within
+    /// [`CAPTURE_QUIET`].
+    fn capturing(&self) -> bool {
+        self.counters.ended.is_none() && self.log_grew.is_some_and(|t| t.elapsed() < CAPTURE_QUIET)
     }
 
     fn read_manifest(&mut self) -> bool {
@@ -348,120 +378,6 @@ impl FollowState {
         }
     }
 
-    fn read_log(&mut self) -> bool {
-        let path = self.config.session.join(paths::EVENTS);
-        let Ok(mut file) = std::fs::File::open(&path) else {
-            return false;
-        };
-        if file.seek(SeekFrom::Start(self.log_offset)).is_err() {
-            return false;
-        }
-        let mut bytes = Vec::new();
-        if file.read_to_end(&mut bytes).is_err() || bytes.is_empty() {
-            return false;
-        }
-        self.log_offset += bytes.len() as u64;
-        self.partial.extend(bytes);
-        let Some(last_newline) = self.partial.iter().rposition(|&b| b == b'\n') else {
-            return false;
-        };
-        let complete: Vec<u8> = self.partial.drain(..=last_newline).collect();
-        for line in complete.split(|&b| b == b'\n') {
-            if line.iter().all(u8::is_ascii_whitespace) {
-                continue;
-            }
-            match serde_json::from_slice::<SessionEvent>(line) {
-                Ok(e) => self.on_event(e),
-                Err(_) => self.bad_lines += 1,
-            }
-        }
-        true
-    }
-
-    fn on_event(&mut self, e: SessionEvent) {
-        let c = &mut self.counters;
-        match e {
-            SessionEvent::Pulse { .. } => c.pulses += 1,
-            SessionEvent::Frame {
-                frame_id,
-                file,
-                t_host_us,
-                status,
-                ..
-            } => {
-                let flagged = match status {
-                    FrameStatus::Complete => None,
-                    FrameStatus::Flagged { reason } => Some(reason),
-                };
-                let pose = self
-                    .frames
-                    .get(&frame_id)
-                    .map_or(PoseStatus::Pending, |f| f.pose.clone());
-                self.frames.insert(
-                    frame_id,
-                    FrameInfo {
-                        file,
-                        t_host_us: t_host_us.0,
-                        flagged,
-                        pose,
-                    },
-                );
-            }
-            SessionEvent::Pairing { .. } => c.paired += 1,
-            SessionEvent::PairingError { kind, .. } => {
-                *c.pairing_errors.entry(kind).or_insert(0) += 1;
-            }
-            SessionEvent::Link { counters, .. } => {
-                c.link_ok = counters.frames_ok;
-                c.link_bad = counters.bad_frames();
-            }
-            SessionEvent::ClockFit { gain, rms_us, .. } => {
-                c.clock_rms_us = Some(rms_us);
-                c.clock_drift_ppm = Some((gain - 1.0) * 1e6);
-            }
-            SessionEvent::Fault { what, .. } => c.faults.push(what),
-            SessionEvent::Disconnected { reason, .. } => c.disconnected = Some(reason),
-            SessionEvent::End { reason, .. } => c.ended = Some(reason),
-            SessionEvent::Pose {
-                frame_id,
-                rotation_camera_from_world: r,
-                translation_camera_from_world_m: t,
-                ..
-            } => {
-                let camera_from_world = Isometry3::from_parts(
-                    Translation3::new(t[0], t[1], t[2]),
-                    UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
-                );
-                self.set_pose(
-                    frame_id,
-                    PoseStatus::Posed {
-                        world_from_camera: camera_from_world.inverse(),
-                        live: false,
-                    },
-                );
-            }
-            SessionEvent::PoseRejected {
-                frame_id, reason, ..
-            } => self.set_pose(frame_id, PoseStatus::Rejected(reason)),
-            _ => {}
-        }
-    }
-
-    fn set_pose(&mut self, frame_id: u64, pose: PoseStatus) {
-        let entry = self.frames.entry(frame_id).or_insert_with(|| FrameInfo {
-            file: paths::frame_file(frame_id),
-            t_host_us: 0,
-            flagged: None,
-            pose: PoseStatus::Pending,
-        });
-        entry.pose = pose;
-        // a recorded pose replaces one the view tracked: recount coverage from scratch
-        if self.covered.contains(&frame_id) {
-            self.coverage = None;
-            self.covered.clear();
-        }
-    }
-
     fn load_raw(&self, frame_id: u64) -> Result<RawFrame, String> {
         let manifest = self.manifest.as_ref().ok_or("no manifest")?;
         let file = self
@@ -503,46 +419,55 @@ impl FollowState {
         let Some(Ok(_)) = &self.tracker else {
             return false;
         };
+        let trackable = |f: &FrameInfo| f.flagged.is_none() && f.t_host_us > 0;
+        if self.capturing() {
+            // the newest frame only (what the operator points at now); the rest after the end
+            let newest = self.frames.iter().rev().find(|(_, f)| trackable(f));
+            return match newest {
+                Some((&id, f)) if matches!(f.pose, PoseStatus::Pending) => {
+                    self.track_one(id);
+                    true
+                }
+                _ => false,
+            };
+        }
         let started = Instant::now();
         let mut changed = false;
-        let budget = if self.counters.ended.is_some() {
-            self.config.track_budget
-        } else {
-            self.config.track_budget_capturing
-        };
-        while started.elapsed() < budget {
+        while started.elapsed() < self.config.track_budget {
             // newest pending frame first
             let Some(id) = self
                 .frames
                 .iter()
                 .rev()
-                .find(|(_, f)| {
-                    matches!(f.pose, PoseStatus::Pending) && f.flagged.is_none() && f.t_host_us > 0
-                })
+                .find(|(_, f)| matches!(f.pose, PoseStatus::Pending) && trackable(f))
                 .map(|(id, _)| *id)
             else {
                 break;
             };
-            let raw = self.load_raw(id);
-            let Some(Ok(tracker)) = &mut self.tracker else {
-                break;
-            };
-            let pose = match raw {
-                Err(e) => PoseStatus::Rejected(format!("frame not readable: {e}")),
-                Ok(raw) => match tracker.track(&raw) {
-                    Ok(p) => PoseStatus::Posed {
-                        world_from_camera: p.world_from_camera,
-                        live: true,
-                    },
-                    Err(r) => PoseStatus::Rejected(r.to_string()),
-                },
-            };
-            if let Some(f) = self.frames.get_mut(&id) {
-                f.pose = pose;
-            }
+            self.track_one(id);
             changed = true;
         }
         changed
+    }
+
+    fn track_one(&mut self, id: u64) {
+        let raw = self.load_raw(id);
+        let Some(Ok(tracker)) = &mut self.tracker else {
+            return;
+        };
+        let pose = match raw {
+            Err(e) => PoseStatus::Rejected(format!("frame not readable: {e}")),
+            Ok(raw) => match tracker.track(&raw) {
+                Ok(p) => PoseStatus::Posed {
+                    world_from_camera: p.world_from_camera,
+                    live: true,
+                },
+                Err(r) => PoseStatus::Rejected(r.to_string()),
+            },
+        };
+        if let Some(f) = self.frames.get_mut(&id) {
+            f.pose = pose;
+        }
     }
 
     fn posed(&self) -> impl Iterator<Item = (u64, Isometry3<f64>)> + '_ {
@@ -651,136 +576,6 @@ impl FollowState {
                     .unwrap_or_default(),
             ),
         }
-    }
-
-    fn json(&self, version: u64) -> serde_json::Value {
-        let c = &self.counters;
-        let coverage = self.coverage.as_ref();
-        let frames: Vec<serde_json::Value> = self
-            .frames
-            .iter()
-            .map(|(id, f)| {
-                let (status, reason, angles) = match (&f.flagged, &f.pose) {
-                    (Some(r), _) => ("flagged", Some(r.clone()), None),
-                    (None, PoseStatus::Pending) => ("pending", None, None),
-                    (None, PoseStatus::Rejected(r)) => ("rejected", Some(r.clone()), None),
-                    (
-                        None,
-                        PoseStatus::Posed {
-                            world_from_camera, ..
-                        },
-                    ) => (
-                        "posed",
-                        None,
-                        coverage.map(|cv| {
-                            cv.dome_angles(&Point3::from(world_from_camera.translation.vector))
-                        }),
-                    ),
-                };
-                json!({"id": id, "status": status, "reason": reason,
-                       "az": angles.map(|a| a.0), "el": angles.map(|a| a.1)})
-            })
-            .collect();
-        let mut rejections: BTreeMap<String, usize> = BTreeMap::new();
-        for f in self.frames.values() {
-            if let PoseStatus::Rejected(r) = &f.pose {
-                *rejections.entry(r.clone()).or_insert(0) += 1;
-            }
-        }
-        let posed = self.posed().count();
-        let live_tracked = self
-            .frames
-            .values()
-            .filter(|f| matches!(f.pose, PoseStatus::Posed { live: true, .. }))
-            .count();
-        let pending = self
-            .frames
-            .values()
-            .filter(|f| matches!(f.pose, PoseStatus::Pending) && f.flagged.is_none())
-            .count();
-        let flagged = self.frames.values().filter(|f| f.flagged.is_some()).count();
-        let recent: Vec<u64> = self
-            .frames
-            .values()
-            .map(|f| f.t_host_us)
-            .filter(|&t| t > 0)
-            .collect();
-        let fps = match (recent.iter().max(), recent.len()) {
-            (Some(&last), n) if n >= 2 => {
-                let window: Vec<u64> = recent
-                    .iter()
-                    .copied()
-                    .filter(|&t| t + 2_000_000 >= last)
-                    .collect();
-                let first = window.iter().min().copied().unwrap_or(last);
-                if last > first {
-                    (window.len() - 1) as f64 / ((last - first) as f64 * 1e-6)
-                } else {
-                    0.0
-                }
-            }
-            _ => 0.0,
-        };
-        let state = if self.manifest.is_none() {
-            "waiting"
-        } else if c.ended.is_some() {
-            "ended"
-        } else {
-            "capturing"
-        };
-        let without_frame = c
-            .pairing_errors
-            .get("pulse_without_frame")
-            .copied()
-            .unwrap_or(0);
-        json!({
-            "version": version,
-            "session": self.config.session.display().to_string(),
-            "state": state,
-            "end_reason": c.ended,
-            "counters": {
-                "frames": self.frames.values().filter(|f| f.t_host_us > 0).count(),
-                "pulses": c.pulses,
-                "paired": c.paired,
-                "dropped": without_frame + flagged as u64,
-                "flagged": flagged,
-                "pairing_errors": c.pairing_errors,
-                "link_frames_ok": c.link_ok,
-                "link_errors": c.link_bad,
-                "clock_rms_us": c.clock_rms_us,
-                "clock_drift_ppm": c.clock_drift_ppm,
-                "faults": c.faults,
-                "disconnected": c.disconnected,
-                "fps": fps,
-                "bad_log_lines": self.bad_lines,
-            },
-            "latest": self.latest_view.as_ref().map(|v| v.stats.clone()),
-            "latest_error": self.latest_error,
-            "frames": frames,
-            "tracking": {
-                "enabled": self.config.track,
-                "error": match &self.tracker { Some(Err(e)) => Some(e.clone()), _ => None },
-                "posed": posed,
-                "posed_by_view": live_tracked,
-                "pending": pending,
-                "rejections": rejections,
-            },
-            "coverage": coverage.map(|cv| json!({
-                "proxy": cv.is_proxy(),
-                "elements": cv.normals().len(),
-                "views": cv.view_count(),
-                "counts": cv.counts(),
-                "labels": Category::ALL.map(Category::label),
-                "hints": cv.hints(),
-                "centre": [cv.centre().x, cv.centre().y, cv.centre().z],
-                "dome": if cv.is_proxy() {
-                    cv.normals().iter().map(|n| {
-                        let (az, el) = super::coverage::dome_angles(&n.into_inner());
-                        [az, el]
-                    }).collect::<Vec<_>>()
-                } else { Vec::new() },
-            })),
-        })
     }
 }
 

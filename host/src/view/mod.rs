@@ -9,6 +9,9 @@
 //!   WebGL2 shader (`assets/pbrdf.glsl`, a port of `ellipso_sim::optics`; [`check`] holds the
 //!   grid it is checked on against the Rust model).
 //!
+//! The live mode's threads run at the lowest priority and pace their work while a capture runs
+//! ([`priority`]).
+//!
 //! [`server`] serves both behind [`security`]: loopback by default, a per-run token, and a
 //! Host-header allow-list. The page's files are embedded in the binary ([`assets`]); nothing is
 //! loaded from elsewhere. `docs/view.md` is the user's guide.
@@ -19,5 +22,6 @@ pub mod coverage;
 pub mod follow;
 pub mod frame_view;
 pub mod material;
+pub mod priority;
 pub mod security;
 pub mod server;

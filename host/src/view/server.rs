@@ -173,6 +173,8 @@ pub fn start(config: ServerConfig, content: Content) -> Result<ViewServer, Serve
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .thread_name("ellipso-view")
+        // the view never competes with a capture in this process (view::priority)
+        .on_thread_start(|| super::priority::lower_this_thread_or_log("web server"))
         .enable_io()
         .enable_time()
         .build()
@@ -182,6 +184,7 @@ pub fn start(config: ServerConfig, content: Content) -> Result<ViewServer, Serve
     let thread = std::thread::Builder::new()
         .name("ellipso-view-main".into())
         .spawn(move || {
+            super::priority::lower_this_thread_or_log("web server");
             runtime.block_on(async move {
                 let listener = match tokio::net::TcpListener::from_std(listener) {
                     Ok(l) => l,

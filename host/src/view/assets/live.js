@@ -62,7 +62,7 @@ window.runLive = async function () {
       ["link errors", c.link_errors + " (" + c.link_frames_ok + " ok)", c.link_errors > 0],
       ["clock residual", c.clock_rms_us === null ? "–" : fmt(c.clock_rms_us, 1) + " µs"],
       ["clock drift", c.clock_drift_ppm === null ? "–" : fmt(c.clock_drift_ppm, 1) + " ppm"],
-      ["posed", `${s.tracking.posed} (${s.tracking.pending} pending)`],
+      ["posed", `${s.tracking.posed} (${s.tracking.pending} pending${s.tracking.deferred && s.tracking.pending > 0 ? "; the newest frame is tracked live, the rest when the capture ends or pauses" : ""})`],
       ["faults", c.faults.length ? c.faults.join("; ") : "0", c.faults.length > 0],
     ];
     if (c.disconnected) rows.push(["link", "disconnected: " + c.disconnected, true]);
