@@ -87,8 +87,7 @@ impl HostPolicy {
         if let Ok(ip) = host.parse::<IpAddr>() {
             return ip == self.bound.ip() || self.bound.ip().is_unspecified();
         }
-        (host == "localhost" && self.bound.ip().is_loopback())
-            || self.extra_names.contains(&host)
+        (host == "localhost" && self.bound.ip().is_loopback()) || self.extra_names.contains(&host)
     }
 }
 
