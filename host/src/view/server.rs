@@ -4,6 +4,9 @@
 //! - [`start`] binds synchronously (so a busy port or a bad address is an error at once, and the
 //!   URL is known before the page opens), then serves on one background thread with a
 //!   single-worker runtime: the view never takes more than that thread from a capture.
+//! - Dropping the [`ViewServer`] stops it: new connections are refused at once, open requests
+//!   (event streams included) are closed after [`SHUTDOWN_GRACE`], so a capture with `--view`
+//!   ends even while a page is open.
 //! - Every request passes [`guard`] first: the `Host` header must pass the [`HostPolicy`] and the
 //!   token must match ([`Token`]); otherwise `403` with a one-line reason and nothing else.
 //!   Responses carry `Cache-Control: no-store`, `Referrer-Policy: no-referrer` (the token is in
@@ -15,7 +18,9 @@
 //!   [`LIVE_MAX_HZ`] per second, only when something changed), `/api/live/image/{s0,dolp,aolp}`,
 //!   `/api/live/mesh.bin` (empty without a mesh), `/api/live/coverage.bin` (live mode).
 
+use std::future::IntoFuture;
 use std::net::{SocketAddr, TcpListener};
+use std::pin::pin;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -27,6 +32,7 @@ use axum::middleware::{Next, from_fn_with_state};
 use axum::response::sse::{Event, KeepAlive, Sse};
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
+use futures_util::future::{Either, select};
 
 use super::assets;
 use super::follow::LiveHub;
@@ -35,6 +41,10 @@ use super::security::{HostPolicy, Token};
 
 /// Most live updates per second pushed to a page.
 pub const LIVE_MAX_HZ: f64 = 4.0;
+
+/// How long a shutdown waits for open requests before it closes them (event streams never end
+/// by themselves).
+pub const SHUTDOWN_GRACE: Duration = Duration::from_millis(300);
 
 /// What the server shows.
 #[derive(Clone)]
@@ -193,14 +203,27 @@ pub fn start(config: ServerConfig, content: Content) -> Result<ViewServer, Serve
                         return;
                     }
                 };
-                let serve = axum::serve(listener, app).with_graceful_shutdown(async move {
-                    let _ = stop_rx.await;
-                });
-                if let Err(e) = serve.await {
+                // Graceful shutdown waits for every connection to close, and an event stream
+                // never does: after SHUTDOWN_GRACE the open ones are dropped with the runtime.
+                let stopping = Arc::new(tokio::sync::Notify::new());
+                let signal = {
+                    let stopping = stopping.clone();
+                    async move {
+                        let _ = stop_rx.await;
+                        stopping.notify_one();
+                    }
+                };
+                let serve = axum::serve(listener, app)
+                    .with_graceful_shutdown(signal)
+                    .into_future();
+                let grace = async {
+                    stopping.notified().await;
+                    tokio::time::sleep(SHUTDOWN_GRACE).await;
+                };
+                if let Either::Left((Err(e), _)) = select(pin!(serve), pin!(grace)).await {
                     tracing::error!("view server: {e}");
                 }
             });
-            // open event streams would otherwise hold the runtime's drop
             runtime.shutdown_timeout(Duration::from_millis(200));
         })
         .map_err(ServerError::Start)?;
