@@ -101,7 +101,19 @@ fn material_mode_shows_the_object_and_moving_the_light_changes_it() {
     ] {
         page.eval(&format!("window.__ellipso.setDisplay('{d}', 1, 1)"));
     }
+    // each display's colour bar says what it shows
+    let legend = "document.getElementById('legend-text').textContent";
+    page.eval("window.__ellipso.setDisplay('mueller', 1, 2)");
+    assert_eq!(page.eval(legend), "M12/M00: −1 … +1");
+    page.eval("window.__ellipso.setDisplay('eta')");
+    assert!(
+        page.eval(legend)
+            .as_str()
+            .unwrap()
+            .ends_with("(1st–99th pct)")
+    );
     page.eval("window.__ellipso.setDisplay('dolp')");
+    assert_eq!(page.eval(legend), "DoLP 0 … 1");
     page.eval("window.__ellipso.setPolarised(true, 30)");
     std::fs::write(out.join("material-dolp.png"), page.screenshot()).unwrap();
     let picked = page.eval("window.__ellipso.pick(7)");
@@ -244,12 +256,22 @@ fn live_mode_follows_a_capture_as_it_grows() {
     );
     let shot = page.screenshot();
     std::fs::write(out.join("live.png"), &shot).unwrap();
-    let (px, _, _) = crop(&shot, &rect_of(&mut page, "#dome"));
+    let (px, w, _) = crop(&shot, &rect_of(&mut page, "#dome"));
     let lit = px.iter().filter(|p| p.iter().any(|&v| v > 60)).count() as f64 / px.len() as f64;
     assert!(
         lit > 0.05,
         "the dome shows coverage and the path ({lit:.3})"
     );
+    // nothing is cut off at the dome's left and right edges (the proxy's lowest directions and
+    // the side labels once were)
+    let w = w as usize;
+    let background = [16u8, 17, 20];
+    let cut = px
+        .chunks(w)
+        .flat_map(|row| [row[2], row[3], row[w - 4], row[w - 3]])
+        .filter(|p| p.iter().zip(background).any(|(a, b)| a.abs_diff(b) > 8))
+        .count();
+    assert_eq!(cut, 0, "pixels drawn at the dome's edges");
     let errors = page.console_errors();
     assert!(errors.is_empty(), "console errors: {errors:?}");
     drop(browser);

@@ -29,14 +29,18 @@ window.runLive = async function () {
   });
   const frameStats = el("div", { class: "muted" }, "waiting for the first frame…");
   const counters = el("table", { id: "counters" });
-  const dome = el("canvas", { width: 420, height: 420, id: "dome" });
+  const dome = el("canvas", { width: 420, height: 436, id: "dome" });
+  const tick = (status, word) => el("span", { style: `color:${STATUS_COLOURS[status]}` }, word);
+  const domeKey = el("div", { class: "muted", style: "width:420px;font-size:12px" },
+    "○ camera position of each posed frame (the latest ringed); strip: one tick per frame, ",
+    tick("posed", "posed"), ", ", tick("rejected", "rejected"), ", ", tick("pending", "pending"), ", ", tick("flagged", "flagged"));
   const hints = el("ul", { class: "hints", id: "hints" });
   const legend = el("div");
   const rejections = el("table");
   const left = el("div", { style: "display:flex;flex-direction:column;gap:8px" },
     el("div", { class: "panel" }, el("h3", {}, "Latest frame"), el("div", { class: "imgs" }, ...figs), frameStats),
     el("div", { class: "panel", style: "display:flex;gap:10px" },
-      el("div", {}, el("h3", {}, "Camera path and coverage (dome, seen from above)"), dome),
+      el("div", {}, el("h3", {}, "Camera path and coverage (dome, seen from above)"), dome, domeKey),
       el("div", { style: "width:300px" }, el("h3", {}, "Coverage"), legend, el("h3", { style: "margin-top:8px" }, "Where to take photos next"), hints)));
   const side = el("div", { class: "side" },
     el("div", { class: "panel" }, el("h3", {}, "Capture"), counters),
@@ -95,29 +99,36 @@ window.runLive = async function () {
   }
 
   function drawDome(cats) {
-    const ctx = dome.getContext("2d"), W = dome.width, R = W / 2 - 24, cx = W / 2, cy = W / 2;
-    ctx.fillStyle = "#101114"; ctx.fillRect(0, 0, W, W);
-    // elevation 90° at the centre, 0° on the circle; azimuth 0 (+x) to the right, +y up
+    const ctx = dome.getContext("2d"), W = dome.width, H = dome.height;
+    // elevation 90° at the centre, 0° on the circle; azimuth 0 (+x) to the right, +y up; the
+    // proxy reaches 10° below the horizon and the side labels sit at −14°: both inside the canvas
+    const R = (W / 2 - 14) * 90 / 104, cx = W / 2, cy = W / 2;
+    ctx.fillStyle = "#101114"; ctx.fillRect(0, 0, W, H);
     const at = (az, elv) => { const r = R * (90 - Math.max(-10, elv)) / 90, a = az * Math.PI / 180; return [cx + r * Math.cos(a), cy - r * Math.sin(a)]; };
+    const label = (t, x, y) => { ctx.strokeText(t, x, y); ctx.fillText(t, x, y); };
     const s = last, cov = s && s.coverage;
-    if (cov && cov.proxy && cats) cov.dome.forEach(([az, elv], i) => { const [x, y] = at(az, elv); ctx.fillStyle = CAT_COLOURS[cats[i]]; ctx.globalAlpha = 0.85; ctx.beginPath(); ctx.arc(x, y, 9, 0, 7); ctx.fill(); });
-    ctx.globalAlpha = 1;
-    ctx.strokeStyle = "#4a505a"; ctx.fillStyle = "#9aa1ab"; ctx.font = "11px system-ui";
-    for (const e of [0, 30, 60]) { ctx.beginPath(); ctx.arc(cx, cy, R * (90 - e) / 90, 0, 7); ctx.stroke(); ctx.fillText(e + "°", cx + 3, cy - R * (90 - e) / 90 + 12); }
-    for (const [az, t] of [[0, "+x"], [90, "+y"], [180, "−x"], [270, "−y"]]) { const [x, y] = at(az, -14); ctx.fillText(t, x - 6, y + 4); }
+    if (cov && cov.proxy && cats) {
+      ctx.globalAlpha = 0.8;
+      cov.dome.forEach(([az, elv], i) => { const [x, y] = at(az, elv); ctx.fillStyle = CAT_COLOURS[cats[i]]; ctx.beginPath(); ctx.arc(x, y, 6.5, 0, 7); ctx.fill(); });
+      ctx.globalAlpha = 1;
+    }
+    ctx.font = "11px system-ui"; ctx.lineJoin = "round";
+    for (const e of [0, 30, 60]) { ctx.strokeStyle = "#5a616c"; ctx.lineWidth = 1; ctx.beginPath(); ctx.arc(cx, cy, R * (90 - e) / 90, 0, 7); ctx.stroke(); }
+    ctx.strokeStyle = "#101114"; ctx.lineWidth = 3; ctx.fillStyle = "#c8ccd3";
+    for (const e of [0, 30, 60]) label(e + "°", cx + 3, cy - R * (90 - e) / 90 + 12);
+    for (const [az, t] of [[0, "+x"], [90, "+y"], [180, "−x"], [270, "−y"]]) { const [x, y] = at(az, -14); label(t, x - 6, y + 4); }
+    ctx.lineWidth = 1;
     if (!s) return;
     const posed = s.frames.filter((f) => f.status === "posed" && f.az !== null);
-    ctx.strokeStyle = "rgba(255,255,255,0.35)"; ctx.beginPath();
+    ctx.strokeStyle = "rgba(255,255,255,0.6)"; ctx.beginPath();
     posed.forEach((f, i) => { const [x, y] = at(f.az, f.el); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
     ctx.stroke();
-    for (const f of posed) { const [x, y] = at(f.az, f.el); ctx.fillStyle = STATUS_COLOURS.posed; ctx.strokeStyle = "#000"; ctx.beginPath(); ctx.arc(x, y, 3.5, 0, 7); ctx.fill(); ctx.stroke(); }
+    for (const f of posed) { const [x, y] = at(f.az, f.el); ctx.fillStyle = "#fff"; ctx.strokeStyle = "#000"; ctx.beginPath(); ctx.arc(x, y, 3, 0, 7); ctx.fill(); ctx.stroke(); }
     const latest = s.frames[s.frames.length - 1];
     if (latest && latest.az !== null) { const [x, y] = at(latest.az, latest.el); ctx.strokeStyle = "#fff"; ctx.lineWidth = 2; ctx.beginPath(); ctx.arc(x, y, 7, 0, 7); ctx.stroke(); ctx.lineWidth = 1; }
     // status strip: one tick per frame (posed / rejected / pending / flagged)
     const n = s.frames.length, w = Math.max(1, Math.min(4, (W - 8) / Math.max(n, 1)));
-    s.frames.forEach((f, i) => { ctx.fillStyle = STATUS_COLOURS[f.status]; ctx.fillRect(4 + i * w, W - 8, Math.max(1, w - 0.5), 6); });
-    ctx.fillStyle = "#9aa1ab";
-    ctx.fillText(`frames: ● posed  ■ strip: green posed, red rejected, grey pending, orange flagged`, 4, 12);
+    s.frames.forEach((f, i) => { ctx.fillStyle = STATUS_COLOURS[f.status]; ctx.fillRect(4 + i * w, H - 9, Math.max(1, w - 0.5), 6); });
   }
 
   const es = new EventSource(url("/api/live/events"));

@@ -59,7 +59,8 @@ void main() {
     } else {
       vec4 m = (s[0] + s[1] + s[2]) / 3.0;
       float dolp = m.x > 0.0 ? length(m.yz) / m.x : 0.0;
-      if (u_display == 2) col = viridis(dolp);
+      // no light reaching the camera: black (as the Mueller and AoLP displays), not DoLP 0
+      if (u_display == 2) col = m.x > 0.0 ? viridis(dolp) : vec3(0.0);
       else {
         float aolp = 0.5 * atan(m.z, m.y);
         if (aolp < 0.0) aolp += PI;
@@ -84,7 +85,7 @@ window.runMaterial = async function () {
   const info = await api("/api/material/info");
   const mesh = decodeMaterial(await api("/api/material/mesh.bin", "bin"));
   const pbrdf = await api("/assets/pbrdf.glsl", "text");
-  document.getElementById("title").textContent = `fitted material · ${info.file} · ${info.vertices} vertices`;
+  document.getElementById("title").textContent = `fitted material · ${info.file} · ${info.vertices} vertices, ${info.triangles} triangles`;
   const app = document.getElementById("app");
   const canvas = el("canvas", { class: "gl", width: 760, height: 600, id: "view" });
   const side = el("div", { class: "side" });
@@ -202,7 +203,7 @@ window.runMaterial = async function () {
   const laz = el("input", { type: "range", min: -180, max: 180, step: 1, value: state.lightAz });
   const lel = el("input", { type: "range", min: -80, max: 89, step: 1, value: state.lightEl });
   const legendCanvas = el("canvas", { width: 200, height: 12 });
-  const legendText = el("span", { class: "muted" });
+  const legendText = el("span", { class: "muted", id: "legend-text" });
   const pickBox = el("div", { class: "muted" }, "click the object to pick a vertex");
   displaySel.addEventListener("change", () => { state.display = displaySel.value; upload(); draw(); });
   pol.addEventListener("change", () => { state.polarised = pol.checked; draw(); });
@@ -224,10 +225,11 @@ window.runMaterial = async function () {
     } else if (d === "mueller") { legendBar(legendCanvas, viridisJs); legendText.textContent = "log10 M00: −3 … 0.5"; }
     else if (d === "dolp") { legendBar(legendCanvas, viridisJs); legendText.textContent = "DoLP 0 … 1"; }
     else if (d === "aolp") { legendBar(legendCanvas, (t) => hsvJs(t)); legendText.textContent = "AoLP 0° … 180° (camera frame)"; }
-    legendCanvas.hidden = d === "rendered" || d === "normal" || d === "flags";
-    if (d === "rendered" || d === "normal") { legendText.textContent = d === "rendered" ? "s0 per channel × exposure, sRGB" : "n·½+½ (world)"; }
-    else if (d === "flags") { legendText.textContent = ""; }
+    else if (d === "rendered") legendText.textContent = "s0 per channel × exposure, sRGB";
+    else if (d === "normal") legendText.textContent = "n·½+½ (world)";
+    else if (d === "flags") legendText.textContent = "";
     else { legendBar(legendCanvas, viridisJs); legendText.textContent = `${fmt(range[0])} … ${fmt(range[1])} (1st–99th pct)`; }
+    legendCanvas.hidden = d === "rendered" || d === "normal" || d === "flags";
   }
   function hsvJs(t) { const h = t * 6, c = 1, x = 1 - Math.abs((h % 2) - 1); const [r, g, b] = h < 1 ? [c, x, 0] : h < 2 ? [x, c, 0] : h < 3 ? [0, c, x] : h < 4 ? [0, x, c] : h < 5 ? [x, 0, c] : [c, 0, x]; return [r * 255, g * 255, b * 255]; }
   const flagBoxes = el("div");
@@ -267,6 +269,6 @@ window.runMaterial = async function () {
   E.pick = (i) => { state.pick = i; showPick(); draw(); return pickBox.textContent; };
   E.info = info;
   upload(); syncControls(); draw();
-  setStatus(`${info.vertices} vertices, ${info.triangles} triangles; drag to rotate, wheel to zoom, shift-drag to move the light, click to pick`);
+  setStatus("drag to rotate, wheel to zoom, shift-drag to move the light, click to pick");
   markReady();
 };
