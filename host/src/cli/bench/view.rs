@@ -211,7 +211,13 @@ fn capture(
             }
         }
     }
-    let _rest: Vec<String> = lines.map_while(Result::ok).collect();
+    for line in lines.map_while(Result::ok) {
+        // the capture's last line before it closes the view: let go of the stream, as a page
+        // closed at the end would (older builds waited for every open stream before exiting)
+        if line.starts_with("session ") {
+            done.store(true, Ordering::Release);
+        }
+    }
     let status = child.wait()?;
     let wall_s = started.elapsed().as_secs_f64();
     let cpu_s = children_cpu_s() - cpu_before;
@@ -234,7 +240,8 @@ fn capture(
 }
 
 /// A page-like client of `addr/?token=…`: the event stream, and the three pictures after each
-/// update. Returns (updates, pictures fetched, frames posed by the view in the last update).
+/// update, until the stream says the capture ended. Returns (updates, pictures fetched, frames
+/// posed by the view in the last update).
 fn page_client(url: &str, done: &AtomicBool) -> (usize, usize, u64) {
     let Some((addr, query)) = url.split_once("/?") else {
         return (0, 0, 0);
@@ -254,7 +261,8 @@ fn page_client(url: &str, done: &AtomicBool) -> (usize, usize, u64) {
     let (mut updates, mut pictures, mut posed) = (0, 0, 0);
     let mut text = String::new();
     let mut buf = vec![0u8; 1 << 16];
-    while !done.load(Ordering::Acquire) {
+    let mut ended = false;
+    while !done.load(Ordering::Acquire) && !ended {
         match s.read(&mut buf) {
             Ok(0) => break,
             Ok(n) => text.push_str(&String::from_utf8_lossy(&buf[..n])),
@@ -280,6 +288,9 @@ fn page_client(url: &str, done: &AtomicBool) -> (usize, usize, u64) {
             updates += 1;
             if let Ok(v) = serde_json::from_str::<serde_json::Value>(data) {
                 posed = v["tracking"]["posed_by_view"].as_u64().unwrap_or(posed);
+                // the capture is over: let go of the stream (older builds' servers waited for
+                // every open stream before they let the capture exit)
+                ended |= v["state"] == "ended";
             }
             for kind in ["s0", "dolp", "aolp"] {
                 pictures += usize::from(get(addr, &format!("/api/live/image/{kind}?{query}")));
