@@ -43,6 +43,8 @@ enum Command {
     /// The simulator: render a scene's capture, or show which effects it needs.
     #[command(subcommand)]
     Sim(cli::sim::Args),
+    /// A local web page: the live capture of a session, or a fitted material in 3-D.
+    View(cli::view::Args),
 }
 
 fn main() -> std::process::ExitCode {
@@ -86,5 +88,6 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Mesh(args) => cli::mesh::run(args),
         Command::Export(args) => cli::export::run(args),
         Command::Sim(args) => cli::sim::run(args),
+        Command::View(args) => cli::view::run(args),
     }
 }

@@ -6,6 +6,8 @@
 //! pseudo-terminal, the firmware on an emulated MCU, aravis against its fake GigE camera on
 //! loopback inside a private network namespace.
 
+pub mod browser;
+pub mod fit_fixture;
 pub mod qemu;
 
 use std::path::PathBuf;

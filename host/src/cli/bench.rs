@@ -6,11 +6,13 @@
 //! Frames are rendered once and tracked with each detection image, so the comparison is on the
 //! same pixels. Writes `pose-bench.json` and prints a table.
 //!
-//! `ellipso bench calibration` ([`calibration`]) checks the camera calibration the same way.
+//! `ellipso bench calibration` ([`calibration`]) checks the camera calibration the same way;
+//! `ellipso bench view` ([`view`]) measures what the live view costs a capture.
 //! `--seed S` replaces the scene's seed: the poses of seeded capture paths (orbit phase, hand-held
 //! walk) and the sensor noise both change.
 
 pub mod calibration;
+pub mod view;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,6 +37,8 @@ pub enum Args {
     /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
     /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
     Mesh(super::bench_mesh::MeshArgs),
+    /// What the live view costs a simulated capture: the same capture without and with `--view`.
+    View(view::ViewArgs),
 }
 
 /// Arguments of `ellipso bench pose`.
@@ -88,6 +92,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Args::Accuracy(a) => super::bench_accuracy::run(a),
         Args::Calibration(a) => calibration::run(a),
         Args::Mesh(a) => super::bench_mesh::run(a),
+        Args::View(a) => view::run(a),
     }
 }
 

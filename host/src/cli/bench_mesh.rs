@@ -128,6 +128,8 @@ fn capture_session(scene: &Path, dir: &Path, args: &MeshArgs) -> anyhow::Result<
         interval_ms: None,
         no_track: true,
         bracket: None,
+        view: false,
+        view_mesh: None,
     };
     capture::capture_sim(&capture_args, true)?;
     capture::track_and_append(dir)?;

@@ -85,6 +85,12 @@ pub struct Args {
     /// (e.g. `1,0.25,0.0625`). Default: the scene's `capture.bracket` (simulator), none (rig).
     #[arg(long, value_name = "E1,E2,…", value_parser = parse_bracket)]
     pub bracket: Option<Bracket>,
+    /// Show the live view in the browser while capturing (prints its URL; `docs/view.md`).
+    #[arg(long)]
+    pub view: bool,
+    /// Object mesh for the live view's coverage (with `--view`; default: a dome proxy).
+    #[arg(long, value_name = "MESH", requires = "view")]
+    pub view_mesh: Option<PathBuf>,
 }
 
 /// Parses `--bracket`: 1 to 8 comma-separated relative energies, each in (0, 1].
@@ -630,6 +636,19 @@ pub fn print_report(r: &CaptureReport) {
 
 /// Runs `ellipso capture`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // The live view follows the session directory from its own threads (read-only).
+    let view = if args.view {
+        let v = crate::cli::view::start_live(
+            args.out.clone(),
+            args.view_mesh.clone(),
+            true,
+            &Default::default(),
+        )?;
+        crate::outln!("live view    open {}", v.server.url());
+        Some(v)
+    } else {
+        None
+    };
     let captured = if args.rig.is_some() {
         capture_hw(&args)?
     } else {
@@ -647,6 +666,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             dir: captured.dir,
         }
         .into());
+    }
+    if view.is_some() && std::io::IsTerminal::is_terminal(&std::io::stdin()) {
+        crate::outln!("live view    still open; press Enter to close it");
+        let _ = std::io::stdin().read_line(&mut String::new());
     }
     Ok(())
 }

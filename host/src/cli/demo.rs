@@ -148,6 +148,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         no_track: true,
         // The demo scene's own bracket, if it has one.
         bracket: None,
+        view: false,
+        view_mesh: None,
     };
     let captured = capture::capture_sim(&capture_args, false)?;
     let (report, dir) = (captured.report, captured.dir);

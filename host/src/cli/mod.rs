@@ -18,3 +18,4 @@ pub mod polar;
 pub mod replay;
 pub mod sim;
 pub mod sim_serve;
+pub mod view;

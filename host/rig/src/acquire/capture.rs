@@ -538,6 +538,12 @@ impl LoopState {
                             rms_us: fit.rms_us,
                             n_samples: fit.n_samples,
                         })?;
+                        // link counters along the way too, so a live view sees link errors
+                        // while they happen rather than at the end
+                        session.log(&SessionEvent::Link {
+                            t_host_us: now(),
+                            counters: link.counters(),
+                        })?;
                     }
                     self.clock = fit;
                 }
