@@ -51,7 +51,7 @@ use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::mosaic::SensorLayout;
 use ellipso_sim::scene::FlashSpec;
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::Isometry3;
 use rayon::prelude::*;
 
 use crate::data::{GateCounts, Sample, SampleSet, VertexSamples, ViewGeometry};
@@ -256,10 +256,7 @@ pub fn poses_from_session(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
                 translation_camera_from_world_m: t,
                 ..
             } => {
-                let camera_from_world = Isometry3::from_parts(
-                    Translation3::new(t[0], t[1], t[2]),
-                    UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
-                );
+                let camera_from_world = ellipso_session::events::camera_from_world(r, t);
                 let finite = r.iter().chain(t).all(|v| v.is_finite());
                 latest.insert(*frame_id, finite.then(|| camera_from_world.inverse()));
             }

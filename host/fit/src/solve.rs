@@ -58,6 +58,8 @@
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
 
 mod lm;
+/// The overflow-free logistic function of the reparameterised bounds (shared with the lobe fit).
+pub(crate) use lm::sigmoid;
 mod problem;
 mod uncertainty;
 

@@ -7,6 +7,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
 use crate::link_counters::LinkCounters;
 use crate::time::{DeviceTimeUs, HostTimeUs};
 
@@ -226,4 +228,17 @@ pub enum SessionEvent {
     /// An event type this build does not know (written by a newer one).
     #[serde(other)]
     Unknown,
+}
+
+/// The `camera_from_world` pose a `pose` or `pose_interpolated` event records: its axis-angle
+/// rotation (rad) and translation (m) as written, the one decoding every reader of the log uses.
+pub fn camera_from_world(
+    rotation_axis_angle: &[f64; 3],
+    translation_m: &[f64; 3],
+) -> Isometry3<f64> {
+    let (r, t) = (rotation_axis_angle, translation_m);
+    Isometry3::from_parts(
+        Translation3::new(t[0], t[1], t[2]),
+        UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
+    )
 }

@@ -29,7 +29,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3};
 
 use crate::process::{ProcessError, TrackedFrame};
 use ellipso_session::events::SessionEvent;
@@ -225,10 +225,7 @@ pub fn interpolated_poses(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
                 translation_camera_from_world_m: t,
                 ..
             } if r.iter().chain(t).all(|v| v.is_finite()) => {
-                let camera_from_world = Isometry3::from_parts(
-                    Translation3::new(t[0], t[1], t[2]),
-                    UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
-                );
+                let camera_from_world = ellipso_session::events::camera_from_world(r, t);
                 latest.insert(*frame_id, Some(camera_from_world.inverse()));
             }
             SessionEvent::Pose { frame_id, .. } => {
@@ -246,6 +243,7 @@ pub fn interpolated_poses(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::{UnitQuaternion, Vector3};
 
     fn pose(x: f64, yaw_deg: f64) -> Isometry3<f64> {
         Isometry3::from_parts(

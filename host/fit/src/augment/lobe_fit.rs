@@ -43,6 +43,7 @@ use ellipso_model::optics::{Dual, Real};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use crate::data::{Sample, VertexFit};
+use crate::solve::sigmoid;
 
 /// Fewer usable I^s samples than this: the cluster gets no model.
 pub const MIN_LOBE_SAMPLES: usize = 32;
@@ -219,15 +220,6 @@ fn nnls4(h: &[[f64; 4]; 4], g: &[f64; 4]) -> [f64; 4] {
         }
     }
     best.0
-}
-
-fn sigmoid<T: Real>(x: T) -> T {
-    if x.re() >= 0.0 {
-        T::one() / (T::one() + (-x).exp())
-    } else {
-        let e = x.exp();
-        e / (T::one() + e)
-    }
 }
 
 /// The bounds of one lobe fit.

@@ -20,7 +20,7 @@ type Vector = SVector<f64, N_RAW>;
 const RAW_LIMIT: f64 = 60.0;
 
 /// 1/(1 + e⁻ˣ), overflow-free.
-pub(super) fn sigmoid<T: Real>(x: T) -> T {
+pub(crate) fn sigmoid<T: Real>(x: T) -> T {
     if x.re() >= 0.0 {
         T::one() / (T::one() + (-x).exp())
     } else {

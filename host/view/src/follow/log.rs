@@ -5,8 +5,6 @@
 use std::io::{Read, Seek, SeekFrom};
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-
 use super::{FollowState, FrameInfo, PoseStatus};
 use ellipso_session::events::{FrameStatus, SessionEvent};
 use ellipso_session::paths;
@@ -93,10 +91,7 @@ impl FollowState {
                 translation_camera_from_world_m: t,
                 ..
             } => {
-                let camera_from_world = Isometry3::from_parts(
-                    Translation3::new(t[0], t[1], t[2]),
-                    UnitQuaternion::from_scaled_axis(Vector3::new(r[0], r[1], r[2])),
-                );
+                let camera_from_world = ellipso_session::events::camera_from_world(&r, &t);
                 self.set_pose(
                     frame_id,
                     PoseStatus::Posed {
