@@ -243,8 +243,26 @@ fn demo_quick_runs_and_says_where_its_results_are() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(text.contains("results in"), "{text}");
-    assert!(out.join("summary.json").is_file());
     assert!(out.join("pictures").join("camera-path.png").is_file());
+    // the real workflow: the mesh is carved from the frames, and compared with the truth only
+    // after the fit
+    assert!(out.join("fit").join("mesh.ply").is_file());
+    assert!(out.join("fit").join("mesh-report.json").is_file());
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("summary.json")).unwrap()).unwrap();
+    let fit = &summary["fit"];
+    assert!(
+        fit["input_mesh"]
+            .as_str()
+            .is_some_and(|p| p.ends_with("mesh.ply")),
+        "{fit}"
+    );
+    for key in ["mesh_before_fit", "mesh_after_fit"] {
+        let chamfer = fit[key]["chamfer_m"].as_f64().unwrap_or(f64::NAN);
+        // a carved mesh is never exact, and never far off the 40 mm sphere (quarter resolution,
+        // 24 photos: a few millimetres)
+        assert!(chamfer > 0.0 && chamfer < 0.02, "{key}: {fit}");
+    }
 }
 
 /// The sphere scene with its link dropping for good at pulse `at_frame`, in a temp dir (board

@@ -201,9 +201,9 @@ pub fn voter(
     rays: &RayTable,
     view: View,
     silhouette: &Silhouette,
-    lo: Point3<f64>,
-    hi: Point3<f64>,
+    [lo, hi]: [Point3<f64>; 2],
     truncation_m: f64,
+    edge_inset_px: f64,
 ) -> Option<Voter> {
     let f_sp = camera.intrinsics.fx.max(camera.intrinsics.fy) / rays.tile as f64;
     // the nearest the box gets to the camera bounds the truncation in pixels
@@ -211,7 +211,7 @@ pub fn voter(
     let margin = (truncation_m * f_sp / near).clamp(4.0, 256.0) + 2.0;
     let crop = crop_of(camera, rays, &view, lo, hi, margin)?;
     Some(Voter {
-        distance: SignedDistance::new(silhouette, crop),
+        distance: SignedDistance::new(silhouette, crop, edge_inset_px as f32),
         view,
     })
 }

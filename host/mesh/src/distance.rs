@@ -4,15 +4,15 @@
 //! Contract: each mesh is sampled at its vertices plus `samples` area-weighted points (seeded,
 //! ChaCha8), and every sample's distance to the other mesh is the exact point–triangle distance
 //! (Ericson, *Real-Time Collision Detection*, 2005, §5.1.5) to the nearest triangle, found
-//! through a uniform grid of triangle bounding boxes. The **Chamfer** distance is the mean of
+//! through the model's bounding-volume hierarchy of the triangles (`Bvh::nearest`). The **Chamfer** distance is the mean of
 //! the two one-sided mean distances, the **Hausdorff** distance the larger one-sided maximum;
 //! both in metres.
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::{Aabb, Bvh, TriangleMesh};
 
 /// Distances between two meshes.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -74,100 +74,103 @@ pub fn closest_on_triangle(
     a + ab * (vb / denom) + ac * (vc / denom)
 }
 
-/// Triangles binned in a uniform grid.
-struct TriangleGrid<'a> {
+/// A mesh's triangles in a bounding-volume hierarchy (the model's [`Bvh`]).
+struct TriangleTree<'a> {
     mesh: &'a TriangleMesh,
-    origin: Vector3<f64>,
-    cell: f64,
-    n: [usize; 3],
-    cells: Vec<Vec<u32>>,
+    bvh: Bvh,
 }
 
-impl<'a> TriangleGrid<'a> {
+impl<'a> TriangleTree<'a> {
     fn new(mesh: &'a TriangleMesh) -> Self {
         let pos = mesh.positions();
-        let mut lo = Vector3::repeat(f64::INFINITY);
-        let mut hi = Vector3::repeat(f64::NEG_INFINITY);
-        for p in pos {
-            lo = lo.inf(&p.coords);
-            hi = hi.sup(&p.coords);
-        }
-        let extent = (hi - lo).max().max(1e-9);
-        // about 4 triangles per cell on a surface
-        let cells_per_axis =
-            ((mesh.triangles().len() as f64 / 4.0).sqrt().ceil()).clamp(1.0, 256.0);
-        let cell = extent / cells_per_axis;
-        let n: [usize; 3] = std::array::from_fn(|a| ((hi[a] - lo[a]) / cell).floor() as usize + 1);
-        let mut cells = vec![Vec::new(); n[0] * n[1] * n[2]];
-        for (t, tri) in mesh.triangles().iter().enumerate() {
-            let ps = tri.map(|i| pos[i as usize].coords);
-            let tlo = ps[0].inf(&ps[1]).inf(&ps[2]);
-            let thi = ps[0].sup(&ps[1]).sup(&ps[2]);
-            let a: [usize; 3] =
-                std::array::from_fn(|k| (((tlo[k] - lo[k]) / cell) as usize).min(n[k] - 1));
-            let b: [usize; 3] =
-                std::array::from_fn(|k| (((thi[k] - lo[k]) / cell) as usize).min(n[k] - 1));
-            for z in a[2]..=b[2] {
-                for y in a[1]..=b[1] {
-                    for x in a[0]..=b[0] {
-                        cells[(z * n[1] + y) * n[0] + x].push(t as u32);
-                    }
-                }
-            }
-        }
+        let bounds: Vec<Aabb> = mesh
+            .triangles()
+            .iter()
+            .map(|t| Aabb::from_points(t.iter().map(|&i| &pos[i as usize])))
+            .collect();
         Self {
             mesh,
-            origin: lo,
-            cell,
-            n,
-            cells,
+            bvh: Bvh::build(&bounds),
         }
     }
 
-    /// Distance from `p` to the mesh.
+    /// Distance from `p` to the mesh (infinite for a mesh without triangles).
     fn distance(&self, p: Point3<f64>) -> f64 {
-        let pos = self.mesh.positions();
-        let c: [isize; 3] =
-            std::array::from_fn(|a| ((p[a] - self.origin[a]) / self.cell).floor() as isize);
-        let mut best = f64::INFINITY;
-        let max_ring = (0..3)
-            .map(|a| c[a].abs().max(self.n[a] as isize - c[a]))
-            .max()
-            .unwrap_or(1)
-            + 1;
-        for ring in 0..=max_ring {
-            // p lies in cell c, so every cell of this ring and beyond is ≥ (ring − 1) cells away
-            if best <= (ring as f64 - 1.0) * self.cell {
-                break;
-            }
-            for z in c[2] - ring..=c[2] + ring {
-                for y in c[1] - ring..=c[1] + ring {
-                    for x in c[0] - ring..=c[0] + ring {
-                        let on_shell = [x - c[0], y - c[1], z - c[2]]
-                            .iter()
-                            .any(|d| d.abs() == ring);
-                        if !on_shell
-                            || x < 0
-                            || y < 0
-                            || z < 0
-                            || x >= self.n[0] as isize
-                            || y >= self.n[1] as isize
-                            || z >= self.n[2] as isize
-                        {
-                            continue;
-                        }
-                        let cell = (z as usize * self.n[1] + y as usize) * self.n[0] + x as usize;
-                        for &t in &self.cells[cell] {
-                            let [a, b, cc] =
-                                self.mesh.triangles()[t as usize].map(|i| pos[i as usize]);
-                            best = best.min((p - closest_on_triangle(p, a, b, cc)).norm());
-                        }
-                    }
-                }
-            }
-        }
-        best
+        self.closest(p)
+            .map_or(f64::INFINITY, |(_, q)| (p - q).norm())
     }
+
+    /// The nearest triangle to `p` and the closest point on it (`None` for a mesh without
+    /// triangles).
+    fn closest(&self, p: Point3<f64>) -> Option<(usize, Point3<f64>)> {
+        let pos = self.mesh.positions();
+        let (t, _) = self.bvh.nearest(&p, |t, _| {
+            let [a, b, c] = self.mesh.triangles()[t as usize].map(|i| pos[i as usize]);
+            (p - closest_on_triangle(p, a, b, c)).norm()
+        })?;
+        let [a, b, c] = self.mesh.triangles()[t as usize].map(|i| pos[i as usize]);
+        Some((t as usize, closest_on_triangle(p, a, b, c)))
+    }
+}
+
+/// Closest-point queries against one mesh (for carrying per-vertex truth onto another mesh).
+pub struct ClosestPoints<'a> {
+    tree: TriangleTree<'a>,
+}
+
+/// Where a query point lands on the mesh.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Closest {
+    /// Index of the nearest triangle.
+    pub triangle: usize,
+    /// The closest point on it.
+    pub point: Point3<f64>,
+    /// Barycentric weights of `point` for the triangle's three vertices (sum 1).
+    pub barycentric: [f64; 3],
+    /// Distance from the query to `point`, m.
+    pub distance_m: f64,
+}
+
+impl<'a> ClosestPoints<'a> {
+    /// Bins `mesh`'s triangles for queries.
+    pub fn new(mesh: &'a TriangleMesh) -> Self {
+        Self {
+            tree: TriangleTree::new(mesh),
+        }
+    }
+
+    /// The closest point of the mesh to `p` (`None` for a mesh without triangles).
+    pub fn closest(&self, p: Point3<f64>) -> Option<Closest> {
+        let (t, q) = self.tree.closest(p)?;
+        let pos = self.tree.mesh.positions();
+        let [a, b, c] = self.tree.mesh.triangles()[t].map(|i| pos[i as usize]);
+        Some(Closest {
+            triangle: t,
+            point: q,
+            barycentric: barycentric(q, a, b, c),
+            distance_m: (p - q).norm(),
+        })
+    }
+}
+
+/// Barycentric weights of `q` (a point of triangle `abc`); a degenerate triangle gives all the
+/// weight to its nearest corner.
+fn barycentric(q: Point3<f64>, a: Point3<f64>, b: Point3<f64>, c: Point3<f64>) -> [f64; 3] {
+    let (v0, v1, v2) = (b - a, c - a, q - a);
+    let (d00, d01, d11) = (v0.dot(&v0), v0.dot(&v1), v1.dot(&v1));
+    let (d20, d21) = (v2.dot(&v0), v2.dot(&v1));
+    let denom = d00 * d11 - d01 * d01;
+    // zero-area triangle: no plane to take coordinates in (guard the division)
+    if denom.abs() <= 1e-30 * (d00 * d11).max(1e-300) {
+        let d = [a, b, c].map(|x| (q - x).norm_squared());
+        let k = (0..3).min_by(|&i, &j| d[i].total_cmp(&d[j])).unwrap_or(0);
+        let mut w = [0.0; 3];
+        w[k] = 1.0;
+        return w;
+    }
+    let v = ((d11 * d20 - d01 * d21) / denom).clamp(0.0, 1.0);
+    let w = ((d00 * d21 - d01 * d20) / denom).clamp(0.0, 1.0 - v);
+    [1.0 - v - w, v, w]
 }
 
 /// Vertices plus `samples` area-weighted surface points of `mesh`.
@@ -212,10 +215,10 @@ pub fn mesh_distance(
 ) -> MeshDistance {
     use rayon::prelude::*;
     let one_sided = |from: &TriangleMesh, to: &TriangleMesh, seed: u64| -> Vec<f64> {
-        let grid = TriangleGrid::new(to);
+        let tree = TriangleTree::new(to);
         surface_samples(from, samples, seed)
             .par_iter()
-            .map(|p| grid.distance(*p))
+            .map(|p| tree.distance(*p))
             .collect()
     };
     let ab = one_sided(a, b, seed);
@@ -256,6 +259,32 @@ mod tests {
         assert!((d.hausdorff_m - 0.1).abs() < 0.01, "{d:?}");
         let same = mesh_distance(&a, &a, 500, 2);
         assert!(same.hausdorff_m < 1e-12, "{same:?}");
+    }
+
+    #[test]
+    fn closest_points_land_on_the_sphere_with_consistent_barycentrics() {
+        let mesh = sphere(0.05, 3);
+        let query = ClosestPoints::new(&mesh);
+        for (k, p) in [[0.1, 0.0, 0.0], [0.0, -0.02, 0.03], [0.03, 0.04, -0.07]]
+            .into_iter()
+            .enumerate()
+        {
+            let p = Point3::from(p);
+            let c = query.closest(p).expect("triangles");
+            let tri = mesh.triangles()[c.triangle].map(|i| mesh.positions()[i as usize]);
+            let back = tri[0].coords * c.barycentric[0]
+                + tri[1].coords * c.barycentric[1]
+                + tri[2].coords * c.barycentric[2];
+            assert!((back - c.point.coords).norm() < 1e-12, "query {k}");
+            assert!(c.barycentric.iter().all(|w| (0.0..=1.0).contains(w)));
+            // an icosphere's faces lie inside the sphere, within its sagitta
+            let r = p.coords.norm();
+            assert!(
+                (c.distance_m - (r - 0.05).abs()).abs() < 2e-3,
+                "query {k}: {c:?}"
+            );
+            assert!((c.distance_m - (p - c.point).norm()).abs() < 1e-15);
+        }
     }
 
     #[test]

@@ -73,6 +73,18 @@ pub struct MeshConfig {
     /// Parts lower than this many coarse grid spacings are board-level residue (tag edges,
     /// glints), not objects: dropped.
     pub min_part_layers: usize,
+    /// Parts smaller than this, m³, are residue too (blurred tag edges that disagree with their
+    /// texels in many views leave uncarved specks of ~0.1 cm³ above the tags), not objects: the
+    /// rig scans objects of centimetres, and at the hull's resolution (a fine node is ~0.5 mm)
+    /// a part of 1 cm³ is already thousands of nodes. A smaller object cannot be meshed.
+    pub min_part_m3: f64,
+    /// How far (superpixels) the silhouette's edge is moved from the pixel boundary into the
+    /// pixels that do not show the board. A boundary pixel partly covered by the object already
+    /// disagrees with its texel, so the not-board set is on average larger than the object's
+    /// true silhouette by the part of a pixel the object does not cover; and the hull is the
+    /// intersection of silhouettes, so it inherits that growth from every side (docs/mesh.md
+    /// "Edge inset"). 0 puts the edge on the pixel boundary.
+    pub edge_inset_px: f64,
     /// Frames read at once.
     pub frames_in_flight: usize,
     /// Worker threads (`None`: rayon's global pool).
@@ -99,6 +111,8 @@ impl Default for MeshConfig {
             min_island_px: 12,
             max_enclosed_board: 0.1,
             min_part_layers: 4,
+            min_part_m3: 1e-6,
+            edge_inset_px: 0.3,
             frames_in_flight: 4,
             threads: None,
             max_second_part: 0.02,

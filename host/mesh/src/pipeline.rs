@@ -397,9 +397,9 @@ fn carve_grid(
                     &setup.rays,
                     setup.views[*i].clone(),
                     s,
-                    lo,
-                    hi,
+                    [lo, hi],
                     truncation_m,
+                    config.edge_inset_px,
                 )
             })
             .collect();
@@ -459,10 +459,11 @@ fn coarse_pass(
     }
     let occupied: Vec<bool> = field.iter().map(|v| *v < 0.0).collect();
     let (labels, all_parts) = components::label(&grid, &occupied);
-    // parts that do not rise above the first layers are board-level residue
-    let (parts, residue): (Vec<Part>, Vec<Part>) = all_parts
-        .into_iter()
-        .partition(|p| p.max[2] + 1 >= config.min_part_layers.max(1));
+    // parts that do not rise above the first layers, or too small to be an object, are
+    // board-level residue
+    let (parts, residue): (Vec<Part>, Vec<Part>) = all_parts.into_iter().partition(|p| {
+        p.max[2] + 1 >= config.min_part_layers.max(1) && p.volume_m3(&grid) >= config.min_part_m3
+    });
     report.parts_dropped = residue.len();
     report.parts_dropped_m3 = residue.iter().map(|p| p.volume_m3(&grid)).sum();
     let Some(main) = parts.first().cloned() else {

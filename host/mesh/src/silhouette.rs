@@ -19,7 +19,9 @@
 //! - [`SignedDistance`]: Euclidean distance transform (Felzenszwalb & Huttenlocher, "Distance
 //!   Transforms of Sampled Functions", Theory of Computing 8, 2012), exact, in pixels:
 //!   `d − ½` to the nearest not-board pixel for board pixels (> 0), `−(d − ½)` to the nearest
-//!   board pixel for the others, so the zero crossing lies on the pixel boundary. Pixels
+//!   board pixel for the others, so the zero crossing lies on the pixel boundary; plus the
+//!   configured edge inset, which moves it into the not-board pixels
+//!   (`MeshConfig::edge_inset_px`). Pixels
 //!   outside the image or the crop count as not board; values within `margin` px of a crop
 //!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
 
@@ -292,8 +294,9 @@ fn edt_2d(feature: &[bool], w: usize, h: usize) -> Vec<f32> {
 }
 
 impl SignedDistance {
-    /// The signed distance over `crop` of `s`.
-    pub fn new(s: &Silhouette, crop: Crop) -> Self {
+    /// The signed distance over `crop` of `s`, its zero crossing moved `edge_inset_px` into
+    /// the not-board side (see [`crate::MeshConfig::edge_inset_px`]).
+    pub fn new(s: &Silhouette, crop: Crop, edge_inset_px: f32) -> Self {
         let (w, h) = (crop.width, crop.height);
         let board: Vec<bool> = (0..w * h)
             .map(|k| s.is_board(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
@@ -303,11 +306,12 @@ impl SignedDistance {
         let to_board = edt_2d(&board, w, h);
         let values = (0..w * h)
             .map(|k| {
-                if board[k] {
-                    to_not_board[k].sqrt() - 0.5
-                } else {
-                    -(to_board[k].sqrt() - 0.5)
-                }
+                edge_inset_px
+                    + if board[k] {
+                        to_not_board[k].sqrt() - 0.5
+                    } else {
+                        -(to_board[k].sqrt() - 0.5)
+                    }
             })
             .collect();
         let disagree = (0..w * h)
@@ -405,7 +409,7 @@ mod tests {
             width: w,
             height: h,
         };
-        let d = SignedDistance::new(&s, crop);
+        let d = SignedDistance::new(&s, crop, 0.0);
         // boundary between x = 9 (board) and x = 10 (object): zero at x = 9.5
         let at = |x: f64| d.sample(x, 15.0).unwrap();
         assert!(at(9.5).abs() < 1e-6, "{}", at(9.5));

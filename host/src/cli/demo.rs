@@ -4,9 +4,11 @@
 //!    the real firmware core behind a real pty, the host's real link, pairing and session code.
 //! 2. Track the camera pose of every frame from the AprilTags and score it against the
 //!    simulator's ground truth.
-//! 3. Fit the polarimetric SVBRDF and shape per vertex of a mesh of the object — the simulator's
-//!    mesh perturbed by smooth noise, as a scanner would deliver it — from the recorded frames and
-//!    the tracked poses (`ellipso fit`), write its pictures, and score it against the truth.
+//! 3. Build the object's mesh from the posed frames alone (`ellipso mesh`: a visual hull carved
+//!    with the learned board), fit the polarimetric SVBRDF and shape per vertex of it from the
+//!    recorded frames and the tracked poses (`ellipso fit`), write its pictures — and only then
+//!    read the simulator's truth to score the mesh (before and after the fit's shape refinement)
+//!    and the fitted parameters and normals.
 //! 4. Pictures: the polarisation images of one frame (s0, DoLP, AoLP, I^d, I^s, I^α) and a plot of
 //!    the tracked camera path against the truth.
 //! 5. A summary (`summary.json`) and the list of where everything is.
@@ -180,7 +182,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         accuracy.p90_translation_mm
     );
 
-    crate::outln!("[3/4] fitting the polarimetric SVBRDF and shape per vertex…");
+    crate::outln!(
+        "[3/4] carving the mesh from the frames, fitting the polarimetric SVBRDF and shape per vertex…"
+    );
     let fit = fit_and_score(&scene, &session, &args.out, args.quick)?;
 
     crate::outln!("[4/4] pictures…");
@@ -284,80 +288,130 @@ struct DemoFit {
     summary: serde_json::Value,
 }
 
-/// Fits a perturbed copy of the scene's object mesh to the session and scores it against the
-/// simulator's truth (same vertices as the truth mesh, so errors are per vertex).
+/// Builds the object's mesh from the session's frames (`ellipso mesh`), fits it (`ellipso fit`)
+/// and only then compares with the simulator's truth: the mesh's distance to the true surface
+/// before and after the fit's shape refinement, and each fitted vertex's parameters and normal
+/// against the truth at the closest point of the true surface.
 fn fit_and_score(
     scene: &Scene,
     session: &ellipso_session::reader::Session,
     out: &Path,
     quick: bool,
 ) -> anyhow::Result<DemoFit> {
-    use ellipso_fit::truth::TruthObject;
-    let truth = TruthObject::from_scene(scene, Some(if quick { 3 } else { 4 }))?;
-    // A scanned mesh is never exact: smooth noise of 0.3 mm along the normals.
-    let input = ellipso_fit::shape::perturb_mesh(&truth.mesh, 3e-4, scene.seed);
-    let mesh_path = out.join("input-mesh.ply");
-    ellipso_report::atomic_file::write(
-        &mesh_path,
-        ellipso_model::geometry::ply::write_ply(
-            &input,
-            ellipso_model::geometry::ply::PlyFormat::BinaryLittleEndian,
-            false,
-        ),
-    )
-    .with_context(|| format!("writing {}", mesh_path.display()))?;
     let dir = out.join("fit");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let started = std::time::Instant::now();
+    let (mesh, mesh_report) =
+        super::mesh::mesh_of_session(session, &ellipso_mesh::MeshConfig::default())?;
+    let mesh_s = started.elapsed().as_secs_f64();
+    let mesh_path = dir.join("mesh.ply");
+    super::mesh::write_mesh(&mesh, &mesh_report, &mesh_path)?;
+    crate::outln!(
+        "mesh         {} vertices carved from {} frames in {mesh_s:.1} s",
+        mesh.positions().len(),
+        mesh_report.frames_used,
+    );
     let config = ellipso_fit::session::SessionFitConfig {
         outer_iterations: if quick { 1 } else { 2 },
         ..Default::default()
     };
-    let run = super::fit::fit_and_export(session, &input, &dir, None, &config)?;
-    let fits = &run.fit.outcome.fits;
-    let mut eta_err = Vec::new();
-    let mut normal_err = Vec::new();
-    let mut rho_d_err = Vec::new();
-    for (v, f) in fits.iter().enumerate() {
-        if f.flags.contains(&ellipso_fit::data::FitFlag::TooFewViews) {
-            continue;
-        }
-        let t = &truth.params[v];
-        eta_err.push(100.0 * (f.params.eta - t.eta).abs() / t.eta);
-        let n_true = truth.mesh.normals()[v].into_inner();
-        let c = nalgebra::Vector3::from(f.normal_world)
-            .normalize()
-            .dot(&n_true);
-        normal_err.push(c.clamp(-1.0, 1.0).acos().to_degrees());
-        rho_d_err.push(100.0 * (f.params.rho_d[0] - t.rho_d[0]).abs() / t.rho_d[0].max(1e-6));
-    }
-    let fitted = eta_err.len();
-    let median = |v: &mut Vec<f64>| ellipso_report::percentile(v, 0.5);
+    let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;
+
+    // Only now the truth: the analytic sphere as a fine icosphere, meshes as rendered.
+    let sphere = matches!(
+        scene.objects.first().map(|o| &o.geometry),
+        Some(ellipso_sim::scene::ObjectGeometry::Sphere(_))
+    );
+    let truth = ellipso_fit::truth::TruthObject::from_scene(scene, sphere.then_some(6))?;
+    let score = score_against_truth(&truth, &run.fit.outcome.fits, &run.fit.mesh);
+    let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
+    let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
     let summary = serde_json::json!({
-        "vertices": fits.len(),
-        "fitted": fitted,
+        "vertices": run.fit.outcome.fits.len(),
+        "fitted": score.fitted,
+        "mesh_s": mesh_s,
         "wall_s": run.wall_s,
         "times_s": run.fit.outcome.times,
-        "eta_median_error_pct": median(&mut eta_err),
-        "normal_median_error_deg": median(&mut normal_err),
-        "normal_p90_error_deg": ellipso_report::percentile(&mut normal_err, 0.9),
-        "rho_d_median_error_pct": median(&mut rho_d_err),
+        "mesh_before_fit": before,
+        "mesh_after_fit": after,
+        "eta_median_error_pct": score.eta_median_error_pct,
+        "normal_median_error_deg": score.normal_median_error_deg,
+        "normal_p90_error_deg": score.normal_p90_error_deg,
+        "rho_d_median_error_pct": score.rho_d_median_error_pct,
         "input_mesh": mesh_path.display().to_string(),
     });
     crate::outln!(
-        "fit          {fitted}/{} vertices in {:.1} s · η error median {:.2} % · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
-        fits.len(),
+        "mesh vs truth  Chamfer {:.3} mm before the fit, {:.3} mm after its shape refinement (Hausdorff {:.2} → {:.2} mm)",
+        before.chamfer_m * 1e3,
+        after.chamfer_m * 1e3,
+        before.hausdorff_m * 1e3,
+        after.hausdorff_m * 1e3,
+    );
+    crate::outln!(
+        "fit          {}/{} vertices in {:.1} s · η error median {:.2} % · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
+        score.fitted,
+        run.fit.outcome.fits.len(),
         run.wall_s,
-        summary["eta_median_error_pct"].as_f64().unwrap_or(f64::NAN),
-        summary["normal_median_error_deg"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
-        summary["normal_p90_error_deg"].as_f64().unwrap_or(f64::NAN),
-        summary["rho_d_median_error_pct"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
+        score.eta_median_error_pct,
+        score.normal_median_error_deg,
+        score.normal_p90_error_deg,
+        score.rho_d_median_error_pct,
     );
     Ok(DemoFit {
         ply: dir.join("fit.ply"),
         dir,
         summary,
     })
+}
+
+/// Per-vertex errors of a fit on a mesh that is not the truth's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct TruthScore {
+    fitted: usize,
+    eta_median_error_pct: f64,
+    normal_median_error_deg: f64,
+    normal_p90_error_deg: f64,
+    rho_d_median_error_pct: f64,
+}
+
+/// Scores each fitted vertex (those with views) against the truth at the closest point of the
+/// true surface: the parameters of that triangle's nearest corner (materials are regions, not
+/// blends), the normal interpolated over the triangle.
+fn score_against_truth(
+    truth: &ellipso_fit::truth::TruthObject,
+    fits: &[ellipso_fit::data::VertexFit],
+    mesh: &ellipso_model::geometry::TriangleMesh,
+) -> TruthScore {
+    let query = ellipso_mesh::distance::ClosestPoints::new(&truth.mesh);
+    let normals = truth.mesh.normals();
+    let (mut eta, mut normal, mut rho_d) = (Vec::new(), Vec::new(), Vec::new());
+    for (f, p) in fits.iter().zip(mesh.positions()) {
+        if f.flags.contains(&ellipso_fit::data::FitFlag::TooFewViews) {
+            continue;
+        }
+        let Some(c) = query.closest(*p) else {
+            continue;
+        };
+        let tri = truth.mesh.triangles()[c.triangle];
+        let corner = (0..3)
+            .max_by(|&i, &j| c.barycentric[i].total_cmp(&c.barycentric[j]))
+            .unwrap_or(0);
+        let t = &truth.params[tri[corner] as usize];
+        let n_true: nalgebra::Vector3<f64> = (0..3)
+            .map(|k| normals[tri[k] as usize].into_inner() * c.barycentric[k])
+            .sum();
+        let cos = nalgebra::Vector3::from(f.normal_world)
+            .normalize()
+            .dot(&n_true.normalize());
+        eta.push(100.0 * (f.params.eta - t.eta).abs() / t.eta);
+        normal.push(cos.clamp(-1.0, 1.0).acos().to_degrees());
+        rho_d.push(100.0 * (f.params.rho_d[0] - t.rho_d[0]).abs() / t.rho_d[0].max(1e-6));
+    }
+    TruthScore {
+        fitted: eta.len(),
+        eta_median_error_pct: ellipso_report::percentile(&mut eta, 0.5),
+        normal_median_error_deg: ellipso_report::percentile(&mut normal, 0.5),
+        normal_p90_error_deg: ellipso_report::percentile(&mut normal, 0.9),
+        rho_d_median_error_pct: ellipso_report::percentile(&mut rho_d, 0.5),
+    }
 }

@@ -89,6 +89,12 @@ pub fn outer_iterations(s: &str) -> Result<usize, String> {
     integer_in(s, 1, MAX_OUTER)
 }
 
+/// The silhouette edge inset of `ellipso mesh`, superpixels: finite, in `[0, 2]` (beyond two
+/// pixels it would carve the object itself).
+pub fn edge_inset_px(s: &str) -> Result<f64, String> {
+    real_in(s, 0.0, 2.0)
+}
+
 /// The photo interval, ms: finite, in `(0, 3_600_000]`.
 pub fn interval_ms(s: &str) -> Result<f64, String> {
     let v = real_in(s, 0.0, MAX_INTERVAL_MS)?;

@@ -32,6 +32,10 @@ pub struct Args {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Move each view's silhouette edge this far (superpixels) into the object's side of the
+    /// pixel boundary (default: the built-in setting, see docs/mesh.md "Edge inset").
+    #[arg(long, value_parser = super::limits::edge_inset_px)]
+    pub edge_inset_px: Option<f64>,
 }
 
 /// Runs `ellipso mesh`.
@@ -40,6 +44,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut config = MeshConfig {
         votes: args.votes.max(1),
         threads: args.threads,
+        edge_inset_px: args
+            .edge_inset_px
+            .unwrap_or(MeshConfig::default().edge_inset_px),
         ..MeshConfig::default()
     };
     config.remesh.target_vertices = args.vertices.max(16);

@@ -222,6 +222,64 @@ impl Bvh {
     }
 }
 
+impl Bvh {
+    /// The primitive nearest to `point`: `distance(prim, best)` returns the primitive's distance
+    /// to `point` (it may return any value ≥ `best` once it knows it cannot win). Boxes are
+    /// visited nearer child first and skipped once their distance reaches the best so far, so
+    /// the result is the minimum over all primitives (tested against a brute-force loop). `None`
+    /// for an empty tree.
+    pub fn nearest(
+        &self,
+        point: &Point3<f64>,
+        mut distance: impl FnMut(u32, f64) -> f64,
+    ) -> Option<(u32, f64)> {
+        let first = self.nodes.first()?;
+        let mut best: Option<(u32, f64)> = None;
+        let mut d_best = f64::INFINITY;
+        let mut stack = [(0u32, 0.0f64); MAX_DEPTH + 2];
+        stack[0] = (0, box_distance(&first.bounds, point));
+        let mut top = 1usize;
+        while top > 0 {
+            top -= 1;
+            let (current, d_box) = stack[top];
+            if d_box >= d_best {
+                continue;
+            }
+            let node = &self.nodes[current as usize];
+            if node.count > 0 {
+                let start = node.first as usize;
+                for &prim in &self.indices[start..start + node.count as usize] {
+                    let d = distance(prim, d_best);
+                    if d < d_best {
+                        d_best = d;
+                        best = Some((prim, d));
+                    }
+                }
+            } else {
+                let left = node.first;
+                let dl = box_distance(&self.nodes[left as usize].bounds, point);
+                let dr = box_distance(&self.nodes[left as usize + 1].bounds, point);
+                // push the farther child first so the nearer one is visited next
+                let (near, far) = if dl <= dr {
+                    ((left, dl), (left + 1, dr))
+                } else {
+                    ((left + 1, dr), (left, dl))
+                };
+                stack[top] = far;
+                stack[top + 1] = near;
+                top += 2;
+            }
+        }
+        best
+    }
+}
+
+/// Euclidean distance from `p` to the box (0 inside).
+fn box_distance(b: &Aabb, p: &Point3<f64>) -> f64 {
+    let d = Vector3::from_fn(|a, _| (b.min[a] - p[a]).max(p[a] - b.max[a]).max(0.0));
+    d.norm()
+}
+
 /// Best binned SAH split: `(axis, centroid threshold, cost in primitive-test units)`.
 fn best_split(
     items: &[u32],
@@ -339,6 +397,48 @@ mod tests {
         };
         let bvh = Bvh::build(&vec![b; 50]);
         assert_eq!(bvh.node_count(), 1);
+    }
+
+    #[test]
+    fn nearest_agrees_with_a_brute_force_loop() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let boxes: Vec<Aabb> = (0..500)
+            .map(|_| {
+                let c = Point3::new(
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                let h = Vector3::repeat(rng.random_range(0.001..0.05));
+                Aabb {
+                    min: c - h,
+                    max: c + h,
+                }
+            })
+            .collect();
+        let bvh = Bvh::build(&boxes);
+        for _ in 0..200 {
+            let p = Point3::new(
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+                rng.random_range(-3.0..3.0),
+            );
+            let brute = boxes
+                .iter()
+                .map(|b| box_distance(b, &p))
+                .fold(f64::INFINITY, f64::min);
+            let (prim, d) = bvh
+                .nearest(&p, |i, _| box_distance(&boxes[i as usize], &p))
+                .expect("non-empty");
+            assert_eq!(d, brute);
+            assert_eq!(box_distance(&boxes[prim as usize], &p), brute);
+        }
+        assert!(
+            Bvh::build(&[])
+                .nearest(&Point3::origin(), |_, _| 0.0)
+                .is_none()
+        );
     }
 
     #[test]
