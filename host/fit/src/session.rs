@@ -254,12 +254,12 @@ pub fn fit_session(
     })
 }
 
+/// Poses by frame id (`world_from_camera`).
+pub type Poses = Vec<(u64, Isometry3<f64>)>;
+
 /// The deterministic split of `poses` into the fitted and the held-out ones
 /// ([`super::holdout::split`]).
-pub fn split_poses(
-    poses: &[(u64, Isometry3<f64>)],
-    holdout_fraction: f64,
-) -> (Vec<(u64, Isometry3<f64>)>, Vec<(u64, Isometry3<f64>)>) {
+pub fn split_poses(poses: &[(u64, Isometry3<f64>)], holdout_fraction: f64) -> (Poses, Poses) {
     let ids: Vec<u64> = poses.iter().map(|p| p.0).collect();
     let held_idx = split(&ids, holdout_fraction);
     let mut held = Vec::with_capacity(held_idx.len());

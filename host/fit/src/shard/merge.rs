@@ -24,22 +24,10 @@ pub enum MergeError {
     /// Shards are missing or repeated, or the counts differ.
     #[error("{0}")]
     Shards(String),
-    /// Two parts disagree on something that must be equal.
-    #[error("{what} differs: {a} has {a_value} but {b} has {b_value} — {hint}")]
-    Mismatch {
-        /// What differs.
-        what: &'static str,
-        /// The first part (file and shard).
-        a: String,
-        /// Its value.
-        a_value: String,
-        /// The disagreeing part.
-        b: String,
-        /// Its value.
-        b_value: String,
-        /// What it usually means.
-        hint: &'static str,
-    },
+    /// Two parts disagree on something that must be equal: what, both parts (file and shard)
+    /// with their values, and what it usually means.
+    #[error("{0}")]
+    Mismatch(String),
     /// A part holds something other than its own vertices.
     #[error("{0}")]
     Vertices(String),
@@ -124,14 +112,11 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
         for (path, p) in &parts[1..] {
             let b_value = value(p);
             if b_value != a_value {
-                return Err(MergeError::Mismatch {
-                    what,
-                    a: name(first_path, first.shard),
-                    a_value,
-                    b: name(path, p.shard),
-                    b_value,
-                    hint,
-                });
+                return Err(MergeError::Mismatch(format!(
+                    "{what} differs: {} has {a_value} but {} has {b_value} — {hint}",
+                    name(first_path, first.shard),
+                    name(path, p.shard)
+                )));
             }
         }
         Ok(())
@@ -330,7 +315,8 @@ mod tests {
 
     #[test]
     fn disagreeing_parts_are_refused_naming_both() {
-        let cases: Vec<(&str, fn(&mut PartFile))> = vec![
+        type Spoil = fn(&mut PartFile);
+        let cases: Vec<(&str, Spoil)> = vec![
             ("session hash", |p| p.session_hash = 99),
             ("mesh hash", |p| p.mesh_hash = 99),
             ("configuration hash", |p| p.config_hash ^= 1),
