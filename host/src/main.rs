@@ -28,6 +28,8 @@ enum Command {
     Calibrate(cli::calibrate::Args),
     /// Fit the per-vertex polarimetric SVBRDF and refined shape of a session to a mesh.
     Fit(cli::fit::Args),
+    /// Merge the part files of a sharded fit (`fit --shard I/N`) and run its global steps.
+    FitMerge(cli::fit_shard::MergeArgs),
     /// Carve the object's watertight mesh from a session's posed frames.
     Mesh(cli::mesh::Args),
     /// Write a session for other tools (a COLMAP sparse model with undistorted images).
@@ -85,6 +87,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),
         Command::Fit(args) => cli::fit::run(args),
+        Command::FitMerge(args) => cli::fit_shard::run_merge(args),
         Command::Mesh(args) => cli::mesh::run(args),
         Command::Export(args) => cli::export::run(args),
         Command::Sim(args) => cli::sim::run(args),

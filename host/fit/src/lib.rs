@@ -21,6 +21,8 @@
 //! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
 //! - [`holdout`]: the held-out views no step sees, and the re-render error on them.
 //! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
+//! - [`shard`]: sharded fits for job arrays (observations and step A per shard, part files, the
+//!   merge that runs the global steps once; docs/scale.md).
 //! - [`truth`], [`synthetic`], [`accuracy`]: the simulator's truth as the fit sees it, synthetic
 //!   samples, simulated captures and error metrics (benchmarks and tests).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit and
@@ -37,6 +39,7 @@ pub mod observe;
 pub mod pipeline;
 pub mod session;
 pub mod shape;
+pub mod shard;
 pub mod solve;
 pub mod synthetic;
 pub mod truth;

@@ -56,6 +56,7 @@ use rayon::prelude::*;
 
 use crate::data::{GateCounts, Sample, SampleSet, VertexSamples, ViewGeometry};
 use crate::gate::GateConfig;
+use crate::shard::Shard;
 use ellipso_polar::PolarConfig;
 use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
 use ellipso_polar::frame::RawFrame;
@@ -347,6 +348,30 @@ pub fn extract_with(
     config: &ObserveConfig,
     progress: &dyn Fn(usize, usize),
 ) -> Result<Extraction, ObserveError> {
+    extract_shard(
+        session,
+        radiometry,
+        mesh,
+        poses,
+        config,
+        Shard::ALL,
+        progress,
+    )
+}
+
+/// [`extract_with`] for the vertices `shard` owns ([`Shard::owns`]): the set's `vertices` hold
+/// those only, ascending, each exactly as the unsharded extraction gives it (visibility and
+/// shadows are still tested against the whole mesh); the report counts those vertices' gates
+/// and samples, and every frame as the unsharded one does.
+pub fn extract_shard(
+    session: &Session,
+    radiometry: &SessionRadiometry,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &ObserveConfig,
+    shard: Shard,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Extraction, ObserveError> {
     let camera = camera_of(session)?;
     let layout =
         ellipso_session::rig::layout_of(&session.manifest).map_err(|e| ObserveError::Manifest {
@@ -431,6 +456,7 @@ pub fn extract_with(
         });
     }
 
+    let owned: Vec<usize> = shard.vertices(mesh.positions().len()).collect();
     let rings = VertexRings::new(mesh);
     let polar = PolarConfig {
         demosaic: DemosaicMethod::Superpixel,
@@ -472,23 +498,17 @@ pub fn extract_with(
             job.gain_db,
             job.flash_energy_rel,
         );
-        let outcomes: Vec<Outcome> = (0..mesh.positions().len())
-            .into_par_iter()
-            .map(|v| sampler.observe(v))
-            .collect();
+        let outcomes: Vec<Outcome> = owned.par_iter().map(|&v| sampler.observe(v)).collect();
         let bytes = bytes + outcomes.len() * std::mem::size_of::<Outcome>();
         Ok((view, outcomes, bytes))
     };
 
-    let mut vertices: Vec<VertexSamples> = mesh
-        .positions()
+    let mut vertices: Vec<VertexSamples> = owned
         .iter()
-        .zip(mesh.normals())
-        .enumerate()
-        .map(|(v, (p, n))| VertexSamples {
+        .map(|&v| VertexSamples {
             vertex: v as u32,
-            position_world: p.coords.into(),
-            normal_world: n.into_inner().into(),
+            position_world: mesh.positions()[v].coords.into(),
+            normal_world: mesh.normals()[v].into_inner().into(),
             samples: Vec::new(),
             gates: GateCounts::default(),
         })

@@ -29,7 +29,7 @@ use super::solve::{SolverConfig, fit_all};
 /// samples, σs floors and pooled η (B), one final pass (C) — measured by `ellipso bench
 /// accuracy` (docs/accuracy-vs-time.md) never worse than step A alone on the shipped scenes and
 /// better on σs, σss and per-vertex η. [`FitConfig::joint_only`] stops after step A.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FitConfig {
     /// The per-vertex solver (iterations, loss weights, bounds).
     pub solver: SolverConfig,
@@ -63,6 +63,17 @@ impl FitConfig {
             final_passes: passes,
             pool_eta: true,
             fast_passes: true,
+        }
+    }
+
+    /// The solver settings of step A as [`fit_sample_set`] runs it (the fast preset's effort
+    /// with the shared steps on and [`FitConfig::fast_passes`]): sharded runs solve step A with
+    /// exactly these.
+    pub fn joint_solver(&self) -> SolverConfig {
+        if self.augment.is_some() && self.fast_passes {
+            self.solver.with_fast_effort()
+        } else {
+            self.solver.clone()
         }
     }
 
@@ -139,16 +150,27 @@ pub fn fit_sample_set(
     config: &FitConfig,
     progress: &mut dyn FnMut(&str),
 ) -> FitOutcome {
-    let mut times = StageTimes::default();
-    let solver = if config.augment.is_some() && config.fast_passes {
-        config.solver.with_fast_effort()
-    } else {
-        config.solver.clone()
-    };
     progress("joint per-vertex solve (normal + pBRDF)");
     let started = Instant::now();
-    let mut fits = fit_all(set, init, None, &solver);
-    times.joint_s = started.elapsed().as_secs_f64();
+    let fits = fit_all(set, init, None, &config.joint_solver());
+    let joint_s = started.elapsed().as_secs_f64();
+    let mut outcome = fit_shared_steps(set, fits, config, progress);
+    outcome.times.joint_s = joint_s;
+    outcome
+}
+
+/// Steps B and C on `set` from step A's results `fits` (one per vertex, in order): what
+/// [`fit_sample_set`] runs after step A, and what a merge of sharded step-A results runs
+/// (`super::shard`). Without [`FitConfig::augment`] the fits are returned as they are.
+pub fn fit_shared_steps(
+    set: &SampleSet,
+    fits: Vec<VertexFit>,
+    config: &FitConfig,
+    progress: &mut dyn FnMut(&str),
+) -> FitOutcome {
+    let mut times = StageTimes::default();
+    let solver = config.joint_solver();
+    let mut fits = fits;
     let mut augmentation = None;
     let mut pooling = None;
     if let Some(augment_config) = &config.augment {

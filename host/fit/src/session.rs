@@ -26,16 +26,19 @@ use nalgebra::Isometry3;
 
 use super::data::{GateCounts, SampleSet, VertexFit};
 use super::holdout::{HoldoutReport, score, split};
-use super::observe::{ObserveConfig, ObserveError, ObserveReport, extract, radiometry_of};
-use super::pipeline::{FitConfig, FitOutcome, fit_sample_set};
+use super::observe::{
+    Extraction, ObserveConfig, ObserveError, ObserveReport, extract, extract_shard, radiometry_of,
+};
+use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
 use super::shape::{
     ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
 };
+use super::shard::Shard;
 use super::solve::fit_all;
 use ellipso_session::reader::Session;
 
 /// Settings of a session fit.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SessionFitConfig {
     /// Observation extraction (gates, sampling).
     pub observe: ObserveConfig,
@@ -73,6 +76,12 @@ pub enum SessionFitError {
     /// No posed frame.
     #[error("no frame of the session has a pose: track poses first")]
     NoPoses,
+    /// A shard was asked to run more than one outer iteration.
+    #[error(
+        "a sharded fit runs one outer iteration (the shape update between iterations needs \
+         every vertex's solve); got {0}"
+    )]
+    ShardedOuterLoop(usize),
     /// Not one vertex has a sample: a fit would report the prior everywhere.
     #[error(
         "no vertex of the mesh has a single sample, so nothing can be fitted: {}",
@@ -155,17 +164,7 @@ pub fn fit_session(
     if poses.is_empty() {
         return Err(SessionFitError::NoPoses);
     }
-    let ids: Vec<u64> = poses.iter().map(|p| p.0).collect();
-    let held_idx = split(&ids, config.holdout_fraction);
-    let mut poses_held_out = Vec::with_capacity(held_idx.len());
-    let mut fitted = Vec::with_capacity(poses.len());
-    for (i, p) in poses.iter().enumerate() {
-        if held_idx.binary_search(&i).is_ok() {
-            poses_held_out.push(*p);
-        } else {
-            fitted.push(*p);
-        }
-    }
+    let (fitted, poses_held_out) = split_poses(poses, config.holdout_fraction);
     let poses = fitted.as_slice();
     let mut mesh = mesh.clone();
     let mut previous: Option<Vec<VertexFit>> = None;
@@ -230,31 +229,186 @@ pub fn fit_session(
     for v in &set.vertices {
         gates.add(&v.gates);
     }
-    let (holdout, held_out_set) = if poses_held_out.is_empty() {
-        (None, None)
+    let held_out_set = if poses_held_out.is_empty() {
+        None
     } else {
         progress(&format!(
             "re-rendering {} held-out frames",
             poses_held_out.len()
         ));
         let held = extract(session, &mesh, &poses_held_out, &config.observe, &|_, _| {})?;
-        let full_scale = radiometry_of(session)?.full_scale_dn;
-        let report = score(
-            &held.samples,
-            &outcome.fits,
-            full_scale,
-            config.fit.solver.albedo_cap,
-        );
-        (
-            (report.overall.samples > 0).then_some(report),
-            Some(held.samples),
-        )
+        Some(held.samples)
     };
+    let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;
     Ok(SessionFit {
         mesh,
         set,
         outcome,
         shape_updates,
+        gates,
+        observe: extraction.report,
+        poses_fitted: fitted,
+        poses_held_out,
+        holdout,
+        held_out_set,
+    })
+}
+
+/// Poses by frame id (`world_from_camera`).
+pub type Poses = Vec<(u64, Isometry3<f64>)>;
+
+/// The deterministic split of `poses` into the fitted and the held-out ones
+/// ([`super::holdout::split`]).
+pub fn split_poses(poses: &[(u64, Isometry3<f64>)], holdout_fraction: f64) -> (Poses, Poses) {
+    let ids: Vec<u64> = poses.iter().map(|p| p.0).collect();
+    let held_idx = split(&ids, holdout_fraction);
+    let mut held = Vec::with_capacity(held_idx.len());
+    let mut fitted = Vec::with_capacity(poses.len());
+    for (i, p) in poses.iter().enumerate() {
+        if held_idx.binary_search(&i).is_ok() {
+            held.push(*p);
+        } else {
+            fitted.push(*p);
+        }
+    }
+    (fitted, held)
+}
+
+/// The re-render errors of `fits` on the held-out observations (`None` without any or when
+/// none gave a sample).
+pub fn score_held_out(
+    session: &Session,
+    held_out_set: Option<&SampleSet>,
+    fits: &[VertexFit],
+    config: &SessionFitConfig,
+) -> Result<Option<HoldoutReport>, SessionFitError> {
+    let Some(held) = held_out_set else {
+        return Ok(None);
+    };
+    let full_scale = radiometry_of(session)?.full_scale_dn;
+    let report = score(held, fits, full_scale, config.fit.solver.albedo_cap);
+    Ok((report.overall.samples > 0).then_some(report))
+}
+
+/// What one shard of a sharded fit computes (`super::shard`): the observations and step A of
+/// the vertices it owns, and their held-out observations.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShardSolve {
+    /// The shard's fitted observations (its vertices only, ascending).
+    pub extraction: Extraction,
+    /// Step A's result per vertex of `extraction.samples.vertices`, in order.
+    pub fits: Vec<VertexFit>,
+    /// The shard's held-out observations (`None` when no frame is held out).
+    pub held_out: Option<SampleSet>,
+    /// Seconds spent extracting (fitted and held-out frames).
+    pub observe_s: f64,
+    /// Seconds of step A.
+    pub joint_s: f64,
+}
+
+/// The part of [`fit_session`] that shard `shard` runs: the observations of its vertices from
+/// the fitted frames, step A on them with the solver [`fit_session`]'s step A uses
+/// ([`super::pipeline::FitConfig::joint_solver`]), and their held-out observations. Needs
+/// `config.outer_iterations == 1` (the shape update between iterations needs every vertex).
+pub fn solve_shard(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &SessionFitConfig,
+    shard: Shard,
+    progress: &mut dyn FnMut(&str),
+) -> Result<ShardSolve, SessionFitError> {
+    if config.outer_iterations != 1 {
+        return Err(SessionFitError::ShardedOuterLoop(config.outer_iterations));
+    }
+    if poses.is_empty() {
+        return Err(SessionFitError::NoPoses);
+    }
+    let (fitted, held) = split_poses(poses, config.holdout_fraction);
+    let radiometry = radiometry_of(session)?;
+    progress(&format!(
+        "shard {shard}: observations from {} posed frames of {} of {} vertices",
+        fitted.len(),
+        shard.vertices(mesh.positions().len()).count(),
+        mesh.positions().len()
+    ));
+    let started = Instant::now();
+    let extraction = extract_shard(
+        session,
+        &radiometry,
+        mesh,
+        &fitted,
+        &config.observe,
+        shard,
+        &|_, _| {},
+    )?;
+    let mut observe_s = started.elapsed().as_secs_f64();
+    progress(&format!("shard {shard}: joint per-vertex solve (step A)"));
+    let started = Instant::now();
+    let fits = fit_all(&extraction.samples, None, None, &config.fit.joint_solver());
+    let joint_s = started.elapsed().as_secs_f64();
+    let held_out = if held.is_empty() {
+        None
+    } else {
+        progress(&format!(
+            "shard {shard}: observations from {} held-out frames",
+            held.len()
+        ));
+        let started = Instant::now();
+        let e = extract_shard(
+            session,
+            &radiometry,
+            mesh,
+            &held,
+            &config.observe,
+            shard,
+            &|_, _| {},
+        )?;
+        observe_s += started.elapsed().as_secs_f64();
+        Some(e.samples)
+    };
+    Ok(ShardSolve {
+        extraction,
+        fits,
+        held_out,
+        observe_s,
+        joint_s,
+    })
+}
+
+/// The rest of a one-iteration [`fit_session`] from every vertex's observations and step-A
+/// results (assembled from the shards, `super::shard::merge`): steps B and C, then the
+/// held-out score. `mesh` is the input mesh (one iteration changes no vertex).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the pieces a merge assembles, named"
+)]
+pub fn finish_from_joint(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    extraction: Extraction,
+    fits: Vec<VertexFit>,
+    held_out_set: Option<SampleSet>,
+    config: &SessionFitConfig,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SessionFit, SessionFitError> {
+    if extraction.report.samples == 0 {
+        return Err(SessionFitError::NoSamples(Box::new(extraction.report)));
+    }
+    let (fitted, poses_held_out) = split_poses(poses, config.holdout_fraction);
+    let set = extraction.samples;
+    let outcome = fit_shared_steps(&set, fits, &config.fit, progress);
+    let mut gates = GateCounts::default();
+    for v in &set.vertices {
+        gates.add(&v.gates);
+    }
+    let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;
+    Ok(SessionFit {
+        mesh: mesh.clone(),
+        set,
+        outcome,
+        shape_updates: Vec::new(),
         gates,
         observe: extraction.report,
         poses_fitted: fitted,

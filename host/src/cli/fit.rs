@@ -17,6 +17,7 @@ use nalgebra::Isometry3;
 
 use ellipso_fit::observe::poses_from_session;
 use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session};
+use ellipso_fit::shard::Shard;
 use ellipso_session::reader::Session;
 
 /// Arguments of `ellipso fit`.
@@ -28,15 +29,17 @@ pub struct Args {
     /// from the session's frames, as `ellipso mesh` does).
     #[arg(long)]
     pub mesh: Option<PathBuf>,
-    /// Output directory.
-    #[arg(long, default_value = "ellipso-fit")]
-    pub out: PathBuf,
+    /// Output directory (default `ellipso-fit`); with `--shard`, the part file to write
+    /// (required).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
     /// Frame id of the view the pictures are rendered from (default: the first posed frame).
     #[arg(long)]
     pub view: Option<u64>,
-    /// Outer iterations (solve ↔ shape update), 1..=20; 1 keeps the input geometry.
-    #[arg(long, default_value_t = 2, value_parser = super::limits::outer_iterations)]
-    pub outer: usize,
+    /// Outer iterations (solve ↔ shape update), 1..=20; 1 keeps the input geometry (default 2;
+    /// a shard runs 1).
+    #[arg(long, value_parser = super::limits::outer_iterations)]
+    pub outer: Option<usize>,
     /// Step A alone: no clusters, virtual samples or pooled η (the paper's shared steps are
     /// on by default; docs/fit.md).
     #[arg(long)]
@@ -52,10 +55,20 @@ pub struct Args {
     /// default 0.1).
     #[arg(long, default_value_t = 0.1)]
     pub holdout: f64,
+    /// Fit one shard of the vertices, `I/N` (those with `v % N == I`), and write a part file to
+    /// `--out` for `ellipso fit-merge`; `env` reads the index from the job array's environment
+    /// (Slurm, Kubernetes Indexed Job, AWS Batch; docs/scale.md). Needs `--mesh`.
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// Number of shards with `--shard env` where the environment does not say it (Kubernetes
+    /// `spec.completions`, AWS Batch array size).
+    #[arg(long)]
+    pub shard_count: Option<u32>,
 }
 
 /// Runs `ellipso fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let shard = shard_of(&args)?;
     // A given mesh is read first: a bad mesh is refused before the session is opened.
     let given_mesh = args
         .mesh
@@ -74,20 +87,93 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if read != "intact" {
         eprintln!("warning: {}: {read}", args.session.display());
     }
+    if let Some(shard) = shard {
+        let mesh_path = args.mesh.as_ref().expect("checked by shard_of");
+        let mesh = given_mesh.expect("checked by shard_of");
+        let out = args.out.as_ref().expect("checked by shard_of");
+        let config = config_of(&args)?;
+        return super::fit_shard::run_shard(
+            &session,
+            &args.session,
+            mesh_path,
+            &mesh,
+            out,
+            shard,
+            config,
+        );
+    }
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("ellipso-fit"));
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
             crate::outln!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =
                 super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
-            let path = args.out.join("mesh.ply");
+            let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
             crate::outln!("  {} ({} vertices)", path.display(), report.vertices);
             mesh
         }
     };
+    let config = config_of(&args)?;
+    let result = fit_and_export(&session, &mesh, &out, args.view, &config)?;
+    crate::outln!("\nresults in {}:", out.display());
+    for f in &result.files {
+        crate::outln!("  {}", f.display());
+    }
+    Ok(())
+}
+
+/// The shard of `--shard`/`--shard-count`, with the flags a shard needs checked.
+fn shard_of(args: &Args) -> anyhow::Result<Option<Shard>> {
+    let Some(spec) = args.shard.as_deref() else {
+        anyhow::ensure!(
+            args.shard_count.is_none(),
+            "--shard-count is only used with --shard env"
+        );
+        return Ok(None);
+    };
+    let shard = if spec == "env" {
+        Shard::from_env(&|var| std::env::var(var).ok(), args.shard_count)?
+    } else {
+        anyhow::ensure!(
+            args.shard_count.is_none(),
+            "--shard-count is only used with --shard env (--shard {spec} gives the count)"
+        );
+        Shard::parse(spec)?
+    };
+    anyhow::ensure!(
+        args.mesh.is_some(),
+        "--shard needs --mesh: every shard must fit the same mesh (carve it once with `ellipso \
+         mesh` first)"
+    );
+    anyhow::ensure!(
+        args.out.is_some(),
+        "--shard needs --out PART: the part file this shard writes for `ellipso fit-merge`"
+    );
+    if let Some(outer) = args.outer {
+        anyhow::ensure!(
+            outer == 1,
+            "--outer {outer} with --shard: a sharded fit runs one outer iteration (the shape \
+             update needs every vertex's solve; docs/scale.md)"
+        );
+    }
+    anyhow::ensure!(
+        args.view.is_none(),
+        "--view is given to `ellipso fit-merge`, which renders the pictures"
+    );
+    Ok(Some(shard))
+}
+
+/// The fit's settings from the flags (shared by whole and sharded runs).
+fn config_of(args: &Args) -> anyhow::Result<SessionFitConfig> {
     let mut config = SessionFitConfig {
-        outer_iterations: args.outer.max(1),
+        outer_iterations: args
+            .outer
+            .unwrap_or(if args.shard.is_some() { 1 } else { 2 }),
         holdout_fraction: args.holdout,
         ..SessionFitConfig::default()
     };
@@ -106,12 +192,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         args.grazing_cutoff_deg
     );
     config.observe.gate.grazing_cutoff_deg = args.grazing_cutoff_deg;
-    let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
-    crate::outln!("\nresults in {}:", args.out.display());
-    for f in &result.files {
-        crate::outln!("  {}", f.display());
-    }
-    Ok(())
+    Ok(config)
 }
 
 /// What a session fit wrote.
@@ -170,15 +251,35 @@ pub fn fit_and_export(
     let started = Instant::now();
     let poses = poses_of(session)?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    // The solver weights samples by their expected noise: the sensor's gain and read noise
-    // where the session says them (simulator sessions), the documented default otherwise.
+    // The solver weights samples by their expected noise (the session's sensor where known).
+    let config = with_session_sensor(session, config);
+    let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
+        crate::outln!("  {stage}…")
+    })?;
+    export_fit(session, &poses, fit, out, view, started)
+}
+
+/// The sensor model the solver weights by: the session's where it says it (simulator
+/// sessions), the documented default otherwise.
+pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> SessionFitConfig {
     let mut config = config.clone();
     if let Some(scene) = ellipso_fit::observe::radiometry::scene_of(session) {
         config.fit.solver.sensor = ellipso_fit::accuracy::sensor_model(&scene);
     }
-    let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
-        crate::outln!("  {stage}…")
-    })?;
+    config
+}
+
+/// Writes a finished fit's outputs into `out` (pictures from frame `view`, `fit-summary.json`);
+/// `started` is when the whole run began.
+pub fn export_fit(
+    session: &Session,
+    poses: &[(u64, Isometry3<f64>)],
+    fit: SessionFit,
+    out: &Path,
+    view: Option<u64>,
+    started: Instant,
+) -> anyhow::Result<FitRun> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
     for s in &fit.observe.skipped {
         tracing::warn!("frame {} skipped: {}", s.frame_id, s.reason);

@@ -10,6 +10,7 @@ pub mod demo;
 pub mod devices;
 pub mod export;
 pub mod fit;
+pub mod fit_shard;
 pub mod limits;
 pub mod mesh;
 pub mod model;
