@@ -199,9 +199,12 @@ mod tests {
                         .map(|k| bary[k] * f64::from(mesh.uv[3 * f + k][i]))
                         .sum()
                 });
+                let corners = face.map(|v| values[v as usize]);
                 for ch in 0..3 {
-                    let want: f64 = (0..3)
-                        .map(|k| bary[k] * f64::from(values[face[k] as usize][ch]))
+                    let want: f64 = bary
+                        .iter()
+                        .zip(&corners)
+                        .map(|(b, c)| b * f64::from(c[ch]))
                         .sum();
                     let got = bilinear(&atlas, uv[0], uv[1], ch);
                     assert!(
