@@ -1,13 +1,15 @@
 //! `ellipso-report`: the files every stage writes — result files written whole or not at all
-//! ([`atomic_file`]), `.npy` arrays ([`npy`]), and small dependency-light raster reports: an RGB8 [`canvas::Canvas`] and a
+//! ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
+//! ([`exr_image`]), and small dependency-light raster reports: an RGB8 [`canvas::Canvas`] and a
 //! [`plot::LinePlot`] builder, written as PNG.
 //!
-//! Contract: pure Rust drawing (lines with clipping, rectangles, `font8x8` text); the only
-//! output format is PNG through the `image` crate. Used by `ellipso model plot` and by later
+//! Contract: pure Rust drawing (lines with clipping, rectangles, `font8x8` text); pictures are
+//! PNG through the `image` crate, float results OpenEXR through the `exr` crate. Used by `ellipso model plot` and by later
 //! reports (accuracy-vs-time, parameter maps).
 
 pub mod atomic_file;
 pub mod canvas;
+pub mod exr_image;
 pub mod npy;
 pub mod plot;
 

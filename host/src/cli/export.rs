@@ -2,6 +2,10 @@
 //! poses and undistorted s0 images (`ellipso_mesh::colmap`), for users who prefer
 //! photogrammetry: COLMAP's `point_triangulator`, dense and meshing steps then give a mesh in
 //! board coordinates that `ellipso fit --mesh` takes unchanged (docs/mesh.md).
+//!
+//! `ellipso export mitsuba FIT_DIR --out DIR`: a fit directory as a Mitsuba 3 scene with
+//! ellipso's own render of the same view beside it (`ellipso_fit::export::mitsuba`,
+//! docs/fit-outputs.md).
 
 use std::path::PathBuf;
 
@@ -15,6 +19,22 @@ pub enum Args {
     /// A COLMAP sparse model (cameras.txt, images.txt, empty points3D.txt) and undistorted s0
     /// images of the posed frames.
     Colmap(ColmapArgs),
+    /// A Mitsuba 3 scene of a fit (the mesh with the pplastic BSDF per vertex, the pictures'
+    /// camera, the rig's flash) and ellipso's render of the same view to compare with.
+    Mitsuba(MitsubaArgs),
+}
+
+/// Arguments of `ellipso export mitsuba`.
+#[derive(Debug, clap::Args)]
+pub struct MitsubaArgs {
+    /// The fit directory (`fit.ply` and `fit-view.json` from `ellipso fit`).
+    pub fit_dir: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Samples per pixel written into the scene (Mitsuba's `-Dspp=N` overrides it).
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..=65536))]
+    pub spp: u32,
 }
 
 /// Arguments of `ellipso export colmap`.
@@ -34,6 +54,31 @@ pub struct ColmapArgs {
 /// Runs `ellipso export`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
+        Args::Mitsuba(a) => {
+            let report = ellipso_fit::export::mitsuba::export(
+                &a.fit_dir,
+                &a.out,
+                &ellipso_fit::export::mitsuba::MitsubaOptions { spp: a.spp },
+            )
+            .with_context(|| format!("exporting {} for Mitsuba 3", a.fit_dir.display()))?;
+            crate::outln!(
+                "mitsuba      {} vertices, {} faces{}",
+                report.vertices,
+                report.faces,
+                if report.clamped > 0 {
+                    format!(
+                        " ({} with eta or alpha raised into Mitsuba's domain)",
+                        report.clamped
+                    )
+                } else {
+                    String::new()
+                }
+            );
+            for f in &report.files {
+                crate::outln!("  {}", f.display());
+            }
+            Ok(())
+        }
         Args::Colmap(a) => {
             let session = ellipso_session::reader::open(&a.session)?;
             let poses = super::fit::poses_of(&session)?;

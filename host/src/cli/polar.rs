@@ -11,6 +11,7 @@
 //! | `i_d.png` | I^d = 2·I90 | 16-bit grey, `clamp(I^d/2, 0, 1)·65535` |
 //! | `i_s.png`, `i_alpha.png` | I^s, I^α (signed) | RGB diverging map, symmetric range, legend |
 //! | `mask.png`, `mask_bits.png` | validity | RGB by reason with legend; raw reason bits (8-bit) |
+//! | `stokes.exr` | every band's S0, S1, S2, DoLP, AoLP, I^d, I^s, I^α, residual, mask | OpenEXR f32 channels named as Mitsuba's (`S0.R` …; [`stokes_exr`]) |
 //! | `summary.json` | everything needed to read the above, plus statistics | JSON |
 //!
 //! Legends sit in a strip under the image rows (`summary.json` gives the image height), so the
@@ -19,6 +20,7 @@
 
 mod load;
 mod render;
+mod stokes_exr;
 mod summary;
 
 use std::fs;
@@ -141,6 +143,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if image.layout == SensorLayout::ColourPolar {
         write_s0_rgb(&args.out, &image, &mut files)?;
     }
+    files.push((
+        stokes_exr::write(&args.out, &image)?,
+        "OpenEXR: S0, S1, S2, DoLP, AoLP, I_d, I_s, I_alpha, residual, mask per band (f32; mask u32)"
+            .into(),
+    ));
     let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;

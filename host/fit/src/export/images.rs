@@ -256,7 +256,8 @@ pub fn pictures(
     out
 }
 
-type PixelModel = Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>;
+/// What one pixel sees of the fitted model: parameters, unit normal, world point and the hit.
+pub type PixelModel = Option<(PbrdfParams<f64>, [f64; 3], Point3<f64>, Hit)>;
 
 /// The linear 3×3 block of the full pBRDF (mean over colour channels) at a surface point seen
 /// by `view` with its flash; `None` where the geometry degenerates or nothing is reflected.
@@ -409,9 +410,30 @@ pub fn relit(
     name: &'static str,
     title: &str,
 ) -> Picture {
+    let rgb = radiance(at, camera, light_world);
+    let mapped = tone_map(&rgb);
+    let panel = Panel {
+        width: w,
+        height: h,
+        pixels: mapped.iter().map(|v| v.map(|c| c.map(srgb))).collect(),
+    };
+    Picture {
+        name,
+        canvas: figure(title, &panel, None),
+    }
+}
+
+/// Linear s0 per colour channel at every pixel under an isotropic unpolarised point light of
+/// unit intensity at `light_world`: P·s/d² (`docs/model.md` §4, P includes the foreshortening),
+/// no shadowing; `None` for background. The relit pictures tone-map it; the Mitsuba export
+/// writes it as the reference of its scene.
+pub fn radiance(
+    at: &[PixelModel],
+    camera: &ViewCamera,
+    light_world: &Point3<f64>,
+) -> Vec<Option<[f64; 3]>> {
     let eye = camera.centre_world();
-    let rgb: Vec<Option<[f64; 3]>> = at
-        .par_iter()
+    at.par_iter()
         .map(|a| {
             let (p, n, point, _) = a.as_ref()?;
             let to_light = light_world - point;
@@ -431,17 +453,7 @@ pub fn relit(
             let s0 = evaluate_s0(&g, p, Stokes::unpolarised(1.0));
             Some(s0.map(|v| v / d2))
         })
-        .collect();
-    let mapped = tone_map(&rgb);
-    let panel = Panel {
-        width: w,
-        height: h,
-        pixels: mapped.iter().map(|v| v.map(|c| c.map(srgb))).collect(),
-    };
-    Picture {
-        name,
-        canvas: figure(title, &panel, None),
-    }
+        .collect()
 }
 
 /// Reinhard's global photographic operator (Reinhard, Stark, Shirley & Ferwerda,

@@ -1,8 +1,10 @@
 //! The fit's outputs: `fit.ply` (per-vertex parameters, standard errors, flags) and the
 //! pictures of the fitted model from a chosen captured view — parameter maps, the 3×3 Mueller
 //! grid, DoLP and AoLP under the rig's flash, a relit image under a new point light, a novel
-//! view, and the captured frame beside its re-rendering. `docs/fit-outputs.md` says how to read
-//! each one.
+//! view, and the captured frame beside its re-rendering — with the parameter maps also as float
+//! OpenEXR ([`float_maps`]) and the pictures' camera and lights as `fit-view.json`
+//! ([`view_file`]); [`mitsuba`] turns a fit directory into a Mitsuba 3 scene.
+//! `docs/fit-outputs.md` says how to read each one.
 //!
 //! Contract: [`export_all`] writes into an existing or new directory and returns every file it
 //! wrote; every error names the path. Pictures use an ideal pinhole camera at the chosen view's
@@ -11,9 +13,12 @@
 //! each pictured surface point into the captured frame with the rig's real camera model.
 
 pub mod colour;
+pub mod float_maps;
 pub mod images;
+pub mod mitsuba;
 pub mod ply;
 pub mod raster;
+pub mod view_file;
 
 #[cfg(test)]
 mod tests;
@@ -87,6 +92,9 @@ pub enum ExportError {
     /// Writing a PNG.
     #[error(transparent)]
     Png(#[from] ellipso_report::ReportError),
+    /// Building or writing an OpenEXR file.
+    #[error(transparent)]
+    Exr(#[from] ellipso_report::exr_image::ExrError),
 }
 
 /// A captured s0 image (superpixel resolution) with the camera that took it and the
@@ -223,6 +231,16 @@ pub fn export_all(
         centre + camera.world_from_camera.rotation * offset_camera
     };
     let light = light_for(&view);
+    let maps_path = out.join("maps.exr");
+    float_maps::maps_image(mesh, fits, &view)?.write(&maps_path)?;
+    report.files.push(maps_path);
+    let record =
+        view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light);
+    let view_path = view_file::write(out, &record).map_err(|source| ExportError::Io {
+        path: out.join(view_file::FILE_NAME).display().to_string(),
+        source,
+    })?;
+    report.files.push(view_path);
     let mut pictures = images::pictures(mesh, fits, &view, flash, &light);
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(

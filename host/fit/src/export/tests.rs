@@ -90,6 +90,8 @@ fn every_output_is_written_and_readable() {
         .collect();
     for want in [
         "fit.ply",
+        "maps.exr",
+        "fit-view.json",
         "map-eta.png",
         "map-sigma-s.png",
         "map-sigma-ss.png",
@@ -117,6 +119,24 @@ fn every_output_is_written_and_readable() {
         let img = image::open(f).unwrap();
         assert!(img.width() >= 48 && img.height() >= 48, "{}", f.display());
     }
+    // The float maps: the PNG maps' view and pixels, model units, read back with the exr crate.
+    let maps = ellipso_report::exr_image::FloatImage::read(&dir.path().join("maps.exr")).unwrap();
+    assert_eq!((maps.width, maps.height), (48, 48));
+    let a = maps.f32_channel("A").unwrap();
+    let centre = 24 * 48 + 24;
+    assert_eq!(a[centre], 1.0);
+    assert_eq!(a[0], 0.0, "corner is background");
+    assert!((maps.f32_channel("eta").unwrap()[centre] - 1.5).abs() < 1e-6);
+    assert!((maps.f32_channel("rho_d.G").unwrap()[centre] - 0.3).abs() < 1e-6);
+    assert!((maps.f32_channel("rho_ss.B").unwrap()[centre] - 0.1).abs() < 1e-6);
+    // the top of the sphere faces the camera straight on: N ≈ +z (toward the viewer)
+    assert!(maps.f32_channel("N.Z").unwrap()[centre] > 0.99);
+    assert_eq!(maps.f32_channel("sigma_s").unwrap()[0], 0.0);
+    // The pictures' view round-trips into the camera the maps were rendered with.
+    let view = view_file::read(dir.path()).unwrap();
+    assert_eq!((view.width, view.height), (48, 48));
+    let flash_world = flash().position_world(&pose());
+    assert!((Point3::from(view.flash_position_world) - flash_world).norm() < 1e-12);
     // An unwritable directory is named.
     let blocker = dir.path().join("file");
     std::fs::write(&blocker, b"x").unwrap();

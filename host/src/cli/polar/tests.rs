@@ -117,6 +117,24 @@ fn mono_frame_produces_every_file_and_a_truthful_summary() {
     assert!((mean_dolp - 0.5).abs() < 1e-3, "{mean_dolp}");
     let aolp = band["mean_aolp_deg_valid"].as_f64().unwrap_or(-1.0);
     assert!((aolp - 30.0).abs() < 0.05, "{aolp}");
+
+    // stokes.exr: the float planes under Mitsuba's names, read back with the exr crate
+    let exr = ellipso_report::exr_image::FloatImage::read(&out.join("stokes.exr")).expect("exr");
+    assert_eq!((exr.width, exr.height), (32, 16));
+    let at = |name: &str| exr.f32_channel(name).unwrap_or_else(|| panic!("{name}"))[0];
+    // S0 = I0 + I90 = 2000 DN, S1 = 1000 cos 60°, S2 = 1000 sin 60° (fractions of 4095)
+    assert!((at("S0") - 2000.0 / 4095.0).abs() < 1e-6);
+    assert!((at("S1") - 500.0 / 4095.0).abs() < 1e-3, "{}", at("S1"));
+    assert!((at("S2") - 866.0 / 4095.0).abs() < 1e-3, "{}", at("S2"));
+    assert!((at("DoLP") - 0.5).abs() < 1e-3 && (at("AoLP") - phi as f32).abs() < 1e-3);
+    assert_eq!(at("Y"), at("S0"));
+    assert!((at("I_alpha") + at("S2")).abs() < 1e-7 && (at("I_s") - at("S1")).abs() < 1e-7);
+    let exr_mask = match exr.channel("mask") {
+        Some(ellipso_report::exr_image::Samples::U32(m)) => m.clone(),
+        other => panic!("mask channel: {other:?}"),
+    };
+    assert!(PixelMask(exr_mask[5 * 32 + 20] as u8).has(MaskReason::Saturated));
+    assert!(exr.channel("S0.R").is_none() && exr.channel("S3").is_none());
 }
 
 #[test]
@@ -163,6 +181,25 @@ fn colour_bilinear_writes_per_band_files() {
     assert!(px[0] > px[1] && px[1] == px[2], "{px:?}");
     let summary = fs::read_to_string(out.join("summary.json")).expect("summary");
     assert!(summary.contains("\"bilinear\"") && summary.contains("\"colourpolar\""));
+    assert!(summary.contains("stokes.exr"));
+    // stokes.exr per band: the same floats as the .npy planes, S0.R … and the viewer's R, G, B
+    let exr = ellipso_report::exr_image::FloatImage::read(&out.join("stokes.exr")).expect("exr");
+    let r = exr.f32_channel("S0.R").expect("S0.R");
+    assert_eq!(r[5 * 16 + 5], v, "the exact .npy value");
+    assert_eq!(exr.f32_channel("R"), Some(r));
+    for name in [
+        "S1.G",
+        "S2.B",
+        "DoLP.R",
+        "AoLP.G",
+        "I_d.B",
+        "I_s.R",
+        "I_alpha.G",
+        "mask.B",
+    ] {
+        assert!(exr.channel(name).is_some(), "{name}");
+    }
+    assert!(exr.channel("S0").is_none());
 }
 
 #[test]
