@@ -52,6 +52,9 @@ pub struct Args {
     /// default 0.1).
     #[arg(long, default_value_t = 0.1)]
     pub holdout: f64,
+    /// Print one JSON object (output folder, files, the fit summary) instead of the text report.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Runs `ellipso fit`.
@@ -77,12 +80,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
-            crate::outln!("no --mesh: carving the object's mesh from the frames first…");
+            eprintln!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =
                 super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
             let path = args.out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
-            crate::outln!("  {} ({} vertices)", path.display(), report.vertices);
+            eprintln!("  {} ({} vertices)", path.display(), report.vertices);
             mesh
         }
     };
@@ -107,6 +110,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     config.observe.gate.grazing_cutoff_deg = args.grazing_cutoff_deg;
     let result = fit_and_export(&session, &mesh, &args.out, args.view, &config)?;
+    if args.json {
+        let json = serde_json::json!({
+            "out": args.out.display().to_string(),
+            "files": result.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
+            "summary": result.summary,
+        });
+        crate::outln!("{json}");
+        return Ok(());
+    }
     crate::outln!("\nresults in {}:", args.out.display());
     for f in &result.files {
         crate::outln!("  {}", f.display());
@@ -122,6 +134,8 @@ pub struct FitRun {
     pub files: Vec<PathBuf>,
     /// Wall time, seconds.
     pub wall_s: f64,
+    /// What `fit-summary.json` holds.
+    pub summary: serde_json::Value,
 }
 
 /// The session's recorded poses (`pose` events), tracking first every complete frame that has
@@ -130,7 +144,7 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
     let untracked = ellipso_vision::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
     if !untracked.is_empty() {
-        crate::outln!(
+        eprintln!(
             "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
             untracked.len(),
             session.frames.iter().filter(|f| f.complete).count()
@@ -176,9 +190,11 @@ pub fn fit_and_export(
     if let Some(scene) = ellipso_fit::observe::radiometry::scene_of(session) {
         config.fit.solver.sensor = ellipso_fit::accuracy::sensor_model(&scene);
     }
+    let progress = super::progress::Progress::spinner("fit");
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
-        crate::outln!("  {stage}…")
+        progress.set_message(stage)
     })?;
+
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
     for s in &fit.observe.skipped {
         tracing::warn!("frame {} skipped: {}", s.frame_id, s.reason);
@@ -222,12 +238,12 @@ pub fn fit_and_export(
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
-    crate::outln!("  pictures from frame {frame_id}…");
+    progress.set_message(format!("pictures from frame {frame_id}"));
     let captured_s0 =
         match ellipso_fit::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
             Ok(c) => Some(c),
             Err(e) => {
-                crate::outln!("  no comparison picture: frame {}: {e}", comparison.0);
+                eprintln!("note: no comparison picture: frame {}: {e}", comparison.0);
                 None
             }
         };
@@ -241,6 +257,11 @@ pub fn fit_and_export(
         &ellipso_fit::export::ExportConfig::default(),
         captured_s0.as_ref(),
     )?;
+    progress.finish(format!(
+        "{} vertices from {} posed frames",
+        mesh.positions().len(),
+        fit.observe.frames_posed
+    ));
     let wall_s = started.elapsed().as_secs_f64();
     let mut files = report.files.clone();
     let summary = out.join("fit-summary.json");
@@ -267,5 +288,10 @@ pub fn fit_and_export(
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);
-    Ok(FitRun { fit, files, wall_s })
+    Ok(FitRun {
+        fit,
+        files,
+        wall_s,
+        summary: json,
+    })
 }
