@@ -133,14 +133,30 @@ const TITLE_FONT: f64 = 17.0;
 const TEXT_FONT: f64 = 14.0;
 
 fn swatch_width(label: &str) -> u32 {
-    ensure_registered();
-    let font = FontDesc::new(FontFamily::Name(FAMILY), TEXT_FONT, FontStyle::Normal);
     // a 14 px square, a space, the label, a gap
-    let text = font.box_size(label).map_or_else(
-        |_| (label.chars().count() as f64 * TEXT_FONT * 0.6) as u32,
+    20 + text_width(label, TEXT_FONT) + 16
+}
+
+/// Width of `text` in the bundled font at `size` px; 0 for no text.
+fn text_width(text: &str, size: f64) -> u32 {
+    if text.is_empty() {
+        return 0;
+    }
+    ensure_registered();
+    let font = FontDesc::new(FontFamily::Name(FAMILY), size, FontStyle::Normal);
+    font.box_size(text).map_or_else(
+        |_| (text.chars().count() as f64 * size * 0.6) as u32,
         |(w, _)| w,
-    );
-    20 + text + 16
+    )
+}
+
+/// A colour-bar tick: `decimals` places, and never "-0.00".
+fn bar_tick(v: f64, decimals: usize) -> String {
+    let text = format!("{v:.decimals$}");
+    match text.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => text,
+    }
 }
 
 impl Figure {
@@ -205,7 +221,9 @@ impl Figure {
         };
         let title = if self.title.is_empty() { 0 } else { TITLE_PX };
         let grid_w = cols * iw + (cols - 1) * GAP;
-        let width = (grid_w + 2 * pad).max(self.min_width);
+        let width = (grid_w + 2 * pad)
+            .max(self.min_width)
+            .max(text_width(&self.title, TITLE_FONT) + 2 * MARGIN);
         let grid_h = rows * (ih + caption) + (rows - 1) * GAP;
         let top = pad + title;
         let keys_top = top + grid_h + if self.keys.is_empty() { pad } else { 4 };
@@ -304,7 +322,7 @@ fn draw_key(
                 .disable_y_axis()
                 .x_labels(6)
                 .set_all_tick_mark_size(6)
-                .x_label_formatter(&|v| format!("{v:.decimals$}"))
+                .x_label_formatter(&|v| bar_tick(*v, decimals))
                 .x_desc(label.as_str())
                 .axis_desc_style(ink(TEXT_FONT))
                 .label_style(ink(TEXT_FONT - 1.0))
@@ -476,5 +494,11 @@ mod tests {
         assert_eq!(tick_decimals(0.0, 1.0), 1);
         assert_eq!(tick_decimals(1.3, 1.75), 2);
         assert_eq!(tick_decimals(0.0, 180.0), 0);
+        assert_eq!(bar_tick(-0.0001, 2), "0.00");
+        assert_eq!(bar_tick(-0.1, 2), "-0.10");
+        // a long title widens the figure instead of being cut
+        let long = "a title much wider than the sixty-pixel image it stands above";
+        let img = Figure::new(long).image("", ramp(60, 20)).render().unwrap();
+        assert!(img.width() > 240 && img.width() >= text_width(long, TITLE_FONT));
     }
 }

@@ -373,7 +373,7 @@ fn polarisation(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Vec<P
         },
         Picture {
             name: "aolp",
-            figure: Figure::new("angle (hue) and degree (saturation) of linear polarisation")
+            figure: Figure::new("AoLP (hue) and DoLP (saturation) under the rig's flash")
                 .image("", composite)
                 .key(Key::AolpDolp {
                     dolp_as_value: false,
