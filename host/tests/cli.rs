@@ -86,3 +86,30 @@ fn errors_are_one_line_naming_what_is_wrong() {
         );
     }
 }
+
+#[test]
+fn polar_json_prints_one_object_on_stdout() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let frame = dir.path().join("frame.png");
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(8, 8, vec![2000u16; 64])
+        .expect("buffer")
+        .save(&frame)
+        .expect("write frame");
+    let out = dir.path().join("out");
+    let (frame, out) = (frame.to_str().expect("utf-8"), out.to_str().expect("utf-8"));
+    let o = ellipso(&["polar", frame, "--out", out, "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(text.lines().count(), 1, "{text}");
+    let v: serde_json::Value = serde_json::from_str(&text).expect("one JSON object");
+    assert_eq!(v["summary"]["output"]["width"], 4, "{v}");
+    assert!(
+        v["summary"]["files"]
+            .as_array()
+            .is_some_and(|f| f.len() >= 8)
+    );
+    // without --json the same run prints the text report
+    let o = ellipso(&["polar", frame, "--out", out]);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("wrote") && serde_json::from_str::<serde_json::Value>(&text).is_err());
+}

@@ -1,20 +1,24 @@
 //! `ellipso-report`: the files every stage writes — result files written whole or not at all
 //! ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
-//! ([`exr_image`]), and small dependency-light raster reports: an RGB8 [`canvas::Canvas`] and a
-//! [`plot::LinePlot`] builder, written as PNG.
+//! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
+//! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`].
 //!
-//! Contract: pure Rust drawing (lines with clipping, rectangles, `font8x8` text); pictures are
-//! PNG through the `image` crate, float results OpenEXR through the `exr` crate. Used by `ellipso model plot` and by later
-//! reports (accuracy-vs-time, parameter maps).
+//! Contract: all drawing goes through `plotters` (pure-Rust bitmap backend) with the font
+//! bundled in [`font`], so pictures look the same on every machine and need no system font;
+//! pictures are PNG, written through `image` and [`atomic_file`]; float results are OpenEXR
+//! through the `exr` crate.
 
 pub mod atomic_file;
-pub mod canvas;
+pub mod colour;
 pub mod exr_image;
+pub mod figure;
+pub mod font;
 pub mod npy;
 pub mod plot;
 
-pub use canvas::{Canvas, ClipRect, Rgb, Stroke};
-pub use plot::{LegendPosition, LinePlot, Series};
+pub use colour::{ColourMap, Rgb};
+pub use figure::{Figure, Key, Picture};
+pub use plot::{LegendPosition, LinePlot, Series, Stroke};
 
 /// Errors of report rendering and writing.
 #[derive(Debug, thiserror::Error)]
@@ -25,20 +29,29 @@ pub enum ReportError {
     /// An explicit axis range is empty, reversed or not finite.
     #[error("the {0} range must be finite with lo < hi")]
     BadRange(&'static str),
-    /// The image is too small for axes and labels.
-    #[error("the plot is too small for its labels; enlarge it or reduce the text scale")]
-    TooSmall,
-    /// The canvas has no pixels.
-    #[error("the canvas is empty")]
+    /// The figure has no pixels (no image).
+    #[error("the picture is empty")]
     EmptyCanvas,
+    /// The images of one figure differ in size, or one's pixels do not fill it.
+    #[error("the images of one figure must all have the same size and be complete")]
+    ImageSize,
+    /// The drawing library failed (too small an area for the axes, a text error).
+    #[error("cannot draw the picture: {0}")]
+    Draw(String),
     /// Writing the PNG failed.
     #[error("cannot write {path}: {source}")]
     Write {
         /// Destination.
         path: String,
         /// Cause.
-        source: image::ImageError,
+        source: std::io::Error,
     },
+}
+
+impl ReportError {
+    fn draw(e: impl std::fmt::Display) -> Self {
+        Self::Draw(e.to_string())
+    }
 }
 
 impl PartialEq for ReportError {
@@ -49,6 +62,14 @@ impl PartialEq for ReportError {
             _ => core::mem::discriminant(self) == core::mem::discriminant(other),
         }
     }
+}
+
+/// Writes an RGB image as PNG, whole or not at all (a full disk leaves no half picture).
+fn save_rgb(img: &image::RgbImage, path: &std::path::Path) -> Result<(), ReportError> {
+    atomic_file::write_png(path, img).map_err(|source| ReportError::Write {
+        path: path.display().to_string(),
+        source,
+    })
 }
 
 /// The `p`-quantile (0..=1, nearest rank) of `values`, sorting them in place; NaN when empty.

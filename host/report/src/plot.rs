@@ -1,15 +1,21 @@
-//! Line plots: axes with numeric ticks, title, axis labels, legend, several coloured series,
-//! optional logarithmic x axis; rendered on a [`Canvas`] and saved as PNG.
+//! Line plots through `plotters`: title, axes with numeric ticks and labels (any Unicode the
+//! bundled font has: η, σ, °), a legend, several coloured solid or dashed series, an optional
+//! logarithmic x axis; rendered to an RGB image and saved as PNG.
 //!
 //! Contract: `LinePlot::new(title).x_label(..).y_label(..).series(name, points)….save_png(path)`.
-//! Non-finite points (and x ≤ 0 on a log axis) break a series' line instead of failing; a plot
-//! with no drawable point at all is an error ([`ReportError::NoData`]). Ranges default to the
-//! data (y padded by 5 %), ticks are "nice" 1–2–5 steps, or decades on a log axis.
+//! Non-finite points (and x ≤ 0 on a log axis) break a series' line instead of failing; a
+//! series of one point is drawn as a dot; a plot with no drawable point at all is an error
+//! ([`ReportError::NoData`]). Ranges default to the data (y padded by 5 %).
 
+use std::ops::Range;
 use std::path::Path;
 
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
+use plotters::prelude::*;
+
 use super::ReportError;
-use super::canvas::{Canvas, ClipRect, GLYPH_PX, Rgb, Stroke};
+use super::colour::Rgb;
+use super::font::{FAMILY, ensure_registered};
 
 /// Default series colours (colour-blind-friendly Okabe–Ito order, then greys).
 pub const PALETTE: [Rgb; 8] = [
@@ -23,10 +29,27 @@ pub const PALETTE: [Rgb; 8] = [
     [120, 120, 120],
 ];
 
-const WHITE: Rgb = [255, 255, 255];
-const INK: Rgb = [20, 20, 20];
-const GRID: Rgb = [225, 225, 225];
-const GRID_MINOR: Rgb = [242, 242, 242];
+/// How a series' line is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Stroke {
+    /// Colour.
+    pub color: Rgb,
+    /// Width in pixels (≥ 1).
+    pub thickness: u32,
+    /// `Some((on, off))`: dashed, lengths in pixels.
+    pub dash: Option<(f64, f64)>,
+}
+
+impl Stroke {
+    /// A solid line.
+    pub fn solid(color: Rgb, thickness: u32) -> Self {
+        Self {
+            color,
+            thickness,
+            dash: None,
+        }
+    }
+}
 
 /// Where the legend box sits inside the plot area.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -65,7 +88,6 @@ pub struct LinePlot {
     y_range: Option<(f64, f64)>,
     width: u32,
     height: u32,
-    text_scale: u32,
     legend: LegendPosition,
 }
 
@@ -82,7 +104,6 @@ impl LinePlot {
             y_range: None,
             width: 960,
             height: 640,
-            text_scale: 2,
             legend: LegendPosition::TopRight,
         }
     }
@@ -116,15 +137,10 @@ impl LinePlot {
         self.y_range = Some((lo, hi));
         self
     }
-    /// Image size in pixels (at least 200 × 150).
+    /// Image size in pixels (at least 320 × 240).
     pub fn size(mut self, width: u32, height: u32) -> Self {
-        self.width = width.max(200);
-        self.height = height.max(150);
-        self
-    }
-    /// Glyph magnification of all text (1 = 8 px font).
-    pub fn text_scale(mut self, scale: u32) -> Self {
-        self.text_scale = scale.clamp(1, 8);
+        self.width = width.max(320);
+        self.height = height.max(240);
         self
     }
     /// Adds a solid series in the next palette colour.
@@ -151,27 +167,19 @@ impl LinePlot {
         self
     }
 
-    fn to_axis_x(&self, x: f64) -> f64 {
-        if self.log_x {
-            if x > 0.0 { x.log10() } else { f64::NAN }
-        } else {
-            x
-        }
+    fn drawable(&self, (x, y): (f64, f64)) -> bool {
+        x.is_finite() && y.is_finite() && (!self.log_x || x > 0.0)
     }
 
-    /// Data ranges in axis coordinates (log10 for a log x axis).
+    /// Data ranges (x in data units; a log axis spans whole data, not log units).
     fn ranges(&self) -> Result<[(f64, f64); 2], ReportError> {
         let pts: Vec<(f64, f64)> = self
             .series
             .iter()
-            .flat_map(|s| s.points.iter())
-            .map(|&(x, y)| (self.to_axis_x(x), y))
-            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .flat_map(|s| s.points.iter().copied())
+            .filter(|&p| self.drawable(p))
             .collect();
-        let explicit_x = self
-            .x_range
-            .map(|(a, b)| (self.to_axis_x(a), self.to_axis_x(b)));
-        if pts.is_empty() && (explicit_x.is_none() || self.y_range.is_none()) {
+        if pts.is_empty() && (self.x_range.is_none() || self.y_range.is_none()) {
             return Err(ReportError::NoData);
         }
         let span = |f: fn(&(f64, f64)) -> f64| {
@@ -181,294 +189,194 @@ impl LinePlot {
                     (a.min(v), b.max(v))
                 })
         };
-        let widen = |(lo, hi): (f64, f64), pad: f64| {
+        let log = self.log_x;
+        let widen = |(lo, hi): (f64, f64), pad: f64, log: bool| {
             if hi > lo {
                 let p = (hi - lo) * pad;
                 (lo - p, hi + p)
+            } else if log {
+                (lo / 2.0, hi * 2.0)
             } else {
                 let d = if lo == 0.0 { 1.0 } else { lo.abs() * 0.1 };
                 (lo - d, hi + d)
             }
         };
-        let x = match explicit_x {
-            Some((a, b)) if a.is_finite() && b.is_finite() && b > a => (a, b),
+        let valid = |(a, b): (f64, f64)| a.is_finite() && b.is_finite() && b > a;
+        let x = match self.x_range {
+            Some(r) if valid(r) && (!log || r.0 > 0.0) => r,
             Some(_) => return Err(ReportError::BadRange("x")),
-            None => widen(span(|p| p.0), 0.0),
+            None => widen(span(|p| p.0), 0.0, log),
         };
         let y = match self.y_range {
-            Some((a, b)) if a.is_finite() && b.is_finite() && b > a => (a, b),
+            Some(r) if valid(r) => r,
             Some(_) => return Err(ReportError::BadRange("y")),
-            None => widen(span(|p| p.1), 0.05),
+            None => widen(span(|p| p.1), 0.05, false),
         };
         Ok([x, y])
     }
 
     /// Renders the plot.
-    pub fn render(&self) -> Result<Canvas, ReportError> {
+    pub fn render(&self) -> Result<image::RgbImage, ReportError> {
         let [(x0, x1), (y0, y1)] = self.ranges()?;
-        let s = self.text_scale;
-        let g = i64::from(GLYPH_PX * s);
-        let mut c = Canvas::new(self.width, self.height, WHITE);
-        let x_ticks = if self.log_x {
-            log_ticks(x0, x1)
-        } else {
-            linear_ticks(x0, x1)
-        };
-        let y_ticks = linear_ticks(y0, y1);
-        let y_label_w = y_ticks
-            .iter()
-            .map(|t| Canvas::text_width(&t.label, s))
-            .max()
-            .unwrap_or(0);
-        // Layout (pixels).
-        let left = g / 2
-            + if self.y_label.is_empty() {
-                0
+        ensure_registered();
+        let mut buf = vec![255u8; self.width as usize * self.height as usize * 3];
+        {
+            let root =
+                BitMapBackend::with_buffer(&mut buf, (self.width, self.height)).into_drawing_area();
+            if self.log_x {
+                self.draw_on(&root, (x0..x1).log_scale(), y0..y1)?;
             } else {
-                g + g / 2
+                self.draw_on(&root, x0..x1, y0..y1)?;
             }
-            + i64::from(y_label_w)
-            + g / 2
-            + 6;
-        let right = i64::from(self.width) - g * 2;
-        let top = if self.title.is_empty() { g } else { g * 3 };
-        let bottom = i64::from(self.height) - g * if self.x_label.is_empty() { 2 } else { 4 };
-        if right - left < 20 || bottom - top < 20 {
-            return Err(ReportError::TooSmall);
+            root.present().map_err(ReportError::draw)?;
         }
-        let px = |x: f64| left as f64 + (x - x0) / (x1 - x0) * (right - left) as f64;
-        let py = |y: f64| bottom as f64 - (y - y0) / (y1 - y0) * (bottom - top) as f64;
-        // Grid and ticks.
-        for t in &x_ticks {
-            let x = px(t.value).round() as i64;
-            c.fill_rect(
-                x,
-                top,
-                1,
-                bottom - top,
-                if t.major { GRID } else { GRID_MINOR },
-            );
-            if t.major {
-                c.fill_rect(x, bottom, 1, 6, INK);
-                let w = i64::from(Canvas::text_width(&t.label, s));
-                c.text(x - w / 2, bottom + 10, &t.label, INK, s);
-            }
-        }
-        for t in &y_ticks {
-            let y = py(t.value).round() as i64;
-            c.fill_rect(left, y, right - left, 1, GRID);
-            c.fill_rect(left - 6, y, 6, 1, INK);
-            let w = i64::from(Canvas::text_width(&t.label, s));
-            c.text(left - 10 - w, y - g / 2, &t.label, INK, s);
-        }
-        c.stroke_rect(left, top, right - left + 1, bottom - top + 1, INK);
-        // Title and labels: centred on the plot area, or on the image and at a smaller scale
-        // when they would not fit.
-        let width = i64::from(self.width);
-        let place = |text: &str, lo: i64, hi: i64| {
-            let mut scale = s;
-            while scale > 1 && i64::from(Canvas::text_width(text, scale)) > width - 8 {
-                scale -= 1;
-            }
-            let w = i64::from(Canvas::text_width(text, scale));
-            let (lo, hi) = if w > hi - lo { (0, width) } else { (lo, hi) };
-            (((lo + hi) / 2 - w / 2).max(0), scale)
-        };
-        let (tx, ts) = place(&self.title, left, right);
-        c.text(tx, g, &self.title, INK, ts);
-        let (lx, ls) = place(&self.x_label, left, right);
-        c.text(lx, bottom + 10 + g + g / 2, &self.x_label, INK, ls);
-        if !self.y_label.is_empty() {
-            let h = i64::from(Canvas::text_width(&self.y_label, s));
-            c.text_vertical(g / 2, (top + bottom) / 2 - h / 2, &self.y_label, INK, s);
-        }
-        // Series.
-        let clip = ClipRect {
-            x_min: left as f64 + 1.0,
-            y_min: top as f64 + 1.0,
-            x_max: right as f64 - 1.0,
-            y_max: bottom as f64 - 1.0,
-        };
+        image::RgbImage::from_raw(self.width, self.height, buf).ok_or(ReportError::EmptyCanvas)
+    }
+
+    fn draw_on<X>(
+        &self,
+        root: &DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>,
+        x: X,
+        y: Range<f64>,
+    ) -> Result<(), ReportError>
+    where
+        X: AsRangedCoord<Value = f64>,
+        X::CoordDescType: ValueFormatter<f64>,
+    {
+        let text = |size: f64| (FAMILY, size).into_font().color(&INK);
+        let mut chart = ChartBuilder::on(root)
+            .caption(&self.title, text(24.0))
+            .margin(16)
+            .x_label_area_size(56)
+            .y_label_area_size(if self.y_label.is_empty() { 56 } else { 80 })
+            .build_cartesian_2d(x, y)
+            .map_err(ReportError::draw)?;
+        let log_x = self.log_x;
+        let x_tick = move |v: &f64| tick_label(*v, log_x);
+        let y_tick = |v: &f64| tick_label(*v, false);
+        chart
+            .configure_mesh()
+            .x_label_formatter(&x_tick)
+            .y_label_formatter(&y_tick)
+            .x_desc(self.x_label.as_str())
+            .y_desc(self.y_label.as_str())
+            .axis_desc_style(text(20.0))
+            .label_style(text(17.0))
+            .bold_line_style(RGBColor(222, 222, 222))
+            .light_line_style(RGBColor(244, 244, 244))
+            .axis_style(INK)
+            .draw()
+            .map_err(ReportError::draw)?;
+        let mut labelled = false;
         for series in &self.series {
-            let mut run: Vec<(f64, f64)> = Vec::new();
-            for &(x, y) in &series.points {
-                let ax = self.to_axis_x(x);
-                if ax.is_finite() && y.is_finite() {
-                    run.push((px(ax), py(y)));
-                } else {
-                    c.polyline(&run, &series.stroke, clip);
-                    run.clear();
+            let Stroke {
+                color: [r, g, b],
+                thickness,
+                dash,
+            } = series.stroke;
+            let style = RGBColor(r, g, b).stroke_width(thickness.max(1));
+            let mut first = true;
+            for run in series.points.split(|&p| !self.drawable(p)) {
+                let anno = match (run, dash) {
+                    ([], _) => continue,
+                    ([p], _) => chart.draw_series(std::iter::once(Circle::new(
+                        *p,
+                        thickness + 2,
+                        style.filled(),
+                    ))),
+                    (_, None) => chart.draw_series(LineSeries::new(run.iter().copied(), style)),
+                    (_, Some((on, off))) => chart.draw_series(DashedLineSeries::new(
+                        run.iter().copied(),
+                        on.max(1.0) as u32,
+                        off.max(1.0) as u32,
+                        style,
+                    )),
+                }
+                .map_err(ReportError::draw)?;
+                if std::mem::take(&mut first) && !series.name.is_empty() {
+                    labelled = true;
+                    let anno = anno.label(series.name.as_str());
+                    match dash {
+                        None => anno
+                            .legend(move |(x, y)| PathElement::new([(x, y), (x + 28, y)], style)),
+                        // short dashes, so a dashed series reads as dashed in the legend
+                        Some(_) => anno.legend(move |(x, y)| {
+                            plotters::element::DashedPathElement::new(
+                                [(x, y), (x + 28, y)],
+                                7,
+                                4,
+                                style,
+                            )
+                        }),
+                    };
                 }
             }
-            c.polyline(&run, &series.stroke, clip);
-            if let [only] = run.as_slice() {
-                c.fill_rect(
-                    only.0.round() as i64 - 2,
-                    only.1.round() as i64 - 2,
-                    5,
-                    5,
-                    series.stroke.color,
-                );
-            }
         }
-        self.draw_legend(&mut c, (left, top, right, bottom));
-        Ok(c)
+        if labelled {
+            chart
+                .configure_series_labels()
+                .position(match self.legend {
+                    LegendPosition::TopLeft => SeriesLabelPosition::UpperLeft,
+                    LegendPosition::TopRight => SeriesLabelPosition::UpperRight,
+                    LegendPosition::BottomLeft => SeriesLabelPosition::LowerLeft,
+                    LegendPosition::BottomRight => SeriesLabelPosition::LowerRight,
+                })
+                .margin(12)
+                .legend_area_size(36)
+                .label_font(text(17.0))
+                .background_style(WHITE.mix(0.9))
+                .border_style(INK)
+                .draw()
+                .map_err(ReportError::draw)?;
+        }
+        Ok(())
     }
 
-    fn draw_legend(&self, c: &mut Canvas, (left, top, right, bottom): (i64, i64, i64, i64)) {
-        if self.series.is_empty() {
-            return;
-        }
-        let s = self.text_scale;
-        let g = i64::from(GLYPH_PX * s);
-        let sample = g * 3;
-        let name_w = self
-            .series
-            .iter()
-            .map(|x| Canvas::text_width(&x.name, s))
-            .max()
-            .unwrap_or(0);
-        let w = sample + g + i64::from(name_w) + g;
-        let h = self.series.len() as i64 * (g + g / 2) + g / 2;
-        let x = match self.legend {
-            LegendPosition::TopLeft | LegendPosition::BottomLeft => left + g / 2,
-            LegendPosition::TopRight | LegendPosition::BottomRight => right - w - g / 2,
-        };
-        let y = match self.legend {
-            LegendPosition::TopLeft | LegendPosition::TopRight => top + g / 2,
-            LegendPosition::BottomLeft | LegendPosition::BottomRight => bottom - h - g / 2,
-        };
-        c.fill_rect(x, y, w, h, WHITE);
-        c.stroke_rect(x, y, w, h, INK);
-        for (k, series) in self.series.iter().enumerate() {
-            let row = y + g / 2 + k as i64 * (g + g / 2);
-            let mid = (row + g / 2) as f64;
-            let stroke = Stroke {
-                dash: series.stroke.dash.map(|(a, b)| (a.min(8.0), b.min(6.0))),
-                ..series.stroke
-            };
-            c.line(
-                ((x + g / 2) as f64, mid),
-                ((x + g / 2 + sample) as f64, mid),
-                &stroke,
-                ClipRect::NONE,
-            );
-            c.text(x + g + sample, row, &series.name, INK, s);
-        }
-    }
-
-    /// Renders and writes the plot as PNG.
+    /// Renders and writes the plot as PNG (whole or not at all).
     pub fn save_png(&self, path: impl AsRef<Path>) -> Result<(), ReportError> {
-        self.render()?.save_png(path.as_ref())
+        super::save_rgb(&self.render()?, path.as_ref())
     }
 }
 
-/// One axis tick.
-#[derive(Clone, Debug, PartialEq)]
-struct Tick {
-    value: f64,
-    label: String,
-    major: bool,
-}
-
-/// 1–2–5 ticks covering [lo, hi], about 5–10 of them.
-fn linear_ticks(lo: f64, hi: f64) -> Vec<Tick> {
-    let raw = (hi - lo) / 6.0;
-    let mag = 10f64.powf(raw.log10().floor());
-    let norm = raw / mag;
-    let step = mag
-        * if norm < 1.5 {
-            1.0
-        } else if norm < 3.0 {
-            2.0
-        } else if norm < 7.0 {
-            5.0
-        } else {
-            10.0
-        };
-    let decimals = (-step.log10().floor()).max(0.0) as usize;
-    let first = (lo / step).ceil() as i64;
-    let last = (hi / step + 1e-9).floor() as i64;
-    (first..=last)
-        .map(|k| {
-            let value = k as f64 * step;
-            let mut label = format!("{value:.decimals$}");
-            if label
-                .trim_start_matches('-')
-                .chars()
-                .all(|ch| ch == '0' || ch == '.')
-            {
-                label = format!("{:.decimals$}", 0.0);
-            }
-            Tick {
-                value,
-                label,
-                major: true,
-            }
-        })
-        .collect()
-}
-
-/// Decade ticks (major) and 2…9 sub-ticks (minor) for a log10 axis spanning [lo, hi] in log
-/// units.
-fn log_ticks(lo: f64, hi: f64) -> Vec<Tick> {
-    let mut ticks = Vec::new();
-    for k in (lo.floor() as i64)..=(hi.ceil() as i64) {
-        for m in 1..10 {
-            let value = k as f64 + f64::from(m).log10();
-            if value < lo - 1e-9 || value > hi + 1e-9 {
-                continue;
-            }
-            let label = if m != 1 {
-                String::new()
-            } else if (-3..=3).contains(&k) {
-                let decimals = (-k).max(0) as usize;
-                format!("{:.decimals$}", 10f64.powi(k as i32))
-            } else {
-                format!("1e{k}")
-            };
-            ticks.push(Tick {
-                value,
-                label,
-                major: m == 1,
-            });
+/// A tick's text: the value with no trailing zeros; on a log axis only 1, 2 and 5 times a
+/// power of ten are labelled (the other ticks stay, unlabelled), so labels never crowd.
+fn tick_label(v: f64, log: bool) -> String {
+    if log && v > 0.0 {
+        let mantissa = v / 10f64.powf(v.log10().floor());
+        if ![1.0, 2.0, 5.0, 10.0]
+            .iter()
+            .any(|m| (mantissa - m).abs() < 1e-6 * m)
+        {
+            return String::new();
         }
     }
-    ticks
+    let text = format!("{v:.6}");
+    let text = text.trim_end_matches('0').trim_end_matches('.');
+    if text == "-0" {
+        "0".into()
+    } else {
+        text.into()
+    }
 }
+
+/// Text and axis colour.
+const INK: RGBColor = RGBColor(20, 20, 20);
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn ticks_are_nice_and_cover_the_range() {
-        let t = linear_ticks(0.0, 1.0);
-        let labels: Vec<&str> = t.iter().map(|t| t.label.as_str()).collect();
-        assert_eq!(labels, ["0.0", "0.2", "0.4", "0.6", "0.8", "1.0"]);
-        let t = linear_ticks(-0.05, 90.0);
-        assert_eq!(t.first().map(|t| t.label.as_str()), Some("0"));
-        assert_eq!(t.last().map(|t| t.value), Some(80.0));
-        let l = log_ticks(-3.0, 1.0);
-        let majors: Vec<&str> = l
-            .iter()
-            .filter(|t| t.major)
-            .map(|t| t.label.as_str())
-            .collect();
-        assert_eq!(majors, ["0.001", "0.01", "0.1", "1", "10"]);
-        assert_eq!(l.iter().filter(|t| !t.major).count(), 32);
-    }
-
-    #[test]
     fn renders_series_in_their_colours_and_rejects_empty_plots() {
-        let plot = LinePlot::new("test")
+        let plot = LinePlot::new("test η, σ in °")
             .x_label("x")
             .y_label("y")
             .series("a", (0..50).map(|i| (f64::from(i), f64::from(i).sin())))
             .series("b", [(0.0, 0.0), (f64::NAN, 1.0), (49.0, 1.0)]);
         let c = plot.render().unwrap();
-        let has = |color: Rgb| c.as_bytes().chunks(3).any(|p| p == color);
+        let has = |color: Rgb| c.pixels().any(|p| p.0 == color);
         assert!(has(PALETTE[0]) && has(PALETTE[1]));
+        assert!(!has(PALETTE[2]), "only two series");
         assert_eq!(
             LinePlot::new("empty").render().unwrap_err(),
             ReportError::NoData
@@ -479,6 +387,8 @@ mod tests {
             .log_x(true)
             .series("l", [(0.0, 1.0), (1e-3, 1.0), (10.0, 2.0)]);
         assert!(log.render().is_ok());
+        let zero_only = LinePlot::new("log").log_x(true).series("l", [(0.0, 1.0)]);
+        assert_eq!(zero_only.render().unwrap_err(), ReportError::NoData);
         assert_eq!(
             LinePlot::new("r")
                 .y_range(1.0, 0.0)
@@ -490,12 +400,56 @@ mod tests {
     }
 
     #[test]
+    fn dashed_series_leave_gaps_and_text_is_drawn() {
+        let stroke = Stroke {
+            color: [200, 0, 0],
+            thickness: 2,
+            dash: Some((10.0, 10.0)),
+        };
+        let count = |p: &LinePlot| {
+            p.render()
+                .unwrap()
+                .pixels()
+                .filter(|px| px.0 == [200, 0, 0])
+                .count()
+        };
+        let line = |dash| {
+            LinePlot::new("")
+                .x_range(0.0, 1.0)
+                .y_range(0.0, 1.0)
+                .series_styled("", [(0.0, 0.5), (1.0, 0.5)], Stroke { dash, ..stroke })
+        };
+        let (solid, dashed) = (count(&line(None)), count(&line(stroke.dash)));
+        assert!(dashed > 0 && dashed < solid * 3 / 4, "{dashed} vs {solid}");
+        // the title is drawn: a plot with a title has more ink than one without
+        let ink = |p: &LinePlot| {
+            p.render()
+                .unwrap()
+                .pixels()
+                .filter(|px| px.0[0] < 128)
+                .count()
+        };
+        assert!(
+            ink(&LinePlot::new("ηηη σσσ").x_range(0.0, 1.0).y_range(0.0, 1.0)) > ink(&line(None))
+        );
+    }
+
+    #[test]
+    fn tick_labels_are_short_and_sparse_on_log_axes() {
+        assert_eq!(tick_label(10.0, false), "10");
+        assert_eq!(tick_label(0.25, false), "0.25");
+        assert_eq!(tick_label(-0.0, false), "0");
+        assert_eq!(tick_label(3.0, true), "");
+        assert_eq!(tick_label(20.0, true), "20");
+        assert_eq!(tick_label(0.5, true), "0.5");
+    }
+
+    #[test]
     fn writes_a_png_that_decodes() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("p.png");
         LinePlot::new("png")
             .size(320, 240)
-            .text_scale(1)
             .series("a", [(0.0, 0.0), (1.0, 1.0)])
             .save_png(&path)
             .unwrap();

@@ -501,15 +501,15 @@ fn write_report(
     plot(
         results,
         &eta_png,
-        "eta error vs fit time",
-        "mean per-vertex eta error (%)",
+        "η error vs fit time",
+        "mean per-vertex η error (%)",
         |s| s.eta_mean_pct,
     )?;
     plot(
         results,
         &normal_png,
         "normal error vs fit time",
-        "median normal error (deg)",
+        "median normal error (°)",
         |s| s.normal_median_deg,
     )?;
     let json = dir.join(format!("{stem}.json"));
@@ -535,15 +535,34 @@ fn plot(
     y_label: &str,
     metric: impl Fn(&Scores) -> f64,
 ) -> anyhow::Result<()> {
+    let points = results.iter().filter(|r| r.sweep != "large").map(|r| {
+        (
+            r.scene.as_str(),
+            r.sweep.as_str(),
+            r.fit_s,
+            metric(&r.scores),
+        )
+    });
+    plot_points(points, out, title, y_label)
+}
+
+/// The accuracy-vs-time plot of `(scene, sweep, fit seconds, metric)` points: one line per
+/// scene and sweep, in order of fit time, on a log time axis.
+fn plot_points<'a>(
+    points: impl Iterator<Item = (&'a str, &'a str, f64, f64)>,
+    out: &Path,
+    title: &str,
+    y_label: &str,
+) -> anyhow::Result<()> {
     let mut p = LinePlot::new(title)
-        .x_label("fit wall time (s, log)")
+        .x_label("fit wall time (s, log scale)")
         .y_label(y_label)
         .log_x(true)
         .legend(LegendPosition::TopRight);
     let mut groups: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for r in results.iter().filter(|r| r.sweep != "large") {
-        let key = format!("{} - {}", r.scene, r.sweep);
-        let point = (r.fit_s.max(1e-3), metric(&r.scores));
+    for (scene, sweep, fit_s, value) in points {
+        let key = format!("{scene} – {sweep}");
+        let point = (fit_s.max(1e-3), value);
         match groups.iter_mut().find(|(k, _)| *k == key) {
             Some((_, pts)) => pts.push(point),
             None => groups.push((key, vec![point])),
@@ -556,4 +575,46 @@ fn plot(
     }
     p.save_png(out)?;
     Ok(())
+}
+
+/// The committed report's plots redrawn from its JSON (`ELLIPSO_DOCS_IMG=docs/img cargo test
+/// -p ellipso redraw_committed`), so a change of drawing needs no re-run of the benchmark.
+#[cfg(test)]
+mod redraw {
+    #[test]
+    fn redraw_committed_accuracy_plots() {
+        let Some(img) = std::env::var_os("ELLIPSO_DOCS_IMG") else {
+            return;
+        };
+        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs");
+        for stem in ["accuracy-vs-time", "accuracy-bracket"] {
+            let text = std::fs::read_to_string(docs.join(format!("{stem}.json"))).unwrap();
+            let runs: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
+            let points = |metric: &'static str| {
+                runs.iter().filter(|r| r["sweep"] != "large").map(move |r| {
+                    (
+                        r["scene"].as_str().unwrap_or("?"),
+                        r["sweep"].as_str().unwrap_or("?"),
+                        r["fit_s"].as_f64().unwrap_or(f64::NAN),
+                        r["scores"][metric].as_f64().unwrap_or(f64::NAN),
+                    )
+                })
+            };
+            let img = std::path::Path::new(&img);
+            super::plot_points(
+                points("eta_mean_pct"),
+                &img.join(format!("{stem}-eta.png")),
+                "η error vs fit time",
+                "mean per-vertex η error (%)",
+            )
+            .unwrap();
+            super::plot_points(
+                points("normal_median_deg"),
+                &img.join(format!("{stem}-normal.png")),
+                "normal error vs fit time",
+                "median normal error (°)",
+            )
+            .unwrap();
+        }
+    }
 }

@@ -21,6 +21,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
+use super::progress::Progress;
 use anyhow::Context;
 use ellipso_protocol::{Bracket, CaptureConfig, PulseCount, TriggerSource};
 use ellipso_sim::render::{RenderOptions, Renderer};
@@ -28,7 +29,6 @@ use ellipso_sim::rig::{
     self, FrameSource, SimCamera, SimCameraConfig, VirtualBoard, VirtualBoardConfig,
 };
 use ellipso_sim::scene::Scene;
-use indicatif::{ProgressBar, ProgressStyle};
 use serialport::{SerialPort, TTYPort};
 
 use ellipso_rig::acquire::capture::{CapturePlan, CaptureReport, capture};
@@ -378,14 +378,10 @@ fn run_with_progress(
     quiet: bool,
 ) -> anyhow::Result<(CaptureReport, PathBuf, Option<i32>)> {
     let bar = if quiet {
-        ProgressBar::hidden()
+        Progress::hidden()
     } else {
-        ProgressBar::new(u64::from(photos))
+        Progress::bar("capture", u64::from(photos), "frames")
     };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} capture [{bar:30}] {pos}/{len} frames · {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
     let stop = StopOnSignal::install()?;
     let result = capture(link, camera, session, plan, stop.flag(), |p| {
         bar.set_position(p.frames);
@@ -394,7 +390,10 @@ fn run_with_progress(
             p.fps, p.paired, p.pairing_errors, p.camera_drops
         ));
     });
-    bar.finish_and_clear();
+    match &result {
+        Ok((report, _)) => bar.finish(format!("{} frames", report.frames)),
+        Err(_) => drop(bar),
+    }
     let signal = stop.signal();
     drop(stop);
     let (report, dir) = result?;

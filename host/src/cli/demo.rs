@@ -209,6 +209,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
         aolp_dolp_weighted: true,
+        json: false,
         npy: false,
         calibration: None,
     })?;

@@ -64,6 +64,9 @@ pub struct Args {
     /// `spec.completions`, AWS Batch array size).
     #[arg(long)]
     pub shard_count: Option<u32>,
+    /// Print one JSON object (output folder, files, the fit summary) instead of the text report.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Runs `ellipso fit`.
@@ -109,17 +112,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
-            crate::outln!("no --mesh: carving the object's mesh from the frames first…");
+            eprintln!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =
                 super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
             let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
-            crate::outln!("  {} ({} vertices)", path.display(), report.vertices);
+            eprintln!("  {} ({} vertices)", path.display(), report.vertices);
             mesh
         }
     };
     let config = config_of(&args)?;
     let result = fit_and_export(&session, &mesh, &out, args.view, &config)?;
+    if args.json {
+        let json = serde_json::json!({
+            "out": out.display().to_string(),
+            "files": result.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
+            "summary": result.summary,
+        });
+        crate::outln!("{json}");
+        return Ok(());
+    }
     crate::outln!("\nresults in {}:", out.display());
     for f in &result.files {
         crate::outln!("  {}", f.display());
@@ -203,6 +215,8 @@ pub struct FitRun {
     pub files: Vec<PathBuf>,
     /// Wall time, seconds.
     pub wall_s: f64,
+    /// What `fit-summary.json` holds.
+    pub summary: serde_json::Value,
 }
 
 /// The session's recorded poses (`pose` events), tracking first every complete frame that has
@@ -211,7 +225,7 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
     let untracked = ellipso_vision::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
     if !untracked.is_empty() {
-        crate::outln!(
+        eprintln!(
             "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
             untracked.len(),
             session.frames.iter().filter(|f| f.complete).count()
@@ -253,9 +267,15 @@ pub fn fit_and_export(
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // The solver weights samples by their expected noise (the session's sensor where known).
     let config = with_session_sensor(session, config);
+    let progress = super::progress::Progress::spinner("fit");
     let fit = fit_session(session, mesh, &poses, &config, &mut |stage| {
-        crate::outln!("  {stage}…")
+        progress.set_message(stage)
     })?;
+    progress.finish(format!(
+        "{} vertices from {} posed frames",
+        mesh.positions().len(),
+        fit.observe.frames_posed
+    ));
     export_fit(session, &poses, fit, out, view, started)
 }
 
@@ -309,8 +329,8 @@ pub fn export_fit(
         .map(|p| (p.0, p.1, true))
         .unwrap_or((frame_id, world_from_camera, false));
     if let Some(h) = &fit.holdout {
-        crate::outln!(
-            "  held-out views: {} frames, {} samples: s0 relative RMSE {:.3} (PSNR {:.1} dB), I^s {:.3}, I^alpha {:.3}",
+        eprintln!(
+            "held-out views: {} frames, {} samples: s0 relative RMSE {:.3} (PSNR {:.1} dB), I^s {:.3}, I^alpha {:.3}",
             h.per_frame.len(),
             h.overall.samples,
             h.overall.s0.relative_rmse,
@@ -323,12 +343,12 @@ pub fn export_fit(
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
-    crate::outln!("  pictures from frame {frame_id}…");
+    eprintln!("pictures from frame {frame_id}…");
     let captured_s0 =
         match ellipso_fit::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
             Ok(c) => Some(c),
             Err(e) => {
-                crate::outln!("  no comparison picture: frame {}: {e}", comparison.0);
+                eprintln!("note: no comparison picture: frame {}: {e}", comparison.0);
                 None
             }
         };
@@ -368,5 +388,10 @@ pub fn export_fit(
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);
-    Ok(FitRun { fit, files, wall_s })
+    Ok(FitRun {
+        fit,
+        files,
+        wall_s,
+        summary: json,
+    })
 }

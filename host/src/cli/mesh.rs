@@ -36,6 +36,9 @@ pub struct Args {
     /// pixel boundary (default: the built-in setting, see docs/mesh.md "Edge inset").
     #[arg(long, value_parser = super::limits::edge_inset_px)]
     pub edge_inset_px: Option<f64>,
+    /// Print one JSON object (the files and the mesh report) instead of the text report.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Runs `ellipso mesh`.
@@ -54,6 +57,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mesh, mut report) = mesh_of_session(&session, &config)?;
     report.peak_rss_bytes = ellipso_mesh::peak_rss_bytes();
     let json = write_mesh(&mesh, &report, &args.out)?;
+    if args.json {
+        let object = serde_json::json!({
+            "mesh": args.out.display().to_string(),
+            "report_file": json.display().to_string(),
+            "wall_s": started.elapsed().as_secs_f64(),
+            "report": report,
+        });
+        crate::outln!("{object}");
+        return Ok(());
+    }
     crate::outln!(
         "mesh         {} vertices, {} triangles, {:.1} cm³ from {} frames in {:.1} s",
         report.vertices,
@@ -79,10 +92,15 @@ pub fn mesh_of_session(
     config: &MeshConfig,
 ) -> anyhow::Result<(TriangleMesh, MeshReport)> {
     let poses = super::fit::poses_of(session)?;
+    let progress = super::progress::Progress::spinner("mesh");
     let result = build_mesh(session, &poses, config, &mut |stage| {
-        crate::outln!("  {stage}…")
+        progress.set_message(stage)
     })
     .with_context(|| format!("meshing {}", session.dir.display()))?;
+    progress.finish(format!(
+        "{} vertices from {} frames",
+        result.report.vertices, result.report.frames_used
+    ));
     Ok((result.mesh, result.report))
 }
 

@@ -16,6 +16,7 @@ pub mod mesh;
 pub mod model;
 pub mod out;
 pub mod polar;
+pub mod progress;
 pub mod replay;
 pub mod sim;
 pub mod sim_serve;

@@ -364,7 +364,7 @@ fn print_mueller_tables(v: &Value) {
 pub fn dop_plot() -> LinePlot {
     let angles: Vec<f64> = (0..=360).map(|k| f64::from(k) * 0.25).collect();
     let mut plot = LinePlot::new("DoP vs angle: diffuse (solid) and specular (dashed)")
-        .x_label("angle to normal, deg (diffuse: exit angle; specular: incidence)")
+        .x_label("angle to the normal (°; diffuse: exit angle θo, specular: incidence angle θd)")
         .y_label("degree of polarisation")
         .legend(LegendPosition::TopLeft)
         .x_range(0.0, 90.0)
@@ -376,7 +376,7 @@ pub fn dop_plot() -> LinePlot {
             .iter()
             .map(|&t| (t, dop_diffuse_with_d_eta(t.to_radians().cos(), eta).0));
         plot = plot.series_styled(
-            format!("diffuse  eta {eta}"),
+            format!("diffuse, η = {eta}"),
             diffuse,
             Stroke::solid(color, 3),
         );
@@ -386,7 +386,7 @@ pub fn dop_plot() -> LinePlot {
             (t, if r > 0.0 { f.r_minus().abs() / r } else { 0.0 })
         });
         plot = plot.series_styled(
-            format!("specular eta {eta}"),
+            format!("specular, η = {eta}"),
             specular,
             Stroke {
                 color,

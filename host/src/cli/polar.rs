@@ -6,15 +6,15 @@
 //! | file | content | encoding |
 //! |---|---|---|
 //! | `s0.png` | total intensity | 16-bit grey, `clamp(s0/2, 0, 1)·65535` (mean analyser intensity) |
-//! | `dolp.png` | DoLP | 8-bit grey `DoLP·255`, legend strip below the image |
-//! | `aolp.png` | AoLP | RGB hue wheel, hue = 2·AoLP (0 and π meet), legend below |
+//! | `dolp.png` | DoLP | 8-bit grey `DoLP·255`, colour bar below the image |
+//! | `aolp.png` | AoLP and DoLP | RGB, HSV composite: hue = AoLP (once round the wheel over [0, π), 0 and π meet), saturation = DoLP (`--aolp-dolp-weighted`: value = DoLP); AoLP × DoLP key below |
 //! | `i_d.png` | I^d = 2·I90 | 16-bit grey, `clamp(I^d/2, 0, 1)·65535` |
 //! | `i_s.png`, `i_alpha.png` | I^s, I^α (signed) | RGB diverging map, symmetric range, legend |
 //! | `mask.png`, `mask_bits.png` | validity | RGB by reason with legend; raw reason bits (8-bit) |
 //! | `stokes.exr` | every band's S0, S1, S2, DoLP, AoLP, I^d, I^s, I^α, residual, mask | OpenEXR f32 channels named as Mitsuba's (`S0.R` …; [`stokes_exr`]) |
 //! | `summary.json` | everything needed to read the above, plus statistics | JSON |
 //!
-//! Legends sit in a strip under the image rows (`summary.json` gives the image height), so the
+//! Keys (colour bars, the AoLP × DoLP key, mask swatches) sit under the image rows (`summary.json` gives the image height), so the
 //! top `height` rows are pixel-aligned with the demosaiced output. Masked pixels are mid-grey
 //! in false-colour images. Errors name the file and what is wrong, in one line.
 
@@ -33,7 +33,8 @@ use ellipso_polar::{
     AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
     StokesBand, process,
 };
-use render::{Canvas, Legend, MASKED, Rgb};
+use ellipso_report::{ColourMap, Key, Rgb};
+use render::MASKED;
 
 /// Sensor layout names on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -85,7 +86,8 @@ pub struct Args {
     /// default).
     #[arg(long, value_parser = |s: &str| crate::cli::limits::real_in(s, 0.0_f32, 2.0))]
     pub max_residual: Option<f32>,
-    /// Scale the AoLP image's brightness by DoLP (unpolarised regions go dark).
+    /// AoLP image with DoLP as the colour's value (unpolarised regions go black) instead of its
+    /// saturation (unpolarised regions go white).
     #[arg(long)]
     pub aolp_dolp_weighted: bool,
     /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
@@ -96,6 +98,10 @@ pub struct Args {
     /// 0°, 45°, 90°, 135° order); default: ideal analysers.
     #[arg(long)]
     pub calibration: Option<PathBuf>,
+    /// Print `summary.json`'s object (with the files written) on one line instead of the text
+    /// report.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Parses `--bit-depth`: one of the depths an IMX250 camera delivers.
@@ -157,6 +163,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "summary.json".into(),
         "layout, method, levels, statistics, encodings".into(),
     ));
+    if args.json {
+        crate::outln!(
+            "{}",
+            serde_json::json!({ "out": args.out.display().to_string(), "summary": summary })
+        );
+        return Ok(());
+    }
 
     crate::outln!(
         "{name}: {}×{} {}-bit {:?}, demosaic {} → {}×{} × {} band(s)",
@@ -235,132 +248,108 @@ fn write_band(
         "I^d/2 = I90 as 16-bit grey",
     )?;
 
-    let mut dolp = Canvas::new(w, h, [0, 0, 0]);
-    for (p, d) in dolp.pixels.iter_mut().zip(band.dolp.data()) {
-        *p = render::grey(*d);
-    }
-    let legend = Legend::Bar {
-        title: "DoLP".into(),
-        map: Box::new(render::grey),
-        ticks: [0.0f32, 0.25, 0.5, 0.75, 1.0]
-            .iter()
-            .map(|t| (*t, format!("{t}")))
-            .collect(),
-    };
-    let dolp = dolp.with_legend(&legend);
-    save_gray8(
+    let dolp = render::picture(
+        w,
+        h,
+        band.dolp.data().iter().map(|d| render::grey(*d)).collect(),
+    );
+    let dolp = render::with_key(
+        dolp,
+        Key::Bar {
+            map: ColourMap::Grey,
+            lo: 0.0,
+            hi: 1.0,
+            label: "DoLP".into(),
+        },
+    )?;
+    save_png(
         out,
         &format!("dolp{suffix}.png"),
-        &dolp,
+        Some(image::DynamicImage::ImageRgb8(dolp).into_luma8()),
         files,
-        "DoLP·255, 8-bit grey, legend below",
+        "DoLP·255, 8-bit grey, key below",
     )?;
 
     let weighted = args.aolp_dolp_weighted;
-    let mut aolp = Canvas::new(w, h, MASKED);
-    for ((p, a), (d, m)) in aolp
-        .pixels
-        .iter_mut()
-        .zip(band.aolp_rad.data())
+    let aolp = band
+        .aolp_rad
+        .data()
+        .iter()
         .zip(band.dolp.data().iter().zip(masks))
-    {
-        let value = if weighted { *d } else { 1.0 };
-        *p = if m.is_valid() {
-            render::hue(a / std::f32::consts::PI, value)
-        } else {
-            MASKED
-        };
-    }
-    let legend = Legend::Bar {
-        title: "AoLP, CCW from image-right".into(),
-        map: Box::new(|t| render::hue(t, 1.0)),
-        ticks: [0u32, 45, 90, 135, 180]
-            .iter()
-            .map(|d| (*d as f32 / 180.0, format!("{d}°")))
-            .collect(),
-    };
+        .map(|(a, (d, m))| {
+            if m.is_valid() {
+                render::aolp_colour(*a, *d, weighted)
+            } else {
+                MASKED
+            }
+        })
+        .collect();
     let what = if weighted {
-        "AoLP hue wheel, value = DoLP"
+        "AoLP as hue, DoLP as value (unpolarised is black)"
     } else {
-        "AoLP hue wheel"
+        "AoLP as hue, DoLP as saturation (unpolarised is white)"
     };
-    save_rgb8(
-        out,
-        &format!("aolp{suffix}.png"),
-        &aolp.with_legend(&legend),
-        files,
-        what,
+    let aolp = render::with_key(
+        render::picture(w, h, aolp),
+        Key::AolpDolp {
+            dolp_as_value: weighted,
+        },
     )?;
+    save_png(out, &format!("aolp{suffix}.png"), Some(aolp), files, what)?;
 
     let range_s = symmetric_range(channels.i_s.data(), masks);
     let range_alpha = symmetric_range(channels.i_alpha.data(), masks);
     for (stem, title, data, range) in [
-        ("i_s", "I^s = I0 - I90", channels.i_s.data(), range_s),
+        ("i_s", "I^s = I0 − I90", channels.i_s.data(), range_s),
         (
             "i_alpha",
-            "I^alpha = I135 - I45",
+            "I^α = I135 − I45",
             channels.i_alpha.data(),
             range_alpha,
         ),
     ] {
-        let mut c = Canvas::new(w, h, MASKED);
-        for ((p, v), m) in c.pixels.iter_mut().zip(data).zip(masks) {
-            *p = if m.is_valid() {
-                render::diverging(v / range)
-            } else {
-                MASKED
-            };
-        }
-        let legend = Legend::Bar {
-            title: format!("{title} (normalised)"),
-            map: Box::new(|t| render::diverging(2.0 * t - 1.0)),
-            ticks: vec![
-                (0.0, format!("{:.3}", -range)),
-                (0.5, "0".into()),
-                (1.0, format!("{range:.3}")),
-            ],
-        };
-        let what = format!("{title}, diverging map ±{range:.4}");
-        save_rgb8(
-            out,
-            &format!("{stem}{suffix}.png"),
-            &c.with_legend(&legend),
-            files,
-            &what,
+        let pixels = data
+            .iter()
+            .zip(masks)
+            .map(|(v, m)| {
+                if m.is_valid() {
+                    render::diverging(v / range)
+                } else {
+                    MASKED
+                }
+            })
+            .collect();
+        let img = render::with_key(
+            render::picture(w, h, pixels),
+            Key::Bar {
+                map: ColourMap::Diverging,
+                lo: f64::from(-range),
+                hi: f64::from(range),
+                label: format!("{title} (normalised)"),
+            },
         )?;
+        let what = format!("{title}, diverging map ±{range:.4}");
+        save_png(out, &format!("{stem}{suffix}.png"), Some(img), files, &what)?;
     }
 
-    let mut mask_img = Canvas::new(w, h, [0, 0, 0]);
-    for (p, m) in mask_img.pixels.iter_mut().zip(masks) {
-        *p = mask_colour(*m);
-    }
+    let mask_pixels = masks.iter().map(|m| mask_colour(*m)).collect();
     let swatches = std::iter::once(([0, 0, 0], "valid".to_string()))
         .chain(MASK_COLOURS.iter().map(|(r, c)| (*c, r.name().to_string())))
-        .map(|(c, n)| {
-            if c == [0, 0, 0] {
-                ([40, 40, 40], n)
-            } else {
-                (c, n)
-            }
-        })
         .collect();
     let what = "mask by reason (first of saturated, no_samples, unphysical, inconsistent, dark)";
-    save_rgb8(
+    let mask_img = render::with_key(render::picture(w, h, mask_pixels), Key::Swatches(swatches))?;
+    save_png(
         out,
         &format!("mask{suffix}.png"),
-        &mask_img.with_legend(&Legend::Swatches(swatches)),
+        Some(mask_img),
         files,
         what,
     )?;
-    let bits = Canvas {
-        width: w,
-        height: h,
-        pixels: masks.iter().map(|m| [m.0; 3]).collect(),
-    };
-    save_gray8(
+    let bits: Vec<u8> = masks.iter().map(|m| m.0).collect();
+    save_png(
         out,
         &format!("mask_bits{suffix}.png"),
-        &bits,
+        image::GrayImage::from_raw(w as u32, h as u32, bits),
         files,
         "mask reason bits, 0 = valid",
     )?;
@@ -482,35 +471,6 @@ fn save_gray16(
     what: &str,
 ) -> anyhow::Result<()> {
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data);
-    save_png(out, name, buf, files, what)
-}
-
-fn save_gray8(
-    out: &Path,
-    name: &str,
-    canvas: &Canvas,
-    files: &mut Vec<FileEntry>,
-    what: &str,
-) -> anyhow::Result<()> {
-    let (w, h) = (canvas.width as u32, canvas.height as u32);
-    save_png(
-        out,
-        name,
-        image::GrayImage::from_raw(w, h, canvas.to_gray()),
-        files,
-        what,
-    )
-}
-
-fn save_rgb8(
-    out: &Path,
-    name: &str,
-    canvas: &Canvas,
-    files: &mut Vec<FileEntry>,
-    what: &str,
-) -> anyhow::Result<()> {
-    let (w, h) = (canvas.width as u32, canvas.height as u32);
-    let buf = image::RgbImage::from_raw(w, h, canvas.to_rgb_bytes());
     save_png(out, name, buf, files, what)
 }
 

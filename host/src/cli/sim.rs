@@ -20,7 +20,6 @@ use anyhow::{Context, anyhow, bail};
 use ellipso_sim::effects::{EffectPlan, StageCounts};
 use ellipso_sim::render::{FrameTruth, RenderOptions, RenderedFrame, Renderer};
 use ellipso_sim::scene::Scene;
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Serialize;
 
 /// `ellipso sim` subcommands.
@@ -146,18 +145,18 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let indices = frame_indices(&args, renderer.frame_count())?;
     fs::create_dir_all(&args.out)
         .with_context(|| format!("cannot create {}", args.out.display()))?;
-    let progress = ProgressBar::new(indices.len() as u64);
-    progress.set_style(
-        ProgressStyle::with_template("{bar:40} {pos}/{len} frames, {elapsed} (eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    let progress = super::progress::Progress::bar("render", indices.len() as u64, "frames");
     let mut frames = Vec::with_capacity(indices.len());
     for &k in &indices {
         let f = renderer.render_frame(k).map_err(|e| anyhow!("{e}"))?;
         frames.push(write_frame(&args.out, k, &f)?);
         progress.inc(1);
     }
-    progress.finish_and_clear();
+    progress.finish(format!(
+        "{} frames into {}",
+        indices.len(),
+        args.out.display()
+    ));
     let camera = &scene.rig.camera;
     let truth = TruthFile {
         scene: renderer.plan().scene.clone(),

@@ -7,7 +7,8 @@
 //! - the 3×3 Mueller grid: per pixel the linear 3×3 block of the full pBRDF (`pbrdf::evaluate`,
 //!   mean of the colour channels) for the rig's own camera/flash geometry at that view, M00 in
 //!   viridis (log10) and every other element as M_ij/M00 in a diverging map over [−1, 1];
-//! - DoLP and AoLP of the light the camera receives under the rig's polarised flash;
+//! - DoLP (viridis) and AoLP of the light the camera receives under the rig's polarised flash,
+//!   AoLP as the HSV composite hue = AoLP, saturation = DoLP (`ellipso_report::colour::aolp_dolp`);
 //! - relit: s0 under a new unpolarised point light (1/d², foreshortening in P), exposed and
 //!   tone-mapped by Reinhard's global operator ([`tone_map`]), sRGB; the novel view: the same
 //!   light from another camera pose.
@@ -26,11 +27,12 @@ use ellipso_sim::scene::FlashSpec;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 
-use super::colour::{Bar, ColourMap, Panel, figure, robust_range, srgb};
+use super::colour::{robust_range, srgb};
 use super::raster::{Hit, ViewCamera, rasterise};
 use crate::data::{FitFlag, VertexFit, ViewGeometry};
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_report::Canvas;
+use ellipso_report::figure::NO_DATA;
+use ellipso_report::{ColourMap, Figure, Key, Picture as Pixels, Rgb};
 
 /// Per-vertex arrays interpolated over pixels.
 struct Field {
@@ -100,7 +102,16 @@ pub struct Picture {
     /// File stem, e.g. `map-eta`.
     pub name: &'static str,
     /// The framed figure.
-    pub canvas: Canvas,
+    pub figure: Figure,
+}
+
+/// Pixels of an RGB field (`None`: no data, drawn grey).
+pub fn rgb_pixels(w: u32, h: u32, pixels: impl IntoIterator<Item = Option<Rgb>>) -> Pixels {
+    Pixels {
+        width: w,
+        height: h,
+        pixels: pixels.into_iter().map(|p| p.unwrap_or(NO_DATA)).collect(),
+    }
 }
 
 /// The model's geometry at a surface point for a view (camera + flash as the rig places them).
@@ -145,30 +156,27 @@ pub fn pictures(
         .collect();
     out.push(scalar_picture(
         "map-eta",
-        "refractive index eta (grey: not identifiable)",
-        "eta",
+        "refractive index η (grey: not identifiable)",
+        "η",
         w,
         h,
         &eta,
     ));
     out.push(scalar(
         "map-sigma-s",
-        "specular roughness sigma_s (GGX)",
-        "sigma_s",
+        "specular roughness σs (GGX)",
+        "σs",
         &|p| p.sigma_s,
     ));
     out.push(scalar(
         "map-sigma-ss",
-        "single-scattering roughness sigma_ss",
-        "sigma_ss",
+        "single-scattering roughness σss",
+        "σss",
         &|p| p.sigma_ss,
     ));
-    out.push(scalar(
-        "map-rho-s",
-        "specular albedo rho_s",
-        "rho_s",
-        &|p| p.rho_s,
-    ));
+    out.push(scalar("map-rho-s", "specular albedo ρs", "ρs", &|p| {
+        p.rho_s
+    }));
     // η standard error (per vertex, interpolated).
     let eta_std: Vec<Option<f64>> = at
         .iter()
@@ -179,8 +187,8 @@ pub fn pictures(
         .collect();
     out.push(scalar_picture(
         "map-eta-std",
-        "eta standard error (grey: not identifiable)",
-        "std(eta)",
+        "standard error of η (grey: not identifiable)",
+        "σ(η)",
         w,
         h,
         &eta_std,
@@ -198,48 +206,41 @@ pub fn pictures(
             .filter(|x| x.is_finite())
             .collect();
         let gain = 0.9 / ellipso_report::percentile(&mut all, 0.95).max(1e-9);
-        let panel = Panel {
-            width: w,
-            height: h,
-            pixels: values
-                .iter()
-                .map(|v| v.map(|c| c.map(|x| srgb(x * gain))))
-                .collect(),
-        };
+        let pixels = rgb_pixels(
+            w,
+            h,
+            values.iter().map(|v| v.map(|c| c.map(|x| srgb(x * gain)))),
+        );
         Picture {
             name,
-            canvas: figure(&format!("{title} (x{gain:.2} for display)"), &panel, None),
+            figure: Figure::new(format!("{title} (×{gain:.2} for display)")).image("", pixels),
         }
     };
-    out.push(rgb("map-rho-d", "diffuse albedo rho_d (RGB)", &|p| p.rho_d));
+    out.push(rgb("map-rho-d", "diffuse albedo ρd (RGB)", &|p| p.rho_d));
     out.push(rgb(
         "map-rho-ss",
-        "single-scattering albedo rho_ss (RGB)",
+        "single-scattering albedo ρss (RGB)",
         &|p| p.rho_ss,
     ));
     let camera_from_world = camera.world_from_camera.inverse();
-    let normal_panel = Panel {
-        width: w,
-        height: h,
-        pixels: at
-            .iter()
-            .map(|a| {
-                a.as_ref().map(|(_, n, ..)| {
-                    // Camera frame with y up and z toward the viewer (the usual normal-map colours).
-                    let c = camera_from_world.transform_vector(&Vector3::from(*n));
-                    let v = [c.x, -c.y, -c.z];
-                    v.map(|x| ((x * 0.5 + 0.5) * 255.0).clamp(0.0, 255.0) as u8)
-                })
+    let normal_pixels = rgb_pixels(
+        w,
+        h,
+        at.iter().map(|a| {
+            a.as_ref().map(|(_, n, ..)| {
+                // Camera frame with y up and z toward the viewer (the usual normal-map colours).
+                let c = camera_from_world.transform_vector(&Vector3::from(*n));
+                let v = [c.x, -c.y, -c.z];
+                v.map(|x| ((x * 0.5 + 0.5) * 255.0).clamp(0.0, 255.0) as u8)
             })
-            .collect(),
-    };
+        }),
+    );
     out.push(Picture {
         name: "map-normal",
-        canvas: figure(
-            "refined normals (camera frame: x red, y-up green, toward viewer blue)",
-            &normal_panel,
-            None,
-        ),
+        figure: Figure::new(
+            "refined normals, camera frame (x → red, y up → green, toward viewer → blue)",
+        )
+        .image("", normal_pixels),
     });
     let view = ViewGeometry::from_rig(0, &camera.world_from_camera, flash);
     out.push(mueller_grid(&at, w, h, &view));
@@ -290,61 +291,42 @@ fn mueller_grid(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Pictu
             mueller_at(view, p, *n, point)
         })
         .collect();
-    let cell_w = w;
-    let cell_h = h;
-    let title_px = 14;
-    let mut canvas = Canvas::new(3 * cell_w + 8, 3 * (cell_h + title_px) + 40, [24, 24, 24]);
     let m00: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[0][0].log10())).collect();
     let (lo, hi) = robust_range(&m00);
+    let mut figure =
+        Figure::new("Mueller matrix, linear 3×3 block, under the rig's camera and flash")
+            .columns(3);
     for i in 0..3 {
         for j in 0..3 {
-            let panel = if i == 0 && j == 0 {
-                Panel::scalar(w, h, &m00, ColourMap::Viridis, lo, hi)
+            figure = if i == 0 && j == 0 {
+                figure.image(
+                    "log₁₀ M00",
+                    Pixels::scalar(w, h, &m00, ColourMap::Viridis, lo, hi),
+                )
             } else {
                 let v: Vec<Option<f64>> = m.iter().map(|x| x.map(|x| x[i][j] / x[0][0])).collect();
-                Panel::scalar(w, h, &v, ColourMap::Diverging, -1.0, 1.0)
+                figure.image(
+                    format!("M{i}{j} / M00"),
+                    Pixels::scalar(w, h, &v, ColourMap::Diverging, -1.0, 1.0),
+                )
             };
-            let (iu, ju) = (i as u32, j as u32);
-            let x = i64::from(ju * (cell_w + 4));
-            let y = i64::from(iu * (cell_h + title_px));
-            let label = if i == 0 && j == 0 {
-                "log10 M00".to_string()
-            } else {
-                format!("M{i}{j}/M00")
-            };
-            canvas.text(x + 2, y + 3, &label, [240, 240, 240], 1);
-            super::colour::blit(&mut canvas, &panel, x, y + i64::from(title_px));
         }
     }
-    let bar_y = i64::from(3 * (cell_h + title_px) + 4);
-    let half = (3 * cell_w) / 2 - 8;
-    super::colour::draw_bar(
-        &mut canvas,
-        &Bar {
-            map: ColourMap::Viridis,
-            lo,
-            hi,
-            label: "log10 M00".into(),
-        },
-        4,
-        bar_y,
-        half,
-    );
-    super::colour::draw_bar(
-        &mut canvas,
-        &Bar {
-            map: ColourMap::Diverging,
-            lo: -1.0,
-            hi: 1.0,
-            label: "Mij/M00".into(),
-        },
-        i64::from(half + 12),
-        bar_y,
-        half,
-    );
     Picture {
         name: "mueller-grid",
-        canvas,
+        figure: figure
+            .key(Key::Bar {
+                map: ColourMap::Viridis,
+                lo,
+                hi,
+                label: "log₁₀ M00 (M00: reflectance, sr⁻¹)".into(),
+            })
+            .key(Key::Bar {
+                map: ColourMap::Diverging,
+                lo: -1.0,
+                hi: 1.0,
+                label: "Mij / M00".into(),
+            }),
     }
 }
 
@@ -370,32 +352,33 @@ fn polarisation(at: &[PixelModel], w: u32, h: u32, view: &ViewGeometry) -> Vec<P
         .map(|s| s.map(|s| (0.5 * s[2].atan2(s[1])).rem_euclid(std::f64::consts::PI)))
         .collect();
     let (_, hi) = robust_range(&dolp);
+    let hi = hi.max(1e-3);
+    let composite = rgb_pixels(
+        w,
+        h,
+        aolp.iter()
+            .zip(&dolp)
+            .map(|(a, d)| Some(ellipso_report::colour::aolp_dolp((*a)?, (*d)?, 1.0))),
+    );
     vec![
         Picture {
             name: "dolp",
-            canvas: figure(
-                "degree of linear polarisation under the rig's flash",
-                &Panel::scalar(w, h, &dolp, ColourMap::Viridis, 0.0, hi.max(1e-3)),
-                Some(&Bar {
+            figure: Figure::new("degree of linear polarisation under the rig's flash")
+                .image("", Pixels::scalar(w, h, &dolp, ColourMap::Viridis, 0.0, hi))
+                .key(Key::Bar {
                     map: ColourMap::Viridis,
                     lo: 0.0,
-                    hi: hi.max(1e-3),
+                    hi,
                     label: "DoLP".into(),
                 }),
-            ),
         },
         Picture {
             name: "aolp",
-            canvas: figure(
-                "angle of linear polarisation (camera x = 0, counter-clockwise)",
-                &Panel::scalar(w, h, &aolp, ColourMap::Cyclic, 0.0, std::f64::consts::PI),
-                Some(&Bar {
-                    map: ColourMap::Cyclic,
-                    lo: 0.0,
-                    hi: 180.0,
-                    label: "AoLP (deg)".into(),
+            figure: Figure::new("AoLP (hue) and DoLP (saturation) under the rig's flash")
+                .image("", composite)
+                .key(Key::AolpDolp {
+                    dolp_as_value: false,
                 }),
-            ),
         },
     ]
 }
@@ -412,14 +395,10 @@ pub fn relit(
 ) -> Picture {
     let rgb = radiance(at, camera, light_world);
     let mapped = tone_map(&rgb);
-    let panel = Panel {
-        width: w,
-        height: h,
-        pixels: mapped.iter().map(|v| v.map(|c| c.map(srgb))).collect(),
-    };
+    let pixels = rgb_pixels(w, h, mapped.iter().map(|v| v.map(|c| c.map(srgb))));
     Picture {
         name,
-        canvas: figure(title, &panel, None),
+        figure: Figure::new(title).image("", pixels),
     }
 }
 
@@ -527,18 +506,15 @@ fn scalar_picture(
     values: &[Option<f64>],
 ) -> Picture {
     let (lo, hi) = robust_range(values);
-    let bar = Bar {
-        map: ColourMap::Viridis,
-        lo,
-        hi,
-        label: label.into(),
-    };
     Picture {
         name,
-        canvas: figure(
-            title,
-            &Panel::scalar(w, h, values, ColourMap::Viridis, lo, hi),
-            Some(&bar),
-        ),
+        figure: Figure::new(title)
+            .image("", Pixels::scalar(w, h, values, ColourMap::Viridis, lo, hi))
+            .key(Key::Bar {
+                map: ColourMap::Viridis,
+                lo,
+                hi,
+                label: label.into(),
+            }),
     }
 }

@@ -34,7 +34,7 @@ use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use crate::data::{VertexFit, ViewGeometry};
-use colour::{ColourMap, Panel, blit};
+use ellipso_report::{ColourMap, Figure, Key, Picture as Pixels};
 use raster::ViewCamera;
 
 /// Settings of the pictures.
@@ -259,7 +259,7 @@ pub fn export_all(
         &light_for(&novel),
         "novel-view",
         &format!(
-            "novel view ({:.0} deg about z), key light",
+            "novel view ({:.0}° about z), key light",
             config.novel_view_turn_deg
         ),
     ));
@@ -273,7 +273,7 @@ pub fn export_all(
     }
     for p in pictures {
         let path = out.join(format!("{}.png", p.name));
-        p.canvas.save_png(&path)?;
+        p.figure.save_png(&path)?;
         report.files.push(path);
     }
     Ok(report)
@@ -347,48 +347,42 @@ fn comparison(
         .iter()
         .map(|p| p.map(|p| (p.0 - rendered(p.1)) / hi))
         .collect();
-    let mut canvas = ellipso_report::Canvas::new(3 * w + 16, h + 54, [24, 24, 24]);
     let title = format!(
-        "frame {}{}: captured s0 | re-rendered | difference / max   (relative RMSE {})",
+        "frame {}{}: captured and re-rendered s0, relative RMSE {}",
         captured.frame_id,
         if captured.held_out { " (held out)" } else { "" },
         rmse.map_or("n/a".into(), |r| format!("{r:.3}"))
     );
-    canvas.text(4, 3, &title, [240, 240, 240], 1);
-    blit(
-        &mut canvas,
-        &Panel::scalar(w, h, &captured_v, ColourMap::Viridis, 0.0, hi),
-        0,
-        14,
-    );
-    blit(
-        &mut canvas,
-        &Panel::scalar(w, h, &rendered_v, ColourMap::Viridis, 0.0, hi),
-        i64::from(w + 8),
-        14,
-    );
-    blit(
-        &mut canvas,
-        &Panel::scalar(w, h, &error_v, ColourMap::Diverging, -0.25, 0.25),
-        i64::from(2 * w + 16),
-        14,
-    );
-    colour::draw_bar(
-        &mut canvas,
-        &colour::Bar {
+    let figure = Figure::new(title)
+        .columns(3)
+        .image(
+            "captured s0",
+            Pixels::scalar(w, h, &captured_v, ColourMap::Viridis, 0.0, hi),
+        )
+        .image(
+            "re-rendered s0",
+            Pixels::scalar(w, h, &rendered_v, ColourMap::Viridis, 0.0, hi),
+        )
+        .image(
+            "difference / max s0",
+            Pixels::scalar(w, h, &error_v, ColourMap::Diverging, -0.25, 0.25),
+        )
+        .key(Key::Bar {
+            map: ColourMap::Viridis,
+            lo: 0.0,
+            hi,
+            label: "s0 (DN, summed over colour bands)".into(),
+        })
+        .key(Key::Bar {
             map: ColourMap::Diverging,
             lo: -0.25,
             hi: 0.25,
-            label: "difference / max s0".into(),
-        },
-        i64::from(2 * w + 16),
-        i64::from(h + 18),
-        w,
-    );
+            label: "(captured − re-rendered) / max s0".into(),
+        });
     (
         images::Picture {
             name: "rerender-vs-captured",
-            canvas,
+            figure,
         },
         rmse,
     )

@@ -204,7 +204,7 @@ fn relit_lambertian_sphere_is_brightest_towards_the_light() {
         }
     }
     let pic = images::relit(&models, 40, 40, &camera, &light, "relit", "t");
-    assert!(pic.canvas.width() >= 40);
+    assert!(pic.figure.render().unwrap().width() >= 40);
     let (_, _, point, _) = models[best.0].unwrap();
     assert!(point.x > 0.02, "brightest point {point:?}");
 }

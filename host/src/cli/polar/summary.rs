@@ -92,7 +92,7 @@ pub(super) fn summary_json(
         "output": {
             "width": image.width(),
             "height": image.height(),
-            "note": "PNG rows below `height` are the legend strip",
+            "note": "PNG rows below `height` are the key (colour bar, AoLP x DoLP key, mask swatches)",
         },
         "conventions": {
             "rows": "y grows downward, x to image-right, sensor not flipped",

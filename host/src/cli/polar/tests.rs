@@ -20,6 +20,7 @@ fn args(frame: &Path, out: &Path) -> Args {
         dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
         aolp_dolp_weighted: false,
+        json: false,
         calibration: None,
         npy: false,
     }
@@ -308,6 +309,13 @@ fn documented_sphere_example_reproduces() {
     let mut a = args(&frame_path, &out);
     a.max_residual = Some(0.05);
     run(a).expect("run");
+    // the pictures of docs/polar.md: `ELLIPSO_DOCS_IMG=docs/img` (a folder) copies them there
+    if let Some(img) = std::env::var_os("ELLIPSO_DOCS_IMG") {
+        for stem in ["aolp", "i_s", "dolp", "mask"] {
+            let to = Path::new(&img).join(format!("polar-example-{stem}.png"));
+            fs::copy(out.join(format!("{stem}.png")), &to).expect("copy to ELLIPSO_DOCS_IMG");
+        }
+    }
     let summary: serde_json::Value =
         serde_json::from_str(&fs::read_to_string(out.join("summary.json")).expect("read"))
             .expect("json");
