@@ -287,6 +287,17 @@ pub fn field(top: &TopK, truncation_m: f64) -> (Vec<f32>, usize) {
     (values, unseen)
 }
 
+/// Per node: not carved, yet without evidence of an object (the nodes [`field`] sets to
+/// `+truncation` although no k views saw the board through them): space no view could judge.
+pub fn unjudged(top: &TopK) -> Vec<bool> {
+    (0..top.seen.len())
+        .map(|n| match top.kth(n) {
+            Some(v) => v < 0.0 && top.solid(n) < top.k.max(top.seen(n) / 2),
+            None => true,
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

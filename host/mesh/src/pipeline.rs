@@ -451,6 +451,7 @@ fn coarse_pass(
     let truncation = 4.0 * h;
     let top = carve_grid(setup, silhouettes, &grid, None, truncation, config, report);
     let (mut field, unseen) = carve::field(&top, truncation);
+    let unjudged = carve::unjudged(&top);
     drop(top);
     report.nodes_unseen = unseen;
     report.coarse = Some(grid);
@@ -505,6 +506,46 @@ fn coarse_pass(
             height: hi.z,
             frames: frame_list(&frames_seeing(setup, silhouettes, p), 10),
         });
+    }
+    // An object that runs off the board ends where the learned board ends: beyond it no view can
+    // judge the space (its background is unknown), so that part is neither carved nor solid.
+    // Object and unjudged space together reaching a side of the box is the same error.
+    let reach: Vec<bool> = occupied
+        .iter()
+        .zip(&unjudged)
+        .map(|(o, u)| *o || *u)
+        .collect();
+    let (reach_labels, reach_parts) = components::label(&grid, &reach);
+    let main_node = labels.iter().position(|l| *l == main.label);
+    if let Some(region) = main_node
+        .map(|n| reach_labels[n])
+        .and_then(|l| reach_parts.iter().find(|p| p.label == l))
+    {
+        let sides: Vec<usize> = (0..4).filter(|&f| region.touches[f]).collect();
+        if !sides.is_empty() {
+            let faces: Vec<&str> = sides.iter().map(|&f| components::FACES[f]).collect();
+            let f = sides[0];
+            let a = f / 2;
+            let i = if f % 2 == 0 { main.min[a] } else { main.max[a] };
+            let ijk: [usize; 3] = std::array::from_fn(|b| {
+                if b == a {
+                    i
+                } else {
+                    (main.min[b] + main.max[b]) / 2
+                }
+            });
+            let p = grid.point(ijk);
+            return Err(MeshError::ObjectOffBoard {
+                faces: faces.join(", "),
+                board: setup.volume.board,
+                x0: lo.x,
+                x1: hi.x,
+                y0: lo.y,
+                y1: hi.y,
+                height: hi.z,
+                frames: frame_list(&frames_seeing(setup, silhouettes, p), 10),
+            });
+        }
     }
     if let Some(second) = parts.get(1)
         && second.volume_m3(&grid) >= config.max_second_part * main.volume_m3(&grid)

@@ -225,10 +225,6 @@ fn too_few_posed_frames_is_an_error_naming_them() {
 }
 
 #[test]
-#[ignore = "known failure: with 12 views at 320×256 only ~12 % of the board's texels are learned, \
-            and views of unknown board carry no evidence of an object, so the part of the sphere \
-            near and beyond the footprint edge is not kept and no face is reached (docs/mesh.md, \
-            open problems)"]
 fn an_object_off_the_board_is_an_error_naming_the_face_and_frames() {
     let tmp = tempfile::tempdir().unwrap();
     // the base board's tags span x ±0.1335 m: a sphere at x = 0.12 reaches past it
