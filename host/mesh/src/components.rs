@@ -36,16 +36,6 @@ impl Part {
     pub fn volume_m3(&self, grid: &Grid) -> f64 {
         self.nodes as f64 * grid.spacing_m.powi(3)
     }
-
-    /// The faces it touches, by name.
-    pub fn touched_faces(&self) -> Vec<&'static str> {
-        FACES
-            .iter()
-            .zip(self.touches)
-            .filter(|(_, t)| *t)
-            .map(|(f, _)| *f)
-            .collect()
-    }
 }
 
 fn neighbours(grid: &Grid, n: usize) -> impl Iterator<Item = usize> + '_ {

@@ -480,32 +480,9 @@ fn coarse_pass(
         });
     };
     // sides and top: the object must stand inside the footprint, below the box's lid
-    let faces: Vec<&str> = main
-        .touched_faces()
-        .into_iter()
-        .filter(|f| *f != "bottom")
-        .collect();
+    let faces: Vec<usize> = (0..6).filter(|&f| f != 4 && main.touches[f]).collect();
     if !faces.is_empty() {
-        let at = |a: usize, face: usize| -> f64 {
-            let i = match face {
-                f if f == 2 * a => main.min[a],
-                f if f == 2 * a + 1 => main.max[a],
-                _ => (main.min[a] + main.max[a]) / 2,
-            };
-            grid.origin_m[a] + i as f64 * grid.spacing_m
-        };
-        let face = (0..6).find(|&f| f != 4 && main.touches[f]).unwrap_or(0);
-        let p = Point3::new(at(0, face), at(1, face), at(2, face));
-        return Err(MeshError::ObjectOffBoard {
-            faces: faces.join(", "),
-            board: setup.volume.board,
-            x0: lo.x,
-            x1: hi.x,
-            y0: lo.y,
-            y1: hi.y,
-            height: hi.z,
-            frames: frame_list(&frames_seeing(setup, silhouettes, p), 10),
-        });
+        return Err(off_board(setup, silhouettes, &grid, &main, &faces));
     }
     // An object that runs off the board ends where the learned board ends: beyond it no view can
     // judge the space (its background is unknown), so that part is neither carved nor solid.
@@ -523,28 +500,7 @@ fn coarse_pass(
     {
         let sides: Vec<usize> = (0..4).filter(|&f| region.touches[f]).collect();
         if !sides.is_empty() {
-            let faces: Vec<&str> = sides.iter().map(|&f| components::FACES[f]).collect();
-            let f = sides[0];
-            let a = f / 2;
-            let i = if f % 2 == 0 { main.min[a] } else { main.max[a] };
-            let ijk: [usize; 3] = std::array::from_fn(|b| {
-                if b == a {
-                    i
-                } else {
-                    (main.min[b] + main.max[b]) / 2
-                }
-            });
-            let p = grid.point(ijk);
-            return Err(MeshError::ObjectOffBoard {
-                faces: faces.join(", "),
-                board: setup.volume.board,
-                x0: lo.x,
-                x1: hi.x,
-                y0: lo.y,
-                y1: hi.y,
-                height: hi.z,
-                frames: frame_list(&frames_seeing(setup, silhouettes, p), 10),
-            });
+            return Err(off_board(setup, silhouettes, &grid, &main, &sides));
         }
     }
     if let Some(second) = parts.get(1)
@@ -576,6 +532,39 @@ fn coarse_pass(
         -truncation as f32,
     );
     Ok((grid, field, main))
+}
+
+/// [`MeshError::ObjectOffBoard`] for `main` reaching the box faces `faces` (indices into
+/// [`components::FACES`]), naming the frames that see the main part's edge on the first of them.
+fn off_board(
+    setup: &Setup<'_>,
+    silhouettes: &[(usize, Silhouette)],
+    grid: &Grid,
+    main: &Part,
+    faces: &[usize],
+) -> MeshError {
+    let face = faces[0];
+    let axis = face / 2;
+    let ijk: [usize; 3] = std::array::from_fn(|a| match a {
+        a if a == axis && face % 2 == 0 => main.min[a],
+        a if a == axis => main.max[a],
+        a => (main.min[a] + main.max[a]) / 2,
+    });
+    let (lo, hi) = (setup.volume.min_m, setup.volume.max_m);
+    MeshError::ObjectOffBoard {
+        faces: faces
+            .iter()
+            .map(|&f| components::FACES[f])
+            .collect::<Vec<_>>()
+            .join(", "),
+        board: setup.volume.board,
+        x0: lo.x,
+        x1: hi.x,
+        y0: lo.y,
+        y1: hi.y,
+        height: hi.z,
+        frames: frame_list(&frames_seeing(setup, silhouettes, grid.point(ijk)), 10),
+    }
 }
 
 fn fine_pass(
