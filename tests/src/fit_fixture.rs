@@ -1,15 +1,35 @@
-//! A small `fit.ply` for viewer tests: an icosphere of radius 40 mm at z = 40 mm with plausible
-//! fitted values that vary over the surface, a few flagged vertices and one with wild values
-//! (as a fit under rework may write), written by the export's own writer.
+//! Fit fixtures: the sphere scene's object as a mesh file for `ellipso fit --mesh`, and a small
+//! `fit.ply` for viewer tests — an icosphere of radius 40 mm at z = 40 mm with plausible fitted
+//! values that vary over the surface, a few flagged vertices and one with wild values (as a fit
+//! under rework may write), written by the export's own writer.
 
 use std::path::{Path, PathBuf};
 
 use ellipso_fit::data::{FitFlag, VertexFit};
 use ellipso_fit::export::ply::write_fit_ply;
 use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::procedural::icosphere;
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::Point3;
+
+/// The sphere scene's object (radius 40 mm at z = 40 mm) as an icosphere mesh, written to
+/// `dir/sphere.ply` (binary PLY); returns the path.
+pub fn sphere_mesh(dir: &Path) -> PathBuf {
+    let (dirs, faces) = icosphere(2);
+    let pos = dirs
+        .iter()
+        .map(|d| Point3::new(0.0, 0.0, 0.04) + d.into_inner() * 0.04)
+        .collect();
+    let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
+    let path = dir.join("sphere.ply");
+    std::fs::write(
+        &path,
+        write_ply(&mesh, PlyFormat::BinaryLittleEndian, false),
+    )
+    .unwrap();
+    path
+}
 
 /// Writes `dir/fit.ply` and returns its directory.
 pub fn write_fit_dir(dir: &Path) -> PathBuf {

@@ -6,31 +6,12 @@
 //! - a missing session, a missing mesh and a truncated mesh each fail with one line naming the
 //!   file.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::geometry::ply::{PlyFormat, write_ply};
-use ellipso_model::geometry::procedural::icosphere;
+use ellipso_tests::fit_fixture::sphere_mesh;
 use ellipso_tests::{ellipso_bin, shipped_scene as scene};
-use nalgebra::Point3;
-
-/// The sphere scene's object (radius 40 mm at z = 40 mm) as an icosphere mesh file.
-fn sphere_mesh(dir: &Path) -> PathBuf {
-    let (dirs, faces) = icosphere(2);
-    let pos = dirs
-        .iter()
-        .map(|d| Point3::new(0.0, 0.0, 0.04) + d.into_inner() * 0.04)
-        .collect();
-    let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
-    let path = dir.join("sphere.ply");
-    std::fs::write(
-        &path,
-        write_ply(&mesh, PlyFormat::BinaryLittleEndian, false),
-    )
-    .unwrap();
-    path
-}
 
 fn frames_snapshot(session: &Path) -> Vec<(String, Vec<u8>)> {
     let mut files: Vec<_> = std::fs::read_dir(session.join("frames"))

@@ -9,10 +9,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::geometry::ply::{PlyFormat, write_ply};
-use ellipso_model::geometry::procedural::icosphere;
+use ellipso_tests::fit_fixture::sphere_mesh;
 use ellipso_tests::{ellipso_bin, shipped_scene as scene};
-use nalgebra::Point3;
 
 const ARRAY_VARS: [&str; 7] = [
     "SLURM_ARRAY_TASK_ID",
@@ -52,23 +50,6 @@ fn failure(o: Output) -> String {
     let e = String::from_utf8_lossy(&o.stderr).trim().to_string();
     assert_eq!(e.lines().count(), 1, "{e}");
     e
-}
-
-/// The sphere scene's object as an icosphere mesh file.
-fn sphere_mesh(dir: &Path) -> PathBuf {
-    let (dirs, faces) = icosphere(2);
-    let pos = dirs
-        .iter()
-        .map(|d| Point3::new(0.0, 0.0, 0.04) + d.into_inner() * 0.04)
-        .collect();
-    let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
-    let path = dir.join("sphere.ply");
-    std::fs::write(
-        &path,
-        write_ply(&mesh, PlyFormat::BinaryLittleEndian, false),
-    )
-    .unwrap();
-    path
 }
 
 /// The figures of `fit-summary.json` that must not depend on sharding (times, wall clock,
