@@ -136,13 +136,14 @@ fn capture_session(scene: &Path, dir: &Path, args: &MeshArgs) -> anyhow::Result<
     Ok(())
 }
 
-/// The simulator's true object: the analytic sphere as a fine icosphere, meshes as rendered.
-fn truth_mesh(scene: &Scene) -> anyhow::Result<TriangleMesh> {
+/// The simulator's true object to score a mesh against: the analytic sphere as a fine
+/// icosphere (40 962 vertices), meshes as rendered.
+pub fn truth_object(scene: &Scene) -> anyhow::Result<TruthObject> {
     let sphere = matches!(
         scene.objects.first().map(|o| &o.geometry),
         Some(ellipso_sim::scene::ObjectGeometry::Sphere(_))
     );
-    Ok(TruthObject::from_scene(scene, sphere.then_some(6))?.mesh)
+    Ok(TruthObject::from_scene(scene, sphere.then_some(6))?)
 }
 
 fn bench_scene(
@@ -173,7 +174,7 @@ fn bench_scene(
         .with_context(|| format!("reading {}", report_path.display()))?;
     let peak_rss_bytes = report.peak_rss_bytes;
     let mesh = TriangleMesh::load(&out)?;
-    let truth = truth_mesh(scene)?;
+    let truth = truth_object(scene)?.mesh;
     let before_fit = mesh_distance(&mesh, &truth, 50_000, 1);
     crate::outln!(
         "[{name}] {} vertices · Chamfer {:.3} mm · Hausdorff {:.3} mm · {:.1} s · peak {:.0} MB",

@@ -318,12 +318,8 @@ fn fit_and_score(
     };
     let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;
 
-    // Only now the truth: the analytic sphere as a fine icosphere, meshes as rendered.
-    let sphere = matches!(
-        scene.objects.first().map(|o| &o.geometry),
-        Some(ellipso_sim::scene::ObjectGeometry::Sphere(_))
-    );
-    let truth = ellipso_fit::truth::TruthObject::from_scene(scene, sphere.then_some(6))?;
+    // Only now the truth.
+    let truth = super::bench_mesh::truth_object(scene)?;
     let score = score_against_truth(&truth, &run.fit.outcome.fits, &run.fit.mesh);
     let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
     let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
