@@ -44,17 +44,7 @@ impl<T: Real> FresnelTerms<T> {
     /// index `eta` (air → material). Exit transmission (material → air) at exterior angle θ_o
     /// has the same power transmittances (reciprocity, docs/model.md §2): call this with cos θ_o.
     pub fn dielectric(cos_theta: T, eta: T) -> Self {
-        let c = cos_theta.clamp_re(0.0, 1.0);
-        let eta = eta.max_re(T::one());
-        let eta_sq = eta.sq();
-        let eta_sq_m1 = (eta - T::one()) * (eta + T::one());
-        // q = √(η² − 1 + c²); where the radicand underflows (η = 1, c² below the f32 range)
-        // q = c exactly.
-        let q_sq = eta_sq_m1 + c.sq();
-        let q = if q_sq.re() > 0.0 { q_sq.sqrt() } else { c };
-        let den_s = c + q;
-        let den_p = eta_sq * c + q;
-        if den_s.re() <= 0.0 || den_p.re() <= 0.0 {
+        let Some(i) = Interface::new(cos_theta, eta) else {
             // η = 1 at c = 0: no interface.
             let (z, o) = (T::zero(), T::one());
             return Self {
@@ -65,22 +55,40 @@ impl<T: Real> FresnelTerms<T> {
                 r_minus: z,
                 t_cross: o,
             };
-        }
-        // Every quotient is formed as a product of ratios, never as x/(den·den): with η → 1
-        // and c → 0 both denominators are tiny and their product would underflow in f32.
-        let one = T::one();
-        let four = T::from_f64(4.0);
-        let sin_sq = (one - c) * (one + c);
-        let u = eta_sq_m1 / den_s / den_p; // (η² − 1)/((c + q)(η²c + q))
+        };
+        let (t_s, t_p) = i.transmittances();
         Self {
-            r_s: -(eta_sq_m1 / den_s) / den_s,
-            r_p: (eta_sq_m1 / den_p) * (((eta_sq + one) * c.sq() - one) / den_p),
-            t_s: (four * c / den_s) * (q / den_s),
-            t_p: (four * eta_sq * c / den_p) * (q / den_p),
-            // R− = ½(r_s − r_p)(r_s + r_p) with r_s − r_p = −2cq·u, r_s + r_p = −2 sin²θ·u.
-            r_minus: T::from_f64(2.0) * c * q * sin_sq * u.sq(),
-            t_cross: (four * eta * c / den_s) * (q / den_p),
+            r_s: i.r_s(),
+            r_p: i.r_p(),
+            t_s,
+            t_p,
+            r_minus: i.r_minus(),
+            t_cross: (T::from_f64(4.0) * i.eta * i.c / i.den_s) * (i.q / i.den_p),
         }
+    }
+
+    /// Only the reflection's Mueller entries (R+, R−, R×) of [`FresnelTerms::dielectric`], same
+    /// formulas and clamps, for callers that need nothing else (the microfacet reflection).
+    pub fn reflection_terms(cos_theta: T, eta: T) -> [T; 3] {
+        let Some(i) = Interface::new(cos_theta, eta) else {
+            return [T::zero(); 3];
+        };
+        let (r_s, r_p) = (i.r_s(), i.r_p());
+        [
+            (r_s.sq() + r_p.sq()) * T::from_f64(0.5),
+            i.r_minus(),
+            r_s * r_p,
+        ]
+    }
+
+    /// Only the transmission's T+ and T− of [`FresnelTerms::dielectric`], same formulas and
+    /// clamps (the diffuse lobe's entry and exit).
+    pub fn transmission_terms(cos_theta: T, eta: T) -> [T; 2] {
+        let Some(i) = Interface::new(cos_theta, eta) else {
+            return [T::one(), T::zero()];
+        };
+        let (t_s, t_p) = i.transmittances();
+        [(t_s + t_p) * T::from_f64(0.5), -i.r_minus()]
     }
     /// R_s = r_s².
     pub fn reflectance_s(&self) -> T {
@@ -117,6 +125,72 @@ impl<T: Real> FresnelTerms<T> {
     /// F^T in the local (s, p) frame (docs/model.md §2).
     pub fn transmission_mueller(&self) -> Mueller<T> {
         symmetric_block(self.t_plus(), self.t_minus(), self.t_cross)
+    }
+}
+
+/// The quantities every Fresnel term is formed from (module doc), with the clamps applied:
+/// c ∈ [0, 1], η ≥ 1, q = √(η² − 1 + c²) and the two denominators. `None` at the single point
+/// η = 1, c = 0 (no interface).
+struct Interface<T> {
+    c: T,
+    eta: T,
+    eta_sq: T,
+    eta_sq_m1: T,
+    q: T,
+    den_s: T,
+    den_p: T,
+}
+
+impl<T: Real> Interface<T> {
+    fn new(cos_theta: T, eta: T) -> Option<Self> {
+        let c = cos_theta.clamp_re(0.0, 1.0);
+        let eta = eta.max_re(T::one());
+        let eta_sq = eta.sq();
+        let eta_sq_m1 = (eta - T::one()) * (eta + T::one());
+        // q = √(η² − 1 + c²); where the radicand underflows (η = 1, c² below the f32 range)
+        // q = c exactly.
+        let q_sq = eta_sq_m1 + c.sq();
+        let q = if q_sq.re() > 0.0 { q_sq.sqrt() } else { c };
+        let den_s = c + q;
+        let den_p = eta_sq * c + q;
+        (den_s.re() > 0.0 && den_p.re() > 0.0).then_some(Self {
+            c,
+            eta,
+            eta_sq,
+            eta_sq_m1,
+            q,
+            den_s,
+            den_p,
+        })
+    }
+
+    // Every quotient is formed as a product of ratios, never as x/(den·den): with η → 1 and
+    // c → 0 both denominators are tiny and their product would underflow in f32.
+
+    fn r_s(&self) -> T {
+        -(self.eta_sq_m1 / self.den_s) / self.den_s
+    }
+
+    fn r_p(&self) -> T {
+        let one = T::one();
+        (self.eta_sq_m1 / self.den_p) * (((self.eta_sq + one) * self.c.sq() - one) / self.den_p)
+    }
+
+    fn transmittances(&self) -> (T, T) {
+        let four = T::from_f64(4.0);
+        (
+            (four * self.c / self.den_s) * (self.q / self.den_s),
+            (four * self.eta_sq * self.c / self.den_p) * (self.q / self.den_p),
+        )
+    }
+
+    /// R− = ½(r_s − r_p)(r_s + r_p) with r_s − r_p = −2cq·u, r_s + r_p = −2 sin²θ·u,
+    /// u = (η² − 1)/((c + q)(η²c + q)).
+    fn r_minus(&self) -> T {
+        let one = T::one();
+        let sin_sq = (one - self.c) * (one + self.c);
+        let u = self.eta_sq_m1 / self.den_s / self.den_p;
+        T::from_f64(2.0) * self.c * self.q * sin_sq * u.sq()
     }
 }
 

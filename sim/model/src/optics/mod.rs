@@ -36,6 +36,7 @@ pub mod measure;
 pub mod microfacet;
 pub mod pbrdf;
 mod real;
+pub mod staged;
 mod stokes;
 mod vec3;
 

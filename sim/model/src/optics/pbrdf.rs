@@ -26,6 +26,7 @@
 use super::frame::DIRECTION_EPS_SQ;
 use super::fresnel::FresnelTerms;
 use super::microfacet::microfacet_weight;
+use super::staged::{NormalCosines, ReflectionFrames, diffuse_stokes};
 use super::{Frame, Mueller, OpticsError, Real, Rotator, Stokes, Vec3};
 
 /// Material parameters of one surface point (docs/model.md §4; as fit unknowns, §11 "Unknowns").
@@ -148,7 +149,7 @@ impl<T: Real> Geometry<T> {
             v.normalized_or_none(DIRECTION_EPS_SQ)
                 .ok_or(OpticsError::ZeroDirection(name))
         };
-        let normal = unit(normal, "normal")?;
+        let unit_normal = unit(normal, "normal")?;
         let to_light = unit(to_light, "to_light")?;
         let to_camera = unit(to_camera, "to_camera")?;
         let mismatch = |a: Vec3<T>, b: Vec3<T>| (a - b).norm_squared().re() > 1e-10;
@@ -162,24 +163,33 @@ impl<T: Real> Geometry<T> {
                 "camera frame z must equal to_camera",
             ));
         }
-        let half = (to_light + to_camera)
-            .normalized_or_none(DIRECTION_EPS_SQ)
-            .unwrap_or(normal);
-        let raw_i = normal.dot(to_light);
-        let raw_o = normal.dot(to_camera);
+        // The half vector falls back to the unit normal when ω_i = −ω_o.
+        let half = super::staged::half_vector(to_light, to_camera).unwrap_or(unit_normal);
+        let c = NormalCosines::from_unit(unit_normal, to_light, to_camera, half);
         Ok(Self {
-            normal,
+            normal: c.normal,
             to_light,
             to_camera,
             light_frame,
             camera_frame,
             half,
-            cos_theta_i: raw_i.clamp_re(0.0, 1.0),
-            cos_theta_o: raw_o.clamp_re(0.0, 1.0),
-            cos_theta_h: normal.dot(half).clamp_re(0.0, 1.0),
+            cos_theta_i: c.cos_theta_i,
+            cos_theta_o: c.cos_theta_o,
+            cos_theta_h: c.cos_theta_h,
             cos_theta_d: half.dot(to_light).clamp_re(0.0, 1.0),
-            front_facing: raw_i.re() >= 0.0 && raw_o.re() >= 0.0,
+            front_facing: c.front_facing,
         })
+    }
+
+    /// The normal's part of this geometry (the unit normal and its cosines).
+    pub fn cosines(&self) -> NormalCosines<T> {
+        NormalCosines {
+            normal: self.normal,
+            cos_theta_i: self.cos_theta_i,
+            cos_theta_o: self.cos_theta_o,
+            cos_theta_h: self.cos_theta_h,
+            front_facing: self.front_facing,
+        }
     }
 
     /// Builds the frames from up vectors (see [`Frame::light`], [`Frame::camera`]) and then the
@@ -225,12 +235,7 @@ impl<T: Real> Lobes<T> {
 /// The s-axis of the microfacet reflection (specular and single scattering): ω_i × ω_o, or the
 /// camera x axis when ω_i ∥ ω_o (see the module doc).
 pub fn reflection_axis<T: Real>(g: &Geometry<T>) -> Vec3<T> {
-    let s = g.to_light.cross(g.to_camera);
-    if s.norm_squared().re() > DIRECTION_EPS_SQ {
-        s
-    } else {
-        g.camera_frame.x
-    }
+    super::staged::reflection_axis(g.to_light, g.to_camera, &g.camera_frame)
 }
 
 /// C_out · [[a, b, 0, 0], [b, a, 0, 0], [0, 0, c, 0], [0, 0, 0, c]] · C_in, written out.
@@ -289,23 +294,14 @@ pub fn lobe_weight<T: Real>(g: &Geometry<T>, sigma: T) -> T {
 
 /// The diffuse row and column: (C_{n→o}[T_o+, T_o−, 0, 0]ᵀ, [T_i+, T_i−, 0, 0] C_{i→n}).
 fn diffuse_factors<T: Real>(g: &Geometry<T>, eta: T) -> ([T; 4], [T; 4]) {
-    let z = T::zero();
-    let fi = FresnelTerms::dielectric(g.cos_theta_i, eta);
-    let fo = FresnelTerms::dielectric(g.cos_theta_o, eta);
-    let rot_in = g
-        .light_frame
-        .rotator_to_axis(g.to_light.cross(g.normal))
-        .unwrap_or_else(Rotator::identity);
-    let rot_out = g
-        .camera_frame
-        .rotator_to_axis(g.to_camera.cross(g.normal))
-        .unwrap_or_else(Rotator::identity)
-        .inverse();
-    let row = rot_in.apply_row([fi.t_plus(), fi.t_minus(), z, z]);
-    let col = rot_out
-        .apply(Stokes::new(fo.t_plus(), fo.t_minus(), z, z))
-        .to_array();
-    (col, row)
+    super::staged::diffuse_factors(
+        &g.cosines(),
+        g.to_light,
+        g.to_camera,
+        &g.light_frame,
+        &g.camera_frame,
+        eta,
+    )
 }
 
 /// P^d with ρ_d = 1 (multiply by ρ_d per channel).
@@ -379,29 +375,23 @@ pub fn apply_unit_lobes<T: Real>(
             weight_ss: T::zero(),
         };
     }
-    let s = s_light.to_array();
-    let (col, row) = diffuse_factors(g, eta);
-    let k = (row[0] * s[0] + row[1] * s[1] + row[2] * s[2] + row[3] * s[3]) * g.cos_theta_i;
-    let diffuse = Stokes::from_array(col).scale(k);
-    let f = FresnelTerms::dielectric(g.cos_theta_d, eta);
-    let axis = reflection_axis(g);
-    let rot_in = g
-        .light_frame
-        .rotator_to_axis(axis)
-        .unwrap_or_else(Rotator::identity);
-    let rot_out = g
-        .camera_frame
-        .rotator_to_axis(axis)
-        .unwrap_or_else(Rotator::identity)
-        .inverse();
-    let local = rot_in.apply(s_light);
-    let (a, b, c) = (f.r_plus(), f.r_minus(), f.r_cross());
-    let reflection = rot_out.apply(Stokes::new(
-        a * local.s0 + b * local.s1,
-        b * local.s0 + a * local.s1,
-        c * local.s2,
-        c * local.s3,
-    ));
+    let diffuse = diffuse_stokes(
+        &g.cosines(),
+        g.to_light,
+        g.to_camera,
+        &g.light_frame,
+        &g.camera_frame,
+        eta,
+        s_light,
+    );
+    let reflection = ReflectionFrames::new(
+        g.to_light,
+        g.to_camera,
+        &g.light_frame,
+        &g.camera_frame,
+        s_light,
+    )
+    .reflect(FresnelTerms::reflection_terms(g.cos_theta_d, eta));
     UnitLobeStokes {
         diffuse,
         reflection,
