@@ -22,10 +22,8 @@
 
 use std::collections::BTreeMap;
 
-use ellipso_model::optics::Vec3;
-
 use super::data::{SampleSet, VertexFit};
-use super::model::{SampleFrames, observed_pixels, predicted_pixels, unit_sample};
+use super::model::{SampleFrames, observed_pixels, predicted_pixels, unit_sample_at};
 
 /// Indices (into `frame_ids`) of the held-out views for `fraction` (module doc); `frame_ids`
 /// need not be sorted, the choice is made on the sorted order.
@@ -134,7 +132,6 @@ pub fn score(
     for (v, fit) in held.vertices.iter().zip(fits) {
         let trusted = fit.is_reliable(albedo_cap);
         let p = &fit.params;
-        let normal = Vec3::from_f64(fit.normal_world);
         for s in &v.samples {
             let Some(view) = held.views.get(s.view as usize) else {
                 continue;
@@ -149,7 +146,7 @@ pub fn score(
                 &mut untrusted
             };
             sums.n += 1;
-            let unit = unit_sample(&frames, normal, p.eta, p.sigma_s, p.sigma_ss);
+            let unit = unit_sample_at(&frames, fit.normal_world, p.eta, p.sigma_s, p.sigma_ss);
             for c in 0..channels {
                 let observed = observed_pixels(s.channels[c].map(f64::from));
                 let model = match &unit {

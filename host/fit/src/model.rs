@@ -19,11 +19,12 @@
 //!   (θ_i = θ_o = θ_h, Fresnel R(0)), through `ellipso_model::optics::coaxial::specular_term`.
 //! - A sample whose geometry is degenerate or back-facing has no prediction (`None`).
 
+mod lobes;
+
 use ellipso_model::optics::coaxial::unit_specular_terms;
-use ellipso_model::optics::measure::{
-    AnalyserAngles, ObservationChannels, dop_diffuse, observe_unit_lobes,
-};
+use ellipso_model::optics::measure::{AnalyserAngles, ObservationChannels, SensorIntensities};
 use ellipso_model::optics::pbrdf::Geometry;
+use ellipso_model::optics::staged::{ReflectionFrames, half_vector};
 use ellipso_model::optics::{Frame, Real, Stokes, Vec3};
 use nalgebra::Point3;
 
@@ -32,19 +33,29 @@ use ellipso_model::optics::Dual;
 
 use super::data::ViewGeometry;
 
-/// The fixed (normal-independent) part of one (vertex, view) geometry, prepared once per vertex.
+pub use lobes::LobeScalar;
+
+/// The fixed (normal- and material-independent) part of one (vertex, view) geometry, prepared
+/// once per vertex: directions, frames, the half vector, the reflection's rotations
+/// (`ellipso_model::optics::staged`) and the analyser rows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleFrames {
     /// Unit direction surface → flash, world.
     pub to_light: Vec3<f64>,
     /// Unit direction surface → camera, world.
     pub to_camera: Vec3<f64>,
+    /// Unit half vector of `to_light` and `to_camera`.
+    pub half: Vec3<f64>,
+    /// cos θ_d = h·ω_i clamped to [0, 1]: the Fresnel angle of the microfacet reflection.
+    pub cos_theta_d: f64,
     /// Light frame (z = −ω_i, x along the flash polariser).
     pub light_frame: Frame<f64>,
     /// Camera frame (z = ω_o, y = image up).
     pub camera_frame: Frame<f64>,
     /// Whether the flash is polarised (s_light = [1, 1, 0, 0]) or bare ([1, 0, 0, 0]).
     pub polarised: bool,
+    /// The microfacet reflection's rotations for this configuration and flash.
+    pub reflection: ReflectionFrames<f64>,
     /// The analyser pixels as linear functions of the observation channels: row k (nominal
     /// 0°, 45°, 90°, 135°) gives I_k = r·[I^d, I^s, I^α] with the analysers' effective angles
     /// for this ray ([`AnalyserAngles::for_ray`]; nominal when the view has no optical axis).
@@ -81,22 +92,53 @@ pub fn pixel_rows(a: &AnalyserAngles) -> [[f64; 3]; 4] {
 impl SampleFrames {
     /// The frames of `view` at `position_world`, built exactly as
     /// [`crate::data::SampleGeometry::model`] builds them; `None` when the geometry is
-    /// degenerate (see [`ViewGeometry::geometry_at`]).
+    /// degenerate (see [`ViewGeometry::geometry_at`]) or the flash is exactly opposite the
+    /// camera (no half vector).
     pub fn new(view: &ViewGeometry, position_world: [f64; 3]) -> Option<Self> {
         let g = view.geometry_at(&Point3::from(position_world))?;
-        let to_light = Vec3::from_f64(g.to_light);
-        let to_camera = Vec3::from_f64(g.to_camera);
-        let light_frame = Frame::light(to_light, Vec3::from_f64(g.light_up)).ok()?;
-        let camera_frame = Frame::camera(to_camera, Vec3::from_f64(g.camera_up)).ok()?;
-        let angles = view.analyser_angles(&g);
-        Some(Self {
-            to_light,
-            to_camera,
+        let light_frame =
+            Frame::light(Vec3::from_f64(g.to_light), Vec3::from_f64(g.light_up)).ok()?;
+        let camera_frame =
+            Frame::camera(Vec3::from_f64(g.to_camera), Vec3::from_f64(g.camera_up)).ok()?;
+        // Directions as the model's geometry normalises them (the normal only enters later).
+        let fixed = Geometry::new(
+            Vec3::from_f64(g.to_camera),
+            Vec3::from_f64(g.to_light),
+            Vec3::from_f64(g.to_camera),
             light_frame,
             camera_frame,
-            polarised: view.polarised(),
+        )
+        .ok()?;
+        let half = half_vector(fixed.to_light, fixed.to_camera)?;
+        let polarised = view.polarised();
+        let angles = view.analyser_angles(&g);
+        Some(Self {
+            to_light: fixed.to_light,
+            to_camera: fixed.to_camera,
+            half,
+            cos_theta_d: fixed.cos_theta_d,
+            light_frame,
+            camera_frame,
+            polarised,
+            reflection: ReflectionFrames::new(
+                fixed.to_light,
+                fixed.to_camera,
+                &light_frame,
+                &camera_frame,
+                light_stokes(polarised),
+            ),
             pixel_rows: pixel_rows(&angles),
         })
+    }
+}
+
+/// The flash's Stokes vector in the light frame at unit intensity: [1, 1, 0, 0] behind the
+/// rig's polariser (along light x), [1, 0, 0, 0] bare.
+pub fn light_stokes<T: Real>(polarised: bool) -> Stokes<T> {
+    if polarised {
+        Stokes::new(T::one(), T::one(), T::zero(), T::zero())
+    } else {
+        Stokes::unpolarised(T::one())
     }
 }
 
@@ -127,6 +169,11 @@ impl<T: Real> UnitSample<T> {
 
 fn channels<T: Real>(o: ObservationChannels<T>) -> [T; 3] {
     [o.diffuse, o.specular, o.alpha]
+}
+
+/// The observation channels [I^d, I^s, I^α] of a Stokes vector in the camera frame.
+fn observed<T: Real>(s: Stokes<T>) -> [T; 3] {
+    channels(SensorIntensities::from_stokes(s).observation())
 }
 
 /// An orthonormal tangent basis (t1, t2) of the unit normal `n` (t1 × t2 = n), built from the
@@ -167,40 +214,75 @@ pub fn unit_tangent_normal(n0: [f64; 3], t1: [f64; 3], t2: [f64; 3], p: f64, q: 
     [v.x / len, v.y / len, v.z / len]
 }
 
-/// The unit-albedo observations of one sample for `normal` (any non-zero length) and the
-/// nonlinear parameters, or `None` when the geometry is degenerate or back-facing
-/// (n·ω_i < 0 or n·ω_o < 0).
-pub fn unit_sample<T: Real>(
+/// A normal parameterised on the tangent plane of a unit `n0`: `n0 + p·t1 + q·t2` (any
+/// non-zero length; the optics normalise it). (p, q) are the solver's unknowns; a fixed normal
+/// is `p = q = 0`.
+#[derive(Clone, Copy, Debug)]
+pub struct TangentNormal<T> {
+    /// Unit centre normal.
+    pub n0: [f64; 3],
+    /// Orthonormal tangent basis of `n0` ([`tangent_basis`]).
+    pub t1: [f64; 3],
+    /// Second tangent, t1 × t2 = n0.
+    pub t2: [f64; 3],
+    /// Coordinate along t1.
+    pub p: T,
+    /// Coordinate along t2.
+    pub q: T,
+}
+
+impl<T: Real> TangentNormal<T> {
+    /// The (unnormalised) normal `n0 + p·t1 + q·t2`.
+    pub fn vector(&self) -> Vec3<T> {
+        tangent_normal(self.n0, self.t1, self.t2, self.p, self.q)
+    }
+}
+
+impl TangentNormal<f64> {
+    /// A fixed unit normal (p = q = 0).
+    pub fn fixed(n: [f64; 3]) -> Self {
+        let (t1, t2) = tangent_basis(n);
+        Self {
+            n0: n,
+            t1,
+            t2,
+            p: 0.0,
+            q: 0.0,
+        }
+    }
+}
+
+/// The unit-albedo observations of one sample for `normal` and the nonlinear parameters, or
+/// `None` when the normal is degenerate or the geometry back-facing (n·ω_i < 0 or n·ω_o < 0).
+/// `with_dop` also fills [`UnitSample::cos_theta_o`] and [`UnitSample::dop_diffuse`] (zero
+/// otherwise): only the paper loss and the fit's flags read them.
+pub fn unit_sample<T: LobeScalar>(
     frames: &SampleFrames,
-    normal: Vec3<T>,
+    normal: &TangentNormal<T>,
     eta: T,
     sigma_s: T,
     sigma_ss: T,
+    with_dop: bool,
 ) -> Option<UnitSample<T>> {
-    let g = Geometry::new(
-        normal,
-        frames.to_light.cast(),
-        frames.to_camera.cast(),
-        frames.light_frame.cast(),
-        frames.camera_frame.cast(),
+    T::unit_sample(frames, normal, eta, sigma_s, sigma_ss, with_dop)
+}
+
+/// [`unit_sample`] in `f64` at a fixed unit `normal` (the lobes only, no DoP fields).
+pub fn unit_sample_at(
+    frames: &SampleFrames,
+    normal: [f64; 3],
+    eta: f64,
+    sigma_s: f64,
+    sigma_ss: f64,
+) -> Option<UnitSample<f64>> {
+    unit_sample(
+        frames,
+        &TangentNormal::fixed(normal),
+        eta,
+        sigma_s,
+        sigma_ss,
+        false,
     )
-    .ok()?;
-    if !g.front_facing {
-        return None;
-    }
-    let s_light = if frames.polarised {
-        Stokes::new(T::one(), T::one(), T::zero(), T::zero())
-    } else {
-        Stokes::unpolarised(T::one())
-    };
-    let u = observe_unit_lobes(&g, eta, sigma_s, sigma_ss, s_light);
-    Some(UnitSample {
-        diffuse: channels(u.diffuse),
-        single_scattering: channels(u.single_scattering),
-        specular: channels(u.specular),
-        cos_theta_o: g.cos_theta_o,
-        dop_diffuse: dop_diffuse(g.cos_theta_o, eta),
-    })
 }
 
 /// The coaxial specular I^s of the two unit-albedo reflection lobes at `cos_theta_h`
@@ -273,7 +355,7 @@ mod tests {
             let Some(f) = SampleFrames::new(&v, [0.0; 3]) else {
                 continue;
             };
-            let Some(u) = unit_sample(&f, Vec3::from_f64(n), p.eta, p.sigma_s, p.sigma_ss) else {
+            let Some(u) = unit_sample_at(&f, n, p.eta, p.sigma_s, p.sigma_ss) else {
                 continue;
             };
             let g = v
@@ -308,7 +390,14 @@ mod tests {
         let (t1, t2) = tangent_basis(n0);
         let x0 = [1.45, 0.2, 0.45, 0.03, -0.02];
         let eval = |f: &SampleFrames, x: [f64; 5]| {
-            unit_sample(f, tangent_normal(n0, t1, t2, x[3], x[4]), x[0], x[1], x[2])
+            let normal = TangentNormal {
+                n0,
+                t1,
+                t2,
+                p: x[3],
+                q: x[4],
+            };
+            unit_sample(f, &normal, x[0], x[1], x[2], true)
         };
         let mut checked = 0;
         for _ in 0..60 {
@@ -317,8 +406,14 @@ mod tests {
                 continue;
             };
             let d = |k: usize| Dual::<5>::variable(x0[k], k);
-            let Some(u) = unit_sample(&f, tangent_normal(n0, t1, t2, d(3), d(4)), d(0), d(1), d(2))
-            else {
+            let normal = TangentNormal {
+                n0,
+                t1,
+                t2,
+                p: d(3),
+                q: d(4),
+            };
+            let Some(u) = unit_sample(&f, &normal, d(0), d(1), d(2), true) else {
                 continue;
             };
             for k in 0..5 {
@@ -349,6 +444,11 @@ mod tests {
                     out
                 };
                 let (fp, fm) = (fields(&up), fields(&um));
+                // The narrow duals carry the f64 evaluation's values (to rounding).
+                let at = fields(&eval(&f, x0).expect("front-facing at x0"));
+                for j in 0..11 {
+                    assert!((duals[j].re - at[j]).abs() <= 1e-13 * (1.0 + at[j].abs()));
+                }
                 for j in 0..11 {
                     let fd = (fp[j] - fm[j]) / (2.0 * h);
                     let ad = duals[j].du[k];

@@ -57,6 +57,7 @@
 //!
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
 
+mod albedos;
 mod lm;
 /// The overflow-free logistic function of the reparameterised bounds (shared with the lobe fit).
 pub(crate) use lm::sigmoid;
@@ -77,13 +78,10 @@ use ellipso_model::optics::pbrdf::PbrdfParams;
 use rayon::prelude::*;
 
 use super::data::{FitFlag, SampleSet, VertexFit, VertexGuide, VertexSamples, ViewGeometry};
-use super::model::{tangent_normal, unit_sample};
+use super::model::unit_sample_at;
 use lm::{LmState, RawDual, chart, physical, raw_from};
 
 use problem::{Albedos, Problem, Scratch};
-
-/// Raw unknowns of a warm start are clamped to ±this (sigmoid within 3.4e-4 of a bound).
-const WARM_RAW_LIMIT: f64 = 8.0;
 
 /// The guide of a vertex without one (no virtual samples, no floor, the default priors).
 static NO_GUIDE: VertexGuide = VertexGuide {
@@ -378,37 +376,48 @@ pub fn fit_vertex(
     let virtuals = problem.virtuals.len();
     let mut scratch_f = Scratch::<f64>::new(n, virtuals);
     let mut scratch_d = Scratch::<RawDual>::new(n, virtuals);
-    let mut starts: Vec<[f64; 6]> = match init {
+    let mut starts: Vec<[f64; lm::N_RAW]> = match init {
         Some(f) => {
             let p = &f.params;
-            // A warm start is pulled off a saturated bound (|raw| ≤ WARM_RAW_LIMIT), where the
-            // reparameterisation is flat and LM could not move it whatever the new terms say.
-            let warm = |raw: [f64; 6]| raw.map(|v| v.clamp(-WARM_RAW_LIMIT, WARM_RAW_LIMIT));
-            let mut s = vec![warm(raw_from(
-                p.eta, p.sigma_s, p.sigma_ss, p.rho_s, &bounds,
-            ))];
-            if let Some([sigma_s, sigma_ss, rho_s]) = guide.lobe_start {
-                // The cluster's lobe with the material's η where it is pooled.
+            // A warm start may sit on a bound: the projected LM leaves it as soon as the
+            // gradient points into the box (lm.rs).
+            let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, &bounds)];
+            if let Some([sigma_s, sigma_ss, _]) = guide.lobe_start {
+                // The cluster's lobes with the material's η where it is pooled (the albedos,
+                // ρ_s included, are projected: only the lobe shapes are a start), and its sharp
+                // lobe with the broader of its and the vertex's own second lobe. Where the two
+                // lobes would start (nearly) equal — a cluster that saw one lobe returns
+                // σss = σs — the second starts at 3σs: on equal lobes the split of the light
+                // between them is undetermined and LM cannot tell which way to separate them.
                 let eta = guide.eta_prior.map_or(p.eta, |prior| prior[0]);
-                s.push(warm(raw_from(eta, sigma_s, sigma_ss, rho_s, &bounds)));
+                if sigma_ss >= 1.5 * sigma_s {
+                    s.push(raw_from(eta, sigma_s, sigma_ss, &bounds));
+                }
+                let mut broad = sigma_ss.max(p.sigma_ss);
+                if broad < 1.5 * sigma_s {
+                    broad = (3.0 * sigma_s).min(1.0);
+                }
+                if broad != sigma_ss {
+                    s.push(raw_from(eta, sigma_s, broad, &bounds));
+                }
             }
             s
         }
         None => config
             .cold_starts
             .iter()
-            .map(|s| raw_from(s[0], s[1], s[2], config.initial_rho_s, &bounds))
+            .map(|s| raw_from(s[0], s[1], s[2], &bounds))
             .collect(),
     };
     if starts.is_empty() {
         let p = config.prior;
-        starts.push(raw_from(p[0], p[1], p[2], p[3], &bounds));
+        starts.push(raw_from(p[0], p[1], p[2], &bounds));
     }
     let adaptive = config.effort == Effort::Adaptive;
     if starts.len() > 1 && (adaptive || init.is_some()) {
         // Rank the starts by their cost at the start normal (one f64 evaluation each).
         let ch = chart(start_normal);
-        let mut ranked: Vec<(f64, [f64; 6])> = starts
+        let mut ranked: Vec<(f64, [f64; lm::N_RAW])> = starts
             .iter()
             .map(|s| {
                 let (c, _) = lm::cost_at(&problem, &ch, *s, &mut scratch_f);
@@ -470,22 +479,21 @@ pub fn fit_vertex(
             state.iterations = iterations;
         }
     }
-    // The weights at the final state (for the standard errors).
+    // The unit lobes at the final state, with their DoP fields (for the flags), and from them
+    // the weights at the final state (for the standard errors).
+    let x = physical(state.raw, &problem.bounds);
+    problem.units_at(&chart(state.normal), &x, true, &mut scratch_f);
     if measurement {
-        let _ = reweight_at(&mut problem, &state, &mut scratch_f);
+        let _ = problem.reweight(&scratch_f, &state.albedos);
     }
-    finish(&problem, vertex, state, flags, guide, config)
+    finish(&problem, vertex, state, flags, guide, config, &scratch_f)
 }
 
 /// Measurement mode: reweights `problem` from the model at `state`; returns the largest
 /// relative change of any 1/σ.
 fn reweight_at(problem: &mut Problem, state: &LmState, scratch: &mut Scratch<f64>) -> f64 {
     let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, scratch);
-    problem.reweight(
-        scratch,
-        &albedos,
-        physical(state.raw, &problem.bounds).rho_s,
-    )
+    problem.reweight(scratch, &albedos)
 }
 
 /// Adaptive effort: whether a start's result warrants trying the next start.
@@ -522,6 +530,7 @@ fn finish(
     mut flags: Vec<FitFlag>,
     guide: &VertexGuide,
     config: &SolverConfig,
+    final_units: &Scratch<f64>,
 ) -> VertexFit {
     let bounds = problem.bounds;
     let x = physical(state.raw, &bounds);
@@ -530,7 +539,7 @@ fn finish(
         eta: x.eta,
         sigma_s: x.sigma_s,
         sigma_ss: x.sigma_ss.max(x.sigma_s).min(1.0),
-        rho_s: x.rho_s,
+        rho_s: state.albedos.rho_s.max(0.0),
         rho_ss: state.albedos.rho_ss.map(|v| v.max(0.0)),
         rho_d: state.albedos.rho_d.map(|v| v.max(0.0)),
     };
@@ -539,26 +548,25 @@ fn finish(
         return prior_fit(problem, vertex, state.normal, None, flags, config);
     }
     let u = uncertainty::standard_errors(problem, &ch, &x, &state.albedos);
-    // Identifiability of η and grazing, at the solution.
-    let normal = tangent_normal(ch.n0, ch.t1, ch.t2, 0.0, 0.0);
+    // Identifiability of η and grazing, at the solution (`final_units`: the unit lobes there,
+    // zero for samples the fitted normal turns away).
     let mut max_sensitivity: f64 = 0.0;
     let mut max_cos_o: f64 = 0.0;
     let mut dop_sum = 0.0;
-    for f in &problem.frames {
-        if let Some(s) = unit_sample(f, normal, x.eta, x.sigma_s, x.sigma_ss) {
-            let (dop, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
-            max_sensitivity = max_sensitivity.max(d.abs());
-            max_cos_o = max_cos_o.max(s.cos_theta_o);
-            dop_sum += dop;
-        }
+    let back_facing = |s: &&super::model::UnitSample<f64>| {
+        s.diffuse == [0.0; 3] && s.specular == [0.0; 3] && s.single_scattering == [0.0; 3]
+    };
+    for s in final_units.units.iter().filter(|s| !back_facing(s)) {
+        let (dop, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
+        max_sensitivity = max_sensitivity.max(d.abs());
+        max_cos_o = max_cos_o.max(s.cos_theta_o);
+        dop_sum += dop;
     }
     // Polarisation SNR: RMS of the (unweighted) DoP residuals against the mean model DoP. Below
     // 1 the observed DoP is dominated by noise and its Rice bias (docs/model.md §12, dark
     // pixels), so the std error (which assumes zero-mean noise) understates η's error.
-    let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
-    let _ = problem.evaluate(&ch, &x, Some(state.albedos), &mut scratch, &mut |_: f64| {});
     let dop_sq: f64 = problem
-        .dop_residuals(&scratch, &state.albedos, x.rho_s)
+        .dop_residuals(final_units, &state.albedos)
         .map(|r| r * r)
         .sum();
     let n = problem.len().max(1) as f64;
@@ -645,16 +653,18 @@ fn prior_fit(
         },
     };
     if init.is_none() && problem.len() > 0 {
-        let raw = raw_from(params.eta, params.sigma_s, params.sigma_ss, params.rho_s, b);
+        let raw = raw_from(params.eta, params.sigma_s, params.sigma_ss, b);
         let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
         let (_, a): (f64, Albedos<f64>) = lm::cost_at(problem, &chart(normal), raw, &mut scratch);
         if a.rho_d
             .iter()
             .chain(&a.rho_ss)
+            .chain([&a.rho_s])
             .all(|v| v.is_finite() && *v >= 0.0)
         {
             params.rho_d = a.rho_d;
             params.rho_ss = a.rho_ss;
+            params.rho_s = a.rho_s;
         }
     }
     flags.sort();
@@ -710,7 +720,6 @@ pub fn forward_cost_all(set: &SampleSet, fits: &[VertexFit]) -> ForwardCost {
         .par_iter()
         .zip(fits.par_iter())
         .map(|(v, fit)| {
-            let normal = ellipso_model::optics::Vec3::from_f64(fit.normal_world);
             let p = &fit.params;
             let mut sum = 0.0;
             let mut count = 0u64;
@@ -721,7 +730,8 @@ pub fn forward_cost_all(set: &SampleSet, fits: &[VertexFit]) -> ForwardCost {
                 let Some(f) = super::model::SampleFrames::new(view, v.position_world) else {
                     continue;
                 };
-                let Some(u) = unit_sample(&f, normal, p.eta, p.sigma_s, p.sigma_ss) else {
+                let Some(u) = unit_sample_at(&f, fit.normal_world, p.eta, p.sigma_s, p.sigma_ss)
+                else {
                     continue;
                 };
                 for c in 0..channels {

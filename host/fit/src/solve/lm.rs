@@ -1,6 +1,23 @@
-//! Levenberg–Marquardt over the six raw (unbounded) nonlinear unknowns of one vertex, with
-//! exact Jacobians from dual numbers and the bounds removed by reparameterisation
-//! (docs/fit-solver.md "Bounds"; formulas in the `solve` module doc).
+//! Levenberg–Marquardt over the six nonlinear unknowns of one vertex inside their physical box,
+//! with exact Jacobians from dual numbers (docs/fit-solver.md "Bounds" and "LM").
+//!
+//! Contract:
+//! - The unknowns are box coordinates `x` = (η, ln σ_s, v, p, q) with σ_ss = σ_s +
+//!   (1 − σ_s)·v, so every bound is a plain interval: η ∈ [η_min, η_max], ln σ_s ∈
+//!   [ln σ_floor, 0], v ∈ [0, 1]; p, q (the normal's tangent coordinates) are free. No iterate
+//!   ever leaves the box (σ_floor ≤ σ_s ≤ σ_ss ≤ 1 always). The albedos, ρ_s included, are not
+//!   LM unknowns: they are projected out exactly inside every evaluation (`albedos.rs`).
+//! - Bounds are handled by projection with an active set (projected Levenberg–Marquardt, Kanzow,
+//!   Yamashita & Fukushima 2004, "Levenberg–Marquardt methods with strong local convergence
+//!   properties for solving nonlinear equations with convex constraints"): an unknown at a bound
+//!   whose gradient points out of the box is held there for the step, the others take the damped
+//!   Gauss–Newton step, and the trial point is clipped into the box. An optimum on a bound is
+//!   reached in a step or two (a sigmoid reparameterisation puts it at infinity, where LM crawls
+//!   a few logit units per iteration until the iteration cap).
+//! - The damping follows the gain ratio of each step (Madsen, Nielsen & Tingleff 2004, "Methods
+//!   for non-linear least squares problems", §3.2). A run stops when the Gauss–Newton decrement
+//!   is below `chi2_tolerance`·s², when a step the linear model mispredicted (gain < ¼) bought
+//!   less than that, or on the classic relative-decrease and step tolerances.
 
 use ellipso_model::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
@@ -9,15 +26,11 @@ use super::super::model::{tangent_basis, unit_tangent_normal};
 use super::problem::{Albedos, Bounds, Chart, Nonlinear, Problem, Scratch};
 use super::{LossMode, SolverConfig};
 
-/// Raw unknowns: u (η), a (σ_s), b (σ_ss), c (ρ_s), p, q (tangent normal).
-pub(super) const N_RAW: usize = 6;
+/// Box coordinates: η, ln σ_s, v (σ_ss fraction), tangent p, q.
+pub(super) const N_RAW: usize = 5;
 pub(super) type RawDual = Dual<N_RAW>;
 type Mat = SMatrix<f64, N_RAW, N_RAW>;
 type Vector = SVector<f64, N_RAW>;
-
-/// Raw values are clamped to ±[`RAW_LIMIT`]: sigmoid/softplus are saturated to 1e-26 there, so
-/// nothing is lost, and exp() never overflows.
-const RAW_LIMIT: f64 = 60.0;
 
 /// 1/(1 + e⁻ˣ), overflow-free.
 pub(crate) fn sigmoid<T: Real>(x: T) -> T {
@@ -29,66 +42,67 @@ pub(crate) fn sigmoid<T: Real>(x: T) -> T {
     }
 }
 
-/// Inverse of the sigmoid, the argument clamped to [1e-12, 1 − 1e-12].
-pub(super) fn logit(s: f64) -> f64 {
-    let s = s.clamp(1e-12, 1.0 - 1e-12);
-    (s / (1.0 - s)).ln()
+/// The box of the coordinates: lower and upper bound per coordinate (±∞ for p, q).
+fn box_of(bounds: &Bounds) -> ([f64; N_RAW], [f64; N_RAW]) {
+    (
+        [
+            bounds.eta_min,
+            bounds.sigma_s_min.ln(),
+            0.0,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        [bounds.eta_max, 0.0, 1.0, f64::INFINITY, f64::INFINITY],
+    )
 }
 
-/// Physical unknowns from raw ones (the reparameterisation): every unknown in its box.
-pub(super) fn physical<T: Real>(raw: [T; N_RAW], bounds: &Bounds) -> Nonlinear<T> {
-    let k = T::from_f64;
-    let eta = k(bounds.eta_min) + k(bounds.eta_max - bounds.eta_min) * sigmoid(raw[0]);
-    let smin = bounds.sigma_s_min;
-    let sigma_s = k(smin) + k(1.0 - smin) * sigmoid(raw[1]);
-    let sigma_ss = sigma_s + (T::one() - sigma_s) * sigmoid(raw[2]);
-    Nonlinear {
-        eta,
-        sigma_s,
-        sigma_ss,
-        rho_s: k(bounds.albedo_cap) * sigmoid(raw[3]),
-        p: raw[4],
-        q: raw[5],
-    }
-}
-
-/// Raw unknowns (with p = q = 0) for physical values, clamped into the open box.
-pub(super) fn raw_from(
-    eta: f64,
-    sigma_s: f64,
-    sigma_ss: f64,
-    rho_s: f64,
-    bounds: &Bounds,
-) -> [f64; N_RAW] {
-    let smin = bounds.sigma_s_min;
-    let s = ((sigma_s - smin) / (1.0 - smin)).clamp(0.0, 1.0);
-    let sigma_s_c = smin + (1.0 - smin) * s.clamp(1e-12, 1.0 - 1e-12);
-    let t = ((sigma_ss - sigma_s_c) / (1.0 - sigma_s_c).max(1e-12)).clamp(0.0, 1.0);
-    let e = (eta - bounds.eta_min) / (bounds.eta_max - bounds.eta_min);
-    clamp_raw([
-        logit(e),
-        logit(s),
-        logit(t),
-        logit(rho_s / bounds.albedo_cap),
-        0.0,
-        0.0,
-    ])
-}
-
-fn clamp_raw(mut raw: [f64; N_RAW]) -> [f64; N_RAW] {
-    for v in &mut raw[..4] {
-        *v = if v.is_finite() {
-            v.clamp(-RAW_LIMIT, RAW_LIMIT)
+/// `x` clipped into the box; a non-finite coordinate becomes the middle of its interval (0 for
+/// p, q).
+fn project(mut x: [f64; N_RAW], bounds: &Bounds) -> [f64; N_RAW] {
+    let (lo, hi) = box_of(bounds);
+    for i in 0..N_RAW {
+        x[i] = if !x[i].is_finite() {
+            if lo[i].is_finite() {
+                0.5 * (lo[i] + hi[i])
+            } else {
+                0.0
+            }
         } else {
-            0.0
+            x[i].clamp(lo[i], hi[i])
         };
     }
-    raw
+    x
+}
+
+/// Physical unknowns from box coordinates (inside the box by construction; the clamps only
+/// guard rounding: σ_s ≤ 1, v ∈ [0, 1]).
+pub(super) fn physical<T: Real>(x: [T; N_RAW], _bounds: &Bounds) -> Nonlinear<T> {
+    let sigma_s = x[1].exp().min_re(T::one());
+    let v = x[2].clamp_re(0.0, 1.0);
+    Nonlinear {
+        eta: x[0],
+        sigma_s,
+        sigma_ss: sigma_s + (T::one() - sigma_s) * v,
+        p: x[3],
+        q: x[4],
+    }
+}
+
+/// Box coordinates (with p = q = 0) for physical values, clipped into the box.
+pub(super) fn raw_from(eta: f64, sigma_s: f64, sigma_ss: f64, bounds: &Bounds) -> [f64; N_RAW] {
+    let sigma_s_c = sigma_s.clamp(bounds.sigma_s_min, 1.0);
+    let v = if sigma_s_c < 1.0 {
+        (sigma_ss - sigma_s_c) / (1.0 - sigma_s_c)
+    } else {
+        0.0
+    };
+    project([eta, sigma_s_c.ln(), v, 0.0, 0.0], bounds)
 }
 
 /// The state LM returns.
 #[derive(Clone, Debug)]
 pub(super) struct LmState {
+    /// Box coordinates at the end (p = q = 0: the chart is centred on `normal`).
     pub raw: [f64; N_RAW],
     pub normal: [f64; 3],
     pub cost: f64,
@@ -136,15 +150,46 @@ fn jacobian_at(
     let re = Albedos {
         rho_d: albedos.rho_d.map(|v| v.re),
         rho_ss: albedos.rho_ss.map(|v| v.re),
+        rho_s: albedos.rho_s.re,
     };
     (cost, jtj, jtr, re)
 }
 
-/// The Gauss–Newton decrement rᵀJ(JᵀJ)⁻¹Jᵀr: the cost decrease the undamped step predicts,
-/// i.e. the squared distance to the local optimum in the metric of JᵀJ. Divided by s² it is
-/// that distance in standard errors squared, so it does not stop early in flat valleys (where
-/// a small actual decrease says little). JᵀJ gets a 1e-9·max-diagonal ridge so null directions
-/// count as far (large decrement) only where the gradient points along them; ∞ if singular.
+/// Which coordinates are held at their bound for the next step: at (within 1e-12 of the
+/// interval) a bound with the gradient `jtr` pointing out of the box.
+fn active_set(x: &[f64; N_RAW], jtr: &Vector, bounds: &Bounds) -> [bool; N_RAW] {
+    let (lo, hi) = box_of(bounds);
+    core::array::from_fn(|i| {
+        if !lo[i].is_finite() {
+            return false;
+        }
+        let eps = 1e-12 * (hi[i] - lo[i]).max(1.0);
+        (x[i] <= lo[i] + eps && jtr[i] > 0.0) || (x[i] >= hi[i] - eps && jtr[i] < 0.0)
+    })
+}
+
+/// JᵀJ and Jᵀr with the `active` coordinates removed (their rows and columns replaced by the
+/// identity and zero), so a solve moves only the free ones.
+fn restricted(jtj: &Mat, jtr: &Vector, active: &[bool; N_RAW]) -> (Mat, Vector) {
+    let mut a = *jtj;
+    let mut g = *jtr;
+    for i in (0..N_RAW).filter(|&i| active[i]) {
+        for j in 0..N_RAW {
+            a[(i, j)] = 0.0;
+            a[(j, i)] = 0.0;
+        }
+        a[(i, i)] = 1.0;
+        g[i] = 0.0;
+    }
+    (a, g)
+}
+
+/// The Gauss–Newton decrement rᵀJ(JᵀJ)⁻¹Jᵀr over the free coordinates: the cost decrease the
+/// undamped step predicts, i.e. the squared distance to the local optimum in the metric of
+/// JᵀJ. Divided by s² it is that distance in standard errors squared, so it does not stop early
+/// in flat valleys (where a small actual decrease says little). JᵀJ gets a 1e-9·max-diagonal
+/// ridge so null directions count as far (large decrement) only where the gradient points along
+/// them; ∞ if singular.
 fn newton_decrement(jtj: &Mat, jtr: &Vector) -> f64 {
     let max_diag = (0..N_RAW).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
     let mut a = *jtj;
@@ -153,6 +198,23 @@ fn newton_decrement(jtj: &Mat, jtr: &Vector) -> f64 {
     }
     a.cholesky()
         .map_or(f64::INFINITY, |c| jtr.dot(&c.solve(jtr)))
+}
+
+/// Largest step of one coordinate per LM iteration: 0.5 in η, 1.5 in ln σ_s (a factor 4.5),
+/// 0.5 in v, 0.35 rad (20°) for the normal's tangent coordinates. A longer step is shortened as
+/// a whole, so it keeps its direction (a trust region in the box's own units).
+const MAX_STEP: [f64; N_RAW] = [0.5, 1.5, 0.5, 0.35, 0.35];
+
+/// `delta` shortened so no component exceeds [`MAX_STEP`].
+fn capped_step(delta: Vector) -> Vector {
+    let over = (0..N_RAW)
+        .map(|i| delta[i].abs() / MAX_STEP[i])
+        .fold(1.0, f64::max);
+    if over.is_finite() {
+        delta / over
+    } else {
+        delta
+    }
 }
 
 /// One LM run from (`raw`, `normal`). In measurement mode the problem is first reweighted from
@@ -167,14 +229,15 @@ pub(super) fn run(
     scratch_f: &mut Scratch<f64>,
     scratch_d: &mut Scratch<RawDual>,
 ) -> LmState {
-    let mut raw = clamp_raw(raw);
+    let bounds = problem.bounds;
+    let mut raw = project(raw, &bounds);
+    raw[3] = 0.0;
     raw[4] = 0.0;
-    raw[5] = 0.0;
     let mut ch = chart(normal);
     let reweighting = problem.loss == LossMode::Measurement;
     if reweighting {
         let (_, a) = cost_at(problem, &ch, raw, scratch_f);
-        let _ = problem.reweight(scratch_f, &a, physical(raw, &problem.bounds).rho_s);
+        let _ = problem.reweight(scratch_f, &a);
     }
     let (mut cost, mut jtj, mut jtr, mut albedos) = jacobian_at(problem, &ch, raw, scratch_d);
     // Statistical scale of the cost: s² = cost/(m − p) (module doc of `solve`).
@@ -201,11 +264,19 @@ pub(super) fn run(
     }
     while !converged && iterations < config.max_iterations {
         iterations += 1;
-        let max_diag = (0..N_RAW).map(|i| jtj[(i, i)]).fold(0.0, f64::max);
+        let active = active_set(&raw, &jtr, &bounds);
+        let (free_jtj, free_jtr) = restricted(&jtj, &jtr, &active);
+        let max_diag = (0..N_RAW)
+            .filter(|&i| !active[i])
+            .map(|i| jtj[(i, i)])
+            .fold(0.0, f64::max);
         let mut accepted = false;
+        // Growth factor of the damping on a rejected step, doubled at every rejection (Madsen,
+        // Nielsen & Tingleff 2004, §3.2): a far-off linearisation is left in a few trials.
+        let mut growth = 2.0;
         while !accepted {
-            let mut a = jtj;
-            for i in 0..N_RAW {
+            let mut a = free_jtj;
+            for i in (0..N_RAW).filter(|&i| !active[i]) {
                 // Marquardt scaling with a floor so flat directions are still damped.
                 a[(i, i)] += mu * jtj[(i, i)].max(1e-9 * max_diag).max(1e-300);
             }
@@ -216,42 +287,65 @@ pub(super) fn run(
                 }
                 continue;
             };
-            let delta = chol.solve(&(-jtr));
-            let mut trial = raw;
-            for i in 0..N_RAW {
-                trial[i] += delta[i];
-            }
+            let proposed = capped_step(chol.solve(&(-free_jtr)));
             let trial = {
-                let mut t = clamp_raw(trial);
-                t[4] = trial[4];
-                t[5] = trial[5];
-                t
+                let mut t = raw;
+                for i in 0..N_RAW {
+                    t[i] += proposed[i];
+                }
+                project(t, &bounds)
             };
+            // The step actually taken (clipped into the box) and the decrease the linearised
+            // model predicts for it: |r|² − |r + Jδ|² = −2δᵀJᵀr − δᵀJᵀJδ.
+            let delta = Vector::from_fn(|i, _| trial[i] - raw[i]);
+            let predicted = -2.0 * delta.dot(&jtr) - delta.dot(&(jtj * delta));
             let (trial_cost, _) = cost_at(problem, &ch, trial, scratch_f);
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
-                let decrease = (cost - trial_cost) / cost;
+                let actual = cost - trial_cost;
+                let decrease = actual / cost;
+                // Gain ratio (module doc): the damping falls where the linear model predicted
+                // the decrease well and rises where it did not, so a step across a kink of the
+                // projected cost (an albedo meeting its bound) is not followed by an undamped
+                // step straight back.
+                let gain = if predicted > 0.0 {
+                    actual / predicted
+                } else {
+                    0.0
+                };
                 let step = delta.norm();
-                let size = raw[..4].iter().map(|v| v * v).sum::<f64>().sqrt();
+                let size = raw[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
                 // Re-centre the normal chart on the accepted normal.
-                let new_normal = unit_tangent_normal(ch.n0, ch.t1, ch.t2, trial[4], trial[5]);
+                let new_normal = unit_tangent_normal(ch.n0, ch.t1, ch.t2, trial[3], trial[4]);
                 ch = chart(new_normal);
                 raw = trial;
+                raw[3] = 0.0;
                 raw[4] = 0.0;
-                raw[5] = 0.0;
                 (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, scratch_d);
-                mu = (mu / 3.0).max(1e-12);
+                let factor = 1.0 - (2.0 * gain - 1.0).powi(3);
+                mu = (mu * factor.clamp(1.0 / 3.0, 2.0)).max(1e-12);
+                let s2 = cost / dof;
+                let next_active = active_set(&raw, &jtr, &bounds);
+                let (fj, fr) = restricted(&jtj, &jtr, &next_active);
                 let near_optimum = config.chi2_tolerance > 0.0
-                    && newton_decrement(&jtj, &jtr) < config.chi2_tolerance * cost / dof;
+                    && newton_decrement(&fj, &fr) < config.chi2_tolerance * s2;
+                // The linear model failed (gain < ¼) and the step bought a decrease below the
+                // χ² tolerance: what the model still promises lies across a kink no step can
+                // take, and what is left to gain is statistically nothing.
+                let stalled = config.chi2_tolerance > 0.0
+                    && gain < 0.25
+                    && actual < config.chi2_tolerance * s2;
                 if decrease < config.relative_tolerance
                     || near_optimum
+                    || stalled
                     || step < config.step_tolerance * (size + config.step_tolerance)
                     || cost <= abs_tol
                 {
                     converged = true;
                 }
             } else {
-                mu *= 4.0;
+                mu *= growth;
+                growth *= 2.0;
                 if mu > 1e16 {
                     // No damped step decreases the cost: a stationary point to working precision.
                     converged = true;

@@ -27,27 +27,22 @@ use super::super::data::{
     OBSERVATION_CHANNELS, VertexGuide, VertexSamples, ViewGeometry, VirtualSample,
 };
 use super::super::model::{
-    SampleFrames, UnitSample, coaxial_unit_specular, observed_pixels as pixels_of,
-    predicted_pixels as pixel_pred, tangent_basis, tangent_normal, unit_sample,
+    LobeScalar, SampleFrames, TangentNormal, UnitSample, coaxial_unit_specular,
+    observed_pixels as pixels_of, predicted_pixels as pixel_pred, tangent_basis, tangent_normal,
+    unit_sample,
 };
+use super::albedos::AlbedoSystem;
+pub(super) use super::albedos::Albedos;
 use super::{LossMode, SolverConfig};
 
-/// The nonlinear unknowns in physical units (η, σ_s, σ_ss, ρ_s, tangent p, q).
+/// The nonlinear unknowns in physical units (η, σ_s, σ_ss, tangent p, q).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Nonlinear<T> {
     pub eta: T,
     pub sigma_s: T,
     pub sigma_ss: T,
-    pub rho_s: T,
     pub p: T,
     pub q: T,
-}
-
-/// The linear albedos (ρ_d, ρ_ss per colour channel).
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Albedos<T> {
-    pub rho_d: [T; 3],
-    pub rho_ss: [T; 3],
 }
 
 /// The normal chart: unit n0 and its tangent basis.
@@ -408,7 +403,7 @@ impl<'a> Problem<'a> {
     /// and `rho_s` — iteratively reweighted least squares, the weights held fixed inside each
     /// LM run (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
     /// paper mode. Returns the largest relative change of any 1/σ (0 in paper mode).
-    pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>, rho_s: f64) -> f64 {
+    pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>) -> f64 {
         if self.loss != LossMode::Measurement || scratch.units.len() != self.len() {
             return 0.0;
         }
@@ -419,7 +414,7 @@ impl<'a> Problem<'a> {
                 core::array::from_fn(|c| {
                     pixel_pred(
                         &rows[k],
-                        units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], rho_s),
+                        units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s),
                     )
                 })
             })
@@ -495,7 +490,7 @@ impl<'a> Problem<'a> {
     /// Evaluates every residual into `sink` (in the documented order) and returns the albedos
     /// used: `given`, or the per-channel box-constrained least-squares projection
     /// (docs/model.md §11 "Unknowns") of the data (+ virtual) residuals when `given` is `None`.
-    pub fn evaluate<T: Real>(
+    pub fn evaluate<T: LobeScalar>(
         &self,
         chart: &Chart,
         x: &Nonlinear<T>,
@@ -504,20 +499,7 @@ impl<'a> Problem<'a> {
         sink: &mut impl FnMut(T),
     ) -> Albedos<T> {
         let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x.p, x.q);
-        let zero = T::zero();
-        scratch.units.clear();
-        for f in &self.frames {
-            // Back-facing under the current normal: the model returns no light.
-            scratch.units.push(
-                unit_sample(f, normal, x.eta, x.sigma_s, x.sigma_ss).unwrap_or(UnitSample {
-                    diffuse: [zero; 3],
-                    single_scattering: [zero; 3],
-                    specular: [zero; 3],
-                    cos_theta_o: zero,
-                    dop_diffuse: zero,
-                }),
-            );
-        }
+        self.units_at(chart, x, self.loss == LossMode::Paper, scratch);
         scratch.virt.clear();
         for v in self.virtuals {
             scratch.virt.push(coaxial_unit_specular(
@@ -529,18 +511,18 @@ impl<'a> Problem<'a> {
         }
         let albedos = match given {
             Some(a) => a,
-            None => self.project(x.rho_s, scratch),
+            None => self.project(scratch),
         };
         let k = T::from_f64;
         for (i, u) in scratch.units.iter().enumerate() {
             match self.loss {
-                LossMode::Paper => self.paper_residuals(i, u, &albedos, x.rho_s, sink),
+                LossMode::Paper => self.paper_residuals(i, u, &albedos, sink),
                 LossMode::Measurement => {
                     let rows = &self.frames[i].pixel_rows;
                     for c in 0..self.channels {
                         let pred = pixel_pred(
                             rows,
-                            u.predict(albedos.rho_d[c], albedos.rho_ss[c], x.rho_s),
+                            u.predict(albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s),
                         );
                         let (o, w) = (&self.pixel_obs[i][c], &self.inv_sigma[i][c]);
                         for j in 0..4 {
@@ -554,11 +536,42 @@ impl<'a> Problem<'a> {
             let (b, s) = scratch.virt[m];
             let w = k(self.virtual_weight[m].sqrt());
             for c in 0..self.channels {
-                sink(w * (albedos.rho_ss[c] * b + x.rho_s * s - k(v.specular[c])));
+                sink(w * (albedos.rho_ss[c] * b + albedos.rho_s * s - k(v.specular[c])));
             }
         }
         self.prior_rows(x, normal, sink);
         albedos
+    }
+
+    /// Fills `scratch.units` with every sample's unit lobes at `chart` and `x` (zero where the
+    /// normal makes the sample back-facing: the model returns no light); `with_dop` also fills
+    /// their DoP fields (`UnitSample::dop_diffuse`, `cos_theta_o`).
+    pub fn units_at<T: LobeScalar>(
+        &self,
+        chart: &Chart,
+        x: &Nonlinear<T>,
+        with_dop: bool,
+        scratch: &mut Scratch<T>,
+    ) {
+        let tangent = TangentNormal {
+            n0: chart.n0,
+            t1: chart.t1,
+            t2: chart.t2,
+            p: x.p,
+            q: x.q,
+        };
+        let zero = T::zero();
+        let none = UnitSample {
+            diffuse: [zero; 3],
+            single_scattering: [zero; 3],
+            specular: [zero; 3],
+            cos_theta_o: zero,
+            dop_diffuse: zero,
+        };
+        scratch.units.clear();
+        scratch.units.extend(self.frames.iter().map(|f| {
+            unit_sample(f, &tangent, x.eta, x.sigma_s, x.sigma_ss, with_dop).unwrap_or(none)
+        }));
     }
 
     /// The prior rows (module doc), in standard deviations.
@@ -594,13 +607,8 @@ impl<'a> Problem<'a> {
     /// paper's I^β = I^s − SS_model generalised to all three channels, docs/model.md §6
     /// "Observation channels"; monochrome projection of §11 "Monochrome projection"):
     /// (I^d_D, I^β, I^α_D, DP = √(I^α_D² + I^β²)).
-    fn diffuse_only<T: Real>(
-        &self,
-        i: usize,
-        u: &UnitSample<T>,
-        albedos: &Albedos<T>,
-        rho_s: T,
-    ) -> [T; 4] {
+    fn diffuse_only<T: Real>(&self, i: usize, u: &UnitSample<T>, albedos: &Albedos<T>) -> [T; 4] {
+        let rho_s = albedos.rho_s;
         let k = T::from_f64;
         let rho_ss_mono = (0..self.channels).fold(T::zero(), |acc, c| {
             acc + albedos.rho_ss[c] * k(self.colour_weights[c])
@@ -621,9 +629,8 @@ impl<'a> Problem<'a> {
         i: usize,
         u: &UnitSample<T>,
         albedos: &Albedos<T>,
-        rho_s: T,
     ) -> Option<T> {
-        let [d_obs, beta, _, dp] = self.diffuse_only(i, u, albedos, rho_s);
+        let [d_obs, beta, _, dp] = self.diffuse_only(i, u, albedos);
         let s0 = d_obs + beta;
         (s0.re() > 1e-12).then(|| dp / s0)
     }
@@ -638,10 +645,10 @@ impl<'a> Problem<'a> {
         i: usize,
         u: &UnitSample<T>,
         albedos: &Albedos<T>,
-        rho_s: T,
         sink: &mut impl FnMut(T),
     ) {
         let k = T::from_f64;
+        let rho_s = albedos.rho_s;
         let o = &self.obs[i];
         let wd = k((self.lambda_d * self.w_int[i]).sqrt());
         let ws = k((self.lambda_s_real * self.w_int[i]).sqrt());
@@ -650,9 +657,9 @@ impl<'a> Problem<'a> {
             sink(wd * (pred[0] - k(o[c][0])));
             sink(ws * (pred[1] - k(o[c][1])));
         }
-        let [_, beta, alpha, dp] = self.diffuse_only(i, u, albedos, rho_s);
+        let [_, beta, alpha, dp] = self.diffuse_only(i, u, albedos);
         let w_psi = k((self.lambda_psi * self.w_dop[i]).sqrt());
-        match self.observed_dop(i, u, albedos, rho_s) {
+        match self.observed_dop(i, u, albedos) {
             Some(dop) => sink(w_psi * (u.dop_diffuse - dop)),
             None => sink(T::zero()),
         }
@@ -671,42 +678,30 @@ impl<'a> Problem<'a> {
         &'s self,
         scratch: &'s Scratch<f64>,
         albedos: &Albedos<f64>,
-        rho_s: f64,
     ) -> impl Iterator<Item = f64> + 's {
         let albedos = *albedos;
         scratch.units.iter().enumerate().filter_map(move |(i, u)| {
-            self.observed_dop(i, u, &albedos, rho_s)
+            self.observed_dop(i, u, &albedos)
                 .map(|dop| u.dop_diffuse - dop)
         })
     }
 
-    /// The per-channel 2×2 box-constrained least squares for (ρ_d, ρ_ss) ∈ [0, cap]² given the
-    /// nonlinear unknowns (in `scratch`).
-    fn project<T: Real>(&self, rho_s: T, scratch: &Scratch<T>) -> Albedos<T> {
-        let z = T::zero();
+    /// The albedos ρ_d, ρ_ss per colour channel and the shared ρ_s by exact box-constrained
+    /// least squares over [0, cap] given the nonlinear unknowns (whose unit lobes are in
+    /// `scratch`): the data (+ virtual) residuals, which are linear in them (`albedos.rs`).
+    fn project<T: Real>(&self, scratch: &Scratch<T>) -> Albedos<T> {
         let k = T::from_f64;
-        // Per channel: H = [[haa, hab], [hab, hbb]] and g of the weighted residual rows.
-        let (mut haa, mut hab, mut hbb) = ([z; 3], [z; 3], [z; 3]);
-        let mut ga = [z; 3];
-        let mut gb = [z; 3];
+        let mut sys = AlbedoSystem::new();
         for (i, u) in scratch.units.iter().enumerate() {
             match self.loss {
                 LossMode::Paper => {
                     let wd = k(self.lambda_d * self.w_int[i]);
                     let ws = k(self.lambda_s_real * self.w_int[i]);
                     let (a, b, c) = (u.diffuse, u.single_scattering, u.specular);
-                    let h_aa = wd * a[0].sq() + ws * a[1].sq();
-                    let h_ab = wd * a[0] * b[0] + ws * a[1] * b[1];
-                    let h_bb = wd * b[0].sq() + ws * b[1].sq();
                     for ch in 0..self.channels {
                         let o = &self.obs[i][ch];
-                        let td = k(o[0]) - rho_s * c[0];
-                        let ts = k(o[1]) - rho_s * c[1];
-                        haa[ch] += h_aa;
-                        hab[ch] += h_ab;
-                        hbb[ch] += h_bb;
-                        ga[ch] += wd * a[0] * td + ws * a[1] * ts;
-                        gb[ch] += wd * b[0] * td + ws * b[1] * ts;
+                        sys.add_row(ch, wd, a[0], b[0], c[0], k(o[0]));
+                        sys.add_row(ch, ws, a[1], b[1], c[1], k(o[1]));
                     }
                 }
                 LossMode::Measurement => {
@@ -718,13 +713,7 @@ impl<'a> Problem<'a> {
                         let o = &self.pixel_obs[i][ch];
                         let w = &self.inv_sigma[i][ch];
                         for j in 0..4 {
-                            let wj = k(w[j] * w[j]);
-                            let t = k(o[j]) - rho_s * c[j];
-                            haa[ch] += wj * a[j].sq();
-                            hab[ch] += wj * a[j] * b[j];
-                            hbb[ch] += wj * b[j].sq();
-                            ga[ch] += wj * a[j] * t;
-                            gb[ch] += wj * b[j] * t;
+                            sys.add_row(ch, k(w[j] * w[j]), a[j], b[j], c[j], k(o[j]));
                         }
                     }
                 }
@@ -734,22 +723,10 @@ impl<'a> Problem<'a> {
             let (b, s) = scratch.virt[m];
             let w = k(self.virtual_weight[m]);
             for ch in 0..self.channels {
-                hbb[ch] += w * b.sq();
-                gb[ch] += w * b * (k(v.specular[ch]) - rho_s * s);
+                sys.add_specular_row(ch, w, b, s, k(v.specular[ch]));
             }
         }
-        let mut out = Albedos {
-            rho_d: [z; 3],
-            rho_ss: [z; 3],
-        };
-        let cap = self.bounds.albedo_cap;
-        for ch in 0..3 {
-            let src = ch.min(self.channels - 1);
-            let (x, y) = box2(haa[src], hab[src], hbb[src], ga[src], gb[src], cap);
-            out.rho_d[ch] = x;
-            out.rho_ss[ch] = y;
-        }
-        out
+        sys.solve(self.channels, self.bounds.albedo_cap)
     }
 }
 
@@ -757,60 +734,4 @@ impl<'a> Problem<'a> {
 fn unit3(v: [f64; 3]) -> Option<[f64; 3]> {
     let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     (l.is_finite() && l > 1e-12).then(|| v.map(|x| x / l))
-}
-
-/// Exact box-constrained least squares of ½[x y]H[x y]ᵀ − [x y]·g over [0, cap]² for a 2×2
-/// symmetric H ⪰ 0: every candidate of the active-set enumeration (the free optimum; each
-/// variable free on the four edges with the other at 0 or at the cap, clipped to the box; the
-/// four corners) is scored by the exact objective, and the best feasible one wins. Values at a
-/// bound are constants (zero derivative). A zero diagonal (a lobe that predicts nothing) keeps
-/// that variable at 0.
-pub(super) fn box2<T: Real>(haa: T, hab: T, hbb: T, ga: T, gb: T, cap: f64) -> (T, T) {
-    let z = T::zero();
-    let c = T::from_f64(cap);
-    let objective = |x: f64, y: f64| {
-        0.5 * (haa.re() * x * x + 2.0 * hab.re() * x * y + hbb.re() * y * y)
-            - ga.re() * x
-            - gb.re() * y
-    };
-    let mut best: (f64, T, T) = (0.0, z, z);
-    let mut consider = |x: T, y: T| {
-        let o = objective(x.re(), y.re());
-        if o < best.0 {
-            best = (o, x, y);
-        }
-    };
-    let det = haa * hbb - hab * hab;
-    // Relative test: H is numerically singular below 1e-12 of its diagonal product.
-    if det.re() > 1e-12 * haa.re() * hbb.re() && det.re() > 0.0 {
-        let x = (hbb * ga - hab * gb) / det;
-        let y = (haa * gb - hab * ga) / det;
-        if (0.0..=cap).contains(&x.re()) && (0.0..=cap).contains(&y.re()) {
-            consider(x, y);
-        }
-    }
-    // One variable free on an edge: x with y ∈ {0, cap}, y with x ∈ {0, cap}.
-    let clip = |v: T| {
-        if v.re() <= 0.0 {
-            z
-        } else if v.re() >= cap {
-            c
-        } else {
-            v
-        }
-    };
-    for y in [z, c] {
-        if haa.re() > 0.0 {
-            consider(clip((ga - hab * y) / haa), y);
-        }
-    }
-    for x in [z, c] {
-        if hbb.re() > 0.0 {
-            consider(x, clip((gb - hab * x) / hbb));
-        }
-    }
-    for (x, y) in [(c, z), (z, c), (c, c)] {
-        consider(x, y);
-    }
-    (best.1, best.2)
 }

@@ -360,7 +360,6 @@ fn virtual_samples_pull_the_specular_lobe_and_keep_truth() {
         eta: 1.5,
         sigma_s: 0.2,
         sigma_ss: 0.4,
-        rho_s: 1.0,
         p: 0.0,
         q: 0.0,
     };
@@ -391,11 +390,27 @@ fn virtual_samples_pull_the_specular_lobe_and_keep_truth() {
             }
         })
         .collect();
-    let pulled = fit_vertex(&views, &v, true, None, &guide(rougher), &config);
+    let pulled = fit_vertex(&views, &v, true, None, &guide(rougher.clone()), &config);
     assert_sane(&pulled);
+    // The fitted coaxial profile (both lobes; how the light splits between them is the fit's
+    // choice) moves toward the rougher one.
+    let distance = |f: &VertexFit| {
+        rougher
+            .iter()
+            .map(|s| {
+                let p = &f.params;
+                let (b, sp) = coaxial_unit_specular(s.cos_theta_h, p.eta, p.sigma_s, p.sigma_ss);
+                (0..3)
+                    .map(|ch| (p.rho_ss[ch] * b + p.rho_s * sp - s.specular[ch]).powi(2))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+    };
     assert!(
-        pulled.params.sigma_s > fit.params.sigma_s + 1e-4,
-        "{pulled:?}"
+        distance(&pulled) < 0.5 * distance(&fit),
+        "{} vs {}: {pulled:?}",
+        distance(&pulled),
+        distance(&fit)
     );
 }
 

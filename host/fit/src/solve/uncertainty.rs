@@ -40,13 +40,13 @@ pub(super) fn standard_errors(
         eta: v(x.eta, 0),
         sigma_s: v(x.sigma_s, 1),
         sigma_ss: v(x.sigma_ss, 2),
-        rho_s: v(x.rho_s, 3),
         p: v(0.0, 10),
         q: v(0.0, 11),
     };
     let ad = Albedos {
         rho_ss: core::array::from_fn(|c| v(albedos.rho_ss[c], 4 + c)),
         rho_d: core::array::from_fn(|c| v(albedos.rho_d[c], 7 + c)),
+        rho_s: v(albedos.rho_s, 3),
     };
     let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
     let mut jtj = SMatrix::<f64, N_ALL, N_ALL>::zeros();
