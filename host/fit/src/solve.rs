@@ -58,6 +58,7 @@
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
 
 mod albedos;
+mod jacobian;
 mod lm;
 /// The overflow-free logistic function of the reparameterised bounds (shared with the lobe fit).
 pub(crate) use lm::sigmoid;

@@ -12,8 +12,7 @@ pub fn markdown(
     results: &[RunResult],
     total_s: f64,
     command: &str,
-    eta_png: &Path,
-    normal_png: &Path,
+    plots: Option<(&Path, &Path)>,
     dir: &Path,
 ) -> String {
     let rel = |p: &Path| p.strip_prefix(dir).unwrap_or(p).display().to_string();
@@ -42,7 +41,9 @@ pub fn markdown(
          included — the figure a user can check on a real capture; docs/fit-outputs.md). All rows come from one run on one machine, so compare \
          ratios, not absolute seconds. `fit` = steps A + B + C (joint solve; clusters, virtual \
          samples and pooled η; final pass); `×fwd` = fit time over one forward evaluation of \
-         every observation measured right after it.\n"
+         every observation with the fitted parameters (the renderer's own model: geometry, \
+         frames and all three lobes, on the same threads), measured right after the fit as the \
+         fastest of at least 3 repetitions.\n"
     );
     let _ = writeln!(
         s,
@@ -54,8 +55,10 @@ pub fn markdown(
          estimate is worth) and per material (the error of the material's median η, averaged \
          over materials: the paper's measure, 1.49 % on real objects).\n"
     );
-    let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
-    let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));
+    if let Some((eta_png, normal_png)) = plots {
+        let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
+        let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));
+    }
     for sweep in ["photos", "solver", "vertices", "bracket", "large"] {
         let rows: Vec<&RunResult> = results.iter().filter(|r| r.sweep == sweep).collect();
         if rows.is_empty() {

@@ -94,8 +94,17 @@ impl<T: Real> AlbedoSystem<T> {
     /// The exact minimiser over [0, `cap`]^(2·channels + 1) (module doc); channels beyond
     /// `channels` copy the last one.
     pub fn solve(&self, channels: usize, cap: f64) -> Albedos<T> {
+        self.solve_faces(channels, cap).0
+    }
+
+    /// [`AlbedoSystem::solve`] and which albedos are free on the minimiser's face (strictly
+    /// inside the box, determined by the face's linear equations), in the layout ρ_d,c = c,
+    /// ρ_ss,c = 3 + c, ρ_s = 6 (channels beyond `channels` are copies, never free).
+    pub fn solve_faces(&self, channels: usize, cap: f64) -> (Albedos<T>, [bool; 7]) {
         let channels = channels.clamp(1, 3);
-        let rho_s = self.shared(channels, cap);
+        let (rho_s, rho_s_free) = self.shared(channels, cap);
+        let mut free = [false; 7];
+        free[6] = rho_s_free;
         let mut out = Albedos {
             rho_d: [T::zero(); 3],
             rho_ss: [T::zero(); 3],
@@ -109,8 +118,31 @@ impl<T: Real> AlbedoSystem<T> {
             let (d, ss) = at_face(face, haa, hab, hbb, ga, gb);
             out.rho_d[c] = d;
             out.rho_ss[c] = ss;
+            if c < channels {
+                free[c] = matches!(face, Face::Free | Face::DFree(_));
+                free[3 + c] = matches!(face, Face::Free | Face::SsFree(_));
+            }
         }
-        out
+        (out, free)
+    }
+
+    /// The quadratic's Hessian in the layout of [`AlbedoSystem::solve_faces`] (real parts).
+    pub fn hessian(&self) -> [[f64; 7]; 7] {
+        let mut h = [[0.0; 7]; 7];
+        for c in 0..3 {
+            let [haa, hab, hbb] = self.h[c].map(|v| v.re());
+            let [hx, hy] = self.hs[c].map(|v| v.re());
+            h[c][c] = haa;
+            h[c][3 + c] = hab;
+            h[3 + c][c] = hab;
+            h[3 + c][3 + c] = hbb;
+            h[c][6] = hx;
+            h[6][c] = hx;
+            h[3 + c][6] = hy;
+            h[6][3 + c] = hy;
+        }
+        h[6][6] = self.hss.re();
+        h
     }
 
     /// g_c − ρ_s·h_c: channel c's right-hand side for a given ρ_s.
@@ -154,8 +186,9 @@ impl<T: Real> AlbedoSystem<T> {
         (self.gs - num, self.hss - den)
     }
 
-    /// ρ_s at the minimum (module doc), in `T` with the final faces fixed.
-    fn shared(&self, channels: usize, cap: f64) -> T {
+    /// ρ_s at the minimum (module doc), in `T` with the final faces fixed, and whether it is
+    /// free (inside the box, from its piece's linear equation).
+    fn shared(&self, channels: usize, cap: f64) -> (T, bool) {
         let re = |v: T| v.re();
         // φ′(ρ) and the faces there, in f64.
         let slope_at = |rho: f64| -> (f64, [Face; 3]) {
@@ -173,15 +206,15 @@ impl<T: Real> AlbedoSystem<T> {
         };
         if re(self.hss) <= 0.0 {
             // The specular lobe predicts nothing here: ρ_s is not determined; it stays 0.
-            return T::zero();
+            return (T::zero(), false);
         }
         let (d0, _) = slope_at(0.0);
         if d0 >= 0.0 || !d0.is_finite() {
-            return T::zero();
+            return (T::zero(), false);
         }
         let (dc, _) = slope_at(cap);
         if dc <= 0.0 {
-            return T::from_f64(cap);
+            return (T::from_f64(cap), false);
         }
         // Root of the monotone piecewise-linear φ′ in (lo, hi): Newton to the root of the
         // current piece, kept inside the bracket (bisection otherwise); a piece whose root lies
@@ -200,7 +233,7 @@ impl<T: Real> AlbedoSystem<T> {
                 let (d, at_root) = slope_at(root);
                 if at_root[..channels] == faces[..channels] {
                     // Exact: the piece's root lies on the piece.
-                    return num / den;
+                    return (num / den, true);
                 }
                 if d < 0.0 {
                     lo = root;
@@ -225,7 +258,7 @@ impl<T: Real> AlbedoSystem<T> {
         }
         // Not resolved to a piece within the iteration cap (a root on a breakpoint): the
         // bracket's midpoint, a constant.
-        T::from_f64(rho.clamp(0.0, cap))
+        (T::from_f64(rho.clamp(0.0, cap)), false)
     }
 }
 

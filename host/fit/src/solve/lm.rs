@@ -29,8 +29,8 @@ use super::{LossMode, SolverConfig};
 /// Box coordinates: η, ln σ_s, v (σ_ss fraction), tangent p, q.
 pub(super) const N_RAW: usize = 5;
 pub(super) type RawDual = Dual<N_RAW>;
-type Mat = SMatrix<f64, N_RAW, N_RAW>;
-type Vector = SVector<f64, N_RAW>;
+pub(super) type Mat = SMatrix<f64, N_RAW, N_RAW>;
+pub(super) type Vector = SVector<f64, N_RAW>;
 
 /// 1/(1 + e⁻ˣ), overflow-free.
 pub(crate) fn sigmoid<T: Real>(x: T) -> T {
@@ -129,7 +129,9 @@ pub(super) fn cost_at(
     (cost, albedos)
 }
 
-/// Cost, JᵀJ and Jᵀr (the Jacobian includes the projected albedos' derivatives).
+/// Cost, JᵀJ and Jᵀr (the Jacobian includes the projected albedos' derivatives): written out
+/// for the measurement loss (`jacobian.rs`), dual numbers through every residual for the paper
+/// loss.
 fn jacobian_at(
     problem: &Problem,
     chart: &Chart,
@@ -138,6 +140,9 @@ fn jacobian_at(
 ) -> (f64, Mat, Vector, Albedos<f64>) {
     let seeded: [RawDual; N_RAW] = core::array::from_fn(|k| Dual::variable(raw[k], k));
     let x = physical(seeded, &problem.bounds);
+    if problem.loss == LossMode::Measurement {
+        return super::jacobian::lm_normal_equations(problem, chart, &x, scratch);
+    }
     let mut cost = 0.0;
     let mut jtj = Mat::zeros();
     let mut jtr = Vector::zeros();

@@ -500,15 +500,7 @@ impl<'a> Problem<'a> {
     ) -> Albedos<T> {
         let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x.p, x.q);
         self.units_at(chart, x, self.loss == LossMode::Paper, scratch);
-        scratch.virt.clear();
-        for v in self.virtuals {
-            scratch.virt.push(coaxial_unit_specular(
-                v.cos_theta_h.clamp(0.0, 1.0),
-                x.eta,
-                x.sigma_s,
-                x.sigma_ss,
-            ));
-        }
+        self.virtuals_at(x, scratch);
         let albedos = match given {
             Some(a) => a,
             None => self.project(scratch),
@@ -574,8 +566,16 @@ impl<'a> Problem<'a> {
         }));
     }
 
+    /// Fills `scratch.virt` with every virtual sample's two unit reflection lobes at `x`.
+    pub fn virtuals_at<T: LobeScalar>(&self, x: &Nonlinear<T>, scratch: &mut Scratch<T>) {
+        scratch.virt.clear();
+        scratch.virt.extend(self.virtuals.iter().map(|v| {
+            coaxial_unit_specular(v.cos_theta_h.clamp(0.0, 1.0), x.eta, x.sigma_s, x.sigma_ss)
+        }));
+    }
+
     /// The prior rows (module doc), in standard deviations.
-    fn prior_rows<T: Real>(
+    pub fn prior_rows<T: Real>(
         &self,
         x: &Nonlinear<T>,
         normal: ellipso_model::optics::Vec3<T>,

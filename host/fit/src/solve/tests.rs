@@ -114,7 +114,7 @@ pub(super) fn assert_sane(fit: &VertexFit) {
     );
 }
 
-const TILTED: [f64; 3] = [0.3, -0.2, 0.93];
+pub(super) const TILTED: [f64; 3] = [0.3, -0.2, 0.93];
 
 #[test]
 fn noiseless_data_recovers_truth() {

@@ -12,6 +12,7 @@
 use ellipso_model::optics::Dual;
 use nalgebra::{DMatrix, SMatrix, SVector};
 
+use super::LossMode;
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
 
 const N_ALL: usize = 12;
@@ -35,29 +36,11 @@ pub(super) fn standard_errors(
     x: &Nonlinear<f64>,
     albedos: &Albedos<f64>,
 ) -> Uncertainty {
-    let v = |re: f64, k: usize| AllDual::variable(re, k);
-    let xd = Nonlinear {
-        eta: v(x.eta, 0),
-        sigma_s: v(x.sigma_s, 1),
-        sigma_ss: v(x.sigma_ss, 2),
-        p: v(0.0, 10),
-        q: v(0.0, 11),
+    let (cost, m, jtj) = if problem.loss == LossMode::Measurement {
+        super::jacobian::physical_normal_matrix(problem, chart, x, albedos)
+    } else {
+        all_duals(problem, chart, x, albedos)
     };
-    let ad = Albedos {
-        rho_ss: core::array::from_fn(|c| v(albedos.rho_ss[c], 4 + c)),
-        rho_d: core::array::from_fn(|c| v(albedos.rho_d[c], 7 + c)),
-        rho_s: v(albedos.rho_s, 3),
-    };
-    let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
-    let mut jtj = SMatrix::<f64, N_ALL, N_ALL>::zeros();
-    let mut cost = 0.0;
-    let mut m = 0usize;
-    problem.evaluate(chart, &xd, Some(ad), &mut scratch, &mut |r: AllDual| {
-        cost += r.re * r.re;
-        m += 1;
-        let g = SVector::<f64, N_ALL>::from(r.du);
-        jtj.ger(1.0, &g, &g, 1.0);
-    });
     // Monochrome: only the R entries of ρ_ss and ρ_d are parameters; G, B copy them.
     let active: Vec<usize> = if problem.channels == 3 {
         (0..N_ALL).collect()
@@ -85,6 +68,40 @@ pub(super) fn standard_errors(
         std_error,
         normal_std_error_deg: normal_var.sqrt().to_degrees(),
     }
+}
+
+/// Cost, residual count and JᵀJ over all 12 parameters by dual numbers through every residual
+/// (the paper loss; the measurement loss has them written out, `jacobian.rs`).
+pub(super) fn all_duals(
+    problem: &Problem,
+    chart: &Chart,
+    x: &Nonlinear<f64>,
+    albedos: &Albedos<f64>,
+) -> (f64, usize, SMatrix<f64, N_ALL, N_ALL>) {
+    let v = |re: f64, k: usize| AllDual::variable(re, k);
+    let xd = Nonlinear {
+        eta: v(x.eta, 0),
+        sigma_s: v(x.sigma_s, 1),
+        sigma_ss: v(x.sigma_ss, 2),
+        p: v(x.p, 10),
+        q: v(x.q, 11),
+    };
+    let ad = Albedos {
+        rho_ss: core::array::from_fn(|c| v(albedos.rho_ss[c], 4 + c)),
+        rho_d: core::array::from_fn(|c| v(albedos.rho_d[c], 7 + c)),
+        rho_s: v(albedos.rho_s, 3),
+    };
+    let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
+    let mut jtj = SMatrix::<f64, N_ALL, N_ALL>::zeros();
+    let mut cost = 0.0;
+    let mut m = 0usize;
+    problem.evaluate(chart, &xd, Some(ad), &mut scratch, &mut |r: AllDual| {
+        cost += r.re * r.re;
+        m += 1;
+        let g = SVector::<f64, N_ALL>::from(r.du);
+        jtj.ger(1.0, &g, &g, 1.0);
+    });
+    (cost, m, jtj)
 }
 
 /// Diagonal of s²·(JᵀJ)⁻¹ restricted to `active` (others INFINITY), with the null-direction rule
