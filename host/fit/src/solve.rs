@@ -153,6 +153,10 @@ pub struct SolverConfig {
     /// LM passes from the best start; each later pass restarts the damping (default 2; with
     /// [`Effort::Adaptive`] a later pass runs only after an unconverged one).
     pub passes: u32,
+    /// Samples of the coarse level of a cold start (default 24; 0 disables): a vertex with at
+    /// least twice as many first runs its starts on that many samples spread along the capture,
+    /// then LM on all of them from the result (coarse to fine).
+    pub coarse_samples: usize,
     /// Cold starts (η, σ_s, σ_ss) tried without `init` (default (1.5, 0.1, 0.3) and
     /// (1.5, 0.4, 0.8)); see [`Effort`].
     pub cold_starts: Vec<[f64; 3]>,
@@ -231,6 +235,7 @@ impl Default for SolverConfig {
             sensor: SensorNoiseModel::default(),
             max_iterations: 50,
             passes: 2,
+            coarse_samples: 24,
             cold_starts: vec![[1.5, 0.1, 0.3], [1.5, 0.4, 0.8]],
             restart_reduced_chi2: 4.0,
             chi2_tolerance: 1e-3,
@@ -375,14 +380,20 @@ pub fn fit_vertex(
     }
     let bounds = problem.bounds;
     let virtuals = problem.virtuals.len();
-    let mut scratch_f = Scratch::<f64>::new(n, virtuals);
-    let mut scratch_d = Scratch::<RawDual>::new(n, virtuals);
+    let scratch_f = Scratch::<f64>::new(n, virtuals);
+    let scratch_d = Scratch::<RawDual>::new(n, virtuals);
     let mut starts: Vec<[f64; lm::N_RAW]> = match init {
         Some(f) => {
             let p = &f.params;
             // A warm start may sit on a bound: the projected LM leaves it as soon as the
             // gradient points into the box (lm.rs).
             let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, &bounds)];
+            if let Some([eta, _]) = guide.eta_prior {
+                // The vertex's own lobes at the material's η: the starts are ranked by their
+                // cost, where an own η a few prior widths off would outweigh everything else
+                // although LM corrects it in one step.
+                s.push(raw_from(eta, p.sigma_s, p.sigma_ss, &bounds));
+            }
             if let Some([sigma_s, sigma_ss, _]) = guide.lobe_start {
                 // The cluster's lobes with the material's η where it is pooled (the albedos,
                 // ρ_s included, are projected: only the lobe shapes are a start), and its sharp
@@ -415,42 +426,44 @@ pub fn fit_vertex(
         starts.push(raw_from(p[0], p[1], p[2], &bounds));
     }
     let adaptive = config.effort == Effort::Adaptive;
-    if starts.len() > 1 && (adaptive || init.is_some()) {
-        // Rank the starts by their cost at the start normal (one f64 evaluation each).
-        let ch = chart(start_normal);
-        let mut ranked: Vec<(f64, [f64; lm::N_RAW])> = starts
-            .iter()
-            .map(|s| {
-                let (c, _) = lm::cost_at(&problem, &ch, *s, &mut scratch_f);
-                (if c.is_finite() { c } else { f64::INFINITY }, *s)
-            })
-            .collect();
-        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
-        starts = ranked.into_iter().map(|(_, s)| s).collect();
-    }
-    let mut best: Option<LmState> = None;
-    for (k, s) in starts.iter().enumerate() {
-        if adaptive && k > 0 && best.as_ref().is_some_and(|b| !poor(&problem, b, config)) {
-            break;
+    let rank = starts.len() > 1 && (adaptive || init.is_some());
+    let mut scratches = (scratch_f, scratch_d);
+    let mut state = match coarse_subset(&problem, init.is_none(), config) {
+        // Coarse to fine: the starts and their LM runs on a subsample of the views, then LM on
+        // every sample from the result.
+        Some(keep) => {
+            let mut coarse = problem.subset(&keep);
+            let s = best_start(
+                &mut coarse,
+                &starts,
+                start_normal,
+                rank,
+                config,
+                &mut scratches,
+            );
+            let fine = lm::run(
+                &mut problem,
+                s.raw,
+                s.normal,
+                config,
+                &mut scratches.0,
+                &mut scratches.1,
+            );
+            LmState {
+                iterations: s.iterations + fine.iterations,
+                ..fine
+            }
         }
-        let st = lm::run(
+        None => best_start(
             &mut problem,
-            *s,
+            &starts,
             start_normal,
+            rank,
             config,
-            &mut scratch_f,
-            &mut scratch_d,
-        );
-        if best.as_ref().is_none_or(|b| {
-            !matches!(
-                b.cost.partial_cmp(&st.cost),
-                Some(Ordering::Less | Ordering::Equal)
-            )
-        }) {
-            best = Some(st);
-        }
-    }
-    let mut state = best.expect("at least one start");
+            &mut scratches,
+        ),
+    };
+    let (mut scratch_f, mut scratch_d) = scratches;
     let measurement = problem.loss == LossMode::Measurement;
     for _ in 1..config.passes {
         // Measurement mode: the weights at the current solution (the run used the weights of
@@ -488,6 +501,75 @@ pub fn fit_vertex(
         let _ = problem.reweight(&scratch_f, &state.albedos);
     }
     finish(&problem, vertex, state, flags, guide, config, &scratch_f)
+}
+
+/// LM from the best of `starts`: ranked by their cost at `start_normal` when `rank` (one f64
+/// evaluation each), then run in that order; with adaptive effort the next start runs only
+/// when the result so far is [`poor`]. The lowest cost wins.
+fn best_start(
+    problem: &mut Problem,
+    starts: &[[f64; lm::N_RAW]],
+    start_normal: [f64; 3],
+    rank: bool,
+    config: &SolverConfig,
+    (scratch_f, scratch_d): &mut (Scratch<f64>, Scratch<RawDual>),
+) -> LmState {
+    let mut starts = starts.to_vec();
+    if rank {
+        let ch = chart(start_normal);
+        let mut ranked: Vec<(f64, [f64; lm::N_RAW])> = starts
+            .iter()
+            .map(|s| {
+                let (c, _) = lm::cost_at(problem, &ch, *s, scratch_f);
+                (if c.is_finite() { c } else { f64::INFINITY }, *s)
+            })
+            .collect();
+        ranked.sort_by(|a, b| a.0.total_cmp(&b.0));
+        starts = ranked.into_iter().map(|(_, s)| s).collect();
+    }
+    let adaptive = config.effort == Effort::Adaptive;
+    let mut best: Option<LmState> = None;
+    for (k, s) in starts.iter().enumerate() {
+        if adaptive && k > 0 && best.as_ref().is_some_and(|b| !poor(problem, b, config)) {
+            break;
+        }
+        let st = lm::run(problem, *s, start_normal, config, scratch_f, scratch_d);
+        if best.as_ref().is_none_or(|b| {
+            !matches!(
+                b.cost.partial_cmp(&st.cost),
+                Some(Ordering::Less | Ordering::Equal)
+            )
+        }) {
+            best = Some(st);
+        }
+    }
+    best.expect("at least one start")
+}
+
+/// The samples of the coarse level of a cold start (`cold`, no virtual samples), or `None`
+/// when the vertex has fewer than twice [`SolverConfig::coarse_samples`]: that many samples
+/// spread evenly along the capture (samples come in view order), with the brightest specular
+/// sample among them (the one a sharp lobe is seen in).
+fn coarse_subset(problem: &Problem, cold: bool, config: &SolverConfig) -> Option<Vec<usize>> {
+    let n = problem.len();
+    let m = config.coarse_samples;
+    if !cold || m == 0 || n < 2 * m || !problem.virtuals.is_empty() {
+        return None;
+    }
+    let mut keep: Vec<usize> = (0..m).map(|k| ((2 * k + 1) * n) / (2 * m)).collect();
+    let brightest = (0..n)
+        .max_by(|&a, &b| problem.mono[a][1].total_cmp(&problem.mono[b][1]))
+        .unwrap_or(0);
+    if !keep.contains(&brightest) {
+        let nearest = keep
+            .iter()
+            .enumerate()
+            .min_by_key(|(_, k)| k.abs_diff(brightest))
+            .map_or(0, |(i, _)| i);
+        keep[nearest] = brightest;
+        keep.sort_unstable();
+    }
+    Some(keep)
 }
 
 /// Measurement mode: reweights `problem` from the model at `state`; returns the largest

@@ -389,7 +389,17 @@ pub fn fit_lobes(samples: &[LobeSample], sigma_min: f64, cap: f64) -> Option<Lob
 
         u = next;
         (f, jtj, jtr) = normal_equations(samples, u, b, &mut scratch_d);
-        if decrease < 1e-14 || step < 1e-12 {
+        // Statistical stop: the loss is a mean over m = 3·samples residuals, so one standard
+        // error of the parameters moves it by about f/m; stop once the Gauss–Newton decrement
+        // promises less than 0.1 % of that (parameters within ~0.03 standard errors). A lobe whose
+        // optimum lies on a bound (ρ_s → 0, σ_ss → 1) is otherwise chased along the flat
+        // sigmoid tail for up to the iteration cap (measured: 46–110 iterations on clusters of
+        // the shipped scenes).
+        let m = 3.0 * samples.len() as f64;
+        let near_optimum = jtj
+            .cholesky()
+            .is_some_and(|c| jtr.dot(&c.solve(&jtr)) < 1e-3 * f / m);
+        if decrease < 1e-14 || step < 1e-12 || near_optimum {
             break;
         }
     }

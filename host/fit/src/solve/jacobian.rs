@@ -20,22 +20,13 @@
 use ellipso_model::optics::Dual;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
-use super::super::model::{UnitSample, predicted_pixels, tangent_normal};
+use super::super::model::tangent_normal;
 use super::albedos::{AlbedoSystem, Albedos};
 use super::lm::{Mat, N_RAW, RawDual, Vector};
 use super::problem::{Chart, Nonlinear, Problem, Scratch};
 
 /// Physical unknowns with a dual slot each: η, σ_s, σ_ss, p, q.
 type Physical = Dual<5>;
-
-/// The four analyser pixels of each unit lobe (diffuse, single scattering, specular).
-fn pixel_lobes<const N: usize>(rows: &[[f64; 3]; 4], u: &UnitSample<Dual<N>>) -> [[Dual<N>; 4]; 3] {
-    [
-        predicted_pixels(rows, u.diffuse),
-        predicted_pixels(rows, u.single_scattering),
-        predicted_pixels(rows, u.specular),
-    ]
-}
 
 /// `acc += k·d` on derivative arrays.
 #[inline]
@@ -65,8 +56,7 @@ fn for_each_row<const N: usize>(
     mut row: impl FnMut(usize, f64, [&Dual<N>; 3], f64),
 ) {
     let zero = Dual::<N>::constant(0.0);
-    for (i, u) in scratch.units.iter().enumerate() {
-        let [a, b, s] = pixel_lobes(&problem.frames[i].pixel_rows, u);
+    for (i, [a, b, s]) in scratch.pixels.iter().enumerate() {
         for c in 0..problem.channels {
             let (o, w) = (&problem.pixel_obs[i][c], &problem.inv_sigma[i][c]);
             for j in 0..4 {

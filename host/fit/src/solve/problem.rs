@@ -175,6 +175,9 @@ pub(super) const HUBER_K: f64 = 3.0;
 /// Reusable per-vertex buffers (no allocation inside the LM loop).
 pub(super) struct Scratch<T> {
     pub units: Vec<UnitSample<T>>,
+    /// Measurement mode: per sample, the four analyser pixels of each unit lobe (diffuse,
+    /// single scattering, specular), from `units` and the sample's pixel rows.
+    pub pixels: Vec<[[T; 4]; 3]>,
     pub virt: Vec<(T, T)>,
 }
 
@@ -182,6 +185,7 @@ impl<T> Scratch<T> {
     pub fn new(samples: usize, virtuals: usize) -> Self {
         Self {
             units: Vec::with_capacity(samples),
+            pixels: Vec::with_capacity(samples),
             virt: Vec::with_capacity(virtuals),
         }
     }
@@ -348,6 +352,44 @@ impl<'a> Problem<'a> {
         .with_initial_weights()
     }
 
+    /// The same problem on the samples `keep` (indices into this one, in order): a coarse
+    /// level for the solver's first iterations. Weights, priors and bounds carry over.
+    pub fn subset(&self, keep: &[usize]) -> Self {
+        let obs: Vec<[[f64; OBSERVATION_CHANNELS]; 3]> =
+            keep.iter().map(|&k| self.obs[k]).collect();
+        let data_scale = obs
+            .iter()
+            .flat_map(|o| o.iter().take(self.channels))
+            .flat_map(|c| c[..3].iter())
+            .map(|v| v * v)
+            .sum::<f64>();
+        Self {
+            frames: keep.iter().map(|&k| self.frames[k]).collect(),
+            obs,
+            mono: pick(keep, &self.mono),
+            w_int: pick(keep, &self.w_int),
+            w_dop: pick(keep, &self.w_dop),
+            normalisers: pick(keep, &self.normalisers),
+            virtuals: self.virtuals,
+            channels: self.channels,
+            colour_weights: self.colour_weights,
+            lambda_psi: self.lambda_psi,
+            lambda_d: self.lambda_d,
+            lambda_s_real: self.lambda_s_real,
+            lambda_phi: self.lambda_phi,
+            data_scale,
+            loss: self.loss,
+            pixel_obs: pick(keep, &self.pixel_obs),
+            inv_sigma: pick(keep, &self.inv_sigma),
+            virtual_weight: self.virtual_weight.clone(),
+            bounds: self.bounds,
+            priors: self.priors,
+            robust: self.robust,
+            dn_per_electron: self.dn_per_electron,
+            floor_variance_dn2: self.floor_variance_dn2,
+        }
+    }
+
     /// Measurement mode: weights from the observations themselves (floored at 0), used only
     /// until [`Problem::reweight`] replaces them with the model's prediction at the start of
     /// every LM run (observation-derived weights correlate with the noise and bias the fit).
@@ -404,18 +446,17 @@ impl<'a> Problem<'a> {
     /// LM run (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
     /// paper mode. Returns the largest relative change of any 1/σ (0 in paper mode).
     pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>) -> f64 {
-        if self.loss != LossMode::Measurement || scratch.units.len() != self.len() {
+        if self.loss != LossMode::Measurement || scratch.pixels.len() != self.len() {
             return 0.0;
         }
-        let units = &scratch.units;
-        let rows: Vec<[[f64; 3]; 4]> = self.frames.iter().map(|f| f.pixel_rows).collect();
-        let predicted: Vec<[[f64; 4]; 3]> = (0..self.len())
-            .map(|k| {
+        let predicted: Vec<[[f64; 4]; 3]> = scratch
+            .pixels
+            .iter()
+            .map(|[a, b, s]| {
                 core::array::from_fn(|c| {
-                    pixel_pred(
-                        &rows[k],
-                        units[k].predict(albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s),
-                    )
+                    core::array::from_fn(|j| {
+                        albedos.rho_d[c] * a[j] + albedos.rho_ss[c] * b[j] + albedos.rho_s * s[j]
+                    })
                 })
             })
             .collect();
@@ -506,19 +547,20 @@ impl<'a> Problem<'a> {
             None => self.project(scratch),
         };
         let k = T::from_f64;
-        for (i, u) in scratch.units.iter().enumerate() {
-            match self.loss {
-                LossMode::Paper => self.paper_residuals(i, u, &albedos, sink),
-                LossMode::Measurement => {
-                    let rows = &self.frames[i].pixel_rows;
+        match self.loss {
+            LossMode::Paper => {
+                for (i, u) in scratch.units.iter().enumerate() {
+                    self.paper_residuals(i, u, &albedos, sink);
+                }
+            }
+            LossMode::Measurement => {
+                for (i, [a, b, s]) in scratch.pixels.iter().enumerate() {
                     for c in 0..self.channels {
-                        let pred = pixel_pred(
-                            rows,
-                            u.predict(albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s),
-                        );
                         let (o, w) = (&self.pixel_obs[i][c], &self.inv_sigma[i][c]);
+                        let (rd, rss) = (albedos.rho_d[c], albedos.rho_ss[c]);
                         for j in 0..4 {
-                            sink(k(w[j]) * (pred[j] - k(o[j])));
+                            let pred = rd * a[j] + rss * b[j] + albedos.rho_s * s[j];
+                            sink(k(w[j]) * (pred - k(o[j])));
                         }
                     }
                 }
@@ -564,6 +606,19 @@ impl<'a> Problem<'a> {
         scratch.units.extend(self.frames.iter().map(|f| {
             unit_sample(f, &tangent, x.eta, x.sigma_s, x.sigma_ss, with_dop).unwrap_or(none)
         }));
+        scratch.pixels.clear();
+        if self.loss == LossMode::Measurement {
+            scratch
+                .pixels
+                .extend(self.frames.iter().zip(&scratch.units).map(|(f, u)| {
+                    let rows = &f.pixel_rows;
+                    [
+                        pixel_pred(rows, u.diffuse),
+                        pixel_pred(rows, u.single_scattering),
+                        pixel_pred(rows, u.specular),
+                    ]
+                }));
+        }
     }
 
     /// Fills `scratch.virt` with every virtual sample's two unit reflection lobes at `x`.
@@ -705,10 +760,7 @@ impl<'a> Problem<'a> {
                     }
                 }
                 LossMode::Measurement => {
-                    let rows = &self.frames[i].pixel_rows;
-                    let a = pixel_pred(rows, u.diffuse);
-                    let b = pixel_pred(rows, u.single_scattering);
-                    let c = pixel_pred(rows, u.specular);
+                    let [a, b, c] = &scratch.pixels[i];
                     for ch in 0..self.channels {
                         let o = &self.pixel_obs[i][ch];
                         let w = &self.inv_sigma[i][ch];
@@ -728,6 +780,11 @@ impl<'a> Problem<'a> {
         }
         sys.solve(self.channels, self.bounds.albedo_cap)
     }
+}
+
+/// The entries `keep` of `v`, in order.
+fn pick<T: Copy>(keep: &[usize], v: &[T]) -> Vec<T> {
+    keep.iter().map(|&k| v[k]).collect()
 }
 
 /// A unit vector, or `None` for a zero or non-finite one.
