@@ -177,12 +177,3 @@ pub struct MeshReport {
     #[serde(default)]
     pub peak_rss_bytes: Option<u64>,
 }
-
-/// This process's resident-memory high-water mark (`VmHWM` of `/proc/self/status`), bytes;
-/// `None` where the kernel does not report it.
-pub fn peak_rss_bytes() -> Option<u64> {
-    let status = std::fs::read_to_string("/proc/self/status").ok()?;
-    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
-    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
-    Some(kb * 1024)
-}

@@ -38,7 +38,7 @@ pub struct AccuracyArgs {
     /// Small sweep for a smoke test (few vertices and photos; no large run).
     #[arg(long)]
     pub quick: bool,
-    /// Skip the large throughput run (100 000 vertices × 150 views).
+    /// Skip the large runs (100 000 vertices × 150 and × 300 views, 500 000 × 60).
     #[arg(long)]
     pub no_large: bool,
     /// Noise and normal-tilt seed.
@@ -78,6 +78,8 @@ pub struct RunResult {
     pub forward_s: f64,
     /// fit_s / forward_s.
     pub fit_over_forward: f64,
+    /// The run's resident-memory high-water mark (simulation, fit, scoring), bytes (Linux).
+    pub peak_rss_bytes: Option<u64>,
     /// Scores against the truth.
     pub scores: Scores,
     /// Re-render errors on the held-out views (`None` when none were held out).
@@ -132,6 +134,10 @@ fn solver_settings() -> Vec<SolverSetting> {
         },
     ]
 }
+
+/// The large runs (vertices, photos): the throughput target's 100 000 × 150, and 100 000 × 300
+/// and 500 000 × 60, from which 500 000 × 300 is extrapolated.
+pub const LARGE_RUNS: [(usize, usize); 3] = [(100_000, 150), (100_000, 300), (500_000, 60)];
 
 /// Runs `ellipso bench accuracy`.
 pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
@@ -220,23 +226,28 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
         results.extend(bracket_sweep(&args, base_subdivisions, holdout)?);
     }
     if !args.quick && !args.no_large && wants("large") {
+        // Throughput and scale (issue 19): 100 000 × 150, then the two runs the 500 000 × 300
+        // extrapolation rests on (bench_report::scale_section).
         let scene = Scene::load(&super::demo::shipped_scene("sphere.toml"))?;
-        let case = CaptureCase {
-            photos: 150,
-            subdivisions: Some(7),
-            max_vertices: Some(100_000),
-            seed: args.seed,
-            ..CaptureCase::default()
-        };
-        results.push(one_run(
-            &scene,
-            "sphere",
-            "large",
-            "default",
-            &case,
-            &FitConfig::default(),
-            holdout,
-        )?);
+        for (vertices, photos) in LARGE_RUNS {
+            let case = CaptureCase {
+                photos,
+                // Icosphere levels 7 and 8: 163 842 and 655 362 vertices, cut to `vertices`.
+                subdivisions: Some(if vertices > 163_842 { 8 } else { 7 }),
+                max_vertices: Some(vertices),
+                seed: args.seed,
+                ..CaptureCase::default()
+            };
+            results.push(one_run(
+                &scene,
+                "sphere",
+                "large",
+                "default",
+                &case,
+                &FitConfig::default(),
+                holdout,
+            )?);
+        }
     }
     write_report(
         &args.report,
@@ -301,6 +312,9 @@ fn one_run(
     config: &FitConfig,
     holdout: f64,
 ) -> anyhow::Result<RunResult> {
+    // The run's own peak memory: the simulated capture (what a session's samples would be),
+    // the fit and its scoring.
+    let rss_reset = super::memory::reset_peak_rss();
     let t = Instant::now();
     let full = simulate(scene, case)?;
     let simulate_s = t.elapsed().as_secs_f64();
@@ -339,6 +353,7 @@ fn one_run(
         repetitions += 1;
     }
     let scores = evaluate(&capture, &outcome.fits);
+    let peak_rss_bytes = super::memory::peak_rss_bytes().filter(|_| rss_reset);
     let lobes = ellipso_fit::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
     let bracket = case
         .bracket
@@ -355,6 +370,7 @@ fn one_run(
         times: outcome.times,
         forward_s,
         fit_over_forward: fit_s / forward_s,
+        peak_rss_bytes,
         scores,
         holdout,
         clusters: outcome

@@ -69,18 +69,18 @@ pub fn markdown(
             "solver" => "Solver effort",
             "vertices" => "Vertex count",
             "bracket" => "Flash-energy bracket: runs",
-            _ => "Throughput: 100 000 vertices × 150 views",
+            _ => "Throughput and scale: 100 000 vertices × 150 and × 300 views, 500 000 × 60",
         };
         let _ = writeln!(s, "## {title}\n");
         let _ = writeln!(
             s,
-            "| scene | solver | photos | vertices | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex mean / median (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | held-out s0 RMSE / PSNR | flagged |"
+            "| scene | solver | photos | vertices | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex mean / median (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | held-out s0 RMSE / PSNR | peak memory (GB) | flagged |"
         );
         let _ = writeln!(
             s,
-            "|---|---|---:|---:|---:|---:|---|---:|---|---:|---|---:|---:|---|---:|---|---|"
+            "|---|---|---:|---:|---:|---:|---|---:|---|---:|---|---:|---:|---|---:|---|---:|---|"
         );
-        for r in rows {
+        for r in &rows {
             let flags = r
                 .scores
                 .flags
@@ -90,7 +90,7 @@ pub fn markdown(
                 .join(", ");
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} / {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} | {} | {} |",
+                "| {} | {} | {} | {} | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} / {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} | {} | {} | {} |",
                 r.scene,
                 r.solver,
                 r.photos,
@@ -116,6 +116,8 @@ pub fn markdown(
                     "{:.4} / {:.1} dB",
                     h.s0.relative_rmse, h.s0.psnr_db
                 )),
+                r.peak_rss_bytes
+                    .map_or("—".into(), |b| format!("{:.2}", b as f64 / 1e9)),
                 if flags.is_empty() {
                     "—".into()
                 } else {
@@ -124,6 +126,9 @@ pub fn markdown(
             );
         }
         let _ = writeln!(s);
+        if sweep == "large" {
+            scale_section(&mut s, &rows);
+        }
     }
     bracket_section(&mut s, results);
     let _ = writeln!(s, "## Pooled η: per-vertex uncertainty before and after\n");
@@ -264,4 +269,63 @@ fn bracket_section(s: &mut String, results: &[RunResult]) {
         }
     }
     let _ = writeln!(s);
+}
+
+/// The 500 000 × 300 extrapolation from the large runs (issue 19): fit time and peak memory
+/// modelled as c₀ + c_V·vertices + c_S·samples through the three measured runs, at 500 000
+/// vertices and the samples 300 views give at the measured samples per (vertex, view).
+fn scale_section(s: &mut String, rows: &[&RunResult]) {
+    let runs: Vec<(f64, f64, f64, Option<f64>)> = rows
+        .iter()
+        .map(|r| {
+            (
+                r.scores.vertices as f64,
+                r.scores.samples as f64,
+                r.fit_s,
+                r.peak_rss_bytes.map(|b| b as f64),
+            )
+        })
+        .collect();
+    if runs.len() < 3 {
+        return;
+    }
+    let design = nalgebra::Matrix3::from_fn(|i, j| match j {
+        0 => 1.0,
+        1 => runs[i].0,
+        _ => runs[i].1,
+    });
+    let Some(inverse) = design.try_inverse() else {
+        return;
+    };
+    let views = |r: &RunResult| r.views.max(1) as f64;
+    let per_vertex_view = rows
+        .iter()
+        .map(|r| r.scores.samples as f64 / (r.scores.vertices.max(1) as f64 * views(r)))
+        .sum::<f64>()
+        / rows.len() as f64;
+    let (vertices, samples) = (500_000.0, 500_000.0 * 300.0 * per_vertex_view);
+    let predict = |y: [f64; 3]| {
+        let c = inverse * nalgebra::Vector3::from(y);
+        c[0] + c[1] * vertices + c[2] * samples
+    };
+    let time = predict([runs[0].2, runs[1].2, runs[2].2]);
+    let memory = match (runs[0].3, runs[1].3, runs[2].3) {
+        (Some(a), Some(b), Some(c)) => Some(predict([a, b, c])),
+        _ => None,
+    };
+    let _ = writeln!(
+        s,
+        "**500 000 vertices × 300 views, extrapolated** from the three runs above (fit time and \
+         peak memory as c₀ + c_V·vertices + c_S·samples through them; {:.0} samples at their \
+         {:.3} samples per vertex and view): fit **{:.0} s** ({:.1} min; target ≤ 10 min on 2 \
+         cores), peak memory **{}** (target ≤ 16 GB).\n",
+        samples,
+        per_vertex_view,
+        time,
+        time / 60.0,
+        memory.map_or("not measured (no VmHWM)".into(), |m| format!(
+            "{:.1} GB",
+            m / 1e9
+        ))
+    );
 }

@@ -55,7 +55,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.remesh.target_vertices = args.vertices.max(16);
     let started = Instant::now();
     let (mesh, mut report) = mesh_of_session(&session, &config)?;
-    report.peak_rss_bytes = ellipso_mesh::peak_rss_bytes();
+    report.peak_rss_bytes = super::memory::peak_rss_bytes();
     let json = write_mesh(&mesh, &report, &args.out)?;
     if args.json {
         let object = serde_json::json!({

@@ -1,5 +1,6 @@
 //! The `ellipso` command line: one module per subcommand, each with an `Args` (clap) and a `run`.
 
+pub mod allocator;
 pub mod bench;
 pub mod bench_accuracy;
 pub mod bench_mesh;
@@ -12,6 +13,7 @@ pub mod export;
 pub mod fit;
 pub mod fit_shard;
 pub mod limits;
+pub mod memory;
 pub mod mesh;
 pub mod model;
 pub mod out;

@@ -113,18 +113,29 @@ impl DnImage {
                         .map(|&v| v * dn_per_unit)
                         .collect()
                 });
+                // Row by row: for each block of the tile, the two raw rows it covers, and the
+                // largest of its 2×2 samples per tile column (the tiles lie inside the frame:
+                // w·t ≤ raw width, h·t ≤ raw height).
                 let mut max_dn = vec![0f32; w * h];
+                let mut top = vec![0u16; w];
                 for (j, row) in max_dn.chunks_exact_mut(w).enumerate() {
-                    for (i, m) in row.iter_mut().enumerate() {
-                        let mut top = 0u16;
-                        for &(bx, by) in blocks {
-                            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
-                                let x = t * i + 2 * bx + dx;
-                                let y = t * j + 2 * by + dy;
-                                top = top.max(data.get(y * raw_w + x).copied().unwrap_or(0));
+                    top.fill(0);
+                    for &(bx, by) in blocks {
+                        for dy in 0..2 {
+                            let y = t * j + 2 * by + dy;
+                            let Some(raw_row) = data.get(y * raw_w..(y + 1) * raw_w) else {
+                                continue;
+                            };
+                            for (i, m) in top.iter_mut().enumerate() {
+                                let x = t * i + 2 * bx;
+                                if let Some(pair) = raw_row.get(x..x + 2) {
+                                    *m = (*m).max(pair[0]).max(pair[1]);
+                                }
                             }
                         }
-                        *m = f32::from(top) - dark;
+                    }
+                    for (m, &v) in row.iter_mut().zip(&top) {
+                        *m = f32::from(v) - dark;
                     }
                 }
                 DnBand {
