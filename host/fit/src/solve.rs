@@ -1,5 +1,5 @@
-//! The per-vertex solver of the polarimetric SVBRDF fit: Levenberg–Marquardt with exact
-//! dual-number Jacobians, the albedos by variable projection, standard errors and honest flags
+//! The per-vertex solver of the polarimetric SVBRDF fit: box-constrained Levenberg–Marquardt
+//! with exact Jacobians, the albedos by variable projection, standard errors and honest flags
 //! (docs/model.md §11; docs/fit-solver.md has the derivations and measured numbers).
 //!
 //! # API
@@ -10,14 +10,14 @@
 //!   (f64, no derivatives): the unit the benchmark divides fit time by.
 //!
 //! # Unknowns and bounds (docs/fit-solver.md, "Bounds")
-//! Every unknown has a physical range, enforced by the parameterisation. Outer (LM) unknowns,
-//! raw and unbounded: η = η_min + (η_max − η_min)·sigmoid(u) (default [1.1, 3], the paper's);
-//! σ_s = σ_floor + (1 − σ_floor)·sigmoid(a) with σ_floor the larger of `sigma_min` and the
-//! guide's cluster floor; σ_ss = σ_s + (1 − σ_s)·sigmoid(b) (so σ_floor ≤ σ_s ≤ σ_ss ≤ 1);
-//! ρ_s = cap·sigmoid(c); normal = normalise(n0 + p·t1 + q·t2), re-centred on the tangent plane of
-//! the current normal after every accepted step. Inner (projected) unknowns: ρ_d and ρ_ss per
-//! colour channel by exact box-constrained least squares in [0, cap]² inside every evaluation,
-//! in dual arithmetic (the outer Jacobian includes the projection's derivative).
+//! Every unknown has a physical range. LM unknowns (`lm.rs`), box coordinates handled by
+//! projection with an active set: η ∈ [η_min, η_max] (default [1.1, 3], the paper's);
+//! ln σ_s ∈ [ln σ_floor, 0] with σ_floor the larger of `sigma_min` and the guide's cluster floor;
+//! v ∈ [0, 1] with σ_ss = σ_s + (1 − σ_s)·v (so σ_floor ≤ σ_s ≤ σ_ss ≤ 1); the normal's tangent
+//! coordinates p, q (normal = normalise(n0 + p·t1 + q·t2), re-centred on the tangent plane of the
+//! current normal after every accepted step). Projected (linear) unknowns (`albedos.rs`): ρ_d and
+//! ρ_ss per colour channel and ρ_s, by exact box-constrained least squares in [0, cap] inside
+//! every evaluation; the LM Jacobian includes the projection's derivative (`jacobian.rs`).
 //!
 //! # Priors (measurement mode)
 //! Weak priors make directions the data leaves flat well defined instead of letting them run
@@ -168,8 +168,6 @@ pub struct SolverConfig {
     /// predicts) is below this × s², s² = cost/(m − p): the parameters are then within ~√tol
     /// standard errors of the local optimum (default 1e-3; 0 disables).
     pub chi2_tolerance: f64,
-    /// ρ_s of cold starts (default 0.5).
-    pub initial_rho_s: f64,
     /// Weight of L_ψ (DoP) (default 10).
     pub lambda_psi: f64,
     /// Weight of L_d (default 1).
@@ -239,7 +237,6 @@ impl Default for SolverConfig {
             cold_starts: vec![[1.5, 0.1, 0.3], [1.5, 0.4, 0.8]],
             restart_reduced_chi2: 4.0,
             chi2_tolerance: 1e-3,
-            initial_rho_s: 0.5,
             lambda_psi: 10.0,
             lambda_d: 1.0,
             lambda_s: 1.0,

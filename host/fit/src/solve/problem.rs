@@ -1,7 +1,8 @@
 //! One vertex's least-squares problem: the prepared samples and the residual vector, generic
-//! over the scalar so one source gives the cost (`f64`), the LM Jacobian (duals over the raw
-//! nonlinear unknowns, albedos projected inside) and the covariance Jacobian (duals over all
-//! parameters, albedos given).
+//! over the scalar so one source gives the cost (`f64`), the LM Jacobian (duals over the box
+//! coordinates, albedos projected inside) and the covariance Jacobian (duals over all
+//! parameters, albedos given); the measurement loss's Jacobians are also written out from the
+//! same unit lobes (`jacobian.rs`, tested equal).
 //!
 //! Residuals, in emission order (docs/fit-solver.md; module doc of `solve` for the weights):
 //! - [`LossMode::Paper`]: per real sample, per colour channel: L_d `√(λd·w)·(Î^d − I^d)`,
@@ -442,7 +443,7 @@ impl<'a> Problem<'a> {
 
     /// Measurement mode: re-derives every residual's noise from the model's prediction at the
     /// point whose unit lobes are in `scratch` (an f64 evaluation just done) with `albedos`
-    /// and `rho_s` — iteratively reweighted least squares, the weights held fixed inside each
+    /// (ρ_s among them) — iteratively reweighted least squares, the weights held fixed inside each
     /// LM run (quasi-likelihood: consistent, unlike weights from the noisy data). No-op in
     /// paper mode. Returns the largest relative change of any 1/σ (0 in paper mode).
     pub fn reweight(&mut self, scratch: &Scratch<f64>, albedos: &Albedos<f64>) -> f64 {
