@@ -24,7 +24,7 @@ mod lobes;
 use ellipso_model::optics::coaxial::unit_specular_terms;
 use ellipso_model::optics::measure::{AnalyserAngles, ObservationChannels, SensorIntensities};
 use ellipso_model::optics::pbrdf::Geometry;
-use ellipso_model::optics::staged::{ReflectionFrames, half_vector};
+use ellipso_model::optics::staged::{Directions, ReflectionFrames, half_vector};
 use ellipso_model::optics::{Frame, Real, Stokes, Vec3};
 use nalgebra::Point3;
 
@@ -40,18 +40,13 @@ pub use lobes::LobeScalar;
 /// (`ellipso_model::optics::staged`) and the analyser rows.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SampleFrames {
-    /// Unit direction surface → flash, world.
-    pub to_light: Vec3<f64>,
-    /// Unit direction surface → camera, world.
-    pub to_camera: Vec3<f64>,
-    /// Unit half vector of `to_light` and `to_camera`.
+    /// Unit directions surface → flash and surface → camera (world) and their Stokes frames:
+    /// light frame z = −ω_i, x along the flash polariser; camera frame z = ω_o, y = image up.
+    pub directions: Directions<f64>,
+    /// Unit half vector of the two directions.
     pub half: Vec3<f64>,
     /// cos θ_d = h·ω_i clamped to [0, 1]: the Fresnel angle of the microfacet reflection.
     pub cos_theta_d: f64,
-    /// Light frame (z = −ω_i, x along the flash polariser).
-    pub light_frame: Frame<f64>,
-    /// Camera frame (z = ω_o, y = image up).
-    pub camera_frame: Frame<f64>,
     /// Whether the flash is polarised (s_light = [1, 1, 0, 0]) or bare ([1, 0, 0, 0]).
     pub polarised: bool,
     /// The microfacet reflection's rotations for this configuration and flash.
@@ -112,21 +107,13 @@ impl SampleFrames {
         let half = half_vector(fixed.to_light, fixed.to_camera)?;
         let polarised = view.polarised();
         let angles = view.analyser_angles(&g);
+        let directions = fixed.directions();
         Some(Self {
-            to_light: fixed.to_light,
-            to_camera: fixed.to_camera,
+            directions,
             half,
             cos_theta_d: fixed.cos_theta_d,
-            light_frame,
-            camera_frame,
             polarised,
-            reflection: ReflectionFrames::new(
-                fixed.to_light,
-                fixed.to_camera,
-                &light_frame,
-                &camera_frame,
-                light_stokes(polarised),
-            ),
+            reflection: ReflectionFrames::new(&directions, light_stokes(polarised)),
             pixel_rows: pixel_rows(&angles),
         })
     }

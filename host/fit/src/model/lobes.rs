@@ -19,7 +19,7 @@ use ellipso_model::optics::fresnel::FresnelTerms;
 use ellipso_model::optics::measure::dop_diffuse;
 use ellipso_model::optics::microfacet::microfacet_weight;
 use ellipso_model::optics::staged::{NormalCosines, diffuse_stokes};
-use ellipso_model::optics::{Dual, Frame, Real, Vec3};
+use ellipso_model::optics::{Dual, Real, Vec3};
 
 use super::{SampleFrames, TangentNormal, UnitSample, light_stokes, observed, tangent_normal};
 
@@ -39,10 +39,11 @@ pub trait LobeScalar: Real {
 /// The cosines of `normal` with the sample's fixed directions; `None` when degenerate or
 /// back-facing.
 fn cosines<T: Real>(frames: &SampleFrames, normal: Vec3<T>) -> Option<NormalCosines<T>> {
+    let d = &frames.directions;
     let c = NormalCosines::new(
         normal,
-        frames.to_light.cast(),
-        frames.to_camera.cast(),
+        d.to_light.cast(),
+        d.to_camera.cast(),
         frames.half.cast(),
     )?;
     c.front_facing.then_some(c)
@@ -52,10 +53,7 @@ fn cosines<T: Real>(frames: &SampleFrames, normal: Vec3<T>) -> Option<NormalCosi
 fn diffuse<T: Real>(frames: &SampleFrames, cosines: &NormalCosines<T>, eta: T) -> [T; 3] {
     observed(diffuse_stokes(
         cosines,
-        frames.to_light.cast(),
-        frames.to_camera.cast(),
-        &cast_frame(&frames.light_frame),
-        &cast_frame(&frames.camera_frame),
+        &frames.directions.cast(),
         eta,
         light_stokes(frames.polarised),
     ))
@@ -65,10 +63,6 @@ fn diffuse<T: Real>(frames: &SampleFrames, cosines: &NormalCosines<T>, eta: T) -
 fn reflection<T: Real>(frames: &SampleFrames, eta: T) -> [T; 3] {
     let terms = FresnelTerms::reflection_terms(T::from_f64(frames.cos_theta_d), eta);
     observed(frames.reflection.cast::<T>().reflect(terms))
-}
-
-fn cast_frame<T: Real>(f: &Frame<f64>) -> Frame<T> {
-    f.cast()
 }
 
 impl LobeScalar for f64 {

@@ -157,7 +157,7 @@ fn albedo_derivatives(
 }
 
 /// Slot of each physical unknown (η, σ_s, σ_ss, p, q) in the covariance's 12-parameter layout.
-const PHYSICAL_SLOTS: [usize; 5] = [0, 1, 2, 10, 11];
+pub(super) const PHYSICAL_SLOTS: [usize; 5] = [0, 1, 2, 10, 11];
 
 /// JᵀJ over all 12 parameters in physical units (layout of `uncertainty.rs`: η, σ_s, σ_ss,
 /// ρ_s, ρ_ss RGB, ρ_d RGB, p, q) at `x` (p = q = 0 on `chart`) and the given `albedos`, with
@@ -168,14 +168,7 @@ pub(super) fn physical_normal_matrix(
     x: &Nonlinear<f64>,
     albedos: &Albedos<f64>,
 ) -> (f64, usize, SMatrix<f64, 12, 12>) {
-    let v = |re: f64, k: usize| Physical::variable(re, k);
-    let xd = Nonlinear {
-        eta: v(x.eta, 0),
-        sigma_s: v(x.sigma_s, 1),
-        sigma_ss: v(x.sigma_ss, 2),
-        p: v(x.p, 3),
-        q: v(x.q, 4),
-    };
+    let xd: Nonlinear<Physical> = x.seeded([0, 1, 2, 3, 4]);
     let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
     problem.units_at(chart, &xd, false, &mut scratch);
     problem.virtuals_at(&xd, &mut scratch);
@@ -204,14 +197,7 @@ pub(super) fn physical_normal_matrix(
         rows += 1;
     });
     // The prior rows, in the 12-parameter duals.
-    let all = |re: f64, k: usize| Dual::<12>::variable(re, k);
-    let x12 = Nonlinear {
-        eta: all(x.eta, 0),
-        sigma_s: all(x.sigma_s, 1),
-        sigma_ss: all(x.sigma_ss, 2),
-        p: all(x.p, 10),
-        q: all(x.q, 11),
-    };
+    let x12: Nonlinear<Dual<12>> = x.seeded(PHYSICAL_SLOTS);
     let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x12.p, x12.q);
     problem.prior_rows(&x12, normal, &mut |r: Dual<12>| {
         let g = SVector::<f64, 12>::from(r.du);

@@ -22,7 +22,7 @@
 //!   centre (the solver's weak default or the cluster's pooled value), ln σs and ln σss about
 //!   theirs, and the normal's two tangent components about the mesh normal (the prior cone).
 
-use ellipso_model::optics::Real;
+use ellipso_model::optics::{Dual, Real};
 
 use super::super::data::{
     OBSERVATION_CHANNELS, VertexGuide, VertexSamples, ViewGeometry, VirtualSample,
@@ -44,6 +44,21 @@ pub(super) struct Nonlinear<T> {
     pub sigma_ss: T,
     pub p: T,
     pub q: T,
+}
+
+impl Nonlinear<f64> {
+    /// These values as dual variables in `slots` (η, σ_s, σ_ss, p, q), for derivatives with
+    /// respect to the physical unknowns.
+    pub fn seeded<const N: usize>(&self, slots: [usize; 5]) -> Nonlinear<Dual<N>> {
+        let v = |re: f64, k: usize| Dual::variable(re, slots[k]);
+        Nonlinear {
+            eta: v(self.eta, 0),
+            sigma_s: v(self.sigma_s, 1),
+            sigma_ss: v(self.sigma_ss, 2),
+            p: v(self.p, 3),
+            q: v(self.q, 4),
+        }
+    }
 }
 
 /// The normal chart: unit n0 and its tangent basis.

@@ -79,13 +79,7 @@ pub(super) fn all_duals(
     albedos: &Albedos<f64>,
 ) -> (f64, usize, SMatrix<f64, N_ALL, N_ALL>) {
     let v = |re: f64, k: usize| AllDual::variable(re, k);
-    let xd = Nonlinear {
-        eta: v(x.eta, 0),
-        sigma_s: v(x.sigma_s, 1),
-        sigma_ss: v(x.sigma_ss, 2),
-        p: v(x.p, 10),
-        q: v(x.q, 11),
-    };
+    let xd: Nonlinear<AllDual> = x.seeded(super::jacobian::PHYSICAL_SLOTS);
     let ad = Albedos {
         rho_ss: core::array::from_fn(|c| v(albedos.rho_ss[c], 4 + c)),
         rho_d: core::array::from_fn(|c| v(albedos.rho_d[c], 7 + c)),

@@ -26,7 +26,7 @@
 use super::frame::DIRECTION_EPS_SQ;
 use super::fresnel::FresnelTerms;
 use super::microfacet::microfacet_weight;
-use super::staged::{NormalCosines, ReflectionFrames, diffuse_stokes};
+use super::staged::{Directions, NormalCosines, ReflectionFrames, diffuse_stokes};
 use super::{Frame, Mueller, OpticsError, Real, Rotator, Stokes, Vec3};
 
 /// Material parameters of one surface point (docs/model.md §4; as fit unknowns, §11 "Unknowns").
@@ -181,6 +181,16 @@ impl<T: Real> Geometry<T> {
         })
     }
 
+    /// The fixed part of this geometry (directions and frames).
+    pub fn directions(&self) -> Directions<T> {
+        Directions {
+            to_light: self.to_light,
+            to_camera: self.to_camera,
+            light_frame: self.light_frame,
+            camera_frame: self.camera_frame,
+        }
+    }
+
     /// The normal's part of this geometry (the unit normal and its cosines).
     pub fn cosines(&self) -> NormalCosines<T> {
         NormalCosines {
@@ -294,14 +304,7 @@ pub fn lobe_weight<T: Real>(g: &Geometry<T>, sigma: T) -> T {
 
 /// The diffuse row and column: (C_{n→o}[T_o+, T_o−, 0, 0]ᵀ, [T_i+, T_i−, 0, 0] C_{i→n}).
 fn diffuse_factors<T: Real>(g: &Geometry<T>, eta: T) -> ([T; 4], [T; 4]) {
-    super::staged::diffuse_factors(
-        &g.cosines(),
-        g.to_light,
-        g.to_camera,
-        &g.light_frame,
-        &g.camera_frame,
-        eta,
-    )
+    super::staged::diffuse_factors(&g.cosines(), &g.directions(), eta)
 }
 
 /// P^d with ρ_d = 1 (multiply by ρ_d per channel).
@@ -375,23 +378,10 @@ pub fn apply_unit_lobes<T: Real>(
             weight_ss: T::zero(),
         };
     }
-    let diffuse = diffuse_stokes(
-        &g.cosines(),
-        g.to_light,
-        g.to_camera,
-        &g.light_frame,
-        &g.camera_frame,
-        eta,
-        s_light,
-    );
-    let reflection = ReflectionFrames::new(
-        g.to_light,
-        g.to_camera,
-        &g.light_frame,
-        &g.camera_frame,
-        s_light,
-    )
-    .reflect(FresnelTerms::reflection_terms(g.cos_theta_d, eta));
+    let d = g.directions();
+    let diffuse = diffuse_stokes(&g.cosines(), &d, eta, s_light);
+    let reflection = ReflectionFrames::new(&d, s_light)
+        .reflect(FresnelTerms::reflection_terms(g.cos_theta_d, eta));
     UnitLobeStokes {
         diffuse,
         reflection,

@@ -5,6 +5,7 @@
 //! Contract: these functions are the only implementation of the unit lobes —
 //! [`super::pbrdf::apply_unit_lobes`] is composed of them, so a staged caller gets the renderer's
 //! numbers bit for bit. The pieces:
+//! - [`Directions`]: ω_i, ω_o and their Stokes frames, the configuration's fixed part.
 //! - [`NormalCosines`]: the unit normal and the clamped cosines n·ω_i, n·ω_o, n·h — the only
 //!   place the normal enters besides the diffuse lobe's frames.
 //! - [`ReflectionFrames`]: the microfacet reflection's rotations, C_{i→h}·s_light and C_{h→o}.
@@ -18,6 +19,32 @@
 use super::frame::DIRECTION_EPS_SQ;
 use super::fresnel::FresnelTerms;
 use super::{Frame, Real, Rotator, Stokes, Vec3};
+
+/// The fixed part of one configuration: the unit directions to the light and to the camera and
+/// their Stokes frames (light frame z = −ω_i, camera frame z = ω_o).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Directions<T> {
+    /// Unit direction surface → light, ω_i.
+    pub to_light: Vec3<T>,
+    /// Unit direction surface → camera, ω_o.
+    pub to_camera: Vec3<T>,
+    /// Light frame (z = −ω_i).
+    pub light_frame: Frame<T>,
+    /// Camera frame (z = ω_o).
+    pub camera_frame: Frame<T>,
+}
+
+impl Directions<f64> {
+    /// The same directions as constants of another scalar type.
+    pub fn cast<U: Real>(&self) -> Directions<U> {
+        Directions {
+            to_light: self.to_light.cast(),
+            to_camera: self.to_camera.cast(),
+            light_frame: self.light_frame.cast(),
+            camera_frame: self.camera_frame.cast(),
+        }
+    }
+}
 
 /// The unit normal and its clamped cosines with ω_i, ω_o and the half vector h.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -97,20 +124,15 @@ pub struct ReflectionFrames<T> {
 }
 
 impl<T: Real> ReflectionFrames<T> {
-    /// The rotations for unit `to_light`, `to_camera`, their frames and the light's Stokes
-    /// vector in the light frame.
-    pub fn new(
-        to_light: Vec3<T>,
-        to_camera: Vec3<T>,
-        light_frame: &Frame<T>,
-        camera_frame: &Frame<T>,
-        s_light: Stokes<T>,
-    ) -> Self {
-        let axis = reflection_axis(to_light, to_camera, camera_frame);
-        let rot_in = light_frame
+    /// The rotations for the configuration `d` and the light's Stokes vector in the light frame.
+    pub fn new(d: &Directions<T>, s_light: Stokes<T>) -> Self {
+        let axis = reflection_axis(d.to_light, d.to_camera, &d.camera_frame);
+        let rot_in = d
+            .light_frame
             .rotator_to_axis(axis)
             .unwrap_or_else(Rotator::identity);
-        let rotate_out = camera_frame
+        let rotate_out = d
+            .camera_frame
             .rotator_to_axis(axis)
             .unwrap_or_else(Rotator::identity)
             .inverse();
@@ -151,23 +173,22 @@ impl ReflectionFrames<f64> {
 
 /// The diffuse lobe's column and row, C_{n→o}[T_o+, T_o−, 0, 0]ᵀ and [T_i+, T_i−, 0, 0]C_{i→n}
 /// (docs/model.md §4: P^d = ρ_d cosθ_i · column · row), for a unit normal with the cosines of
-/// `cosines`.
+/// `cosines` in the configuration `d`.
 pub fn diffuse_factors<T: Real>(
     cosines: &NormalCosines<T>,
-    to_light: Vec3<T>,
-    to_camera: Vec3<T>,
-    light_frame: &Frame<T>,
-    camera_frame: &Frame<T>,
+    d: &Directions<T>,
     eta: T,
 ) -> ([T; 4], [T; 4]) {
     let z = T::zero();
     let [ti_plus, ti_minus] = FresnelTerms::transmission_terms(cosines.cos_theta_i, eta);
     let [to_plus, to_minus] = FresnelTerms::transmission_terms(cosines.cos_theta_o, eta);
-    let rot_in = light_frame
-        .rotator_to_axis(to_light.cross(cosines.normal))
+    let rot_in = d
+        .light_frame
+        .rotator_to_axis(d.to_light.cross(cosines.normal))
         .unwrap_or_else(Rotator::identity);
-    let rot_out = camera_frame
-        .rotator_to_axis(to_camera.cross(cosines.normal))
+    let rot_out = d
+        .camera_frame
+        .rotator_to_axis(d.to_camera.cross(cosines.normal))
         .unwrap_or_else(Rotator::identity)
         .inverse();
     let row = rot_in.apply_row([ti_plus, ti_minus, z, z]);
@@ -181,10 +202,7 @@ pub fn diffuse_factors<T: Real>(
 /// Zero when back-facing.
 pub fn diffuse_stokes<T: Real>(
     cosines: &NormalCosines<T>,
-    to_light: Vec3<T>,
-    to_camera: Vec3<T>,
-    light_frame: &Frame<T>,
-    camera_frame: &Frame<T>,
+    d: &Directions<T>,
     eta: T,
     s_light: Stokes<T>,
 ) -> Stokes<T> {
@@ -192,7 +210,7 @@ pub fn diffuse_stokes<T: Real>(
         return Stokes::unpolarised(T::zero());
     }
     let s = s_light.to_array();
-    let (col, row) = diffuse_factors(cosines, to_light, to_camera, light_frame, camera_frame, eta);
+    let (col, row) = diffuse_factors(cosines, d, eta);
     let k = (row[0] * s[0] + row[1] * s[1] + row[2] * s[2] + row[3] * s[3]) * cosines.cos_theta_i;
     Stokes::from_array(col).scale(k)
 }
