@@ -279,18 +279,9 @@ pub fn reflection_unit<T: Real>(g: &Geometry<T>, eta: T) -> Mueller<T> {
     if !g.front_facing {
         return Mueller::zero();
     }
-    let f = FresnelTerms::dielectric(g.cos_theta_d, eta);
-    let s = reflection_axis(g);
-    let rot_in = g
-        .light_frame
-        .rotator_to_axis(s)
-        .unwrap_or_else(Rotator::identity);
-    let rot_out = g
-        .camera_frame
-        .rotator_to_axis(s)
-        .unwrap_or_else(Rotator::identity)
-        .inverse();
-    rotated_symmetric(f.r_plus(), f.r_minus(), f.r_cross(), rot_in, rot_out)
+    let [r_plus, r_minus, r_cross] = FresnelTerms::reflection_terms(g.cos_theta_d, eta);
+    let (rot_in, rot_out) = super::staged::reflection_rotators(&g.directions());
+    rotated_symmetric(r_plus, r_minus, r_cross, rot_in, rot_out)
 }
 
 /// The scalar weight of a reflection lobe of roughness `sigma` (albedo 1), foreshortening

@@ -114,6 +114,23 @@ pub fn reflection_axis<T: Real>(
     }
 }
 
+/// The microfacet reflection's two Stokes rotations, (C_{i→h}, C_{h→o}): from the light frame
+/// into the reflection's s/p frame (s-axis [`reflection_axis`]) and from it into the camera
+/// frame.
+pub fn reflection_rotators<T: Real>(d: &Directions<T>) -> (Rotator<T>, Rotator<T>) {
+    let axis = reflection_axis(d.to_light, d.to_camera, &d.camera_frame);
+    let rot_in = d
+        .light_frame
+        .rotator_to_axis(axis)
+        .unwrap_or_else(Rotator::identity);
+    let rot_out = d
+        .camera_frame
+        .rotator_to_axis(axis)
+        .unwrap_or_else(Rotator::identity)
+        .inverse();
+    (rot_in, rot_out)
+}
+
 /// The microfacet reflection's Stokes rotations for one configuration (module doc).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReflectionFrames<T> {
@@ -126,16 +143,7 @@ pub struct ReflectionFrames<T> {
 impl<T: Real> ReflectionFrames<T> {
     /// The rotations for the configuration `d` and the light's Stokes vector in the light frame.
     pub fn new(d: &Directions<T>, s_light: Stokes<T>) -> Self {
-        let axis = reflection_axis(d.to_light, d.to_camera, &d.camera_frame);
-        let rot_in = d
-            .light_frame
-            .rotator_to_axis(axis)
-            .unwrap_or_else(Rotator::identity);
-        let rotate_out = d
-            .camera_frame
-            .rotator_to_axis(axis)
-            .unwrap_or_else(Rotator::identity)
-            .inverse();
+        let (rot_in, rotate_out) = reflection_rotators(d);
         Self {
             local: rot_in.apply(s_light),
             rotate_out,
