@@ -23,9 +23,8 @@ mod lobes;
 
 use ellipso_model::optics::coaxial::unit_specular_terms;
 use ellipso_model::optics::measure::{AnalyserAngles, ObservationChannels, SensorIntensities};
-use ellipso_model::optics::pbrdf::Geometry;
 use ellipso_model::optics::staged::{Directions, ReflectionFrames, half_vector};
-use ellipso_model::optics::{Frame, Real, Stokes, Vec3};
+use ellipso_model::optics::{Real, Stokes, Vec3};
 use nalgebra::Point3;
 
 #[cfg(doc)]
@@ -85,25 +84,14 @@ pub fn pixel_rows(a: &AnalyserAngles) -> [[f64; 3]; 4] {
 }
 
 impl SampleFrames {
-    /// The frames of `view` at `position_world`, built exactly as
-    /// [`crate::data::SampleGeometry::model`] builds them; `None` when the geometry is
+    /// The frames of `view` at `position_world`, from [`crate::data::SampleGeometry::model`]; `None` when the geometry is
     /// degenerate (see [`ViewGeometry::geometry_at`]) or the flash is exactly opposite the
     /// camera (no half vector).
     pub fn new(view: &ViewGeometry, position_world: [f64; 3]) -> Option<Self> {
         let g = view.geometry_at(&Point3::from(position_world))?;
-        let light_frame =
-            Frame::light(Vec3::from_f64(g.to_light), Vec3::from_f64(g.light_up)).ok()?;
-        let camera_frame =
-            Frame::camera(Vec3::from_f64(g.to_camera), Vec3::from_f64(g.camera_up)).ok()?;
-        // Directions as the model's geometry normalises them (the normal only enters later).
-        let fixed = Geometry::new(
-            Vec3::from_f64(g.to_camera),
-            Vec3::from_f64(g.to_light),
-            Vec3::from_f64(g.to_camera),
-            light_frame,
-            camera_frame,
-        )
-        .ok()?;
+        // Directions and frames as the model's geometry builds them; the normal only enters
+        // later, so any valid one serves here.
+        let fixed = g.model::<f64>(Vec3::from_f64(g.to_camera)).ok()?;
         let half = half_vector(fixed.to_light, fixed.to_camera)?;
         let polarised = view.polarised();
         let angles = view.analyser_angles(&g);
