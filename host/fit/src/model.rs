@@ -84,9 +84,9 @@ pub fn pixel_rows(a: &AnalyserAngles) -> [[f64; 3]; 4] {
 }
 
 impl SampleFrames {
-    /// The frames of `view` at `position_world`, from [`crate::data::SampleGeometry::model`]; `None` when the geometry is
-    /// degenerate (see [`ViewGeometry::geometry_at`]) or the flash is exactly opposite the
-    /// camera (no half vector).
+    /// The frames of `view` at `position_world`, from [`crate::data::SampleGeometry::model`];
+    /// `None` when the geometry is degenerate (see [`ViewGeometry::geometry_at`]) or the flash
+    /// is exactly opposite the camera (no half vector).
     pub fn new(view: &ViewGeometry, position_world: [f64; 3]) -> Option<Self> {
         let g = view.geometry_at(&Point3::from(position_world))?;
         // Directions and frames as the model's geometry builds them; the normal only enters
