@@ -189,38 +189,61 @@ pub fn unit_tangent_normal(n0: [f64; 3], t1: [f64; 3], t2: [f64; 3], p: f64, q: 
     [v.x / len, v.y / len, v.z / len]
 }
 
-/// A normal parameterised on the tangent plane of a unit `n0`: `n0 + p·t1 + q·t2` (any
-/// non-zero length; the optics normalise it). (p, q) are the solver's unknowns; a fixed normal
-/// is `p = q = 0`.
-#[derive(Clone, Copy, Debug)]
-pub struct TangentNormal<T> {
+/// A chart of the normal's directions about a unit `n0`: `n0 + p·t1 + q·t2` with (t1, t2) its
+/// orthonormal tangent basis ([`tangent_basis`]), so (p, q) are tangent-plane coordinates
+/// (radians to first order). The solver re-centres it on every accepted normal.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Chart {
     /// Unit centre normal.
     pub n0: [f64; 3],
-    /// Orthonormal tangent basis of `n0` ([`tangent_basis`]).
+    /// First tangent.
     pub t1: [f64; 3],
     /// Second tangent, t1 × t2 = n0.
     pub t2: [f64; 3],
-    /// Coordinate along t1.
+}
+
+impl Chart {
+    /// The chart centred on the unit normal `n0`.
+    pub fn at(n0: [f64; 3]) -> Self {
+        let (t1, t2) = tangent_basis(n0);
+        Self { n0, t1, t2 }
+    }
+
+    /// The (unnormalised) normal at (p, q): [`tangent_normal`].
+    pub fn normal<T: Real>(&self, p: T, q: T) -> Vec3<T> {
+        tangent_normal(self.n0, self.t1, self.t2, p, q)
+    }
+
+    /// The unit normal at (p, q): [`unit_tangent_normal`].
+    pub fn unit_normal(&self, p: f64, q: f64) -> [f64; 3] {
+        unit_tangent_normal(self.n0, self.t1, self.t2, p, q)
+    }
+}
+
+/// A normal on a [`Chart`]: (p, q) are the solver's unknowns; a fixed normal is `p = q = 0`
+/// (any non-zero length; the optics normalise it).
+#[derive(Clone, Copy, Debug)]
+pub struct TangentNormal<T> {
+    /// The chart.
+    pub chart: Chart,
+    /// Coordinate along the chart's t1.
     pub p: T,
-    /// Coordinate along t2.
+    /// Coordinate along the chart's t2.
     pub q: T,
 }
 
 impl<T: Real> TangentNormal<T> {
     /// The (unnormalised) normal `n0 + p·t1 + q·t2`.
     pub fn vector(&self) -> Vec3<T> {
-        tangent_normal(self.n0, self.t1, self.t2, self.p, self.q)
+        self.chart.normal(self.p, self.q)
     }
 }
 
 impl TangentNormal<f64> {
     /// A fixed unit normal (p = q = 0).
     pub fn fixed(n: [f64; 3]) -> Self {
-        let (t1, t2) = tangent_basis(n);
         Self {
-            n0: n,
-            t1,
-            t2,
+            chart: Chart::at(n),
             p: 0.0,
             q: 0.0,
         }
@@ -366,9 +389,7 @@ mod tests {
         let x0 = [1.45, 0.2, 0.45, 0.03, -0.02];
         let eval = |f: &SampleFrames, x: [f64; 5]| {
             let normal = TangentNormal {
-                n0,
-                t1,
-                t2,
+                chart: Chart { n0, t1, t2 },
                 p: x[3],
                 q: x[4],
             };
@@ -382,9 +403,7 @@ mod tests {
             };
             let d = |k: usize| Dual::<5>::variable(x0[k], k);
             let normal = TangentNormal {
-                n0,
-                t1,
-                t2,
+                chart: Chart { n0, t1, t2 },
                 p: d(3),
                 q: d(4),
             };

@@ -80,9 +80,9 @@ use rayon::prelude::*;
 
 use super::data::{FitFlag, SampleSet, VertexFit, VertexGuide, VertexSamples, ViewGeometry};
 use super::model::unit_sample_at;
-use lm::{LmState, RawDual, chart, physical, raw_from};
+use lm::{LmState, RawDual, physical, raw_from};
 
-use problem::{Albedos, Problem, Scratch};
+use problem::{Albedos, Chart, Problem, Scratch};
 
 /// The guide of a vertex without one (no virtual samples, no floor, the default priors).
 static NO_GUIDE: VertexGuide = VertexGuide {
@@ -493,7 +493,7 @@ pub fn fit_vertex(
     // The unit lobes at the final state, with their DoP fields (for the flags), and from them
     // the weights at the final state (for the standard errors).
     let x = physical(state.raw, &problem.bounds);
-    problem.units_at(&chart(state.normal), &x, true, &mut scratch_f);
+    problem.units_at(&Chart::at(state.normal), &x, true, &mut scratch_f);
     if measurement {
         let _ = problem.reweight(&scratch_f, &state.albedos);
     }
@@ -513,7 +513,7 @@ fn best_start(
 ) -> LmState {
     let mut starts = starts.to_vec();
     if rank {
-        let ch = chart(start_normal);
+        let ch = Chart::at(start_normal);
         let mut ranked: Vec<(f64, [f64; lm::N_RAW])> = starts
             .iter()
             .map(|s| {
@@ -572,7 +572,7 @@ fn coarse_subset(problem: &Problem, cold: bool, config: &SolverConfig) -> Option
 /// Measurement mode: reweights `problem` from the model at `state`; returns the largest
 /// relative change of any 1/σ.
 fn reweight_at(problem: &mut Problem, state: &LmState, scratch: &mut Scratch<f64>) -> f64 {
-    let (_, albedos) = lm::cost_at(problem, &chart(state.normal), state.raw, scratch);
+    let (_, albedos) = lm::cost_at(problem, &Chart::at(state.normal), state.raw, scratch);
     problem.reweight(scratch, &albedos)
 }
 
@@ -614,7 +614,7 @@ fn finish(
 ) -> VertexFit {
     let bounds = problem.bounds;
     let x = physical(state.raw, &bounds);
-    let ch = chart(state.normal);
+    let ch = Chart::at(state.normal);
     let params = PbrdfParams {
         eta: x.eta,
         sigma_s: x.sigma_s,
@@ -735,7 +735,8 @@ fn prior_fit(
     if init.is_none() && problem.len() > 0 {
         let raw = raw_from(params.eta, params.sigma_s, params.sigma_ss, b);
         let mut scratch = Scratch::<f64>::new(problem.len(), problem.virtuals.len());
-        let (_, a): (f64, Albedos<f64>) = lm::cost_at(problem, &chart(normal), raw, &mut scratch);
+        let (_, a): (f64, Albedos<f64>) =
+            lm::cost_at(problem, &Chart::at(normal), raw, &mut scratch);
         if a.rho_d
             .iter()
             .chain(&a.rho_ss)

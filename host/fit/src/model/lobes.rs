@@ -21,7 +21,7 @@ use ellipso_model::optics::microfacet::microfacet_weight;
 use ellipso_model::optics::staged::{NormalCosines, diffuse_stokes};
 use ellipso_model::optics::{Dual, Real, Vec3};
 
-use super::{SampleFrames, TangentNormal, UnitSample, light_stokes, observed, tangent_normal};
+use super::{SampleFrames, TangentNormal, UnitSample, light_stokes, observed};
 
 /// A scalar the unit lobes can be evaluated in (module doc).
 pub trait LobeScalar: Real {
@@ -155,10 +155,7 @@ impl<const N: usize> LobeScalar for Dual<N> {
             q: normal.q.du,
         };
         // The normal and its cosines over (p, q).
-        let n2 = tangent_normal(
-            normal.n0,
-            normal.t1,
-            normal.t2,
+        let n2 = normal.chart.normal(
             Dual::<2>::variable(normal.p.re, 0),
             Dual::<2>::variable(normal.q.re, 1),
         );

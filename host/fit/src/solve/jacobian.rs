@@ -20,7 +20,6 @@
 use ellipso_model::optics::Dual;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
-use super::super::model::tangent_normal;
 use super::albedos::{AlbedoSystem, Albedos};
 use super::lm::{Mat, N_RAW, RawDual, Vector};
 use super::problem::{Chart, Nonlinear, Problem, Scratch};
@@ -117,7 +116,7 @@ pub(super) fn lm_normal_equations(
         jtj.ger(1.0, &g, &g, 1.0);
         jtr.axpy(sw * r, &g, 1.0);
     });
-    let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x.p, x.q);
+    let normal = chart.normal(x.p, x.q);
     problem.prior_rows(x, normal, &mut |r: RawDual| {
         cost += r.re * r.re;
         let g = Vector::from(r.du);
@@ -198,7 +197,7 @@ pub(super) fn physical_normal_matrix(
     });
     // The prior rows, in the 12-parameter duals.
     let x12: Nonlinear<Dual<12>> = x.seeded(PHYSICAL_SLOTS);
-    let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x12.p, x12.q);
+    let normal = chart.normal(x12.p, x12.q);
     problem.prior_rows(&x12, normal, &mut |r: Dual<12>| {
         let g = SVector::<f64, 12>::from(r.du);
         jtj.ger(1.0, &g, &g, 1.0);
@@ -252,7 +251,7 @@ mod tests {
                     let config = SolverConfig::default();
                     assert_eq!(config.loss, LossMode::Measurement);
                     let problem = Problem::new(&views, &v, colour, &guide, &config);
-                    let ch = lm::chart(v.normal_world);
+                    let ch = Chart::at(v.normal_world);
                     for raw in [[1.45, -1.6, 0.3, 0.01, -0.02], [2.9, -4.0, 0.0, 0.0, 0.0]] {
                         let seeded: [RawDual; N_RAW] =
                             core::array::from_fn(|k| Dual::variable(raw[k], k));

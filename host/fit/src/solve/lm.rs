@@ -22,7 +22,6 @@
 use ellipso_model::optics::{Dual, Real};
 use nalgebra::{SMatrix, SVector};
 
-use super::super::model::{tangent_basis, unit_tangent_normal};
 use super::problem::{Albedos, Bounds, Chart, Nonlinear, Problem, Scratch};
 use super::{LossMode, SolverConfig};
 
@@ -109,11 +108,6 @@ pub(super) struct LmState {
     pub albedos: Albedos<f64>,
     pub iterations: u32,
     pub converged: bool,
-}
-
-pub(super) fn chart(normal: [f64; 3]) -> Chart {
-    let (t1, t2) = tangent_basis(normal);
-    Chart { n0: normal, t1, t2 }
 }
 
 /// Cost (Σ r²) and albedos in `f64`.
@@ -238,7 +232,7 @@ pub(super) fn run(
     let mut raw = project(raw, &bounds);
     raw[3] = 0.0;
     raw[4] = 0.0;
-    let mut ch = chart(normal);
+    let mut ch = Chart::at(normal);
     let reweighting = problem.loss == LossMode::Measurement;
     if reweighting {
         let (_, a) = cost_at(problem, &ch, raw, scratch_f);
@@ -323,8 +317,7 @@ pub(super) fn run(
                 let step = delta.norm();
                 let size = raw[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
                 // Re-centre the normal chart on the accepted normal.
-                let new_normal = unit_tangent_normal(ch.n0, ch.t1, ch.t2, trial[3], trial[4]);
-                ch = chart(new_normal);
+                ch = Chart::at(ch.unit_normal(trial[3], trial[4]));
                 raw = trial;
                 raw[3] = 0.0;
                 raw[4] = 0.0;

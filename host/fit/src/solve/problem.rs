@@ -27,10 +27,10 @@ use ellipso_model::optics::{Dual, Real};
 use super::super::data::{
     OBSERVATION_CHANNELS, VertexGuide, VertexSamples, ViewGeometry, VirtualSample,
 };
+pub(super) use super::super::model::Chart;
 use super::super::model::{
     LobeScalar, SampleFrames, TangentNormal, UnitSample, coaxial_unit_specular,
-    observed_pixels as pixels_of, predicted_pixels as pixel_pred, tangent_basis, tangent_normal,
-    unit_sample,
+    observed_pixels as pixels_of, predicted_pixels as pixel_pred, tangent_basis, unit_sample,
 };
 use super::albedos::AlbedoSystem;
 pub(super) use super::albedos::Albedos;
@@ -59,14 +59,6 @@ impl Nonlinear<f64> {
             q: v(self.q, 4),
         }
     }
-}
-
-/// The normal chart: unit n0 and its tangent basis.
-#[derive(Clone, Copy, Debug)]
-pub(super) struct Chart {
-    pub n0: [f64; 3],
-    pub t1: [f64; 3],
-    pub t2: [f64; 3],
 }
 
 /// The box every unknown of one vertex lives in (docs/fit-solver.md, "Bounds").
@@ -555,7 +547,7 @@ impl<'a> Problem<'a> {
         scratch: &mut Scratch<T>,
         sink: &mut impl FnMut(T),
     ) -> Albedos<T> {
-        let normal = tangent_normal(chart.n0, chart.t1, chart.t2, x.p, x.q);
+        let normal = chart.normal(x.p, x.q);
         self.units_at(chart, x, self.loss == LossMode::Paper, scratch);
         self.virtuals_at(x, scratch);
         let albedos = match given {
@@ -604,9 +596,7 @@ impl<'a> Problem<'a> {
         scratch: &mut Scratch<T>,
     ) {
         let tangent = TangentNormal {
-            n0: chart.n0,
-            t1: chart.t1,
-            t2: chart.t2,
+            chart: *chart,
             p: x.p,
             q: x.q,
         };

@@ -365,7 +365,7 @@ fn virtual_samples_pull_the_specular_lobe_and_keep_truth() {
     };
     let mut scratch = Scratch::new(problem.len(), virtuals.virtual_samples.len());
     problem.evaluate(
-        &lm::chart(v.normal_world),
+        &problem::Chart::at(v.normal_world),
         &x,
         None,
         &mut scratch,
