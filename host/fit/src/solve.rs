@@ -60,8 +60,6 @@
 mod albedos;
 mod jacobian;
 mod lm;
-/// The overflow-free logistic function of the reparameterised bounds (shared with the lobe fit).
-pub(crate) use lm::sigmoid;
 mod problem;
 mod uncertainty;
 
@@ -492,7 +490,7 @@ pub fn fit_vertex(
     }
     // The unit lobes at the final state, with their DoP fields (for the flags), and from them
     // the weights at the final state (for the standard errors).
-    let x = physical(state.raw, &problem.bounds);
+    let x = physical(state.raw);
     problem.units_at(&Chart::at(state.normal), &x, true, &mut scratch_f);
     if measurement {
         let _ = problem.reweight(&scratch_f, &state.albedos);
@@ -583,7 +581,7 @@ fn poor(problem: &Problem, state: &LmState, config: &SolverConfig) -> bool {
     }
     // A lobe at its bound often means the start's basin, not the data (noiseless glaze from
     // (0.1, 0.3): σ_ss → 1, Δcost 1.1 above the truth's 0).
-    let x = physical(state.raw, &problem.bounds);
+    let x = physical(state.raw);
     if x.sigma_s < problem.bounds.sigma_s_min + config.bound_margin_sigma
         || x.sigma_ss > 1.0 - config.bound_margin_sigma
     {
@@ -613,7 +611,7 @@ fn finish(
     final_units: &Scratch<f64>,
 ) -> VertexFit {
     let bounds = problem.bounds;
-    let x = physical(state.raw, &bounds);
+    let x = physical(state.raw);
     let ch = Chart::at(state.normal);
     let params = PbrdfParams {
         eta: x.eta,

@@ -43,7 +43,6 @@ use ellipso_model::optics::{Dual, Real};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use crate::data::{Sample, VertexFit};
-use crate::solve::sigmoid;
 
 /// Fewer usable I^s samples than this: the cluster gets no model.
 pub const MIN_LOBE_SAMPLES: usize = 32;
@@ -54,6 +53,16 @@ pub const RIDGE: f64 = 1e-6;
 const SIGMA_GRID: usize = 12;
 /// Levenberg–Marquardt iteration limit.
 const MAX_LM_ITERATIONS: usize = 200;
+
+/// 1/(1 + e⁻ˣ), overflow-free: the reparameterised bounds of the lobe fit (module doc).
+fn sigmoid<T: Real>(x: T) -> T {
+    if x.re() >= 0.0 {
+        T::one() / (T::one() + (-x).exp())
+    } else {
+        let e = x.exp();
+        e / (T::one() + e)
+    }
+}
 
 /// One sample prepared for the two-lobe fit.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -255,7 +255,7 @@ mod tests {
                     for raw in [[1.45, -1.6, 0.3, 0.01, -0.02], [2.9, -4.0, 0.0, 0.0, 0.0]] {
                         let seeded: [RawDual; N_RAW] =
                             core::array::from_fn(|k| Dual::variable(raw[k], k));
-                        let x = lm::physical(seeded, &problem.bounds);
+                        let x = lm::physical(seeded);
                         let mut scratch = Scratch::new(problem.len(), guide.virtual_samples.len());
                         let (cost, jtj, jtr, albedos) =
                             lm_normal_equations(&problem, &ch, &x, &mut scratch);
@@ -281,7 +281,7 @@ mod tests {
                         }
                         assert!((albedos.rho_s - dual_albedos.rho_s.re).abs() < 1e-12);
                         // The covariance's 12-parameter normal matrix, likewise.
-                        let xf = lm::physical(raw, &problem.bounds);
+                        let xf = lm::physical(raw);
                         let (c12, m12, j12) = physical_normal_matrix(&problem, &ch, &xf, &albedos);
                         let (dc12, dm12, dj12) =
                             super::super::uncertainty::all_duals(&problem, &ch, &xf, &albedos);

@@ -1,4 +1,4 @@
-//! Levenberg–Marquardt over the six nonlinear unknowns of one vertex inside their physical box,
+//! Levenberg–Marquardt over the five nonlinear unknowns of one vertex inside their physical box,
 //! with exact Jacobians from dual numbers (docs/fit-solver.md "Bounds" and "LM").
 //!
 //! Contract:
@@ -30,16 +30,6 @@ pub(super) const N_RAW: usize = 5;
 pub(super) type RawDual = Dual<N_RAW>;
 pub(super) type Mat = SMatrix<f64, N_RAW, N_RAW>;
 pub(super) type Vector = SVector<f64, N_RAW>;
-
-/// 1/(1 + e⁻ˣ), overflow-free.
-pub(crate) fn sigmoid<T: Real>(x: T) -> T {
-    if x.re() >= 0.0 {
-        T::one() / (T::one() + (-x).exp())
-    } else {
-        let e = x.exp();
-        e / (T::one() + e)
-    }
-}
 
 /// The box of the coordinates: lower and upper bound per coordinate (±∞ for p, q).
 fn box_of(bounds: &Bounds) -> ([f64; N_RAW], [f64; N_RAW]) {
@@ -75,7 +65,7 @@ fn project(mut x: [f64; N_RAW], bounds: &Bounds) -> [f64; N_RAW] {
 
 /// Physical unknowns from box coordinates (inside the box by construction; the clamps only
 /// guard rounding: σ_s ≤ 1, v ∈ [0, 1]).
-pub(super) fn physical<T: Real>(x: [T; N_RAW], _bounds: &Bounds) -> Nonlinear<T> {
+pub(super) fn physical<T: Real>(x: [T; N_RAW]) -> Nonlinear<T> {
     let sigma_s = x[1].exp().min_re(T::one());
     let v = x[2].clamp_re(0.0, 1.0);
     Nonlinear {
@@ -117,7 +107,7 @@ pub(super) fn cost_at(
     raw: [f64; N_RAW],
     scratch: &mut Scratch<f64>,
 ) -> (f64, Albedos<f64>) {
-    let x = physical(raw, &problem.bounds);
+    let x = physical(raw);
     let mut cost = 0.0;
     let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: f64| cost += r * r);
     (cost, albedos)
@@ -133,7 +123,7 @@ fn jacobian_at(
     scratch: &mut Scratch<RawDual>,
 ) -> (f64, Mat, Vector, Albedos<f64>) {
     let seeded: [RawDual; N_RAW] = core::array::from_fn(|k| Dual::variable(raw[k], k));
-    let x = physical(seeded, &problem.bounds);
+    let x = physical(seeded);
     if problem.loss == LossMode::Measurement {
         return super::jacobian::lm_normal_equations(problem, chart, &x, scratch);
     }
