@@ -131,6 +131,9 @@ pub struct UnitSample<T> {
     pub cos_theta_o: T,
     /// DoP_d(η, θ_o) (docs/model.md §6 "Diffuse DoP and its η-derivative").
     pub dop_diffuse: T,
+    /// Whether the normal faces the light and the camera; false only for the all-zero stand-in
+    /// of a sample the normal turns away (`unit_sample` returns `None` for it).
+    pub front_facing: bool,
 }
 
 impl<T: Real> UnitSample<T> {

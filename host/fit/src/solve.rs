@@ -626,15 +626,12 @@ fn finish(
         return prior_fit(problem, vertex, state.normal, None, flags, config);
     }
     let u = uncertainty::standard_errors(problem, &ch, &x, &state.albedos);
-    // Identifiability of η and grazing, at the solution (`final_units`: the unit lobes there,
-    // zero for samples the fitted normal turns away).
+    // Identifiability of η and grazing, at the solution (`final_units`: the unit lobes there),
+    // over the samples the fitted normal faces.
     let mut max_sensitivity: f64 = 0.0;
     let mut max_cos_o: f64 = 0.0;
     let mut dop_sum = 0.0;
-    let back_facing = |s: &&super::model::UnitSample<f64>| {
-        s.diffuse == [0.0; 3] && s.specular == [0.0; 3] && s.single_scattering == [0.0; 3]
-    };
-    for s in final_units.units.iter().filter(|s| !back_facing(s)) {
+    for s in final_units.units.iter().filter(|s| s.front_facing) {
         let (dop, d) = dop_diffuse_with_d_eta(s.cos_theta_o, x.eta);
         max_sensitivity = max_sensitivity.max(d.abs());
         max_cos_o = max_cos_o.max(s.cos_theta_o);

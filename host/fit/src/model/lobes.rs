@@ -89,6 +89,7 @@ impl LobeScalar for f64 {
             specular: refl.map(|r| r * w_s),
             cos_theta_o,
             dop_diffuse: dop,
+            front_facing: true,
         })
     }
 }
@@ -195,6 +196,7 @@ impl<const N: usize> LobeScalar for Dual<N> {
             specular: r.map(|r| lobe(w_s, r, 1)),
             cos_theta_o,
             dop_diffuse: dop,
+            front_facing: true,
         })
     }
 }

@@ -607,6 +607,7 @@ impl<'a> Problem<'a> {
             specular: [zero; 3],
             cos_theta_o: zero,
             dop_diffuse: zero,
+            front_facing: false,
         };
         scratch.units.clear();
         scratch.units.extend(self.frames.iter().map(|f| {
