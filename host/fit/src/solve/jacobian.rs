@@ -46,28 +46,32 @@ fn d_prediction<const N: usize>(
     core::array::from_fn(|k| alpha.0 * a.du[k] + alpha.1 * b.du[k] + alpha.2 * s.du[k])
 }
 
-/// One pass over every data and virtual row of the measurement loss: `row(c, w, [a, b, s],
-/// o)` with c the colour channel, w the weight of the squared residual, the lobes' values at
-/// the row (a = 0 for a virtual sample) and the observation.
-fn for_each_row<const N: usize>(
-    problem: &Problem,
-    scratch: &Scratch<Dual<N>>,
-    mut row: impl FnMut(usize, f64, [&Dual<N>; 3], f64),
-) {
-    let zero = Dual::<N>::constant(0.0);
-    for (i, [a, b, s]) in scratch.pixels.iter().enumerate() {
-        for c in 0..problem.channels {
-            let (o, w) = (&problem.pixel_obs[i][c], &problem.inv_sigma[i][c]);
-            for j in 0..4 {
-                row(c, w[j] * w[j], [&a[j], &b[j], &s[j]], o[j]);
-            }
+/// Σ r², JᵀJ and Jᵀr of residual rows given as dual numbers (value and gradient), and their
+/// count: what every Jacobian of the solver accumulates.
+pub(super) struct NormalEquations<const N: usize> {
+    pub cost: f64,
+    pub rows: usize,
+    pub jtj: SMatrix<f64, N, N>,
+    pub jtr: SVector<f64, N>,
+}
+
+impl<const N: usize> NormalEquations<N> {
+    pub fn new() -> Self {
+        Self {
+            cost: 0.0,
+            rows: 0,
+            jtj: SMatrix::zeros(),
+            jtr: SVector::zeros(),
         }
     }
-    for (m, v) in problem.virtuals.iter().enumerate() {
-        let (b, s) = &scratch.virt[m];
-        for c in 0..problem.channels {
-            row(c, problem.virtual_weight[m], [&zero, b, s], v.specular[c]);
-        }
+
+    /// Adds the residual row `r` (value and gradient).
+    pub fn add(&mut self, r: Dual<N>) {
+        self.cost += r.re * r.re;
+        self.rows += 1;
+        let g = SVector::<f64, N>::from(r.du);
+        self.jtj.ger(1.0, &g, &g, 1.0);
+        self.jtr.axpy(r.re, &g, 1.0);
     }
 }
 
@@ -83,47 +87,42 @@ pub(super) fn lm_normal_equations(
     problem.virtuals_at(x, scratch);
     // The albedos, in f64, and their face.
     let mut sys = AlbedoSystem::<f64>::new();
-    for_each_row(problem, scratch, |c, w, [a, b, s], o| {
+    problem.measurement_rows(scratch, |c, w, [a, b, s], o| {
         sys.add_row(c, w, a.re, b.re, s.re, o)
     });
     let (albedos, free) = sys.solve_faces(problem.channels, problem.bounds.albedo_cap);
     let alpha = |c: usize| (albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s);
     // ∂(Hα − g)/∂θ per albedo (layout of `AlbedoSystem::solve_faces`).
     let mut m = [[0.0; N_RAW]; 7];
-    for_each_row(problem, scratch, |c, w, [a, b, s], o| {
+    problem.measurement_rows(scratch, |c, w, [a, b, s], o| {
         let al = alpha(c);
         let r = al.0 * a.re + al.1 * b.re + al.2 * s.re - o;
-        let dp = d_prediction(al, a, b, s);
+        let dp = d_prediction(al, &a, &b, &s);
         for (k, lobe) in [(c, a), (3 + c, b), (6, s)] {
             axpy(&mut m[k], w * r, &lobe.du);
             axpy(&mut m[k], w * lobe.re, &dp);
         }
     });
     let d_alpha = albedo_derivatives(&sys.hessian(), &free, &m);
-    let mut cost = 0.0;
-    let mut jtj = Mat::zeros();
-    let mut jtr = Vector::zeros();
-    for_each_row(problem, scratch, |c, w, [a, b, s], o| {
+    let mut ne = NormalEquations::<N_RAW>::new();
+    problem.measurement_rows(scratch, |c, w, [a, b, s], o| {
         let al = alpha(c);
         let r = al.0 * a.re + al.1 * b.re + al.2 * s.re - o;
-        let mut j = d_prediction(al, a, b, s);
+        let mut j = d_prediction(al, &a, &b, &s);
         axpy(&mut j, a.re, &d_alpha[c]);
         axpy(&mut j, b.re, &d_alpha[3 + c]);
         axpy(&mut j, s.re, &d_alpha[6]);
+        // Written out rather than through `NormalEquations::add`: the weight w multiplies the
+        // squared residual, and w·r² is the cost the f64 evaluation adds up.
         let sw = w.sqrt();
         let g = Vector::from(j) * sw;
-        cost += w * r * r;
-        jtj.ger(1.0, &g, &g, 1.0);
-        jtr.axpy(sw * r, &g, 1.0);
+        ne.cost += w * r * r;
+        ne.jtj.ger(1.0, &g, &g, 1.0);
+        ne.jtr.axpy(sw * r, &g, 1.0);
     });
     let normal = chart.normal(x.p, x.q);
-    problem.prior_rows(x, normal, &mut |r: RawDual| {
-        cost += r.re * r.re;
-        let g = Vector::from(r.du);
-        jtj.ger(1.0, &g, &g, 1.0);
-        jtr.axpy(r.re, &g, 1.0);
-    });
-    (cost, jtj, jtr, albedos)
+    problem.prior_rows(x, normal, &mut |r: RawDual| ne.add(r));
+    (ne.cost, ne.jtj, ne.jtr, albedos)
 }
 
 /// ∂α/∂θ for the free albedos: −H_FF⁻¹·m_F (module doc); zero for albedos on a bound, and for
@@ -171,14 +170,12 @@ pub(super) fn physical_normal_matrix(
     let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
     problem.units_at(chart, &xd, false, &mut scratch);
     problem.virtuals_at(&xd, &mut scratch);
-    let mut jtj = SMatrix::<f64, 12, 12>::zeros();
-    let mut cost = 0.0;
-    let mut rows = 0usize;
-    for_each_row(problem, &scratch, |c, w, [a, b, s], o| {
+    let mut ne = NormalEquations::<12>::new();
+    problem.measurement_rows(&scratch, |c, w, [a, b, s], o| {
         let al = (albedos.rho_d[c], albedos.rho_ss[c], albedos.rho_s);
         let r = al.0 * a.re + al.1 * b.re + al.2 * s.re - o;
         let sw = w.sqrt();
-        let dp = d_prediction(al, a, b, s);
+        let dp = d_prediction(al, &a, &b, &s);
         // The row's non-zero entries: the 5 nonlinear unknowns, then ρ_s, ρ_ss,c, ρ_d,c.
         let mut entries = [(0usize, 0.0); 8];
         for (k, slot) in PHYSICAL_SLOTS.iter().enumerate() {
@@ -189,22 +186,17 @@ pub(super) fn physical_normal_matrix(
         entries[7] = (7 + c, sw * a.re);
         for (i, gi) in entries {
             for (j, gj) in entries {
-                jtj[(i, j)] += gi * gj;
+                ne.jtj[(i, j)] += gi * gj;
             }
         }
-        cost += w * r * r;
-        rows += 1;
+        ne.cost += w * r * r;
+        ne.rows += 1;
     });
     // The prior rows, in the 12-parameter duals.
     let x12: Nonlinear<Dual<12>> = x.seeded(PHYSICAL_SLOTS);
     let normal = chart.normal(x12.p, x12.q);
-    problem.prior_rows(&x12, normal, &mut |r: Dual<12>| {
-        let g = SVector::<f64, 12>::from(r.du);
-        jtj.ger(1.0, &g, &g, 1.0);
-        cost += r.re * r.re;
-        rows += 1;
-    });
-    (cost, rows, jtj)
+    problem.prior_rows(&x12, normal, &mut |r: Dual<12>| ne.add(r));
+    (ne.cost, ne.rows, ne.jtj)
 }
 
 #[cfg(test)]
@@ -259,16 +251,12 @@ mod tests {
                         let mut scratch = Scratch::new(problem.len(), guide.virtual_samples.len());
                         let (cost, jtj, jtr, albedos) =
                             lm_normal_equations(&problem, &ch, &x, &mut scratch);
-                        let mut dual_cost = 0.0;
-                        let mut dual_jtj = Mat::zeros();
-                        let mut dual_jtr = Vector::zeros();
+                        let mut dual = NormalEquations::<N_RAW>::new();
                         let dual_albedos =
                             problem.evaluate(&ch, &x, None, &mut scratch, &mut |r: RawDual| {
-                                dual_cost += r.re * r.re;
-                                let g = Vector::from(r.du);
-                                dual_jtj.ger(1.0, &g, &g, 1.0);
-                                dual_jtr.axpy(r.re, &g, 1.0);
+                                dual.add(r)
                             });
+                        let (dual_cost, dual_jtj, dual_jtr) = (dual.cost, dual.jtj, dual.jtr);
                         let close = |a: f64, b: f64, scale: f64| (a - b).abs() <= 1e-8 * scale;
                         assert!(close(cost, dual_cost, dual_cost), "{cost} vs {dual_cost}");
                         let jscale = dual_jtj.abs().max();

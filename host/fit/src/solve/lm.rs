@@ -127,21 +127,14 @@ fn jacobian_at(
     if problem.loss == LossMode::Measurement {
         return super::jacobian::lm_normal_equations(problem, chart, &x, scratch);
     }
-    let mut cost = 0.0;
-    let mut jtj = Mat::zeros();
-    let mut jtr = Vector::zeros();
-    let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: RawDual| {
-        cost += r.re * r.re;
-        let g = Vector::from(r.du);
-        jtj.ger(1.0, &g, &g, 1.0);
-        jtr.axpy(r.re, &g, 1.0);
-    });
+    let mut ne = super::jacobian::NormalEquations::<N_RAW>::new();
+    let albedos = problem.evaluate(chart, &x, None, scratch, &mut |r: RawDual| ne.add(r));
     let re = Albedos {
         rho_d: albedos.rho_d.map(|v| v.re),
         rho_ss: albedos.rho_ss.map(|v| v.re),
         rho_s: albedos.rho_s.re,
     };
-    (cost, jtj, jtr, re)
+    (ne.cost, ne.jtj, ne.jtr, re)
 }
 
 /// Which coordinates are held at their bound for the next step: at (within 1e-12 of the

@@ -754,9 +754,9 @@ impl<'a> Problem<'a> {
     fn project<T: Real>(&self, scratch: &Scratch<T>) -> Albedos<T> {
         let k = T::from_f64;
         let mut sys = AlbedoSystem::new();
-        for (i, u) in scratch.units.iter().enumerate() {
-            match self.loss {
-                LossMode::Paper => {
+        match self.loss {
+            LossMode::Paper => {
+                for (i, u) in scratch.units.iter().enumerate() {
                     let wd = k(self.lambda_d * self.w_int[i]);
                     let ws = k(self.lambda_s_real * self.w_int[i]);
                     let (a, b, c) = (u.diffuse, u.single_scattering, u.specular);
@@ -766,26 +766,45 @@ impl<'a> Problem<'a> {
                         sys.add_row(ch, ws, a[1], b[1], c[1], k(o[1]));
                     }
                 }
-                LossMode::Measurement => {
-                    let [a, b, c] = &scratch.pixels[i];
+                for (m, v) in self.virtuals.iter().enumerate() {
+                    let (b, s) = scratch.virt[m];
+                    let w = k(self.virtual_weight[m]);
                     for ch in 0..self.channels {
-                        let o = &self.pixel_obs[i][ch];
-                        let w = &self.inv_sigma[i][ch];
-                        for j in 0..4 {
-                            sys.add_row(ch, k(w[j] * w[j]), a[j], b[j], c[j], k(o[j]));
-                        }
+                        sys.add_specular_row(ch, w, b, s, k(v.specular[ch]));
                     }
+                }
+            }
+            LossMode::Measurement => self.measurement_rows(scratch, |c, w, [a, b, s], o| {
+                sys.add_row(c, k(w), a, b, s, k(o))
+            }),
+        }
+        sys.solve(self.channels, self.bounds.albedo_cap)
+    }
+
+    /// Measurement mode: every data and virtual row of the loss in emission order, as
+    /// `row(c, w, [a, b, s], o)` with c the colour channel, w the weight of the squared
+    /// residual (1/σ² of an analyser pixel; W_m of a virtual sample), the unit lobes' values at
+    /// the row (diffuse, single scattering, specular; no diffuse for a virtual sample) and the
+    /// observation. Reads the lobes of the last `units_at` and `virtuals_at` in `scratch`.
+    pub fn measurement_rows<T: Real>(
+        &self,
+        scratch: &Scratch<T>,
+        mut row: impl FnMut(usize, f64, [T; 3], f64),
+    ) {
+        for (i, [a, b, s]) in scratch.pixels.iter().enumerate() {
+            for c in 0..self.channels {
+                let (o, w) = (&self.pixel_obs[i][c], &self.inv_sigma[i][c]);
+                for j in 0..4 {
+                    row(c, w[j] * w[j], [a[j], b[j], s[j]], o[j]);
                 }
             }
         }
         for (m, v) in self.virtuals.iter().enumerate() {
             let (b, s) = scratch.virt[m];
-            let w = k(self.virtual_weight[m]);
-            for ch in 0..self.channels {
-                sys.add_specular_row(ch, w, b, s, k(v.specular[ch]));
+            for c in 0..self.channels {
+                row(c, self.virtual_weight[m], [T::zero(), b, s], v.specular[c]);
             }
         }
-        sys.solve(self.channels, self.bounds.albedo_cap)
     }
 }
 

@@ -10,7 +10,7 @@
 //! (squared loading > 1e-6) in a null direction, or a zero column, gets `f64::INFINITY`.
 
 use ellipso_model::optics::Dual;
-use nalgebra::{DMatrix, SMatrix, SVector};
+use nalgebra::{DMatrix, SMatrix};
 
 use super::LossMode;
 use super::problem::{Albedos, Chart, Nonlinear, Problem, Scratch};
@@ -86,16 +86,11 @@ pub(super) fn all_duals(
         rho_s: v(albedos.rho_s, 3),
     };
     let mut scratch = Scratch::new(problem.len(), problem.virtuals.len());
-    let mut jtj = SMatrix::<f64, N_ALL, N_ALL>::zeros();
-    let mut cost = 0.0;
-    let mut m = 0usize;
+    let mut ne = super::jacobian::NormalEquations::<N_ALL>::new();
     problem.evaluate(chart, &xd, Some(ad), &mut scratch, &mut |r: AllDual| {
-        cost += r.re * r.re;
-        m += 1;
-        let g = SVector::<f64, N_ALL>::from(r.du);
-        jtj.ger(1.0, &g, &g, 1.0);
+        ne.add(r)
     });
-    (cost, m, jtj)
+    (ne.cost, ne.rows, ne.jtj)
 }
 
 /// Diagonal of s²·(JᵀJ)⁻¹ restricted to `active` (others INFINITY), with the null-direction rule
