@@ -375,8 +375,8 @@ pub fn fit_vertex(
     }
     let bounds = problem.bounds;
     let virtuals = problem.virtuals.len();
-    let scratch_f = Scratch::<f64>::new(n, virtuals);
-    let scratch_d = Scratch::<RawDual>::new(n, virtuals);
+    let mut scratch_f = Scratch::<f64>::new(n, virtuals);
+    let mut scratch_d = Scratch::<RawDual>::new(n, virtuals);
     let mut starts: Vec<[f64; lm::N_RAW]> = match init {
         Some(f) => {
             let p = &f.params;
@@ -422,7 +422,6 @@ pub fn fit_vertex(
     }
     let adaptive = config.effort == Effort::Adaptive;
     let rank = starts.len() > 1 && (adaptive || init.is_some());
-    let mut scratches = (scratch_f, scratch_d);
     let mut state = match coarse_subset(&problem, init.is_none(), config) {
         // Coarse to fine: the starts and their LM runs on a subsample of the views, then LM on
         // every sample from the result.
@@ -434,15 +433,16 @@ pub fn fit_vertex(
                 start_normal,
                 rank,
                 config,
-                &mut scratches,
+                &mut scratch_f,
+                &mut scratch_d,
             );
             let fine = lm::run(
                 &mut problem,
                 s.raw,
                 s.normal,
                 config,
-                &mut scratches.0,
-                &mut scratches.1,
+                &mut scratch_f,
+                &mut scratch_d,
             );
             LmState {
                 iterations: s.iterations + fine.iterations,
@@ -455,10 +455,10 @@ pub fn fit_vertex(
             start_normal,
             rank,
             config,
-            &mut scratches,
+            &mut scratch_f,
+            &mut scratch_d,
         ),
     };
-    let (mut scratch_f, mut scratch_d) = scratches;
     let measurement = problem.loss == LossMode::Measurement;
     for _ in 1..config.passes {
         // Measurement mode: the weights at the current solution (the run used the weights of
@@ -507,7 +507,8 @@ fn best_start(
     start_normal: [f64; 3],
     rank: bool,
     config: &SolverConfig,
-    (scratch_f, scratch_d): &mut (Scratch<f64>, Scratch<RawDual>),
+    scratch_f: &mut Scratch<f64>,
+    scratch_d: &mut Scratch<RawDual>,
 ) -> LmState {
     let mut starts = starts.to_vec();
     if rank {
