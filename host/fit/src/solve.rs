@@ -422,42 +422,34 @@ pub fn fit_vertex(
     }
     let adaptive = config.effort == Effort::Adaptive;
     let rank = starts.len() > 1 && (adaptive || init.is_some());
-    let mut state = match coarse_subset(&problem, init.is_none(), config) {
-        // Coarse to fine: the starts and their LM runs on a subsample of the views, then LM on
-        // every sample from the result.
-        Some(keep) => {
-            let mut coarse = problem.subset(&keep);
-            let s = best_start(
-                &mut coarse,
-                &starts,
-                start_normal,
-                rank,
-                config,
-                &mut scratch_f,
-                &mut scratch_d,
-            );
-            let fine = lm::run(
-                &mut problem,
-                s.raw,
-                s.normal,
-                config,
-                &mut scratch_f,
-                &mut scratch_d,
-            );
-            LmState {
-                iterations: s.iterations + fine.iterations,
-                ..fine
-            }
-        }
-        None => best_start(
+    // Coarse to fine: a cold start ranks its starts and runs LM on a subsample of the views,
+    // then LM runs on every sample from that result.
+    let mut coarse =
+        coarse_subset(&problem, init.is_none(), config).map(|keep| problem.subset(&keep));
+    let first = best_start(
+        coarse.as_mut().unwrap_or(&mut problem),
+        &starts,
+        start_normal,
+        rank,
+        config,
+        &mut scratch_f,
+        &mut scratch_d,
+    );
+    let mut state = if coarse.is_some() {
+        let fine = lm::run(
             &mut problem,
-            &starts,
-            start_normal,
-            rank,
+            first.raw,
+            first.normal,
             config,
             &mut scratch_f,
             &mut scratch_d,
-        ),
+        );
+        LmState {
+            iterations: first.iterations + fine.iterations,
+            ..fine
+        }
+    } else {
+        first
     };
     let measurement = problem.loss == LossMode::Measurement;
     for _ in 1..config.passes {
