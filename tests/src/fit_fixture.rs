@@ -61,6 +61,7 @@ pub fn write_fit_dir(dir: &Path) -> PathBuf {
                 cost: 1.0,
                 iterations: 6,
                 flags: vec![],
+                eta_unpooled: None,
             };
             if d.z < -0.8 {
                 fit.flags = vec![FitFlag::TooFewViews];

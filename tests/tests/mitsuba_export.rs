@@ -80,6 +80,7 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
                 cost: 1.0,
                 iterations: 6,
                 flags: vec![],
+                eta_unpooled: None,
             }
         })
         .collect();

@@ -229,6 +229,11 @@ pub struct GateCounts {
     pub occluded: u64,
     /// The vertex is in the flash's shadow.
     pub shadowed: u64,
+    /// The pixels the sample's value is interpolated from reach off the vertex's visible
+    /// surface (past a silhouette, across an occlusion boundary, onto the board under a
+    /// contact): they mix light the vertex's model cannot explain.
+    #[serde(default)]
+    pub mixed: u64,
     /// View direction beyond the grazing cut-off.
     pub grazing: u64,
     /// Any analyser pixel at or above the saturation level.
@@ -249,6 +254,7 @@ impl GateCounts {
         self.not_in_view += other.not_in_view;
         self.occluded += other.occluded;
         self.shadowed += other.shadowed;
+        self.mixed += other.mixed;
         self.grazing += other.grazing;
         self.saturated += other.saturated;
         self.dark += other.dark;
@@ -307,6 +313,9 @@ pub enum FitFlag {
     AtBound,
     /// The solver stopped at its iteration limit without converging.
     NotConverged,
+    /// η was fitted with the material's pooled η as a prior (the vertex's own estimate is kept
+    /// in [`VertexFit::eta_unpooled`]).
+    EtaPooled,
 }
 
 /// The fitted parameters of one vertex, with standard errors.
@@ -332,9 +341,22 @@ pub struct VertexFit {
     pub iterations: u32,
     /// Reasons not to trust the result as is (empty: fine).
     pub flags: Vec<FitFlag>,
+    /// The vertex's own η and its standard error before its material's pool entered
+    /// ([`FitFlag::EtaPooled`]: step A's estimate); `None` where no pool did.
+    #[serde(default)]
+    pub eta_unpooled: Option<[f64; 2]>,
 }
 
 impl VertexFit {
+    /// Whether η of this vertex is a measurement: fitted from enough views, and neither its
+    /// own data nor its material's pool leaves it unidentified.
+    pub fn eta_identified(&self) -> bool {
+        !self
+            .flags
+            .iter()
+            .any(|f| matches!(f, FitFlag::TooFewViews | FitFlag::EtaUnidentifiable))
+    }
+
     /// Whether the fit trusts this vertex's parameters enough to draw or re-render them: seen
     /// from enough views, and no albedo at the solver's cap `albedo_cap` (an albedo there
     /// means the data fixed only a product like ρ·σ², not the lobe). The pictures interpolate

@@ -294,6 +294,7 @@ mod tests {
             cost: 0.0,
             iterations: 0,
             flags: Vec::new(),
+            eta_unpooled: None,
         };
         let cap = 5.0;
         let runaway = PbrdfParams {

@@ -65,7 +65,8 @@ use ellipso_session::reader::{FrameEntry, Session};
 use ellipso_session::rig::RigRecord;
 
 pub use radiometry::{PointNormaliser, SessionRadiometry, flash_of, radiometry_of};
-use sampler::{DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
+pub use sampler::SampleKernel;
+use sampler::{AnalyserPixels, DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
 
 /// Where in its superpixel tile each analyser sample is taken to sit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -93,6 +94,9 @@ pub struct ObserveConfig {
     pub sample_point: SamplePoint,
     /// Black level subtracted from every raw sample, DN.
     pub dark_level_dn: f32,
+    /// Interpolation of the analyser planes at a sample.
+    #[serde(default)]
+    pub sample_kernel: SampleKernel,
 }
 
 impl Default for ObserveConfig {
@@ -103,6 +107,7 @@ impl Default for ObserveConfig {
             frames_in_flight: 2,
             sample_point: SamplePoint::Lattice,
             dark_level_dn: 0.0,
+            sample_kernel: SampleKernel::default(),
         }
     }
 }
@@ -359,6 +364,72 @@ pub fn extract_with(
     )
 }
 
+/// Where an extraction gets each posed frame's analyser pixels.
+pub trait FrameImages: Sync {
+    /// The analyser pixels of `entry` (a complete, lit frame of the session) and the bytes
+    /// held while they are in use; an unreadable frame is an `Err` with the reason, and the
+    /// extraction skips it.
+    fn load(&self, entry: &FrameEntry) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String>;
+}
+
+/// The session's recorded frames: PNG → raw mosaic → superpixel demosaic → [`DnImage`]
+/// (sampled at the analysers' lattice positions or the tile centres, [`SamplePoint`]).
+pub struct MosaicFrames<'a> {
+    session: &'a Session,
+    layout: SensorLayout,
+    polar: PolarConfig,
+    sample_point: SamplePoint,
+    sample_kernel: SampleKernel,
+}
+
+impl<'a> MosaicFrames<'a> {
+    /// The recorded frames of `session` read with `config`'s dark level and sample point.
+    pub fn new(session: &'a Session, config: &ObserveConfig) -> Result<Self, ObserveError> {
+        let layout = ellipso_session::rig::layout_of(&session.manifest).map_err(|e| {
+            ObserveError::Manifest {
+                path: manifest_path(session),
+                what: e.to_string(),
+            }
+        })?;
+        Ok(Self {
+            session,
+            layout,
+            polar: PolarConfig {
+                demosaic: DemosaicMethod::Superpixel,
+                dark_level_dn: config.dark_level_dn,
+                ..PolarConfig::default()
+            },
+            sample_point: config.sample_point,
+            sample_kernel: config.sample_kernel,
+        })
+    }
+}
+
+impl FrameImages for MosaicFrames<'_> {
+    fn load(&self, entry: &FrameEntry) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String> {
+        let (w, h, px) = self.session.load_frame(entry).map_err(|e| e.to_string())?;
+        let bit_depth = self.session.manifest.sensor.bit_depth;
+        let raw = RawFrame::new(w, h, bit_depth, self.layout, px)
+            .map_err(|e| format!("{}: {e}", entry.path.display()))?;
+        let levels = self.polar.levels(&raw).map_err(|e| e.to_string())?;
+        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+        let image = DnImage::new(
+            &raw,
+            &analysers,
+            &levels,
+            self.sample_point,
+            self.sample_kernel,
+        );
+        // Held together at this point: the raw frame, the demosaic (4 f32 planes and a mask
+        // byte per band and superpixel) and its DN copy.
+        let superpixels = analysers.bands.first().map_or(0, |b| b.mask.data().len());
+        let bytes = raw.data_dn().len() * 2
+            + analysers.bands.len() * superpixels * (4 * 4 + 1)
+            + image.bytes();
+        Ok((Box::new(image), bytes))
+    }
+}
+
 /// [`extract_with`] for the vertices `shard` owns ([`Shard::owns`]): the set's `vertices` hold
 /// those only, ascending, each exactly as the unsharded extraction gives it (visibility and
 /// shadows are still tested against the whole mesh); the report counts those vertices' gates
@@ -370,6 +441,30 @@ pub fn extract_shard(
     poses: &[(u64, Isometry3<f64>)],
     config: &ObserveConfig,
     shard: Shard,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Extraction, ObserveError> {
+    let frames = MosaicFrames::new(session, config)?;
+    extract_from(
+        session, radiometry, mesh, poses, config, shard, &frames, progress,
+    )
+}
+
+/// [`extract_shard`] with the analyser pixels of each posed frame from `frames` (the recorded
+/// mosaic, [`MosaicFrames`], or another sensor's images of the same frames): the session
+/// still supplies the camera, the flash, each frame's exposure, gain and flash energy, and
+/// which frames are complete and lit.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "extract_shard's inputs plus the frame source, named"
+)]
+pub fn extract_from(
+    session: &Session,
+    radiometry: &SessionRadiometry,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &ObserveConfig,
+    shard: Shard,
+    frames: &dyn FrameImages,
     progress: &dyn Fn(usize, usize),
 ) -> Result<Extraction, ObserveError> {
     let camera = camera_of(session)?;
@@ -458,11 +553,6 @@ pub fn extract_shard(
 
     let owned: Vec<usize> = shard.vertices(mesh.positions().len()).collect();
     let rings = VertexRings::new(mesh);
-    let polar = PolarConfig {
-        demosaic: DemosaicMethod::Superpixel,
-        dark_level_dn: config.dark_level_dn,
-        ..PolarConfig::default()
-    };
     let context = SessionContext {
         mesh,
         rings: &rings,
@@ -472,28 +562,14 @@ pub fn extract_shard(
         gate: &config.gate,
         full_scale_dn: (radiometry.full_scale_dn - f64::from(config.dark_level_dn)).max(1.0),
     };
-    let bit_depth = session.manifest.sensor.bit_depth;
     let run_frame = |job: &Job<'_>| -> FrameResult {
-        let (w, h, px) = session.load_frame(job.entry).map_err(|e| e.to_string())?;
-        let raw = RawFrame::new(w, h, bit_depth, layout, px)
-            .map_err(|e| format!("{}: {e}", job.entry.path.display()))?;
-        let levels = polar.levels(&raw).map_err(|e| e.to_string())?;
-        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
-        let image = DnImage::new(&raw, &analysers, &levels, config.sample_point);
-        // Held together at this point: the raw frame, the demosaic (4 f32 planes and a mask
-        // byte per band and superpixel) and its DN copy.
-        let superpixels = analysers.bands.first().map_or(0, |b| b.mask.data().len());
-        let bytes = raw.data_dn().len() * 2
-            + analysers.bands.len() * superpixels * (4 * 4 + 1)
-            + image.bytes();
-        drop(analysers);
-        drop(raw);
+        let (image, bytes) = frames.load(job.entry)?;
         let view = view_of(&radiometry.flash, job.frame_id, &job.pose);
         let sampler = FrameSampler::new(
             &context,
             &view,
             &job.pose,
-            &image,
+            image.as_ref(),
             job.exposure_us,
             job.gain_db,
             job.flash_energy_rel,
@@ -568,6 +644,7 @@ pub fn extract_shard(
                     }
                     Outcome::NotInView => g.not_in_view += 1,
                     Outcome::Occluded => g.occluded += 1,
+                    Outcome::Mixed => g.mixed += 1,
                     Outcome::Shadowed => g.shadowed += 1,
                     Outcome::Gate(r) => r.count(g),
                 }

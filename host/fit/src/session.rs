@@ -27,7 +27,8 @@ use nalgebra::Isometry3;
 use super::data::{GateCounts, SampleSet, VertexFit};
 use super::holdout::{HoldoutReport, score, split};
 use super::observe::{
-    Extraction, ObserveConfig, ObserveError, ObserveReport, extract, extract_shard, radiometry_of,
+    Extraction, FrameImages, MosaicFrames, ObserveConfig, ObserveError, ObserveReport,
+    extract_from, extract_shard, radiometry_of,
 };
 use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
 use super::shape::{
@@ -161,6 +162,20 @@ pub fn fit_session(
     config: &SessionFitConfig,
     progress: &mut dyn FnMut(&str),
 ) -> Result<SessionFit, SessionFitError> {
+    let frames = MosaicFrames::new(session, &config.observe)?;
+    fit_session_with(session, mesh, poses, config, &frames, progress)
+}
+
+/// [`fit_session`] with each frame's analyser pixels from `frames` (the recorded mosaic,
+/// [`MosaicFrames`], or an ideal sensor's images of the same frames in the error budget).
+pub fn fit_session_with(
+    session: &Session,
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+    config: &SessionFitConfig,
+    frames: &dyn FrameImages,
+    progress: &mut dyn FnMut(&str),
+) -> Result<SessionFit, SessionFitError> {
     if poses.is_empty() {
         return Err(SessionFitError::NoPoses);
     }
@@ -175,9 +190,22 @@ pub fn fit_session(
     let iterations = config.outer_iterations.max(1);
     // (The solve starts from the previous iteration's normals through its warm start; the
     // samples keep the mesh normal, the centre of the normal prior.)
+    let radiometry = radiometry_of(session)?;
+    let extract = |mesh: &TriangleMesh, poses: &[(u64, Isometry3<f64>)]| {
+        extract_from(
+            session,
+            &radiometry,
+            mesh,
+            poses,
+            &config.observe,
+            Shard::ALL,
+            frames,
+            &|_, _| {},
+        )
+    };
     let observe = |mesh: &TriangleMesh| {
         let started = Instant::now();
-        let e = extract(session, mesh, poses, &config.observe, &|_, _| {})?;
+        let e = extract(mesh, poses)?;
         if e.report.samples == 0 {
             return Err(SessionFitError::NoSamples(Box::new(e.report)));
         }
@@ -236,7 +264,7 @@ pub fn fit_session(
             "re-rendering {} held-out frames",
             poses_held_out.len()
         ));
-        let held = extract(session, &mesh, &poses_held_out, &config.observe, &|_, _| {})?;
+        let held = extract(&mesh, &poses_held_out)?;
         Some(held.samples)
     };
     let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;

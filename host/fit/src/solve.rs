@@ -667,6 +667,7 @@ fn finish(
         cost: state.cost,
         iterations: state.iterations,
         flags,
+        eta_unpooled: None,
     }
 }
 
@@ -748,6 +749,7 @@ fn prior_fit(
         cost: 0.0,
         iterations: 0,
         flags,
+        eta_unpooled: None,
     }
 }
 

@@ -32,6 +32,9 @@ pub enum Args {
     /// What accuracy costs in time: fit error against seconds on simulated captures with known
     /// truth (photo count, solver effort, vertex count sweeps); writes docs/accuracy-vs-time.md.
     Accuracy(super::bench_accuracy::AccuracyArgs),
+    /// The error budget of the whole chain: rendered frames, mosaic, tracked poses, carved mesh
+    /// and fit, then one stage at a time replaced by its truth; writes docs/error-budget.md.
+    Chain(super::bench_chain::ChainArgs),
     /// Camera calibration accuracy on a rendered calibration capture.
     Calibration(calibration::CalibrationArgs),
     /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
@@ -91,6 +94,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Args::Pose(a) => pose(a),
         Args::Accuracy(a) => super::bench_accuracy::run(a),
         Args::Calibration(a) => calibration::run(a),
+        Args::Chain(a) => super::bench_chain::run(a),
         Args::Mesh(a) => super::bench_mesh::run(a),
         Args::View(a) => view::run(a),
     }

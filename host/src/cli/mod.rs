@@ -3,6 +3,7 @@
 pub mod allocator;
 pub mod bench;
 pub mod bench_accuracy;
+pub mod bench_chain;
 pub mod bench_mesh;
 pub mod bench_report;
 pub mod calibrate;

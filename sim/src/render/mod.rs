@@ -31,6 +31,7 @@
 //!   pose) and turns (about the axis of the path's rotation there) symmetrically about the listed
 //!   pose during the exposure; `samples` instants are averaged. The truth pose is mid-exposure.
 
+mod footprint;
 pub mod radiometry;
 mod sensor;
 mod shade;
@@ -41,6 +42,7 @@ mod tests;
 #[cfg(test)]
 mod tests_invariants;
 
+pub use footprint::{Footprint, IdealPixel, PointFrame};
 pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
 
 use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams, StageSet};
@@ -52,11 +54,8 @@ use ellipso_model::optics::OpticsError;
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use radiometry::Radiometry;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
-use sensor::SensorChain;
-use shade::{PixelSensor, PoseContext, Shader};
+use shade::{PixelSensor, Shader};
 
 /// Largest supported supersampling factor per axis (64 rays per raw pixel, times motion samples).
 pub const MAX_SUPERSAMPLING: u32 = 8;
@@ -190,17 +189,6 @@ fn mix(mut z: u64) -> u64 {
 /// The noise seed of frame `index` under render seed `seed`.
 pub fn frame_seed(seed: u64, index: usize) -> u64 {
     mix(seed ^ mix(index as u64 ^ 0x9e37_79b9_7f4a_7c15))
-}
-
-/// The light of one frame, shared by its rows.
-#[derive(Clone, Copy)]
-struct RowLight<'a, 's> {
-    /// The camera and flash at each instant of the exposure.
-    contexts: &'a [PoseContext],
-    /// The shading state.
-    shader: &'a Shader<'s>,
-    /// Flash energy relative to the scene's full pulse.
-    flash_energy_rel: f64,
 }
 
 /// Renders frames of one scene (see the module doc for the contract).
@@ -408,45 +396,21 @@ impl<'s> Renderer<'s> {
         index: usize,
         flash_energy_rel: f64,
     ) -> Result<RenderedFrame, RenderError> {
-        if !(flash_energy_rel.is_finite() && flash_energy_rel >= 0.0) {
-            return Err(RenderError::FlashEnergy(flash_energy_rel));
-        }
-        let count = self.frame_count();
-        let pose = self
-            .scene
-            .camera_poses
-            .get(index)
-            .ok_or(RenderError::FrameOutOfRange { index, count })?;
-        let contexts: Vec<PoseContext> = self
-            .sub_poses(index)
-            .into_iter()
-            .map(|w| PoseContext::new(self.scene, w))
-            .collect();
-        let seed = frame_seed(self.seed, index);
-        let shader = self.shader();
-        let read_noise_e = match self.plan.params(Stage::ReadNoise) {
-            Some(StageParams::ReadNoise(r)) => r.sigma_e,
-            _ => 0.0,
-        };
-        let chain = SensorChain::new(self.set, read_noise_e, &self.radiometry);
+        let frame = self.frame_setup(index, flash_energy_rel)?;
         let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         let mut dn = vec![0f32; w * h];
         let row_counts: Vec<StageCounts> = dn
             .par_chunks_mut(w)
             .enumerate()
             .map(|(y, row)| {
-                let light = RowLight {
-                    contexts: &contexts,
-                    shader: &shader,
-                    flash_energy_rel,
-                };
-                self.render_row(y as u32, row, &light, &chain, seed)
+                self.render_row(y as u32, row, &frame)
             })
             .collect();
         let mut counts = StageCounts::default();
         for c in &row_counts {
             counts.merge(c);
         }
+        let pose = &self.scene.camera_poses[index];
         let pixels = self
             .options
             .pixel_truth
@@ -455,7 +419,7 @@ impl<'s> Renderer<'s> {
             width: self.camera.width,
             height: self.camera.height,
             dn,
-            truth: FrameTruth::new(self.scene, pose, &self.camera, seed),
+            truth: FrameTruth::new(self.scene, pose, &self.camera, frame.seed),
             pixels,
             counts,
         })
@@ -482,67 +446,6 @@ impl<'s> Renderer<'s> {
             *o = v.round().clamp(0.0, 65535.0) as u16;
         }
         Ok((f.truth, f.counts))
-    }
-
-    /// One row of DN; returns the row's stage counts.
-    fn render_row(
-        &self,
-        y: u32,
-        row: &mut [f32],
-        light: &RowLight<'_, '_>,
-        chain: &SensorChain,
-        seed: u64,
-    ) -> StageCounts {
-        let RowLight {
-            contexts,
-            shader,
-            flash_energy_rel,
-        } = *light;
-        let mut counts = StageCounts::default();
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        rng.set_stream(u64::from(y));
-        let n = self.options.supersampling;
-        let step = 1.0 / f64::from(n);
-        let samples = f64::from(n * n) * contexts.len() as f64;
-        let blur = self.set.has(Stage::MotionBlur) && contexts.len() > 1;
-        let vignette = self.set.has(Stage::Vignetting);
-        for (x, out) in row.iter_mut().enumerate() {
-            let x = x as u32;
-            let pixel = self.pixel_sensor(x, y);
-            let mut signal = 0.0;
-            for sy in 0..n {
-                let v = f64::from(y) + (f64::from(sy) + 0.5) * step - 0.5;
-                for sx in 0..n {
-                    let u = f64::from(x) + (f64::from(sx) + 0.5) * step - 0.5;
-                    let dir_camera = self.ray_camera(u, v, &mut counts);
-                    let vig = if vignette {
-                        counts.add(Stage::Vignetting, 1);
-                        // dir_camera is unit, so z is the cosine of the field angle.
-                        self.radiometry
-                            .vignetting(dir_camera.z.clamp(-1.0, 1.0).acos())
-                    } else {
-                        1.0
-                    };
-                    let ray_pixel = pixel.for_ray(&dir_camera);
-                    for ctx in contexts {
-                        if blur {
-                            counts.add(Stage::MotionBlur, 1);
-                        }
-                        let w2c = &ctx.world_from_camera;
-                        let ray =
-                            Ray::new(w2c.translation.vector.into(), w2c.rotation * dir_camera);
-                        if let Some(hit) = self.scene.intersect(&ray, 0.0, f64::INFINITY) {
-                            signal += vig * shader.sample(ctx, &ray, &hit, &ray_pixel, &mut counts);
-                        }
-                    }
-                }
-            }
-            // Multiplying by exactly 1.0 leaves a full-energy frame bit-identical.
-            let electrons =
-                signal / samples * self.radiometry.electrons_per_irradiance() * flash_energy_rel;
-            *out = chain.digitise(electrons, &mut rng, &mut counts);
-        }
-        counts
     }
 
     /// Per-pixel truth from the centre rays at the mid-exposure pose.

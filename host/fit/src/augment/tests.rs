@@ -156,6 +156,7 @@ fn fit_of(vertex: usize, params: PbrdfParams<f64>, normal: [f64; 3]) -> VertexFi
         cost: 0.0,
         iterations: 0,
         flags: Vec::new(),
+        eta_unpooled: None,
     }
 }
 

@@ -15,7 +15,7 @@ use ellipso_model::geometry::TriangleMesh;
 use crate::data::{FitFlag, VertexFit};
 
 /// Flag bit order of the `flags` property.
-pub const FLAG_BITS: [FitFlag; 8] = [
+pub const FLAG_BITS: [FitFlag; 9] = [
     FitFlag::TooFewViews,
     FitFlag::UnderDetermined,
     FitFlag::Dark,
@@ -24,6 +24,7 @@ pub const FLAG_BITS: [FitFlag; 8] = [
     FitFlag::GrazingOnly,
     FitFlag::AtBound,
     FitFlag::NotConverged,
+    FitFlag::EtaPooled,
 ];
 
 /// Parameter property names in `VertexFit::std_error` order.
@@ -245,6 +246,7 @@ mod tests {
                 } else {
                     vec![]
                 },
+                eta_unpooled: None,
             })
             .collect();
         let dir = tempfile::tempdir().unwrap();

@@ -42,6 +42,7 @@ fn fits(mesh: &TriangleMesh) -> Vec<VertexFit> {
             } else {
                 vec![]
             },
+            eta_unpooled: None,
         })
         .collect()
 }

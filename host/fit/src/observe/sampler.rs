@@ -37,6 +37,10 @@ use ellipso_polar::frame::RawFrame;
 /// Ray parameter margin at both ends of an occlusion or shadow segment (relative to its length).
 pub const RAY_T_EPS: f64 = 1e-7;
 
+/// cos 85°: the footprint test's stretch 1/cos θ is capped there (a footprint seen more
+/// obliquely than that reaches the silhouette anyway).
+const COS_85_DEG: f64 = 0.087_155_742_747_658_17;
+
 /// What one (vertex, view) pair gave.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Outcome {
@@ -48,6 +52,9 @@ pub enum Outcome {
     Occluded,
     /// Not lit by the flash (blocked, facing away from it, or outside its emission profile).
     Shadowed,
+    /// The image footprint of the sample's value reaches off the vertex's visible surface
+    /// ([`AnalyserPixels::footprint_radius_px`], `FrameSampler::footprint_on_surface`).
+    Mixed,
     /// A shared sample gate (non-finite, grazing, saturated, dark).
     Gate(SampleGate),
 }
@@ -56,6 +63,9 @@ pub enum Outcome {
 #[derive(Clone, Debug)]
 pub struct DnImage {
     tile_px: f64,
+    kernel: SampleKernel,
+    /// Half-side of the square of raw pixels a sampled value draws on, px.
+    footprint_radius_px: f64,
     width: usize,
     height: usize,
     bands: Vec<DnBand>,
@@ -78,6 +88,7 @@ impl DnImage {
         image: &AnalyserImage,
         levels: &Levels,
         point: SamplePoint,
+        kernel: SampleKernel,
     ) -> DnImage {
         let layout = raw.layout();
         let t = layout.tile_px() as usize;
@@ -145,8 +156,34 @@ impl DnImage {
                 }
             })
             .collect();
+        // A value interpolates lattice samples within one tile of the point (two for the
+        // cubic kernel); a colour band's sample averages its blocks, which sit up to `spread`
+        // raw pixels from their mean; every raw pixel covers ±½ px.
+        let spread = match layout {
+            SensorLayout::ColourPolar => ellipso_model::mosaic::Channel::ALL
+                .iter()
+                .map(|c| {
+                    let b = c.blocks_in_tile();
+                    let n = b.len() as f64;
+                    let (mx, my) = (
+                        b.iter().map(|b| 2.0 * b.0 as f64).sum::<f64>() / n,
+                        b.iter().map(|b| 2.0 * b.1 as f64).sum::<f64>() / n,
+                    );
+                    b.iter()
+                        .map(|b| (2.0 * b.0 as f64 - mx).abs().max((2.0 * b.1 as f64 - my).abs()))
+                        .fold(0.0, f64::max)
+                })
+                .fold(0.0, f64::max),
+            SensorLayout::MonoPolar => 0.0,
+        };
+        let reach = match kernel {
+            SampleKernel::Bilinear => 1.0,
+            SampleKernel::CatmullRom => 2.0,
+        };
         DnImage {
             tile_px: t as f64,
+            kernel,
+            footprint_radius_px: reach * t as f64 + spread + 0.5,
             width: w,
             height: h,
             bands,
@@ -163,16 +200,8 @@ impl DnImage {
         self.bands.len() * 5 * self.width * self.height * std::mem::size_of::<f32>()
     }
 
-    /// Bilinear weights of lattice coordinate `s` in `0..n`: (index, fraction), clamped.
-    fn axis(s: f64, n: usize) -> (usize, f64) {
-        let hi = n.saturating_sub(1) as f64;
-        let s = s.clamp(0.0, hi);
-        let i = (s.floor() as usize).min(n.saturating_sub(2));
-        (i, s - i as f64)
-    }
-
     /// Analyser DN `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and
-    /// analyser the largest raw DN in the bilinear footprint.
+    /// analyser the largest raw DN in the kernel's footprint.
     pub fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
         let mut values = [[0f32; 4]; 3];
         let mut peaks = [[0f32; 4]; 3];
@@ -180,30 +209,89 @@ impl DnImage {
         for (b, band) in self.bands.iter().enumerate().take(3) {
             for k in 0..4 {
                 let [ox, oy] = band.offset_px[k];
-                let (i, fx) = Self::axis((pixel[0] - ox) / self.tile_px, w);
-                let (j, fy) = Self::axis((pixel[1] - oy) / self.tile_px, h);
-                let i1 = (i + 1).min(w - 1);
-                let j1 = (j + 1).min(h - 1);
+                let sx = (pixel[0] - ox) / self.tile_px;
+                let sy = (pixel[1] - oy) / self.tile_px;
+                let taps_x = self.kernel.taps(sx, w);
+                let taps_y = self.kernel.taps(sy, h);
                 let plane = &band.dn[k];
-                let at = |x: usize, y: usize| f64::from(plane[y * w + x]);
-                let v = (1.0 - fy) * ((1.0 - fx) * at(i, j) + fx * at(i1, j))
-                    + fy * ((1.0 - fx) * at(i, j1) + fx * at(i1, j1));
-                values[b][k] = v as f32;
+                let mut v = 0.0;
                 let mut peak = f32::NEG_INFINITY;
-                for (x, y, wgt) in [
-                    (i, j, (1.0 - fx) * (1.0 - fy)),
-                    (i1, j, fx * (1.0 - fy)),
-                    (i, j1, (1.0 - fx) * fy),
-                    (i1, j1, fx * fy),
-                ] {
-                    if wgt > 0.0 {
+                for &(y, wy) in taps_y.iter().filter(|t| t.1 != 0.0) {
+                    for &(x, wx) in taps_x.iter().filter(|t| t.1 != 0.0) {
+                        v += wx * wy * f64::from(plane[y * w + x]);
                         peak = peak.max(band.max_dn[y * w + x]);
                     }
                 }
+                values[b][k] = v as f32;
                 peaks[b][k] = peak;
             }
         }
         (values, peaks)
+    }
+}
+
+/// How the analyser planes are interpolated at a sample's lattice coordinate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SampleKernel {
+    /// Bilinear (2 × 2 superpixels).
+    #[default]
+    Bilinear,
+    /// Catmull–Rom cubic convolution (Keys 1981, a = −½; 4 × 4 superpixels): exact for
+    /// quadratics, so a shading profile's curvature does not bias the value.
+    CatmullRom,
+}
+
+impl SampleKernel {
+    /// Up to four (index, weight) taps of lattice coordinate `s` in `0..n`; indices are clamped
+    /// to the plane (the edge sample repeats), weights sum to 1.
+    fn taps(self, s: f64, n: usize) -> [(usize, f64); 4] {
+        let hi = n.saturating_sub(1);
+        let s = s.clamp(0.0, hi as f64);
+        let i = (s.floor() as usize).min(n.saturating_sub(2));
+        let f = s - i as f64;
+        let at = |d: isize| (i as isize + d).clamp(0, hi as isize) as usize;
+        match self {
+            SampleKernel::Bilinear => [(at(0), 1.0 - f), (at(1), f), (at(0), 0.0), (at(0), 0.0)],
+            SampleKernel::CatmullRom => {
+                let (f2, f3) = (f * f, f * f * f);
+                [
+                    (at(-1), 0.5 * (-f3 + 2.0 * f2 - f)),
+                    (at(0), 0.5 * (3.0 * f3 - 5.0 * f2 + 2.0)),
+                    (at(1), 0.5 * (-3.0 * f3 + 4.0 * f2 + f)),
+                    (at(2), 0.5 * (f3 - f2)),
+                ]
+            }
+        }
+    }
+}
+
+/// A frame's analyser images as the sampler reads them (the recorded mosaic's [`DnImage`], or
+/// an ideal sensor's in the error budget): per band, the four analysers' dark-subtracted DN at
+/// a raw pixel position, and the largest raw DN of the pixels that value draws on (the
+/// saturation test).
+pub trait AnalyserPixels: Sync {
+    /// Number of colour bands (1 mono, 3 colour).
+    fn band_count(&self) -> usize;
+    /// `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and analyser the
+    /// largest raw DN in the footprint.
+    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]);
+    /// Half-side of the square of raw pixels about the sampled point that a value draws on
+    /// (its footprint), px; 0 for a point sample.
+    fn footprint_radius_px(&self) -> f64;
+}
+
+impl AnalyserPixels for DnImage {
+    fn band_count(&self) -> usize {
+        DnImage::band_count(self)
+    }
+
+    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
+        DnImage::sample(self, pixel)
+    }
+
+    fn footprint_radius_px(&self) -> f64 {
+        self.footprint_radius_px
     }
 }
 
@@ -276,7 +364,8 @@ pub struct FrameSampler<'a> {
     session: &'a SessionContext<'a>,
     view: &'a ViewGeometry,
     camera_from_world: Isometry3<f64>,
-    image: &'a DnImage,
+    world_from_camera: Isometry3<f64>,
+    image: &'a dyn AnalyserPixels,
     normaliser: PointNormaliser,
 }
 
@@ -310,7 +399,7 @@ impl<'a> FrameSampler<'a> {
         session: &'a SessionContext<'a>,
         view: &'a ViewGeometry,
         world_from_camera: &Isometry3<f64>,
-        image: &'a DnImage,
+        image: &'a dyn AnalyserPixels,
         exposure_us: f64,
         gain_db: f64,
         flash_energy_rel: f64,
@@ -319,6 +408,7 @@ impl<'a> FrameSampler<'a> {
             session,
             view,
             camera_from_world: world_from_camera.inverse(),
+            world_from_camera: *world_from_camera,
             image,
             normaliser: PointNormaliser::new(
                 session.radiometry.for_frame(exposure_us, gain_db),
@@ -347,6 +437,58 @@ impl<'a> FrameSampler<'a> {
             }
         }
         false
+    }
+
+    /// Whether the sample's footprint — the square of half-side
+    /// [`AnalyserPixels::footprint_radius_px`] about its pixel — lies on the vertex's visible
+    /// surface: the rays through its four corners and four edge midpoints each meet the mesh
+    /// within the distance a footprint of that size can cover on the vertex's tangent plane
+    /// (the corners' image distance at depth `depth_m`, stretched by 1/cos of the view angle,
+    /// capped at 85°, plus the unstretched distance again as room for curvature). A ray that
+    /// misses the mesh has left the object past a silhouette (or onto the board below a
+    /// contact); one that meets it farther away crossed an occlusion boundary. Either way the
+    /// value mixes in light the vertex's model cannot explain. A point sample (radius 0)
+    /// always passes.
+    fn footprint_on_surface(
+        &self,
+        position: &Point3<f64>,
+        pixel: [f64; 2],
+        depth_m: f64,
+        cos_view: f64,
+    ) -> bool {
+        let r = self.image.footprint_radius_px();
+        if r <= 0.0 {
+            return true;
+        }
+        let px_m = depth_m / self.session.camera.intrinsics.fx.abs().max(1e-9);
+        // A corner is r·√2 px off; on the tangent plane that stretches by at most 1/cos θ.
+        let reach_m =
+            r * std::f64::consts::SQRT_2 * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
+        let origin = Point3::from(self.view.camera_position_world);
+        for (dx, dy) in [
+            (-1.0, -1.0),
+            (0.0, -1.0),
+            (1.0, -1.0),
+            (-1.0, 0.0),
+            (1.0, 0.0),
+            (-1.0, 1.0),
+            (0.0, 1.0),
+            (1.0, 1.0),
+        ] {
+            let Ok(dir) = self
+                .session
+                .camera
+                .unproject_to_ray([pixel[0] + dx * r, pixel[1] + dy * r])
+            else {
+                return false;
+            };
+            let ray = Ray::new(origin, self.world_from_camera.rotation * dir.into_inner());
+            match self.session.mesh.intersect(&ray, 0.0, f64::INFINITY) {
+                Some(hit) if (ray.at(hit.t) - position).norm() <= reach_m => {}
+                _ => return false,
+            }
+        }
+        true
     }
 
     /// Observes vertex `v` in this frame.
@@ -380,6 +522,9 @@ impl<'a> FrameSampler<'a> {
         let flash = Point3::from(self.view.flash_position_world);
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
+        }
+        if !self.footprint_on_surface(&position, pixel, p_cam.z, cos_view) {
+            return Outcome::Mixed;
         }
 
         let (values, peaks) = self.image.sample(pixel);

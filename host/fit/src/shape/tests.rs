@@ -496,6 +496,7 @@ fn fit(vertex: u32, normal: [f64; 3], sigma_deg: f64, flags: Vec<FitFlag>) -> Ve
         cost: 0.0,
         iterations: 5,
         flags,
+        eta_unpooled: None,
     }
 }
 

@@ -23,7 +23,7 @@ use ellipso_session::reader::Session;
 /// The first bytes of every part file.
 pub const MAGIC: &[u8; 16] = b"ELLIPSO-FITPART\n";
 /// The format version this build writes and reads.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 const CRC64: Crc<u64> = Crc::<u64>::new(&CRC_64_XZ);
 
@@ -255,6 +255,7 @@ pub(crate) mod tests {
                 cost: 0.5,
                 iterations: 3,
                 flags: vec![crate::data::FitFlag::TooFewViews],
+                eta_unpooled: None,
             })
             .collect();
         PartFile {

@@ -194,6 +194,7 @@ fn reference_render(
                     .filter(|(k, _)| v.flags & (1 << k) != 0)
                     .map(|(_, f)| *f)
                     .collect(),
+                eta_unpooled: None,
             }
         })
         .collect();
@@ -349,6 +350,7 @@ mod tests {
                 cost: 1.0,
                 iterations: 3,
                 flags: vec![],
+                eta_unpooled: None,
             })
             .collect();
         super::super::ply::write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();

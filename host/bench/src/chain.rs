@@ -1,0 +1,412 @@
+//! The error budget of the whole chain: a scene's capture rendered into raw mosaic frames, then
+//! tracked, carved and fitted exactly as `ellipso demo` does — and the same with one stage at a
+//! time replaced by its truth, so each stage's cost is the difference it makes.
+//!
+//! Contract:
+//! - A [`RunSpec`] says where each stage's input comes from: the frames (the session rendered
+//!   with a [`SceneEdit`] — sensor effects removed — at a supersampling), the pixels the fit
+//!   samples ([`Pixels::Mosaic`]: the recorded mosaic through the superpixel demosaic, or
+//!   [`Pixels::Ideal`]: an ideal polarisation sensor at the exact sampled point), the poses
+//!   (tracked from the AprilTags, or the scene's) and the mesh (carved from the frames with those
+//!   poses, or the scene's own).
+//! - [`run`] fits one spec with the demo's fit settings and scores it ([`crate::score`]): per
+//!   material and per vertex, held-out re-render beside the truth's own, residuals at the truth,
+//!   and the wall time of each stage.
+//! - Sessions are rendered once per frame variant into the work directory and reused by every
+//!   spec that shares them (a session is reused only when its manifest names the same scene
+//!   variant and holds every frame).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use ellipso_fit::observe::{MosaicFrames, poses_from_session};
+use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session_with};
+use ellipso_fit::truth::TruthObject;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_session::reader::Session;
+use ellipso_sim::render::{Footprint, RenderOptions, Renderer};
+use ellipso_sim::scene::{ObjectGeometry, Scene};
+use nalgebra::Isometry3;
+use serde::Serialize;
+
+use crate::BenchError;
+use crate::capture::{render_session, true_poses};
+use crate::ideal::IdealFrames;
+use crate::score::{
+    FitScores, HoldoutBeside, MaterialResiduals, holdout_beside_truth, score_fit, truth_residuals,
+};
+use crate::truth_map::truth_at;
+pub use crate::variant::SceneEdit;
+
+/// Where the fit's pixels come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Pixels {
+    /// The recorded raw mosaic, superpixel demosaic, bilinear at the analysers' lattice
+    /// positions (what the fit does on a real capture).
+    Mosaic,
+    /// An ideal polarisation sensor sampled at the exact projected point.
+    Ideal(Footprint),
+}
+
+/// Tracked or true poses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PoseSource {
+    /// From the AprilTags of the frames (`ellipso_vision`), as the demo tracks them.
+    Tracked,
+    /// The scene's capture path.
+    True,
+}
+
+/// Carved or true mesh.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MeshSource {
+    /// Carved from the frames with the run's poses (`ellipso mesh`).
+    Carved,
+    /// The scene object's own mesh (icosphere with 2562 vertices for a sphere).
+    True,
+}
+
+/// One run of the budget.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RunSpec {
+    /// Short name (table row).
+    pub name: String,
+    /// The frames: effects removed from the scene.
+    pub edit: SceneEdit,
+    /// Rays per raw pixel per axis.
+    pub supersampling: u32,
+    /// The fit's pixels.
+    pub pixels: Pixels,
+    /// Poses.
+    pub poses: PoseSource,
+    /// Mesh.
+    pub mesh: MeshSource,
+}
+
+/// Wall time of each stage of a run, seconds.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct RunTimes {
+    /// Rendering the session (0 when reused).
+    pub render_s: f64,
+    /// Tracking poses (0 with true poses).
+    pub track_s: f64,
+    /// Carving the mesh (0 with the true mesh).
+    pub mesh_s: f64,
+    /// The fit (observations, outer loop, steps A + B + C, held-out extraction).
+    pub fit_s: f64,
+}
+
+/// What one run measured.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RunResult {
+    /// The spec.
+    pub spec: RunSpec,
+    /// Frames posed / frames in the session.
+    pub frames_posed: usize,
+    /// Frames in the session.
+    pub frames: usize,
+    /// Mesh vertices.
+    pub vertices: usize,
+    /// Scores.
+    pub scores: FitScores,
+    /// Held-out re-render, fit and truth.
+    pub holdout: Option<HoldoutBeside>,
+    /// Residuals of the fitted observations at the truth.
+    pub residuals: Vec<MaterialResiduals>,
+    /// Times.
+    pub times: RunTimes,
+}
+
+/// The scene and work directory a budget runs in.
+pub struct Bench {
+    /// The scene file.
+    pub scene_path: PathBuf,
+    /// The scene.
+    pub scene: Scene,
+    /// Where sessions and variant scenes go.
+    pub work: PathBuf,
+    /// Render resolution (`None`: the scene's).
+    pub resolution: Option<[u32; 2]>,
+    /// The fit's settings (the demo's).
+    pub fit: SessionFitConfig,
+}
+
+/// The truth object the bench scores against: the scene object's own mesh (a sphere refined to
+/// icosphere 6 for the closest-point search).
+pub fn truth_for_scoring(scene: &Scene) -> Result<TruthObject, BenchError> {
+    let sphere = matches!(
+        scene.objects.first().map(|o| &o.geometry),
+        Some(ObjectGeometry::Sphere(_))
+    );
+    TruthObject::from_scene(scene, sphere.then_some(6)).map_err(|e| BenchError::stage("truth", e))
+}
+
+/// The true mesh the fit runs on with [`MeshSource::True`]: the object's own mesh (icosphere 4
+/// for a sphere).
+pub fn true_mesh(scene: &Scene) -> Result<TriangleMesh, BenchError> {
+    Ok(TruthObject::from_scene(scene, None)
+        .map_err(|e| BenchError::stage("truth", e))?
+        .mesh)
+}
+
+impl Bench {
+    /// The session of `edit` at `supersampling`: rendered into the work directory unless a
+    /// complete one is there. Returns it and the seconds spent rendering.
+    pub fn session(
+        &self,
+        edit: &SceneEdit,
+        supersampling: u32,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<(PathBuf, Scene, f64), BenchError> {
+        let key = session_key(edit, supersampling, self.resolution);
+        let dir = self.work.join(&key);
+        let scene_file = dir.join("scene.toml");
+        let scene = crate::variant::write_variant(&self.scene_path, edit, &scene_file)?;
+        let session_dir = dir.join("session");
+        if let Ok(s) = ellipso_session::reader::open(&session_dir) {
+            let complete = s.manifest.end.is_some()
+                && s.frames.iter().filter(|f| f.complete).count() == scene.camera_poses.len();
+            if complete {
+                return Ok((session_dir, scene, 0.0));
+            }
+        }
+        if session_dir.exists() {
+            std::fs::remove_dir_all(&session_dir).map_err(|e| BenchError::io(&session_dir, e))?;
+        }
+        let started = Instant::now();
+        let options = RenderOptions {
+            supersampling,
+            resolution_px: self.resolution,
+            ..RenderOptions::default()
+        };
+        render_session(&scene_file, &scene, options, &session_dir, progress)?;
+        Ok((session_dir, scene, started.elapsed().as_secs_f64()))
+    }
+
+    /// Runs `spec` (module doc).
+    pub fn run(
+        &self,
+        spec: &RunSpec,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<RunResult, BenchError> {
+        let mut times = RunTimes::default();
+        progress(&format!("{}: frames", spec.name));
+        let (session_dir, scene, render_s) =
+            self.session(&spec.edit, spec.supersampling, &mut |_, _| {})?;
+        times.render_s = render_s;
+        let session = ellipso_session::reader::open(&session_dir)
+            .map_err(|e| BenchError::Session(e.to_string()))?;
+        let poses = match spec.poses {
+            PoseSource::True => true_poses(&session, &scene),
+            PoseSource::Tracked => {
+                progress(&format!("{}: tracking", spec.name));
+                let started = Instant::now();
+                let p = tracked_poses(&session)?;
+                times.track_s = started.elapsed().as_secs_f64();
+                p
+            }
+        };
+        let mesh = match spec.mesh {
+            MeshSource::True => true_mesh(&scene)?,
+            MeshSource::Carved => {
+                progress(&format!("{}: carving", spec.name));
+                let started = Instant::now();
+                let m = ellipso_mesh::build_mesh(
+                    &session,
+                    &poses,
+                    &ellipso_mesh::MeshConfig::default(),
+                    &mut |_| {},
+                )
+                .map_err(|e| BenchError::stage("mesh", e))?
+                .mesh;
+                times.mesh_s = started.elapsed().as_secs_f64();
+                m
+            }
+        };
+        progress(&format!("{}: fitting", spec.name));
+        let started = Instant::now();
+        let fit = self.fit(&session, &scene, &mesh, &poses, spec)?;
+        times.fit_s = started.elapsed().as_secs_f64();
+        let truth = truth_for_scoring(&scene)?;
+        let at = truth_at(&truth, fit.mesh.positions());
+        let colour = fit.set.colour;
+        let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
+        let full_scale = ellipso_fit::accuracy::full_scale_dn(&scene);
+        let holdout = fit.held_out_set.as_ref().map(|held| {
+            holdout_beside_truth(
+                held,
+                &fit.outcome.fits,
+                &at,
+                full_scale,
+                self.fit.fit.solver.albedo_cap,
+            )
+        });
+        let sensor = ellipso_fit::accuracy::sensor_model(&scene);
+        let residuals = truth_residuals(&fit.set, &at, &truth.material_names, &sensor);
+        Ok(RunResult {
+            spec: spec.clone(),
+            frames_posed: poses.len(),
+            frames: session.frames.len(),
+            vertices: mesh.positions().len(),
+            scores,
+            holdout,
+            residuals,
+            times,
+        })
+    }
+
+    fn fit(
+        &self,
+        session: &Session,
+        scene: &Scene,
+        mesh: &TriangleMesh,
+        poses: &[(u64, Isometry3<f64>)],
+        spec: &RunSpec,
+    ) -> Result<SessionFit, BenchError> {
+        let config = &self.fit;
+        let fit_error = |e| BenchError::stage("fit", e);
+        match spec.pixels {
+            Pixels::Mosaic => {
+                let frames = MosaicFrames::new(session, &config.observe)
+                    .map_err(|e| BenchError::stage("fit", e))?;
+                fit_session_with(session, mesh, poses, config, &frames, &mut |_| {})
+                    .map_err(fit_error)
+            }
+            Pixels::Ideal(footprint) => {
+                let options = RenderOptions {
+                    supersampling: spec.supersampling,
+                    resolution_px: self.resolution,
+                    ..RenderOptions::default()
+                };
+                let renderer =
+                    Renderer::new(scene, options).map_err(|e| BenchError::Render(e.to_string()))?;
+                let frames = IdealFrames::new(&renderer, session, footprint);
+                fit_session_with(session, mesh, poses, config, &frames, &mut |_| {})
+                    .map_err(fit_error)
+            }
+        }
+    }
+}
+
+/// The poses of `session`: its `pose` events when it has any, else tracked now (in memory;
+/// the session is not written).
+pub fn tracked_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, BenchError> {
+    let recorded = poses_from_session(session);
+    if !recorded.is_empty() {
+        return Ok(recorded);
+    }
+    let tracked = ellipso_vision::process::track_session(
+        session,
+        &ellipso_vision::track::TrackConfig::default(),
+    )
+    .map_err(|e| BenchError::stage("tracking", e))?;
+    Ok(tracked
+        .into_iter()
+        .filter_map(|t| t.result.ok().map(|p| (t.frame_id, p.world_from_camera)))
+        .collect())
+}
+
+/// The work-directory name of a frame variant.
+fn session_key(edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]>) -> String {
+    let mut key = format!("ss{supersampling}");
+    if let Some([w, h]) = resolution {
+        key += &format!("-{w}x{h}");
+    }
+    if let Some(n) = edit.photo_count {
+        key += &format!("-n{n}");
+    }
+    if let Some(s) = edit.seed {
+        key += &format!("-seed{s}");
+    }
+    let mut removed = edit.remove_effects.clone();
+    removed.sort();
+    for r in removed {
+        key += &format!("-no_{r}");
+    }
+    key
+}
+
+/// Path helper for callers: the work directory's session of a spec.
+pub fn session_dir(work: &Path, edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]>) -> PathBuf {
+    work.join(session_key(edit, supersampling, resolution)).join("session")
+}
+
+/// The runs of the error budget for `scene` captured at `supersampling` (module doc): the full
+/// chain, each stage replaced by its truth alone, the geometry replaced together, the frame
+/// stages again on the true geometry (where the geometry's own cost does not mask them), and
+/// everything replaced at once. Sensor effects the scene does not simulate get no row.
+pub fn budget_specs(scene: &Scene, supersampling: u32) -> Vec<RunSpec> {
+    let e = &scene.effects;
+    let sensor_effects: Vec<(&str, bool)> = vec![
+        ("shot_noise", e.shot_noise.is_some()),
+        ("read_noise", e.read_noise.is_some()),
+        ("quantisation", e.quantisation.is_some()),
+        ("saturation", e.saturation.is_some()),
+        ("polariser_extinction", e.polariser_extinction.is_some()),
+        ("vignetting", e.vignetting.is_some()),
+        ("motion_blur", e.motion_blur.is_some()),
+    ];
+    let present: Vec<&str> = sensor_effects
+        .iter()
+        .filter(|(_, on)| *on)
+        .map(|(n, _)| *n)
+        .collect();
+    let base = RunSpec {
+        name: "full chain".into(),
+        edit: SceneEdit::default(),
+        supersampling,
+        pixels: Pixels::Mosaic,
+        poses: PoseSource::Tracked,
+        mesh: MeshSource::Carved,
+    };
+    let with = |name: &str, f: &dyn Fn(&mut RunSpec)| {
+        let mut s = base.clone();
+        s.name = name.into();
+        f(&mut s);
+        s
+    };
+    let mut specs = vec![
+        base.clone(),
+        with("true poses", &|s| s.poses = PoseSource::True),
+        with("true mesh", &|s| s.mesh = MeshSource::True),
+        with("true poses + mesh", &|s| {
+            s.poses = PoseSource::True;
+            s.mesh = MeshSource::True;
+        }),
+    ];
+    let geometry_true = |s: &mut RunSpec| {
+        s.poses = PoseSource::True;
+        s.mesh = MeshSource::True;
+    };
+    for on_true_geometry in [false, true] {
+        let suffix = if on_true_geometry { " | true geometry" } else { "" };
+        let stage = |name: &str, f: &dyn Fn(&mut RunSpec)| {
+            with(&format!("{name}{suffix}"), &|s| {
+                if on_true_geometry {
+                    geometry_true(s);
+                }
+                f(s);
+            })
+        };
+        specs.push(stage("ideal pixels", &|s| {
+            s.pixels = Pixels::Ideal(Footprint::Pixel)
+        }));
+        specs.push(stage("ideal point", &|s| {
+            s.pixels = Pixels::Ideal(Footprint::Point)
+        }));
+        for name in &present {
+            specs.push(stage(&format!("no {}", name.replace('_', " ")), &|s| {
+                s.edit.remove_effects = vec![(*name).to_string()];
+            }));
+        }
+    }
+    specs.push(with("all truth", &|s| {
+        geometry_true(s);
+        s.pixels = Pixels::Ideal(Footprint::Point);
+        s.edit.remove_effects = present.iter().map(|n| n.to_string()).collect();
+    }));
+    specs
+}

@@ -1,0 +1,76 @@
+//! ellipso's end-to-end benchmarks against the simulator's truth.
+//!
+//! The fit-only benches (`ellipso bench accuracy`) simulate each observation with the very
+//! optics the fit inverts; what a user gets goes through the whole chain — rendered frames, the
+//! mosaic and its demosaic, tracked poses, the carved mesh, the fit. This crate measures that
+//! chain and what each of its stages costs, by replacing one stage at a time with its truth
+//! ([`chain`], `ellipso bench chain`, docs/error-budget.md).
+//!
+//! | module | what it does |
+//! |---|---|
+//! | [`variant`] | scene files with effects removed (or seed, photo count changed) |
+//! | [`capture`] | a scene rendered straight into a session; true poses of a recorded session |
+//! | [`ideal`] | a session's frames as an ideal polarisation sensor sees them (no mosaic) |
+//! | [`truth_map`] | the truth at the vertices of any mesh (closest point of the true surface) |
+//! | [`score`] | per-material and per-vertex errors, held-out re-render beside the truth's own, residuals at the truth |
+//! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
+
+pub mod capture;
+pub mod chain;
+pub mod ideal;
+pub mod score;
+pub mod truth_map;
+pub mod variant;
+
+use std::path::{Path, PathBuf};
+
+/// Why a bench run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// File I/O.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or directory.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A scene file could not be read, edited or loaded.
+    #[error("scene {}: {what}", path.display())]
+    Scene {
+        /// The scene file.
+        path: PathBuf,
+        /// What is wrong.
+        what: String,
+    },
+    /// Rendering failed.
+    #[error("render: {0}")]
+    Render(String),
+    /// Writing or reading a session failed.
+    #[error("session: {0}")]
+    Session(String),
+    /// A stage of the chain (tracking, meshing, fitting) failed.
+    #[error("{stage}: {what}")]
+    Stage {
+        /// The stage.
+        stage: &'static str,
+        /// What went wrong.
+        what: String,
+    },
+}
+
+impl BenchError {
+    fn io(path: &Path, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.to_owned(),
+            source,
+        }
+    }
+
+    fn stage(stage: &'static str, e: impl std::fmt::Display) -> Self {
+        Self::Stage {
+            stage,
+            what: e.to_string(),
+        }
+    }
+}
