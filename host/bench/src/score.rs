@@ -313,6 +313,7 @@ pub fn truth_residuals(
         gates: ellipso_fit::data::GateCounts,
     }
     let mut acc = vec![Acc::default(); names.len()];
+    let mut dump = std::env::var("ELLIPSO_DUMP").ok().map(|p| std::fs::File::create(p).unwrap());
     let min_boundary_m: f64 = std::env::var("ELLIPSO_BOUNDARY_MM")
         .ok()
         .and_then(|v| v.parse::<f64>().ok())
@@ -358,6 +359,14 @@ pub fn truth_residuals(
                     var[1] + var[3],
                 ];
                 let (o, m) = (ch(obs), ch(model));
+                if let Some(f) = dump.as_mut() {
+                    use std::io::Write;
+                    let n_t = nalgebra::Vector3::from(t.normal_world);
+                    let g = view.geometry_at(&nalgebra::Point3::from(vs.position_world)).unwrap();
+                    let co = n_t.dot(&nalgebra::Vector3::from(g.to_camera));
+                    let ci = n_t.dot(&nalgebra::Vector3::from(g.to_light));
+                    writeln!(f, "{},{},{},{},{},{},{},{},{},{},{},{},{},{}", vs.vertex, t.material, c, vs.position_world[2], co, ci, t.boundary_m, s.view, o[0], m[0], o[1], m[1], o[2], m[2]).unwrap();
+                }
                 for k in 0..4 {
                     let z = (o[k] - m[k]) / vars[k].sqrt();
                     a.z[k] += z;

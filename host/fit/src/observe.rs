@@ -97,6 +97,10 @@ pub struct ObserveConfig {
     /// Interpolation of the analyser planes at a sample.
     #[serde(default)]
     pub sample_kernel: SampleKernel,
+    /// A material label per mesh vertex (`None`: unknown): samples whose footprint reaches
+    /// another label's triangles are gated as mixed.
+    #[serde(skip)]
+    pub vertex_labels: Option<Vec<u32>>,
 }
 
 impl Default for ObserveConfig {
@@ -108,6 +112,7 @@ impl Default for ObserveConfig {
             sample_point: SamplePoint::Lattice,
             dark_level_dn: 0.0,
             sample_kernel: SampleKernel::default(),
+            vertex_labels: None,
         }
     }
 }
@@ -561,6 +566,10 @@ pub fn extract_from(
         radiometry,
         gate: &config.gate,
         full_scale_dn: (radiometry.full_scale_dn - f64::from(config.dark_level_dn)).max(1.0),
+        labels: config
+            .vertex_labels
+            .as_deref()
+            .filter(|l| l.len() == mesh.positions().len()),
     };
     let run_frame = |job: &Job<'_>| -> FrameResult {
         let (image, bytes) = frames.load(job.entry)?;

@@ -357,6 +357,9 @@ pub struct SessionContext<'a> {
     pub gate: &'a GateConfig,
     /// Full scale minus the dark level, DN (what the gates compare against).
     pub full_scale_dn: f64,
+    /// A material label per vertex (`None`: unknown): a footprint that meets a triangle with
+    /// a corner of another label mixes materials.
+    pub labels: Option<&'a [u32]>,
 }
 
 /// Everything needed to observe every vertex in one frame.
@@ -451,6 +454,7 @@ impl<'a> FrameSampler<'a> {
     /// always passes.
     fn footprint_on_surface(
         &self,
+        v: usize,
         position: &Point3<f64>,
         pixel: [f64; 2],
         depth_m: f64,
@@ -484,7 +488,14 @@ impl<'a> FrameSampler<'a> {
             };
             let ray = Ray::new(origin, self.world_from_camera.rotation * dir.into_inner());
             match self.session.mesh.intersect(&ray, 0.0, f64::INFINITY) {
-                Some(hit) if (ray.at(hit.t) - position).norm() <= reach_m => {}
+                Some(hit) if (ray.at(hit.t) - position).norm() <= reach_m => {
+                    if let Some(labels) = self.session.labels {
+                        let tri = self.session.mesh.triangles()[hit.primitive as usize];
+                        if tri.iter().any(|&c| labels[c as usize] != labels[v]) {
+                            return false;
+                        }
+                    }
+                }
                 _ => return false,
             }
         }
@@ -523,7 +534,7 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        if !self.footprint_on_surface(&position, pixel, p_cam.z, cos_view) {
+        if !self.footprint_on_surface(v, &position, pixel, p_cam.z, cos_view) {
             return Outcome::Mixed;
         }
 
