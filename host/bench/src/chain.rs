@@ -266,14 +266,7 @@ impl Bench {
         poses: &[(u64, Isometry3<f64>)],
         spec: &RunSpec,
     ) -> Result<SessionFit, BenchError> {
-        let mut config = self.fit.clone();
-        if std::env::var("ELLIPSO_TRUTH_LABELS").is_ok() {
-            let truth = truth_for_scoring(scene)?;
-            let at = truth_at(&truth, mesh.positions());
-            config.observe.vertex_labels =
-                Some(at.iter().map(|t| t.map_or(u32::MAX, |t| t.material as u32)).collect());
-        }
-        let config = &config;
+        let config = &self.fit;
         let fit_error = |e| BenchError::stage("fit", e);
         match spec.pixels {
             Pixels::Mosaic => {

@@ -313,16 +313,8 @@ pub fn truth_residuals(
         gates: ellipso_fit::data::GateCounts,
     }
     let mut acc = vec![Acc::default(); names.len()];
-    let mut dump = std::env::var("ELLIPSO_DUMP").ok().map(|p| std::fs::File::create(p).unwrap());
-    let min_boundary_m: f64 = std::env::var("ELLIPSO_BOUNDARY_MM")
-        .ok()
-        .and_then(|v| v.parse::<f64>().ok())
-        .map_or(0.0, |mm| mm * 1e-3);
     for (vs, t) in set.vertices.iter().zip(truth) {
         let Some(t) = t else { continue };
-        if t.boundary_m < min_boundary_m {
-            continue;
-        }
         let p = &t.params;
         let a = &mut acc[t.material];
         a.gates.add(&vs.gates);
@@ -359,14 +351,6 @@ pub fn truth_residuals(
                     var[1] + var[3],
                 ];
                 let (o, m) = (ch(obs), ch(model));
-                if let Some(f) = dump.as_mut() {
-                    use std::io::Write;
-                    let n_t = nalgebra::Vector3::from(t.normal_world);
-                    let g = view.geometry_at(&nalgebra::Point3::from(vs.position_world)).unwrap();
-                    let co = n_t.dot(&nalgebra::Vector3::from(g.to_camera));
-                    let ci = n_t.dot(&nalgebra::Vector3::from(g.to_light));
-                    writeln!(f, "{},{},{},{},{},{},{},{},{},{},{},{},{},{}", vs.vertex, t.material, c, vs.position_world[2], co, ci, t.boundary_m, s.view, o[0], m[0], o[1], m[1], o[2], m[2]).unwrap();
-                }
                 for k in 0..4 {
                     let z = (o[k] - m[k]) / vars[k].sqrt();
                     a.z[k] += z;

@@ -24,9 +24,6 @@ pub struct VertexTruth {
     pub normal_world: [f64; 3],
     /// Distance to the true surface, metres.
     pub distance_m: f64,
-    /// Distance from the closest point to the nearest true vertex of another material, metres
-    /// (infinite on a one-material object): how close the vertex is to a material boundary.
-    pub boundary_m: f64,
 }
 
 /// The truth at every position (module doc).
@@ -50,20 +47,12 @@ pub fn truth_at(truth: &TruthObject, positions: &[Point3<f64>]) -> Vec<Option<Ve
                 .try_normalize(1e-12)
                 .unwrap_or_else(|| normals[v].into_inner());
             let material = truth.material[v];
-            let boundary_m = truth
-                .mesh
-                .positions()
-                .iter()
-                .zip(&truth.material)
-                .filter(|(_, m)| **m != material)
-                .map(|(q, _)| (q - c.point).norm())
-                .fold(f64::INFINITY, f64::min);
+
             Some(VertexTruth {
                 material,
                 params: truth.params[v],
                 normal_world: n.into(),
                 distance_m: c.distance_m,
-                boundary_m,
             })
         })
         .collect()

@@ -398,60 +398,102 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
 }
 
+/// Step A's fits grouped into materials: the members (finite fits without an excluded flag),
+/// every finite fit's feature, and the chosen partition of the members.
+struct Clustering<'f> {
+    by_vertex: Vec<Option<&'f VertexFit>>,
+    members: Vec<usize>,
+    features: Vec<Option<Feature>>,
+    selection: cluster::Selection,
+    scaling: FeatureScaling,
+}
+
+impl<'f> Clustering<'f> {
+    fn new(n: usize, fits: &'f [VertexFit], config: &ClusterConfig) -> Self {
+        let mut by_vertex: Vec<Option<&VertexFit>> = vec![None; n];
+        for f in fits {
+            if let Some(slot) = by_vertex.get_mut(f.vertex as usize)
+                && slot.is_none()
+                && fit_is_finite(f)
+            {
+                *slot = Some(f);
+            }
+        }
+        let excluded = |f: &VertexFit| f.flags.iter().any(|flag| config.exclude_flags.contains(flag));
+        let members: Vec<usize> = (0..n)
+            .filter(|&v| by_vertex[v].is_some_and(|f| !excluded(f)))
+            .collect();
+        let member_rho_d: Vec<[f64; 3]> = members
+            .iter()
+            .map(|&v| by_vertex[v].expect("member").params.rho_d)
+            .collect();
+        let scaling = FeatureScaling::from_members(&member_rho_d);
+        let shrink = pool::EtaShrink::from_members(
+            &members
+                .iter()
+                .map(|&v| {
+                    let f = by_vertex[v].expect("member");
+                    (f.params.eta, f.std_error[0])
+                })
+                .collect::<Vec<_>>(),
+        );
+        let features: Vec<Option<Feature>> = by_vertex
+            .iter()
+            .map(|f| {
+                f.map(|f| {
+                    // A vertex whose own η its flags disown is placed by its colour alone.
+                    let se = if eta_trusted(f) {
+                        f.std_error[0]
+                    } else {
+                        f64::INFINITY
+                    };
+                    scaling.feature(f.params.rho_d, shrink.apply(f.params.eta, se))
+                })
+            })
+            .collect();
+        let member_features: Vec<Feature> = members
+            .iter()
+            .map(|&v| features[v].expect("member"))
+            .collect();
+        let selection = cluster::select(&member_features, config);
+        Self {
+            by_vertex,
+            members,
+            features,
+            selection,
+            scaling,
+        }
+    }
+}
+
+/// Step A's fits of `n` vertices grouped into materials as [`augment`] groups them (features,
+/// k-means, choice of k): each vertex's cluster — a member's own, the nearest centroid's for a
+/// vertex with a finite fit that is not a member — or `None` without a finite fit. What the
+/// next outer iteration's extraction uses to gate samples that mix materials
+/// (`ObserveConfig::vertex_labels`).
+pub fn material_labels(n: usize, fits: &[VertexFit], config: &ClusterConfig) -> Vec<Option<usize>> {
+    let c = Clustering::new(n, fits, config);
+    let centroids = &c.selection.partition.centroids;
+    if centroids.is_empty() {
+        return vec![None; n];
+    }
+    c.features
+        .iter()
+        .map(|f| f.map(|f| cluster::nearest(&f, centroids).0))
+        .collect()
+}
+
 /// Clusters the joint solve's vertices, fits the cluster models and builds every vertex's
 /// virtual specular samples (module doc).
 pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> Augmentation {
     let n = set.vertices.len();
-    let mut by_vertex: Vec<Option<&VertexFit>> = vec![None; n];
-    for f in fits {
-        if let Some(slot) = by_vertex.get_mut(f.vertex as usize)
-            && slot.is_none()
-            && fit_is_finite(f)
-        {
-            *slot = Some(f);
-        }
-    }
-    let excluded = |f: &VertexFit| {
-        f.flags
-            .iter()
-            .any(|flag| config.cluster.exclude_flags.contains(flag))
-    };
-    let members: Vec<usize> = (0..n)
-        .filter(|&v| by_vertex[v].is_some_and(|f| !excluded(f)))
-        .collect();
-    let member_rho_d: Vec<[f64; 3]> = members
-        .iter()
-        .map(|&v| by_vertex[v].expect("member").params.rho_d)
-        .collect();
-    let scaling = FeatureScaling::from_members(&member_rho_d);
-    let shrink = pool::EtaShrink::from_members(
-        &members
-            .iter()
-            .map(|&v| {
-                let f = by_vertex[v].expect("member");
-                (f.params.eta, f.std_error[0])
-            })
-            .collect::<Vec<_>>(),
-    );
-    let features: Vec<Option<Feature>> = by_vertex
-        .iter()
-        .map(|f| {
-            f.map(|f| {
-                // A vertex whose own η its flags disown is placed by its colour alone.
-                let se = if eta_trusted(f) {
-                    f.std_error[0]
-                } else {
-                    f64::INFINITY
-                };
-                scaling.feature(f.params.rho_d, shrink.apply(f.params.eta, se))
-            })
-        })
-        .collect();
-    let member_features: Vec<Feature> = members
-        .iter()
-        .map(|&v| features[v].expect("member"))
-        .collect();
-    let selection = cluster::select(&member_features, &config.cluster);
+    let Clustering {
+        by_vertex,
+        members,
+        features,
+        selection,
+        scaling,
+    } = Clustering::new(n, fits, &config.cluster);
     let partition = &selection.partition;
     let mut lists = vec![Vec::new(); partition.centroids.len()];
     for (i, &label) in partition.labels.iter().enumerate() {

@@ -34,6 +34,7 @@ use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
 use super::shape::{
     ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
 };
+use super::observe::sampler::UNLABELLED;
 use super::shard::Shard;
 use super::solve::fit_all;
 use ellipso_session::reader::Session;
@@ -191,21 +192,26 @@ pub fn fit_session_with(
     // (The solve starts from the previous iteration's normals through its warm start; the
     // samples keep the mesh normal, the centre of the normal prior.)
     let radiometry = radiometry_of(session)?;
-    let extract = |mesh: &TriangleMesh, poses: &[(u64, Isometry3<f64>)]| {
+    // The first extraction knows no materials; every later one gates samples whose footprint
+    // mixes two of the previous iteration's materials (`material_labels`).
+    let mut observe_config = config.observe.clone();
+    let extract = |mesh: &TriangleMesh,
+                   poses: &[(u64, Isometry3<f64>)],
+                   observe_config: &ObserveConfig| {
         extract_from(
             session,
             &radiometry,
             mesh,
             poses,
-            &config.observe,
+            observe_config,
             Shard::ALL,
             frames,
             &|_, _| {},
         )
     };
-    let observe = |mesh: &TriangleMesh| {
+    let observe = |mesh: &TriangleMesh, observe_config: &ObserveConfig| {
         let started = Instant::now();
-        let e = extract(mesh, poses)?;
+        let e = extract(mesh, poses, observe_config)?;
         if e.report.samples == 0 {
             return Err(SessionFitError::NoSamples(Box::new(e.report)));
         }
@@ -220,7 +226,7 @@ pub fn fit_session_with(
     };
     for k in 1..iterations {
         progress(&announce(k, &mesh));
-        let (extraction, seconds) = observe(&mesh)?;
+        let (extraction, seconds) = observe(&mesh, &observe_config)?;
         let set = extraction.samples;
         observe_s += seconds;
         progress(&format!(
@@ -229,6 +235,7 @@ pub fn fit_session_with(
         let started = Instant::now();
         let fits = fit_all(&set, previous.as_deref(), None, &config.fit.solver);
         joint_s += started.elapsed().as_secs_f64();
+        observe_config.vertex_labels = Some(labels_of(&fits, mesh.positions().len(), config));
         progress(&format!(
             "outer iteration {k}/{iterations}: shape update from refined normals"
         ));
@@ -246,7 +253,7 @@ pub fn fit_session_with(
         previous = Some(fits);
     }
     progress(&announce(iterations, &mesh));
-    let (extraction, seconds) = observe(&mesh)?;
+    let (extraction, seconds) = observe(&mesh, &observe_config)?;
     let set = extraction.samples;
     observe_s += seconds;
     let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
@@ -264,7 +271,7 @@ pub fn fit_session_with(
             "re-rendering {} held-out frames",
             poses_held_out.len()
         ));
-        let held = extract(&mesh, &poses_held_out)?;
+        let held = extract(&mesh, &poses_held_out, &observe_config)?;
         Some(held.samples)
     };
     let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;
@@ -280,6 +287,21 @@ pub fn fit_session_with(
         holdout,
         held_out_set,
     })
+}
+
+/// The material label of every vertex from step A's `fits` ([`super::augment::material_labels`]
+/// with the fit's clustering settings; [`UNLABELLED`] without a finite fit).
+fn labels_of(fits: &[VertexFit], vertices: usize, config: &SessionFitConfig) -> Vec<u32> {
+    let cluster = config
+        .fit
+        .augment
+        .as_ref()
+        .map(|a| a.cluster.clone())
+        .unwrap_or_default();
+    super::augment::material_labels(vertices, fits, &cluster)
+        .into_iter()
+        .map(|l| l.map_or(UNLABELLED, |l| l as u32))
+        .collect()
 }
 
 /// Poses by frame id (`world_from_camera`).

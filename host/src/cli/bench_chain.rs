@@ -45,16 +45,7 @@ pub fn run(args: ChainArgs) -> anyhow::Result<()> {
         scene,
         work: args.work.clone(),
         resolution: Some(resolution),
-        fit: {
-            let mut c = ellipso_fit::session::SessionFitConfig::default();
-            if std::env::var("ELLIPSO_KERNEL").as_deref() == Ok("cubic") {
-                c.observe.sample_kernel = ellipso_fit::observe::SampleKernel::CatmullRom;
-            }
-            if let Ok(g) = std::env::var("ELLIPSO_GRAZING") {
-                c.observe.gate.grazing_cutoff_deg = g.parse().unwrap();
-            }
-            c
-        },
+        fit: ellipso_fit::session::SessionFitConfig::default(),
     };
     let mut specs = budget_specs(&bench.scene, args.supersampling);
     if !args.runs.is_empty() {

@@ -11,7 +11,8 @@ use crate::scene::{Scene, SurfaceKind};
 use ellipso_model::optics::measure::Analyser;
 use ellipso_model::optics::pbrdf::{self, Geometry};
 use ellipso_model::optics::{Stokes, Vec3};
-use rand::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 const MONO: [f64; 3] = [1.0 / 3.0; 3];
 
