@@ -204,8 +204,7 @@ fn reference_render(
     // A = 1 only where all three vertices of the pixel's triangle are reliable: there ellipso
     // interpolates exactly the exported values (elsewhere its pictures interpolate over the
     // reliable vertices only, and Mitsuba sees every vertex).
-    let cap = crate::solve::SolverConfig::default().albedo_cap;
-    let reliable: Vec<bool> = fits.iter().map(|f| f.is_reliable(cap)).collect();
+    let reliable: Vec<bool> = fits.iter().map(VertexFit::is_reliable).collect();
     let mut planes = [(); 4].map(|_| vec![0.0f32; rgb.len()]);
     for (i, (c, m)) in rgb.iter().zip(&models).enumerate() {
         if let (Some(c), Some((.., hit))) = (c, m) {
