@@ -222,7 +222,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
     crate::outln!("  {}", path_plot.display());
 
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "scene": scene_path.display().to_string(),
         "resolution": resolution,
         "capture": report,
@@ -230,6 +230,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "fit": fit.summary,
     });
     let summary_path = args.out.join("summary.json");
+    crate::cli::out::paths_relative_to(&mut summary, &args.out);
     ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
     crate::outln!("\nresults in {}:", args.out.display());
     crate::outln!("  session (raw frames + event log)  {}", dir.display());
