@@ -244,7 +244,12 @@ pub fn export_all(
     float_maps::maps_image(mesh, fits, &view)?.write(&maps_path)?;
     report.files.push(maps_path);
     let record =
-        view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light);
+        view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light)
+            .with_polariser(
+                flash
+                    .polariser_axis_world(world_from_camera)
+                    .map(|a| a.into_inner().into()),
+            );
     let view_path = view_file::write(out, &record).map_err(|source| ExportError::Io {
         path: out.join(view_file::FILE_NAME).display().to_string(),
         source,
