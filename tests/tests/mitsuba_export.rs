@@ -233,7 +233,10 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
     // the scalar RGB round trip (unpolarised flash, s0)
     let result = compare("scalar_rgb", "64", &figure);
     let rmse = result["relative_rmse"].as_f64().expect("rmse");
-    assert!(rmse <= 0.05, "scalar_rgb: relative RMSE {rmse} > 5 %: {result}");
+    assert!(
+        rmse <= 0.05,
+        "scalar_rgb: relative RMSE {rmse} > 5 %: {result}"
+    );
     // the polarised variants: the rig's polarised flash, S0 and the polarised part (S1, S2)
     for variant in ["llvm_ad_mono_polarized", "scalar_spectral_polarized"] {
         let r = compare(variant, "64", &tmp.path().join(format!("{variant}.png")));
@@ -243,7 +246,10 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
         }
         // the light is polarised where ellipso says so: a test that a depolarised render fails
         let dolp = r["mean_dolp_ellipso"].as_f64().unwrap_or(0.0);
-        assert!(dolp > 0.05, "{variant}: the scene must be polarised to test it: {r}");
+        assert!(
+            dolp > 0.05,
+            "{variant}: the scene must be polarised to test it: {r}"
+        );
     }
     let channels = &result["exr_channels"][stokes.display().to_string()];
     for name in [

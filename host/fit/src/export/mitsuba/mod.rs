@@ -166,7 +166,10 @@ pub fn export(
         put(name, image.encode(&out.join(name))?)?;
     }
     let axis = polariser_axis(&view)?;
-    put("objects.xml", objects_xml(&view, &axis, options).into_bytes())?;
+    put(
+        "objects.xml",
+        objects_xml(&view, &axis, options).into_bytes(),
+    )?;
     put("scene.xml", scene_xml(true).into_bytes())?;
     put("scene-rgb.xml", scene_xml(false).into_bytes())?;
     let fits = fits_of(&vertices);
@@ -308,7 +311,8 @@ pub fn stokes_render(
             continue;
         };
         let d2 = g.light_distance_m.powi(2).max(1e-12);
-        let s = ellipso_model::optics::pbrdf::apply(&model, p, FlashPolariser::default().stokes(1.0));
+        let s =
+            ellipso_model::optics::pbrdf::apply(&model, p, FlashPolariser::default().stokes(1.0));
         for (c, stokes) in s.iter().enumerate() {
             for (k, v) in [stokes.s0, stokes.s1, stokes.s2].into_iter().enumerate() {
                 planes[3 * k + c][i] = (v / d2) as f32;
