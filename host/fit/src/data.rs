@@ -446,7 +446,10 @@ impl VertexFit {
     /// finite.
     pub fn output_flags(&self) -> Vec<FitFlag> {
         let mut flags = self.flags.clone();
-        if !(self.normal_std_error_deg <= MAX_REPORTED_ANGLE_STD_DEG) {
+        // NaN counts as unconstrained
+        if self.normal_std_error_deg.is_nan()
+            || self.normal_std_error_deg > MAX_REPORTED_ANGLE_STD_DEG
+        {
             flags.push(FitFlag::NormalUnconstrained);
         }
         flags.sort();

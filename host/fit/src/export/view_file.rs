@@ -90,7 +90,7 @@ impl PictureView {
         }
         if let Some(a) = self.flash_polariser_axis_world {
             let norm = a.iter().map(|v| v * v).sum::<f64>().sqrt();
-            if !(norm - 1.0).abs().lt(&1e-6) {
+            if norm.is_nan() || (norm - 1.0).abs() >= 1e-6 {
                 return Some("flash_polariser_axis_world is not a unit vector".into());
             }
         }
