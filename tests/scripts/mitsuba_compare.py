@@ -85,6 +85,7 @@ def main():
     ap.add_argument("--variant", default="scalar_rgb")
     ap.add_argument("--figure")
     ap.add_argument("--check-exr", nargs="+", default=[])
+    ap.add_argument("--check-ply", help="a fit.ply to read with plyfile: its vertex properties and types")
     a = ap.parse_args()
 
     if a.variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
@@ -125,10 +126,25 @@ def main():
         "variant": a.variant,
         "spp": a.spp,
         "exr_channels": {p: sorted(read_exr(p).keys()) for p in a.check_exr},
+        "ply": check_ply(a.check_ply),
     }
     if a.figure:
         figure(a.figure, ellipso_rgb, mitsuba_rgb, mask, rmse, f"{a.variant}, {a.spp} spp")
     print(json.dumps(result))
+
+
+def check_ply(path):
+    """plyfile's view of a fit.ply: vertex property name -> numpy dtype, and the first row."""
+    if not path:
+        return None
+    from plyfile import PlyData
+
+    v = PlyData.read(path)["vertex"]
+    return {
+        "types": {p.name: str(v.data.dtype[p.name]) for p in v.properties},
+        "rows": int(v.count),
+        "first": {p.name: float(v.data[p.name][0]) for p in v.properties},
+    }
 
 
 def rel_rmse(m, e):

@@ -32,14 +32,14 @@ const ENV_REQUIRE: &str = "ELLIPSO_REQUIRE_MITSUBA";
 fn python() -> Result<String, String> {
     let python = std::env::var("ELLIPSO_PYTHON").unwrap_or_else(|_| "python3".into());
     let probe = Command::new(&python)
-        .args(["-c", "import mitsuba, OpenEXR, numpy, PIL"])
+        .args(["-c", "import mitsuba, OpenEXR, numpy, PIL, plyfile"])
         .output()
         .map_err(|e| format!("cannot run {python}: {e}"))?;
     if probe.status.success() {
         Ok(python)
     } else {
         Err(format!(
-            "{python} lacks mitsuba/OpenEXR/numpy/Pillow (pip install mitsuba OpenEXR pillow): {}",
+            "{python} lacks mitsuba/OpenEXR/numpy/Pillow/plyfile (pip install mitsuba OpenEXR pillow plyfile): {}",
             String::from_utf8_lossy(&probe.stderr).trim()
         ))
     }
@@ -230,7 +230,27 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
         );
         result
     };
-    // the scalar RGB round trip (unpolarised flash, s0)
+    // the scalar RGB round trip (unpolarised flash, s0); plyfile reads fit.ply alongside
+    let o = Command::new(&python)
+        .arg(&script)
+        .arg(&out)
+        .args(["--variant", "scalar_rgb", "--spp", "4", "--check-ply"])
+        .arg(fit.join("fit.ply"))
+        .output()
+        .expect("spawn python");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let ply: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {stdout} {}", String::from_utf8_lossy(&o.stderr)));
+    let types = &ply["ply"]["types"];
+    for (name, ty) in [
+        ("x", "float64"),
+        ("flags", "int32"),
+        ("samples", "int32"),
+        ("red", "uint8"),
+        ("std_eta", "float32"),
+    ] {
+        assert_eq!(types[name], ty, "plyfile reads {name} of fit.ply: {ply}");
+    }
     let result = compare("scalar_rgb", "64", &figure);
     let rmse = result["relative_rmse"].as_f64().expect("rmse");
     assert!(
