@@ -32,14 +32,14 @@ const ENV_REQUIRE: &str = "ELLIPSO_REQUIRE_MITSUBA";
 fn python() -> Result<String, String> {
     let python = std::env::var("ELLIPSO_PYTHON").unwrap_or_else(|_| "python3".into());
     let probe = Command::new(&python)
-        .args(["-c", "import mitsuba, OpenEXR, numpy, PIL"])
+        .args(["-c", "import mitsuba, OpenEXR, numpy, PIL, plyfile"])
         .output()
         .map_err(|e| format!("cannot run {python}: {e}"))?;
     if probe.status.success() {
         Ok(python)
     } else {
         Err(format!(
-            "{python} lacks mitsuba/OpenEXR/numpy/Pillow (pip install mitsuba OpenEXR pillow): {}",
+            "{python} lacks mitsuba/OpenEXR/numpy/Pillow/plyfile (pip install mitsuba OpenEXR pillow plyfile): {}",
             String::from_utf8_lossy(&probe.stderr).trim()
         ))
     }
@@ -93,7 +93,11 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
         * nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::PI);
     let camera = ViewCamera::framing(world_from_camera, 96, 80, &centre, 0.04);
     let flash = world_from_camera.transform_point(&Point3::new(0.0, -0.03, 0.0));
-    let view = PictureView::new(&camera, &flash, &Point3::new(0.3, 0.3, 0.4));
+    // the flash polariser at 30° from image right toward image down (OpenCV y): S1 and S2 both
+    let (s, c) = 30f64.to_radians().sin_cos();
+    let axis = world_from_camera.rotation * Vector3::new(c, s, 0.0);
+    let view = PictureView::new(&camera, &flash, &Point3::new(0.3, 0.3, 0.4))
+        .with_polariser(Some(axis.into()));
     write_view(dir, &view).unwrap();
     dir.to_path_buf()
 }
@@ -199,32 +203,75 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
     let figure = std::env::var_os("ELLIPSO_MITSUBA_FIGURE")
         .map(PathBuf::from)
         .unwrap_or_else(|| tmp.path().join("compare.png"));
+    let compare = |variant: &str, spp: &str, figure: &Path| -> serde_json::Value {
+        let o = Command::new(&python)
+            .arg(&script)
+            .arg(&out)
+            .args(["--variant", variant, "--spp", spp, "--figure"])
+            .arg(figure)
+            .arg("--check-exr")
+            .arg(&stokes)
+            .arg(out.join("diffuse.exr"))
+            .output()
+            .expect("spawn python");
+        assert!(
+            o.status.success(),
+            "mitsuba_compare.py --variant {variant}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        let result: serde_json::Value =
+            serde_json::from_str(stdout.lines().last().unwrap_or_default())
+                .unwrap_or_else(|e| panic!("{e}: {stdout}"));
+        eprintln!("mitsuba vs ellipso ({variant}): {result}");
+        let pixels = result["pixels"].as_u64().expect("pixels");
+        assert!(
+            pixels as usize > covered / 2,
+            "{variant}: {pixels} compared of {covered}"
+        );
+        result
+    };
+    // the scalar RGB round trip (unpolarised flash, s0); plyfile reads fit.ply alongside
     let o = Command::new(&python)
         .arg(&script)
         .arg(&out)
-        .args(["--spp", "64", "--figure"])
-        .arg(&figure)
-        .arg("--check-exr")
-        .arg(&stokes)
-        .arg(out.join("diffuse.exr"))
+        .args(["--variant", "scalar_rgb", "--spp", "4", "--check-ply"])
+        .arg(fit.join("fit.ply"))
         .output()
         .expect("spawn python");
-    assert!(
-        o.status.success(),
-        "mitsuba_compare.py: {}",
-        String::from_utf8_lossy(&o.stderr)
-    );
     let stdout = String::from_utf8_lossy(&o.stdout);
-    let result: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
-        .unwrap_or_else(|e| panic!("{e}: {stdout}"));
-    eprintln!("mitsuba vs ellipso: {result}");
+    let ply: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap_or_default())
+        .unwrap_or_else(|e| panic!("{e}: {stdout} {}", String::from_utf8_lossy(&o.stderr)));
+    let types = &ply["ply"]["types"];
+    for (name, ty) in [
+        ("x", "float64"),
+        ("flags", "int32"),
+        ("samples", "int32"),
+        ("red", "uint8"),
+        ("std_eta", "float32"),
+    ] {
+        assert_eq!(types[name], ty, "plyfile reads {name} of fit.ply: {ply}");
+    }
+    let result = compare("scalar_rgb", "64", &figure);
     let rmse = result["relative_rmse"].as_f64().expect("rmse");
-    let pixels = result["pixels"].as_u64().expect("pixels");
     assert!(
-        pixels as usize > covered / 2,
-        "{pixels} compared of {covered}"
+        rmse <= 0.05,
+        "scalar_rgb: relative RMSE {rmse} > 5 %: {result}"
     );
-    assert!(rmse <= 0.05, "relative RMSE {rmse} > 5 %: {result}");
+    // the polarised variants: the rig's polarised flash, S0 and the polarised part (S1, S2)
+    for variant in ["llvm_ad_mono_polarized", "scalar_spectral_polarized"] {
+        let r = compare(variant, "64", &tmp.path().join(format!("{variant}.png")));
+        for key in ["relative_rmse", "relative_rmse_polarised"] {
+            let v = r[key].as_f64().expect(key);
+            assert!(v <= 0.05, "{variant}: {key} {v} > 5 %: {r}");
+        }
+        // the light is polarised where ellipso says so: a test that a depolarised render fails
+        let dolp = r["mean_dolp_ellipso"].as_f64().unwrap_or(0.0);
+        assert!(
+            dolp > 0.05,
+            "{variant}: the scene must be polarised to test it: {r}"
+        );
+    }
     let channels = &result["exr_channels"][stokes.display().to_string()];
     for name in [
         "S0", "S1", "S2", "DoLP", "AoLP", "I_d", "I_s", "I_alpha", "mask", "Y",

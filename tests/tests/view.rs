@@ -60,9 +60,22 @@ fn view_serves_only_with_the_token_and_its_own_host_and_binds_loopback() {
     assert_eq!(status, 200);
     let info: serde_json::Value = serde_json::from_str(&info).unwrap();
     assert_eq!(info["vertices"], 642);
+    let invalid = info["flags"].as_array().unwrap().len() - 1;
+    assert!(
+        info["flags"][invalid]
+            .as_str()
+            .unwrap()
+            .starts_with("Invalid")
+    );
     assert_eq!(
-        info["flag_counts"][8], 1,
+        info["flag_counts"][invalid], 1,
         "the wild vertex is marked invalid"
+    );
+    // the PNG maps' colour ranges: η over the identifiable vertices of the fixture, 1.35–1.75
+    let eta = &info["ranges"][0];
+    assert!(
+        eta[0].as_f64().unwrap() > 1.34 && eta[1].as_f64().unwrap() < 1.76,
+        "{eta}"
     );
     assert_eq!(
         get(addr, "/", &format!("localhost:{port}")).0,

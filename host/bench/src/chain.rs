@@ -236,13 +236,7 @@ impl Bench {
         let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
         let full_scale = ellipso_fit::accuracy::full_scale_dn(&scene);
         let holdout = fit.held_out_set.as_ref().map(|held| {
-            holdout_beside_truth(
-                held,
-                &fit.outcome.fits,
-                &at,
-                full_scale,
-                self.fit.fit.solver.albedo_cap,
-            )
+            holdout_beside_truth(held, &fit.outcome.fits, &at, full_scale)
         });
         let sensor = ellipso_fit::accuracy::sensor_model(&scene);
         let residuals = truth_residuals(&fit.set, &at, &truth.material_names, &sensor);

@@ -246,7 +246,6 @@ pub fn holdout_beside_truth(
     fits: &[VertexFit],
     truth: &[Option<VertexTruth>],
     full_scale_dn: f64,
-    albedo_cap: f64,
 ) -> HoldoutBeside {
     let mut held = held.clone();
     let mut truth_fits = fits.to_vec();
@@ -257,16 +256,18 @@ pub fn holdout_beside_truth(
         .zip(truth_fits.iter_mut().zip(truth))
     {
         match t {
-            Some(t) if f.is_reliable(albedo_cap) => {
+            Some(t) if f.is_reliable() => {
                 tf.params = t.params;
                 tf.normal_world = t.normal_world;
+                // The truth is trusted wherever the fit is (the samples are already those).
+                tf.flags.clear();
             }
             _ => vs.samples.clear(),
         }
     }
     HoldoutBeside {
-        fit: score(&held, fits, full_scale_dn, albedo_cap).overall,
-        truth: score(&held, &truth_fits, full_scale_dn, f64::INFINITY).overall,
+        fit: score(&held, fits, full_scale_dn).overall,
+        truth: score(&held, &truth_fits, full_scale_dn).overall,
     }
 }
 

@@ -313,9 +313,106 @@ pub enum FitFlag {
     AtBound,
     /// The solver stopped at its iteration limit without converging.
     NotConverged,
+    /// An albedo ended at the solver's cap: the data fixed only a product like ρ·σ², not the
+    /// lobe, so no parameter of the vertex is reported as a measurement.
+    AlbedoAtCap,
+    /// The normal's standard error would exceed 180° (or is infinite): the data do not
+    /// constrain the normal; outputs report 180°.
+    NormalUnconstrained,
     /// η was fitted with the material's pooled η as a prior (the vertex's own estimate is kept
     /// in [`VertexFit::eta_unpooled`]).
     EtaPooled,
+}
+
+/// The largest angular standard error an output reports, degrees: an angle's uncertainty cannot
+/// exceed a half-turn; a larger value is reported as this with [`FitFlag::NormalUnconstrained`].
+pub const MAX_REPORTED_ANGLE_STD_DEG: f64 = 180.0;
+
+impl FitFlag {
+    /// Every flag in the bit order of the `flags` bitmask every output writes (`fit.ply`'s
+    /// `flags`, `maps.exr`'s `flags` channel, the view): bit k = `ALL[k]`. A new flag is one
+    /// entry at the end (and one line in [`FitFlag::withholds_vertex`] or
+    /// [`FitFlag::withholds_eta`] when it withholds values).
+    pub const ALL: [FitFlag; 11] = [
+        FitFlag::TooFewViews,
+        FitFlag::UnderDetermined,
+        FitFlag::Dark,
+        FitFlag::Saturated,
+        FitFlag::EtaUnidentifiable,
+        FitFlag::GrazingOnly,
+        FitFlag::AtBound,
+        FitFlag::NotConverged,
+        FitFlag::AlbedoAtCap,
+        FitFlag::NormalUnconstrained,
+        FitFlag::EtaPooled,
+    ];
+
+    /// This flag's bit in the bitmask ([`FitFlag::ALL`] order).
+    pub fn bit(self) -> u32 {
+        let k = Self::ALL.iter().position(|f| *f == self).unwrap_or(0);
+        1 << k
+    }
+
+    /// The bitmask of `flags`.
+    pub fn mask(flags: &[FitFlag]) -> u32 {
+        flags.iter().fold(0, |m, f| m | f.bit())
+    }
+
+    /// The flags set in `mask` (unknown bits ignored).
+    pub fn from_mask(mask: u32) -> Vec<FitFlag> {
+        Self::ALL
+            .iter()
+            .copied()
+            .filter(|f| mask & f.bit() != 0)
+            .collect()
+    }
+
+    /// Whether this flag withholds every parameter of the vertex: no output reports them as a
+    /// measurement (standard errors +inf, grey in every picture and in the view).
+    pub fn withholds_vertex(self) -> bool {
+        matches!(self, FitFlag::TooFewViews | FitFlag::AlbedoAtCap)
+    }
+
+    /// Whether this flag withholds η (standard error +inf, grey η maps), beyond
+    /// [`FitFlag::withholds_vertex`].
+    pub fn withholds_eta(self) -> bool {
+        self.withholds_vertex() || matches!(self, FitFlag::EtaUnidentifiable)
+    }
+}
+
+/// The identifiability rule: what the outputs report of a vertex, from its flags alone
+/// (`fit.ply`, `maps.exr`, the pictures and the view all call [`Identifiable::of_mask`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Identifiable {
+    /// The vertex's parameters are measurements (drawn; finite standard errors where the
+    /// covariance has them).
+    pub vertex: bool,
+    /// η is a measurement.
+    pub eta: bool,
+}
+
+impl Identifiable {
+    /// The rule over a flags bitmask ([`FitFlag::ALL`] bit order).
+    pub fn of_mask(mask: u32) -> Self {
+        let flags = FitFlag::from_mask(mask);
+        Self {
+            vertex: !flags.iter().any(|f| f.withholds_vertex()),
+            eta: !flags.iter().any(|f| f.withholds_eta()),
+        }
+    }
+
+    /// Standard errors as every output reports them: +inf for each parameter the rule
+    /// withholds (η: index 0), the covariance's value otherwise.
+    pub fn std_error(self, std_error: &[f64; 10]) -> [f64; 10] {
+        std::array::from_fn(|k| {
+            let withheld = !self.vertex || (k == 0 && !self.eta);
+            if withheld {
+                f64::INFINITY
+            } else {
+                std_error[k]
+            }
+        })
+    }
 }
 
 /// The fitted parameters of one vertex, with standard errors.
@@ -347,28 +444,69 @@ pub struct VertexFit {
     pub eta_unpooled: Option<[f64; 2]>,
 }
 
+/// Whether any albedo of `params` sits at the solver's cap `albedo_cap` (within 0.1 %): the
+/// condition of [`FitFlag::AlbedoAtCap`].
+pub fn albedo_at_cap(params: &PbrdfParams<f64>, albedo_cap: f64) -> bool {
+    [params.rho_s]
+        .iter()
+        .chain(&params.rho_ss)
+        .chain(&params.rho_d)
+        .any(|v| *v >= albedo_cap * (1.0 - 1e-3))
+}
+
 impl VertexFit {
-    /// Whether η of this vertex is a measurement: fitted from enough views, and neither its
-    /// own data nor its material's pool leaves it unidentified.
+    /// Whether η of this vertex is a measurement (the rule's `eta`, [`VertexFit::identifiable`]).
     pub fn eta_identified(&self) -> bool {
-        !self
-            .flags
-            .iter()
-            .any(|f| matches!(f, FitFlag::TooFewViews | FitFlag::EtaUnidentifiable))
+        self.identifiable().eta
     }
 
-    /// Whether the fit trusts this vertex's parameters enough to draw or re-render them: seen
-    /// from enough views, and no albedo at the solver's cap `albedo_cap` (an albedo there
-    /// means the data fixed only a product like ρ·σ², not the lobe). The pictures interpolate
-    /// untrusted vertices from trusted neighbours; the held-out score reports them apart.
-    pub fn is_reliable(&self, albedo_cap: f64) -> bool {
-        let p = &self.params;
-        let capped = [p.rho_s]
-            .iter()
-            .chain(&p.rho_ss)
-            .chain(&p.rho_d)
-            .any(|v| *v >= albedo_cap * (1.0 - 1e-3));
-        !capped && !self.flags.contains(&FitFlag::TooFewViews)
+    /// The flags every output writes: the fit's own, plus [`FitFlag::NormalUnconstrained`]
+    /// where the normal's standard error exceeds [`MAX_REPORTED_ANGLE_STD_DEG`] or is not
+    /// finite.
+    pub fn output_flags(&self) -> Vec<FitFlag> {
+        let mut flags = self.flags.clone();
+        // NaN counts as unconstrained
+        if self.normal_std_error_deg.is_nan()
+            || self.normal_std_error_deg > MAX_REPORTED_ANGLE_STD_DEG
+        {
+            flags.push(FitFlag::NormalUnconstrained);
+        }
+        flags.sort();
+        flags.dedup();
+        flags
+    }
+
+    /// The bitmask of [`VertexFit::output_flags`].
+    pub fn output_mask(&self) -> u32 {
+        FitFlag::mask(&self.output_flags())
+    }
+
+    /// The identifiability rule applied to this vertex's output flags.
+    pub fn identifiable(&self) -> Identifiable {
+        Identifiable::of_mask(self.output_mask())
+    }
+
+    /// Standard errors as every output reports them ([`Identifiable::std_error`]).
+    pub fn reported_std_error(&self) -> [f64; 10] {
+        self.identifiable().std_error(&self.std_error)
+    }
+
+    /// The normal's standard error as outputs report it: at most
+    /// [`MAX_REPORTED_ANGLE_STD_DEG`] (flagged [`FitFlag::NormalUnconstrained`] beyond).
+    pub fn reported_normal_std_deg(&self) -> f64 {
+        if self.normal_std_error_deg <= MAX_REPORTED_ANGLE_STD_DEG {
+            self.normal_std_error_deg
+        } else {
+            MAX_REPORTED_ANGLE_STD_DEG
+        }
+    }
+
+    /// Whether the outputs draw and re-render this vertex's parameters (the rule's `vertex`:
+    /// seen from enough views and no albedo at the solver's cap — an albedo there means the
+    /// data fixed only a product like ρ·σ², not the lobe). The pictures interpolate untrusted
+    /// vertices from trusted neighbours; the held-out score reports them apart.
+    pub fn is_reliable(&self) -> bool {
+        self.identifiable().vertex
     }
 }
 

@@ -120,17 +120,12 @@ impl Sums {
 
 /// Scores `fits` (indexed like `held.vertices`) on the held-out samples `held` (module doc);
 /// `full_scale_dn` is the sensor's largest code.
-pub fn score(
-    held: &SampleSet,
-    fits: &[VertexFit],
-    full_scale_dn: f64,
-    albedo_cap: f64,
-) -> HoldoutReport {
+pub fn score(held: &SampleSet, fits: &[VertexFit], full_scale_dn: f64) -> HoldoutReport {
     let channels = if held.colour { 3 } else { 1 };
     let mut per_view: BTreeMap<u32, Sums> = BTreeMap::new();
     let mut untrusted = Sums::default();
     for (v, fit) in held.vertices.iter().zip(fits) {
-        let trusted = fit.is_reliable(albedo_cap);
+        let trusted = fit.is_reliable();
         let p = &fit.params;
         for s in &v.samples {
             let Some(view) = held.views.get(s.view as usize) else {
@@ -303,8 +298,10 @@ mod tests {
             sigma_ss: 0.6,
             ..truth
         };
-        let fits = [fit(0, truth), fit(1, runaway)];
-        let r = score(&set, &fits, 4095.0, cap);
+        let mut runaway = fit(1, runaway);
+        runaway.flags = vec![crate::data::FitFlag::AlbedoAtCap];
+        let fits = [fit(0, truth), runaway];
+        let r = score(&set, &fits, 4095.0);
         assert_eq!(r.untrusted_samples, set.vertices[1].samples.len());
         assert!(r.untrusted_samples > 0);
         assert!(r.overall.s0.relative_rmse < 1e-3, "{:?}", r.overall);
@@ -318,7 +315,7 @@ mod tests {
             r.all_vertices.samples
         );
         // Every vertex trusted: both scores agree.
-        let r = score(&set, &[fit(0, truth), fit(1, truth)], 4095.0, cap);
+        let r = score(&set, &[fit(0, truth), fit(1, truth)], 4095.0);
         assert_eq!(r.untrusted_samples, 0);
         assert_eq!(r.overall, r.all_vertices);
     }

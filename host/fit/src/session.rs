@@ -330,13 +330,13 @@ pub fn score_held_out(
     session: &Session,
     held_out_set: Option<&SampleSet>,
     fits: &[VertexFit],
-    config: &SessionFitConfig,
+    _config: &SessionFitConfig,
 ) -> Result<Option<HoldoutReport>, SessionFitError> {
     let Some(held) = held_out_set else {
         return Ok(None);
     };
     let full_scale = radiometry_of(session)?.full_scale_dn;
-    let report = score(held, fits, full_scale, config.fit.solver.albedo_cap);
+    let report = score(held, fits, full_scale);
     Ok((report.overall.samples > 0).then_some(report))
 }
 

@@ -54,6 +54,8 @@
 //!   0.1 % of the albedo cap, or the normal more than 2.5 prior-cone widths from the mesh
 //!   normal.
 //! - `NotConverged`: the last pass stopped at `max_iterations` (or the damping overflowed).
+//! - `AlbedoAtCap`: ρ_s, any ρ_ss or any ρ_d within 0.1 % of the albedo cap (also `AtBound`;
+//!   this one withholds the vertex from every output, `data::FitFlag::withholds_vertex`).
 //!
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
 
@@ -651,6 +653,9 @@ fn finish(
     }
     if at_bound(&params, state.normal, vertex.normal_world, &bounds, config) {
         flags.push(FitFlag::AtBound);
+    }
+    if crate::data::albedo_at_cap(&params, bounds.albedo_cap) {
+        flags.push(FitFlag::AlbedoAtCap);
     }
     if !state.converged {
         flags.push(FitFlag::NotConverged);

@@ -1,23 +1,30 @@
-//! A session as a COLMAP sparse model with known poses: undistorted s0 images and the text
-//! files `cameras.txt`, `images.txt`, `points3D.txt`, so COLMAP's triangulation, dense and
-//! meshing steps build a mesh already in board coordinates (`ellipso fit --mesh` takes it).
+//! A session as a COLMAP sparse model with known poses: undistorted full-resolution s0 images,
+//! the text files `cameras.txt`, `images.txt`, `points3D.txt`, and the feature database that
+//! COLMAP's own pipeline (`feature_extractor`, `exhaustive_matcher`, `point_triangulator`) needs
+//! to triangulate the known-pose model, so its dense and meshing steps build a mesh already in
+//! board coordinates (`ellipso fit --mesh` takes it).
 //!
-//! Contract (COLMAP's documented text format, "Output Format" of its manual):
-//! - `images/FRAMEID.png`: 8-bit s0 of every posed, readable frame at superpixel resolution
-//!   (the tracker's detection plane, `ellipso_vision::track::detection_plane`, colour bands summed), one
-//!   tone curve for the whole session (scaled by the first frame's 99.5th percentile, gamma
-//!   1/2.2) so brightness is comparable across views. Undistorted by default: each output
-//!   pixel samples (bilinear) where the calibrated lens model puts it.
+//! Contract (COLMAP's documented text format, "Output Format" of its manual, and its database
+//! schema as of COLMAP 3.8):
+//! - `images/FRAMEID.png`: 8-bit s0 of every posed, readable frame at the sensor's full
+//!   resolution (bilinear demosaic of the four analysers, colour bands summed), one tone curve
+//!   for the whole session (scaled by the first frame's 99.5th percentile, gamma 1/2.2) so
+//!   brightness is comparable across views. Undistorted by default: each output pixel samples
+//!   (bilinear) where the calibrated lens model puts it.
 //! - `sparse/cameras.txt`: one camera. Undistorted images: `PINHOLE fx fy cx cy`. With
 //!   `keep_distortion` the images are written as captured and the model carries the
 //!   calibration's Brown–Conrady coefficients: `OPENCV fx fy cx cy k1 k2 p1 p2`, or
-//!   `FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 0 0 0` when k3 ≠ 0. Intrinsics are scaled to the
-//!   superpixel image (`(u_raw − (t − 1)/2)/t`) and shifted by +0.5 px: COLMAP puts the centre
-//!   of the top-left pixel at (0.5, 0.5), this project (OpenCV) at (0, 0).
+//!   `FULL_OPENCV fx fy cx cy k1 k2 p1 p2 k3 0 0 0` when k3 ≠ 0. cx, cy are shifted by +0.5 px:
+//!   COLMAP puts the centre of the top-left pixel at (0.5, 0.5), this project (OpenCV) at (0, 0).
 //! - `sparse/images.txt`: per image `IMAGE_ID QW QX QY QZ TX TY TZ CAMERA_ID NAME` with the
 //!   rotation and translation of camera_from_world (world = board frame, metres; COLMAP's camera
 //!   axes are OpenCV's: x right, y down, z forward), `QW ≥ 0`, then an empty line of 2-D points.
 //! - `sparse/points3D.txt`: no points (the header only).
+//! - `database.db`: COLMAP's SQLite feature database holding that camera (its model, size and
+//!   parameters, `prior_focal_length` = 1: the focal length is known) and every image under the
+//!   id and name of `images.txt`. `feature_extractor` finds each image there by name and keeps
+//!   its id (on its own it numbers images in whatever order its threads finish, and
+//!   `point_triangulator` then aborts: "existing_image.Name() == image.second.Name()").
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -29,7 +36,6 @@ use super::frames::posed_frames;
 use ellipso_fit::observe::{SkippedFrame, camera_of};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::reader::Session;
-use ellipso_vision::track::{DetectImage, detection_plane};
 
 /// Settings of the export.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -93,6 +99,80 @@ pub fn camera_line(camera: &CameraModel, tile: usize, keep_distortion: bool) -> 
         )
     };
     format!("1 {params}")
+}
+
+/// COLMAP's model id and parameters of a `cameras.txt` line (`1 MODEL W H P…`).
+fn camera_row(line: &str) -> Option<(i64, i64, i64, Vec<f64>)> {
+    let f: Vec<&str> = line.split_whitespace().collect();
+    let model = match *f.get(1)? {
+        "SIMPLE_PINHOLE" => 0,
+        "PINHOLE" => 1,
+        "OPENCV" => 4,
+        "FULL_OPENCV" => 6,
+        _ => return None,
+    };
+    let params = f[4..]
+        .iter()
+        .map(|v| v.parse().ok())
+        .collect::<Option<Vec<f64>>>()?;
+    Some((
+        model,
+        f.get(2)?.parse().ok()?,
+        f.get(3)?.parse().ok()?,
+        params,
+    ))
+}
+
+/// Writes COLMAP's feature database at `path` (module contract): the camera of `camera_line`
+/// and `images` (id, name), in COLMAP 3.8's schema; COLMAP adds its other tables on opening.
+fn write_database(
+    path: &Path,
+    camera_line: &str,
+    images: &[(usize, String)],
+) -> Result<(), ColmapError> {
+    let fail = |what: String| ColmapError::Io {
+        path: path.to_path_buf(),
+        error: std::io::Error::other(what),
+    };
+    let (model, width, height, params) =
+        camera_row(camera_line).ok_or_else(|| fail(format!("camera `{camera_line}`")))?;
+    // whole or nothing: built under a temporary name, renamed into place
+    let tmp = path.with_extension("db.partial");
+    let _ = std::fs::remove_file(&tmp);
+    let db = rusqlite::Connection::open(&tmp).map_err(|e| fail(e.to_string()))?;
+    let blob: Vec<u8> = params.iter().flat_map(|p| p.to_le_bytes()).collect();
+    let sql = |e: rusqlite::Error| fail(e.to_string());
+    db.execute_batch(
+        "CREATE TABLE IF NOT EXISTS cameras (camera_id INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, \
+         model INTEGER NOT NULL, width INTEGER NOT NULL, height INTEGER NOT NULL, params BLOB, \
+         prior_focal_length INTEGER NOT NULL);\n\
+         CREATE TABLE IF NOT EXISTS images (image_id INTEGER PRIMARY KEY AUTOINCREMENT NOT NULL, \
+         name TEXT NOT NULL UNIQUE, camera_id INTEGER NOT NULL, prior_qw REAL, prior_qx REAL, \
+         prior_qy REAL, prior_qz REAL, prior_tx REAL, prior_ty REAL, prior_tz REAL, \
+         CONSTRAINT image_id_check CHECK(image_id >= 0 and image_id < 2147483647), \
+         FOREIGN KEY(camera_id) REFERENCES cameras(camera_id));\n\
+         CREATE UNIQUE INDEX IF NOT EXISTS index_name ON images(name);\n\
+         BEGIN;",
+    )
+    .map_err(sql)?;
+    db.execute(
+        "INSERT INTO cameras VALUES (1, ?1, ?2, ?3, ?4, 1)",
+        rusqlite::params![model, width, height, blob],
+    )
+    .map_err(sql)?;
+    for (id, name) in images {
+        db.execute(
+            "INSERT INTO images (image_id, name, camera_id) VALUES (?1, ?2, 1)",
+            rusqlite::params![*id as i64, name],
+        )
+        .map_err(sql)?;
+    }
+    db.execute_batch("COMMIT;").map_err(sql)?;
+    db.close().map_err(|(_, e)| sql(e))?;
+    std::fs::rename(&tmp, path).map_err(|error| ColmapError::Io {
+        path: path.to_path_buf(),
+        error,
+    })
 }
 
 /// The `images.txt` line of one image.
@@ -163,6 +243,24 @@ fn write(path: &Path, bytes: &[u8]) -> Result<(), ColmapError> {
     })
 }
 
+/// s0 of a raw frame at the sensor's full resolution (bilinear demosaic, colour bands summed),
+/// in fractions of full scale: `(plane, width, height)`.
+fn full_resolution_s0(raw: &RawFrame) -> Result<(Vec<f32>, usize, usize), String> {
+    let config = ellipso_polar::PolarConfig {
+        demosaic: ellipso_polar::DemosaicMethod::Bilinear,
+        ..Default::default()
+    };
+    let image = ellipso_polar::process(raw, &config).map_err(|e| e.to_string())?;
+    let (w, h) = (image.width(), image.height());
+    let mut plane = vec![0f32; w * h];
+    for band in &image.bands {
+        for (p, v) in plane.iter_mut().zip(band.s0.data()) {
+            *p += if v.is_finite() { *v } else { 0.0 };
+        }
+    }
+    Ok((plane, w, h))
+}
+
 /// Writes the COLMAP model of `session` seen from `poses` into `out` (module contract).
 pub fn export_colmap(
     session: &Session,
@@ -173,7 +271,8 @@ pub fn export_colmap(
     let camera = camera_of(session).map_err(|e| ColmapError::Session(e.to_string()))?;
     let layout = ellipso_session::rig::layout_of(&session.manifest)
         .map_err(|e| ColmapError::Session(e.to_string()))?;
-    let tile = layout.tile_px() as usize;
+    // full resolution: one image pixel per raw pixel
+    let tile = 1;
     let (frames, mut skipped) = posed_frames(session, poses);
     let images_dir = out.join("images");
     let sparse = out.join("sparse");
@@ -186,6 +285,7 @@ pub fn export_colmap(
     let mut files = Vec::new();
     let mut lines = Vec::new();
     let mut scale: Option<f32> = None;
+    let mut names = Vec::new();
     for frame in &frames {
         let plane = session
             .load_frame(frame.entry)
@@ -194,7 +294,7 @@ pub fn export_colmap(
                 RawFrame::new(w, h, session.manifest.sensor.bit_depth, layout, px)
                     .map_err(|e| e.to_string())
             })
-            .and_then(|raw| detection_plane(&raw, DetectImage::S0).map_err(|e| e.to_string()));
+            .and_then(|raw| full_resolution_s0(&raw));
         let (s0, w, h) = match plane {
             Ok(p) => p,
             Err(reason) => {
@@ -229,7 +329,9 @@ pub fn export_colmap(
             error: std::io::Error::other(e.to_string()),
         })?;
         files.push(path);
-        lines.push(image_line(lines.len() + 1, &frame.world_from_camera, &name));
+        let id = lines.len() + 1;
+        lines.push(image_line(id, &frame.world_from_camera, &name));
+        names.push((id, name));
     }
     if lines.is_empty() {
         return Err(ColmapError::NoImages(super::error::skipped_list(
@@ -269,6 +371,9 @@ pub fn export_colmap(
         write(&path, text.as_bytes())?;
         files.push(path);
     }
+    let database = out.join("database.db");
+    write_database(&database, &camera_line, &names)?;
+    files.push(database);
     skipped.sort_by_key(|s| s.frame_id);
     Ok(ColmapReport {
         images: lines.len(),

@@ -58,6 +58,7 @@ pub mod channels;
 pub mod demosaic;
 pub mod frame;
 pub mod intensity;
+pub mod layout;
 pub mod mask;
 pub mod plane;
 pub mod stokes;

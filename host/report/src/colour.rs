@@ -72,6 +72,24 @@ pub fn aolp_dolp(aolp_rad: f64, dolp: f64, value: f64) -> Rgb {
     hsv(aolp_rad / std::f64::consts::PI, dolp, value)
 }
 
+/// The one colouring of DoLP every picture and the view use: viridis over [0, 1]; `None` (a
+/// masked pixel: dark, saturated, …, whose DoLP is noise) is the pictures' no-data grey
+/// ([`crate::figure::NO_DATA`]).
+pub fn dolp_colour(dolp: Option<f64>) -> Rgb {
+    dolp.filter(|d| d.is_finite())
+        .map_or(crate::figure::NO_DATA, |d| ColourMap::Viridis.at(d))
+}
+
+/// The one AoLP colouring every picture and the view use: [`aolp_dolp`] with value 1 (hue =
+/// AoLP, saturation = DoLP: unpolarised light is white); `None` (a masked pixel) is the
+/// no-data grey.
+pub fn aolp_colour(aolp_rad: Option<f64>, dolp: Option<f64>) -> Rgb {
+    match (aolp_rad, dolp) {
+        (Some(a), Some(d)) if a.is_finite() && d.is_finite() => aolp_dolp(a, d, 1.0),
+        _ => crate::figure::NO_DATA,
+    }
+}
+
 /// `round(255·t)` for `t` clamped to [0, 1]; NaN gives 0.
 pub fn unit_to_u8(t: f64) -> u8 {
     if t.is_nan() {

@@ -330,10 +330,8 @@ fn one_run(
     config.solver.sensor = ellipso_fit::accuracy::sensor_model(scene);
     let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
     let full_scale = ellipso_fit::accuracy::full_scale_dn(scene);
-    let holdout = (!held.views.is_empty()).then(|| {
-        ellipso_fit::holdout::score(&held, &outcome.fits, full_scale, config.solver.albedo_cap)
-            .overall
-    });
+    let holdout = (!held.views.is_empty())
+        .then(|| ellipso_fit::holdout::score(&held, &outcome.fits, full_scale).overall);
     let fit_s = outcome.times.fit_s();
     // The forward pass is short (tens of milliseconds): its fastest of at least 3 repetitions
     // and 0.25 s in all, so one scheduling hiccup does not move the ratio.

@@ -195,29 +195,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .iter()
         .find(|f| f.complete)
         .context("no complete frame was captured")?;
-    crate::cli::polar::run(crate::cli::polar::Args {
+    // the polarisation pictures of the first frame, listed once below (not file by file)
+    let polar = crate::cli::polar::write(&crate::cli::polar::Args {
         frame: first.path.clone(),
         out: pictures.join("frame0-polarisation"),
-        layout: match scene.rig.camera.sensor {
+        layout: Some(match scene.rig.camera.sensor {
             ellipso_sim::scene::SensorKind::MonoPolar => crate::cli::polar::LayoutArg::Mono,
             ellipso_sim::scene::SensorKind::ColourPolar => crate::cli::polar::LayoutArg::Colour,
-        },
+        }),
         bit_depth: Some(session.manifest.sensor.bit_depth),
         demosaic: ellipso_polar::demosaic::DemosaicMethod::Superpixel,
         dark_level: 0.0,
         saturation: None,
         dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
-        aolp_dolp_weighted: true,
         json: false,
         npy: false,
         calibration: None,
     })?;
+    crate::outln!(
+        "  {} ({} files: s0, DoLP, AoLP, I^d/I^s/I^α, mask per band, stokes.exr)",
+        pictures.join("frame0-polarisation").display(),
+        polar.files.len()
+    );
     let path_plot = pictures.join("camera-path.png");
     plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
     crate::outln!("  {}", path_plot.display());
 
-    let summary = serde_json::json!({
+    let mut summary = serde_json::json!({
         "scene": scene_path.display().to_string(),
         "resolution": resolution,
         "capture": report,
@@ -225,6 +230,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "fit": fit.summary,
     });
     let summary_path = args.out.join("summary.json");
+    crate::cli::out::paths_relative_to(&mut summary, &args.out);
     ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
     crate::outln!("\nresults in {}:", args.out.display());
     crate::outln!("  session (raw frames + event log)  {}", dir.display());

@@ -365,7 +365,7 @@ pub fn export_fit(
     let wall_s = started.elapsed().as_secs_f64();
     let mut files = report.files.clone();
     let summary = out.join("fit-summary.json");
-    let json = serde_json::json!({
+    let mut json = serde_json::json!({
         "session": session.dir.display().to_string(),
         "vertices": fit.outcome.fits.len(),
         "frames_posed": poses.len(),
@@ -385,6 +385,8 @@ pub fn export_fit(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
+    // every path in the summary is relative to its own folder
+    super::out::paths_relative_to(&mut json, out);
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", summary.display()))?;
     files.push(summary);

@@ -109,7 +109,8 @@ pub fn write_mesh(mesh: &TriangleMesh, report: &MeshReport, out: &Path) -> anyho
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    std::fs::write(out, write_ply(mesh, PlyFormat::BinaryLittleEndian, false))
+    // double: a fit on this file sees exactly the geometry the fit that wrote it used
+    std::fs::write(out, write_ply(mesh, PlyFormat::BinaryLittleEndian, true))
         .with_context(|| format!("writing {}", out.display()))?;
     let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh");
     let json = out.with_file_name(format!("{stem}-report.json"));

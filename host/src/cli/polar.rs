@@ -1,13 +1,14 @@
 //! `ellipso polar FRAME.png --out DIR`: one raw mosaic frame to s0, DoLP, AoLP and I^d/I^s/I^α images.
 //!
-//! Reads a raw IMX250MZR/MYR mosaic (grayscale PNG as the camera delivered it), runs
+//! Reads a raw IMX250MZR/MYR mosaic (grey PNG, TIFF — 8/16/32-bit or float — or `.npy`, as
+//! the camera delivered it; [`load`] settles its bit depth and layout), runs
 //! [`ellipso_polar::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
 //!
 //! | file | content | encoding |
 //! |---|---|---|
 //! | `s0.png` | total intensity | 16-bit grey, `clamp(s0/2, 0, 1)·65535` (mean analyser intensity) |
-//! | `dolp.png` | DoLP | 8-bit grey `DoLP·255`, colour bar below the image |
-//! | `aolp.png` | AoLP and DoLP | RGB, HSV composite: hue = AoLP (once round the wheel over [0, π), 0 and π meet), saturation = DoLP (`--aolp-dolp-weighted`: value = DoLP); AoLP × DoLP key below |
+//! | `dolp.png` | DoLP | RGB, viridis over [0, 1] (`ellipso_report::colour::dolp_colour`), colour bar below the image |
+//! | `aolp.png` | AoLP and DoLP | RGB, HSV composite: hue = AoLP (once round the wheel over [0, π), 0 and π meet), saturation = DoLP, value 1 (`ellipso_report::colour::aolp_colour`: every AoLP picture's convention); AoLP × DoLP key below |
 //! | `i_d.png` | I^d = 2·I90 | 16-bit grey, `clamp(I^d/2, 0, 1)·65535` |
 //! | `i_s.png`, `i_alpha.png` | I^s, I^α (signed) | RGB diverging map, symmetric range, legend |
 //! | `mask.png`, `mask_bits.png` | validity | RGB by reason with legend; raw reason bits (8-bit) |
@@ -15,8 +16,8 @@
 //! | `summary.json` | everything needed to read the above, plus statistics | JSON |
 //!
 //! Keys (colour bars, the AoLP × DoLP key, mask swatches) sit under the image rows (`summary.json` gives the image height), so the
-//! top `height` rows are pixel-aligned with the demosaiced output. Masked pixels are mid-grey
-//! in false-colour images. Errors name the file and what is wrong, in one line.
+//! top `height` rows are pixel-aligned with the demosaiced output. Masked pixels are the
+//! pictures' no-data grey in every false-colour image (DoLP and AoLP included). Errors name the file and what is wrong, in one line.
 
 mod load;
 mod render;
@@ -57,15 +58,18 @@ impl From<LayoutArg> for SensorLayout {
 /// Arguments of `ellipso polar`.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Raw mosaic frame: an 8- or 16-bit grayscale PNG exactly as the camera delivered it.
+    /// Raw mosaic frame exactly as the camera delivered it: grey PNG (8/16-bit), TIFF
+    /// (8/16/32-bit unsigned, 32/64-bit float) or NumPy `.npy` (u1/u2/u4/f4/f8, 2-D).
     pub frame: PathBuf,
     /// Directory to write the images and summary.json into (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Sensor mosaic layout.
-    #[arg(long, value_enum, default_value = "mono")]
-    pub layout: LayoutArg,
-    /// Bits per sample the camera delivered [default: 8 for 8-bit PNGs, 12 for 16-bit PNGs].
+    /// Sensor mosaic layout [default: the session manifest's for a frame inside a session,
+    /// else detected from the pixels; refused when unclear].
+    #[arg(long, value_enum)]
+    pub layout: Option<LayoutArg>,
+    /// Bits per sample the camera delivered [default: 8 for 8-bit containers, 12 for 16-bit
+    /// ones, 16 for floats].
     #[arg(long, value_parser = parse_bit_depth)]
     pub bit_depth: Option<u8>,
     /// Demosaic method: superpixel (half resolution, no interpolation; for measuring) or
@@ -86,10 +90,6 @@ pub struct Args {
     /// default).
     #[arg(long, value_parser = |s: &str| crate::cli::limits::real_in(s, 0.0_f32, 2.0))]
     pub max_residual: Option<f32>,
-    /// AoLP image with DoLP as the colour's value (unpolarised regions go black) instead of its
-    /// saturation (unpolarised regions go white).
-    #[arg(long)]
-    pub aolp_dolp_weighted: bool,
     /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
     /// aolp_rad, residual, i_d; mask as u8 bits).
     #[arg(long)]
@@ -112,12 +112,43 @@ fn parse_bit_depth(text: &str) -> Result<u8, String> {
         .ok_or_else(|| format!("`{text}` is not one of 8, 10, 12, 16"))
 }
 
+/// What `ellipso polar` wrote.
+pub struct Written {
+    /// One line: input, size, depth, layout, method and output size.
+    pub headline: String,
+    /// Every file (name inside `--out`) with what it holds.
+    pub files: Vec<FileEntry>,
+    /// `summary.json`'s object.
+    pub summary: serde_json::Value,
+}
+
 /// Runs `ellipso polar`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let written = write(&args)?;
+    if args.json {
+        crate::outln!(
+            "{}",
+            serde_json::json!({ "out": args.out.display().to_string(), "summary": written.summary })
+        );
+        return Ok(());
+    }
+    crate::outln!("{}", written.headline);
+    for (file, what) in &written.files {
+        crate::outln!("  wrote {}  ({what})", args.out.join(file).display());
+    }
+    Ok(())
+}
+
+/// Processes the frame and writes every output into `args.out` without printing them (the
+/// demo lists the folder once).
+pub fn write(args: &Args) -> anyhow::Result<Written> {
     let name = args.frame.display().to_string();
-    let layout = SensorLayout::from(args.layout);
-    let loaded = load::load_frame(&args.frame, layout, args.bit_depth)
-        .map_err(|msg| anyhow!("{name}: {msg}"))?;
+    let loaded = load::load_frame(
+        &args.frame,
+        args.layout.map(SensorLayout::from),
+        args.bit_depth,
+    )
+    .map_err(|msg| anyhow!("{name}: {msg}"))?;
     for w in &loaded.warnings {
         eprintln!("warning: {name}: {w}");
     }
@@ -143,7 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let suffix = band
             .colour
             .map_or(String::new(), |c| format!("_{}", c.letter()));
-        let stats = write_band(&args, band, &suffix, &mut files)?;
+        let stats = write_band(args, band, &suffix, &mut files)?;
         band_stats.push(stats);
     }
     if image.layout == SensorLayout::ColourPolar {
@@ -154,7 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "OpenEXR: S0, S1, S2, DoLP, AoLP, I_d, I_s, I_alpha, residual, mask per band (f32; mask u32)"
             .into(),
     ));
-    let summary = summary::summary_json(&args, &loaded, &config, &image, band_stats, &files);
+    let summary = summary::summary_json(args, &loaded, &config, &image, band_stats, &files);
     let summary_path = args.out.join("summary.json");
     let text = serde_json::to_string_pretty(&summary).context("encoding summary.json")?;
     ellipso_report::atomic_file::write(&summary_path, text + "\n")
@@ -163,29 +194,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "summary.json".into(),
         "layout, method, levels, statistics, encodings".into(),
     ));
-    if args.json {
-        crate::outln!(
-            "{}",
-            serde_json::json!({ "out": args.out.display().to_string(), "summary": summary })
-        );
-        return Ok(());
-    }
-
-    crate::outln!(
-        "{name}: {}×{} {}-bit {:?}, demosaic {} → {}×{} × {} band(s)",
+    let headline = format!(
+        "{name}: {}×{} {}-bit {:?} ({}; layout from {}), demosaic {} → {}×{} × {} band(s)",
         loaded.frame.width(),
         loaded.frame.height(),
         loaded.frame.bit_depth(),
         image.layout,
+        loaded.container,
+        loaded.layout_source,
         image.method.name(),
         image.width(),
         image.height(),
         image.bands.len()
     );
-    for (file, what) in &files {
-        crate::outln!("  wrote {}  ({what})", args.out.join(file).display());
-    }
-    Ok(())
+    Ok(Written {
+        headline,
+        files,
+        summary,
+    })
 }
 
 /// Reads and checks an analyser calibration file; errors name the file.
@@ -201,7 +227,7 @@ fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
 }
 
 /// One written file: name inside DIR and what it holds.
-type FileEntry = (String, String);
+pub type FileEntry = (String, String);
 
 fn write_band(
     args: &Args,
@@ -248,54 +274,61 @@ fn write_band(
         "I^d/2 = I90 as 16-bit grey",
     )?;
 
+    // DoLP and AoLP in the one convention of every picture; masked pixels grey
+    let valid = |m: &PixelMask| m.is_valid();
     let dolp = render::picture(
         w,
         h,
-        band.dolp.data().iter().map(|d| render::grey(*d)).collect(),
+        band.dolp
+            .data()
+            .iter()
+            .zip(masks)
+            .map(|(d, m)| ellipso_report::colour::dolp_colour(valid(m).then_some(f64::from(*d))))
+            .collect(),
     );
     let dolp = render::with_key(
         dolp,
         Key::Bar {
-            map: ColourMap::Grey,
+            map: ColourMap::Viridis,
             lo: 0.0,
             hi: 1.0,
-            label: "DoLP".into(),
+            label: "DoLP (grey: masked)".into(),
         },
     )?;
     save_png(
         out,
         &format!("dolp{suffix}.png"),
-        Some(image::DynamicImage::ImageRgb8(dolp).into_luma8()),
+        Some(dolp),
         files,
-        "DoLP·255, 8-bit grey, key below",
+        "DoLP, viridis over [0, 1], masked pixels grey, key below",
     )?;
 
-    let weighted = args.aolp_dolp_weighted;
     let aolp = band
         .aolp_rad
         .data()
         .iter()
         .zip(band.dolp.data().iter().zip(masks))
         .map(|(a, (d, m))| {
-            if m.is_valid() {
-                render::aolp_colour(*a, *d, weighted)
-            } else {
-                MASKED
-            }
+            let ok = valid(m);
+            ellipso_report::colour::aolp_colour(
+                ok.then_some(f64::from(*a)),
+                ok.then_some(f64::from(*d)),
+            )
         })
         .collect();
-    let what = if weighted {
-        "AoLP as hue, DoLP as value (unpolarised is black)"
-    } else {
-        "AoLP as hue, DoLP as saturation (unpolarised is white)"
-    };
     let aolp = render::with_key(
         render::picture(w, h, aolp),
         Key::AolpDolp {
-            dolp_as_value: weighted,
+            dolp_as_value: false,
         },
     )?;
-    save_png(out, &format!("aolp{suffix}.png"), Some(aolp), files, what)?;
+    save_png(
+        out,
+        &format!("aolp{suffix}.png"),
+        Some(aolp),
+        files,
+        "AoLP as hue, DoLP as saturation (unpolarised is white, masked grey)",
+    )?;
 
     let range_s = symmetric_range(channels.i_s.data(), masks);
     let range_alpha = symmetric_range(channels.i_alpha.data(), masks);

@@ -4,9 +4,12 @@
 //! demosaic, ideal analysers, default levels) on one raw frame and returns small PNGs, at most
 //! [`MAX_WIDTH_PX`] wide (nearest superpixel, no smoothing so that masked pixels stay visible):
 //! - `s0`: grey, s0/2 (the mean analyser intensity) with an sRGB curve; saturated pixels red;
-//! - `dolp`: grey DoLP·255 over [0, 1]; dark pixels black (their DoLP is noise);
-//! - `aolp`: hue = AoLP (0° and 180° meet: hue = 2·AoLP), saturation = DoLP scaled so that
-//!   DoLP ≥ 0.5 is fully saturated, value 1 (dark pixels black).
+//! - `dolp`: viridis over [0, 1] (`ellipso_report::colour::dolp_colour`);
+//! - `aolp`: hue = AoLP (0° and 180° meet), saturation = DoLP, value 1
+//!   (`ellipso_report::colour::aolp_colour`, the convention of every AoLP picture);
+//!
+//! in both, masked pixels (dark, saturated, … — their DoLP is noise) are the pictures' no-data
+//! grey.
 //!
 //! Colour frames use the mean of the three bands. Statistics: the saturated and dark fractions
 //! (polar's mask), the valid fraction, the mean s0 and DoLP over valid pixels.
@@ -47,24 +50,13 @@ pub fn render(frame_id: u64, frame: &RawFrame) -> Result<FrameView, String> {
         for x in (0..w).step_by(step) {
             let px = pixel(&image, y * w + x);
             let saturated = px.mask & MaskReason::Saturated.bit() != 0;
-            let dark = px.mask & MaskReason::Dark.bit() != 0;
             let g = srgb((px.s0 / 2.0).clamp(0.0, 1.0));
             s0_rgb.extend(if saturated { [255, 40, 40] } else { [g, g, g] });
-            let d = if dark {
-                0
-            } else {
-                (px.dolp.clamp(0.0, 1.0) * 255.0).round() as u8
-            };
-            dolp_rgb.extend([d, d, d]);
-            aolp_rgb.extend(if dark {
-                [0, 0, 0]
-            } else {
-                hsv(
-                    2.0 * px.aolp_rad.to_degrees(),
-                    (px.dolp * 2.0).clamp(0.0, 1.0),
-                    1.0,
-                )
-            });
+            let valid = px.mask == 0;
+            let dolp = valid.then_some(f64::from(px.dolp));
+            let aolp = valid.then_some(f64::from(px.aolp_rad));
+            dolp_rgb.extend(ellipso_report::colour::dolp_colour(dolp));
+            aolp_rgb.extend(ellipso_report::colour::aolp_colour(aolp, dolp));
         }
     }
     let mut valid = 0usize;
@@ -149,23 +141,6 @@ fn srgb(v: f32) -> u8 {
     (s.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
-/// HSV (hue in degrees) → 8-bit RGB.
-pub fn hsv(h_deg: f32, s: f32, v: f32) -> [u8; 3] {
-    let h = h_deg.rem_euclid(360.0) / 60.0;
-    let c = v * s;
-    let x = c * (1.0 - ((h % 2.0) - 1.0).abs());
-    let (r, g, b) = match h as u32 {
-        0 => (c, x, 0.0),
-        1 => (x, c, 0.0),
-        2 => (0.0, c, x),
-        3 => (0.0, x, c),
-        4 => (x, 0.0, c),
-        _ => (c, 0.0, x),
-    };
-    let m = v - c;
-    [r, g, b].map(|u| ((u + m).clamp(0.0, 1.0) * 255.0).round() as u8)
-}
-
 fn png(w: usize, h: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {
     let img =
         image::RgbImage::from_raw(w as u32, h as u32, rgb.to_vec()).ok_or("picture buffer size")?;
@@ -178,14 +153,6 @@ fn png(w: usize, h: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn hue_wheel_and_saturation() {
-        assert_eq!(hsv(0.0, 1.0, 1.0), [255, 0, 0]);
-        assert_eq!(hsv(120.0, 1.0, 1.0), [0, 255, 0]);
-        assert_eq!(hsv(360.0, 1.0, 1.0), [255, 0, 0]);
-        assert_eq!(hsv(200.0, 0.0, 1.0), [255, 255, 255]);
-    }
 
     #[test]
     fn a_polarised_frame_renders_with_its_statistics() {
@@ -224,7 +191,7 @@ mod tests {
     }
 
     #[test]
-    fn dark_pixels_are_black_in_dolp_and_aolp() {
+    fn dark_pixels_are_grey_in_dolp_and_aolp() {
         let layout = ellipso_model::mosaic::SensorLayout::MonoPolar;
         // left half: a few DN of noise with a strongly polarised pattern (DoLP ≈ 1 computed, but
         // the pixels are dark); right half: bright, DoLP ≈ 0.88
@@ -249,11 +216,13 @@ mod tests {
         for y in 0..oh {
             for x in 0..ow {
                 let (d, a) = (dolp.get_pixel(x, y).0, aolp.get_pixel(x, y).0);
+                let grey = ellipso_report::figure::NO_DATA;
                 if x < ow / 2 {
-                    assert_eq!(d, [0, 0, 0], "dark DoLP at {x},{y}");
-                    assert_eq!(a, [0, 0, 0], "dark AoLP at {x},{y}");
+                    assert_eq!(d, grey, "dark DoLP at {x},{y}");
+                    assert_eq!(a, grey, "dark AoLP at {x},{y}");
                 } else {
-                    assert!(d[0] > 200, "bright DoLP at {x},{y}: {d:?}");
+                    // DoLP ≈ 0.88: the yellow-green end of viridis
+                    assert!(d[1] > 200 && d[2] < 100, "bright DoLP at {x},{y}: {d:?}");
                 }
             }
         }

@@ -7,22 +7,33 @@
 //! - Fitted values may be wild while the fit is being reworked: a vertex whose parameters are
 //!   non-finite or outside the model's domain (η < 1, σ outside [0, 1], σ_s > σ_ss, a negative
 //!   albedo) gets status bit [`STATUS_INVALID`]; its parameters are clamped into the domain for the
-//!   shader and the page draws it grey, as it does the flags the user chooses (default
-//!   `TooFewViews`, `UnderDetermined`). Nothing here panics on bad numbers.
-//! - Display ranges of each parameter are its 1st–99th percentiles over the vertices that are
-//!   neither invalid nor flagged `TooFewViews`, so a few wild vertices cannot blow out a map.
+//!   shader and the page draws it grey. The fit's identifiability rule
+//!   ([`ellipso_fit::data::Identifiable`], the one the PNG maps and `maps.exr` apply) sets
+//!   [`STATUS_WITHHELD`] (no parameter is a measurement: grey in every display, as in the
+//!   pictures) and [`STATUS_ETA_WITHHELD`] (grey in the η displays); the user may grey more
+//!   flags. Nothing here panics on bad numbers.
+//! - Display ranges of each parameter and standard error are the fit's shared
+//!   [`ellipso_fit::export::colour::MapRanges`] (the PNG maps' ranges) over the valid vertices.
 //! - [`MaterialMesh::to_bytes`] layout (little-endian, every section 4-byte aligned):
 //!   `u32 n_vertices, u32 n_triangles`, then `f32` positions `3n`, normals `3n`, parameters `10n`
 //!   (clamped, [`PARAMS`] order), standard errors `10n` (as read, +inf kept), normal σ (deg) `n`,
-//!   `u32` samples `n`, `u32` status `n` (fit flags in bits 0–7, [`STATUS_INVALID`] in bit 8),
+//!   `u32` samples `n`, `u32` status `n` (fit flags in bits 0–15, [`FLAG_BITS`] order;
+//!   [`STATUS_INVALID`], [`STATUS_WITHHELD`], [`STATUS_ETA_WITHHELD`] in bits 16–18),
 //!   `u32` triangle indices `3t`.
 
 use std::path::{Path, PathBuf};
 
+use ellipso_fit::export::colour::MapRanges;
 use ellipso_fit::export::ply::{FLAG_BITS, FitVertex, PARAMS, read_fit_ply};
 
 /// Status bit: the stored parameters were non-finite or outside the model's domain.
-pub const STATUS_INVALID: u32 = 1 << 8;
+pub const STATUS_INVALID: u32 = 1 << 16;
+/// Status bit: the identifiability rule withholds every parameter of the vertex.
+pub const STATUS_WITHHELD: u32 = 1 << 17;
+/// Status bit: the identifiability rule withholds η.
+pub const STATUS_ETA_WITHHELD: u32 = 1 << 18;
+/// Fit flags occupy the bits below this.
+const FLAG_BITS_MASK: u32 = 0xffff;
 
 /// The fitted mesh, sanitised for display.
 #[derive(Clone, Debug)]
@@ -33,7 +44,7 @@ pub struct MaterialMesh {
     pub vertices: Vec<FitVertex>,
     /// Parameters clamped into the model's domain (what the shader evaluates).
     pub params_clamped: Vec<[f32; 10]>,
-    /// Fit flags (bits 0–7) and [`STATUS_INVALID`].
+    /// Fit flags (bits 0–15), [`STATUS_INVALID`] and the rule's bits.
     pub status: Vec<u32>,
     /// Triangles.
     pub triangles: Vec<[u32; 3]>,
@@ -127,7 +138,13 @@ impl MaterialMesh {
                 let (p, ok) = sanitise(&v.params);
                 let geometry_ok = v.position.iter().chain(&v.normal).all(|x| x.is_finite());
                 let invalid = if ok && geometry_ok { 0 } else { STATUS_INVALID };
-                (p, (v.flags & 0xff) | invalid)
+                let rule = v.identifiable();
+                let withheld = if rule.vertex { 0 } else { STATUS_WITHHELD };
+                let eta_withheld = if rule.eta { 0 } else { STATUS_ETA_WITHHELD };
+                (
+                    p,
+                    (v.flags & FLAG_BITS_MASK) | invalid | withheld | eta_withheld,
+                )
             })
             .unzip();
         Ok(Self {
@@ -182,23 +199,36 @@ impl MaterialMesh {
 
     /// The summary the page needs before the buffer: counts, bounds, names, ranges.
     pub fn info(&self) -> serde_json::Value {
-        let usable: Vec<usize> = (0..self.vertices.len())
-            .filter(|&i| self.status[i] & (STATUS_INVALID | 1) == 0)
-            .collect();
-        let ranges: Vec<[f32; 2]> = (0..10)
-            .map(|k| percentile_range(usable.iter().map(|&i| self.params_clamped[i][k])))
-            .collect();
-        let std_ranges: Vec<[f32; 2]> = (0..10)
-            .map(|k| percentile_range(usable.iter().map(|&i| self.vertices[i].std_error[k])))
-            .collect();
-        let (centre, radius) = bounding_sphere(&self.vertices);
-        let flag_names: Vec<String> = FLAG_BITS.iter().map(|f| format!("{f:?}")).collect();
-        let flag_counts: Vec<usize> = (0..9)
-            .map(|b| {
-                let bit = if b == 8 { STATUS_INVALID } else { 1 << b };
-                self.status.iter().filter(|s| *s & bit != 0).count()
+        let rows: Vec<_> = (0..self.vertices.len())
+            .filter(|&i| self.status[i] & STATUS_INVALID == 0)
+            .map(|i| {
+                let v = &self.vertices[i];
+                (
+                    self.params_clamped[i].map(f64::from),
+                    v.std_error.map(f64::from),
+                    v.identifiable(),
+                )
             })
             .collect();
+        let shared = MapRanges::of(&rows);
+        let ranges: Vec<[f64; 2]> = shared.params.iter().map(|r| [r.0, r.1]).collect();
+        let std_ranges: Vec<[f64; 2]> = shared.std_error.iter().map(|r| [r.0, r.1]).collect();
+        let (centre, radius) = bounding_sphere(&self.vertices);
+        let mut flag_names: Vec<String> = FLAG_BITS.iter().map(|f| format!("{f:?}")).collect();
+        flag_names.push("Invalid (outside the model's domain)".into());
+        let bits: Vec<u32> = (0..FLAG_BITS.len())
+            .map(|b| 1 << b)
+            .chain([STATUS_INVALID])
+            .collect();
+        let flag_counts: Vec<usize> = bits
+            .iter()
+            .map(|bit| self.status.iter().filter(|s| *s & bit != 0).count())
+            .collect();
+        let unflagged = self
+            .status
+            .iter()
+            .filter(|s| *s & (FLAG_BITS_MASK | STATUS_INVALID) == 0)
+            .count();
         serde_json::json!({
             "file": self.path.display().to_string(),
             "vertices": self.vertices.len(),
@@ -209,27 +239,13 @@ impl MaterialMesh {
             "ranges": ranges,
             "std_ranges": std_ranges,
             "flags": flag_names,
+            "flag_bits": bits,
             "flag_counts": flag_counts,
-            "invalid_bit": 8,
+            "unflagged": unflagged,
+            "invalid_bit": STATUS_INVALID.trailing_zeros(),
+            "withheld_bit": STATUS_WITHHELD.trailing_zeros(),
+            "eta_withheld_bit": STATUS_ETA_WITHHELD.trailing_zeros(),
         })
-    }
-}
-
-/// The 1st and 99th percentiles of the finite values (`[0, 1]` when there are none; widened
-/// when they coincide, so a constant map still has a range).
-fn percentile_range(values: impl Iterator<Item = f32>) -> [f32; 2] {
-    let mut v: Vec<f32> = values.filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return [0.0, 1.0];
-    }
-    v.sort_by(f32::total_cmp);
-    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
-    let (lo, hi) = (at(0.01), at(0.99));
-    if hi - lo > 1e-6 * hi.abs().max(1e-6) {
-        [lo, hi]
-    } else {
-        let pad = 0.05 * lo.abs().max(1e-3);
-        [lo - pad, hi + pad]
     }
 }
 
@@ -290,17 +306,5 @@ mod tests {
         let mut order = good;
         order[1] = 0.5;
         assert!(!sanitise(&order).1, "σs > σss is outside the domain");
-    }
-
-    #[test]
-    fn ranges_ignore_outliers_and_never_collapse() {
-        let mut v: Vec<f32> = (0..1000).map(|i| 1.4 + 0.0001 * i as f32).collect();
-        v.push(1e9);
-        v.push(f32::NAN);
-        let [lo, hi] = percentile_range(v.into_iter());
-        assert!(lo > 1.39 && hi < 1.51, "{lo} {hi}");
-        let [lo, hi] = percentile_range([2.0; 5].into_iter());
-        assert!(lo < 2.0 && hi > 2.0);
-        assert_eq!(percentile_range(std::iter::empty()), [0.0, 1.0]);
     }
 }

@@ -26,6 +26,51 @@ pub fn robust_range(values: &[Option<f64>]) -> (f64, f64) {
     }
 }
 
+/// The display ranges every map of a fit shares (the PNG maps and `ellipso view`): per
+/// parameter ([`super::ply::PARAMS`] order) and per standard error, the 1st–99th percentile
+/// ([`robust_range`]) over the vertices whose value the identifiability rule reports (η: only
+/// where η is identifiable; standard errors: the finite ones).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct MapRanges {
+    /// Range of each parameter.
+    pub params: [(f64, f64); 10],
+    /// Range of each standard error.
+    pub std_error: [(f64, f64); 10],
+}
+
+impl MapRanges {
+    /// The ranges over `vertices`: (parameters, reported standard errors, the rule).
+    pub fn of(vertices: &[([f64; 10], [f64; 10], crate::data::Identifiable)]) -> Self {
+        let column = |k: usize, std: bool| -> (f64, f64) {
+            let values: Vec<Option<f64>> = vertices
+                .iter()
+                .filter(|(_, _, i)| i.vertex && (k != 0 || i.eta))
+                .map(|(p, s, _)| Some(if std { s[k] } else { p[k] }))
+                .collect();
+            robust_range(&values)
+        };
+        Self {
+            params: std::array::from_fn(|k| column(k, false)),
+            std_error: std::array::from_fn(|k| column(k, true)),
+        }
+    }
+
+    /// The ranges of a fit's vertices.
+    pub fn of_fits(fits: &[crate::data::VertexFit]) -> Self {
+        let rows: Vec<_> = fits
+            .iter()
+            .map(|f| {
+                (
+                    super::ply::params_of(f),
+                    f.reported_std_error(),
+                    f.identifiable(),
+                )
+            })
+            .collect();
+        Self::of(&rows)
+    }
+}
+
 /// sRGB encoding of a linear value in [0, 1] (IEC 61966-2-1).
 pub fn srgb(linear: f64) -> u8 {
     let l = if linear.is_finite() {

@@ -14,8 +14,10 @@
 //!   light from another camera pose.
 //!
 //! Parameters are interpolated over a triangle from its reliable vertices only (barycentric
-//! weights renormalised); a vertex is unreliable when flagged `TooFewViews`, `NotConverged` or
-//! `AtBound`. Pixels where the mesh is not hit, or nearer unreliable vertices than reliable ones
+//! weights renormalised); a vertex is unreliable where the identifiability rule withholds it
+//! ([`crate::data::Identifiable`]: `TooFewViews`, `AlbedoAtCap`), and η is grey on triangles
+//! with a vertex whose η the rule withholds. Map colour ranges are the fit's shared
+//! [`super::colour::MapRanges`] (the view uses the same). Pixels where the mesh is not hit, or nearer unreliable vertices than reliable ones
 //! (reliable weight < ½), are grey: one bad vertex is drawn as a small grey patch, never as a
 //! fan of its lobe over its neighbours' triangles.
 
@@ -29,7 +31,7 @@ use rayon::prelude::*;
 
 use super::colour::{robust_range, srgb};
 use super::raster::{Hit, ViewCamera, rasterise};
-use crate::data::{FitFlag, VertexFit, ViewGeometry};
+use crate::data::{VertexFit, ViewGeometry};
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_report::figure::NO_DATA;
 use ellipso_report::{ColourMap, Figure, Key, Picture as Pixels, Rgb};
@@ -40,7 +42,7 @@ struct Field {
     normals: Vec<[f64; 3]>,
     eta_std: Vec<[f64; 1]>,
     reliable: Vec<bool>,
-    eta_unidentified: Vec<bool>,
+    eta_identifiable: Vec<bool>,
 }
 
 impl Field {
@@ -48,16 +50,18 @@ impl Field {
         Self {
             params: fits.iter().map(super::ply::params_of).collect(),
             normals: fits.iter().map(|f| f.normal_world).collect(),
-            eta_std: fits.iter().map(|f| [f.std_error[0]]).collect(),
-            reliable: fits
-                .iter()
-                .map(|f| f.is_reliable(crate::solve::SolverConfig::default().albedo_cap))
-                .collect(),
-            eta_unidentified: fits
-                .iter()
-                .map(|f| f.flags.contains(&FitFlag::EtaUnidentifiable))
-                .collect(),
+            eta_std: fits.iter().map(|f| [f.reported_std_error()[0]]).collect(),
+            reliable: fits.iter().map(VertexFit::is_reliable).collect(),
+            eta_identifiable: fits.iter().map(|f| f.identifiable().eta).collect(),
         }
+    }
+
+    /// Whether η is reported at a pixel of `hit`: every vertex of its triangle has η
+    /// identifiable (the rule, [`crate::data::Identifiable`]).
+    fn eta_at(&self, hit: &Hit) -> bool {
+        hit.vertices
+            .iter()
+            .all(|&v| self.eta_identifiable[v as usize])
     }
 
     /// `hit` with its barycentric weights restricted to the reliable vertices and renormalised;
@@ -136,22 +140,21 @@ pub fn pictures(
     let (w, h) = (camera.width, camera.height);
     let at = models_of(mesh, &field, camera);
     let mut out = Vec::new();
-    let scalar =
-        |name: &'static str, title: &str, label: &str, f: &dyn Fn(&PbrdfParams<f64>) -> f64| {
-            let values: Vec<Option<f64>> =
-                at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
-            scalar_picture(name, title, label, w, h, &values)
-        };
+    let ranges = super::colour::MapRanges::of_fits(fits);
+    let scalar = |name: &'static str,
+                  title: &str,
+                  label: &str,
+                  range: (f64, f64),
+                  f: &dyn Fn(&PbrdfParams<f64>) -> f64| {
+        let values: Vec<Option<f64>> = at.iter().map(|a| a.as_ref().map(|(p, ..)| f(p))).collect();
+        scalar_picture(name, title, label, w, h, &values, range)
+    };
     // η where it is identifiable; grey where any vertex of the triangle says it is not.
     let eta: Vec<Option<f64>> = at
         .iter()
         .map(|a| {
             let (p, _, _, hit) = a.as_ref()?;
-            let unidentified = hit
-                .vertices
-                .iter()
-                .any(|&v| field.eta_unidentified[v as usize]);
-            (!unidentified).then_some(p.eta)
+            field.eta_at(hit).then_some(p.eta)
         })
         .collect();
     out.push(scalar_picture(
@@ -161,28 +164,36 @@ pub fn pictures(
         w,
         h,
         &eta,
+        ranges.params[0],
     ));
     out.push(scalar(
         "map-sigma-s",
         "specular roughness σs (GGX)",
         "σs",
+        ranges.params[1],
         &|p| p.sigma_s,
     ));
     out.push(scalar(
         "map-sigma-ss",
         "single-scattering roughness σss",
         "σss",
+        ranges.params[2],
         &|p| p.sigma_ss,
     ));
-    out.push(scalar("map-rho-s", "specular albedo ρs", "ρs", &|p| {
-        p.rho_s
-    }));
-    // η standard error (per vertex, interpolated).
+    out.push(scalar(
+        "map-rho-s",
+        "specular albedo ρs",
+        "ρs",
+        ranges.params[3],
+        &|p| p.rho_s,
+    ));
+    // η standard error (per vertex, interpolated), grey exactly where map-eta is.
     let eta_std: Vec<Option<f64>> = at
         .iter()
         .map(|a| {
-            let s = a.as_ref()?.3.interpolate(&field.eta_std)[0];
-            s.is_finite().then_some(s)
+            let hit = &a.as_ref()?.3;
+            let s = hit.interpolate(&field.eta_std)[0];
+            (field.eta_at(hit) && s.is_finite()).then_some(s)
         })
         .collect();
     out.push(scalar_picture(
@@ -192,6 +203,7 @@ pub fn pictures(
         w,
         h,
         &eta_std,
+        ranges.std_error[0],
     ));
     let rgb = |name: &'static str, title: &str, f: &dyn Fn(&PbrdfParams<f64>) -> [f64; 3]| {
         let values: Vec<Option<[f64; 3]>> =
@@ -496,7 +508,8 @@ fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<Pix
         .collect()
 }
 
-/// A scalar map (viridis over the robust range, with its colour bar).
+/// A scalar map (viridis over the fit's shared range, [`super::colour::MapRanges`], with its
+/// colour bar).
 fn scalar_picture(
     name: &'static str,
     title: &str,
@@ -504,8 +517,8 @@ fn scalar_picture(
     w: u32,
     h: u32,
     values: &[Option<f64>],
+    (lo, hi): (f64, f64),
 ) -> Picture {
-    let (lo, hi) = robust_range(values);
     Picture {
         name,
         figure: Figure::new(title)

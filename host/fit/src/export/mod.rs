@@ -71,8 +71,17 @@ pub struct ExportReport {
     /// the captured s0, the re-rendering in DN through the frame's own radiometry (when a
     /// captured frame was given).
     pub rerender_rmse: Option<f64>,
-    /// The frame of the comparison picture, and whether the fit never saw it.
-    pub comparison_frame: Option<(u64, bool)>,
+    /// The frame of the comparison picture (`rerender-vs-captured.png`).
+    pub comparison_frame: Option<ComparisonFrame>,
+}
+
+/// Which captured frame `rerender-vs-captured.png` shows.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct ComparisonFrame {
+    /// The session's frame id.
+    pub frame_id: u64,
+    /// Whether the fit never saw the frame (a held-out view; else the pictures' view).
+    pub held_out: bool,
 }
 
 /// Errors of the export.
@@ -235,7 +244,12 @@ pub fn export_all(
     float_maps::maps_image(mesh, fits, &view)?.write(&maps_path)?;
     report.files.push(maps_path);
     let record =
-        view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light);
+        view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light)
+            .with_polariser(
+                flash
+                    .polariser_axis_world(world_from_camera)
+                    .map(|a| a.into_inner().into()),
+            );
     let view_path = view_file::write(out, &record).map_err(|source| ExportError::Io {
         path: out.join(view_file::FILE_NAME).display().to_string(),
         source,
@@ -269,7 +283,10 @@ pub fn export_all(
         let (pic, rmse) = comparison(mesh, fits, &framing, camera, flash, c);
         pictures.push(pic);
         report.rerender_rmse = rmse;
-        report.comparison_frame = Some((c.frame_id, c.held_out));
+        report.comparison_frame = Some(ComparisonFrame {
+            frame_id: c.frame_id,
+            held_out: c.held_out,
+        });
     }
     for p in pictures {
         let path = out.join(format!("{}.png", p.name));

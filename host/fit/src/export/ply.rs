@@ -1,31 +1,29 @@
 //! `fit.ply`: the fitted mesh with every per-vertex parameter, its standard error and flags.
 //!
-//! Contract: binary little-endian PLY 1.0. Vertex properties, all `float` (f32) unless noted:
-//! `x y z` (refined position, world, metres), `nx ny nz` (refined unit normal), `eta sigma_s
-//! sigma_ss rho_s rho_ss_r rho_ss_g rho_ss_b rho_d_r rho_d_g rho_d_b`, their standard errors
-//! `std_eta … std_rho_d_b` (same order; +inf where not identifiable), `normal_std_deg`,
-//! `uint samples`, `uint flags` (bit k set = [`FLAG_BITS`]`[k]`). Faces: `uchar`-counted `int`
-//! lists, as the simulator's PLY reader expects, so `fit.ply` also loads as a plain mesh.
-//! [`read_fit_ply`] reads back exactly what [`write_fit_ply`] wrote (f32 precision).
+//! Contract: binary little-endian PLY 1.0 whose vertex properties are the table [`schema`] (one
+//! entry per property: name, PLY type, value; adding a property is one line there):
+//! `double x y z` (refined position, world, metres, exact), `float nx ny nz` (refined unit
+//! normal), `float eta sigma_s sigma_ss rho_s rho_ss_r rho_ss_g rho_ss_b rho_d_r rho_d_g
+//! rho_d_b`, their standard errors `float std_eta … std_rho_d_b` (same order; +inf where the
+//! identifiability rule [`crate::data::Identifiable`] withholds the parameter),
+//! `float normal_std_deg` (≤ 180°, [`crate::data::MAX_REPORTED_ANGLE_STD_DEG`]), `int samples`,
+//! `int flags` (bit k set = [`FitFlag::ALL`]`[k]`, the output flags of
+//! [`VertexFit::output_flags`]) and `uchar red green blue` (the diffuse albedo π·ρ_d, sRGB, grey
+//! where the rule withholds the vertex), so Open3D, plyfile, trimesh and MeshLab read every
+//! property and show the object in its colours. Faces: `uchar`-counted `int` lists, so
+//! `fit.ply` also loads as a plain mesh. [`read_fit_ply`] reads back what [`write_fit_ply`]
+//! wrote, by property name (older files with `float` positions and `uint` flags too).
 
 use std::path::Path;
 
 use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::ply::read_vertex_table;
+use nalgebra::Point3;
 
-use crate::data::{FitFlag, VertexFit};
+use crate::data::{FitFlag, Identifiable, VertexFit};
 
-/// Flag bit order of the `flags` property.
-pub const FLAG_BITS: [FitFlag; 9] = [
-    FitFlag::TooFewViews,
-    FitFlag::UnderDetermined,
-    FitFlag::Dark,
-    FitFlag::Saturated,
-    FitFlag::EtaUnidentifiable,
-    FitFlag::GrazingOnly,
-    FitFlag::AtBound,
-    FitFlag::NotConverged,
-    FitFlag::EtaPooled,
-];
+/// Flag bit order of the `flags` property (every output's bitmask).
+pub const FLAG_BITS: [FitFlag; FitFlag::ALL.len()] = FitFlag::ALL;
 
 /// Parameter property names in `VertexFit::std_error` order.
 pub const PARAMS: [&str; 10] = [
@@ -33,8 +31,8 @@ pub const PARAMS: [&str; 10] = [
     "rho_d_g", "rho_d_b",
 ];
 
-/// Float properties per vertex: position 3, normal 3, params 10, std 10, normal_std 1.
-const FLOATS: usize = 27;
+/// Grey of the vertex colour where the rule withholds the vertex (the pictures' no-data grey).
+const WITHHELD_GREY: u8 = ellipso_report::figure::NO_DATA[0];
 
 /// Errors writing or reading `fit.ply`.
 #[derive(Debug, thiserror::Error)]
@@ -60,13 +58,9 @@ pub enum PlyError {
     },
 }
 
-/// The bitmask of `flags`.
+/// The bitmask of `flags` ([`FitFlag::ALL`] order).
 pub fn flag_mask(flags: &[FitFlag]) -> u32 {
-    FLAG_BITS
-        .iter()
-        .enumerate()
-        .filter(|(_, f)| flags.contains(f))
-        .fold(0, |m, (k, _)| m | (1 << k))
+    FitFlag::mask(flags)
 }
 
 /// A fit's parameters in [`PARAMS`] order.
@@ -86,42 +80,142 @@ pub fn params_of(f: &VertexFit) -> [f64; 10] {
     ]
 }
 
+/// The PLY scalar types `fit.ply` uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlyType {
+    /// `float` (f32).
+    Float,
+    /// `double` (f64).
+    Double,
+    /// `int` (i32; Open3D drops unsigned properties).
+    Int,
+    /// `uchar` (u8).
+    Uchar,
+}
+
+impl PlyType {
+    fn name(self) -> &'static str {
+        match self {
+            PlyType::Float => "float",
+            PlyType::Double => "double",
+            PlyType::Int => "int",
+            PlyType::Uchar => "uchar",
+        }
+    }
+
+    fn put(self, v: f64, out: &mut Vec<u8>) {
+        match self {
+            PlyType::Float => out.extend((v as f32).to_le_bytes()),
+            PlyType::Double => out.extend(v.to_le_bytes()),
+            PlyType::Int => out.extend((v as i32).to_le_bytes()),
+            PlyType::Uchar => out.push(v.clamp(0.0, 255.0) as u8),
+        }
+    }
+}
+
+/// What one vertex row is computed from.
+pub struct Row<'a> {
+    /// Refined position, world, metres.
+    pub position: Point3<f64>,
+    /// The vertex's fit.
+    pub fit: &'a VertexFit,
+    /// [`VertexFit::output_mask`].
+    pub mask: u32,
+    /// The rule applied to `mask`.
+    pub identifiable: Identifiable,
+    /// [`Identifiable::std_error`] of the fit's standard errors.
+    pub std_error: [f64; 10],
+}
+
+/// One vertex property: its name, type and value.
+pub struct Property {
+    /// Property name in the header.
+    pub name: String,
+    /// PLY type.
+    pub ty: PlyType,
+    /// The value of a row.
+    pub value: Box<dyn Fn(&Row) -> f64>,
+}
+
+fn property(
+    name: impl Into<String>,
+    ty: PlyType,
+    value: impl Fn(&Row) -> f64 + 'static,
+) -> Property {
+    Property {
+        name: name.into(),
+        ty,
+        value: Box::new(value),
+    }
+}
+
+/// The vertex properties of `fit.ply`, in file order (module contract).
+pub fn schema() -> Vec<Property> {
+    use PlyType::{Double, Float, Int, Uchar};
+    let mut s = Vec::new();
+    for (k, name) in ["x", "y", "z"].into_iter().enumerate() {
+        s.push(property(name, Double, move |r| r.position[k]));
+    }
+    for (k, name) in ["nx", "ny", "nz"].into_iter().enumerate() {
+        s.push(property(name, Float, move |r| r.fit.normal_world[k]));
+    }
+    for (k, name) in PARAMS.into_iter().enumerate() {
+        s.push(property(name, Float, move |r| params_of(r.fit)[k]));
+    }
+    for (k, name) in PARAMS.into_iter().enumerate() {
+        s.push(property(format!("std_{name}"), Float, move |r| {
+            r.std_error[k]
+        }));
+    }
+    s.push(property("normal_std_deg", Float, |r| {
+        r.fit.reported_normal_std_deg()
+    }));
+    s.push(property("samples", Int, |r| f64::from(r.fit.samples_used)));
+    s.push(property("flags", Int, |r| f64::from(r.mask)));
+    for (k, name) in ["red", "green", "blue"].into_iter().enumerate() {
+        s.push(property(name, Uchar, move |r| {
+            if r.identifiable.vertex {
+                let albedo = std::f64::consts::PI * r.fit.params.rho_d[k];
+                f64::from(super::colour::srgb(albedo))
+            } else {
+                f64::from(WITHHELD_GREY)
+            }
+        }));
+    }
+    s
+}
+
 /// Writes `mesh` (refined positions) with `fits` (one per vertex, in order) to `path`.
 pub fn write_fit_ply(path: &Path, mesh: &TriangleMesh, fits: &[VertexFit]) -> Result<(), PlyError> {
     let n = mesh.positions().len();
     if fits.len() != n {
         return Err(PlyError::Count(fits.len(), n));
     }
+    let schema = schema();
     let mut header = format!(
         "ply\nformat binary_little_endian 1.0\ncomment ellipso fit: per-vertex polarimetric SVBRDF\nelement vertex {n}\n"
     );
-    for name in ["x", "y", "z", "nx", "ny", "nz"] {
-        header += &format!("property float {name}\n");
+    for p in &schema {
+        header += &format!("property {} {}\n", p.ty.name(), p.name);
     }
-    for name in PARAMS {
-        header += &format!("property float {name}\n");
-    }
-    for name in PARAMS {
-        header += &format!("property float std_{name}\n");
-    }
-    header += "property float normal_std_deg\nproperty uint samples\nproperty uint flags\n";
     header += &format!(
         "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
         mesh.triangles().len()
     );
     let mut bytes = header.into_bytes();
     for (p, f) in mesh.positions().iter().zip(fits) {
-        let mut floats = Vec::with_capacity(FLOATS);
-        floats.extend([p.x, p.y, p.z]);
-        floats.extend(f.normal_world);
-        floats.extend(params_of(f));
-        floats.extend(f.std_error);
-        floats.push(f.normal_std_error_deg);
-        for v in floats {
-            bytes.extend((v as f32).to_le_bytes());
+        let mask = f.output_mask();
+        let identifiable = Identifiable::of_mask(mask);
+        let row = Row {
+            position: *p,
+            fit: f,
+            mask,
+            identifiable,
+            std_error: identifiable.std_error(&f.std_error),
+        };
+        for prop in &schema {
+            prop.ty.put((prop.value)(&row), &mut bytes);
         }
-        bytes.extend(f.samples_used.to_le_bytes());
-        bytes.extend(flag_mask(&f.flags).to_le_bytes());
     }
     for t in mesh.triangles() {
         bytes.push(3);
@@ -154,6 +248,13 @@ pub struct FitVertex {
     pub flags: u32,
 }
 
+impl FitVertex {
+    /// The identifiability rule applied to this vertex's flags.
+    pub fn identifiable(&self) -> Identifiable {
+        Identifiable::of_mask(self.flags)
+    }
+}
+
 /// Reads the vertices of a `fit.ply` written by [`write_fit_ply`].
 pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
     let err = |what: String| PlyError::Format {
@@ -164,45 +265,36 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
         path: path.display().to_string(),
         source,
     })?;
-    let end = bytes
-        .windows(11)
-        .position(|w| w == b"end_header\n")
-        .ok_or_else(|| err("no end_header".into()))?;
-    let header =
-        std::str::from_utf8(&bytes[..end]).map_err(|_| err("header is not text".into()))?;
-    if !header.contains("property float normal_std_deg") {
-        return Err(err(
-            "not an ellipso fit.ply (no normal_std_deg property)".into()
-        ));
-    }
-    let n: usize = header
-        .lines()
-        .find_map(|l| l.strip_prefix("element vertex "))
-        .and_then(|s| s.trim().parse().ok())
-        .ok_or_else(|| err("no vertex count".into()))?;
-    let stride = FLOATS * 4 + 8;
-    let body = &bytes[end + 11..];
-    if body.len() < n * stride {
-        return Err(err(format!(
-            "truncated: {n} vertices need {} bytes, {} present",
-            n * stride,
-            body.len()
-        )));
-    }
-    let f32_at = |o: usize| f32::from_le_bytes([body[o], body[o + 1], body[o + 2], body[o + 3]]);
-    let u32_at = |o: usize| u32::from_le_bytes([body[o], body[o + 1], body[o + 2], body[o + 3]]);
-    Ok((0..n)
-        .map(|v| {
-            let o = v * stride;
-            let f = |k: usize| f32_at(o + 4 * k);
+    let table = read_vertex_table(&bytes).map_err(|e| err(e.to_string()))?;
+    let col = |name: &str| {
+        table.column(name).ok_or_else(|| {
+            err(format!(
+                "not an ellipso fit.ply (no vertex property `{name}`)"
+            ))
+        })
+    };
+    let cols = |names: &[&str]| names.iter().map(|n| col(n)).collect::<Result<Vec<_>, _>>();
+    let position = cols(&["x", "y", "z"])?;
+    let normal = cols(&["nx", "ny", "nz"])?;
+    let params = cols(&PARAMS)?;
+    let std_names: Vec<String> = PARAMS.iter().map(|p| format!("std_{p}")).collect();
+    let std = cols(&std_names.iter().map(String::as_str).collect::<Vec<_>>())?;
+    let normal_std = col("normal_std_deg")?;
+    let samples = col("samples")?;
+    let flags = col("flags")?;
+    Ok(table
+        .rows
+        .iter()
+        .map(|r| {
+            let f = |k: usize| r[k] as f32;
             FitVertex {
-                position: [f(0), f(1), f(2)],
-                normal: [f(3), f(4), f(5)],
-                params: std::array::from_fn(|k| f(6 + k)),
-                std_error: std::array::from_fn(|k| f(16 + k)),
-                normal_std_deg: f(26),
-                samples: u32_at(o + FLOATS * 4),
-                flags: u32_at(o + FLOATS * 4 + 4),
+                position: std::array::from_fn(|i| f(position[i])),
+                normal: std::array::from_fn(|i| f(normal[i])),
+                params: std::array::from_fn(|i| f(params[i])),
+                std_error: std::array::from_fn(|i| f(std[i])),
+                normal_std_deg: f(normal_std),
+                samples: r[samples].max(0.0) as u32,
+                flags: r[flags].max(0.0) as u32,
             }
         })
         .collect())
@@ -241,14 +333,16 @@ mod tests {
                 samples_used: 40 + v as u32,
                 cost: 1.0,
                 iterations: 5,
-                flags: if v == 3 {
-                    vec![FitFlag::EtaUnidentifiable, FitFlag::AtBound]
-                } else {
-                    vec![]
+                flags: match v {
+                    3 => vec![FitFlag::EtaUnidentifiable, FitFlag::AtBound],
+                    4 => vec![FitFlag::AlbedoAtCap],
+                    _ => vec![],
                 },
                 eta_unpooled: None,
             })
             .collect();
+        let mut fits = fits;
+        fits[5].normal_std_error_deg = 500.0;
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("fit.ply");
         write_fit_ply(&path, &mesh, &fits).unwrap();
@@ -257,13 +351,36 @@ mod tests {
         for (b, f) in back.iter().zip(&fits) {
             assert!((f64::from(b.params[0]) - f.params.eta).abs() < 1e-6);
             assert_eq!(b.samples, f.samples_used);
-            assert_eq!(b.flags, flag_mask(&f.flags));
+            assert_eq!(b.flags, f.output_mask());
         }
         assert!(back[3].std_error[0].is_infinite());
         assert_eq!(back[3].flags, (1 << 4) | (1 << 6));
-        let plain = parse_ply(&std::fs::read(&path).unwrap()).unwrap();
+        // One rule: η withheld at vertex 3 only; every parameter at the capped vertex 4; the
+        // normal's 500° reported as 180° and flagged.
+        assert!(back[2].std_error.iter().all(|s| s.is_finite()));
+        assert!(back[4].std_error.iter().all(|s| s.is_infinite()));
+        assert!(!back[4].identifiable().vertex && back[0].identifiable().eta);
+        assert_eq!(back[5].normal_std_deg, 180.0);
+        assert_ne!(back[5].flags & FitFlag::NormalUnconstrained.bit(), 0);
+        let bytes = std::fs::read(&path).unwrap();
+        let header = String::from_utf8_lossy(&bytes[..bytes.len().min(2000)]).to_string();
+        for want in [
+            "property double x",
+            "property int samples",
+            "property int flags",
+            "property uchar red",
+        ] {
+            assert!(header.contains(want), "{want}");
+        }
+        let table = read_vertex_table(&bytes).unwrap();
+        let red = table.column("red").unwrap();
+        // π·ρd_r = π·0.4 > 1: full red; the withheld vertex is grey
+        assert_eq!(table.rows[0][red], 255.0);
+        assert_eq!(table.rows[4][red], f64::from(WITHHELD_GREY));
+        let plain = parse_ply(&bytes).unwrap();
         assert_eq!(plain.triangles(), mesh.triangles());
-        assert!((plain.positions()[5] - mesh.positions()[5]).norm() < 1e-7);
+        // positions are exact (double): a fit on this mesh sees the same geometry
+        assert_eq!(plain.positions()[5], mesh.positions()[5]);
         // Wrong count and unwritable paths are named.
         assert!(matches!(
             write_fit_ply(&path, &mesh, &fits[1..]),

@@ -156,6 +156,76 @@ fn every_output_is_written_and_readable() {
     assert!(e.contains("file"), "{e}");
 }
 
+/// One identifiability rule: vertices with η unidentifiable on one half of the sphere have
+/// std_eta = +inf in `fit.ply`, and `maps.exr` has eta NaN, eta_std +inf and the flag bit on
+/// exactly the pixels of triangles touching them — the pixels `map-eta.png` draws grey.
+#[test]
+fn one_rule_for_the_ply_and_the_float_maps() {
+    let mesh = sphere();
+    let mut fits = fits(&mesh);
+    for (f, p) in fits.iter_mut().zip(mesh.positions()) {
+        if p.x > 0.01 {
+            f.flags = vec![FitFlag::EtaUnidentifiable];
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let camera = sphere_scene().rig.camera.camera_model();
+    let config = ExportConfig {
+        picture_px: 48,
+        ..ExportConfig::default()
+    };
+    export_all(
+        dir.path(),
+        &mesh,
+        &fits,
+        &camera,
+        &pose(),
+        &flash(),
+        &config,
+        None,
+    )
+    .unwrap();
+    let back = ply::read_fit_ply(&dir.path().join("fit.ply")).unwrap();
+    for (b, f) in back.iter().zip(&fits) {
+        let withheld = f.flags.contains(&FitFlag::EtaUnidentifiable) || f.vertex == 0;
+        assert_eq!(
+            b.std_error[0].is_infinite(),
+            withheld,
+            "vertex {}",
+            f.vertex
+        );
+    }
+    let maps = ellipso_report::exr_image::FloatImage::read(&dir.path().join("maps.exr")).unwrap();
+    let eta = maps.f32_channel("eta").unwrap();
+    let eta_std = maps.f32_channel("eta_std").unwrap();
+    let a = maps.f32_channel("A").unwrap();
+    let Some(ellipso_report::exr_image::Samples::U32(flags)) = maps.channel("flags") else {
+        panic!("no u32 flags channel");
+    };
+    let view = view_file::read(dir.path()).unwrap().camera();
+    let hits = raster::rasterise(&mesh, &view);
+    let (mut nan, mut shown) = (0, 0);
+    for (i, hit) in hits.iter().enumerate() {
+        if a[i] != 1.0 {
+            continue;
+        }
+        let hit = hit.unwrap();
+        let touches = hit
+            .vertices
+            .iter()
+            .any(|&v| fits[v as usize].flags.contains(&FitFlag::EtaUnidentifiable));
+        assert_eq!(eta[i].is_nan(), touches, "pixel {i}");
+        assert_eq!(eta_std[i].is_infinite(), touches, "pixel {i}");
+        assert_eq!(flags[i] & FitFlag::EtaUnidentifiable.bit() != 0, touches);
+        if touches {
+            nan += 1;
+        } else {
+            shown += 1;
+        }
+    }
+    assert!(nan > 100 && shown > 100, "{nan} {shown}");
+}
+
 #[test]
 fn mueller_block_has_the_coaxial_sign_pattern_head_on() {
     // The sphere's top point seen from straight above with the flash 3 cm off the lens.

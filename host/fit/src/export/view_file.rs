@@ -4,8 +4,10 @@
 //! Contract: JSON with `width`, `height` (px), `focal_px` (ideal pinhole, square pixels, the
 //! principal point at the image centre), `world_from_camera` (4×4 row-major, OpenCV axes: x
 //! right, y down, z forward; world = the board frame, metres), `flash_position_world` (the
-//! rig's flash at that pose) and `key_light_world` (the relit picture's light). [`read`] checks
-//! every number is finite and the rotation orthonormal.
+//! rig's flash at that pose), `flash_polariser_axis_world` (the transmission axis of the flash's
+//! linear polariser at that pose, unit; absent or `null`: an unpolarised flash) and
+//! `key_light_world` (the relit picture's light). [`read`] checks every number is finite, the
+//! rotation orthonormal and the polariser axis a unit vector.
 
 use std::path::Path;
 
@@ -29,6 +31,9 @@ pub struct PictureView {
     pub world_from_camera: [[f64; 4]; 4],
     /// The rig's flash at this pose, world, metres.
     pub flash_position_world: [f64; 3],
+    /// The flash polariser's transmission axis at this pose, world, unit (`None`: unpolarised).
+    #[serde(default)]
+    pub flash_polariser_axis_world: Option<[f64; 3]>,
     /// The relit picture's key light, world, metres.
     pub key_light_world: [f64; 3],
 }
@@ -43,8 +48,16 @@ impl PictureView {
             focal_px: camera.focal_px,
             world_from_camera: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
             flash_position_world: flash.coords.into(),
+            flash_polariser_axis_world: None,
             key_light_world: key_light.coords.into(),
         }
+    }
+
+    /// This record with the flash behind a linear polariser of transmission axis `axis`
+    /// (world; `None`: unpolarised).
+    pub fn with_polariser(mut self, axis: Option<[f64; 3]>) -> Self {
+        self.flash_polariser_axis_world = axis;
+        self
     }
 
     /// The pinhole camera of this record.
@@ -74,6 +87,12 @@ impl PictureView {
             .chain(std::iter::once(&self.focal_px));
         if numbers.into_iter().any(|v| !v.is_finite()) {
             return Some("a number is not finite".into());
+        }
+        if let Some(a) = self.flash_polariser_axis_world {
+            let norm = a.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if norm.is_nan() || (norm - 1.0).abs() >= 1e-6 {
+                return Some("flash_polariser_axis_world is not a unit vector".into());
+            }
         }
         if self.width == 0 || self.height == 0 || self.focal_px <= 0.0 {
             return Some("the image size and focal length must be positive".into());

@@ -8,8 +8,8 @@
 
 use ellipso_report::{ColourMap, Figure, Key, Picture, Rgb};
 
-/// Colour of masked pixels in false-colour images (mid-grey: no hue, not black, not white).
-pub(super) const MASKED: Rgb = [128, 128, 128];
+/// Colour of masked pixels in false-colour images: the no-data grey of every picture.
+pub(super) const MASKED: Rgb = ellipso_report::figure::NO_DATA;
 
 /// A `w × h` picture from per-pixel colours.
 pub(super) fn picture(w: usize, h: usize, pixels: Vec<Rgb>) -> Picture {
@@ -23,22 +23,6 @@ pub(super) fn picture(w: usize, h: usize, pixels: Vec<Rgb>) -> Picture {
 /// `picture` with `key` underneath, rendered.
 pub(super) fn with_key(picture: Picture, key: Key) -> anyhow::Result<image::RgbImage> {
     Ok(Figure::bare().image("", picture).key(key).render()?)
-}
-
-/// Grey level of DoLP `t` in [0, 1] (clamped; NaN is black).
-pub(super) fn grey(t: f32) -> Rgb {
-    ColourMap::Grey.at(f64::from(t))
-}
-
-/// The AoLP picture's colour: hue = AoLP (0 and π meet), and DoLP as saturation (value 1), or
-/// as value (saturation 1) when `dolp_as_value`.
-pub(super) fn aolp_colour(aolp_rad: f32, dolp: f32, dolp_as_value: bool) -> Rgb {
-    let (a, d) = (f64::from(aolp_rad), f64::from(dolp));
-    if dolp_as_value {
-        ellipso_report::colour::aolp_dolp(a, 1.0, d)
-    } else {
-        ellipso_report::colour::aolp_dolp(a, d, 1.0)
-    }
 }
 
 /// Diverging blue–white–red colour for `t` in [−1, 1] (clamped; NaN is the colour of −1).
@@ -60,15 +44,15 @@ mod tests {
     use super::*;
 
     #[test]
-    fn aolp_colours_close_the_wheel_and_follow_dolp() {
-        use std::f32::consts::PI;
-        assert_eq!(aolp_colour(0.0, 1.0, false), [255, 0, 0]);
-        assert_eq!(aolp_colour(PI, 1.0, false), aolp_colour(0.0, 1.0, false));
-        assert_eq!(aolp_colour(PI / 3.0, 1.0, false), [0, 255, 0]);
-        // unpolarised: white as saturation, black as value
-        assert_eq!(aolp_colour(1.0, 0.0, false), [255, 255, 255]);
-        assert_eq!(aolp_colour(1.0, 0.0, true), [0, 0, 0]);
-        let _ = aolp_colour(f32::NAN, f32::NAN, true);
+    fn aolp_colours_close_the_wheel_and_unpolarised_is_white() {
+        use ellipso_report::colour::aolp_colour;
+        use std::f64::consts::PI;
+        assert_eq!(aolp_colour(Some(0.0), Some(1.0)), [255, 0, 0]);
+        assert_eq!(aolp_colour(Some(PI), Some(1.0)), [255, 0, 0]);
+        assert_eq!(aolp_colour(Some(PI / 3.0), Some(1.0)), [0, 255, 0]);
+        assert_eq!(aolp_colour(Some(1.0), Some(0.0)), [255, 255, 255]);
+        assert_eq!(aolp_colour(None, Some(0.5)), MASKED);
+        assert_eq!(aolp_colour(Some(f64::NAN), Some(f64::NAN)), MASKED);
     }
 
     #[test]
@@ -84,8 +68,6 @@ mod tests {
     fn scaling_clamps() {
         assert_eq!(unit_to_u16(2.0), 65535);
         assert_eq!(unit_to_u16(-1.0), 0);
-        assert_eq!(grey(0.5), [128; 3]);
-        assert_eq!(grey(f32::INFINITY), [255; 3]);
         let mid = diverging(0.0);
         assert!(mid.iter().all(|&c| c > 230), "{mid:?}");
     }

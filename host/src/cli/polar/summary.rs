@@ -75,7 +75,9 @@ pub(super) fn summary_json(
         "raw": {
             "width": frame.width(),
             "height": frame.height(),
-            "png_bits": loaded.container_bits,
+            "container": loaded.container,
+            "container_bits": loaded.container_bits,
+            "layout_source": loaded.layout_source,
             "bit_depth": frame.bit_depth(),
             "bit_depth_source": loaded.bit_depth_source,
             "max_dn": frame.max_dn(),

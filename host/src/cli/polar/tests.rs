@@ -12,14 +12,13 @@ fn args(frame: &Path, out: &Path) -> Args {
     Args {
         frame: frame.to_path_buf(),
         out: out.to_path_buf(),
-        layout: LayoutArg::Mono,
+        layout: Some(LayoutArg::Mono),
         bit_depth: None,
         demosaic: DemosaicMethod::Superpixel,
         dark_level: 0.0,
         saturation: None,
         dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
         max_residual: None,
-        aolp_dolp_weighted: false,
         json: false,
         calibration: None,
         npy: false,
@@ -82,14 +81,19 @@ fn mono_frame_produces_every_file_and_a_truthful_summary() {
     // s0/2 = 1000 DN of 4095 → 16-bit
     let expect = (1000.0 / 4095.0 * 65535.0f64).round() as u16;
     assert!(s0.get_pixel(0, 0)[0].abs_diff(expect) <= 1);
-    let dolp = image::open(out.join("dolp.png"))
-        .expect("dolp")
-        .into_luma8();
+    let dolp = image::open(out.join("dolp.png")).expect("dolp").into_rgb8();
     assert_eq!(dolp.width(), 240, "narrow frames get a legend-wide canvas");
+    let want = ellipso_report::colour::dolp_colour(Some(0.5));
     assert!(
-        dolp.get_pixel(0, 0)[0].abs_diff(128) <= 1,
-        "DoLP 0.5 (whole-DN rounding)"
+        dolp.get_pixel(0, 0)
+            .0
+            .iter()
+            .zip(want)
+            .all(|(a, b)| a.abs_diff(b) <= 2),
+        "DoLP 0.5 in viridis (whole-DN rounding)"
     );
+    // the saturated pixel is masked: grey, not a DoLP colour
+    assert_eq!(dolp.get_pixel(20, 5).0, render::MASKED);
     let mask = image::open(out.join("mask_bits.png"))
         .expect("mask")
         .into_luma8();
@@ -150,9 +154,8 @@ fn colour_bilinear_writes_per_band_files() {
     write_png16(&frame_path, 16, 8, frame.into_data());
     let out = dir.path().join("out");
     let mut a = args(&frame_path, &out);
-    a.layout = LayoutArg::Colour;
+    a.layout = Some(LayoutArg::Colour);
     a.demosaic = DemosaicMethod::Bilinear;
-    a.aolp_dolp_weighted = true;
     a.npy = true;
     run(a).expect("run");
     // full-precision planes: the R band's s0 is exactly 3000/4095 in the interior
@@ -216,7 +219,10 @@ fn bad_inputs_fail_with_one_line_naming_file_and_problem() {
     let rgb = dir.path().join("rgb.png");
     image::RgbImage::new(4, 4).save(&rgb).expect("write");
     let e = error_of(args(&rgb, &out));
-    assert!(e.contains("rgb.png") && e.contains("grayscale"), "{e}");
+    assert!(
+        e.contains("rgb.png") && e.contains("single-channel grey"),
+        "{e}"
+    );
 
     let truncated = dir.path().join("truncated.png");
     let full = fs::read(&rgb).expect("read");
@@ -248,7 +254,7 @@ fn bad_inputs_fail_with_one_line_naming_file_and_problem() {
     let mut a = args(&eight, &out);
     a.bit_depth = Some(12);
     let e = error_of(a);
-    assert!(e.contains("8-bit PNG but --bit-depth 12"), "{e}");
+    assert!(e.contains("PNG 8-bit but --bit-depth 12"), "{e}");
 
     let mut a = args(&dir.path().join("missing.png"), &out);
     a.saturation = Some(10);
@@ -445,4 +451,106 @@ fn bit_depth_defaults_and_warnings_are_recorded() {
         e.contains("dim.png") && e.contains("saturation level 9000"),
         "{e}"
     );
+}
+
+/// The same 12-bit mono frame as 16-bit PNG, 16-bit TIFF, float TIFF (normalised), `.npy` u2
+/// and `.npy` f4 (DN) gives the same Stokes planes; a colour frame without `--layout` is
+/// detected as colour, and a frame that is neither clearly is refused, never read as mono.
+#[test]
+fn tiff_npy_and_float_mosaics_read_like_png_and_colour_is_never_read_as_mono() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let phi = 30f64.to_radians();
+    let frame = mosaic_from_stokes(SensorLayout::MonoPolar, 64, 32, 12, |x, _, _| {
+        let s0 = 1500.0 + 8.0 * x as f64;
+        [
+            s0,
+            0.4 * s0 * (2.0 * phi).cos(),
+            0.4 * s0 * (2.0 * phi).sin(),
+        ]
+    })
+    .expect("frame");
+    let data = frame.into_data();
+    let png = dir.path().join("f.png");
+    write_png16(&png, 64, 32, data.clone());
+    let tiff16 = dir.path().join("f16.tif");
+    let tiff32 = dir.path().join("f32.tiff");
+    {
+        use tiff::encoder::{TiffEncoder, colortype};
+        let mut e = TiffEncoder::new(fs::File::create(&tiff16).unwrap()).unwrap();
+        e.write_image::<colortype::Gray16>(64, 32, &data).unwrap();
+        let floats: Vec<f32> = data.iter().map(|v| f32::from(*v) / 4095.0).collect();
+        let mut e = TiffEncoder::new(fs::File::create(&tiff32).unwrap()).unwrap();
+        e.write_image::<colortype::Gray32Float>(64, 32, &floats)
+            .unwrap();
+    }
+    let npy16 = dir.path().join("f16.npy");
+    ellipso_report::npy::write(&npy16, &[32, 64], &data).unwrap();
+    let npyf = dir.path().join("ff.npy");
+    let dn: Vec<f32> = data.iter().map(|v| f32::from(*v)).collect();
+    ellipso_report::npy::write(&npyf, &[32, 64], &dn).unwrap();
+    let s0_of = |frame: &Path, bit_depth: Option<u8>| {
+        let out = dir
+            .path()
+            .join(frame.file_name().unwrap())
+            .with_extension("out");
+        let mut a = args(frame, &out);
+        a.layout = None;
+        a.bit_depth = bit_depth;
+        a.npy = true;
+        let w = write(&a).expect("write");
+        assert!(w.headline.contains("MonoPolar"), "{}", w.headline);
+        let bytes = fs::read(out.join("s0.npy")).unwrap();
+        ellipso_report::npy::decode(&bytes).unwrap().data
+    };
+    let reference = s0_of(&png, None);
+    for (f, depth) in [
+        (&tiff16, None),
+        (&npy16, None),
+        (&npyf, Some(12)),
+        (&tiff32, Some(12)),
+    ] {
+        let s0 = s0_of(f, depth);
+        let worst = s0
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "{}: s0 differs by {worst}", f.display());
+    }
+    // a colour frame (green twice as sensitive as red and blue) without --layout: detected
+    let colour = mosaic_from_stokes(SensorLayout::ColourPolar, 64, 32, 12, |_, _, c| {
+        let k = if c == Some(Channel::Green) { 2.0 } else { 1.0 };
+        [k * 1000.0, 0.0, 0.0]
+    })
+    .expect("colour");
+    let cpath = dir.path().join("colour.png");
+    write_png16(&cpath, 64, 32, colour.into_data());
+    let mut a = args(&cpath, &dir.path().join("c"));
+    a.layout = None;
+    let w = write(&a).expect("colour frame");
+    assert!(
+        w.headline.contains("ColourPolar") && w.headline.contains("detected"),
+        "{}",
+        w.headline
+    );
+    // neither clearly: red and blue blocks off by a little, greens equal → refused
+    // block gains R 1.06, G 1.00 and 1.02, B 1.06: red/blue vs green 0.097, green vs green 0.019
+    let unclear: Vec<u16> = (0..64 * 32)
+        .map(|i| {
+            let (x, y) = (i % 64, i / 64);
+            let k = [[1.06, 1.0], [1.02, 1.06]][(y / 2) % 2][(x / 2) % 2];
+            (1000.0 * k) as u16
+        })
+        .collect();
+    let upath = dir.path().join("unclear.png");
+    write_png16(&upath, 64, 32, unclear);
+    let mut a = args(&upath, &dir.path().join("u"));
+    a.layout = None;
+    let e = error_of(a);
+    assert!(e.contains("--layout"), "{e}");
+    // a colour TIFF and a 3-D .npy are refused by name
+    let rgb = dir.path().join("rgb.npy");
+    ellipso_report::npy::write(&rgb, &[4, 4, 3], &[0u8; 48]).unwrap();
+    let e = error_of(args(&rgb, &dir.path().join("r")));
+    assert!(e.contains("2-D"), "{e}");
 }

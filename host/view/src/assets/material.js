@@ -20,7 +20,7 @@ ${GLSL_COLOUR}
 in vec3 v_pos; in vec3 v_nrm; in vec4 v_p0; in vec3 v_ss; in vec3 v_d; in float v_grey; in float v_map; flat in float v_cat;
 uniform vec3 u_eye; uniform vec3 u_light; uniform vec3 u_camUp; uniform float u_polarised; uniform float u_psi;
 uniform float u_exposure; uniform float u_d0; uniform int u_display; uniform ivec2 u_elem; uniform vec2 u_range;
-uniform vec3 u_palette[10]; uniform vec3 u_pick; uniform float u_pickR;
+uniform vec3 u_palette[18]; uniform vec3 u_pick; uniform float u_pickR;
 out vec4 o;
 void main() {
   vec3 n = normalize(v_nrm);
@@ -64,7 +64,7 @@ void main() {
       else {
         float aolp = 0.5 * atan(m.z, m.y);
         if (aolp < 0.0) aolp += PI;
-        col = m.x > 0.0 ? hsv2rgb(vec3(aolp / PI, clamp(dolp * 2.0, 0.0, 1.0), 1.0)) : vec3(0.0);
+        col = m.x > 0.0 ? hsv2rgb(vec3(aolp / PI, clamp(dolp, 0.0, 1.0), 1.0)) : vec3(0.0);
       }
     }
   }
@@ -79,7 +79,12 @@ const DISPLAYS = [
   ["std_eta", "σ(η) standard error"], ["std_rho_d", "σ(ρd) standard error"], ["normal_std", "normal σ (deg)"], ["samples", "samples used"],
   ["normal", "normal"], ["flags", "flags"],
 ];
-const FLAG_COLOURS = [[0.85, 0.2, 0.2], [0.9, 0.5, 0.1], [0.25, 0.25, 0.3], [1, 0.95, 0.3], [0.3, 0.6, 1], [0.6, 0.3, 0.9], [0.2, 0.8, 0.8], [0.95, 0.5, 0.7], [1, 0, 1], [0.35, 0.75, 0.35]];
+// one colour per fit flag (info.flags order, the last one "Invalid"), then "no flag"
+const FLAG_COLOURS = [[0.85, 0.2, 0.2], [0.9, 0.5, 0.1], [0.25, 0.25, 0.3], [1, 0.95, 0.3], [0.3, 0.6, 1], [0.6, 0.3, 0.9], [0.2, 0.8, 0.8], [0.95, 0.5, 0.7], [0.55, 0.35, 0.2], [0.7, 0.7, 0.95], [0.9, 0.9, 0.6], [0.4, 0.55, 0.4], [0.6, 0.6, 0.6], [0.2, 0.4, 0.6], [0.8, 0.4, 0.4], [0.5, 0.3, 0.5], [1, 0, 1]];
+const NO_FLAG_COLOUR = [0.35, 0.75, 0.35];
+// the display's colour range: the fit's shared ranges (the PNG maps'), mean RGB over channels
+const PARAM_INDEX = { eta: [0], sigma_s: [1], sigma_ss: [2], rho_s: [3], rho_ss: [4, 5, 6], rho_d: [7, 8, 9] };
+const STD_INDEX = { std_eta: [0], std_rho_d: [7, 8, 9] };
 
 window.runMaterial = async function () {
   const info = await api("/api/material/info");
@@ -94,7 +99,9 @@ window.runMaterial = async function () {
   const prog = program(gl, MAT_VS, matFs(pbrdf));
   const n = mesh.n;
   const centre = info.centre, radius = info.radius;
-  const state = { display: "rendered", elem: [0, 0], polarised: false, psi: 0, exposure: 1.0, lightAz: -25, lightEl: 40, lightDist: 4 * radius, greyMask: 1 | 2 | 256, pick: -1 };
+  const INVALID = 1 << info.invalid_bit, WITHHELD = 1 << info.withheld_bit, ETA_WITHHELD = 1 << info.eta_withheld_bit;
+  // grey by default: what the fit's identifiability rule withholds (as the PNG maps) and invalid values
+  const state = { display: "rendered", elem: [0, 0], polarised: false, psi: 0, exposure: 1.0, lightAz: -25, lightEl: 40, lightDist: 4 * radius, greyMask: WITHHELD | INVALID, pick: -1 };
 
   // attributes
   const p0 = new Float32Array(4 * n), ss = new Float32Array(3 * n), dd = new Float32Array(3 * n);
@@ -128,26 +135,35 @@ window.runMaterial = async function () {
     }
     return 0;
   }
+  const nFlags = info.flags.length;  // the fit's flags, then "Invalid"
   function category(st) {
-    if (st & 256) return 8;
-    for (let b = 0; b < 8; b++) if (st & (1 << b)) return b;
-    return 9;
+    for (let b = 0; b < nFlags; b++) if (st & info.flag_bits[b]) return b;
+    return nFlags;
+  }
+  function sharedRange(table, idx) {
+    const r = idx.map((k) => table[k]);
+    return [Math.min(...r.map((x) => x[0])), Math.max(...r.map((x) => x[1]))];
   }
   let range = [0, 1];
   function upload() {
     const grey = new Float32Array(n), map = new Float32Array(n), cat = new Float32Array(n);
     const vals = [];
+    const etaDisplay = state.display === "eta" || state.display === "std_eta";
     for (let i = 0; i < n; i++) {
       const st = mesh.status[i];
-      grey[i] = st & state.greyMask ? 1 : 0;
+      grey[i] = st & (state.greyMask | (etaDisplay ? ETA_WITHHELD : 0)) ? 1 : 0;
       cat[i] = category(st);
       const v = scalarOf(i, state.display);
       map[i] = isFinite(v) ? v : 1e30;
-      if (!(st & (1 | 256)) && isFinite(v)) vals.push(v);
+      if (!(st & (WITHHELD | INVALID)) && isFinite(v)) vals.push(v);
     }
-    vals.sort((a, b) => a - b);
-    range = vals.length ? [vals[Math.floor(0.01 * (vals.length - 1))], vals[Math.ceil(0.99 * (vals.length - 1))]] : [0, 1];
-    if (!(range[1] > range[0])) range = [range[0] - 0.5 * Math.abs(range[0] || 1) * 0.1, range[0] + Math.abs(range[0] || 1) * 0.05];
+    if (PARAM_INDEX[state.display]) range = sharedRange(info.ranges, PARAM_INDEX[state.display]);
+    else if (STD_INDEX[state.display]) range = sharedRange(info.std_ranges, STD_INDEX[state.display]);
+    else {
+      vals.sort((a, b) => a - b);
+      range = vals.length ? [vals[Math.floor(0.01 * (vals.length - 1))], vals[Math.ceil(0.99 * (vals.length - 1))]] : [0, 1];
+      if (!(range[1] > range[0])) range = [range[0] - 0.5 * Math.abs(range[0] || 1) * 0.1, range[0] + Math.abs(range[0] || 1) * 0.05];
+    }
     attrib("a_grey", grey, 1); attrib("a_map", map, 1); attrib("a_cat", cat, 1);
     legend();
   }
@@ -179,7 +195,7 @@ window.runMaterial = async function () {
     gl.uniform1i(U("u_display"), code === undefined ? 4 : code);
     gl.uniform2i(U("u_elem"), state.elem[0], state.elem[1]);
     gl.uniform2fv(U("u_range"), state.display === "mueller" ? [-3, 0.5] : range);
-    gl.uniform3fv(U("u_palette"), new Float32Array(FLAG_COLOURS.flat()));
+    gl.uniform3fv(U("u_palette"), new Float32Array(FLAG_COLOURS.slice(0, nFlags).concat([NO_FLAG_COLOUR]).flat()));
     const pk = state.pick >= 0 ? [mesh.pos[3 * state.pick], mesh.pos[3 * state.pick + 1], mesh.pos[3 * state.pick + 2]] : [0, 0, 0];
     gl.uniform3fv(U("u_pick"), pk);
     gl.uniform1f(U("u_pickR"), state.pick >= 0 ? 0.025 * radius : 0);
@@ -227,28 +243,39 @@ window.runMaterial = async function () {
     else if (d === "aolp") { legendBar(legendCanvas, (t) => hsvJs(t)); legendText.textContent = "AoLP 0° … 180° (camera frame)"; }
     else if (d === "rendered") legendText.textContent = "s0 per channel × exposure, sRGB";
     else if (d === "normal") legendText.textContent = "n·½+½ (world)";
-    else if (d === "flags") legendText.textContent = "";
+    else if (d === "flags") legendText.textContent = "first flag of each vertex (swatches below; green: no flag)";
     else { legendBar(legendCanvas, viridisJs); legendText.textContent = `${fmt(range[0])} … ${fmt(range[1])} (1st–99th pct)`; }
     legendCanvas.hidden = d === "rendered" || d === "normal" || d === "flags";
   }
   function hsvJs(t) { const h = t * 6, c = 1, x = 1 - Math.abs((h % 2) - 1); const [r, g, b] = h < 1 ? [c, x, 0] : h < 2 ? [x, c, 0] : h < 3 ? [0, c, x] : h < 4 ? [0, x, c] : h < 5 ? [x, 0, c] : [c, 0, x]; return [r * 255, g * 255, b * 255]; }
   const flagBoxes = el("div");
-  info.flags.concat(["Invalid (outside the model's domain)"]).forEach((name, b) => {
-    const bit = b === 8 ? 256 : 1 << b;
+  {
+    const box = el("input", { type: "checkbox" });
+    box.checked = true;
+    box.addEventListener("change", () => { state.greyMask = box.checked ? state.greyMask | WITHHELD : state.greyMask & ~WITHHELD; upload(); draw(); });
+    flagBoxes.append(el("label", {}, box, " not identifiable (the fit's rule, as the PNG maps)"));
+  }
+  info.flags.forEach((name, b) => {
+    const bit = info.flag_bits[b];
     const box = el("input", { type: "checkbox" });
     box.checked = !!(state.greyMask & bit);
     box.addEventListener("change", () => { state.greyMask = box.checked ? state.greyMask | bit : state.greyMask & ~bit; upload(); draw(); });
     const c = FLAG_COLOURS[b].map((v) => Math.round(255 * v));
     flagBoxes.append(el("label", {}, box, el("span", { class: "swatch", style: `background:rgb(${c})` }), ` ${name} (${info.flag_counts[b]})`));
   });
+  {
+    const c = NO_FLAG_COLOUR.map((v) => Math.round(255 * v));
+    flagBoxes.append(el("label", {}, el("span", { class: "swatch", style: `background:rgb(${c})` }), ` no flag (${info.unflagged})`));
+  }
   function showPick() {
     const i = state.pick;
     if (i < 0) { pickBox.textContent = "no vertex under the cursor"; return; }
     const P = mesh.params.subarray(10 * i, 10 * i + 10), S = mesh.std.subarray(10 * i, 10 * i + 10);
-    const rows = info.params.map((name, k) => el("tr", {}, el("td", {}, name), el("td", {}, fmt(P[k], 4)), el("td", {}, "± " + fmt(S[k], 4))));
     const st = mesh.status[i];
-    const flags = info.flags.filter((_, b) => st & (1 << b));
-    if (st & 256) flags.push("Invalid (parameters outside the model's domain; shown clamped)");
+    const std = (k) => (isFinite(S[k]) ? "± " + fmt(S[k], 4) : "not identifiable");
+    const value = (k) => (st & WITHHELD || (k === 0 && st & ETA_WITHHELD) ? `(${fmt(P[k], 4)}, not a measurement)` : fmt(P[k], 4));
+    const rows = info.params.map((name, k) => el("tr", {}, el("td", {}, name), el("td", {}, value(k)), el("td", {}, std(k))));
+    const flags = info.flags.filter((_, b) => st & info.flag_bits[b]);
     pickBox.replaceChildren(el("div", {}, `vertex ${i} · ${mesh.samples[i]} samples · normal ± ${fmt(mesh.nstd[i], 2)}°`),
       el("table", {}, el("tr", {}, el("th", {}, "param"), el("th", {}, "value"), el("th", {}, "std error")), ...rows),
       el("div", { class: flags.length ? "warn" : "ok" }, flags.length ? "flags: " + flags.join(", ") : "no flags"));

@@ -333,6 +333,88 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
     TriangleMesh::new(positions, normals, regions, triangles)
 }
 
+/// The scalar properties of a PLY file's `vertex` element, by name, as f64 (integers exact).
+#[derive(Clone, Debug, PartialEq)]
+pub struct VertexTable {
+    /// Property names in file order (list properties are left out).
+    pub names: Vec<String>,
+    /// The scalar type of each property as read (`f32`, `f64`, `i32`, `u32`, `u8`, …).
+    pub types: Vec<String>,
+    /// Row-major values: `rows[v][k]` is property `names[k]` of vertex `v`.
+    pub rows: Vec<Vec<f64>>,
+}
+
+impl VertexTable {
+    /// The column of property `name`, if the file has it.
+    pub fn column(&self, name: &str) -> Option<usize> {
+        self.names.iter().position(|n| n == name)
+    }
+}
+
+/// Reads every scalar property of the `vertex` element (any encoding), for files whose
+/// per-vertex properties carry more than geometry (the fit's `fit.ply`). Errors as
+/// [`parse_ply`].
+pub fn read_vertex_table(bytes: &[u8]) -> Result<VertexTable, MeshError> {
+    let (encoding, elements, start) = parse_header(bytes)?;
+    let mut body = Body {
+        bytes: &bytes[start..],
+        pos: 0,
+        encoding,
+    };
+    for el in &elements {
+        let is_vertex = el.name == "vertex";
+        let mut rows = Vec::new();
+        if el.properties.is_empty() {
+            continue;
+        }
+        for row in 0..el.count {
+            let mut values = Vec::new();
+            for p in &el.properties {
+                let missing = || {
+                    err(format!(
+                        "element `{}` row {row} property `{}`: missing or malformed value",
+                        el.name, p.name
+                    ))
+                };
+                match p.list_count {
+                    None => values.push(body.read(p.value).ok_or_else(missing)?),
+                    Some(count_ty) => {
+                        let n = body.read(count_ty).ok_or_else(missing)?;
+                        if n.is_nan() || n < 0.0 {
+                            return Err(missing());
+                        }
+                        for _ in 0..n as usize {
+                            body.read(p.value).ok_or_else(missing)?;
+                        }
+                    }
+                }
+            }
+            if is_vertex {
+                rows.push(values);
+            }
+        }
+        if is_vertex {
+            let scalar = |p: &&Property| p.list_count.is_none();
+            return Ok(VertexTable {
+                names: el
+                    .properties
+                    .iter()
+                    .filter(scalar)
+                    .map(|p| p.name.clone())
+                    .collect(),
+                types: el
+                    .properties
+                    .iter()
+                    .filter(scalar)
+                    .map(|p| format!("{:?}", p.value).to_lowercase())
+                    .collect(),
+                rows,
+            });
+        }
+    }
+    Err(err("file has no `vertex` element"))
+}
+
 /// PLY body encodings this module writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlyFormat {

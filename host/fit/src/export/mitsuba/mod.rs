@@ -1,24 +1,39 @@
-//! `ellipso export mitsuba FIT_DIR --out DIR`: a fit directory as a Mitsuba 3 scene, with
-//! ellipso's own render of the same view beside it, so a user can check the hand-over.
+//! `ellipso export mitsuba FIT_DIR --out DIR`: a fit directory as a Mitsuba 3 scene that renders
+//! in the polarised variants as the rig sees it, with ellipso's own renders of the same view
+//! beside it, so a user can check the hand-over.
 //!
 //! Contract: from `fit.ply` and `fit-view.json` alone, [`export`] writes into `out`:
-//! - `scene.xml` — the fitted mesh with Mitsuba's `pplastic` BSDF (GGX), η and α per vertex
-//!   (`mesh_attribute`), diffuse and specular albedo from bitmaps ([`atlas`]); the pictures'
-//!   camera (ideal pinhole at the chosen captured view's pose, `fit-view.json`); the rig's flash
-//!   at that pose as an isotropic unpolarised point light of unit intensity; the `direct`
-//!   integrator and a box pixel filter;
-//! - `mesh.ply`, `diffuse.exr`, `specular.exr` — what the scene loads;
-//! - `ellipso-s0.exr` — ellipso's render of the same view, parameters and light with the
-//!   single-scattering lobe off (`R`, `G`, `B` = s0 per colour channel where ellipso draws the
-//!   object, [`super::images::radiance`], no shadows, in the units Mitsuba's film gets for that
-//!   scene; `A` = 1 where the pixel's triangle has three reliable vertices, so ellipso's value
-//!   there comes from exactly the exported parameters — compare there);
+//! - `objects.xml` — what both scenes share: the fitted mesh with Mitsuba's `pplastic` BSDF
+//!   (GGX), η and α per vertex (`mesh_attribute`), diffuse and specular albedo from bitmaps
+//!   ([`atlas`]); the pictures' camera (ideal pinhole at the chosen captured view's pose,
+//!   `fit-view.json`); the rig's flash at that pose as an isotropic point light of intensity 2
+//!   behind an ideal linear polariser (a 20 × 20 mm `polarizer` sheet 5 mm in front of it,
+//!   perpendicular to the optical axis, its transmission axis the flash polariser's), so the
+//!   light leaving the sheet is a unit-intensity beam polarised as the rig's flash; a box pixel
+//!   filter;
+//! - `scene.xml` — for the `*_polarized` variants (`scalar_spectral_polarized`,
+//!   `llvm_ad_mono_polarized`, …): the `stokes` integrator around `volpath` (the integrator
+//!   that carries light through the polariser, a null surface, on its shadow rays), so the
+//!   film holds S0–S3 per pixel in the sensor's frame (x image right, y image up);
+//! - `scene-rgb.xml` — the same scene for the RGB variants (`scalar_rgb`): `volpath` alone
+//!   (there the polariser is a 50 % neutral filter, so the flash is unpolarised of intensity 1);
+//! - `mesh.ply`, `diffuse.exr` (RGB, colour-converted by Mitsuba: spectral upsampling, or
+//!   luminance in mono variants), `specular.exr` (one channel `Y`) — what the scenes load;
+//! - `ellipso-stokes.exr` — ellipso's render of the same view, parameters and polarised flash
+//!   with the single-scattering lobe off: `S0.R/G/B`, `S1.R/G/B`, `S2.R/G/B` (the Stokes vector
+//!   reaching the camera in its frame: x image right, y image up; [`stokes_render`]) and `A`;
+//! - `ellipso-s0.exr` — the same under the unpolarised flash of `scene-rgb.xml` (`R G B A`,
+//!   [`super::images::radiance`]);
+//!
+//!   in both, `A` = 1 where the pixel's triangle has three reliable vertices, so ellipso's value
+//!   there comes from exactly the exported parameters — compare there; no shadows;
 //! - `README.md` — the parameter mapping and what the hand-over loses.
 //!
 //! The mapping (`docs/model.md` §3–§4): Mitsuba's `eta` = η; `alpha` = σ_s (the model's GGX α
 //! is σ); `diffuse_reflectance` = π·ρ_d (ellipso's ρ_d has 1/π absorbed; `pplastic`
-//! divides by π; both attenuate by the unpolarised Fresnel transmissions in and out);
-//! `specular_reflectance` = ρ_s. ρ_ss and σ_ss have no `pplastic` counterpart and are dropped.
+//! divides by π; both attenuate by the Fresnel transmissions in and out, as Mueller matrices in
+//! the polarised variants); `specular_reflectance` = ρ_s. ρ_ss and σ_ss have no `pplastic`
+//! counterpart and are dropped.
 
 pub mod atlas;
 
@@ -29,7 +44,7 @@ use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_report::exr_image::FloatImage;
 use nalgebra::{Point3, Vector3};
 
-use super::ply::{FLAG_BITS, read_fit_ply};
+use super::ply::read_fit_ply;
 use super::view_file;
 use crate::data::VertexFit;
 
@@ -138,19 +153,35 @@ pub fn export(
         .map(|v| [v.params[7] * pi, v.params[8] * pi, v.params[9] * pi])
         .collect();
     let specular: Vec<[f32; 3]> = vertices.iter().map(|v| [v.params[3]; 3]).collect();
-    for (name, values) in [("diffuse.exr", &diffuse), ("specular.exr", &specular)] {
+    for (name, values, channels) in [
+        ("diffuse.exr", &diffuse, &["R", "G", "B"][..]),
+        // ρ_s is grey: one channel, which no variant colour-converts
+        ("specular.exr", &specular, &["Y"][..]),
+    ] {
         let baked = atlas::bake(faces, values);
         let mut image = FloatImage::new(baked.width, baked.height)?;
-        for (channel, plane) in ["R", "G", "B"].into_iter().zip(baked.rgb) {
+        for (channel, plane) in channels.iter().zip(baked.rgb) {
             image.push_f32(channel, plane)?;
         }
         put(name, image.encode(&out.join(name))?)?;
     }
-    put("scene.xml", scene_xml(&view, options).into_bytes())?;
-    let reference = reference_render(&mesh, &vertices, &view)?;
+    let axis = polariser_axis(&view)?;
+    put(
+        "objects.xml",
+        objects_xml(&view, &axis, options).into_bytes(),
+    )?;
+    put("scene.xml", scene_xml(true).into_bytes())?;
+    put("scene-rgb.xml", scene_xml(false).into_bytes())?;
+    let fits = fits_of(&vertices);
+    let reference = reference_render(&mesh, &fits, &view)?;
     put(
         "ellipso-s0.exr",
         reference.encode(&out.join("ellipso-s0.exr"))?,
+    )?;
+    let stokes = stokes_render(&mesh, &fits, &view, &axis)?;
+    put(
+        "ellipso-stokes.exr",
+        stokes.encode(&out.join("ellipso-stokes.exr"))?,
     )?;
     put("README.md", README.as_bytes().to_vec())?;
     Ok(MitsubaReport {
@@ -161,13 +192,9 @@ pub fn export(
     })
 }
 
-/// ellipso's render of the exported view (see the module doc), single scattering off.
-fn reference_render(
-    mesh: &TriangleMesh,
-    vertices: &[super::ply::FitVertex],
-    view: &view_file::PictureView,
-) -> Result<FloatImage, MitsubaError> {
-    let fits: Vec<VertexFit> = vertices
+/// The exported vertices as fits with the single-scattering lobe off (what `pplastic` renders).
+fn fits_of(vertices: &[super::ply::FitVertex]) -> Vec<VertexFit> {
+    vertices
         .iter()
         .enumerate()
         .map(|(i, v)| {
@@ -188,40 +215,119 @@ fn reference_render(
                 samples_used: v.samples,
                 cost: 0.0,
                 iterations: 0,
-                flags: FLAG_BITS
-                    .iter()
-                    .enumerate()
-                    .filter(|(k, _)| v.flags & (1 << k) != 0)
-                    .map(|(_, f)| *f)
-                    .collect(),
+                flags: crate::data::FitFlag::from_mask(v.flags),
                 eta_unpooled: None,
             }
         })
-        .collect();
+        .collect()
+}
+
+/// The flash polariser's transmission axis of `view` (an unpolarised rig cannot be exported as
+/// the rig: the error says so).
+fn polariser_axis(view: &view_file::PictureView) -> Result<Vector3<f64>, MitsubaError> {
+    view.flash_polariser_axis_world
+        .map(Vector3::from)
+        .ok_or_else(|| {
+            MitsubaError::Input(format!(
+                "{}: no flash_polariser_axis_world (an unpolarised flash, or a fit directory \
+                 written by an older ellipso: re-run `ellipso fit`)",
+                view_file::FILE_NAME
+            ))
+        })
+}
+
+/// `A` of the reference renders: 1 where all three vertices of the pixel's triangle are
+/// reliable (there ellipso interpolates exactly the exported values; elsewhere its pictures
+/// interpolate over the reliable vertices only, and Mitsuba sees every vertex).
+fn coverage(models: &[super::images::PixelModel], fits: &[VertexFit]) -> Vec<f32> {
+    let reliable: Vec<bool> = fits.iter().map(VertexFit::is_reliable).collect();
+    models
+        .iter()
+        .map(|m| match m {
+            Some((.., hit)) if hit.vertices.iter().all(|&v| reliable[v as usize]) => 1.0,
+            _ => 0.0,
+        })
+        .collect()
+}
+
+/// ellipso's render of the exported view under the unpolarised flash (see the module doc).
+fn reference_render(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    view: &view_file::PictureView,
+) -> Result<FloatImage, MitsubaError> {
     let camera = view.camera();
-    let models = super::images::pixel_models(mesh, &fits, &camera);
+    let models = super::images::pixel_models(mesh, fits, &camera);
     let light = Point3::from(view.flash_position_world);
     let rgb = super::images::radiance(&models, &camera, &light);
-    // A = 1 only where all three vertices of the pixel's triangle are reliable: there ellipso
-    // interpolates exactly the exported values (elsewhere its pictures interpolate over the
-    // reliable vertices only, and Mitsuba sees every vertex).
-    let cap = crate::solve::SolverConfig::default().albedo_cap;
-    let reliable: Vec<bool> = fits.iter().map(|f| f.is_reliable(cap)).collect();
-    let mut planes = [(); 4].map(|_| vec![0.0f32; rgb.len()]);
-    for (i, (c, m)) in rgb.iter().zip(&models).enumerate() {
-        if let (Some(c), Some((.., hit))) = (c, m) {
+    let mut planes = [(); 3].map(|_| vec![0.0f32; rgb.len()]);
+    for (i, c) in rgb.iter().enumerate() {
+        if let Some(c) = c {
             for (plane, v) in planes.iter_mut().zip(c) {
                 plane[i] = *v as f32;
-            }
-            if hit.vertices.iter().all(|&v| reliable[v as usize]) {
-                planes[3][i] = 1.0;
             }
         }
     }
     let mut image = FloatImage::new(camera.width as usize, camera.height as usize)?;
-    for (name, plane) in ["R", "G", "B", "A"].into_iter().zip(planes) {
+    for (name, plane) in ["R", "G", "B"].into_iter().zip(planes) {
         image.push_f32(name, plane)?;
     }
+    image.push_f32("A", coverage(&models, fits))?;
+    Ok(image)
+}
+
+/// ellipso's Stokes render of the exported view under the polarised flash: per pixel and colour
+/// channel the Stokes vector the camera receives, `P·s_flash/d²` with `s_flash` = (1, 1, 0, 0)
+/// in the light frame whose x is the polariser axis (`docs/model.md` §4, the renderer's own
+/// geometry: [`crate::data::ViewGeometry::geometry_at`]), expressed in the camera frame
+/// (x image right, y image up, z toward the camera) — the basis of Mitsuba's `stokes`
+/// integrator.
+pub fn stokes_render(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    view: &view_file::PictureView,
+    polariser_axis: &Vector3<f64>,
+) -> Result<FloatImage, MitsubaError> {
+    use ellipso_model::optics::measure::FlashPolariser;
+    let camera = view.camera();
+    let models = super::images::pixel_models(mesh, fits, &camera);
+    let pose = camera.world_from_camera;
+    let rig = crate::data::ViewGeometry {
+        frame_id: 0,
+        camera_position_world: pose.translation.vector.into(),
+        camera_up_world: (pose.rotation * -Vector3::y()).into(),
+        flash_position_world: view.flash_position_world,
+        polariser_axis_world: Some((*polariser_axis).into()),
+        camera_axis_world: None,
+    };
+    let mut planes = [(); 9].map(|_| vec![0.0f32; models.len()]);
+    for (i, m) in models.iter().enumerate() {
+        let Some((p, n, point, _)) = m else {
+            continue;
+        };
+        let Some(g) = rig.geometry_at(point) else {
+            continue;
+        };
+        let Ok(model) = g.model::<f64>(ellipso_model::optics::Vec3::from_f64(*n)) else {
+            continue;
+        };
+        let d2 = g.light_distance_m.powi(2).max(1e-12);
+        let s =
+            ellipso_model::optics::pbrdf::apply(&model, p, FlashPolariser::default().stokes(1.0));
+        for (c, stokes) in s.iter().enumerate() {
+            for (k, v) in [stokes.s0, stokes.s1, stokes.s2].into_iter().enumerate() {
+                planes[3 * k + c][i] = (v / d2) as f32;
+            }
+        }
+    }
+    let mut image = FloatImage::new(camera.width as usize, camera.height as usize)?;
+    let names = [
+        "S0.R", "S0.G", "S0.B", "S1.R", "S1.G", "S1.B", "S2.R", "S2.G", "S2.B",
+    ];
+    for (name, plane) in names.into_iter().zip(planes) {
+        image.push_f32(name, plane)?;
+    }
+    image.push_f32("A", coverage(&models, fits))?;
     Ok(image)
 }
 
@@ -230,29 +336,82 @@ fn triple(v: &Vector3<f64>) -> String {
     format!("{:e}, {:e}, {:e}", v.x, v.y, v.z)
 }
 
-/// The scene file (see the module doc).
-fn scene_xml(view: &view_file::PictureView, options: &MitsubaOptions) -> String {
+/// The scene file of the polarised (`polarised`) or the RGB variants: the integrator, then
+/// `objects.xml`.
+fn scene_xml(polarised: bool) -> String {
+    let (variants, integrator) = if polarised {
+        (
+            "a *_polarized variant: mitsuba -m scalar_spectral_polarized scene.xml (or llvm_ad_mono_polarized)",
+            r#"<integrator type="stokes">
+        <integrator type="volpath">
+            <integer name="max_depth" value="2"/>
+        </integrator>
+    </integrator>"#,
+        )
+    } else {
+        (
+            "an RGB variant: mitsuba -m scalar_rgb scene-rgb.xml (the polarised scene is scene.xml)",
+            r#"<integrator type="volpath">
+        <integer name="max_depth" value="2"/>
+    </integrator>"#,
+        )
+    };
+    format!(
+        r#"<?xml version="1.0" encoding="utf-8"?>
+<!-- Written by `ellipso export mitsuba` (README.md beside this file: the mapping and what is lost).
+     Render in {variants}; -Dspp=N changes the samples.
+     volpath (direct light only: max_depth 2) carries the flash's light through the polariser sheet. -->
+<scene version="3.0.0">
+    {integrator}
+    <include filename="objects.xml"/>
+</scene>
+"#
+    )
+}
+
+/// The camera, the polarised flash and the fitted object (see the module doc).
+fn objects_xml(
+    view: &view_file::PictureView,
+    polariser_axis: &Vector3<f64>,
+    options: &MitsubaOptions,
+) -> String {
     let camera = view.camera();
     let pose = camera.world_from_camera;
     let origin = pose.translation.vector;
     // OpenCV axes (x right, y down, z forward) → Mitsuba's look-at (forward, up = −y).
-    let target = origin + pose.rotation * Vector3::z();
+    let forward = pose.rotation * Vector3::z();
+    let target = origin + forward;
     let up = pose.rotation * -Vector3::y();
     let fov_x_deg = 2.0
         * (f64::from(camera.width) / (2.0 * camera.focal_px))
             .atan()
             .to_degrees();
+    let flash = Vector3::from(view.flash_position_world);
     let [fx, fy, fz] = view.flash_position_world;
+    // The polariser sheet: a `rectangle` (local x, y ∈ [−1, 1], normal z) whose local x is the
+    // transmission axis (Mitsuba's polarizer absorbs along the surface's v = local y), facing
+    // along the optical axis, 5 mm in front of the flash, 20 × 20 mm: it covers every ray from
+    // the flash to the object (within 60° of the axis) and none from the object to the camera
+    // (tens of millimetres to the side of it).
+    let half = 0.010;
+    let normal = (forward - polariser_axis * polariser_axis.dot(&forward)).normalize();
+    let x_axis = polariser_axis.normalize();
+    let y_axis = normal.cross(&x_axis);
+    let centre = flash + normal * 0.005;
+    let m = [x_axis * half, y_axis * half, normal];
+    let matrix: Vec<String> = (0..3)
+        .flat_map(|r| {
+            let row = [m[0][r], m[1][r], m[2][r], centre[r]];
+            row.map(|v| format!("{v:e}"))
+        })
+        .chain(["0", "0", "0", "1"].map(String::from))
+        .collect();
     format!(
         r#"<?xml version="1.0" encoding="utf-8"?>
-<!-- Written by `ellipso export mitsuba` (README.md beside this file: the mapping and what is lost).
-     Render: mitsuba -m scalar_rgb scene.xml  (or -m llvm_ad_rgb; -Dspp=N to change the samples) -->
+<!-- Written by `ellipso export mitsuba`: the camera, flash and object that scene.xml (polarised variants)
+     and scene-rgb.xml (RGB variants) share. -->
 <scene version="3.0.0">
     <default name="spp" value="{spp}"/>
-    <integrator type="direct">
-        <integer name="emitter_samples" value="1"/>
-        <integer name="bsdf_samples" value="0"/>
-    </integrator>
     <!-- the fit pictures' camera: ideal pinhole at the chosen captured view's pose (board frame, metres) -->
     <sensor type="perspective">
         <string name="fov_axis" value="x"/>
@@ -272,11 +431,18 @@ fn scene_xml(view: &view_file::PictureView, options: &MitsubaOptions) -> String 
             <string name="pixel_format" value="rgba"/>
         </film>
     </sensor>
-    <!-- the rig's flash at that pose: isotropic, unpolarised, unit intensity (README.md) -->
+    <!-- the rig's flash at that pose: an isotropic point light of intensity 2 behind an ideal
+         linear polariser, whose transmission axis is the flash polariser's: unit intensity, polarised -->
     <emitter type="point">
         <point name="position" x="{fx:e}" y="{fy:e}" z="{fz:e}"/>
-        <rgb name="intensity" value="1, 1, 1"/>
+        <rgb name="intensity" value="2, 2, 2"/>
     </emitter>
+    <shape type="rectangle">
+        <transform name="to_world">
+            <matrix value="{matrix}"/>
+        </transform>
+        <bsdf type="polarizer"/>
+    </shape>
     <shape type="ply">
         <string name="filename" value="mesh.ply"/>
         <bsdf type="pplastic">
@@ -289,13 +455,11 @@ fn scene_xml(view: &view_file::PictureView, options: &MitsubaOptions) -> String 
             </texture>
             <texture type="bitmap" name="diffuse_reflectance">
                 <string name="filename" value="diffuse.exr"/>
-                <boolean name="raw" value="true"/>
                 <string name="filter_type" value="bilinear"/>
                 <string name="wrap_mode" value="clamp"/>
             </texture>
             <texture type="bitmap" name="specular_reflectance">
                 <string name="filename" value="specular.exr"/>
-                <boolean name="raw" value="true"/>
                 <string name="filter_type" value="bilinear"/>
                 <string name="wrap_mode" value="clamp"/>
             </texture>
@@ -309,6 +473,7 @@ fn scene_xml(view: &view_file::PictureView, options: &MitsubaOptions) -> String 
         up = triple(&up),
         width = camera.width,
         height = camera.height,
+        matrix = matrix.join(" "),
     )
 }
 
@@ -360,7 +525,8 @@ mod tests {
         );
         let camera = ViewCamera::framing(pose, 40, 32, &Point3::origin(), 0.04);
         let flash = pose.transform_point(&Point3::new(0.0, -0.03, 0.0));
-        let view = view_file::PictureView::new(&camera, &flash, &Point3::new(0.1, 0.1, 0.3));
+        let view = view_file::PictureView::new(&camera, &flash, &Point3::new(0.1, 0.1, 0.3))
+            .with_polariser(Some((pose.rotation * Vector3::x()).into()));
         view_file::write(dir, &view).unwrap();
     }
 
@@ -370,9 +536,13 @@ mod tests {
         fit_dir(tmp.path());
         let out = tmp.path().join("mitsuba");
         let report = export(tmp.path(), &out, &MitsubaOptions { spp: 8 }).unwrap();
-        assert_eq!(report.files.len(), 6);
+        assert_eq!(report.files.len(), 9);
         assert_eq!(report.clamped, 1, "vertex 0 has eta = 1");
-        let xml = std::fs::read_to_string(out.join("scene.xml")).unwrap();
+        let scene = std::fs::read_to_string(out.join("scene.xml")).unwrap();
+        assert!(scene.contains(r#"<integrator type="stokes">"#) && scene.contains("volpath"));
+        assert!(scene.contains(r#"<include filename="objects.xml"/>"#));
+        let xml = std::fs::read_to_string(out.join("objects.xml")).unwrap();
+        assert!(xml.contains(r#"<bsdf type="polarizer"/>"#));
         for want in [
             r#"<bsdf type="pplastic">"#,
             r#"value="ggx""#,
