@@ -330,18 +330,47 @@ fn fit_cluster(
     })
 }
 
-/// Pools η per cluster from `fits` (indexed like the set's vertices: step A's results) and
-/// gives each vertex inside its cluster's kernel whose own η agrees the pooled
-/// prior ([`pool`]); the cluster's `eta_pooled` and `vertices_with_eta_prior` are updated.
-/// Members are the vertices with virtual samples from the cluster and a finite η standard
-/// error (a vertex returned at its prior has an infinite one).
+/// Pools η per cluster from `fits` (indexed like the set's vertices: step A's results, whose
+/// η carries the solver's weak default prior `eta_prior` = (mean, sd)) and gives each vertex
+/// inside its cluster's kernel whose own η agrees the pooled prior ([`pool`]); the cluster's
+/// `eta_pooled` and `vertices_with_eta_prior` are updated. Members are the vertices with
+/// virtual samples from the cluster.
 ///
-/// Clusters whose colour (the ρ_d part of their centroids) lies within the kernel's reach of
-/// each other ([`POOL_COLOUR_DISTANCE`]) pool together: k-means may split one material by the
-/// noise of its η, and pooling each half alone would return the bias that split selected.
-pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
+/// - **Likelihoods, not posteriors.** Each member enters with its data's own estimate: the
+///   default prior removed from its step-A posterior ([`pool::without_prior`]). Pooling the
+///   posteriors would count the default prior once per vertex and pull a material whose
+///   vertices each say little towards the prior's mean — the start value every cold start
+///   uses — until the material came back at exactly that value.
+/// - **Identified or nothing.** A pool needs [`pool::MIN_VERTICES`] informative members
+///   ([`pool::random_effects`]); a cluster without them gives no prior, its vertices keep their
+///   own η and their own flags (`EtaUnidentifiable` where their data leave it open), and the
+///   cluster's `eta_pooled.usable` says so.
+/// - **Merging.** Clusters whose colour (the ρ_d part of their centroids) lies within the
+///   kernel's reach of each other ([`POOL_COLOUR_DISTANCE`]) pool together only when their own
+///   pooled η agree (within [`pool::AGREE_SIGMAS`] of the combined spread): k-means may split one
+///   material by the noise of its η, and pooling each half alone would return the bias that
+///   split selected — but two materials of one colour and different η stay apart.
+pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
     let k = a.clusters.len();
-    // Union-find over clusters by colour distance.
+    let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
+    for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
+        if let Some(j) = j
+            && !g.virtual_samples.is_empty()
+            && v < fits.len()
+        {
+            members[*j].push(v);
+        }
+    }
+    let points_of = |list: &[usize]| -> Vec<(f64, f64)> {
+        list.iter()
+            .map(|&v| pool::without_prior(fits[v].params.eta, fits[v].std_error[0], eta_prior))
+            .collect()
+    };
+    let own: Vec<pool::Pooled> = members
+        .iter()
+        .map(|list| pool::random_effects(&points_of(list)))
+        .collect();
+    // Union-find over clusters of one colour whose identified η agree.
     let mut group: Vec<usize> = (0..k).collect();
     fn root(group: &mut [usize], mut i: usize) -> usize {
         while group[i] != i {
@@ -354,30 +383,21 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
         for j in i + 1..k {
             let (ci, cj) = (&a.clusters[i].centroid, &a.clusters[j].centroid);
             let d2: f64 = (0..3).map(|c| (ci[c] - cj[c]).powi(2)).sum();
-            if d2.sqrt() < POOL_COLOUR_DISTANCE {
+            if d2.sqrt() < POOL_COLOUR_DISTANCE && own[i].agrees_with(&own[j]) {
                 let (ri, rj) = (root(&mut group, i), root(&mut group, j));
                 group[ri.max(rj)] = ri.min(rj);
             }
         }
     }
-    let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
-    for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
-        if let Some(j) = j
-            && !g.virtual_samples.is_empty()
-            && v < fits.len()
-        {
-            members[root(&mut group, *j)].push(v);
-        }
-    }
+    let mut pooled_members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (j, list) in members.iter().enumerate() {
+        pooled_members[root(&mut group, j)].extend(list);
+    }
+    for (j, list) in pooled_members.iter().enumerate() {
         if list.is_empty() {
             continue;
         }
-        let points: Vec<(f64, f64)> = list
-            .iter()
-            .map(|&v| (fits[v].params.eta, fits[v].std_error[0]))
-            .collect();
-        let pooled = pool::random_effects(&points);
+        let pooled = pool::random_effects(&points_of(list));
         for c in 0..k {
             if root(&mut group, c) == j {
                 a.clusters[c].eta_pooled = pooled;
@@ -387,12 +407,12 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit]) {
             let f = &fits[v];
             // A vertex whose η its own flags disown takes the material's η without the
             // agreement test.
-            let se = if eta_trusted(f) {
-                f.std_error[0]
+            let (eta, se) = if eta_trusted(f) {
+                pool::without_prior(f.params.eta, f.std_error[0], eta_prior)
             } else {
-                f64::INFINITY
+                (f.params.eta, f64::INFINITY)
             };
-            a.guides[v].eta_prior = pooled.prior_for(f.params.eta, se);
+            a.guides[v].eta_prior = pooled.prior_for(eta, se);
         }
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();

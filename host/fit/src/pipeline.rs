@@ -178,7 +178,7 @@ pub fn fit_shared_steps(
         let started = Instant::now();
         let mut a = augment(set, &fits, augment_config);
         if config.pool_eta {
-            pool_eta(&mut a, &fits);
+            pool_eta(&mut a, &fits, config.solver.eta_prior);
         }
         times.augment_s = started.elapsed().as_secs_f64();
         let pooled: Vec<usize> = (0..fits.len())
@@ -236,7 +236,14 @@ fn final_pass(
             if guide.virtual_samples.is_empty() && guide.eta_prior.is_none() {
                 return fit.clone();
             }
-            crate::solve::fit_vertex(&set.views, v, set.colour, Some(fit), guide, solver)
+            let mut out =
+                crate::solve::fit_vertex(&set.views, v, set.colour, Some(fit), guide, solver);
+            if guide.eta_prior.is_some() {
+                // The pool's prior entered: keep the vertex's own estimate beside it.
+                out.flags.push(crate::data::FitFlag::EtaPooled);
+                out.eta_unpooled = Some(fit.eta_unpooled.unwrap_or([fit.params.eta, fit.std_error[0]]));
+            }
+            out
         })
         .collect()
 }

@@ -27,7 +27,7 @@
 //!   high and low η (whose pooled values would then be biased by that very selection); with
 //!   materials of different η, τ is their spread and precise vertices keep their η.
 
-/// Fewer usable vertices than this give no pooled value.
+/// Fewer usable — and fewer informative — vertices than this give no pooled value.
 pub const MIN_VERTICES: usize = 5;
 
 /// Vertices whose η standard error is at most this carry information of their own (the
@@ -60,6 +60,17 @@ pub struct Pooled {
 }
 
 impl Pooled {
+    /// Whether two pools may be one material's: both identified and their η within
+    /// [`AGREE_SIGMAS`] of their combined spread (standard errors and between-vertex spreads).
+    pub fn agrees_with(&self, other: &Pooled) -> bool {
+        if !(self.usable && other.usable) {
+            return false;
+        }
+        let spread = (self.se.powi(2) + other.se.powi(2) + self.tau.powi(2) + other.tau.powi(2))
+            .sqrt();
+        (self.mean - other.mean).abs() <= AGREE_SIGMAS * spread
+    }
+
     /// The prior (mean, sd) for a vertex whose own estimate is `eta` ± `se` (module doc); an
     /// infinite `se` (an estimate the vertex's flags disown) always agrees.
     pub fn prior_for(&self, eta: f64, se: f64) -> Option<[f64; 2]> {
@@ -74,6 +85,28 @@ impl Pooled {
             || (eta - self.mean).abs() <= AGREE_SIGMAS * spread;
         (agrees && sd > 0.0 && sd.is_finite()).then_some([self.mean, sd])
     }
+}
+
+/// A vertex's own estimate of η from its data alone: the Gaussian prior `prior` = (mean, sd)
+/// that its solve carried, removed from its posterior `eta` ± `se` (precisions subtract:
+/// 1/s_data² = 1/se² − 1/sd², and the means follow). A posterior no more precise than the
+/// prior holds no data about η: its standard error is +∞. A non-finite `se` stays +∞, and a
+/// prior of infinite width leaves the estimate as it is.
+pub fn without_prior(eta: f64, se: f64, prior: [f64; 2]) -> (f64, f64) {
+    let [mean, sd] = prior;
+    if !(se.is_finite() && se > 0.0) {
+        return (eta, f64::INFINITY);
+    }
+    if !(sd.is_finite() && sd > 0.0) {
+        return (eta, se);
+    }
+    let (post, prior_precision) = (1.0 / (se * se), 1.0 / (sd * sd));
+    let data = post - prior_precision;
+    // Below a thousandth of the prior's precision the data say nothing about η.
+    if data <= 1e-3 * prior_precision {
+        return (eta, f64::INFINITY);
+    }
+    ((eta * post - mean * prior_precision) / data, 1.0 / data.sqrt())
 }
 
 /// One DerSimonian–Laird estimate over `(η, s)` pairs (all usable): (mean, se, τ).
@@ -129,11 +162,17 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
         .filter(|p| p.1 <= INFORMATIVE_SE)
         .map(|p| p.0)
         .collect();
-    let mean = if informative.is_empty() {
-        median(kept.iter().map(|p| p.0).collect())
-    } else {
-        median(informative)
-    };
+    // Without informative members the material's η is not identified: no value at all rather
+    // than the median of estimates the data did not fix.
+    if informative.len() < MIN_VERTICES {
+        return Pooled {
+            vertices: kept.len(),
+            trimmed: usable.len() - kept.len(),
+            median: centre,
+            ..Pooled::default()
+        };
+    }
+    let mean = median(informative);
     let se = 1.2533 * se;
     Pooled {
         usable: mean.is_finite() && se.is_finite() && tau.is_finite(),

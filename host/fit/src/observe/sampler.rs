@@ -180,14 +180,10 @@ impl DnImage {
                 .fold(0.0, f64::max),
             SensorLayout::MonoPolar => 0.0,
         };
-        let reach = match kernel {
-            SampleKernel::Bilinear => 1.0,
-            SampleKernel::CatmullRom => 2.0,
-        };
         DnImage {
             tile_px: t as f64,
             kernel,
-            footprint_radius_px: reach * t as f64 + spread + 0.5,
+            footprint_radius_px: kernel.reach_tiles() * t as f64 + spread + 0.5,
             width: w,
             height: h,
             bands,
@@ -249,6 +245,14 @@ pub enum SampleKernel {
 }
 
 impl SampleKernel {
+    /// How many lattice steps (tiles) on each side of the point the kernel's taps reach.
+    pub fn reach_tiles(self) -> f64 {
+        match self {
+            SampleKernel::Bilinear => 1.0,
+            SampleKernel::CatmullRom => 2.0,
+        }
+    }
+
     /// Up to four (index, weight) taps of lattice coordinate `s` in `0..n`; indices are clamped
     /// to the plane (the edge sample repeats), weights sum to 1.
     fn taps(self, s: f64, n: usize) -> [(usize, f64); 4] {
@@ -448,8 +452,8 @@ impl<'a> FrameSampler<'a> {
         false
     }
 
-    /// Whether the sample's footprint — the square of half-side
-    /// [`AnalyserPixels::footprint_radius_px`] about its pixel — lies on the vertex's visible
+    /// Whether the sample's footprint — the square of half-side `r` px about its pixel
+    /// ([`AnalyserPixels::footprint_radius_px`]) — lies on the vertex's visible
     /// surface: the rays through its four corners and four edge midpoints each meet the mesh
     /// within the distance a footprint of that size can cover on the vertex's tangent plane
     /// (the corners' image distance at depth `depth_m`, stretched by 1/cos of the view angle,
@@ -463,10 +467,10 @@ impl<'a> FrameSampler<'a> {
         v: usize,
         position: &Point3<f64>,
         pixel: [f64; 2],
+        r: f64,
         depth_m: f64,
         cos_view: f64,
     ) -> bool {
-        let r = self.image.footprint_radius_px();
         if r <= 0.0 {
             return true;
         }
@@ -545,7 +549,8 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        if !self.footprint_on_surface(v, &position, pixel, p_cam.z, cos_view) {
+        let r = self.image.footprint_radius_px();
+        if !self.footprint_on_surface(v, &position, pixel, r, p_cam.z, cos_view) {
             return Outcome::Mixed;
         }
 
