@@ -235,9 +235,10 @@ impl Bench {
         let colour = fit.set.colour;
         let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
         let full_scale = ellipso_fit::accuracy::full_scale_dn(&scene);
-        let holdout = fit.held_out_set.as_ref().map(|held| {
-            holdout_beside_truth(held, &fit.outcome.fits, &at, full_scale)
-        });
+        let holdout = fit
+            .held_out_set
+            .as_ref()
+            .map(|held| holdout_beside_truth(held, &fit.outcome.fits, &at, full_scale));
         let sensor = ellipso_fit::accuracy::sensor_model(&scene);
         let residuals = truth_residuals(&fit.set, &at, &truth.material_names, &sensor);
         Ok(RunResult {
@@ -324,8 +325,14 @@ fn session_key(edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]
 }
 
 /// Path helper for callers: the work directory's session of a spec.
-pub fn session_dir(work: &Path, edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]>) -> PathBuf {
-    work.join(session_key(edit, supersampling, resolution)).join("session")
+pub fn session_dir(
+    work: &Path,
+    edit: &SceneEdit,
+    supersampling: u32,
+    resolution: Option<[u32; 2]>,
+) -> PathBuf {
+    work.join(session_key(edit, supersampling, resolution))
+        .join("session")
 }
 
 /// The runs of the error budget for `scene` captured at `supersampling` (module doc): the full
@@ -376,7 +383,11 @@ pub fn budget_specs(scene: &Scene, supersampling: u32) -> Vec<RunSpec> {
         s.mesh = MeshSource::True;
     };
     for on_true_geometry in [false, true] {
-        let suffix = if on_true_geometry { " | true geometry" } else { "" };
+        let suffix = if on_true_geometry {
+            " | true geometry"
+        } else {
+            ""
+        };
         let stage = |name: &str, f: &dyn Fn(&mut RunSpec)| {
             with(&format!("{name}{suffix}"), &|s| {
                 if on_true_geometry {

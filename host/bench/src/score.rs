@@ -136,8 +136,11 @@ pub fn score_fit(
     let unpooled = |f: &VertexFit| f.eta_unpooled.map_or(f.params.eta, |u| u[0]);
     let mut materials = Vec::new();
     for (m, name) in names.iter().enumerate() {
-        let members: Vec<(usize, &VertexTruth)> =
-            scored.iter().copied().filter(|(_, t)| t.material == m).collect();
+        let members: Vec<(usize, &VertexTruth)> = scored
+            .iter()
+            .copied()
+            .filter(|(_, t)| t.material == m)
+            .collect();
         let Some(&(_, first)) = members.first() else {
             continue;
         };
@@ -164,10 +167,18 @@ pub fn score_fit(
                     .map(|&(v, t)| rho_d_error_pct(&fits[v], t, colour))
                     .collect(),
             ),
-            sigma_s_median: median(members.iter().map(|&(v, _)| fits[v].params.sigma_s).collect()),
+            sigma_s_median: median(
+                members
+                    .iter()
+                    .map(|&(v, _)| fits[v].params.sigma_s)
+                    .collect(),
+            ),
             sigma_s_true: first.params.sigma_s,
             sigma_ss_median: median(
-                members.iter().map(|&(v, _)| fits[v].params.sigma_ss).collect(),
+                members
+                    .iter()
+                    .map(|&(v, _)| fits[v].params.sigma_ss)
+                    .collect(),
             ),
             sigma_ss_true: first.params.sigma_ss,
             normal_median_deg: median(
@@ -326,8 +337,7 @@ pub fn truth_residuals(
             let Some(frames) = SampleFrames::new(view, vs.position_world) else {
                 continue;
             };
-            let Some(unit) =
-                unit_sample_at(&frames, t.normal_world, p.eta, p.sigma_s, p.sigma_ss)
+            let Some(unit) = unit_sample_at(&frames, t.normal_world, p.eta, p.sigma_s, p.sigma_ss)
             else {
                 continue;
             };

@@ -190,8 +190,19 @@ fn read_noise_e(scene: &Scene) -> f64 {
 
 /// Simulates `case` on `scene` (see the module doc).
 pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCapture> {
+    let truth = TruthObject::from_scene(scene, case.subdivisions)?;
+    simulate_with_truth(scene, case, truth)
+}
+
+/// [`simulate`] of an object given as `truth` (its mesh in the world frame, its parameters
+/// and materials per vertex — e.g. the scene's object with materials of its own), photographed
+/// along `scene`'s capture path with its radiometry and sensor.
+pub fn simulate_with_truth(
+    scene: &Scene,
+    case: &CaptureCase,
+    mut truth: TruthObject,
+) -> anyhow::Result<SimulatedCapture> {
     let scene = with_photo_count(scene, case.photos)?;
-    let mut truth = TruthObject::from_scene(&scene, case.subdivisions)?;
     let views = views_of_scene(&scene, &scene.camera_poses);
     let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
     let radiometry = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);

@@ -53,6 +53,8 @@ pub mod virtual_samples;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_pool;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -349,7 +351,9 @@ fn fit_cluster(
 ///   kernel's reach of each other ([`POOL_COLOUR_DISTANCE`]) pool together only when their own
 ///   pooled η agree (within [`pool::AGREE_SIGMAS`] of the combined spread): k-means may split one
 ///   material by the noise of its η, and pooling each half alone would return the bias that
-///   split selected — but two materials of one colour and different η stay apart.
+///   split selected — but two materials of one colour and different η stay apart, and a
+///   vertex whose own η agrees with both (its data cannot tell which it is of) borrows from
+///   neither.
 pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
     let k = a.clusters.len();
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
@@ -389,20 +393,40 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
             }
         }
     }
+    let roots: Vec<usize> = (0..k).map(|j| root(&mut group, j)).collect();
     let mut pooled_members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (j, list) in members.iter().enumerate() {
-        pooled_members[root(&mut group, j)].extend(list);
+        pooled_members[roots[j]].extend(list);
     }
-    for (j, list) in pooled_members.iter().enumerate() {
-        if list.is_empty() {
+    let pools: Vec<Option<pool::Pooled>> = pooled_members
+        .iter()
+        .map(|list| (!list.is_empty()).then(|| pool::random_effects(&points_of(list))))
+        .collect();
+    for c in 0..k {
+        if let Some(p) = pools[roots[c]] {
+            a.clusters[c].eta_pooled = p;
+        }
+    }
+    // The pools of one colour as cluster `j`'s, other than its own.
+    let same_colour = |j: usize| -> Vec<usize> {
+        let mut r: Vec<usize> = (0..k)
+            .filter(|&c| roots[c] != roots[j])
+            .filter(|&c| {
+                let (cj, cc) = (&a.clusters[j].centroid, &a.clusters[c].centroid);
+                (0..3).map(|i| (cj[i] - cc[i]).powi(2)).sum::<f64>().sqrt() < POOL_COLOUR_DISTANCE
+            })
+            .map(|c| roots[c])
+            .collect();
+        r.sort_unstable();
+        r.dedup();
+        r
+    };
+    let neighbours: Vec<Vec<usize>> = (0..k).map(same_colour).collect();
+    let mut priors = Vec::new();
+    for (j, list) in members.iter().enumerate() {
+        let Some(pooled) = pools[roots[j]] else {
             continue;
-        }
-        let pooled = pool::random_effects(&points_of(list));
-        for c in 0..k {
-            if root(&mut group, c) == j {
-                a.clusters[c].eta_pooled = pooled;
-            }
-        }
+        };
         for &v in list {
             let f = &fits[v];
             // A vertex whose η its own flags disown takes the material's η without the
@@ -412,8 +436,23 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
             } else {
                 (f.params.eta, f64::INFINITY)
             };
-            a.guides[v].eta_prior = pooled.prior_for(eta, se);
+            // A vertex whose own η would agree with another pool of its colour as well cannot
+            // say which material it is of: it borrows from neither.
+            let ambiguous = neighbours[j]
+                .iter()
+                .any(|&r| pools[r].is_some_and(|p| p.prior_for(eta, se).is_some()));
+            priors.push((
+                v,
+                if ambiguous {
+                    None
+                } else {
+                    pooled.prior_for(eta, se)
+                },
+            ));
         }
+    }
+    for (v, prior) in priors {
+        a.guides[v].eta_prior = prior;
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
 }
@@ -439,7 +478,11 @@ impl<'f> Clustering<'f> {
                 *slot = Some(f);
             }
         }
-        let excluded = |f: &VertexFit| f.flags.iter().any(|flag| config.exclude_flags.contains(flag));
+        let excluded = |f: &VertexFit| {
+            f.flags
+                .iter()
+                .any(|flag| config.exclude_flags.contains(flag))
+        };
         let members: Vec<usize> = (0..n)
             .filter(|&v| by_vertex[v].is_some_and(|f| !excluded(f)))
             .collect();

@@ -241,7 +241,10 @@ fn final_pass(
             if guide.eta_prior.is_some() {
                 // The pool's prior entered: keep the vertex's own estimate beside it.
                 out.flags.push(crate::data::FitFlag::EtaPooled);
-                out.eta_unpooled = Some(fit.eta_unpooled.unwrap_or([fit.params.eta, fit.std_error[0]]));
+                out.eta_unpooled = Some(
+                    fit.eta_unpooled
+                        .unwrap_or([fit.params.eta, fit.std_error[0]]),
+                );
             }
             out
         })

@@ -26,6 +26,7 @@ use nalgebra::Isometry3;
 
 use super::data::{GateCounts, SampleSet, VertexFit};
 use super::holdout::{HoldoutReport, score, split};
+use super::observe::sampler::UNLABELLED;
 use super::observe::{
     Extraction, FrameImages, MosaicFrames, ObserveConfig, ObserveError, ObserveReport,
     extract_from, extract_shard, radiometry_of,
@@ -34,7 +35,6 @@ use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
 use super::shape::{
     ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
 };
-use super::observe::sampler::UNLABELLED;
 use super::shard::Shard;
 use super::solve::fit_all;
 use ellipso_session::reader::Session;
@@ -195,20 +195,19 @@ pub fn fit_session_with(
     // The first extraction knows no materials; every later one gates samples whose footprint
     // mixes two of the previous iteration's materials (`material_labels`).
     let mut observe_config = config.observe.clone();
-    let extract = |mesh: &TriangleMesh,
-                   poses: &[(u64, Isometry3<f64>)],
-                   observe_config: &ObserveConfig| {
-        extract_from(
-            session,
-            &radiometry,
-            mesh,
-            poses,
-            observe_config,
-            Shard::ALL,
-            frames,
-            &|_, _| {},
-        )
-    };
+    let extract =
+        |mesh: &TriangleMesh, poses: &[(u64, Isometry3<f64>)], observe_config: &ObserveConfig| {
+            extract_from(
+                session,
+                &radiometry,
+                mesh,
+                poses,
+                observe_config,
+                Shard::ALL,
+                frames,
+                &|_, _| {},
+            )
+        };
     let observe = |mesh: &TriangleMesh, observe_config: &ObserveConfig| {
         let started = Instant::now();
         let e = extract(mesh, poses, observe_config)?;

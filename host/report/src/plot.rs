@@ -74,6 +74,8 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// How its line is drawn.
     pub stroke: Stroke,
+    /// Dots at the points and no line between them.
+    pub dots: bool,
 }
 
 /// A line-plot builder.
@@ -89,6 +91,7 @@ pub struct LinePlot {
     width: u32,
     height: u32,
     legend: LegendPosition,
+    y_names: Vec<String>,
 }
 
 impl LinePlot {
@@ -105,6 +108,7 @@ impl LinePlot {
             width: 960,
             height: 640,
             legend: LegendPosition::TopRight,
+            y_names: Vec::new(),
         }
     }
     /// Where to put the legend.
@@ -163,7 +167,34 @@ impl LinePlot {
             name: name.into(),
             points: points.into_iter().collect(),
             stroke,
+            dots: false,
         });
+        self
+    }
+
+    /// Adds a series drawn as dots at its points, no line between them, in the next palette
+    /// colour.
+    pub fn dots(
+        mut self,
+        name: impl Into<String>,
+        points: impl IntoIterator<Item = (f64, f64)>,
+    ) -> Self {
+        let color = PALETTE[self.series.len() % PALETTE.len()];
+        self.series.push(Series {
+            name: name.into(),
+            points: points.into_iter().collect(),
+            stroke: Stroke::solid(color, 3),
+            dots: true,
+        });
+        self
+    }
+
+    /// Names the rows of a categorical y axis: y = k is row `names[k]`, drawn top to bottom,
+    /// each tick labelled by its name (the y range becomes −½ … n − ½, reversed).
+    pub fn y_names(mut self, names: Vec<String>) -> Self {
+        let n = names.len() as f64;
+        self.y_names = names;
+        self.y_range = Some((-0.5, n - 0.5));
         self
     }
 
@@ -248,15 +279,44 @@ impl LinePlot {
             .caption(&self.title, text(24.0))
             .margin(16)
             .x_label_area_size(56)
-            .y_label_area_size(if self.y_label.is_empty() { 56 } else { 80 })
+            .y_label_area_size(if !self.y_names.is_empty() {
+                // room for the longest row name at the label font's ~9 px per character
+                (self
+                    .y_names
+                    .iter()
+                    .map(|n| n.chars().count())
+                    .max()
+                    .unwrap_or(0) as u32
+                    * 9
+                    + 24)
+                    .clamp(56, 420)
+            } else if self.y_label.is_empty() {
+                56
+            } else {
+                80
+            })
             .build_cartesian_2d(x, y)
             .map_err(ReportError::draw)?;
         let log_x = self.log_x;
         let x_tick = move |v: &f64| tick_label(*v, log_x);
-        let y_tick = |v: &f64| tick_label(*v, false);
-        chart
-            .configure_mesh()
-            .x_label_formatter(&x_tick)
+        let names = &self.y_names;
+        let y_tick = |v: &f64| {
+            if names.is_empty() {
+                return tick_label(*v, false);
+            }
+            // Rows are drawn top to bottom: row k sits at y = n − 1 − k.
+            let k = names.len() as f64 - 1.0 - v.round();
+            if (v - v.round()).abs() < 1e-6 && k >= 0.0 && (k as usize) < names.len() {
+                names[k as usize].clone()
+            } else {
+                String::new()
+            }
+        };
+        let mut mesh = chart.configure_mesh();
+        if !self.y_names.is_empty() {
+            mesh.y_labels(self.y_names.len() * 2 + 1);
+        }
+        mesh.x_label_formatter(&x_tick)
             .y_label_formatter(&y_tick)
             .x_desc(self.x_label.as_str())
             .y_desc(self.y_label.as_str())
@@ -276,9 +336,22 @@ impl LinePlot {
             } = series.stroke;
             let style = RGBColor(r, g, b).stroke_width(thickness.max(1));
             let mut first = true;
-            for run in series.points.split(|&p| !self.drawable(p)) {
+            // Categorical rows count from the top.
+            let flip = |(x, y): (f64, f64)| {
+                if self.y_names.is_empty() {
+                    (x, y)
+                } else {
+                    (x, self.y_names.len() as f64 - 1.0 - y)
+                }
+            };
+            let points: Vec<(f64, f64)> = series.points.iter().copied().map(flip).collect();
+            for run in points.split(|&p| !self.drawable(p)) {
                 let anno = match (run, dash) {
                     ([], _) => continue,
+                    (_, _) if series.dots => chart.draw_series(
+                        run.iter()
+                            .map(|p| Circle::new(*p, thickness + 2, style.filled())),
+                    ),
                     ([p], _) => chart.draw_series(std::iter::once(Circle::new(
                         *p,
                         thickness + 2,
@@ -297,6 +370,9 @@ impl LinePlot {
                     labelled = true;
                     let anno = anno.label(series.name.as_str());
                     match dash {
+                        _ if series.dots => anno.legend(move |(x, y)| {
+                            Circle::new((x + 14, y), thickness + 2, style.filled())
+                        }),
                         None => anno
                             .legend(move |(x, y)| PathElement::new([(x, y), (x + 28, y)], style)),
                         // short dashes, so a dashed series reads as dashed in the legend

@@ -66,8 +66,8 @@ impl Pooled {
         if !(self.usable && other.usable) {
             return false;
         }
-        let spread = (self.se.powi(2) + other.se.powi(2) + self.tau.powi(2) + other.tau.powi(2))
-            .sqrt();
+        let spread =
+            (self.se.powi(2) + other.se.powi(2) + self.tau.powi(2) + other.tau.powi(2)).sqrt();
         (self.mean - other.mean).abs() <= AGREE_SIGMAS * spread
     }
 
@@ -106,7 +106,10 @@ pub fn without_prior(eta: f64, se: f64, prior: [f64; 2]) -> (f64, f64) {
     if data <= 1e-3 * prior_precision {
         return (eta, f64::INFINITY);
     }
-    ((eta * post - mean * prior_precision) / data, 1.0 / data.sqrt())
+    (
+        (eta * post - mean * prior_precision) / data,
+        1.0 / data.sqrt(),
+    )
 }
 
 /// One DerSimonian–Laird estimate over `(η, s)` pairs (all usable): (mean, se, τ).

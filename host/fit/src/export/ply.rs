@@ -6,6 +6,8 @@
 //! normal), `float eta sigma_s sigma_ss rho_s rho_ss_r rho_ss_g rho_ss_b rho_d_r rho_d_g
 //! rho_d_b`, their standard errors `float std_eta … std_rho_d_b` (same order; +inf where the
 //! identifiability rule [`crate::data::Identifiable`] withholds the parameter),
+//! `float eta_unpooled std_eta_unpooled` (the vertex's own η and standard error before its
+//! material's pooled η entered — flag `EtaPooled` — and its final ones where none did),
 //! `float normal_std_deg` (≤ 180°, [`crate::data::MAX_REPORTED_ANGLE_STD_DEG`]), `int samples`,
 //! `int flags` (bit k set = [`FitFlag::ALL`]`[k]`, the output flags of
 //! [`VertexFit::output_flags`]) and `uchar red green blue` (the diffuse albedo π·ρ_d, sRGB, grey
@@ -167,6 +169,17 @@ pub fn schema() -> Vec<Property> {
             r.std_error[k]
         }));
     }
+    // The vertex's own η before its material's pool entered (its final η where none did).
+    s.push(property("eta_unpooled", Float, |r| {
+        r.fit.eta_unpooled.map_or(r.fit.params.eta, |u| u[0])
+    }));
+    s.push(property("std_eta_unpooled", Float, |r| {
+        match r.fit.eta_unpooled {
+            _ if !r.identifiable.vertex => f64::INFINITY,
+            Some(u) => u[1],
+            None => r.std_error[0],
+        }
+    }));
     s.push(property("normal_std_deg", Float, |r| {
         r.fit.reported_normal_std_deg()
     }));

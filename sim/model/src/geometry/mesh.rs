@@ -21,6 +21,11 @@ use std::path::{Path, PathBuf};
 /// Largest accepted region id (region tables are dense arrays indexed by id).
 pub const MAX_REGION_ID: u32 = 65_535;
 
+/// Rounding a ray-triangle test allows on the barycentric coordinates (dimensionless): enough
+/// for a ray through a shared edge to meet a triangle on either side, far below any sampled
+/// position's precision.
+const EDGE_EPS: f64 = 1e-12;
+
 /// Errors from building or loading a mesh.
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
@@ -242,7 +247,8 @@ impl TriangleMesh {
         Some(regions[k])
     }
 
-    /// Möller–Trumbore test of one triangle: `(t, b1, b2)` with `b0 = 1 - b1 - b2`.
+    /// Möller–Trumbore test of one triangle (Möller & Trumbore 1997): `(t, b1, b2)` with
+    /// `b0 = 1 - b1 - b2`.
     fn hit_triangle(
         &self,
         prim: u32,
@@ -259,13 +265,16 @@ impl TriangleMesh {
         }
         let inv_det = 1.0 / det;
         let tvec = ray.origin.coords - p0;
+        // The barycentric tests allow EDGE_EPS of rounding: a ray through a shared edge (or a
+        // vertex) then meets both triangles instead of slipping between them, where the two
+        // rounded tests could each reject it (Möller–Trumbore is not watertight).
         let b1 = tvec.dot(&pvec) * inv_det;
-        if !(0.0..=1.0).contains(&b1) {
+        if !(-EDGE_EPS..=1.0 + EDGE_EPS).contains(&b1) {
             return None;
         }
         let qvec = tvec.cross(e1);
         let b2 = ray.dir.dot(&qvec) * inv_det;
-        if b2 < 0.0 || b1 + b2 > 1.0 {
+        if b2 < -EDGE_EPS || b1 + b2 > 1.0 + EDGE_EPS {
             return None;
         }
         let t = e2.dot(&qvec) * inv_det;
