@@ -316,6 +316,9 @@ fn session_key(edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]
     if let Some(s) = edit.seed {
         key += &format!("-seed{s}");
     }
+    if edit.unclipped {
+        key += "-unclipped";
+    }
     let mut removed = edit.remove_effects.clone();
     removed.sort();
     for r in removed {
@@ -404,14 +407,23 @@ pub fn budget_specs(scene: &Scene, supersampling: u32) -> Vec<RunSpec> {
         }));
         for name in &present {
             specs.push(stage(&format!("no {}", name.replace('_', " ")), &|s| {
-                s.edit.remove_effects = vec![(*name).to_string()];
+                if *name == "saturation" {
+                    s.edit.unclipped = true;
+                } else {
+                    s.edit.remove_effects = vec![(*name).to_string()];
+                }
             }));
         }
     }
     specs.push(with("all truth", &|s| {
         geometry_true(s);
         s.pixels = Pixels::Ideal(Footprint::Point);
-        s.edit.remove_effects = present.iter().map(|n| n.to_string()).collect();
+        s.edit.unclipped = present.contains(&"saturation");
+        s.edit.remove_effects = present
+            .iter()
+            .filter(|n| **n != "saturation")
+            .map(|n| n.to_string())
+            .collect();
     }));
     specs
 }

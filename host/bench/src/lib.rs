@@ -14,10 +14,12 @@
 //! | [`truth_map`] | the truth at the vertices of any mesh (closest point of the true surface) |
 //! | [`score`] | per-material and per-vertex errors, held-out re-render beside the truth's own, residuals at the truth |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
+//! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
 
 pub mod capture;
 pub mod chain;
 pub mod ideal;
+pub mod report;
 pub mod score;
 pub mod truth_map;
 pub mod variant;

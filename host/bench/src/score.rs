@@ -4,7 +4,8 @@
 //! Contract:
 //! - Vertices scored: every fitted vertex (not `TooFewViews`) with a truth ([`VertexTruth`]).
 //! - **Per material** (the paper's measure): the median fitted η over the material's scored
-//!   vertices and its signed error against the truth, %; the same for the vertices' unpooled η
+//!   vertices whose η the identifiability rule reports (`VertexFit::eta_identified`; NaN
+//!   when none does) and its signed error against the truth, %; the same for the vertices' unpooled η
 //!   (their own estimate before the material's pool, [`ellipso_fit::data::VertexFit::eta_unpooled`],
 //!   else their η); the median relative ρd error (RGB mean), the median σs and σss, the median
 //!   normal error; and whether the material's median sits at the solver's start value η = 1.5
@@ -39,9 +40,9 @@ pub struct MaterialScore {
     pub name: String,
     /// True η.
     pub eta_true: f64,
-    /// Vertices scored.
+    /// Vertices scored whose η the identifiability rule reports (the median's sample).
     pub vertices: usize,
-    /// Median fitted η.
+    /// Median fitted η over those (NaN: none reports η — the material is unidentified).
     pub eta_median: f64,
     /// (median − truth)/truth, %, signed.
     pub eta_error_pct: f64,
@@ -51,7 +52,7 @@ pub struct MaterialScore {
     pub eta_unpooled_error_pct: f64,
     /// The median sits at the start value η = 1.5 (to 1e-4).
     pub at_start_value: bool,
-    /// Vertices of the material flagged `MaterialUnidentified` or without an identified η.
+    /// Scored vertices of the material whose η the rule withholds.
     pub unidentified_vertices: usize,
     /// Median relative ρd error (mean over RGB), %.
     pub rho_d_error_pct: f64,
@@ -78,7 +79,7 @@ pub struct FitScores {
     pub eta_material_mean_pct: f64,
     /// Largest |per-material η error|, %.
     pub eta_material_max_pct: f64,
-    /// Median |η error| over vertices after pooling, %.
+    /// Median |η error| over the scored vertices that report η, after pooling, %.
     pub eta_vertex_median_pct: f64,
     /// Median |η error| over vertices before pooling, %.
     pub eta_vertex_unpooled_median_pct: f64,
@@ -145,22 +146,24 @@ pub fn score_fit(
             continue;
         };
         let eta_true = first.params.eta;
-        let eta_median = median(members.iter().map(|&(v, _)| fits[v].params.eta).collect());
-        let eta_unpooled_median =
-            median(members.iter().map(|&(v, _)| unpooled(&fits[v])).collect());
+        // η is a measurement only where the identifiability rule reports it.
+        let identified: Vec<usize> = members
+            .iter()
+            .map(|&(v, _)| v)
+            .filter(|&v| fits[v].eta_identified())
+            .collect();
+        let eta_median = median(identified.iter().map(|&v| fits[v].params.eta).collect());
+        let eta_unpooled_median = median(identified.iter().map(|&v| unpooled(&fits[v])).collect());
         materials.push(MaterialScore {
             name: name.clone(),
             eta_true,
-            vertices: members.len(),
+            vertices: identified.len(),
             eta_median,
             eta_error_pct: 100.0 * (eta_median - eta_true) / eta_true,
             eta_unpooled_median,
             eta_unpooled_error_pct: 100.0 * (eta_unpooled_median - eta_true) / eta_true,
             at_start_value: (eta_median - ETA_START).abs() < 1e-4,
-            unidentified_vertices: members
-                .iter()
-                .filter(|&&(v, _)| !fits[v].eta_identified())
-                .count(),
+            unidentified_vertices: members.len() - identified.len(),
             rho_d_error_pct: median(
                 members
                     .iter()
@@ -209,12 +212,14 @@ pub fn score_fit(
         eta_vertex_median_pct: median(
             scored
                 .iter()
+                .filter(|&&(v, _)| fits[v].eta_identified())
                 .map(|&(v, t)| eta_err(fits[v].params.eta, t).abs())
                 .collect(),
         ),
         eta_vertex_unpooled_median_pct: median(
             scored
                 .iter()
+                .filter(|&&(v, _)| fits[v].eta_identified())
                 .map(|&(v, t)| eta_err(unpooled(&fits[v]), t).abs())
                 .collect(),
         ),

@@ -27,6 +27,12 @@ pub struct SceneEdit {
     pub photo_count: Option<usize>,
     /// Scene seed (capture path of seeded paths, sensor noise; `None`: the scene's).
     pub seed: Option<u64>,
+    /// No pixel ever clips: the camera's ADC gets 16 bits and its full well grows by the same
+    /// factor, so DN per electron, read noise and quantisation stay as they are while the
+    /// full-well and ADC clips move ~16× above any signal (the truth of "saturation": the
+    /// scene's `saturation` effect alone cannot be removed, a 12-bit frame cannot hold the
+    /// unclipped values).
+    pub unclipped: bool,
 }
 
 /// Writes `scene` edited by `edit` to `out` (module doc) and returns it loaded from there.
@@ -54,6 +60,30 @@ pub fn write_variant(scene: &Path, edit: &SceneEdit, out: &Path) -> Result<Scene
                 what: "no [capture] table to set the photo count in".into(),
             })?;
         capture.insert("photo_count".into(), toml::Value::Integer(n as i64));
+    }
+    if edit.unclipped {
+        let camera = table
+            .get_mut("rig")
+            .and_then(|r| r.as_table_mut())
+            .and_then(|r| r.get_mut("camera"))
+            .and_then(|c| c.as_table_mut())
+            .ok_or_else(|| BenchError::Scene {
+                path: scene.to_owned(),
+                what: "no [rig.camera] table to unclip".into(),
+            })?;
+        let int = |v: Option<&toml::Value>, default: i64| {
+            v.and_then(|v| v.as_integer()).unwrap_or(default)
+        };
+        let float = |v: Option<&toml::Value>, default: f64| {
+            v.and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+                .unwrap_or(default)
+        };
+        let bits = int(camera.get("bit_depth"), 12);
+        // The simulator's default full well (`CameraSpec::full_well_e`).
+        let full_well = float(camera.get("full_well_e"), 10_500.0);
+        let factor = 65_535.0 / ((1i64 << bits.clamp(1, 16)) - 1) as f64;
+        camera.insert("bit_depth".into(), toml::Value::Integer(16));
+        camera.insert("full_well_e".into(), toml::Value::Float(full_well * factor));
     }
     if let Some(seed) = edit.seed {
         // TOML integers are i64; a seed above i64::MAX keeps its bits.
@@ -102,6 +132,7 @@ mod tests {
             remove_effects: vec!["polariser_extinction".into(), "shot_noise".into()],
             photo_count: Some(12),
             seed: Some(3),
+            unclipped: true,
         };
         let v = write_variant(&src, &edit, &tmp.path().join("deep/v.toml")).unwrap();
         assert!(v.effects.polariser_extinction.is_none());
@@ -109,6 +140,11 @@ mod tests {
         assert!(v.effects.read_noise.is_some());
         assert_eq!(v.camera_poses.len(), 12);
         assert_eq!(v.seed, 3);
+        // Unclipped: the same DN per electron, 16× the room.
+        let dn_per_e =
+            |s: &Scene| f64::from((1u32 << s.rig.camera.bit_depth) - 1) / s.rig.camera.full_well_e;
+        assert_eq!(v.rig.camera.bit_depth, 16);
+        assert!((dn_per_e(&v) / dn_per_e(&original) - 1.0).abs() < 1e-12);
         assert_eq!(v.materials.len(), original.materials.len());
         assert_eq!(v.boards.len(), original.boards.len());
     }

@@ -26,7 +26,12 @@ pub struct ChainArgs {
     /// Only the runs whose names contain one of these (comma-separated).
     #[arg(long, value_delimiter = ',')]
     pub runs: Vec<String>,
-    /// Where to write the JSON of every run.
+    /// Where to write the report (default docs/error-budget.md when every run is made; with
+    /// --runs, none unless given). Its JSON and plot go beside it (`.json`, and
+    /// `img/<stem>.png` in its folder).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Where to write the JSON of every run as they finish.
     #[arg(long)]
     pub json: Option<PathBuf>,
 }
@@ -52,6 +57,12 @@ pub fn run(args: ChainArgs) -> anyhow::Result<()> {
         specs.retain(|s| args.runs.iter().any(|r| s.name == *r));
     }
     anyhow::ensure!(!specs.is_empty(), "no run matches --runs {:?}", args.runs);
+    let report = args.report.clone().or_else(|| {
+        args.runs
+            .is_empty()
+            .then(|| PathBuf::from("docs/error-budget.md"))
+    });
+    let started = std::time::Instant::now();
     let mut results = Vec::new();
     for spec in &specs {
         let r = bench
@@ -64,7 +75,63 @@ pub fn run(args: ChainArgs) -> anyhow::Result<()> {
                 .with_context(|| format!("writing {}", path.display()))?;
         }
     }
+    if let Some(path) = report {
+        let meta = ellipso_bench::report::ReportMeta {
+            command: command_line(&args),
+            scene: scene_path.file_name().map_or_else(
+                || scene_path.display().to_string(),
+                |n| n.to_string_lossy().into(),
+            ),
+            resolution,
+            photos: bench.scene.camera_poses.len(),
+            supersampling: args.supersampling,
+            total_s: started.elapsed().as_secs_f64(),
+            threads: rayon::current_num_threads(),
+        };
+        let md = ellipso_bench::report::markdown(&results, &meta);
+        ellipso_report::atomic_file::write(&path, md.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+        let json = path.with_extension("json");
+        ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(&(&meta, &results))?)
+            .with_context(|| format!("writing {}", json.display()))?;
+        let stem = path
+            .file_stem()
+            .map_or("error-budget".into(), |s| s.to_string_lossy());
+        let png = path
+            .parent()
+            .unwrap_or_else(|| std::path::Path::new("."))
+            .join("img")
+            .join(format!("{stem}.png"));
+        if let Some(dir) = png.parent() {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        }
+        ellipso_bench::report::plot(&results, &png)?;
+        crate::outln!(
+            "wrote {}, {} and {}",
+            path.display(),
+            json.display(),
+            png.display()
+        );
+    }
     Ok(())
+}
+
+/// The command that regenerates the report (as the report states it).
+fn command_line(args: &ChainArgs) -> String {
+    let mut c = String::from("ellipso bench chain");
+    if let Some(s) = &args.scene {
+        c += &format!(" --scene {}", s.display());
+    }
+    if let Some([w, h]) = args.resolution {
+        c += &format!(" --resolution {w}x{h}");
+    }
+    if args.supersampling != 2 {
+        c += &format!(" --supersampling {}", args.supersampling);
+    }
+    if !args.runs.is_empty() {
+        c += &format!(" --runs \"{}\"", args.runs.join(","));
+    }
+    c
 }
 
 fn print_row(r: &RunResult) {

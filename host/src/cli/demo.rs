@@ -325,23 +325,39 @@ fn fit_and_score(
     let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;
 
     // Only now the truth.
-    let truth = super::bench_mesh::truth_object(scene)?;
-    let score = score_against_truth(&truth, &run.fit.outcome.fits, &run.fit.mesh);
+    let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
+    let at = ellipso_bench::truth_map::truth_at(&truth, run.fit.mesh.positions());
+    let fits = &run.fit.outcome.fits;
+    let score =
+        ellipso_bench::score::score_fit(fits, &at, &truth.material_names, run.fit.set.colour);
+    let held_out = run.fit.held_out_set.as_ref().map(|held| {
+        ellipso_bench::score::holdout_beside_truth(
+            held,
+            fits,
+            &at,
+            ellipso_fit::accuracy::full_scale_dn(scene),
+        )
+    });
     let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
     let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
     let summary = serde_json::json!({
-        "vertices": run.fit.outcome.fits.len(),
-        "fitted": score.fitted,
+        "vertices": fits.len(),
+        "fitted": score.scored,
         "mesh_s": mesh_s,
         "wall_s": run.wall_s,
         "times_s": run.fit.outcome.times,
         "mesh_before_fit": before,
         "mesh_after_fit": after,
-        "eta_median_error_pct": score.eta_median_error_pct,
-        "normal_median_error_deg": score.normal_median_error_deg,
-        "normal_p90_error_deg": score.normal_p90_error_deg,
-        "rho_d_median_error_pct": score.rho_d_median_error_pct,
-        "input_mesh": mesh_path.display().to_string(),
+        "materials": score.materials,
+        "eta_material_mean_abs_error_pct": score.eta_material_mean_pct,
+        "eta_material_max_abs_error_pct": score.eta_material_max_pct,
+        "eta_vertex_median_error_pct": score.eta_vertex_median_pct,
+        "eta_vertex_unpooled_median_error_pct": score.eta_vertex_unpooled_median_pct,
+        "normal_median_error_deg": score.normal_median_deg,
+        "normal_p90_error_deg": score.normal_p90_deg,
+        "rho_d_median_error_pct": score.rho_d_median_pct,
+        "held_out_beside_truth": held_out,
+        "input_mesh": "fit/mesh.ply",
     });
     crate::outln!(
         "mesh vs truth  Chamfer {:.3} mm before the fit, {:.3} mm after its shape refinement (Hausdorff {:.2} → {:.2} mm)",
@@ -351,70 +367,50 @@ fn fit_and_score(
         after.hausdorff_m * 1e3,
     );
     crate::outln!(
-        "fit          {}/{} vertices in {:.1} s · η error median {:.2} % · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
-        score.fitted,
-        run.fit.outcome.fits.len(),
+        "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
+        score.scored,
+        fits.len(),
         run.wall_s,
-        score.eta_median_error_pct,
-        score.normal_median_error_deg,
-        score.normal_p90_error_deg,
-        score.rho_d_median_error_pct,
+        score.normal_median_deg,
+        score.normal_p90_deg,
+        score.rho_d_median_pct,
     );
+    crate::outln!("η per material (median over the vertices that report η, against the truth):");
+    for m in &score.materials {
+        let verdict = if m.vertices == 0 {
+            "unidentified: no vertex's data fix η".to_string()
+        } else {
+            format!(
+                "{:.4} (true {:.4}, {:+.2} %; before pooling {:+.2} %)",
+                m.eta_median, m.eta_true, m.eta_error_pct, m.eta_unpooled_error_pct
+            )
+        };
+        crate::outln!(
+            "  {:16} {verdict} · {} vertices report η, {} withheld",
+            m.name,
+            m.vertices,
+            m.unidentified_vertices
+        );
+    }
+    crate::outln!(
+        "η per vertex  median error {:.2} % (before pooling {:.2} %)",
+        score.eta_vertex_median_pct,
+        score.eta_vertex_unpooled_median_pct
+    );
+    if let Some(h) = &held_out {
+        crate::outln!(
+            "held-out     re-render relative RMSE, fit / the truth's own on the same samples: s0 {:.3} / {:.3} · I^s {:.3} / {:.3} · I^α {:.3} / {:.3}",
+            h.fit.s0.relative_rmse,
+            h.truth.s0.relative_rmse,
+            h.fit.specular.relative_rmse,
+            h.truth.specular.relative_rmse,
+            h.fit.alpha.relative_rmse,
+            h.truth.alpha.relative_rmse,
+        );
+    }
     Ok(DemoFit {
         ply: dir.join("fit.ply"),
         dir,
         summary,
     })
-}
-
-/// Per-vertex errors of a fit on a mesh that is not the truth's.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct TruthScore {
-    fitted: usize,
-    eta_median_error_pct: f64,
-    normal_median_error_deg: f64,
-    normal_p90_error_deg: f64,
-    rho_d_median_error_pct: f64,
-}
-
-/// Scores each fitted vertex (those with views) against the truth at the closest point of the
-/// true surface: the parameters of that triangle's nearest corner (materials are regions, not
-/// blends), the normal interpolated over the triangle.
-fn score_against_truth(
-    truth: &ellipso_fit::truth::TruthObject,
-    fits: &[ellipso_fit::data::VertexFit],
-    mesh: &ellipso_model::geometry::TriangleMesh,
-) -> TruthScore {
-    let query = ellipso_mesh::distance::ClosestPoints::new(&truth.mesh);
-    let normals = truth.mesh.normals();
-    let (mut eta, mut normal, mut rho_d) = (Vec::new(), Vec::new(), Vec::new());
-    for (f, p) in fits.iter().zip(mesh.positions()) {
-        if f.flags.contains(&ellipso_fit::data::FitFlag::TooFewViews) {
-            continue;
-        }
-        let Some(c) = query.closest(*p) else {
-            continue;
-        };
-        let tri = truth.mesh.triangles()[c.triangle];
-        let corner = (0..3)
-            .max_by(|&i, &j| c.barycentric[i].total_cmp(&c.barycentric[j]))
-            .unwrap_or(0);
-        let t = &truth.params[tri[corner] as usize];
-        let n_true: nalgebra::Vector3<f64> = (0..3)
-            .map(|k| normals[tri[k] as usize].into_inner() * c.barycentric[k])
-            .sum();
-        let cos = nalgebra::Vector3::from(f.normal_world)
-            .normalize()
-            .dot(&n_true.normalize());
-        eta.push(100.0 * (f.params.eta - t.eta).abs() / t.eta);
-        normal.push(cos.clamp(-1.0, 1.0).acos().to_degrees());
-        rho_d.push(100.0 * (f.params.rho_d[0] - t.rho_d[0]).abs() / t.rho_d[0].max(1e-6));
-    }
-    TruthScore {
-        fitted: eta.len(),
-        eta_median_error_pct: ellipso_report::percentile(&mut eta, 0.5),
-        normal_median_error_deg: ellipso_report::percentile(&mut normal, 0.5),
-        normal_p90_error_deg: ellipso_report::percentile(&mut normal, 0.9),
-        rho_d_median_error_pct: ellipso_report::percentile(&mut rho_d, 0.5),
-    }
 }

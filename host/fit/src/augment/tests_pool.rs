@@ -136,3 +136,50 @@ fn an_eta_gradient_is_not_pooled_flat() {
     let true_span = thirds.last().unwrap().1 - thirds[0].1;
     assert!(span > 0.7 * true_span, "{thirds:?}");
 }
+
+#[test]
+fn a_material_the_data_cannot_identify_is_withheld_not_returned_at_the_start_value() {
+    // A nearly black, rough material (albedos 0.002): its few photons fix no η.
+    let black = PbrdfParams {
+        eta: 1.62,
+        sigma_s: 0.6,
+        sigma_ss: 0.8,
+        rho_s: 0.002,
+        rho_ss: [0.002; 3],
+        rho_d: [0.002, 0.002, 0.002],
+    };
+    let (scene, c) = capture(&["black"], |_| (0, black));
+    let fits = fit(&scene, &c);
+    let fitted: Vec<&VertexFit> = fits
+        .iter()
+        .filter(|f| !f.flags.contains(&FitFlag::TooFewViews))
+        .collect();
+    assert!(fitted.len() > 30, "{} vertices fitted", fitted.len());
+    let reported = fitted.iter().filter(|f| f.eta_identified()).count();
+    let at_start = fitted
+        .iter()
+        .filter(|f| f.eta_identified() && (f.params.eta - 1.5).abs() < 1e-3)
+        .count();
+    eprintln!(
+        "black material: {} fitted, {reported} report η, {at_start} of them at 1.5",
+        fitted.len()
+    );
+    // None of its vertices presents η as a measurement — least of all the start value — and
+    // no pool lent one.
+    assert_eq!(reported, 0);
+    assert_eq!(at_start, 0);
+    assert!(
+        fits.iter().all(|f| !f.flags.contains(&FitFlag::EtaPooled)),
+        "a pool of unidentified η lent its value"
+    );
+    // What is reported is the data's, not the prior's: within a few standard errors of 1.62.
+    for f in fitted.iter().filter(|f| f.eta_identified()) {
+        assert!(
+            (f.params.eta - 1.62).abs() < 4.0 * f.std_error[0] + 0.01,
+            "vertex {}: {} ± {}",
+            f.vertex,
+            f.params.eta,
+            f.std_error[0]
+        );
+    }
+}
