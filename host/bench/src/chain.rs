@@ -427,3 +427,31 @@ pub fn budget_specs(scene: &Scene, supersampling: u32) -> Vec<RunSpec> {
     }));
     specs
 }
+
+/// The full chain of `bench`'s scene at each of `photos` photo counts along its capture path
+/// (the end-to-end rows of `ellipso bench accuracy`).
+pub fn photo_sweep(
+    bench: &Bench,
+    photos: &[usize],
+    progress: &mut dyn FnMut(&str),
+) -> Result<Vec<RunResult>, BenchError> {
+    photos
+        .iter()
+        .map(|&n| {
+            let spec = RunSpec {
+                name: format!("full chain, {n} photos"),
+                edit: SceneEdit {
+                    // The scene's own count renders the scene's own session (shared with the
+                    // error budget).
+                    photo_count: (n != bench.scene.camera_poses.len()).then_some(n),
+                    ..SceneEdit::default()
+                },
+                supersampling: 2,
+                pixels: Pixels::Mosaic,
+                poses: PoseSource::Tracked,
+                mesh: MeshSource::Carved,
+            };
+            bench.run(&spec, progress)
+        })
+        .collect()
+}

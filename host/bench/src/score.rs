@@ -81,6 +81,8 @@ pub struct FitScores {
     pub eta_material_max_pct: f64,
     /// Median |η error| over the scored vertices that report η, after pooling, %.
     pub eta_vertex_median_pct: f64,
+    /// Mean |η error| over the same vertices, %.
+    pub eta_vertex_mean_pct: f64,
     /// Median |η error| over vertices before pooling, %.
     pub eta_vertex_unpooled_median_pct: f64,
     /// Median normal error, degrees.
@@ -215,6 +217,13 @@ pub fn score_fit(
                 .filter(|&&(v, _)| fits[v].eta_identified())
                 .map(|&(v, t)| eta_err(fits[v].params.eta, t).abs())
                 .collect(),
+        ),
+        eta_vertex_mean_pct: mean(
+            &scored
+                .iter()
+                .filter(|&&(v, _)| fits[v].eta_identified())
+                .map(|&(v, t)| eta_err(fits[v].params.eta, t).abs())
+                .collect::<Vec<_>>(),
         ),
         eta_vertex_unpooled_median_pct: median(
             scored

@@ -26,6 +26,9 @@ use ellipso_fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate
 use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
 use ellipso_report::plot::{LegendPosition, LinePlot};
 
+/// Photo counts of the end-to-end sweep (the demo scene's capture path; 150 is its own).
+const END_TO_END_PHOTOS: [usize; 3] = [50, 100, 150];
+
 /// Arguments of `ellipso bench accuracy`.
 #[derive(Debug, clap::Args)]
 pub struct AccuracyArgs {
@@ -44,7 +47,12 @@ pub struct AccuracyArgs {
     /// Noise and normal-tilt seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Which sweeps to run (default all): photos, solver, vertices, bracket, large.
+    /// Work directory of the end-to-end sweep's rendered sessions (kept and reused; shared with
+    /// `ellipso bench chain`).
+    #[arg(long, default_value = "ellipso-bench-chain")]
+    pub work: PathBuf,
+    /// Which sweeps to run (default all): photos, solver, vertices, bracket, large,
+    /// end_to_end (rendered frames of the demo scene through tracking, carving and the fit).
     #[arg(long, value_delimiter = ',')]
     pub sweeps: Vec<String>,
     /// Photos of the solver and vertex sweeps (default 100; 25 with --quick).
@@ -162,8 +170,16 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
     let wants = |sweep: &str| args.sweeps.is_empty() || args.sweeps.iter().any(|s| s == sweep);
     for s in &args.sweeps {
         anyhow::ensure!(
-            ["photos", "solver", "vertices", "bracket", "large"].contains(&s.as_str()),
-            "--sweeps: unknown sweep `{s}` (photos, solver, vertices, bracket, large)"
+            [
+                "photos",
+                "solver",
+                "vertices",
+                "bracket",
+                "large",
+                "end_to_end"
+            ]
+            .contains(&s.as_str()),
+            "--sweeps: unknown sweep `{s}` (photos, solver, vertices, bracket, large, end_to_end)"
         );
     }
     anyhow::ensure!(
@@ -249,9 +265,29 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
             )?);
         }
     }
+    // What a capture really gives: rendered frames through the whole chain (not in --quick:
+    // each capture renders 50–150 frames at 1224×1024).
+    let end_to_end = if !args.quick && wants("end_to_end") {
+        let scene_path = super::demo::shipped_scene("demo.toml");
+        let scene = Scene::load(&scene_path)?;
+        let [w, h] = scene.rig.camera.resolution_px;
+        let bench = ellipso_bench::chain::Bench {
+            scene_path,
+            scene,
+            work: args.work.clone(),
+            resolution: Some([w / 2, h / 2]),
+            fit: ellipso_fit::session::SessionFitConfig::default(),
+        };
+        ellipso_bench::chain::photo_sweep(&bench, &END_TO_END_PHOTOS, &mut |stage| {
+            eprintln!("  end to end: {stage}")
+        })?
+    } else {
+        Vec::new()
+    };
     write_report(
         &args.report,
         &results,
+        &end_to_end,
         started.elapsed().as_secs_f64(),
         &command_line(&args),
     )?;
@@ -508,6 +544,7 @@ fn command_line(args: &AccuracyArgs) -> String {
 fn write_report(
     path: &Path,
     results: &[RunResult],
+    end_to_end: &[ellipso_bench::chain::RunResult],
     total_s: f64,
     command: &str,
 ) -> anyhow::Result<()> {
@@ -531,6 +568,9 @@ fn write_report(
             "η error vs fit time",
             "mean per-vertex η error (%)",
             |s| s.eta_mean_pct,
+            end_to_end
+                .iter()
+                .map(|r| (r.times.fit_s, r.scores.eta_vertex_mean_pct)),
         )?;
         plot(
             results,
@@ -538,13 +578,21 @@ fn write_report(
             "normal error vs fit time",
             "median normal error (°)",
             |s| s.normal_median_deg,
+            end_to_end
+                .iter()
+                .map(|r| (r.times.fit_s, r.scores.normal_median_deg)),
         )?;
     }
     let json = dir.join(format!("{stem}.json"));
     ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
         .with_context(|| format!("writing {}", json.display()))?;
+    if !end_to_end.is_empty() {
+        let json = dir.join(format!("{stem}-end-to-end.json"));
+        ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(end_to_end)?)
+            .with_context(|| format!("writing {}", json.display()))?;
+    }
     let plots = plotted.then_some((eta_png.as_path(), normal_png.as_path()));
-    let md = super::bench_report::markdown(results, total_s, command, plots, dir);
+    let md = super::bench_report::markdown(results, end_to_end, total_s, command, plots, dir);
     ellipso_report::atomic_file::write(path, md)
         .with_context(|| format!("writing {}", path.display()))?;
     crate::outln!("\nreport  {}", path.display());
@@ -565,6 +613,7 @@ fn plot(
     title: &str,
     y_label: &str,
     metric: impl Fn(&Scores) -> f64,
+    end_to_end: impl Iterator<Item = (f64, f64)>,
 ) -> anyhow::Result<()> {
     let points = results.iter().filter(|r| r.sweep != "large").map(|r| {
         (
@@ -574,7 +623,8 @@ fn plot(
             metric(&r.scores),
         )
     });
-    plot_points(points, out, title, y_label)
+    let end_to_end = end_to_end.map(|(s, v)| ("demo", "end to end (rendered frames)", s, v));
+    plot_points(points.chain(end_to_end), out, title, y_label)
 }
 
 /// The accuracy-vs-time plot of `(scene, sweep, fit seconds, metric)` points: one line per

@@ -10,6 +10,7 @@ use super::bench_accuracy::RunResult;
 /// `dir` is the report's folder (plots are linked relative to it).
 pub fn markdown(
     results: &[RunResult],
+    end_to_end: &[ellipso_bench::chain::RunResult],
     total_s: f64,
     command: &str,
     plots: Option<(&Path, &Path)>,
@@ -55,6 +56,7 @@ pub fn markdown(
          estimate is worth) and per material (the error of the material's median η, averaged \
          over materials: the paper's measure, 1.49 % on real objects).\n"
     );
+    s += &ellipso_bench::report::end_to_end_section(end_to_end);
     if let Some((eta_png, normal_png)) = plots {
         let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
         let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));
