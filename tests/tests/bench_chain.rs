@@ -1,0 +1,70 @@
+//! The error budget's sessions are the rig's: a capture on the simulated rig (`ellipso capture
+//! --sim`: the firmware core behind a pty, the host's link, pairing and session writer, in real
+//! time) and `ellipso_bench::capture::render_session` (the same renderer straight into a
+//! session) record byte-identical frames, and the bench maps every frame to its true pose.
+
+use std::process::Command;
+
+use ellipso_bench::capture::{pose_index, render_session, true_poses};
+use ellipso_session::reader;
+use ellipso_sim::render::RenderOptions;
+use ellipso_sim::scene::Scene;
+use ellipso_tests::{ellipso_bin, shipped_scene};
+
+#[test]
+fn capture_frames_equal_direct_renders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene_path = shipped_scene("sphere.toml");
+    let rig_dir = tmp.path().join("rig");
+    let status = Command::new(ellipso_bin())
+        .args(["capture", "--sim"])
+        .arg(&scene_path)
+        .arg("--out")
+        .arg(&rig_dir)
+        .args([
+            "--photos",
+            "4",
+            "--resolution",
+            "256x200",
+            "--supersampling",
+            "1",
+        ])
+        .args(["--no-track"])
+        .status()
+        .expect("run ellipso capture");
+    assert!(status.success());
+    let rig = reader::open(&rig_dir).unwrap();
+
+    // The bench's session of the same scene at the same resolution and supersampling: the
+    // scene's first 4 poses.
+    let scene = Scene::load(&scene_path).unwrap();
+    let options = RenderOptions {
+        supersampling: 1,
+        resolution_px: Some([256, 200]),
+        ..RenderOptions::default()
+    };
+    let direct_dir = tmp.path().join("direct");
+    render_session(&scene_path, &scene, options, &direct_dir, &mut |_, _| {}).unwrap();
+    let direct = reader::open(&direct_dir).unwrap();
+
+    let by_pose = |s: &reader::Session| {
+        let index = pose_index(s);
+        let mut frames: Vec<(usize, Vec<u16>)> = s
+            .frames
+            .iter()
+            .filter(|f| f.complete)
+            .map(|f| (index[&f.frame_id], s.load_frame(f).unwrap().2))
+            .collect();
+        frames.sort_by_key(|f| f.0);
+        frames
+    };
+    let (rig_frames, direct_frames) = (by_pose(&rig), by_pose(&direct));
+    assert_eq!(rig_frames.len(), 4);
+    for (k, pixels) in &rig_frames {
+        let (_, direct_pixels) = &direct_frames[*k];
+        assert!(pixels == direct_pixels, "frame of pose {k} differs");
+    }
+    // Both map their frames to the scene's poses.
+    assert_eq!(true_poses(&rig, &scene).len(), 4);
+    assert_eq!(true_poses(&direct, &scene).len(), scene.camera_poses.len());
+}
