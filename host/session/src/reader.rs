@@ -12,6 +12,7 @@
 //!   on-time and [`FrameEntry::flash_energy_rel`]. Sessions written before bracketing (and frames
 //!   without a pairing) read as step 0 at full energy, 1.0.
 
+use ellipso_model::file_io::{caps, read_bounded, read_bounded_text};
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -176,7 +177,8 @@ struct Paired {
 /// Opens the session in `dir`.
 pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let manifest_path = dir.join(paths::MANIFEST);
-    let text = fs::read_to_string(&manifest_path).map_err(SessionError::io(&manifest_path))?;
+    let text = read_bounded_text(&manifest_path, caps::MANIFEST)
+        .map_err(SessionError::io(&manifest_path))?;
     // check the version before the shape, so a newer schema gets the right message
     if let Ok(v) = serde_json::from_str::<serde_json::Value>(&text)
         && let Some(found) = v.get("schema_version").and_then(|x| x.as_u64())
@@ -209,7 +211,7 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     };
 
     let log_path = dir.join(paths::EVENTS);
-    let log = match fs::read(&log_path) {
+    let log = match read_bounded(&log_path, caps::EVENT_LOG) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
         Err(e) => {

@@ -149,6 +149,13 @@ pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::R
 }
 
 fn pose(args: PoseArgs) -> anyhow::Result<()> {
+    let out = ellipso_report::output::OutputFile::claim(
+        &args.out.join("pose-bench.json"),
+        "bench-pose",
+        ellipso_report::output::FileFormat::JSON,
+        &[&args.scene],
+        None,
+    )?;
     let scene = load_scene(&args.scene, args.seed)?;
     let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let camera = *renderer.camera();
@@ -227,9 +234,8 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             crate::outln!("|   rejected: {why} ({count}) |||||||");
         }
     }
-    std::fs::create_dir_all(&args.out)?;
-    let path = args.out.join("pose-bench.json");
-    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    out.write(serde_json::to_vec_pretty(&results)?)?;
+    let path = out.shown();
     crate::outln!("written {}", path.display());
     Ok(())
 }
