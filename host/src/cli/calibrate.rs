@@ -194,6 +194,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for r in &cal.rejected {
         crate::outln!("  view {} rejected: {}", r.index, r.reason);
     }
+    crate::outln!(
+        "views: board tilt spread {:.2}°, out of one plane {:.3}° (common direction {:.3?})",
+        cal.spread.tilt_spread_deg,
+        cal.spread.out_of_plane_deg,
+        cal.spread.common_direction_camera.as_slice()
+    );
     let mut text = cal.to_toml_camera_section();
     if let Some(sphere) = args.sphere {
         // per calibrated view: its frame, board and pose → the highlight
