@@ -91,6 +91,8 @@ fn main() -> std::process::ExitCode {
 
 /// The error and its causes joined with ": ", each cause said once: a cause whose text its
 /// parent already quotes (an OS error inside a message naming the file) is not repeated.
+/// Control characters (a terminal escape quoted from a file) are printed escaped, never sent
+/// to the terminal.
 fn one_line(e: &anyhow::Error) -> String {
     let mut line = String::new();
     let mut last = String::new();
@@ -105,7 +107,12 @@ fn one_line(e: &anyhow::Error) -> String {
         line.push_str(&text);
         last = text;
     }
-    line
+    line.chars()
+        .flat_map(|c| {
+            let escaped = (c.is_control() && c != '\n' && c != '\t').then(|| c.escape_default().collect::<String>());
+            escaped.unwrap_or_else(|| c.to_string()).chars().collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 fn run(command: Command) -> anyhow::Result<()> {

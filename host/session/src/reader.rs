@@ -62,6 +62,9 @@ pub struct ReadReport {
     pub duplicate_frame_events: Vec<u64>,
     /// Pulse sequence numbers with more than one `pulse` event.
     pub duplicate_pulses: Vec<u64>,
+    /// Frame ids whose `pose` / `pose_rejected` events disagree (the last one is what readers
+    /// of poses take; identical repeats are not listed).
+    pub conflicting_poses: Vec<u64>,
 }
 
 impl ReadReport {
@@ -105,6 +108,13 @@ impl ReadReport {
                 "{} pulses logged twice (seq {})",
                 self.duplicate_pulses.len(),
                 list(&self.duplicate_pulses)
+            ));
+        }
+        if !self.conflicting_poses.is_empty() {
+            parts.push(format!(
+                "{} frames with pose events that disagree ({})",
+                self.conflicting_poses.len(),
+                list(&self.conflicting_poses)
             ));
         }
         if !self.frames_without_event.is_empty() {
@@ -239,7 +249,32 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     let mut pulses = std::collections::BTreeSet::new();
+    // per frame: its first pose value (rotation and translation; empty for a rejection)
+    let mut poses: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
     for e in &events {
+        let pose = match e {
+            SessionEvent::Pose {
+                frame_id,
+                rotation_camera_from_world: r,
+                translation_camera_from_world_m: t,
+                ..
+            } => Some((*frame_id, r.iter().chain(t).copied().collect::<Vec<f64>>())),
+            SessionEvent::PoseRejected { frame_id, .. } => Some((*frame_id, Vec::new())),
+            _ => None,
+        };
+        if let Some((id, value)) = pose {
+            match poses.get(&id) {
+                Some(first) if *first != value => {
+                    if !report.conflicting_poses.contains(&id) {
+                        report.conflicting_poses.push(id);
+                    }
+                }
+                Some(_) => {}
+                None => {
+                    poses.insert(id, value);
+                }
+            }
+        }
         match e {
             SessionEvent::Frame { frame_id, .. } => {
                 if logged.contains_key(frame_id) {

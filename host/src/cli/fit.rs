@@ -101,6 +101,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--holdout {}: must be a fraction in [0, 0.5]",
         args.holdout
     );
+    // --view names a frame of the session: checked now, not after the fit
+    if let Some(id) = args.view {
+        anyhow::ensure!(
+            session.frames.iter().any(|f| f.frame_id == id && f.complete),
+            "--view {id}: {} has no complete frame {id}",
+            args.session.display()
+        );
+    }
     let read = session.report.summary();
     if read != "intact" {
         crate::errln!("warning: {}: {read}", args.session.display());
@@ -247,8 +255,23 @@ pub struct FitRun {
 /// The session's recorded poses (`pose` events), tracking first every complete frame that has
 /// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
-    let untracked = ellipso_vision::process::untracked_frames(session);
+    let mut untracked = ellipso_vision::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
+    // one run tracks a session at a time; a second waits and takes the first one's poses
+    let _lock = if untracked.is_empty() {
+        None
+    } else {
+        let lock = ellipso_session::writer::LogLock::acquire(&session.dir, || {
+            crate::errln!(
+                "{}: another run is tracking this session's poses; waiting for it…",
+                session.dir.display()
+            )
+        })?;
+        let now = ellipso_session::reader::open(&session.dir)?;
+        untracked = ellipso_vision::process::untracked_frames(&now);
+        poses = poses_from_session(&now);
+        lock
+    };
     if !untracked.is_empty() {
         crate::errln!(
             "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
@@ -276,6 +299,9 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
         "{}: no frame could be posed from the AprilTags",
         session.dir.display()
     );
+    // what every stage that takes poses needs: a possible camera, possible poses
+    ellipso_fit::inputs::check_camera(&ellipso_fit::observe::camera_of(session)?)?;
+    ellipso_fit::inputs::check_poses(&poses)?;
     Ok(poses)
 }
 
