@@ -59,6 +59,8 @@ fn main() -> std::process::ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(filter)),
         )
         .with_writer(std::io::stderr)
+        // colour codes only for a terminal: never into a log file or a pipe
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         // a closed stderr must not turn into a panic (its default reports write errors there)
         .log_internal_errors(false)
         .init();
@@ -109,8 +111,12 @@ fn one_line(e: &anyhow::Error) -> String {
     }
     line.chars()
         .flat_map(|c| {
-            let escaped = (c.is_control() && c != '\n' && c != '\t').then(|| c.escape_default().collect::<String>());
-            escaped.unwrap_or_else(|| c.to_string()).chars().collect::<Vec<_>>()
+            let escaped = (c.is_control() && c != '\n' && c != '\t')
+                .then(|| c.escape_default().collect::<String>());
+            escaped
+                .unwrap_or_else(|| c.to_string())
+                .chars()
+                .collect::<Vec<_>>()
         })
         .collect()
 }

@@ -128,7 +128,10 @@ fn view_refuses_a_foreign_authority_and_two_hosts_and_answers_localhost_on_ipv6(
             addr,
             &format!("GET http://evil.example{path} HTTP/1.1\r\nHost: {addr}\r\n"),
         );
-        assert_eq!(status, 403, "{bind}: foreign authority in the request target");
+        assert_eq!(
+            status, 403,
+            "{bind}: foreign authority in the request target"
+        );
         assert!(why.contains("another server"), "{why}");
         let (status, why) = raw(
             addr,
@@ -139,7 +142,11 @@ fn view_refuses_a_foreign_authority_and_two_hosts_and_answers_localhost_on_ipv6(
         // its own authority in absolute form is fine, as is localhost on either loopback
         let own = format!("GET http://{addr}{path} HTTP/1.1\r\nHost: {addr}\r\n");
         assert_eq!(raw(addr, &own).0, 200, "{bind}: own absolute form");
-        assert_eq!(get(addr, &path, &format!("localhost:{port}")).0, 200, "{bind}: localhost");
+        assert_eq!(
+            get(addr, &path, &format!("localhost:{port}")).0,
+            200,
+            "{bind}: localhost"
+        );
     }
 }
 

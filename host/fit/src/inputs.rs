@@ -2,7 +2,7 @@
 //! and frame metadata that no real capture can produce are refused with the cause named,
 //! instead of being fitted into a confident answer.
 //!
-//! Contract (`docs/fit-observe.md`, "Inputs refused"; each bound is a constant here):
+//! Contract (`docs/reliability.md`, "Inputs refused"; each bound is a constant here):
 //! - **camera** (`rig.camera`): finite; focal lengths in [[`FOCAL_MIN_SIDES`],
 //!   [`FOCAL_MAX_SIDES`]] × the longer image side; principal point within half an image of the
 //!   image; |k1|, |k2|, |k3| ≤ [`RADIAL_MAX`], |p1|, |p2| ≤ [`TANGENTIAL_MAX`];
@@ -12,8 +12,8 @@
 //! - **frames** of the poses: exposure in (0, [`EXPOSURE_MAX_US`]] µs, gain in
 //!   [[`GAIN_MIN_DB`], [`GAIN_MAX_DB`]] dB, flash energy in [0, [`ENERGY_MAX`]] of a full pulse;
 //!   no frame with two pose events that disagree;
-//! - **mesh**: triangles with area (at most half of them degenerate); its extent at least
-//!   [`MESH_MIN_PX`] px in the median view and at most [`MESH_MAX_M`]; its triangles wound
+//! - **mesh**: its extent at least [`MESH_MIN_PX`] px in the median view and at most
+//!   [`MESH_MAX_M`]; triangles with area (at most half of them degenerate); its triangles wound
 //!   counter-clockwise seen from outside — for a closed mesh a positive signed volume, and for
 //!   any mesh the nearest camera in front of most vertices.
 //!
@@ -109,7 +109,9 @@ pub fn check_camera(camera: &CameraModel) -> Result<(), InputError> {
         ("p2", d.p2, TANGENTIAL_MAX),
     ] {
         if k.abs() > max {
-            return bad(format!("{name} = {k:e} is beyond ±{max}: no lens distorts so"));
+            return bad(format!(
+                "{name} = {k:e} is beyond ±{max}: no lens distorts so"
+            ));
         }
     }
     Ok(())
@@ -152,7 +154,11 @@ pub fn check_poses(poses: &[(u64, Isometry3<f64>)]) -> Result<(), InputError> {
 /// disagree (module doc).
 pub fn check_frames(session: &Session, poses: &[(u64, Isometry3<f64>)]) -> Result<(), InputError> {
     let posed: std::collections::BTreeSet<u64> = poses.iter().map(|p| p.0).collect();
-    for f in session.frames.iter().filter(|f| posed.contains(&f.frame_id)) {
+    for f in session
+        .frames
+        .iter()
+        .filter(|f| posed.contains(&f.frame_id))
+    {
         let bad = |what: String| {
             Err(InputError::Frame {
                 frame_id: f.frame_id,
@@ -211,27 +217,16 @@ pub fn check_mesh(
     let p = mesh.positions();
     let tris = mesh.triangles();
     let (lo, hi) = p.iter().fold(
-        (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+        (
+            Vector3::repeat(f64::INFINITY),
+            Vector3::repeat(f64::NEG_INFINITY),
+        ),
         |(lo, hi), q| (lo.inf(&q.coords), hi.sup(&q.coords)),
     );
     let extent_m = (hi - lo).norm();
     if !(extent_m <= MESH_MAX_M) {
         return bad(format!(
             "it is {extent_m:e} m across (at most {MESH_MAX_M} m): wrong units?"
-        ));
-    }
-    let area = |t: &[u32; 3]| {
-        let [a, b, c] = t.map(|i| p[i as usize]);
-        0.5 * (b - a).cross(&(c - a)).norm()
-    };
-    // a triangle smaller than a square nanometre, or than 1e-12 of the mesh's extent squared
-    let tiny = (extent_m * extent_m * 1e-12).max(1e-18);
-    let degenerate = tris.iter().filter(|t| area(t) <= tiny).count();
-    if 2 * degenerate > tris.len() {
-        return bad(format!(
-            "{degenerate} of {} triangles have no area (total {:e} m²): not a surface",
-            tris.len(),
-            tris.iter().map(area).sum::<f64>()
         ));
     }
     let centre = Point3::from((lo + hi) / 2.0);
@@ -249,6 +244,20 @@ pub fn check_mesh(
                  (at least {MESH_MIN_PX} px): a mesh in other units, or of another object?"
             ));
         }
+    }
+    let area = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|i| p[i as usize]);
+        0.5 * (b - a).cross(&(c - a)).norm()
+    };
+    // a triangle smaller than a square nanometre, or than 1e-12 of the mesh's extent squared
+    let tiny = (extent_m * extent_m * 1e-12).max(1e-18);
+    let degenerate = tris.iter().filter(|t| area(t) <= tiny).count();
+    if 2 * degenerate > tris.len() {
+        return bad(format!(
+            "{degenerate} of {} triangles have no area (total {:e} m²): not a surface",
+            tris.len(),
+            tris.iter().map(area).sum::<f64>()
+        ));
     }
     check_winding(mesh, poses)
 }

@@ -100,7 +100,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn load_scene(path: &Path, seed: Option<u64>) -> anyhow::Result<Scene> {
     let mut scene = Scene::load(path)?;
     if let Some(seed) = seed {
-        let text = std::fs::read_to_string(path)?;
+        let text =
+            ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)?;
         let loc = Located::new(&text, path);
         scene.camera_poses = scene.capture.camera_poses(seed, &loc)?;
         scene.seed = seed;

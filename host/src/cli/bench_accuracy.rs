@@ -531,7 +531,10 @@ impl ReportFiles {
         Ok(Self {
             markdown: claim(path, FileFormat::MARKDOWN)?,
             json: claim(&dir.join(format!("{stem}.json")), FileFormat::JSON)?,
-            eta_png: claim(&dir.join("img").join(format!("{stem}-eta.png")), FileFormat::PNG)?,
+            eta_png: claim(
+                &dir.join("img").join(format!("{stem}-eta.png")),
+                FileFormat::PNG,
+            )?,
             normal_png: claim(
                 &dir.join("img").join(format!("{stem}-normal.png")),
                 FileFormat::PNG,

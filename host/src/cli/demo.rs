@@ -307,9 +307,8 @@ fn fit_and_score(
         outer_iterations: if quick { 1 } else { 2 },
         ..Default::default()
     };
-    let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config, &|p| {
-        out.published(p)
-    })?;
+    let run =
+        super::fit::fit_and_export(session, &mesh, &dir, None, &config, &|p| out.published(p))?;
 
     // Only now the truth.
     let truth = super::bench_mesh::truth_object(scene)?;

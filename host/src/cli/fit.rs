@@ -104,7 +104,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // --view names a frame of the session: checked now, not after the fit
     if let Some(id) = args.view {
         anyhow::ensure!(
-            session.frames.iter().any(|f| f.frame_id == id && f.complete),
+            session
+                .frames
+                .iter()
+                .any(|f| f.frame_id == id && f.complete),
             "--view {id}: {} has no complete frame {id}",
             args.session.display()
         );

@@ -51,8 +51,10 @@ fn stop(sig: usize) -> ! {
     // stderr may be gone too (a closed terminal): nothing to do about it then
     let _ = std::io::Write::write_all(
         &mut std::io::stderr(),
-        format!("interrupted ({name}): stopped; no new output was kept (an earlier one is unchanged)\n")
-            .as_bytes(),
+        format!(
+            "interrupted ({name}): stopped; no new output was kept (an earlier one is unchanged)\n"
+        )
+        .as_bytes(),
     );
     std::process::exit(128 + i32::try_from(sig).unwrap_or(0));
 }
@@ -77,7 +79,9 @@ impl Drop for Deferred {
 /// A run stopped by SIGINT or SIGTERM inside a stage that handles the signal itself, with
 /// nothing to keep (the demo's capture); the process exits with 128 + the signal number.
 #[derive(Debug, thiserror::Error)]
-#[error("interrupted by signal {signal}: stopped; no new output was kept (an earlier one is unchanged)")]
+#[error(
+    "interrupted by signal {signal}: stopped; no new output was kept (an earlier one is unchanged)"
+)]
 pub struct Stopped {
     /// The signal number.
     pub signal: i32,

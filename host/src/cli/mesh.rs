@@ -127,7 +127,13 @@ fn claim_mesh_files(out: &Path, session: &Path) -> anyhow::Result<(OutputFile, O
         FileFormat::PLY
     };
     let mesh = OutputFile::claim(out, "mesh", format, &[session], None)?;
-    let report = OutputFile::claim(&report_path(out), "mesh", FileFormat::JSON, &[session], None)?;
+    let report = OutputFile::claim(
+        &report_path(out),
+        "mesh",
+        FileFormat::JSON,
+        &[session],
+        None,
+    )?;
     Ok((mesh, report))
 }
 

@@ -194,9 +194,8 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
 /// Reads and checks an analyser calibration file; errors name the file.
 fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
     let name = path.display();
-    let text =
-        ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
-            .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+    let text = ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
+        .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
     let calibration: AnalyserCalibration = serde_json::from_str(&text)
         .map_err(|e| anyhow!("{name}: not an analyser calibration: {e}"))?;
     calibration

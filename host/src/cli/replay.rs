@@ -156,6 +156,8 @@ pub fn print_summary(r: &ReplayReport) {
 
 /// Runs `ellipso replay`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // a path that is no session is said as such first (opening reads only its manifest and log)
+    ellipso_session::reader::open(&args.session)?;
     // the session's own `replay/` by default (docs/session-format.md, "Derived outputs")
     let out = args
         .out

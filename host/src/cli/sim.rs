@@ -134,7 +134,8 @@ fn frame_indices(args: &RenderArgs, count: usize) -> anyhow::Result<Vec<usize>> 
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     // claimed before rendering; written beside and swapped in whole
-    let claimed = ellipso_report::output::OutputDir::claim(&args.out, "sim-render", &[&args.scene])?;
+    let claimed =
+        ellipso_report::output::OutputDir::claim(&args.out, "sim-render", &[&args.scene])?;
     let out = claimed.path().to_path_buf();
     let scene = load(&args.scene)?;
     let options = RenderOptions {

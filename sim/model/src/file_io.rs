@@ -46,7 +46,11 @@ fn kind_of(meta: &std::fs::Metadata) -> &'static str {
             return "a socket";
         }
     }
-    if t.is_dir() { "a directory" } else { "not a regular file" }
+    if t.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
 }
 
 /// Checks that `path` is a regular file of at most `cap` bytes; returns its size.
@@ -86,8 +90,12 @@ pub fn read_bounded(path: &Path, cap: u64) -> io::Result<Vec<u8>> {
 
 /// [`read_bounded`] as UTF-8 text.
 pub fn read_bounded_text(path: &Path, cap: u64) -> io::Result<String> {
-    String::from_utf8(read_bounded(path, cap)?)
-        .map_err(|e| io::Error::new(io::ErrorKind::InvalidData, format!("is not UTF-8 text: {e}")))
+    String::from_utf8(read_bounded(path, cap)?).map_err(|e| {
+        io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("is not UTF-8 text: {e}"),
+        )
+    })
 }
 
 #[cfg(test)]

@@ -15,9 +15,9 @@ use std::path::Path;
 pub fn load_board_file(path: &Path) -> Result<Board, SceneError> {
     let text = ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
         .map_err(|source| SceneError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+            path: path.to_owned(),
+            source,
+        })?;
     board_from_toml_str(&text, path)
 }
 

@@ -128,9 +128,9 @@ impl Scene {
         let text =
             ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
                 .map_err(|source| SceneError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+                    path: path.to_owned(),
+                    source,
+                })?;
         Self::from_toml_str(&text, path)
     }
 

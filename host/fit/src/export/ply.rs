@@ -159,10 +159,11 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
         path: path.display().to_string(),
         what,
     };
-    let bytes = std::fs::read(path).map_err(|source| PlyError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
+    let bytes = ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::MESH)
+        .map_err(|source| PlyError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
     let end = bytes
         .windows(11)
         .position(|w| w == b"end_header\n")

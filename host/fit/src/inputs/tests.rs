@@ -56,7 +56,9 @@ fn impossible_cameras_are_refused_by_name() {
     ] {
         let mut p = camera().params();
         p[k] = value;
-        let e = check_camera(&camera().with_params(&p)).unwrap_err().to_string();
+        let e = check_camera(&camera().with_params(&p))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(needle) && e.contains("rig.camera"), "{e}");
     }
 }
@@ -66,18 +68,22 @@ fn impossible_poses_are_refused() {
     let mut far = orbit();
     far[3].1.translation = Translation3::new(1e308, 0.0, 0.0);
     let e = check_poses(&far).unwrap_err().to_string();
-    assert!(e.contains("frame 3") && e.contains("m from the board"), "{e}");
+    assert!(
+        e.contains("frame 3") && e.contains("m from the board"),
+        "{e}"
+    );
     let same: Vec<_> = (0..5).map(|k| (k, orbit()[0].1)).collect();
     let e = check_poses(&same).unwrap_err().to_string();
     assert!(e.contains("one and the same pose"), "{e}");
     let mut nan = orbit();
-    nan[0].1.rotation = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
-        f64::NAN,
-        0.0,
-        0.0,
-        0.0,
-    ));
-    assert!(check_poses(&nan).unwrap_err().to_string().contains("not finite"));
+    nan[0].1.rotation =
+        UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(f64::NAN, 0.0, 0.0, 0.0));
+    assert!(
+        check_poses(&nan)
+            .unwrap_err()
+            .to_string()
+            .contains("not finite")
+    );
 }
 
 #[test]
@@ -85,8 +91,13 @@ fn impossible_meshes_are_refused_with_the_cause() {
     let (poses, cam) = (orbit(), camera());
     // collapsed to one point; scaled to nothing
     for scale in [0.0, 1e-40] {
-        let e = check_mesh(&sphere(scale), &poses, &cam).unwrap_err().to_string();
-        assert!(e.contains("no area") || e.contains("px in the median view"), "{scale}: {e}");
+        let e = check_mesh(&sphere(scale), &poses, &cam)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no area") || e.contains("px in the median view"),
+            "{scale}: {e}"
+        );
     }
     // flattened onto a line: no area
     let s = sphere(1.0);
@@ -99,7 +110,9 @@ fn impossible_meshes_are_refused_with_the_cause() {
     let e = check_mesh(&flat, &poses, &cam).unwrap_err().to_string();
     assert!(e.contains("have no area"), "{e}");
     // 1e6 m across
-    let e = check_mesh(&sphere(1e7), &poses, &cam).unwrap_err().to_string();
+    let e = check_mesh(&sphere(1e7), &poses, &cam)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("wrong units"), "{e}");
 }
 
@@ -108,8 +121,7 @@ fn inward_winding_is_refused_closed_or_open() {
     let (poses, cam) = (orbit(), camera());
     let s = sphere(1.0);
     let flipped: Vec<[u32; 3]> = s.triangles().iter().map(|t| [t[0], t[2], t[1]]).collect();
-    let closed =
-        TriangleMesh::new(s.positions().to_vec(), None, None, flipped.clone()).unwrap();
+    let closed = TriangleMesh::new(s.positions().to_vec(), None, None, flipped.clone()).unwrap();
     let e = check_mesh(&closed, &poses, &cam).unwrap_err().to_string();
     assert!(e.contains("wind clockwise"), "{e}");
     // the upper cap only: open, judged by the cameras
@@ -119,6 +131,8 @@ fn inward_winding_is_refused_closed_or_open() {
         .filter(|t| t.iter().all(|&i| s.positions()[i as usize].z > 0.035))
         .collect();
     let open_mesh = TriangleMesh::new(s.positions().to_vec(), None, None, open).unwrap();
-    let e = check_mesh(&open_mesh, &poses, &cam).unwrap_err().to_string();
+    let e = check_mesh(&open_mesh, &poses, &cam)
+        .unwrap_err()
+        .to_string();
     assert!(e.contains("wind clockwise"), "{e}");
 }

@@ -300,7 +300,10 @@ mod tests {
         let mut given = parts(2);
         given[1].1.shard = Shard { index: 7, count: 2 };
         let e = merge_parts(given).unwrap_err().to_string();
-        assert!(e.contains("p1.part: shard index 7 is not below its count 2"), "{e}");
+        assert!(
+            e.contains("p1.part: shard index 7 is not below its count 2"),
+            "{e}"
+        );
         // a count no run has: refused without a slot per shard
         let mut given = parts(1);
         given[0].1.shard = Shard {

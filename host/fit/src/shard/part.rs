@@ -166,8 +166,8 @@ impl PartFile {
     /// at most the 28 header bytes plus the body length they state plus the checksum (and one
     /// byte more, so trailing bytes are seen).
     pub fn read(path: &Path) -> Result<Self, PartError> {
-        use std::io::Read;
         use ellipso_model::file_io::{check_regular, read_bounded};
+        use std::io::Read;
         let io = |source| PartError::Io {
             path: path.to_path_buf(),
             source,
@@ -366,7 +366,9 @@ pub(crate) mod tests {
         std::fs::write(&p, &bytes).unwrap();
         let e = PartFile::read(&p).unwrap_err().to_string();
         assert!(e.contains("trailing"), "{e}");
-        let e = PartFile::read(Path::new("/dev/zero")).unwrap_err().to_string();
+        let e = PartFile::read(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("character device"), "{e}");
     }
 

@@ -94,6 +94,8 @@ impl OutputFile {
                 format.extensions[0]
             )));
         }
+        let path = place::resolve(out)?;
+        place::check(&path, command, inputs, derived)?;
         let ext = out
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -107,8 +109,6 @@ impl OutputFile {
                 format.extensions.join(" or .")
             )));
         }
-        let path = place::resolve(out)?;
-        place::check(&path, command, inputs, derived)?;
         match std::fs::metadata(&path) {
             Ok(m) if m.is_dir() => {
                 return Err(wrong("is a directory; name a file inside it".into()));

@@ -338,9 +338,8 @@ impl OutputDir {
             software: format!("ellipso {}", env!("CARGO_PKG_VERSION")),
             files,
         };
-        let bytes = serde_json::to_vec_pretty(&marker).map_err(|e| {
-            OutputError::io(&self.staging, std::io::Error::other(e.to_string()))
-        })?;
+        let bytes = serde_json::to_vec_pretty(&marker)
+            .map_err(|e| OutputError::io(&self.staging, std::io::Error::other(e.to_string())))?;
         let marker_path = self.staging.join(MARKER);
         crate::atomic_file::write(&marker_path, bytes)
             .map_err(|e| OutputError::io(&marker_path, e))?;
@@ -348,16 +347,14 @@ impl OutputDir {
         if self.target.exists() {
             // owned by this command (checked at the claim); checked again in case it changed
             check_owned(&self.target, self.command)?;
-            let aside = self
-                .staging
-                .with_file_name(format!(
-                    "{}.ellipso-old-{}",
-                    self.target
-                        .file_name()
-                        .map(|n| format!(".{}", n.to_string_lossy()))
-                        .unwrap_or_default(),
-                    std::process::id()
-                ));
+            let aside = self.staging.with_file_name(format!(
+                "{}.ellipso-old-{}",
+                self.target
+                    .file_name()
+                    .map(|n| format!(".{}", n.to_string_lossy()))
+                    .unwrap_or_default(),
+                std::process::id()
+            ));
             let old = fsops::swap_in(&self.staging, &self.target, &aside)
                 .map_err(|e| OutputError::io(&self.target, e))?;
             // the old output is out of sight; a failure to remove it is the next run's leftover

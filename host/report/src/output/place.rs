@@ -156,7 +156,12 @@ mod tests {
         check(&calib, "calibrate", &inputs, Some("calibration")).unwrap();
         // without the input too: a session is protected whoever writes
         assert!(matches!(
-            check(&session.join("frames/00000001.png"), "model-plot", &[], None),
+            check(
+                &session.join("frames/00000001.png"),
+                "model-plot",
+                &[],
+                None
+            ),
             Err(OutputError::InsideSession { .. })
         ));
         assert!(matches!(
@@ -165,7 +170,12 @@ mod tests {
         ));
         // the derived directory of another command is not this one's
         assert!(matches!(
-            check(&session.join("replay"), "calibrate", &inputs, Some("calibration")),
+            check(
+                &session.join("replay"),
+                "calibrate",
+                &inputs,
+                Some("calibration")
+            ),
             Err(OutputError::InsideSession { .. })
         ));
     }

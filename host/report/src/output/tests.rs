@@ -5,7 +5,9 @@ use super::*;
 static SERIAL: Mutex<()> = Mutex::new(());
 
 fn serial() -> std::sync::MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    SERIAL
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 fn names(dir: &Path) -> Vec<String> {
@@ -79,7 +81,10 @@ fn an_interrupted_run_leaves_the_previous_output_and_its_leftovers_go_next_time(
         std::fs::write(o.path().join("half"), b"x").unwrap();
     }
     assert_eq!(names(dir.path()), ["fit"]);
-    assert_eq!(std::fs::read_to_string(out.join("sub/r.txt")).unwrap(), "old");
+    assert_eq!(
+        std::fs::read_to_string(out.join("sub/r.txt")).unwrap(),
+        "old"
+    );
     // a killed run's staging directory (nobody holds its lock) is removed by the next run
     let dead = dir.path().join(".fit.ellipso-new-999999999");
     std::fs::create_dir(&dead).unwrap();
@@ -153,8 +158,13 @@ fn files_are_claimed_by_format_and_place() {
     assert!(e.to_string().contains("not a regular file"), "{e}");
     // an input is never an output
     std::fs::write(d.join("in.json"), b"{}").unwrap();
-    let e =
-        OutputFile::claim(&d.join("in.json"), "x", FileFormat::JSON, &[&d.join("in.json")], None)
-            .unwrap_err();
+    let e = OutputFile::claim(
+        &d.join("in.json"),
+        "x",
+        FileFormat::JSON,
+        &[&d.join("in.json")],
+        None,
+    )
+    .unwrap_err();
     assert!(matches!(e, OutputError::OverlapsInput { .. }), "{e}");
 }

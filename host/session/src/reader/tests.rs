@@ -442,7 +442,13 @@ fn pose_events_that_disagree_are_reported() {
         rms_px: 0.3,
         tags: 4,
     };
-    for e in [pose(0, 0.0), pose(0, 0.0), pose(1, 0.0), pose(1, 0.2), pose(1, 0.3)] {
+    for e in [
+        pose(0, 0.0),
+        pose(0, 0.0),
+        pose(1, 0.0),
+        pose(1, 0.2),
+        pose(1, 0.3),
+    ] {
         w.log(&e).unwrap();
     }
     w.finish(HostTimeUs(99_999), "completed").unwrap();

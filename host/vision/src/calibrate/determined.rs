@@ -23,9 +23,9 @@
 use ellipso_model::camera::{CAMERA_PARAM_COUNT, CameraModel, Pose};
 use nalgebra::{Matrix2, SMatrix, Vector2};
 
+use super::CalibConfig;
 use super::bundle::{ViewData, bundle_adjust};
 use super::spread::ViewSpread;
-use super::CalibConfig;
 
 /// How far, in stated σ, the profile probe moves the principal point.
 const PROBE_SIGMAS: f64 = 3.0;
@@ -75,7 +75,10 @@ impl std::fmt::Display for Undetermined {
 }
 
 /// The two checks of the module doc on a finished joint optimisation.
-#[expect(clippy::too_many_arguments, reason = "the state of one finished optimisation")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the state of one finished optimisation"
+)]
 pub fn check(
     camera: &CameraModel,
     std_errors: &[f64; CAMERA_PARAM_COUNT],

@@ -29,12 +29,13 @@ pub struct ViewSpread {
 
 /// The spread of the views `camera_from_board`.
 pub fn view_spread(poses: &[Pose]) -> ViewSpread {
-    let normals: Vec<Vector3<f64>> = poses
-        .iter()
-        .map(|p| p.rotation * Vector3::z())
-        .collect();
+    let normals: Vec<Vector3<f64>> = poses.iter().map(|p| p.rotation * Vector3::z()).collect();
     let n = normals.len().max(1) as f64;
-    let moment: Matrix3<f64> = normals.iter().map(|v| v * v.transpose()).sum::<Matrix3<f64>>() / n;
+    let moment: Matrix3<f64> = normals
+        .iter()
+        .map(|v| v * v.transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
     let eig = moment.symmetric_eigen();
     let (k, &smallest) = eig
         .eigenvalues

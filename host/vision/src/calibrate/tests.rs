@@ -462,7 +462,10 @@ fn a_level_orbit_is_refused_with_how_to_take_calibration_photos() {
             println!("{u}");
             assert!(u.spread.out_of_plane_deg < 0.5, "{u}");
             let text = u.to_string();
-            assert!(text.contains("horizontal axis") && text.contains("calibration photos"), "{text}");
+            assert!(
+                text.contains("horizontal axis") && text.contains("calibration photos"),
+                "{text}"
+            );
         }
         Ok(cal) => {
             // where the views happen to determine it, the answer must be right within its σ

@@ -211,7 +211,8 @@ fn outlier_tag(
     let median = sorted[sorted.len() / 2];
     rms.sort_by(|a, b| b.1.total_cmp(&a.1));
     let (tag, worst) = rms[0];
-    (worst > config.max_rms_px && worst > config.tag_outlier_factor * median).then_some((tag, worst))
+    (worst > config.max_rms_px && worst > config.tag_outlier_factor * median)
+        .then_some((tag, worst))
 }
 
 /// Projected − observed for every correspondence at `camera_from_board` (NaN where a point is
@@ -223,10 +224,12 @@ fn residuals(
 ) -> Vec<[f64; 2]> {
     correspondences
         .iter()
-        .map(|c| match camera.project(&(camera_from_board * c.point_board_m)) {
-            Some(p) => [p[0] - c.pixel[0], p[1] - c.pixel[1]],
-            None => [f64::NAN; 2],
-        })
+        .map(
+            |c| match camera.project(&(camera_from_board * c.point_board_m)) {
+                Some(p) => [p[0] - c.pixel[0], p[1] - c.pixel[1]],
+                None => [f64::NAN; 2],
+            },
+        )
         .collect()
 }
 

@@ -159,7 +159,10 @@ mod tests {
     #[test]
     fn written_obj_reads_back_exactly() {
         let (dirs, faces) = crate::geometry::procedural::icosphere(1);
-        let pos = dirs.iter().map(|d| Point3::from(d.into_inner() * 0.04)).collect();
+        let pos = dirs
+            .iter()
+            .map(|d| Point3::from(d.into_inner() * 0.04))
+            .collect();
         let m = TriangleMesh::new(pos, None, None, faces).unwrap();
         let back = parse_obj(&write_obj(&m)).unwrap();
         // the reader numbers vertices in the order faces first use them: compare by position
