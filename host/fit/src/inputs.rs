@@ -224,7 +224,8 @@ pub fn check_mesh(
         |(lo, hi), q| (lo.inf(&q.coords), hi.sup(&q.coords)),
     );
     let extent_m = (hi - lo).norm();
-    if !(extent_m <= MESH_MAX_M) {
+    // NaN (a non-finite position) fails too
+    if extent_m.is_nan() || extent_m > MESH_MAX_M {
         return bad(format!(
             "it is {extent_m:e} m across (at most {MESH_MAX_M} m): wrong units?"
         ));

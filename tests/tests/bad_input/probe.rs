@@ -254,7 +254,7 @@ fn fit_args(dir: &Path, session: &Path, out: &Path) -> Vec<String> {
 pub fn orbit_cases() -> Vec<Case> {
     vec![
         case(
-            "calibration",
+            "calibration and tags",
             "calibrate on a 40-frame orbit of the sphere (the probe: fx 973 ± 4, fy 490 ± 15, cy −127 ± 10)",
             Expect::Refuse("take 15–30 calibration photos"),
             |dir| {
@@ -265,7 +265,7 @@ pub fn orbit_cases() -> Vec<Case> {
             },
         ),
         case(
-            "calibration",
+            "calibration and tags",
             "re-tracking the orbit: a tag cut by the sphere costs the tag, not the frame",
             Expect::Warn("40 of 40 frames"),
             |dir| {

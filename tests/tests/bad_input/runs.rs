@@ -32,6 +32,26 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     out
 }
 
+/// Whether `out` is one run's whole output: its marker lists exactly the files it holds.
+fn whole_output(out: &Path) -> bool {
+    let Ok(bytes) = std::fs::read(out.join(".ellipso-output.json")) else {
+        return false;
+    };
+    let marker: serde_json::Value = serde_json::from_slice(&bytes).unwrap_or_default();
+    let listed: std::collections::BTreeSet<String> = marker["files"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|f| f.as_str().map(str::to_string))
+        .collect();
+    let held: std::collections::BTreeSet<String> = snapshot(out)
+        .into_keys()
+        .map(|p| p.to_string_lossy().into_owned())
+        .filter(|p| p != ".ellipso-output.json")
+        .collect();
+    listed == held && out.join("fit.ply").is_file()
+}
+
 /// Names in `dir` that are a run's leftovers (`.NAME.ellipso-…`).
 fn leftovers(dir: &Path) -> Vec<String> {
     std::fs::read_dir(dir)
@@ -80,12 +100,13 @@ pub fn fit_replacing_an_output_interrupted(dir: &Path, signal: i32) -> Verdict {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    // stopped once it has written three result files into its staging directory (mid-way
-    // through the export), or after 10 s
+    // stopped once it has written three result files — into its staging directory, or (a
+    // build without one) into the output itself — mid-way through the export, or after 10 s
     let started = Instant::now();
+    let since = std::time::SystemTime::now();
     let mut written = Vec::new();
     while started.elapsed() < Duration::from_secs(10) {
-        written = std::fs::read_dir(dir)
+        let staged = std::fs::read_dir(dir)
             .unwrap()
             .flatten()
             .filter(|e| {
@@ -93,7 +114,18 @@ pub fn fit_replacing_an_output_interrupted(dir: &Path, signal: i32) -> Verdict {
                     .to_string_lossy()
                     .starts_with(".fit.ellipso-new")
             })
-            .flat_map(|e| std::fs::read_dir(e.path()).into_iter().flatten().flatten())
+            .flat_map(|e| std::fs::read_dir(e.path()).into_iter().flatten().flatten());
+        let in_place = std::fs::read_dir(&out)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .filter(|e| {
+                e.metadata()
+                    .and_then(|m| m.modified())
+                    .is_ok_and(|t| t > since)
+            });
+        written = staged
+            .chain(in_place)
             .map(|e| e.file_name().to_string_lossy().into_owned())
             .collect();
         if written.len() >= 3 || child.try_wait().unwrap().is_some() {
@@ -105,8 +137,9 @@ pub fn fit_replacing_an_output_interrupted(dir: &Path, signal: i32) -> Verdict {
     let Some(status) = wait(&mut child, Duration::from_secs(60)) else {
         return Verdict::Hang;
     };
-    // a run that finished before the signal replaced the output whole: also allowed
-    let finished = status.success();
+    // a run that finished (or committed) before the signal replaced the output whole: also
+    // allowed — what is never allowed is a mix
+    let finished = status.success() || (snapshot(&out) != before && whole_output(&out));
     println!(
         "fit replacing an output, signal {signal} after {:.2} s with {written:?} written: {}",
         started.elapsed().as_secs_f64(),
@@ -121,7 +154,7 @@ pub fn fit_replacing_an_output_interrupted(dir: &Path, signal: i32) -> Verdict {
         return Verdict::DataChanged;
     }
     if signal != libc::SIGKILL {
-        let exited = finished || status.code() == Some(128 + signal);
+        let exited = status.success() || status.code() == Some(128 + signal);
         if !(exited && leftovers(dir).is_empty()) {
             println!("exit {status:?}, leftovers {:?}", leftovers(dir));
             return Verdict::Unexpected;

@@ -1,10 +1,11 @@
 //! A result file a command owns: claimed before the work starts (so a bad `--out` is refused
 //! before minutes of computing), written whole through [`crate::atomic_file`].
 //!
-//! Contract of [`OutputFile::claim`]: the name is not a directory's (`out/`), its extension is
-//! the format's, its place passes [`super::place::check`], and an existing file there is
+//! Contract of [`OutputFile::claim`]: the name is not a directory's (`out/`), its place passes
+//! [`super::place::check`], its extension is the format's, and an existing file there is
 //! replaced only when it is a regular file whose first bytes are the format's (a user's
-//! document saved under the same name is refused, never overwritten).
+//! document saved under the same name is refused, never overwritten). The temporary files a
+//! killed run left beside it are removed.
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -42,11 +43,11 @@ impl FileFormat {
         extensions: &["obj"],
         magic: b"",
     };
-    /// JSON reports (ellipso's begin with an object).
+    /// JSON reports (objects or arrays: text, any start).
     pub const JSON: Self = Self {
         name: "JSON",
         extensions: &["json"],
-        magic: b"{",
+        magic: b"",
     };
     /// TOML sections (rig files).
     pub const TOML: Self = Self {
@@ -60,6 +61,31 @@ impl FileFormat {
         extensions: &["md"],
         magic: b"",
     };
+}
+
+/// Removes the temporary files of `path` that runs killed mid-write left beside it
+/// (`.NAME.PID.partial` of [`crate::atomic_file`], PID no longer running).
+fn remove_dead_partials(parent: &Path, path: &Path) {
+    let Some(name) = path.file_name().map(|n| n.to_string_lossy().into_owned()) else {
+        return;
+    };
+    let prefix = format!(".{name}.");
+    for e in std::fs::read_dir(parent).into_iter().flatten().flatten() {
+        let file = e.file_name().to_string_lossy().into_owned();
+        let Some(pid) = file
+            .strip_prefix(&prefix)
+            .and_then(|rest| rest.strip_suffix(".partial"))
+            .and_then(|pid| pid.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        // SAFETY: signal 0 sends nothing; it only asks whether the process exists.
+        let alive = unsafe { libc::kill(pid, 0) } == 0
+            || std::io::Error::last_os_error().raw_os_error() == Some(libc::EPERM);
+        if !alive {
+            let _ = std::fs::remove_file(e.path());
+        }
+    }
 }
 
 /// A result file claimed by a command.
@@ -134,6 +160,7 @@ impl OutputFile {
         }
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(|e| OutputError::io(parent, e))?;
+            remove_dead_partials(parent, &path);
         }
         Ok(OutputFile {
             path,

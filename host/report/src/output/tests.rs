@@ -156,6 +156,13 @@ fn files_are_claimed_by_format_and_place() {
     assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
     let e = claim(&fifo, FileFormat::PLY).unwrap_err();
     assert!(e.to_string().contains("not a regular file"), "{e}");
+    // a killed writer's temporary file goes with the next claim; a live one's stays
+    let dead = d.join(".m.ply.999999999.partial");
+    let live = d.join(format!(".m.ply.{}.partial", std::process::id()));
+    std::fs::write(&dead, b"x").unwrap();
+    std::fs::write(&live, b"x").unwrap();
+    claim(&d.join("m.ply"), FileFormat::PLY).unwrap();
+    assert!(!dead.exists() && live.exists());
     // an input is never an output
     std::fs::write(d.join("in.json"), b"{}").unwrap();
     let e = OutputFile::claim(
