@@ -39,7 +39,7 @@ pub(super) fn load_frame(
     bit_depth: Option<u8>,
 ) -> Result<Loaded, String> {
     let bytes = ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::FRAME)
-        .map_err(|e| format!("cannot read: {e}"))?;
+        .map_err(|e| format!("cannot open: {e}"))?;
     if !bytes.starts_with(PNG_SIGNATURE) {
         return Err(match image::guess_format(&bytes) {
             Ok(f) => format!("not a PNG file (looks like {f:?}); raw frames are grayscale PNGs"),
