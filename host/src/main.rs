@@ -59,22 +59,66 @@ fn main() -> std::process::ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(filter)),
         )
         .with_writer(std::io::stderr)
+        // colour codes only for a terminal: never into a log file or a pipe
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        // a closed stderr must not turn into a panic (its default reports write errors there)
+        .log_internal_errors(false)
         .init();
+    if let Err(e) = cli::interrupt::install() {
+        errln!("error: {e:#}");
+        return std::process::ExitCode::FAILURE;
+    }
     // one clear line: the error and its causes, joined
     match run(cli.command) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             // a capture stopped by SIGINT/SIGTERM: the shell's 128 + signal
             if let Some(i) = e.downcast_ref::<cli::capture::Interrupted>() {
-                eprintln!("{i}");
+                errln!("{i}");
                 return std::process::ExitCode::from(
                     u8::try_from(128 + i.signal).unwrap_or(u8::MAX),
                 );
             }
-            eprintln!("error: {e:#}");
+            if let Some(i) = e.downcast_ref::<cli::interrupt::Stopped>() {
+                errln!("{i}");
+                return std::process::ExitCode::from(
+                    u8::try_from(128 + i.signal).unwrap_or(u8::MAX),
+                );
+            }
+            errln!("error: {}", one_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The error and its causes joined with ": ", each cause said once: a cause whose text its
+/// parent already quotes (an OS error inside a message naming the file) is not repeated.
+/// Control characters (a terminal escape quoted from a file) are printed escaped, never sent
+/// to the terminal.
+fn one_line(e: &anyhow::Error) -> String {
+    let mut line = String::new();
+    let mut last = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if !last.is_empty() && last.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+        last = text;
+    }
+    line.chars()
+        .flat_map(|c| {
+            let escaped = (c.is_control() && c != '\n' && c != '\t')
+                .then(|| c.escape_default().collect::<String>());
+            escaped
+                .unwrap_or_else(|| c.to_string())
+                .chars()
+                .collect::<Vec<_>>()
+        })
+        .collect()
 }
 
 fn run(command: Command) -> anyhow::Result<()> {

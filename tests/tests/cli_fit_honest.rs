@@ -142,7 +142,9 @@ fn a_session_fits_from_any_directory_with_its_recorded_flash() {
 fn fit_refuses_when_no_vertex_has_a_sample_or_the_sensor_is_impossible() {
     let tmp = tempfile::tempdir().unwrap();
     let near = sphere_mesh(tmp.path(), "near.ply", [0.0, 0.0, 0.04]);
-    let far = sphere_mesh(tmp.path(), "far.ply", [100.0, 0.0, 0.04]);
+    // a metre beside the board: as large in the views as the object, in none of them
+    let far = sphere_mesh(tmp.path(), "far.ply", [1.0, 0.0, 0.04]);
+    let remote = sphere_mesh(tmp.path(), "remote.ply", [100.0, 0.0, 0.04]);
     let refused = |session: &Path, mesh: &Path, needles: &[&str]| {
         let out = tmp.path().join(format!(
             "out-{}",
@@ -163,6 +165,9 @@ fn fit_refuses_when_no_vertex_has_a_sample_or_the_sensor_is_impossible() {
         &far,
         &["no vertex of the mesh has a single sample", "not in view"],
     );
+    // 100 m away: a pixel in the views, refused as such before any work (issue 28)
+    let s = session_copy(tmp.path(), "remote");
+    refused(&s, &remote, &["the mesh", "px in the median view"]);
     // frames/ gone (poses are in the log)
     let s = session_copy(tmp.path(), "noframes");
     std::fs::remove_dir_all(s.join("frames")).unwrap();

@@ -16,13 +16,14 @@ use ellipso_tests::fit_fixture::write_fit_dir;
 
 /// One raw HTTP/1.1 GET; returns (status, body).
 fn get(addr: &str, path: &str, host: &str) -> (u16, String) {
+    raw(addr, &format!("GET {path} HTTP/1.1\r\nHost: {host}\r\n"))
+}
+
+/// One raw request: `head` is the request line and headers, each line ending in CRLF.
+fn raw(addr: &str, head: &str) -> (u16, String) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(10))).unwrap();
-    write!(
-        s,
-        "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
-    )
-    .unwrap();
+    write!(s, "{head}Connection: close\r\n\r\n").unwrap();
     let mut resp = Vec::new();
     s.read_to_end(&mut resp).unwrap();
     let text = String::from_utf8_lossy(&resp).to_string();
@@ -118,6 +119,48 @@ fn view_serves_only_with_the_token_and_its_own_host_and_binds_loopback() {
         404,
         "live data is not served in material mode"
     );
+}
+
+/// Issue 28, case 10: an absolute-form request target naming another server, and a second
+/// `Host` header behind a valid one, are refused like a foreign `Host`; under `--bind ::1` the
+/// page answers `localhost` as it does under 127.0.0.1.
+#[test]
+fn view_refuses_a_foreign_authority_and_two_hosts_and_answers_localhost_on_ipv6() {
+    let tmp = tempfile::tempdir().unwrap();
+    let fit = write_fit_dir(&tmp.path().join("fit"));
+    for bind in ["127.0.0.1", "::1"] {
+        let mut cmd = Command::new(ellipso_bin());
+        cmd.arg("view").arg(&fit).args(["--bind", bind]);
+        let (child, url) = spawn_with_url(cmd);
+        let _child = ChildGuard(child);
+        let rest = url.strip_prefix("http://").unwrap();
+        let (addr, token) = rest.split_once("/?token=").unwrap();
+        let port = addr.rsplit_once(':').unwrap().1;
+        let path = format!("/api/info?token={token}");
+        let (status, why) = raw(
+            addr,
+            &format!("GET http://evil.example{path} HTTP/1.1\r\nHost: {addr}\r\n"),
+        );
+        assert_eq!(
+            status, 403,
+            "{bind}: foreign authority in the request target"
+        );
+        assert!(why.contains("another server"), "{why}");
+        let (status, why) = raw(
+            addr,
+            &format!("GET {path} HTTP/1.1\r\nHost: {addr}\r\nHost: evil.example:{port}\r\n"),
+        );
+        assert_eq!(status, 403, "{bind}: two Host headers");
+        assert!(why.contains("more than one Host"), "{why}");
+        // its own authority in absolute form is fine, as is localhost on either loopback
+        let own = format!("GET http://{addr}{path} HTTP/1.1\r\nHost: {addr}\r\n");
+        assert_eq!(raw(addr, &own).0, 200, "{bind}: own absolute form");
+        assert_eq!(
+            get(addr, &path, &format!("localhost:{port}")).0,
+            200,
+            "{bind}: localhost"
+        );
+    }
 }
 
 #[test]

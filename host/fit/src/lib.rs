@@ -12,6 +12,8 @@
 //!   ([`data::ViewGeometry::geometry_at`]).
 //! - [`gate`]: the sample gates (saturated, dark, grazing, non-finite, colour outliers), shared by
 //!   extraction from real frames and the synthetic generator.
+//! - [`inputs`]: the session's camera, poses, frame metadata and the mesh checked against
+//!   physical bounds before any work (what no capture can produce is refused, named).
 //! - [`observe`]: a recorded session + a mesh → samples (projection, occlusion, flash shadow,
 //!   demosaiced analyser sampling, normaliser, gates), streaming one frame at a time.
 //! - [`model`]: per-sample prediction (unit-albedo lobes) with exact dual-number derivatives.
@@ -34,6 +36,7 @@ pub mod data;
 pub mod export;
 pub mod gate;
 pub mod holdout;
+pub mod inputs;
 pub mod model;
 pub mod observe;
 pub mod pipeline;

@@ -78,6 +78,9 @@ pub enum SessionFitError {
     /// No posed frame.
     #[error("no frame of the session has a pose: track poses first")]
     NoPoses,
+    /// An input no capture can produce (`crate::inputs`).
+    #[error(transparent)]
+    Inputs(#[from] crate::inputs::InputError),
     /// A shard was asked to run more than one outer iteration.
     #[error(
         "a sharded fit runs one outer iteration (the shape update between iterations needs \
@@ -180,6 +183,7 @@ pub fn fit_session_with(
     if poses.is_empty() {
         return Err(SessionFitError::NoPoses);
     }
+    crate::inputs::check(session, mesh, poses, &crate::observe::camera_of(session)?)?;
     let (fitted, poses_held_out) = split_poses(poses, config.holdout_fraction);
     let poses = fitted.as_slice();
     let mut mesh = mesh.clone();
@@ -373,6 +377,7 @@ pub fn solve_shard(
     if poses.is_empty() {
         return Err(SessionFitError::NoPoses);
     }
+    crate::inputs::check(session, mesh, poses, &crate::observe::camera_of(session)?)?;
     let (fitted, held) = split_poses(poses, config.holdout_fraction);
     let radiometry = radiometry_of(session)?;
     progress(&format!(

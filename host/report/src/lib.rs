@@ -1,5 +1,5 @@
-//! `ellipso-report`: the files every stage writes — result files written whole or not at all
-//! ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
+//! `ellipso-report`: the files every stage writes — result directories and files a command owns
+//! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
 //! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
 //! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`].
 //!
@@ -14,6 +14,7 @@ pub mod exr_image;
 pub mod figure;
 pub mod font;
 pub mod npy;
+pub mod output;
 pub mod plot;
 
 pub use colour::{ColourMap, Rgb};

@@ -34,10 +34,19 @@ pub fn read(path: &Path) -> Result<(u32, u32, Vec<u16>), SessionError> {
         path: path.to_path_buf(),
         reason,
     };
-    let img = image::ImageReader::open(path)
+    // a regular file of a frame's size at most (a FIFO or device never opened), decoded within
+    // the largest sensor the manifest allows
+    ellipso_model::file_io::check_regular(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(SessionError::io(path))?;
+    let mut reader = image::ImageReader::open(path)
         .map_err(SessionError::io(path))?
         .with_guessed_format()
-        .map_err(SessionError::io(path))?
+        .map_err(SessionError::io(path))?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(crate::manifest::MAX_SIDE_PX);
+    limits.max_image_height = Some(crate::manifest::MAX_SIDE_PX);
+    reader.limits(limits);
+    let img = reader
         .decode()
         .map_err(|e| bad(format!("not a readable PNG: {e}")))?;
     match img {

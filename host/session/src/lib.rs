@@ -49,6 +49,23 @@ pub mod paths {
     pub fn frame_file(frame_id: u64) -> String {
         format!("{frame_id:08}.png")
     }
+
+    /// Subdirectories of a session that later stages may write into, each owned by one command
+    /// (`docs/session-format.md`, "Derived outputs"): nothing else inside a session is ever
+    /// written after its capture, except the poses appended to the log.
+    pub const DERIVED: [(&str, &str); 2] = [("replay", "replay"), ("calibration", "calibrate")];
+
+    /// The recorded session `path` lies in (or is), if any: the nearest directory at or above
+    /// `path` that holds a [`MANIFEST`] file beside an [`EVENTS`] log or a [`FRAMES`] directory.
+    /// `path` should be absolute (a relative one is looked at only as far as it goes).
+    pub fn enclosing_session(path: &std::path::Path) -> Option<std::path::PathBuf> {
+        path.ancestors()
+            .find(|dir| {
+                dir.join(MANIFEST).is_file()
+                    && (dir.join(EVENTS).exists() || dir.join(FRAMES).is_dir())
+            })
+            .map(std::path::Path::to_path_buf)
+    }
 }
 
 /// Errors reading or writing a session; each names the file and what is wrong.

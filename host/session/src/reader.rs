@@ -12,6 +12,7 @@
 //!   on-time and [`FrameEntry::flash_energy_rel`]. Sessions written before bracketing (and frames
 //!   without a pairing) read as step 0 at full energy, 1.0.
 
+use ellipso_model::file_io::{caps, read_bounded, read_bounded_text};
 use std::collections::BTreeMap;
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -61,6 +62,9 @@ pub struct ReadReport {
     pub duplicate_frame_events: Vec<u64>,
     /// Pulse sequence numbers with more than one `pulse` event.
     pub duplicate_pulses: Vec<u64>,
+    /// Frame ids whose `pose` / `pose_rejected` events disagree (the last one is what readers
+    /// of poses take; identical repeats are not listed).
+    pub conflicting_poses: Vec<u64>,
 }
 
 impl ReadReport {
@@ -104,6 +108,13 @@ impl ReadReport {
                 "{} pulses logged twice (seq {})",
                 self.duplicate_pulses.len(),
                 list(&self.duplicate_pulses)
+            ));
+        }
+        if !self.conflicting_poses.is_empty() {
+            parts.push(format!(
+                "{} frames with pose events that disagree ({})",
+                self.conflicting_poses.len(),
+                list(&self.conflicting_poses)
             ));
         }
         if !self.frames_without_event.is_empty() {
@@ -176,7 +187,8 @@ struct Paired {
 /// Opens the session in `dir`.
 pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let manifest_path = dir.join(paths::MANIFEST);
-    let text = fs::read_to_string(&manifest_path).map_err(SessionError::io(&manifest_path))?;
+    let text = read_bounded_text(&manifest_path, caps::MANIFEST)
+        .map_err(SessionError::io(&manifest_path))?;
     // check the version before the shape, so a newer schema gets the right message
     if let Ok(v) = serde_json::from_str::<serde_json::Value>(&text)
         && let Some(found) = v.get("schema_version").and_then(|x| x.as_u64())
@@ -209,7 +221,7 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     };
 
     let log_path = dir.join(paths::EVENTS);
-    let log = match fs::read(&log_path) {
+    let log = match read_bounded(&log_path, caps::EVENT_LOG) {
         Ok(b) => b,
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
         Err(e) => {
@@ -237,7 +249,32 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     let mut pulses = std::collections::BTreeSet::new();
+    // per frame: its first pose value (rotation and translation; empty for a rejection)
+    let mut poses: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
     for e in &events {
+        let pose = match e {
+            SessionEvent::Pose {
+                frame_id,
+                rotation_camera_from_world: r,
+                translation_camera_from_world_m: t,
+                ..
+            } => Some((*frame_id, r.iter().chain(t).copied().collect::<Vec<f64>>())),
+            SessionEvent::PoseRejected { frame_id, .. } => Some((*frame_id, Vec::new())),
+            _ => None,
+        };
+        if let Some((id, value)) = pose {
+            match poses.get(&id) {
+                Some(first) if *first != value => {
+                    if !report.conflicting_poses.contains(&id) {
+                        report.conflicting_poses.push(id);
+                    }
+                }
+                Some(_) => {}
+                None => {
+                    poses.insert(id, value);
+                }
+            }
+        }
         match e {
             SessionEvent::Frame { frame_id, .. } => {
                 if logged.contains_key(frame_id) {

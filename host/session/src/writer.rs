@@ -235,6 +235,42 @@ fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
     fs::rename(&tmp, &path).map_err(SessionError::io(&path))
 }
 
+/// An exclusive advisory lock (`flock(2)`) on a session's event log, held by a stage that reads
+/// the log, works, then appends to it (pose tracking): two such runs at once would both track
+/// the same frames and both append their poses. The lock changes no byte of the session and is
+/// released by the kernel however its holder ends.
+#[derive(Debug)]
+pub struct LogLock {
+    _file: File,
+}
+
+impl LogLock {
+    /// Takes the lock on the log of the session in `dir`, calling `waiting` once when another
+    /// process holds it (then waits for it). A session without a log needs no lock (`None`).
+    pub fn acquire(dir: &Path, waiting: impl FnOnce()) -> Result<Option<Self>, SessionError> {
+        let path = dir.join(paths::EVENTS);
+        let file = match File::open(&path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(e) => return Err(SessionError::io(&path)(e)),
+        };
+        #[cfg(unix)]
+        {
+            use std::os::fd::AsRawFd;
+            let fd = file.as_raw_fd();
+            // SAFETY: flock on a descriptor we own; no memory is passed.
+            if unsafe { libc::flock(fd, libc::LOCK_EX | libc::LOCK_NB) } != 0 {
+                waiting();
+                // SAFETY: as above, now waiting.
+                if unsafe { libc::flock(fd, libc::LOCK_EX) } != 0 {
+                    return Err(SessionError::io(&path)(std::io::Error::last_os_error()));
+                }
+            }
+        }
+        Ok(Some(Self { _file: file }))
+    }
+}
+
 /// Appends events to an existing session's log (stages that run after capture, e.g. poses).
 #[derive(Debug)]
 pub struct SessionAppender {

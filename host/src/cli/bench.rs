@@ -104,7 +104,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 pub fn load_scene(path: &Path, seed: Option<u64>) -> anyhow::Result<Scene> {
     let mut scene = Scene::load(path)?;
     if let Some(seed) = seed {
-        let text = std::fs::read_to_string(path)?;
+        let text =
+            ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)?;
         let loc = Located::new(&text, path);
         scene.camera_poses = scene.capture.camera_poses(seed, &loc)?;
         scene.seed = seed;
@@ -153,6 +154,13 @@ pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::R
 }
 
 fn pose(args: PoseArgs) -> anyhow::Result<()> {
+    let out = ellipso_report::output::OutputFile::claim(
+        &args.out.join("pose-bench.json"),
+        "bench-pose",
+        ellipso_report::output::FileFormat::JSON,
+        &[&args.scene],
+        None,
+    )?;
     let scene = load_scene(&args.scene, args.seed)?;
     let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let camera = *renderer.camera();
@@ -231,9 +239,8 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             crate::outln!("|   rejected: {why} ({count}) |||||||");
         }
     }
-    std::fs::create_dir_all(&args.out)?;
-    let path = args.out.join("pose-bench.json");
-    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&results)?)?;
+    out.write(serde_json::to_vec_pretty(&results)?)?;
+    let path = out.shown();
     crate::outln!("written {}", path.display());
     Ok(())
 }

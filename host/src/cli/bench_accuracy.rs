@@ -15,6 +15,7 @@
 //! portable. The fit time is also reported divided by the time of one forward evaluation of
 //! every observation, measured right after it in the same run.
 
+use ellipso_report::output::{FileFormat, OutputFile};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -149,6 +150,8 @@ pub const LARGE_RUNS: [(usize, usize); 3] = [(100_000, 150), (100_000, 300), (50
 
 /// Runs `ellipso bench accuracy`.
 pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
+    // the report's files are claimed before the hour of fitting, not after it
+    let files = ReportFiles::claim(&args.report)?;
     let scenes = if args.scenes.is_empty() {
         vec![
             super::demo::shipped_scene("sphere.toml"),
@@ -285,7 +288,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
         Vec::new()
     };
     write_report(
-        &args.report,
+        &files,
         &results,
         &end_to_end,
         started.elapsed().as_secs_f64(),
@@ -541,24 +544,59 @@ fn command_line(args: &AccuracyArgs) -> String {
     c
 }
 
+/// The report's files: the Markdown report, its JSON data and its two plots in `img/`.
+struct ReportFiles {
+    markdown: OutputFile,
+    json: OutputFile,
+    /// The end-to-end rows' JSON (`<stem>-end-to-end.json`), written when they ran.
+    end_to_end_json: OutputFile,
+    eta_png: OutputFile,
+    normal_png: OutputFile,
+}
+
+impl ReportFiles {
+    fn claim(path: &Path) -> anyhow::Result<Self> {
+        let dir = path
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let stem = path.file_stem().map_or("accuracy-vs-time".into(), |s| {
+            s.to_string_lossy().to_string()
+        });
+        let claim = |p: &Path, f| OutputFile::claim(p, "bench-accuracy", f, &[], None);
+        Ok(Self {
+            markdown: claim(path, FileFormat::MARKDOWN)?,
+            json: claim(&dir.join(format!("{stem}.json")), FileFormat::JSON)?,
+            end_to_end_json: claim(
+                &dir.join(format!("{stem}-end-to-end.json")),
+                FileFormat::JSON,
+            )?,
+            eta_png: claim(
+                &dir.join("img").join(format!("{stem}-eta.png")),
+                FileFormat::PNG,
+            )?,
+            normal_png: claim(
+                &dir.join("img").join(format!("{stem}-normal.png")),
+                FileFormat::PNG,
+            )?,
+        })
+    }
+}
+
 fn write_report(
-    path: &Path,
+    files: &ReportFiles,
     results: &[RunResult],
     end_to_end: &[ellipso_bench::chain::RunResult],
     total_s: f64,
     command: &str,
 ) -> anyhow::Result<()> {
+    let path = files.markdown.shown();
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let img = dir.join("img");
-    std::fs::create_dir_all(&img).with_context(|| format!("creating {}", img.display()))?;
-    let stem = path.file_stem().map_or("accuracy-vs-time".into(), |s| {
-        s.to_string_lossy().to_string()
-    });
-    let eta_png = img.join(format!("{stem}-eta.png"));
-    let normal_png = img.join(format!("{stem}-normal.png"));
+    let eta_png = files.eta_png.shown().to_path_buf();
+    let normal_png = files.normal_png.shown().to_path_buf();
     // The plots draw the sweeps; a report of the large run alone has none to draw.
     let plotted = results.iter().any(|r| r.sweep != "large");
     if plotted {
@@ -583,18 +621,16 @@ fn write_report(
                 .map(|r| (r.times.fit_s, r.scores.normal_median_deg)),
         )?;
     }
-    let json = dir.join(format!("{stem}.json"));
-    ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(results)?)
-        .with_context(|| format!("writing {}", json.display()))?;
+    let json = files.json.shown();
+    files.json.write(serde_json::to_vec_pretty(results)?)?;
     if !end_to_end.is_empty() {
-        let json = dir.join(format!("{stem}-end-to-end.json"));
-        ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(end_to_end)?)
-            .with_context(|| format!("writing {}", json.display()))?;
+        files
+            .end_to_end_json
+            .write(serde_json::to_vec_pretty(end_to_end)?)?;
     }
     let plots = plotted.then_some((eta_png.as_path(), normal_png.as_path()));
     let md = super::bench_report::markdown(results, end_to_end, total_s, command, plots, dir);
-    ellipso_report::atomic_file::write(path, md)
-        .with_context(|| format!("writing {}", path.display()))?;
+    files.markdown.write(md)?;
     crate::outln!("\nreport  {}", path.display());
     if plotted {
         crate::outln!(

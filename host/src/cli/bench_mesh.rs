@@ -7,6 +7,7 @@
 //! `--work`, once: an existing session there is reused, so the report can be re-made without
 //! re-rendering. Writes `mesh-bench.json` and a Markdown report (default `docs/mesh-bench.md`).
 
+use ellipso_report::output::{FileFormat, OutputFile};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -78,6 +79,16 @@ pub struct SceneResult {
 /// Runs `ellipso bench mesh`.
 pub fn run(args: MeshArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    // the report and its data are claimed first (the work directory is a cache of sessions
+    // that each capture creates fresh and later runs reuse)
+    let json = OutputFile::claim(
+        &args.work.join("mesh-bench.json"),
+        "bench-mesh",
+        FileFormat::JSON,
+        &[],
+        None,
+    )?;
+    let report = OutputFile::claim(&args.report, "bench-mesh", FileFormat::MARKDOWN, &[], None)?;
     let mut results = Vec::new();
     for name in &args.scenes {
         let scene_path = shipped_scene(&format!("{name}.toml"));
@@ -100,18 +111,13 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         }
         results.push(bench_scene(name, &scene, &session_dir, &args)?);
     }
-    std::fs::create_dir_all(&args.work)?;
-    let json = args.work.join("mesh-bench.json");
-    std::fs::write(&json, serde_json::to_vec_pretty(&results)?)?;
-    if let Some(dir) = args.report.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    std::fs::write(
-        &args.report,
-        markdown(&results, &args, started.elapsed().as_secs_f64()),
-    )
-    .with_context(|| format!("writing {}", args.report.display()))?;
-    crate::outln!("written {} and {}", args.report.display(), json.display());
+    json.write(serde_json::to_vec_pretty(&results)?)?;
+    report.write(markdown(&results, &args, started.elapsed().as_secs_f64()))?;
+    crate::outln!(
+        "written {} and {}",
+        report.shown().display(),
+        json.shown().display()
+    );
     Ok(())
 }
 

@@ -111,6 +111,18 @@ fn frame_causes(
 
 /// Runs `ellipso calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // claimed first: the session's own `calibration/` by default, never elsewhere inside it
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.session.join("calibration").join("camera.toml"));
+    let out = ellipso_report::output::OutputFile::claim(
+        &out,
+        "calibrate",
+        ellipso_report::output::FileFormat::TOML,
+        &[&args.session],
+        Some("calibration"),
+    )?;
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
     let boards = ellipso_vision::process::boards_of(&session)?;
@@ -182,13 +194,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for r in &cal.rejected {
         crate::outln!("  view {} rejected: {}", r.index, r.reason);
     }
-    let out = args
-        .out
-        .unwrap_or_else(|| args.session.join("calibration").join("camera.toml"));
-    if let Some(parent) = out.parent() {
-        std::fs::create_dir_all(parent)
-            .with_context(|| format!("creating {}", parent.display()))?;
-    }
+    crate::outln!(
+        "views: board tilt spread {:.2}°, out of one plane {:.3}° (common direction {:.3?})",
+        cal.spread.tilt_spread_deg,
+        cal.spread.out_of_plane_deg,
+        cal.spread.common_direction_camera.as_slice()
+    );
     let mut text = cal.to_toml_camera_section();
     if let Some(sphere) = args.sphere {
         // per calibrated view: its frame, board and pose → the highlight
@@ -248,8 +259,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push('\n');
         text.push_str(&flash.to_toml_flash_section());
     }
-    ellipso_report::atomic_file::write(&out, text)
-        .with_context(|| format!("writing {}", out.display()))?;
-    crate::outln!("rig sections written to {}", out.display());
+    out.write(text)?;
+    crate::outln!("rig sections written to {}", out.shown().display());
     Ok(())
 }

@@ -407,11 +407,14 @@ struct StopOnSignal {
     stop: Arc<AtomicBool>,
     signal: Arc<AtomicUsize>,
     ids: Vec<signal_hook::SigId>,
+    /// The process-wide watcher leaves the signals to this capture (dropped after `ids`).
+    _deferred: super::interrupt::Deferred,
 }
 
 impl StopOnSignal {
     fn install() -> anyhow::Result<Self> {
         use signal_hook::consts::{SIGINT, SIGTERM};
+        let deferred = super::interrupt::Deferred::take();
         let stop = Arc::new(AtomicBool::new(false));
         let signal = Arc::new(AtomicUsize::new(0));
         let mut ids = Vec::new();
@@ -428,7 +431,12 @@ impl StopOnSignal {
             );
             ids.push(signal_hook::flag::register(sig, stop.clone()).with_context(context)?);
         }
-        Ok(Self { stop, signal, ids })
+        Ok(Self {
+            stop,
+            signal,
+            ids,
+            _deferred: deferred,
+        })
     }
 
     fn flag(&self) -> &AtomicBool {

@@ -112,22 +112,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         ([w / 2, h / 2], None)
     };
-    if args.out.exists() {
-        // only ever clear a previous demo's output, never an arbitrary directory
-        let previous_demo = args.out.join("summary.json").is_file()
-            || args.out.join("session").join("manifest.json").is_file();
-        let empty = std::fs::read_dir(&args.out)
-            .map(|mut d| d.next().is_none())
-            .unwrap_or(false);
-        anyhow::ensure!(
-            previous_demo || empty,
-            "{} exists and is not a previous demo's output; choose another --out",
-            args.out.display()
-        );
-        std::fs::remove_dir_all(&args.out)
-            .with_context(|| format!("clearing {}", args.out.display()))?;
-    }
-    let session_dir = args.out.join("session");
+    // the demo owns its output: a new or empty directory, or an earlier demo's (marker and
+    // all); everything is written beside it and swapped in whole at the end
+    let out = ellipso_report::output::OutputDir::claim(&args.out, "demo", &[&scene_path])?;
+    let root = out.path().to_path_buf();
+    let session_dir = root.join("session");
     crate::outln!(
         "ellipso demo: scene {} at {}×{}",
         scene_path.display(),
@@ -157,7 +146,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (report, dir) = (captured.report, captured.dir);
     print_report(&report);
     if let Some(signal) = captured.signal {
-        return Err(capture::Interrupted { signal, dir }.into());
+        // the partial demo goes with its staging directory; an earlier demo stays
+        return Err(super::interrupt::Stopped { signal }.into());
     }
 
     crate::outln!("[2/4] tracking camera poses from the AprilTags…");
@@ -185,10 +175,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     crate::outln!(
         "[3/4] carving the mesh from the frames, fitting the polarimetric SVBRDF and shape per vertex…"
     );
-    let fit = fit_and_score(&scene, &session, &args.out, args.quick)?;
+    let fit = fit_and_score(&scene, &session, &out, args.quick)?;
 
     crate::outln!("[4/4] pictures…");
-    let pictures = args.out.join("pictures");
+    let pictures = root.join("pictures");
     std::fs::create_dir_all(&pictures)?;
     let first = session
         .frames
@@ -220,7 +210,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let path_plot = pictures.join("camera-path.png");
     plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
-    crate::outln!("  {}", path_plot.display());
+    crate::outln!("  {}", out.published(&path_plot).display());
 
     let mut summary = serde_json::json!({
         "scene": scene_path.display().to_string(),
@@ -229,28 +219,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "pose_accuracy": accuracy,
         "fit": fit.summary,
     });
-    let summary_path = args.out.join("summary.json");
-    crate::cli::out::paths_relative_to(&mut summary, &args.out);
+    let summary_path = root.join("summary.json");
+    // every path in the summary is relative to its own folder (the staging folder moves whole)
+    crate::cli::out::paths_relative_to(&mut summary, &root);
     ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
-    crate::outln!("\nresults in {}:", args.out.display());
-    crate::outln!("  session (raw frames + event log)  {}", dir.display());
-    crate::outln!(
-        "  polarisation images of frame 0    {}",
-        pictures.join("frame0-polarisation").display()
-    );
-    crate::outln!(
-        "  camera path plot                  {}",
-        path_plot.display()
-    );
-    crate::outln!("  fitted model (PLY, per vertex)    {}", fit.ply.display());
-    crate::outln!(
-        "  fit pictures (maps, Mueller grid, relit, novel view)  {}",
-        fit.dir.display()
-    );
-    crate::outln!(
-        "  summary                           {}",
-        summary_path.display()
-    );
+    let shown = |p: &Path| out.published(p).display().to_string();
+    let lines = [
+        ("session (raw frames + event log) ", shown(&dir)),
+        (
+            "polarisation images of frame 0   ",
+            shown(&pictures.join("frame0-polarisation")),
+        ),
+        ("camera path plot                 ", shown(&path_plot)),
+        ("fitted model (PLY, per vertex)   ", shown(&fit.ply)),
+        (
+            "fit pictures (maps, Mueller grid, relit, novel view) ",
+            shown(&fit.dir),
+        ),
+        ("summary                          ", shown(&summary_path)),
+    ];
+    let published = out.commit()?;
+    crate::outln!("\nresults in {}:", published.display());
+    for (what, path) in lines {
+        crate::outln!("  {what} {path}");
+    }
     Ok(())
 }
 
@@ -302,10 +294,10 @@ struct DemoFit {
 fn fit_and_score(
     scene: &Scene,
     session: &ellipso_session::reader::Session,
-    out: &Path,
+    out: &ellipso_report::output::OutputDir,
     quick: bool,
 ) -> anyhow::Result<DemoFit> {
-    let dir = out.join("fit");
+    let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
     let (mesh, mesh_report) =
@@ -322,7 +314,8 @@ fn fit_and_score(
         outer_iterations: if quick { 1 } else { 2 },
         ..Default::default()
     };
-    let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;
+    let run =
+        super::fit::fit_and_export(session, &mesh, &dir, None, &config, &|p| out.published(p))?;
 
     // Only now the truth.
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;

@@ -12,6 +12,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 
 use ellipso_mesh::colmap::{ColmapOptions, export_colmap};
+use ellipso_report::output::OutputDir;
 
 /// `ellipso export` subcommands.
 #[derive(Debug, clap::Subcommand)]
@@ -29,7 +30,7 @@ pub enum Args {
 pub struct MitsubaArgs {
     /// The fit directory (`fit.ply` and `fit-view.json` from `ellipso fit`).
     pub fit_dir: PathBuf,
-    /// Output directory (created if missing).
+    /// Output directory: new, empty, or an earlier `export mitsuba`'s (replaced whole).
     #[arg(long)]
     pub out: PathBuf,
     /// Samples per pixel written into the scene (Mitsuba's `-Dspp=N` overrides it).
@@ -42,7 +43,8 @@ pub struct MitsubaArgs {
 pub struct ColmapArgs {
     /// The session directory.
     pub session: PathBuf,
-    /// Output directory (gets `images/` and `sparse/`).
+    /// Output directory (gets `images/` and `sparse/`): new, empty, or an earlier `export
+    /// colmap`'s (replaced whole).
     #[arg(long)]
     pub out: PathBuf,
     /// Write the images as captured and the lens model (OPENCV / FULL_OPENCV) in cameras.txt
@@ -55,9 +57,11 @@ pub struct ColmapArgs {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Mitsuba(a) => {
+            // written beside and swapped in whole; never into the fit it reads
+            let out = OutputDir::claim(&a.out, "export-mitsuba", &[&a.fit_dir])?;
             let report = ellipso_fit::export::mitsuba::export(
                 &a.fit_dir,
-                &a.out,
+                out.path(),
                 &ellipso_fit::export::mitsuba::MitsubaOptions { spp: a.spp },
             )
             .with_context(|| format!("exporting {} for Mitsuba 3", a.fit_dir.display()))?;
@@ -74,18 +78,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     String::new()
                 }
             );
-            for f in &report.files {
+            let files: Vec<_> = report.files.iter().map(|f| out.published(f)).collect();
+            out.commit()?;
+            for f in &files {
                 crate::outln!("  {}", f.display());
             }
             Ok(())
         }
         Args::Colmap(a) => {
+            let out = OutputDir::claim(&a.out, "export-colmap", &[&a.session])?;
             let session = ellipso_session::reader::open(&a.session)?;
             let poses = super::fit::poses_of(&session)?;
             let report = export_colmap(
                 &session,
                 &poses,
-                &a.out,
+                out.path(),
                 ColmapOptions {
                     keep_distortion: a.keep_distortion,
                 },
@@ -103,8 +110,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     ellipso_mesh::error::skipped_list(&report.skipped, 4)
                 );
             }
-            crate::outln!("  {}", a.out.join("sparse").display());
-            crate::outln!("  {}", a.out.join("images").display());
+            let published = out.commit()?;
+            crate::outln!("  {}", published.join("sparse").display());
+            crate::outln!("  {}", published.join("images").display());
             Ok(())
         }
     }

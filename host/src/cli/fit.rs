@@ -72,6 +72,21 @@ pub struct Args {
 /// Runs `ellipso fit`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let shard = shard_of(&args)?;
+    // the output is claimed before any work: a bad --out is refused at once, not after the fit
+    let mut inputs: Vec<&Path> = vec![&args.session];
+    inputs.extend(args.mesh.as_deref());
+    let out_dir = match &shard {
+        Some(_) => None,
+        None => Some(ellipso_report::output::OutputDir::claim(
+            args.out.as_deref().unwrap_or(Path::new("ellipso-fit")),
+            "fit",
+            &inputs,
+        )?),
+    };
+    let part_file = match (&shard, &args.out) {
+        (Some(_), Some(out)) => Some(super::fit_shard::claim_part(out, &inputs)?),
+        _ => None,
+    };
     // A given mesh is read first: a bad mesh is refused before the session is opened.
     let given_mesh = args
         .mesh
@@ -86,57 +101,78 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "--holdout {}: must be a fraction in [0, 0.5]",
         args.holdout
     );
+    // --view names a frame of the session: checked now, not after the fit
+    if let Some(id) = args.view {
+        anyhow::ensure!(
+            session
+                .frames
+                .iter()
+                .any(|f| f.frame_id == id && f.complete),
+            "--view {id}: {} has no complete frame {id}",
+            args.session.display()
+        );
+    }
     let read = session.report.summary();
     if read != "intact" {
-        eprintln!("warning: {}: {read}", args.session.display());
+        crate::errln!("warning: {}: {read}", args.session.display());
     }
     if let Some(shard) = shard {
         let mesh_path = args.mesh.as_ref().expect("checked by shard_of");
         let mesh = given_mesh.expect("checked by shard_of");
-        let out = args.out.as_ref().expect("checked by shard_of");
+        let out = part_file.expect("claimed above with the --out shard_of checked");
         let config = config_of(&args)?;
         return super::fit_shard::run_shard(
             &session,
             &args.session,
             mesh_path,
             &mesh,
-            out,
+            &out,
             shard,
             config,
         );
     }
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("ellipso-fit"));
+    let out_dir = out_dir.expect("claimed above without --shard");
+    let out = out_dir.path().to_path_buf();
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
-            eprintln!("no --mesh: carving the object's mesh from the frames first…");
+            crate::errln!("no --mesh: carving the object's mesh from the frames first…");
             let (mesh, report) =
                 super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
             let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
-            eprintln!("  {} ({} vertices)", path.display(), report.vertices);
+            crate::errln!(
+                "  {} ({} vertices)",
+                out_dir.published(&path).display(),
+                report.vertices
+            );
             mesh
         }
     };
     let config = config_of(&args)?;
-    let result = fit_and_export(&session, &mesh, &out, args.view, &config)?;
-    if args.json {
+    let result = fit_and_export(&session, &mesh, &out, args.view, &config, &|p| {
+        out_dir.published(p)
+    })?;
+    let out = out_dir.commit()?;
+    print_results(&out, &result, args.json);
+    Ok(())
+}
+
+/// The text or JSON report of a written fit (files already as published).
+pub fn print_results(out: &Path, result: &FitRun, json: bool) {
+    if json {
         let json = serde_json::json!({
             "out": out.display().to_string(),
             "files": result.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>(),
             "summary": result.summary,
         });
         crate::outln!("{json}");
-        return Ok(());
+        return;
     }
     crate::outln!("\nresults in {}:", out.display());
     for f in &result.files {
         crate::outln!("  {}", f.display());
     }
-    Ok(())
 }
 
 /// The shard of `--shard`/`--shard-count`, with the flags a shard needs checked.
@@ -222,10 +258,25 @@ pub struct FitRun {
 /// The session's recorded poses (`pose` events), tracking first every complete frame that has
 /// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
-    let untracked = ellipso_vision::process::untracked_frames(session);
+    let mut untracked = ellipso_vision::process::untracked_frames(session);
     let mut poses = poses_from_session(session);
+    // one run tracks a session at a time; a second waits and takes the first one's poses
+    let _lock = if untracked.is_empty() {
+        None
+    } else {
+        let lock = ellipso_session::writer::LogLock::acquire(&session.dir, || {
+            crate::errln!(
+                "{}: another run is tracking this session's poses; waiting for it…",
+                session.dir.display()
+            )
+        })?;
+        let now = ellipso_session::reader::open(&session.dir)?;
+        untracked = ellipso_vision::process::untracked_frames(&now);
+        poses = poses_from_session(&now);
+        lock
+    };
     if !untracked.is_empty() {
-        eprintln!(
+        crate::errln!(
             "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
             untracked.len(),
             session.frames.iter().filter(|f| f.complete).count()
@@ -251,19 +302,35 @@ pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>>
         "{}: no frame could be posed from the AprilTags",
         session.dir.display()
     );
+    // what every stage that takes poses needs: a possible camera, possible poses
+    ellipso_fit::inputs::check_camera(&ellipso_fit::observe::camera_of(session)?)?;
+    ellipso_fit::inputs::check_poses(&poses)?;
     Ok(poses)
 }
 
-/// Fits `mesh` to `session` and writes the outputs into `out` (see the module doc).
+/// Fits `mesh` to `session` and writes the outputs into `out` (see the module doc); `publish`
+/// maps a path under `out` to where it will be once the output is committed (recorded paths).
 pub fn fit_and_export(
     session: &Session,
     mesh: &TriangleMesh,
     out: &Path,
     view: Option<u64>,
     config: &SessionFitConfig,
+    publish: &dyn Fn(&Path) -> PathBuf,
 ) -> anyhow::Result<FitRun> {
     let started = Instant::now();
     let poses = poses_of(session)?;
+    // the pictures' frame is checked before the long work, not after it
+    if let Some(id) = view {
+        anyhow::ensure!(
+            poses.iter().any(|p| p.0 == id),
+            "--view {id}: frame {id} has no pose in {} ({} posed frames, ids {}…{})",
+            session.dir.display(),
+            poses.len(),
+            poses.first().map_or(0, |p| p.0),
+            poses.last().map_or(0, |p| p.0)
+        );
+    }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // The solver weights samples by their expected noise (the session's sensor where known).
     let config = with_session_sensor(session, config);
@@ -276,7 +343,7 @@ pub fn fit_and_export(
         mesh.positions().len(),
         fit.observe.frames_posed
     ));
-    export_fit(session, &poses, fit, out, view, started)
+    export_fit(session, &poses, fit, out, view, started, publish)
 }
 
 /// The sensor model the solver weights by: the session's where it says it (simulator
@@ -290,7 +357,7 @@ pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> Sess
 }
 
 /// Writes a finished fit's outputs into `out` (pictures from frame `view`, `fit-summary.json`);
-/// `started` is when the whole run began.
+/// `started` is when the whole run began; `publish` as for [`fit_and_export`].
 pub fn export_fit(
     session: &Session,
     poses: &[(u64, Isometry3<f64>)],
@@ -298,6 +365,7 @@ pub fn export_fit(
     out: &Path,
     view: Option<u64>,
     started: Instant,
+    publish: &dyn Fn(&Path) -> PathBuf,
 ) -> anyhow::Result<FitRun> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
@@ -305,7 +373,7 @@ pub fn export_fit(
         tracing::warn!("frame {} skipped: {}", s.frame_id, s.reason);
     }
     if !fit.observe.skipped.is_empty() {
-        eprintln!(
+        crate::errln!(
             "warning: {} of {} posed frames skipped (reasons above and in fit-summary.json)",
             fit.observe.skipped.len(),
             fit.observe.frames_posed
@@ -329,7 +397,7 @@ pub fn export_fit(
         .map(|p| (p.0, p.1, true))
         .unwrap_or((frame_id, world_from_camera, false));
     if let Some(h) = &fit.holdout {
-        eprintln!(
+        crate::errln!(
             "held-out views: {} frames, {} samples: s0 relative RMSE {:.3} (PSNR {:.1} dB), I^s {:.3}, I^alpha {:.3}",
             h.per_frame.len(),
             h.overall.samples,
@@ -343,16 +411,16 @@ pub fn export_fit(
         .context("the session's manifest has no usable rig section")?;
     let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
         .context("the session's manifest has no usable flash section")?;
-    eprintln!("pictures from frame {frame_id}…");
+    crate::errln!("pictures from frame {frame_id}…");
     let captured_s0 =
         match ellipso_fit::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
             Ok(c) => Some(c),
             Err(e) => {
-                eprintln!("note: no comparison picture: frame {}: {e}", comparison.0);
+                crate::errln!("note: no comparison picture: frame {}: {e}", comparison.0);
                 None
             }
         };
-    let report = ellipso_fit::export::export_all(
+    let mut report = ellipso_fit::export::export_all(
         out,
         &fit.mesh,
         &fit.outcome.fits,
@@ -363,6 +431,10 @@ pub fn export_fit(
         captured_s0.as_ref(),
     )?;
     let wall_s = started.elapsed().as_secs_f64();
+    // recorded and printed paths are where the files will be, not the staging directory
+    for f in &mut report.files {
+        *f = publish(f);
+    }
     let mut files = report.files.clone();
     let summary = out.join("fit-summary.json");
     let mut json = serde_json::json!({
@@ -388,8 +460,8 @@ pub fn export_fit(
     // every path in the summary is relative to its own folder
     super::out::paths_relative_to(&mut json, out);
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)
-        .with_context(|| format!("writing {}", summary.display()))?;
-    files.push(summary);
+        .with_context(|| format!("writing {}", publish(&summary).display()))?;
+    files.push(publish(&summary));
     Ok(FitRun {
         fit,
         files,

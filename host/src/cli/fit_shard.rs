@@ -15,6 +15,7 @@ use ellipso_fit::shard::Shard;
 use ellipso_fit::shard::merge::merge_parts;
 use ellipso_fit::shard::part::{PartFile, config_hash, file_hash, session_hash};
 use ellipso_model::geometry::TriangleMesh;
+use ellipso_report::output::{FileFormat, OutputDir, OutputFile};
 use ellipso_session::reader::Session;
 
 /// The recorded poses, refusing to track: shards run at once and must not append to the log.
@@ -38,13 +39,25 @@ fn recorded_poses(session: &Session) -> anyhow::Result<Vec<(u64, nalgebra::Isome
     Ok(poses)
 }
 
+/// The part file format: `.part`, starting with the part magic.
+const PART: FileFormat = FileFormat {
+    name: "fit part",
+    extensions: &["part"],
+    magic: ellipso_fit::shard::part::MAGIC,
+};
+
+/// Claims the part file a shard writes (before its work starts).
+pub fn claim_part(out: &Path, inputs: &[&Path]) -> anyhow::Result<OutputFile> {
+    Ok(OutputFile::claim(out, "fit", PART, inputs, None)?)
+}
+
 /// `ellipso fit --shard`: one shard's part file.
 pub fn run_shard(
     session: &Session,
     session_arg: &Path,
     mesh_path: &Path,
     mesh: &TriangleMesh,
-    out: &Path,
+    out: &OutputFile,
     shard: Shard,
     config: SessionFitConfig,
 ) -> anyhow::Result<()> {
@@ -72,10 +85,7 @@ pub fn run_shard(
         observe_s: solve.observe_s,
         joint_s: solve.joint_s,
     };
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    part.write(out)?;
+    part.write(out.path())?;
     crate::outln!(
         "shard {shard}: {} vertices, {} samples in {:.1} s (observations {:.1} s, step A {:.1} s) → {}",
         part.set.vertices.len(),
@@ -83,7 +93,7 @@ pub fn run_shard(
         started.elapsed().as_secs_f64(),
         part.observe_s,
         part.joint_s,
-        out.display()
+        out.shown().display()
     );
     Ok(())
 }
@@ -111,6 +121,11 @@ pub struct MergeArgs {
 /// Runs `ellipso fit-merge`.
 pub fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    // the output is claimed first; the parts (and a given session or mesh) are its inputs
+    let mut inputs: Vec<&Path> = args.parts.iter().map(PathBuf::as_path).collect();
+    inputs.extend(args.session.as_deref());
+    inputs.extend(args.mesh.as_deref());
+    let out = OutputDir::claim(&args.out, "fit", &inputs)?;
     let mut parts = Vec::with_capacity(args.parts.len());
     for path in &args.parts {
         parts.push((path.clone(), PartFile::read(path)?));
@@ -162,10 +177,16 @@ pub fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
     // The shards' seconds, summed (CPU-seconds of the array, not its wall time).
     fit.outcome.times.observe_s = observe_s;
     fit.outcome.times.joint_s = joint_s;
-    let result = super::fit::export_fit(&session, &poses, fit, &args.out, args.view, started)?;
-    crate::outln!("\nresults in {}:", args.out.display());
-    for f in &result.files {
-        crate::outln!("  {}", f.display());
-    }
+    let result = super::fit::export_fit(
+        &session,
+        &poses,
+        fit,
+        out.path(),
+        args.view,
+        started,
+        &|p| out.published(p),
+    )?;
+    let published = out.commit()?;
+    super::fit::print_results(&published, &result, false);
     Ok(())
 }

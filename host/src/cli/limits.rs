@@ -89,6 +89,22 @@ pub fn outer_iterations(s: &str) -> Result<usize, String> {
     integer_in(s, 1, MAX_OUTER)
 }
 
+/// Target vertex count of a carved mesh, `100..=500_000` (fewer cannot hold an object's shape;
+/// more is beyond what the fit's per-vertex solve is sized for).
+pub fn mesh_vertices(s: &str) -> Result<usize, String> {
+    integer_in(s, 100, 500_000)
+}
+
+/// Views that must agree to carve a voxel, `1..=100`.
+pub fn votes(s: &str) -> Result<usize, String> {
+    integer_in(s, 1, 100)
+}
+
+/// Worker threads, `1..=256`.
+pub fn threads(s: &str) -> Result<usize, String> {
+    integer_in(s, 1, 256)
+}
+
 /// The silhouette edge inset of `ellipso mesh`, superpixels: finite, in `[0, 2]` (beyond two
 /// pixels it would carve the object itself).
 pub fn edge_inset_px(s: &str) -> Result<f64, String> {
@@ -147,5 +163,10 @@ mod tests {
         assert_eq!(interval_ms("50"), Ok(50.0));
         assert!(unit_f32("NaN").is_err() && unit_f32("1.5").is_err());
         assert!(drift_ppm("-inf").is_err());
+        for bad in ["0", "10000000", "-1"] {
+            assert!(mesh_vertices(bad).is_err(), "{bad}");
+        }
+        assert!(threads("100000").is_err() && threads("0").is_err());
+        assert_eq!(votes("3"), Ok(3));
     }
 }

@@ -1,6 +1,8 @@
 //! `ellipso mesh SESSION --out mesh.ply [--vertices N]`: the object's watertight mesh carved
-//! from the session's posed frames (`ellipso_mesh`), written as a binary PLY in board
-//! coordinates (metres), with `<out stem>-report.json` beside it.
+//! from the session's posed frames (`ellipso_mesh`), written as a binary PLY (or, for an `.obj`
+//! name, Wavefront OBJ) in board coordinates (metres), with `<out stem>-report.json` beside it.
+//! Both files are claimed before the work starts (never inside the session, never over a file of
+//! another format) and written whole.
 //!
 //! Poses come from the session's `pose` events (tracked now and appended when the log has none,
 //! as `ellipso fit` does).
@@ -13,6 +15,7 @@ use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 
 use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
+use ellipso_report::output::{FileFormat, OutputFile};
 use ellipso_session::reader::Session;
 
 /// Arguments of `ellipso mesh`.
@@ -20,17 +23,17 @@ use ellipso_session::reader::Session;
 pub struct Args {
     /// The session directory.
     pub session: PathBuf,
-    /// Output mesh (PLY).
+    /// Output mesh: `.ply` (binary PLY) or `.obj` (Wavefront OBJ).
     #[arg(long, default_value = "mesh.ply")]
     pub out: PathBuf,
-    /// Target vertex count of the mesh.
-    #[arg(long, default_value_t = 2500)]
+    /// Target vertex count of the mesh, 100..=500000.
+    #[arg(long, default_value_t = 2500, value_parser = super::limits::mesh_vertices)]
     pub vertices: usize,
-    /// Views that must see the board through a voxel to carve it.
-    #[arg(long, default_value_t = 3)]
+    /// Views that must see the board through a voxel to carve it, 1..=100.
+    #[arg(long, default_value_t = 3, value_parser = super::limits::votes)]
     pub votes: usize,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1..=256 (default: all cores).
+    #[arg(long, value_parser = super::limits::threads)]
     pub threads: Option<usize>,
     /// Move each view's silhouette edge this far (superpixels) into the object's side of the
     /// pixel boundary (default: the built-in setting, see docs/mesh.md "Edge inset").
@@ -43,23 +46,26 @@ pub struct Args {
 
 /// Runs `ellipso mesh`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let (mesh_file, report_file) = claim_mesh_files(&args.out, &args.session)?;
     let session = ellipso_session::reader::open(&args.session)?;
     let mut config = MeshConfig {
-        votes: args.votes.max(1),
+        votes: args.votes,
         threads: args.threads,
         edge_inset_px: args
             .edge_inset_px
             .unwrap_or(MeshConfig::default().edge_inset_px),
         ..MeshConfig::default()
     };
-    config.remesh.target_vertices = args.vertices.max(16);
+    config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
     let (mesh, mut report) = mesh_of_session(&session, &config)?;
     report.peak_rss_bytes = super::memory::peak_rss_bytes();
-    let json = write_mesh(&mesh, &report, &args.out)?;
+    mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
+    report_file.write(serde_json::to_vec_pretty(&report)?)?;
+    let json = report_file.shown().to_path_buf();
     if args.json {
         let object = serde_json::json!({
-            "mesh": args.out.display().to_string(),
+            "mesh": mesh_file.shown().display().to_string(),
             "report_file": json.display().to_string(),
             "wall_s": started.elapsed().as_secs_f64(),
             "report": report,
@@ -104,17 +110,53 @@ pub fn mesh_of_session(
     Ok((result.mesh, result.report))
 }
 
-/// Writes the mesh (binary PLY) and its report (`<stem>-report.json`); returns the report path.
+/// The report's path beside a mesh file: `<stem>-report.json`.
+fn report_path(out: &Path) -> PathBuf {
+    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh");
+    out.with_file_name(format!("{stem}-report.json"))
+}
+
+/// Claims the mesh file (PLY or OBJ by its extension) and its report for `ellipso mesh`.
+fn claim_mesh_files(out: &Path, session: &Path) -> anyhow::Result<(OutputFile, OutputFile)> {
+    let is_obj = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    let format = if is_obj {
+        FileFormat::OBJ
+    } else {
+        FileFormat::PLY
+    };
+    let mesh = OutputFile::claim(out, "mesh", format, &[session], None)?;
+    let report = OutputFile::claim(
+        &report_path(out),
+        "mesh",
+        FileFormat::JSON,
+        &[session],
+        None,
+    )?;
+    Ok((mesh, report))
+}
+
+/// A mesh's bytes in `format` (binary PLY unless OBJ).
+fn mesh_bytes(mesh: &TriangleMesh, format: FileFormat) -> Vec<u8> {
+    if format == FileFormat::OBJ {
+        ellipso_model::geometry::obj::write_obj(mesh)
+    } else {
+        // double: a fit on this file sees exactly the geometry the fit that wrote it used
+        write_ply(mesh, PlyFormat::BinaryLittleEndian, true)
+    }
+}
+
+/// Writes the mesh (binary PLY) and its report (`<stem>-report.json`) into a directory the
+/// caller owns (a fit's or the demo's staging directory), each whole; returns the report path.
 pub fn write_mesh(mesh: &TriangleMesh, report: &MeshReport, out: &Path) -> anyhow::Result<PathBuf> {
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    // double: a fit on this file sees exactly the geometry the fit that wrote it used
-    std::fs::write(out, write_ply(mesh, PlyFormat::BinaryLittleEndian, true))
+    ellipso_report::atomic_file::write(out, mesh_bytes(mesh, FileFormat::PLY))
         .with_context(|| format!("writing {}", out.display()))?;
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh");
-    let json = out.with_file_name(format!("{stem}-report.json"));
-    std::fs::write(&json, serde_json::to_vec_pretty(report)?)
+    let json = report_path(out);
+    ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(report)?)
         .with_context(|| format!("writing {}", json.display()))?;
     Ok(json)
 }

@@ -13,6 +13,7 @@ pub mod devices;
 pub mod export;
 pub mod fit;
 pub mod fit_shard;
+pub mod interrupt;
 pub mod limits;
 pub mod memory;
 pub mod mesh;

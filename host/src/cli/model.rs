@@ -174,8 +174,16 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
         ModelCommand::Plot(a) => {
+            // a PNG name, never inside a session, never over a file that is not a PNG
+            let out = ellipso_report::output::OutputFile::claim(
+                &a.out,
+                "model-plot",
+                ellipso_report::output::FileFormat::PNG,
+                &[],
+                None,
+            )?;
             dop_plot()
-                .save_png(&a.out)
+                .save_png(out.path())
                 .with_context(|| format!("--out {}", a.out.display()))?;
             crate::outln!("wrote {}", a.out.display());
         }

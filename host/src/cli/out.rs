@@ -1,10 +1,13 @@
-//! Standard output that a closed reader cannot kill.
+//! Standard output and standard error that a closed reader cannot kill.
 //!
 //! `ellipso fit … | head -1` closed the pipe after one line, and the next `println!` panicked
-//! before any result was written. Every subcommand prints through [`outln!`](crate::outln) and
-//! [`out!`](crate::out) instead: the first failed write (a broken pipe, a full disk behind a
-//! redirection) stops all further printing — noted once on stderr — and the work goes on, so
-//! results are still written and the exit status still says how the work went.
+//! before any result was written (with `2>&1`, the next `eprintln!`). Every subcommand prints
+//! through [`outln!`](crate::outln), [`out!`](crate::out) and [`errln!`](crate::errln) instead:
+//! the first failed write to stdout (a broken pipe, a full disk behind a redirection) stops all
+//! further printing — noted once on stderr unless the reader just went away, as other command
+//! line tools stay quiet on EPIPE — and the work goes on, so results are still written and the
+//! exit status still says how the work went. A failed write to stderr is dropped silently
+//! (there is nowhere left to say it).
 
 use std::fmt;
 use std::io::Write;
@@ -27,6 +30,20 @@ pub fn write(args: fmt::Arguments<'_>) {
             );
         }
     }
+}
+
+/// Writes `args` to stderr; a failure (stderr closed) is dropped.
+pub fn write_err(args: fmt::Arguments<'_>) {
+    let mut stderr = std::io::stderr().lock();
+    let _ = stderr.write_fmt(args).and_then(|()| stderr.flush());
+}
+
+/// `eprintln!` that never panics on a closed stderr.
+#[macro_export]
+macro_rules! errln {
+    ($($arg:tt)*) => {
+        $crate::cli::out::write_err(format_args!("{}\n", format_args!($($arg)*)))
+    };
 }
 
 /// `println!` that stops printing, instead of panicking, once stdout is closed.

@@ -24,7 +24,6 @@ mod render;
 mod stokes_exr;
 mod summary;
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow};
@@ -123,24 +122,30 @@ pub struct Written {
 }
 
 /// Runs `ellipso polar`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+pub fn run(mut args: Args) -> anyhow::Result<()> {
+    // the output directory is claimed first and written whole (docs/reliability.md)
+    let mut inputs: Vec<&Path> = vec![&args.frame];
+    inputs.extend(args.calibration.as_deref());
+    let claimed = ellipso_report::output::OutputDir::claim(&args.out, "polar", &inputs)?;
+    let shown_out = std::mem::replace(&mut args.out, claimed.path().to_path_buf());
     let written = write(&args)?;
+    claimed.commit()?;
     if args.json {
         crate::outln!(
             "{}",
-            serde_json::json!({ "out": args.out.display().to_string(), "summary": written.summary })
+            serde_json::json!({ "out": shown_out.display().to_string(), "summary": written.summary })
         );
         return Ok(());
     }
     crate::outln!("{}", written.headline);
     for (file, what) in &written.files {
-        crate::outln!("  wrote {}  ({what})", args.out.join(file).display());
+        crate::outln!("  wrote {}  ({what})", shown_out.join(file).display());
     }
     Ok(())
 }
 
 /// Processes the frame and writes every output into `args.out` without printing them (the
-/// demo lists the folder once).
+/// demo lists the folder once, `run` claims the folder first).
 pub fn write(args: &Args) -> anyhow::Result<Written> {
     let name = args.frame.display().to_string();
     let loaded = load::load_frame(
@@ -150,7 +155,7 @@ pub fn write(args: &Args) -> anyhow::Result<Written> {
     )
     .map_err(|msg| anyhow!("{name}: {msg}"))?;
     for w in &loaded.warnings {
-        eprintln!("warning: {name}: {w}");
+        crate::errln!("warning: {name}: {w}");
     }
     let calibration = match &args.calibration {
         None => None,
@@ -165,8 +170,6 @@ pub fn write(args: &Args) -> anyhow::Result<Written> {
         calibration,
     };
     let image = process(&loaded.frame, &config).map_err(|e| anyhow!("{name}: {e}"))?;
-    fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create output directory {}", args.out.display()))?;
 
     let mut files = Vec::new();
     let mut band_stats = Vec::new();
@@ -217,7 +220,8 @@ pub fn write(args: &Args) -> anyhow::Result<Written> {
 /// Reads and checks an analyser calibration file; errors name the file.
 fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
     let name = path.display();
-    let text = fs::read_to_string(path).map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+    let text = ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
+        .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
     let calibration: AnalyserCalibration = serde_json::from_str(&text)
         .map_err(|e| anyhow!("{name}: not an analyser calibration: {e}"))?;
     calibration

@@ -83,7 +83,7 @@ impl Progress {
     pub fn finish(self, summary: impl Display) {
         self.bar.finish_and_clear();
         if !self.silent {
-            eprintln!(
+            crate::errln!(
                 "{}: {summary} ({:.1} s)",
                 self.label,
                 self.started.elapsed().as_secs_f64()

@@ -156,13 +156,25 @@ pub fn print_summary(r: &ReplayReport) {
 
 /// Runs `ellipso replay`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    // a path that is no session is said as such first (opening reads only its manifest and log)
+    ellipso_session::reader::open(&args.session)?;
+    // the session's own `replay/` by default (docs/session-format.md, "Derived outputs")
+    let out = args
+        .out
+        .clone()
+        .unwrap_or_else(|| args.session.join("replay"));
+    let claimed = ellipso_report::output::OutputDir::claim_in_session(
+        &out,
+        "replay",
+        &[&args.session],
+        Some("replay"),
+    )?;
     let r = report(&args.session, None)?;
     print_summary(&r);
-    let out = args.out.unwrap_or_else(|| args.session.join("replay"));
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    let path = out.join("replay.json");
+    let path = claimed.path().join("replay.json");
     ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
-        .with_context(|| format!("writing {}", path.display()))?;
-    crate::outln!("report       {}", path.display());
+        .with_context(|| format!("writing {}", claimed.published(&path).display()))?;
+    let published = claimed.commit()?;
+    crate::outln!("report       {}", published.join("replay.json").display());
     Ok(())
 }

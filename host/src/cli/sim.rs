@@ -13,7 +13,6 @@
 //!
 //! `serve` (the virtual trigger board on a pty) lives in [`super::sim_serve`].
 
-use std::fs;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, anyhow, bail};
@@ -134,6 +133,10 @@ fn frame_indices(args: &RenderArgs, count: usize) -> anyhow::Result<Vec<usize>> 
 }
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
+    // claimed before rendering; written beside and swapped in whole
+    let claimed =
+        ellipso_report::output::OutputDir::claim(&args.out, "sim-render", &[&args.scene])?;
+    let out = claimed.path().to_path_buf();
     let scene = load(&args.scene)?;
     let options = RenderOptions {
         supersampling: args.supersampling,
@@ -143,13 +146,11 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     };
     let renderer = Renderer::new(&scene, options).map_err(|e| anyhow!("{e}"))?;
     let indices = frame_indices(&args, renderer.frame_count())?;
-    fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create {}", args.out.display()))?;
     let progress = super::progress::Progress::bar("render", indices.len() as u64, "frames");
     let mut frames = Vec::with_capacity(indices.len());
     for &k in &indices {
         let f = renderer.render_frame(k).map_err(|e| anyhow!("{e}"))?;
-        frames.push(write_frame(&args.out, k, &f)?);
+        frames.push(write_frame(&out, k, &f)?);
         progress.inc(1);
     }
     progress.finish(format!(
@@ -170,9 +171,10 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         plan: renderer.plan(),
         frames,
     };
-    let path = args.out.join("truth.json");
+    let path = out.join("truth.json");
     ellipso_report::atomic_file::write(&path, serde_json::to_string_pretty(&truth)?)
-        .with_context(|| format!("cannot write {}", path.display()))?;
+        .with_context(|| format!("cannot write {}", claimed.published(&path).display()))?;
+    claimed.commit()?;
     let c = renderer.camera();
     crate::outln!(
         "rendered {} frame(s) of '{}' at {}×{} into {} (frame_NNNNN.png, truth.json{})",

@@ -61,6 +61,8 @@ pub struct ServeEndpoints {
 
 /// `ellipso sim serve`: prints the endpoints on stdout, serves until SIGINT/SIGTERM.
 pub fn run(args: ServeArgs) -> anyhow::Result<()> {
+    // serving ends cleanly on the signal itself (the board's truth is printed)
+    let _deferred = super::interrupt::Deferred::take();
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
         signal_hook::flag::register(signal, stop.clone())
@@ -75,7 +77,7 @@ pub fn run(args: ServeArgs) -> anyhow::Result<()> {
         out.flush()?;
         Ok(())
     })?;
-    eprintln!(
+    crate::errln!(
         "sim serve: {} pulses, {} frames sent ({} corrupted, {} lost, {} stalled); {}",
         truth.pulses.len(),
         truth.frames_sent,

@@ -92,13 +92,13 @@ pub fn start_live(
 }
 
 fn announce(what: &str, url: &str, addr: SocketAddr) {
-    println!("ellipso view: {what}");
+    crate::outln!("ellipso view: {what}");
     if !addr.ip().is_loopback() {
-        println!(
+        crate::outln!(
             "  listening on {addr} (not loopback: reachable from the network, token required)"
         );
     }
-    println!("  open {url}");
+    crate::outln!("  open {url}");
     use std::io::Write;
     let _ = std::io::stdout().flush();
 }

@@ -330,7 +330,10 @@ impl FollowState {
         }
         self.manifest_checked = Some(Instant::now());
         let path = self.config.session.join(paths::MANIFEST);
-        let Ok(text) = std::fs::read_to_string(&path) else {
+        let Ok(text) = ellipso_model::file_io::read_bounded_text(
+            &path,
+            ellipso_model::file_io::caps::MANIFEST,
+        ) else {
             return false;
         };
         let Ok(manifest) = serde_json::from_str::<Manifest>(&text) else {

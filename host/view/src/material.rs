@@ -113,10 +113,11 @@ impl MaterialMesh {
         let file =
             locate(path).ok_or_else(|| MaterialError::NotFound(path.display().to_string()))?;
         let vertices = read_fit_ply(&file)?;
-        let bytes = std::fs::read(&file).map_err(|e| MaterialError::Mesh {
-            path: file.display().to_string(),
-            what: e.to_string(),
-        })?;
+        let bytes = ellipso_model::file_io::read_bounded(&file, ellipso_model::file_io::caps::MESH)
+            .map_err(|e| MaterialError::Mesh {
+                path: file.display().to_string(),
+                what: e.to_string(),
+            })?;
         let mesh =
             ellipso_model::geometry::ply::parse_ply(&bytes).map_err(|e| MaterialError::Mesh {
                 path: file.display().to_string(),

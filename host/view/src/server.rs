@@ -7,8 +7,10 @@
 //! - Dropping the [`ViewServer`] stops it: new connections are refused at once, open requests
 //!   (event streams included) are closed after [`SHUTDOWN_GRACE`], so a capture with `--view`
 //!   ends even while a page is open.
-//! - Every request passes [`guard`] first: the `Host` header must pass the [`HostPolicy`] and the
-//!   token must match ([`Token`]); otherwise `403` with a one-line reason and nothing else.
+//! - Every request passes [`guard`] first: exactly one `Host` header, which must pass the
+//!   [`HostPolicy`], as must the authority of an absolute-form request target
+//!   (`GET http://host:port/…`); and the token must match ([`Token`]); otherwise `403` with a
+//!   one-line reason and nothing else.
 //!   Responses carry `Cache-Control: no-store`, `Referrer-Policy: no-referrer` (the token is in
 //!   the URL and must not leak through `Referer`), `X-Content-Type-Options: nosniff` and a
 //!   Content-Security-Policy allowing only this origin (no CDN, nothing remote).
@@ -252,13 +254,22 @@ fn router(state: AppState) -> Router {
 
 /// Refuses requests with a foreign `Host` or without the token; adds the security headers.
 async fn guard(State(state): State<AppState>, request: Request, next: Next) -> Response {
-    let host = request
-        .headers()
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .unwrap_or("");
+    // exactly one Host header: with two, a proxy and this server could each read another
+    let mut hosts = request.headers().get_all(header::HOST).iter();
+    let host = match (hosts.next(), hosts.next()) {
+        (Some(h), None) => h.to_str().unwrap_or(""),
+        (Some(_), Some(_)) => return refuse("more than one Host header"),
+        (None, _) => "",
+    };
     if !state.hosts.allows(host) {
         return refuse("Host header does not name this server (DNS-rebinding protection)");
+    }
+    // an absolute-form request target names the server too (RFC 9112 §3.2.2: it takes the
+    // place of Host), so it must name this one
+    if let Some(authority) = request.uri().authority()
+        && !state.hosts.allows(authority.as_str())
+    {
+        return refuse("request target names another server (DNS-rebinding protection)");
     }
     let from_query = request.uri().query().and_then(|q| {
         q.split('&')

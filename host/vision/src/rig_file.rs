@@ -196,10 +196,12 @@ pub enum RigFileError {
 impl RigFile {
     /// Reads and checks a rig file.
     pub fn load(path: &Path) -> Result<Self, RigFileError> {
-        let text = std::fs::read_to_string(path).map_err(|error| RigFileError::Io {
-            path: path.into(),
-            error,
-        })?;
+        let text =
+            ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
+                .map_err(|error| RigFileError::Io {
+                    path: path.into(),
+                    error,
+                })?;
         let mut rig: RigFile = toml::from_str(&text).map_err(|e| RigFileError::Parse {
             path: path.into(),
             message: e.to_string().trim_end().to_string(),

@@ -10,8 +10,10 @@
 //! - [`geometry`]: rays, BVH, triangle meshes (PLY/OBJ), analytic shapes, object transforms.
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
 //!   pixel.
+//! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
 
 pub mod camera;
+pub mod file_io;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;

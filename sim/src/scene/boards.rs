@@ -13,10 +13,11 @@ use std::path::Path;
 
 /// Reads and validates a standalone board file.
 pub fn load_board_file(path: &Path) -> Result<Board, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+    let text = ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
+        .map_err(|source| SceneError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
     board_from_toml_str(&text, path)
 }
 

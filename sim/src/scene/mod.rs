@@ -125,10 +125,12 @@ pub struct Scene {
 impl Scene {
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Self, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let text =
+            ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
+                .map_err(|source| SceneError::Io {
+                    path: path.to_owned(),
+                    source,
+                })?;
         Self::from_toml_str(&text, path)
     }
 

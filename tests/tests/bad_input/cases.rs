@@ -550,7 +550,11 @@ pub fn mesh_cases() -> Vec<Case> {
             },
             "m.stl",
         ),
-        ("nowhere near the views", |d| mesh(d, 100.0), "no vertex"),
+        (
+            "nowhere near the views",
+            |d| mesh(d, 100.0),
+            "px in the median view",
+        ),
     ];
     meshes
         .into_iter()

@@ -18,6 +18,8 @@ pub enum Expect {
     Refuse(&'static str),
     /// Exit 0, stdout or stderr containing this.
     Warn(&'static str),
+    /// Exit non-zero, stderr containing this exactly once (a cause said once, not twice).
+    RefuseOnce(&'static str),
 }
 
 /// Prepares a case's input in its own directory; returns the command and what it must not change.
@@ -73,26 +75,29 @@ pub fn sphere_text() -> String {
 /// One captured session for every session, frame and mesh case (copied per case).
 pub fn fixture() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
-    DIR.get_or_init(|| {
-        let root = tempfile::tempdir().unwrap().keep();
-        let out = root.join("session");
-        let o = ellipso(&["capture", "--sim"])
-            .arg(shipped_scene("sphere.toml").canonicalize().unwrap())
-            .arg("--out")
-            .arg(&out)
-            .args([
-                "--photos",
-                "8",
-                "--resolution",
-                "612x512",
-                "--supersampling",
-                "1",
-            ])
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        out
-    })
+    DIR.get_or_init(|| capture_sphere(8))
+}
+
+/// The probe's orbit: 40 frames of the sphere scene at 612×512, tracked (calibration, carving
+/// and the tag cases; copied per case).
+pub fn fixture40() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| capture_sphere(40))
+}
+
+fn capture_sphere(photos: u32) -> PathBuf {
+    let root = tempfile::tempdir().unwrap().keep();
+    let out = root.join("session");
+    let o = ellipso(&["capture", "--sim"])
+        .arg(shipped_scene("sphere.toml").canonicalize().unwrap())
+        .arg("--out")
+        .arg(&out)
+        .args(["--photos", &photos.to_string()])
+        .args(["--resolution", "612x512", "--supersampling", "1"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    out
 }
 
 pub fn copy_dir(from: &Path, to: &Path) {
@@ -114,6 +119,34 @@ pub fn damaged(dir: &Path, damage: impl Fn(&Path)) -> PathBuf {
     copy_dir(fixture(), &s);
     damage(&s);
     s
+}
+
+/// Edits the session's manifest as JSON.
+pub fn edit_manifest(session: &Path, edit: impl Fn(&mut serde_json::Value)) {
+    let p = session.join("manifest.json");
+    let mut v: serde_json::Value = serde_json::from_slice(&std::fs::read(&p).unwrap()).unwrap();
+    edit(&mut v);
+    std::fs::write(&p, serde_json::to_vec_pretty(&v).unwrap()).unwrap();
+}
+
+/// Rewrites every line of the session's log through `edit` (lines it returns `None` for go).
+pub fn edit_log(session: &Path, edit: impl Fn(serde_json::Value) -> Option<serde_json::Value>) {
+    let p = session.join("events.jsonl");
+    let text = std::fs::read_to_string(&p).unwrap();
+    let lines: Vec<String> = text
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok().and_then(&edit))
+        .map(|v| v.to_string())
+        .collect();
+    std::fs::write(&p, lines.join("\n") + "\n").unwrap();
+}
+
+/// Makes a FIFO at `path` (replacing what is there).
+pub fn fifo(path: &Path) {
+    let _ = std::fs::remove_file(path);
+    let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+    // SAFETY: a NUL-terminated path.
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
 }
 
 /// The sphere object (r = 40 mm at z = 40 mm, moved by `offset`) as a mesh file.

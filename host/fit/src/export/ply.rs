@@ -274,10 +274,11 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
         path: path.display().to_string(),
         what,
     };
-    let bytes = std::fs::read(path).map_err(|source| PlyError::Io {
-        path: path.display().to_string(),
-        source,
-    })?;
+    let bytes = ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::MESH)
+        .map_err(|source| PlyError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
     let table = read_vertex_table(&bytes).map_err(|e| err(e.to_string()))?;
     let col = |name: &str| {
         table.column(name).ok_or_else(|| {

@@ -117,7 +117,7 @@ pub fn write(dir: &Path, view: &PictureView) -> std::io::Result<std::path::PathB
 pub fn read(dir: &Path) -> Result<PictureView, String> {
     let path = dir.join(FILE_NAME);
     let name = path.display();
-    let text = std::fs::read_to_string(&path).map_err(|e| {
+    let text = ellipso_model::file_io::read_bounded_text(&path, ellipso_model::file_io::caps::SCENE).map_err(|e| {
         format!("{name}: {e} (a fit directory written by an older ellipso lacks it: re-run `ellipso fit`)")
     })?;
     let view: PictureView =

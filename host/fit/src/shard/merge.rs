@@ -75,6 +75,21 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
             )));
         }
     }
+    // a shard index outside its count never comes from `--shard`; refused, never indexed
+    if let Some((path, p)) = parts.iter().find(|(_, p)| p.shard.index >= n) {
+        return Err(MergeError::Shards(format!(
+            "{}: shard index {} is not below its count {n}: not a part `ellipso fit --shard` wrote",
+            path.display(),
+            p.shard.index
+        )));
+    }
+    // more shards than parts: some are missing (said without a slot per shard of a huge count)
+    if n as usize > parts.len() && n as usize > 4096 {
+        return Err(MergeError::Shards(format!(
+            "the parts are {} of {n} shards: shards missing (every shard must finish before the merge)",
+            parts.len()
+        )));
+    }
     let mut slot: Vec<Option<usize>> = vec![None; n as usize];
     for (k, (path, p)) in parts.iter().enumerate() {
         let i = p.shard.index as usize;
@@ -278,6 +293,25 @@ mod tests {
                 )
             })
             .collect()
+    }
+
+    #[test]
+    fn a_shard_index_outside_its_count_is_refused_not_indexed() {
+        let mut given = parts(2);
+        given[1].1.shard = Shard { index: 7, count: 2 };
+        let e = merge_parts(given).unwrap_err().to_string();
+        assert!(
+            e.contains("p1.part: shard index 7 is not below its count 2"),
+            "{e}"
+        );
+        // a count no run has: refused without a slot per shard
+        let mut given = parts(1);
+        given[0].1.shard = Shard {
+            index: 0,
+            count: u32::MAX,
+        };
+        let e = merge_parts(given).unwrap_err().to_string();
+        assert!(e.contains("shards missing"), "{e}");
     }
 
     #[test]

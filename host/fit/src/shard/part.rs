@@ -136,6 +136,14 @@ impl PartFile {
         }
         let part: PartFile =
             postcard::from_bytes(body).map_err(|e| bad(format!("body does not decode: {e}")))?;
+        // the shard as written by `--shard I/N`, which refuses I ≥ N and N = 0
+        if part.shard.count == 0 || part.shard.index >= part.shard.count {
+            return Err(bad(format!(
+                "its shard {} is impossible (the index must be below the count): not a part \
+                 `ellipso fit --shard` wrote",
+                part.shard
+            )));
+        }
         if part.fits.len() != part.set.vertices.len() {
             return Err(bad(format!(
                 "{} step-A results for {} vertices",
@@ -154,19 +162,45 @@ impl PartFile {
         })
     }
 
-    /// Reads and checks a part file.
+    /// Reads and checks a part file. The read is bounded by the header: a regular file only,
+    /// at most the 28 header bytes plus the body length they state plus the checksum (and one
+    /// byte more, so trailing bytes are seen).
     pub fn read(path: &Path) -> Result<Self, PartError> {
-        let bytes = std::fs::read(path).map_err(|source| PartError::Io {
+        use ellipso_model::file_io::{check_regular, read_bounded};
+        use std::io::Read;
+        let io = |source| PartError::Io {
             path: path.to_path_buf(),
             source,
+        };
+        check_regular(path, u64::MAX).map_err(io)?;
+        let mut head = Vec::with_capacity(28);
+        std::fs::File::open(path)
+            .and_then(|f| f.take(28).read_to_end(&mut head))
+            .map_err(io)?;
+        let cap = if head.len() == 28 && &head[..16] == MAGIC {
+            u64::from_le_bytes(head[20..28].try_into().expect("8 bytes")).saturating_add(37)
+        } else {
+            28
+        };
+        let bytes = read_bounded(path, cap).or_else(|e| {
+            // longer than the header says: read as much as it may hold and let the check say so
+            if e.kind() == std::io::ErrorKind::InvalidData {
+                let mut b = Vec::new();
+                std::fs::File::open(path)
+                    .and_then(|f| f.take(cap).read_to_end(&mut b))
+                    .map_err(io)?;
+                Ok(b)
+            } else {
+                Err(io(e))
+            }
         })?;
         Self::from_bytes(&bytes, path)
     }
 }
 
-/// CRC-64/XZ of a file's bytes.
+/// CRC-64/XZ of a file's bytes (a mesh: bounded as a mesh is).
 pub fn file_hash(path: &Path) -> Result<u64, PartError> {
-    std::fs::read(path)
+    ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::MESH)
         .map(|b| CRC64.checksum(&b))
         .map_err(|source| PartError::Io {
             path: path.to_path_buf(),
@@ -184,7 +218,12 @@ pub fn session_hash(session: &Session) -> Result<u64, PartError> {
         ellipso_session::paths::EVENTS,
     ] {
         let path = session.dir.join(name);
-        match std::fs::read(&path) {
+        let cap = if name == ellipso_session::paths::MANIFEST {
+            ellipso_model::file_io::caps::MANIFEST
+        } else {
+            ellipso_model::file_io::caps::EVENT_LOG
+        };
+        match ellipso_model::file_io::read_bounded(&path, cap) {
             Ok(bytes) => {
                 digest.update(&(bytes.len() as u64).to_le_bytes());
                 digest.update(&bytes);
@@ -312,6 +351,26 @@ pub(crate) mod tests {
         other[16] = 9;
         assert!(why(&other).contains("version 9"));
         assert!(why(&bytes[..10]).starts_with("p.part: "));
+        // a part whose shard index is not below its count, checksum and all valid (issue 28,
+        // case 5: the merge indexed by it and panicked)
+        let mut impossible = part(Shard::ALL);
+        impossible.shard = Shard { index: 5, count: 2 };
+        assert!(why(&impossible.to_bytes()).contains("shard 5/2 is impossible"));
+    }
+
+    #[test]
+    fn reading_is_bounded_by_the_header_and_refuses_special_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("p.part");
+        let mut bytes = part(Shard::ALL).to_bytes();
+        bytes.extend_from_slice(&[0u8; 4096]);
+        std::fs::write(&p, &bytes).unwrap();
+        let e = PartFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("trailing"), "{e}");
+        let e = PartFile::read(Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("character device"), "{e}");
     }
 
     #[test]

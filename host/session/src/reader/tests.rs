@@ -423,3 +423,42 @@ fn a_new_session_is_never_written_among_other_files() {
     fs::create_dir(&empty).unwrap();
     assert!(SessionWriter::create(&empty, manifest()).is_ok());
 }
+
+/// Issue 28, case 7: a frame whose pose events disagree is said (readers of poses take the last
+/// one), never "intact"; a pose logged twice alike is no conflict.
+#[test]
+fn pose_events_that_disagree_are_reported() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    let mut w = SessionWriter::create(&dir, manifest()).unwrap();
+    for id in 0..3 {
+        record(&mut w, id);
+    }
+    let pose = |id: u64, x: f64| SessionEvent::Pose {
+        t_host_us: HostTimeUs(50_000),
+        frame_id: id,
+        rotation_camera_from_world: [0.0, 0.0, 0.0],
+        translation_camera_from_world_m: [x, 0.0, 0.5],
+        rms_px: 0.3,
+        tags: 4,
+    };
+    for e in [
+        pose(0, 0.0),
+        pose(0, 0.0),
+        pose(1, 0.0),
+        pose(1, 0.2),
+        pose(1, 0.3),
+    ] {
+        w.log(&e).unwrap();
+    }
+    w.finish(HostTimeUs(99_999), "completed").unwrap();
+    let s = open(&dir).unwrap();
+    assert_eq!(s.report.conflicting_poses, [1]);
+    assert!(
+        s.report
+            .summary()
+            .contains("1 frames with pose events that disagree (1)"),
+        "{}",
+        s.report.summary()
+    );
+}

@@ -274,6 +274,13 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
 
 /// Runs `ellipso bench calibration`.
 pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
+    let out = ellipso_report::output::OutputFile::claim(
+        &args.out.join("calibration-bench.json"),
+        "bench-calibration",
+        ellipso_report::output::FileFormat::JSON,
+        &[&args.scene],
+        None,
+    )?;
     crate::outln!(
         "calibrating from rendered frames of {}…",
         args.scene.display()
@@ -335,10 +342,8 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
         K1_TARGET * 100.0,
         if b.meets_targets { "met" } else { "MISSED" }
     );
-    std::fs::create_dir_all(&args.out)?;
-    let path = args.out.join("calibration-bench.json");
-    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&b)?)?;
-    crate::outln!("written {}", path.display());
+    out.write(serde_json::to_vec_pretty(&b)?)?;
+    crate::outln!("written {}", out.shown().display());
     Ok(())
 }
 

@@ -94,8 +94,21 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
         Some(b) => b.clone(),
         None => std::env::current_exe().context("locating this binary")?,
     };
-    let sessions = args.out.join("view-bench-sessions");
-    std::fs::create_dir_all(&sessions).with_context(|| sessions.display().to_string())?;
+    let report_file = ellipso_report::output::OutputFile::claim(
+        &args.out.join("view-bench.json"),
+        "bench-view",
+        ellipso_report::output::FileFormat::JSON,
+        &[&args.scene],
+        None,
+    )?;
+    // the captures' sessions: a directory this bench owns, kept (swapped in whole) only with
+    // --keep-sessions
+    let claimed = ellipso_report::output::OutputDir::claim(
+        &args.out.join("view-bench-sessions"),
+        "bench-view",
+        &[&args.scene],
+    )?;
+    let sessions = claimed.path().to_path_buf();
     let mut results = Vec::new();
     for round in 0..args.runs {
         // alternate the order so that a drift in the machine's load favours neither
@@ -110,7 +123,7 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
                 std::fs::remove_dir_all(&dir).with_context(|| dir.display().to_string())?;
             }
             let r = capture(&bin, &args, &dir, round, view)?;
-            println!(
+            crate::outln!(
                 "round {round} {:<13} load {:>5.2}  {} frames  {:.2} fps  latency p50 {:.1} / p95 {:.1} / max {:.1} ms  paired {} (wrong {})  pairing errors {}  cpu {:.2} s{}",
                 if view { "with view" } else { "without view" },
                 r.load_before,
@@ -138,11 +151,11 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
             results.push(r);
         }
     }
-    if !args.keep_sessions {
-        let _ = std::fs::remove_dir(&sessions);
+    if args.keep_sessions {
+        claimed.commit()?;
     }
     let summary = summary(&results);
-    println!("{summary}");
+    crate::outln!("{summary}");
     let report = serde_json::json!({
         "scene": args.scene.display().to_string(),
         "photos": args.photos,
@@ -152,10 +165,8 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
         "runs": results,
         "summary": summary,
     });
-    let path = args.out.join("view-bench.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&report)?)
-        .with_context(|| path.display().to_string())?;
-    println!("wrote {}", path.display());
+    report_file.write(serde_json::to_string_pretty(&report)?)?;
+    crate::outln!("wrote {}", report_file.shown().display());
     Ok(())
 }
 

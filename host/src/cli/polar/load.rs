@@ -241,7 +241,8 @@ pub(super) fn load_frame(
     layout: Option<SensorLayout>,
     bit_depth: Option<u8>,
 ) -> Result<Loaded, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot open: {e}"))?;
+    let bytes = ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(|e| format!("cannot open: {e}"))?;
     let decoded = decode(&bytes)?;
     let (width, height) = (decoded.width, decoded.height);
     let mut warnings = Vec::new();

@@ -1,6 +1,7 @@
 //! `ellipso polar` end to end: synthetic PNG in, files and summary.json out; bad files rejected
 //! with one line naming the problem.
 
+use std::fs;
 use std::path::Path;
 
 use ellipso_model::mosaic::{Channel, SensorLayout};

@@ -2,6 +2,7 @@
 //! and plan JSON parse, bad frame indices are errors naming the range.
 
 use super::*;
+use std::fs;
 
 fn scene(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))

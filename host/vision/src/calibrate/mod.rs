@@ -10,14 +10,19 @@
 //! 5. joint LM over camera + all poses with a Schur-complement solver — [`bundle`];
 //! 6. views whose RMS exceeds both `outlier_factor`×median and `outlier_floor_px` are rejected
 //!    and step 5 repeats (at most `max_outlier_rounds` times);
-//! 7. standard errors from σ²·S⁻¹, σ² = cost/(2N − p).
+//! 7. standard errors from σ²·S⁻¹, σ² = cost/(2N − p);
+//! 8. the camera must be determined by the views ([`determined`]): a focal length or principal
+//!    point known only roughly, or uncertainties the cost's shape contradicts (a near-degenerate
+//!    view set, [`spread`]), are refused with how to take calibration photos.
 //!
 //! [`flash`] estimates the flash position in the camera frame.
 
 pub mod bundle;
+pub mod determined;
 pub mod flash;
 pub mod highlight;
 pub mod report;
+pub mod spread;
 pub mod views;
 pub mod zhang;
 
@@ -52,6 +57,12 @@ pub struct CalibConfig {
     pub max_outlier_rounds: usize,
     /// Joint LM iteration cap. Default 100.
     pub max_iterations: usize,
+    /// Largest 1σ of a focal length, as a fraction of it, for the camera to count as
+    /// determined ([`determined`]). Default 0.005.
+    pub max_focal_rel_std: f64,
+    /// Largest 1σ of a principal-point coordinate, as a fraction of the image side. Default
+    /// 0.01.
+    pub max_centre_std_frac: f64,
 }
 
 impl Default for CalibConfig {
@@ -65,6 +76,8 @@ impl Default for CalibConfig {
             outlier_floor_px: 0.5,
             max_outlier_rounds: 3,
             max_iterations: 100,
+            max_focal_rel_std: 0.005,
+            max_centre_std_frac: 0.01,
         }
     }
 }
@@ -121,6 +134,9 @@ pub enum CalibError {
     /// The joint optimisation could not run (a board behind the camera or a singular system).
     #[error("joint optimisation failed: {0}")]
     Optimisation(&'static str),
+    /// The views do not determine the camera (see [`determined`]).
+    #[error("{0}")]
+    Undetermined(Box<determined::Undetermined>),
 }
 
 /// One calibrated view.
@@ -155,6 +171,8 @@ pub struct Calibration {
     pub rejected: Vec<RejectedView>,
     /// Joint LM iterations of the final round.
     pub iterations: usize,
+    /// How varied the kept views' board orientations are.
+    pub spread: spread::ViewSpread,
 }
 
 /// Validated points of one view.
@@ -372,6 +390,27 @@ pub fn calibrate(
     }
     // Covariance diagonal ≥ 0 up to round-off: clamp before sqrt.
     let std_errors = std::array::from_fn(|k| covariance[(k, k)].max(0.0).sqrt());
+    let spread = spread::view_spread(&result.poses);
+    let data: Vec<ViewData<'_>> = kept
+        .iter()
+        .map(|p| ViewData {
+            points_board: &p.points,
+            pixels: &p.pixels,
+        })
+        .collect();
+    determined::check(
+        &result.camera,
+        &std_errors,
+        &covariance,
+        &result.poses,
+        &data,
+        &free,
+        result.cost_px2,
+        sigma2,
+        spread,
+        config,
+    )
+    .map_err(|u| CalibError::Undetermined(Box::new(u)))?;
     let views_out = kept
         .iter()
         .zip(&result.poses)
@@ -392,6 +431,7 @@ pub fn calibrate(
         views: views_out,
         rejected,
         iterations: result.iterations,
+        spread,
     })
 }
 

@@ -411,3 +411,79 @@ fn flash_from_one_repeated_ray_geometry_is_degenerate() {
         Err(FlashError::Degenerate)
     );
 }
+
+/// Views of a level camera orbiting the board's centre on a rising spiral (elevation 25…65°,
+/// two turns), σ = 0.3 px: every view tilts the board about the camera's horizontal axis.
+fn level_orbit(n: usize, distance_m: f64) -> (CameraModel, Vec<View>) {
+    let cam = camera_5mp();
+    let b = board(0.05);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let centre = Vector3::new(0.1125, 0.0675, 0.0);
+    let views = (0..n)
+        .filter_map(|k| {
+            let t = k as f64 / n as f64;
+            let elevation = (25.0 + 40.0 * t).to_radians();
+            let azimuth = 2.0 * std::f64::consts::TAU * t;
+            let dir = Vector3::new(
+                elevation.cos() * azimuth.cos(),
+                elevation.cos() * azimuth.sin(),
+                elevation.sin(),
+            );
+            // camera axes: z toward the board, x horizontal (level), y completing the frame
+            let z_c = -dir;
+            let x_c = Vector3::z().cross(&dir).normalize();
+            let y_c = z_c.cross(&x_c);
+            let board_from_camera = Pose::from_parts(
+                nalgebra::Translation3::from(centre + distance_m * dir),
+                nalgebra::UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[
+                    x_c, y_c, z_c,
+                ])),
+            );
+            let obs = observe(&cam, &b, &board_from_camera.inverse(), 0.3, &mut rng);
+            (obs.len() >= 16).then(|| {
+                obs.iter()
+                    .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
+                    .collect()
+            })
+        })
+        .collect();
+    (cam, views)
+}
+
+/// Issue 28, case 2: an orbit around an object at one camera roll does not determine the
+/// camera; calibration says so, with how to take calibration photos, instead of returning a
+/// camera far from the truth with small uncertainties.
+#[test]
+fn a_level_orbit_is_refused_with_how_to_take_calibration_photos() {
+    let (cam, views) = level_orbit(40, 1.2);
+    assert!(views.len() >= 30, "{} views", views.len());
+    match calibrate(&views, (cam.width, cam.height), &CalibConfig::default()) {
+        Err(CalibError::Undetermined(u)) => {
+            println!("{u}");
+            assert!(u.spread.out_of_plane_deg < 0.5, "{u}");
+            let text = u.to_string();
+            assert!(
+                text.contains("horizontal axis") && text.contains("calibration photos"),
+                "{text}"
+            );
+        }
+        Ok(cal) => {
+            // where the views happen to determine it, the answer must be right within its σ
+            let (e, t) = (cal.camera.params(), cam.params());
+            for k in 0..4 {
+                assert!(
+                    (e[k] - t[k]).abs() < 4.0 * cal.std_errors[k],
+                    "param {k}: {} vs {} ± {}",
+                    e[k],
+                    t[k],
+                    cal.std_errors[k]
+                );
+            }
+            panic!(
+                "expected a refusal; got fx {:.1} ± {:.1}, cy {:.1} ± {:.1}, out of plane {:.3}°",
+                e[0], cal.std_errors[0], e[3], cal.std_errors[3], cal.spread.out_of_plane_deg
+            );
+        }
+        Err(e) => panic!("{e}"),
+    }
+}

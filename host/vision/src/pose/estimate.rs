@@ -3,8 +3,17 @@
 //!
 //! Pipeline: validate input → undistort observed corners → initialise (coplanar points: both
 //! IPPE solutions; non-coplanar: linear DLT) → LM-refine every candidate on pixel reprojection
-//! error with distortion ([`super::refine`]) → keep the lower-cost one → flip margin, RMS,
-//! residuals, covariance → accept or reject per [`PoseConfig`].
+//! error with distortion ([`super::refine`]) → keep the lower-cost one → per-tag robust step →
+//! flip margin, RMS, residuals, covariance → accept or reject per [`PoseConfig`].
+//!
+//! Per-tag robust step: one bad tag costs a tag, not the frame. A tag whose corners reproject
+//! with an RMS above both [`PoseConfig::tag_outlier_factor`] × the median tag's and
+//! [`PoseConfig::max_rms_px`] (a tag cut by the object's silhouette, decoded with a corner in
+//! the wrong place) is dropped and the joint pose solved again without it — the worst tag first,
+//! one at a time, at most a third of the tags (one when fewer than six), and never below
+//! [`PoseConfig::min_tags`] and [`PoseConfig::min_corners`]. A frame whose tags are all equally
+//! bad (a wrong camera model, a moved board) keeps them all and is rejected as before. Dropped
+//! tags are listed in [`BoardPose::dropped_tags`].
 
 use std::collections::BTreeSet;
 
@@ -53,6 +62,9 @@ pub struct PoseConfig {
     /// Points whose distance from their best-fit plane is below this fraction of the point
     /// spread are treated as coplanar (IPPE); otherwise DLT initialises. Default 1e-6.
     pub coplanarity_tolerance: f64,
+    /// A tag whose RMS exceeds this multiple of the median tag's (and `max_rms_px`) is dropped
+    /// by the per-tag robust step (module doc). Default 3.
+    pub tag_outlier_factor: f64,
 }
 
 impl Default for PoseConfig {
@@ -65,6 +77,7 @@ impl Default for PoseConfig {
             expected_corner_noise_px: 0.2,
             max_iterations: 50,
             coplanarity_tolerance: 1e-6,
+            tag_outlier_factor: 3.0,
         }
     }
 }
@@ -111,7 +124,7 @@ pub struct BoardPose {
     pub camera_from_board: Pose,
     /// Reprojection RMS over points, √(Σ‖r‖²/N), px.
     pub rms_px: f64,
-    /// Per correspondence (input order): projected − observed, px.
+    /// Per correspondence (input order, dropped tags included): projected − observed, px.
     pub residuals_px: Vec<[f64; 2]>,
     /// Flip margin: cost of the other planar minimum divided by max(cost of this one,
     /// (2N − 6)·σ²) with σ = [`PoseConfig::expected_corner_noise_px`]; `None` when there is no
@@ -128,6 +141,9 @@ pub struct BoardPose {
     pub translation_std_m: [f64; 3],
     /// Distinct tags used.
     pub tag_count: usize,
+    /// Tags the per-tag robust step left out, worst first, with their RMS (px) at the pose
+    /// that dropped them.
+    pub dropped_tags: Vec<(u32, f64)>,
     /// LM iterations of the kept candidate.
     pub iterations: usize,
 }
@@ -138,6 +154,97 @@ pub fn estimate_board_pose(
     correspondences: &[Correspondence],
     config: &PoseConfig,
 ) -> Result<BoardPose, PoseRejection> {
+    let all_tags = correspondences
+        .iter()
+        .map(|c| c.tag_id)
+        .collect::<BTreeSet<u32>>()
+        .len();
+    // a third of the tags, at least one: the good ones stay the majority the median stands on
+    let max_dropped = (all_tags / 3).max(1);
+    let mut kept: Vec<Correspondence> = correspondences.to_vec();
+    let mut dropped: Vec<(u32, f64)> = Vec::new();
+    loop {
+        let solved = solve(camera, &kept, config)?;
+        let tags = kept.iter().map(|c| c.tag_id).collect::<BTreeSet<u32>>();
+        let worst = (dropped.len() < max_dropped && tags.len() > config.min_tags)
+            .then(|| outlier_tag(&kept, &solved.best.residuals_px, config))
+            .flatten();
+        match worst {
+            Some((tag, rms))
+                if kept.iter().filter(|c| c.tag_id != tag).count() >= config.min_corners.max(4) =>
+            {
+                dropped.push((tag, rms));
+                kept.retain(|c| c.tag_id != tag);
+            }
+            _ => {
+                let mut pose = accept(&kept, solved, tags.len(), config)?;
+                if !dropped.is_empty() {
+                    // residuals of every input corner, the dropped ones included
+                    pose.residuals_px = residuals(camera, &pose.camera_from_board, correspondences);
+                }
+                pose.dropped_tags = dropped;
+                return Ok(pose);
+            }
+        }
+    }
+}
+
+/// The tag to drop (module doc), with its RMS, px.
+fn outlier_tag(
+    kept: &[Correspondence],
+    residuals_px: &[[f64; 2]],
+    config: &PoseConfig,
+) -> Option<(u32, f64)> {
+    let mut sums: std::collections::BTreeMap<u32, (f64, usize)> = Default::default();
+    for (c, r) in kept.iter().zip(residuals_px) {
+        let e = sums.entry(c.tag_id).or_insert((0.0, 0));
+        e.0 += r[0] * r[0] + r[1] * r[1];
+        e.1 += 1;
+    }
+    // every tag has ≥ 1 corner: the division is by a positive count
+    let mut rms: Vec<(u32, f64)> = sums
+        .into_iter()
+        .map(|(t, (s, n))| (t, (s / n as f64).sqrt()))
+        .collect();
+    let mut sorted: Vec<f64> = rms.iter().map(|r| r.1).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    rms.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let (tag, worst) = rms[0];
+    (worst > config.max_rms_px && worst > config.tag_outlier_factor * median)
+        .then_some((tag, worst))
+}
+
+/// Projected − observed for every correspondence at `camera_from_board` (NaN where a point is
+/// behind the camera).
+fn residuals(
+    camera: &CameraModel,
+    camera_from_board: &Pose,
+    correspondences: &[Correspondence],
+) -> Vec<[f64; 2]> {
+    correspondences
+        .iter()
+        .map(
+            |c| match camera.project(&(camera_from_board * c.point_board_m)) {
+                Some(p) => [p[0] - c.pixel[0], p[1] - c.pixel[1]],
+                None => [f64::NAN; 2],
+            },
+        )
+        .collect()
+}
+
+/// The refined candidates of one joint solve: the best and a distinct alternative minimum.
+struct Solved {
+    best: RefinedPose,
+    alternative: Option<RefinedPose>,
+}
+
+/// Validates, initialises and refines one joint pose over `correspondences`.
+fn solve(
+    camera: &CameraModel,
+    correspondences: &[Correspondence],
+    config: &PoseConfig,
+) -> Result<Solved, PoseRejection> {
     let tags: BTreeSet<u32> = correspondences.iter().map(|c| c.tag_id).collect();
     if tags.len() < config.min_tags {
         return Err(PoseRejection::TooFewTags {
@@ -198,6 +305,18 @@ pub fn estimate_board_pose(
     let alternative = refined
         .into_iter()
         .find(|alt| !same_pose(&alt.camera_from_board, &best.camera_from_board));
+    Ok(Solved { best, alternative })
+}
+
+/// The acceptance checks of a joint solve over `kept` (RMS, flip margin) and its uncertainty.
+fn accept(
+    kept: &[Correspondence],
+    solved: Solved,
+    tag_count: usize,
+    config: &PoseConfig,
+) -> Result<BoardPose, PoseRejection> {
+    let Solved { best, alternative } = solved;
+    let points = kept;
     let n = points.len() as f64;
     let rms_px = (best.cost_px2 / n).sqrt();
     if rms_px.is_nan() || rms_px > config.max_rms_px {
@@ -240,7 +359,8 @@ pub fn estimate_board_pose(
         covariance,
         rotation_std_rad,
         translation_std_m,
-        tag_count: tags.len(),
+        tag_count,
+        dropped_tags: Vec::new(),
         iterations: best.iterations,
     })
 }

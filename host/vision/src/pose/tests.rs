@@ -182,13 +182,14 @@ fn rejections_name_their_reason() {
         Err(PoseRejection::NotFinite { index: 5, .. })
     ));
 
-    // One tag detected at the wrong place (e.g. a duplicate id elsewhere in the scene).
-    let mut outlier = obs.clone();
-    for c in outlier.iter_mut().filter(|c| c.tag_id == obs[0].tag_id) {
-        c.pixel[0] += 40.0;
+    // Every tag off by its own amount (a moved board, a wrong camera): nothing to drop, the
+    // frame is refused.
+    let mut all_bad = obs.clone();
+    for c in &mut all_bad {
+        c.pixel[0] += 9.0 * f64::from(c.tag_id % 3) - 9.0 * f64::from(c.corner % 2);
     }
     assert!(matches!(
-        estimate_board_pose(&cam, &outlier, &config),
+        estimate_board_pose(&cam, &all_bad, &config),
         Err(PoseRejection::ReprojectionTooHigh { .. })
     ));
 
@@ -346,4 +347,34 @@ proptest::proptest! {
         proptest::prop_assert!(r < 1e-6 && t < 1e-6, "rot {}° trans {} mm", r, t);
         proptest::prop_assert!(pose.rms_px < 1e-6);
     }
+}
+
+/// Issue 28, case 11: one tag decoded with its corners in the wrong place (a tag cut by the
+/// object's silhouette) costs that tag, not the frame; the pose is as good as without it.
+#[test]
+fn one_bad_tag_costs_a_tag_not_the_frame() {
+    let cam = camera_5mp();
+    let (obs, truth) = good_frame(4);
+    let bad_tag = obs[0].tag_id;
+    for shift in [3.0, 40.0] {
+        let mut outlier = obs.clone();
+        for c in outlier.iter_mut().filter(|c| c.tag_id == bad_tag) {
+            // one corner pulled toward the silhouette, as a cut tag is decoded
+            if c.corner == 2 {
+                c.pixel[0] += shift;
+                c.pixel[1] -= shift / 2.0;
+            }
+        }
+        let pose = estimate_board_pose(&cam, &outlier, &PoseConfig::default())
+            .unwrap_or_else(|e| panic!("shift {shift}: {e}"));
+        assert_eq!(pose.dropped_tags.len(), 1, "shift {shift}");
+        assert_eq!(pose.dropped_tags[0].0, bad_tag);
+        assert!(pose.rms_px < 0.5, "rms {}", pose.rms_px);
+        assert_eq!(pose.residuals_px.len(), outlier.len());
+        let (rot_deg, trans_mm) = pose_error(&pose.camera_from_board, &truth);
+        assert!(rot_deg < 0.1 && trans_mm < 1.0, "{rot_deg}° {trans_mm} mm");
+    }
+    // a good frame drops nothing
+    let pose = estimate_board_pose(&cam, &obs, &PoseConfig::default()).unwrap();
+    assert!(pose.dropped_tags.is_empty());
 }

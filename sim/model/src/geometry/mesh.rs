@@ -202,10 +202,13 @@ impl TriangleMesh {
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
-        let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
-            path: path.to_owned(),
-            source,
-        })?;
+        let bytes =
+            crate::file_io::read_bounded(path, crate::file_io::caps::MESH).map_err(|source| {
+                MeshError::Io {
+                    path: path.to_owned(),
+                    source,
+                }
+            })?;
         match ext.as_deref() {
             Some("ply") => super::ply::parse_ply(&bytes),
             Some("obj") => super::obj::parse_obj(&bytes),
