@@ -377,4 +377,4 @@ pub fn transform_mesh(
 
 #[cfg(test)]
 #[path = "colmap_import_tests.rs"]
-mod tests;
+pub(crate) mod tests;

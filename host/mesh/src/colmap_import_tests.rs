@@ -493,3 +493,184 @@ fn images_that_name_no_frame_or_one_frame_twice_are_refused() {
     assert_eq!(frame_of_image("00000099.png", &frame_ids), None);
     assert_eq!(frame_of_image("a104.png", &frame_ids), None);
 }
+
+/// The way back through COLMAP's own reconstruction, called by `tests.rs`'s
+/// `colmap_pipeline_both_ways` once COLMAP has extracted and matched the features of the export
+/// in `c` (`database.db`, `images/`): `mapper` reconstructs the views in a frame and scale of its
+/// own, `model_converter` writes that model as text too; both forms read alike, and the model
+/// imported against the true poses — two frames withheld as if tracking had failed on them, one
+/// moved 15 mm — gives every frame's pose back, and the model's points and a mesh in its frame
+/// land on the true sphere (radius 30 mm at z = 30 mm) and board.
+pub(crate) fn mapper_model_comes_back_onto_the_board(
+    c: &Path,
+    truth: &[(u64, Isometry3<f64>)],
+    camera: &CameraModel,
+    colmap: &dyn Fn(&[&str]),
+) {
+    let p = |x: &Path| x.display().to_string();
+    let mapped = c.join("mapped");
+    let mapped_txt = c.join("mapped-txt");
+    std::fs::create_dir_all(&mapped).unwrap();
+    std::fs::create_dir_all(&mapped_txt).unwrap();
+    // the lens is known: COLMAP keeps the exported camera, as a user with a calibration would
+    colmap(&[
+        "mapper",
+        "--database_path",
+        &p(&c.join("database.db")),
+        "--image_path",
+        &p(&c.join("images")),
+        "--output_path",
+        &p(&mapped),
+        "--Mapper.ba_refine_focal_length",
+        "0",
+        "--Mapper.ba_refine_extra_params",
+        "0",
+    ]);
+    let model_dir = mapped.join("0");
+    colmap(&[
+        "model_converter",
+        "--input_path",
+        &p(&model_dir),
+        "--output_path",
+        &p(&mapped_txt),
+        "--output_type",
+        "TXT",
+    ]);
+    let model = read_model(&model_dir).unwrap();
+    assert_eq!(model.format, ModelFormat::Binary);
+    let text = read_model(&mapped_txt).unwrap();
+    assert_eq!(text.format, ModelFormat::Text);
+    assert_eq!(text.cameras, model.cameras);
+    assert_eq!(text.images.len(), model.images.len());
+    for (a, b) in text.images.iter().zip(&model.images) {
+        assert_eq!(
+            (a.image_id, &a.name, a.points2d),
+            (b.image_id, &b.name, b.points2d)
+        );
+        let d = a.camera_from_model.inverse() * b.camera_from_model;
+        assert!(d.translation.vector.norm() < 1e-9 && d.rotation.angle() < 1e-9);
+    }
+    assert_eq!(text.points.len(), model.points.len());
+    assert_eq!(
+        model.images.len(),
+        truth.len(),
+        "mapper registers every view"
+    );
+
+    // COLMAP's frame is not the board's
+    let frame_ids: BTreeSet<u64> = truth.iter().map(|t| t.0).collect();
+    let ids: Vec<u64> = frame_ids.iter().copied().collect();
+    let (gone, moved) = ([ids[2], ids[7]], ids[5]);
+    let tracked: Vec<(u64, Isometry3<f64>)> = truth
+        .iter()
+        .filter(|t| !gone.contains(&t.0))
+        .map(|&(id, mut pose)| {
+            if id == moved {
+                pose.translation.vector.y += 0.015;
+            }
+            (id, pose)
+        })
+        .collect();
+    let import = import_model(
+        &model,
+        &tracked,
+        &frame_ids,
+        camera,
+        &AlignConfig::default(),
+    )
+    .unwrap();
+    let r = &import.report;
+    println!(
+        "mapper model: scale {:.5} board m per unit; residual RMS {:.3} mm, {:.4}° (max {:.3} mm, \
+         {:.4}°) over {} of {} frames; {} points; focal ratio {:.6}",
+        r.board_from_model.scale,
+        r.rms_position_mm,
+        r.rms_rotation_deg,
+        r.max_position_mm,
+        r.max_rotation_deg,
+        r.frames_inliers,
+        r.frames_common,
+        r.points,
+        r.cameras[0].focal_ratio
+    );
+    assert!(
+        (r.board_from_model.scale - 1.0).abs() > 0.01
+            || r.board_from_model.rotation_wxyz[0].abs() < 0.999,
+        "mapper picked the board frame itself: nothing was aligned"
+    );
+    assert_eq!(r.frames_gained, gone);
+    assert_eq!(r.frames_dropped, [moved]);
+    assert_eq!(r.frames_inliers, truth.len() - 3);
+    assert!((r.cameras[0].focal_ratio - 1.0).abs() < 1e-9);
+    // every frame's pose, the gained and the dropped one's model pose too, against the truth
+    let mut worst = (0.0f64, 0.0f64);
+    for (id, pose) in &import.aligned {
+        let t = truth.iter().find(|t| t.0 == *id).unwrap().1;
+        let d = t.inverse() * pose;
+        worst.0 = worst.0.max(d.translation.vector.norm() * 1e3);
+        worst.1 = worst.1.max(d.rotation.angle().to_degrees());
+    }
+    println!(
+        "aligned mapper poses vs truth: worst {:.3} mm, {:.4}°",
+        worst.0, worst.1
+    );
+    // measured: worst 0.99 mm, 0.17° (a pixel at 480 × 384 is 0.35 mm on the object), RMS
+    // 0.39 mm, 0.074°
+    assert!(worst.0 < 2.0 && worst.1 < 0.35, "{worst:?}");
+    assert!(r.rms_position_mm < 1.0 && r.rms_rotation_deg < 0.2, "{r:?}");
+    let fit_ids: Vec<u64> = import.fit_poses(&tracked).iter().map(|p| p.0).collect();
+    assert_eq!(fit_ids.len(), truth.len() - 1);
+    assert!(!fit_ids.contains(&moved) && gone.iter().all(|g| fit_ids.contains(g)));
+
+    // COLMAP's own points, carried into the board frame, lie on the sphere or the board
+    let (centre, radius) = (Point3::new(0.0, 0.0, 0.03), 0.03);
+    let on_surface = model
+        .points
+        .iter()
+        .map(|q| import.board_from_model.transform_point(&q.position))
+        .filter(|b| ((b - centre).norm() - radius).abs().min(b.z.abs()) < 0.002)
+        .count();
+    println!(
+        "{on_surface} of {} mapper points within 2 mm of the sphere or the board",
+        model.points.len()
+    );
+    assert!(model.points.len() >= 100);
+    assert!(on_surface as f64 >= 0.9 * model.points.len() as f64);
+
+    // a mesh in COLMAP's frame (the true sphere placed there by the similarity of the true
+    // poses, all of them, without the withheld and moved frames' damage) comes back onto the
+    // true sphere
+    let pairs: Vec<PosePair> = truth
+        .iter()
+        .map(|(id, t)| PosePair {
+            source_from_camera: model
+                .images
+                .iter()
+                .find(|i| frame_of_image(&i.name, &frame_ids) == Some(*id))
+                .unwrap()
+                .camera_from_model
+                .inverse(),
+            target_from_camera: *t,
+        })
+        .collect();
+    let oracle = ellipso_model::geometry::similarity::umeyama(
+        &pairs
+            .iter()
+            .map(|p| Point3::from(p.source_from_camera.translation.vector))
+            .collect::<Vec<_>>(),
+        &pairs
+            .iter()
+            .map(|p| Point3::from(p.target_from_camera.translation.vector))
+            .collect::<Vec<_>>(),
+    )
+    .unwrap();
+    let in_model = transform_mesh(&sphere(), &oracle.inverse()).unwrap();
+    let back = transform_mesh(&in_model, &import.board_from_model).unwrap();
+    let worst_mm = back
+        .positions()
+        .iter()
+        .map(|b| ((b - centre).norm() - radius).abs() * 1e3)
+        .fold(0.0, f64::max);
+    println!("mesh from COLMAP's frame: worst vertex {worst_mm:.3} mm off the true sphere");
+    assert!(worst_mm < 0.5, "{worst_mm} mm");
+}

@@ -18,6 +18,8 @@
 //! - The pose is camera_from_model (COLMAP's camera axes are OpenCV's: x right, y down, z
 //!   forward); the quaternion is normalised (refused when its norm is not within 1e-3 of 1, or
 //!   not finite).
+//! - Cameras, images and points are returned sorted by id (COLMAP writes them in its hash
+//!   maps' order, which differs between the two forms).
 //! - Every error names the file and the line (text) or byte offset (binary): a missing file, a
 //!   malformed or truncated record, an unknown camera model, an image whose camera is not in
 //!   the model, a repeated image id or name.
@@ -197,6 +199,11 @@ pub fn read_model(dir: &Path) -> Result<ColmapModel, ModelError> {
         }
     };
     check(&file("images"), &cameras, &images)?;
+    // one order whatever the writer's (COLMAP writes its hash maps' order)
+    let (mut cameras, mut images, mut points) = (cameras, images, points);
+    cameras.sort_by_key(|c| c.camera_id);
+    images.sort_by_key(|i| i.image_id);
+    points.sort_by_key(|p| p.point3d_id);
     Ok(ColmapModel {
         dir: dir.to_path_buf(),
         format,
