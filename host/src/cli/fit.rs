@@ -2,9 +2,10 @@
 //! recorded session, per mesh vertex, with its pictures.
 //!
 //! Poses come from the session's `pose` events (tracked now and appended when the log has
-//! none). The mesh is a triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from
-//! any scanner or photogrammetry; without `--mesh` it is carved from the session's own frames
-//! first (`ellipso mesh`, written to `OUT/mesh.ply`). Writes `fit.ply` (per-vertex parameters
+//! none), or from a COLMAP model aligned to them (`--poses`, `fit_import`). The mesh is a
+//! triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from any scanner or
+//! photogrammetry, or in a COLMAP model's frame (`--mesh-frame colmap`); without `--mesh` it is
+//! carved from the session's own frames first (`ellipso mesh`, written to `OUT/mesh.ply`). Writes `fit.ply` (per-vertex parameters
 //! and uncertainties), the pictures of the fitted model from one captured view, and
 //! `fit-summary.json`.
 
@@ -67,6 +68,10 @@ pub struct Args {
     /// Print one JSON object (output folder, files, the fit summary) instead of the text report.
     #[arg(long)]
     pub json: bool,
+    /// Poses and a mesh from COLMAP or other photogrammetry (`--poses`, `--mesh-frame`,
+    /// `--mesh-model`).
+    #[command(flatten)]
+    pub import: super::fit_import::ImportArgs,
 }
 
 /// Runs `ellipso fit`.
@@ -80,6 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))
         })
         .transpose()?;
+    let models = super::fit_import::read(&args.import, args.mesh.is_some(), args.shard.is_some())?;
     let session = ellipso_session::reader::open(&args.session)?;
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.holdout),
@@ -109,12 +115,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .out
         .clone()
         .unwrap_or_else(|| PathBuf::from("ellipso-fit"));
+    let (given_mesh, import) = super::fit_import::apply(models, &session, given_mesh, &out)?;
+    let imported_poses = import.as_ref().and_then(|i| i.poses.as_deref());
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
             eprintln!("no --mesh: carving the object's mesh from the frames first…");
-            let (mesh, report) =
-                super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
+            let (mesh, report) = super::mesh::mesh_of_session(
+                &session,
+                imported_poses,
+                &ellipso_mesh::MeshConfig::default(),
+            )?;
             let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
             eprintln!("  {} ({} vertices)", path.display(), report.vertices);
@@ -122,7 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let config = config_of(&args)?;
-    let result = fit_and_export(&session, &mesh, &out, args.view, &config)?;
+    let result = fit_and_export_with(&session, &mesh, import.as_ref(), &out, args.view, &config)?;
     if args.json {
         let json = serde_json::json!({
             "out": out.display().to_string(),
@@ -262,8 +273,24 @@ pub fn fit_and_export(
     view: Option<u64>,
     config: &SessionFitConfig,
 ) -> anyhow::Result<FitRun> {
+    fit_and_export_with(session, mesh, None, out, view, config)
+}
+
+/// [`fit_and_export`] with what `--poses`/`--mesh-frame` imported: its poses (else the
+/// session's) and its summary (`import` in `fit-summary.json`).
+pub fn fit_and_export_with(
+    session: &Session,
+    mesh: &TriangleMesh,
+    import: Option<&super::fit_import::Imported>,
+    out: &Path,
+    view: Option<u64>,
+    config: &SessionFitConfig,
+) -> anyhow::Result<FitRun> {
     let started = Instant::now();
-    let poses = poses_of(session)?;
+    let poses = match import.and_then(|i| i.poses.clone()) {
+        Some(poses) => poses,
+        None => poses_of(session)?,
+    };
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // The solver weights samples by their expected noise (the session's sensor where known).
     let config = with_session_sensor(session, config);
@@ -276,7 +303,15 @@ pub fn fit_and_export(
         mesh.positions().len(),
         fit.observe.frames_posed
     ));
-    export_fit(session, &poses, fit, out, view, started)
+    export_fit(
+        session,
+        &poses,
+        fit,
+        out,
+        view,
+        started,
+        import.map(|i| &i.summary),
+    )
 }
 
 /// The sensor model the solver weights by: the session's where it says it (simulator
@@ -289,8 +324,8 @@ pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> Sess
     config
 }
 
-/// Writes a finished fit's outputs into `out` (pictures from frame `view`, `fit-summary.json`);
-/// `started` is when the whole run began.
+/// Writes a finished fit's outputs into `out` (pictures from frame `view`, `fit-summary.json`
+/// with `import` where poses or a mesh were imported); `started` is when the whole run began.
 pub fn export_fit(
     session: &Session,
     poses: &[(u64, Isometry3<f64>)],
@@ -298,6 +333,7 @@ pub fn export_fit(
     out: &Path,
     view: Option<u64>,
     started: Instant,
+    import: Option<&serde_json::Value>,
 ) -> anyhow::Result<FitRun> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
@@ -385,6 +421,9 @@ pub fn export_fit(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
+    if let Some(import) = import {
+        json["import"] = import.clone();
+    }
     // every path in the summary is relative to its own folder
     super::out::paths_relative_to(&mut json, out);
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)

@@ -162,7 +162,8 @@ pub fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
     // The shards' seconds, summed (CPU-seconds of the array, not its wall time).
     fit.outcome.times.observe_s = observe_s;
     fit.outcome.times.joint_s = joint_s;
-    let result = super::fit::export_fit(&session, &poses, fit, &args.out, args.view, started)?;
+    let result =
+        super::fit::export_fit(&session, &poses, fit, &args.out, args.view, started, None)?;
     crate::outln!("\nresults in {}:", args.out.display());
     for f in &result.files {
         crate::outln!("  {}", f.display());

@@ -207,7 +207,8 @@ fn spread(points: &[Point3<f64>]) -> [f64; 3] {
 /// origin (rounding leaves a spread of ~1e-16 of it where they coincide).
 fn coincide(points: &[Point3<f64>], spread: &[f64; 3]) -> bool {
     let extent = points.iter().map(|p| p.coords.norm()).fold(0.0, f64::max);
-    !(spread[0] > 1e-9 * extent)
+    // NaN spreads (non-finite centres) count as coincident
+    spread[0].is_nan() || spread[0] <= 1e-9 * extent
 }
 
 /// Whether the points span a plane: σ₂ ≥ ratio·σ₁ and they do not coincide.
@@ -248,7 +249,7 @@ fn estimate(
         var_y += dy.norm_squared();
     }
     // guard: coincident source centres leave the scale undefined
-    if !(var_x > 0.0 && var_y > 0.0) {
+    if var_x.is_nan() || var_y.is_nan() || var_x <= 0.0 || var_y <= 0.0 {
         return None;
     }
     let mut r = nearest_rotation(&h)?;
@@ -270,7 +271,7 @@ fn estimate(
         }
     }
     // a non-positive scale is no similarity between the two sets (mirror or no relation)
-    if !(s > 0.0 && s.is_finite()) {
+    if !s.is_finite() || s <= 0.0 {
         return None;
     }
     let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
