@@ -14,8 +14,10 @@
 //! 6. [`extract`], [`remesh`]: marching tetrahedra, isotropic remeshing onto the carved surface
 //!    to the target vertex count, Taubin smoothing; the bottom is the board plane.
 //!
-//! Also here: [`distance`] (Chamfer / Hausdorff between meshes, for the bench) and [`colmap`]
-//! (the session as a COLMAP sparse model with undistorted images, for photogrammetry users).
+//! Also here: [`distance`] (Chamfer / Hausdorff between meshes, for the bench), [`colmap`]
+//! (the session as a COLMAP sparse model with undistorted images, for photogrammetry users) and
+//! the way back: [`colmap_model`] reads a COLMAP model (text or binary), [`colmap_import`]
+//! aligns its poses, and a mesh in its frame, to the board frame.
 //!
 //! Contract: [`build_mesh`] reads the session (frames twice, streamed, at most
 //! `frames_in_flight` at once) and never writes to it; the mesh is in world (board)
@@ -26,6 +28,8 @@
 pub mod appearance;
 pub mod carve;
 pub mod colmap;
+pub mod colmap_import;
+pub mod colmap_model;
 pub mod components;
 pub mod debug;
 pub mod distance;

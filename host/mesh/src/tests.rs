@@ -34,6 +34,28 @@ pub fn render_session(
     height: u32,
 ) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
     let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
+    render_session_with(dir, spheres, views, width, height, &board)
+}
+
+/// A4 under a 9 × 6 grid of 22 mm tag36h11 tags (ids 300…), the object standing on it: texture
+/// over the whole sheet. COLMAP's `mapper` finds no initial pair on the shipped base board, a
+/// ring of 16 tags round a blank centre, from a dozen views at 480 × 384 (a few hundred SIFT
+/// features per view, and views from opposite sides alike).
+pub const TAG_GRID_BOARD: &str = "name = \"tag_grid\"\nfamily = \"tag36h11\"\n\
+    tag_size_m = 0.022\nsheet_size_m = [0.297, 0.210]\nwhite_albedo = 0.85\n\
+    black_albedo = 0.04\norigin = \"sheet_centre\"\naxes = \"x_right_y_up\"\n\
+    [grid]\ncols = 9\nrows = 6\nspacing_m = 0.032\nfirst_id = 300\n\
+    first_centre_m = [0.0205, 0.025]\n";
+
+/// [`render_session`] on the board of file `board`.
+pub fn render_session_with(
+    dir: &Path,
+    spheres: &[([f64; 3], f64)],
+    views: usize,
+    width: u32,
+    height: u32,
+    board: &Path,
+) -> (PathBuf, Scene, Vec<(u64, Isometry3<f64>)>) {
     let objects: String = spheres
         .iter()
         .enumerate()
@@ -364,13 +386,15 @@ fn colmap_files_round_trip_with_the_poses_and_the_pixel_centre_convention() {
     assert!(r.camera.starts_with("1 OPENCV 160 128 "), "{}", r.camera);
 }
 
-/// COLMAP's own documented pipeline on the export, to the end: `feature_extractor`,
-/// `exhaustive_matcher`, `point_triangulator` on the known-pose model (the database the export
-/// wrote keeps COLMAP's image ids equal to the model's), then `model_converter` to read the
-/// triangulated points back: many points, sub-pixel reprojection error, and the points lie in
-/// the board frame (on or above the board plane z = 0, within the views).
+/// COLMAP both ways. Out: its own documented pipeline on the export, to the end:
+/// `feature_extractor`, `exhaustive_matcher`, `point_triangulator` on the known-pose model (the
+/// database the export wrote keeps COLMAP's image ids equal to the model's), then
+/// `model_converter` to read the triangulated points back: many points, sub-pixel reprojection
+/// error, and the points lie in the board frame (on or above the board plane z = 0, within the
+/// views). Back: `mapper` on the same features reconstructs the views in a frame of its own, and
+/// the import brings it onto the board (`colmap_import`'s tests).
 #[test]
-fn colmap_triangulates_the_export_with_its_own_pipeline() {
+fn colmap_pipeline_both_ways() {
     let Ok(o) = std::process::Command::new("colmap").arg("help").output() else {
         // CI installs it and sets ELLIPSO_REQUIRE_COLMAP, so there a missing program fails
         assert!(
@@ -382,7 +406,16 @@ fn colmap_triangulates_the_export_with_its_own_pipeline() {
     };
     assert!(o.status.success() || !o.stdout.is_empty());
     let tmp = tempfile::tempdir().unwrap();
-    let (dir, _, poses) = render_session(tmp.path(), &[([0.0, 0.0, 0.03], 0.03)], 12, 480, 384);
+    let board = tmp.path().join("tag_grid.toml");
+    std::fs::write(&board, TAG_GRID_BOARD).unwrap();
+    let (dir, _, poses) = render_session_with(
+        tmp.path(),
+        &[([0.0, 0.0, 0.03], 0.03)],
+        12,
+        480,
+        384,
+        &board,
+    );
     let session = open(&dir);
     let c = tmp.path().join("colmap");
     let report = super::colmap::export_colmap(&session, &poses, &c, Default::default()).unwrap();
@@ -482,5 +515,9 @@ fn colmap_triangulates_the_export_with_its_own_pipeline() {
     assert!(
         above_board as f64 >= 0.95 * n as f64,
         "{above_board} of {n} points on or above the board plane"
+    );
+    let camera = ellipso_fit::observe::camera_of(&session).unwrap();
+    super::colmap_import::tests::mapper_model_comes_back_onto_the_board(
+        &c, &poses, &camera, &colmap,
     );
 }

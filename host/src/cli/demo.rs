@@ -301,7 +301,7 @@ fn fit_and_score(
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
     let (mesh, mesh_report) =
-        super::mesh::mesh_of_session(session, &ellipso_mesh::MeshConfig::default())?;
+        super::mesh::mesh_of_session(session, None, &ellipso_mesh::MeshConfig::default())?;
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
     super::mesh::write_mesh(&mesh, &mesh_report, &mesh_path)?;

@@ -2,9 +2,10 @@
 //! recorded session, per mesh vertex, with its pictures.
 //!
 //! Poses come from the session's `pose` events (tracked now and appended when the log has
-//! none). The mesh is a triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from
-//! any scanner or photogrammetry; without `--mesh` it is carved from the session's own frames
-//! first (`ellipso mesh`, written to `OUT/mesh.ply`). Writes `fit.ply` (per-vertex parameters
+//! none), or from a COLMAP model aligned to them (`--poses`, `fit_import`). The mesh is a
+//! triangle mesh (PLY or OBJ) in board (world) coordinates, metres, from any scanner or
+//! photogrammetry, or in a COLMAP model's frame (`--mesh-frame colmap`); without `--mesh` it is
+//! carved from the session's own frames first (`ellipso mesh`, written to `OUT/mesh.ply`). Writes `fit.ply` (per-vertex parameters
 //! and uncertainties), the pictures of the fitted model from one captured view, and
 //! `fit-summary.json`.
 
@@ -67,6 +68,10 @@ pub struct Args {
     /// Print one JSON object (output folder, files, the fit summary) instead of the text report.
     #[arg(long)]
     pub json: bool,
+    /// Poses and a mesh from COLMAP or other photogrammetry (`--poses`, `--mesh-frame`,
+    /// `--mesh-model`).
+    #[command(flatten)]
+    pub import: super::fit_import::ImportArgs,
 }
 
 /// Runs `ellipso fit`.
@@ -95,6 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))
         })
         .transpose()?;
+    let models = super::fit_import::read(&args.import, args.mesh.is_some(), args.shard.is_some())?;
     let session = ellipso_session::reader::open(&args.session)?;
     anyhow::ensure!(
         (0.0..=0.5).contains(&args.holdout),
@@ -133,12 +139,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let out_dir = out_dir.expect("claimed above without --shard");
     let out = out_dir.path().to_path_buf();
+    let (given_mesh, import) = super::fit_import::apply(models, &session, given_mesh, &out)?;
+    let imported_poses = import.as_ref().and_then(|i| i.poses.as_deref());
     let mesh = match given_mesh {
         Some(mesh) => mesh,
         None => {
             crate::errln!("no --mesh: carving the object's mesh from the frames first…");
-            let (mesh, report) =
-                super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
+            let (mesh, report) = super::mesh::mesh_of_session(
+                &session,
+                imported_poses,
+                &ellipso_mesh::MeshConfig::default(),
+            )?;
             let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
             crate::errln!(
@@ -150,9 +161,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let config = config_of(&args)?;
-    let result = fit_and_export(&session, &mesh, &out, args.view, &config, &|p| {
-        out_dir.published(p)
-    })?;
+    let result = fit_and_export_with(
+        &session,
+        &mesh,
+        import.as_ref(),
+        &out,
+        args.view,
+        &config,
+        &|p| out_dir.published(p),
+    )?;
     let out = out_dir.commit()?;
     print_results(&out, &result, args.json);
     Ok(())
@@ -318,8 +335,25 @@ pub fn fit_and_export(
     config: &SessionFitConfig,
     publish: &dyn Fn(&Path) -> PathBuf,
 ) -> anyhow::Result<FitRun> {
+    fit_and_export_with(session, mesh, None, out, view, config, publish)
+}
+
+/// [`fit_and_export`] with what `--poses`/`--mesh-frame` imported: its poses (else the
+/// session's) and its summary (`import` in `fit-summary.json`).
+pub fn fit_and_export_with(
+    session: &Session,
+    mesh: &TriangleMesh,
+    import: Option<&super::fit_import::Imported>,
+    out: &Path,
+    view: Option<u64>,
+    config: &SessionFitConfig,
+    publish: &dyn Fn(&Path) -> PathBuf,
+) -> anyhow::Result<FitRun> {
     let started = Instant::now();
-    let poses = poses_of(session)?;
+    let poses = match import.and_then(|i| i.poses.clone()) {
+        Some(poses) => poses,
+        None => poses_of(session)?,
+    };
     // the pictures' frame is checked before the long work, not after it
     if let Some(id) = view {
         anyhow::ensure!(
@@ -343,7 +377,15 @@ pub fn fit_and_export(
         mesh.positions().len(),
         fit.observe.frames_posed
     ));
-    export_fit(session, &poses, fit, out, view, started, publish)
+    export_fit(
+        session,
+        &poses,
+        fit,
+        OutputTo { dir: out, publish },
+        view,
+        started,
+        import.map(|i| &i.summary),
+    )
 }
 
 /// The sensor model the solver weights by: the session's where it says it (simulator
@@ -356,17 +398,25 @@ pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> Sess
     config
 }
 
-/// Writes a finished fit's outputs into `out` (pictures from frame `view`, `fit-summary.json`);
-/// `started` is when the whole run began; `publish` as for [`fit_and_export`].
+/// Where a fit's outputs go: the (staging) folder written now, and where a path under it will
+/// be once the output is committed (the paths recorded and shown).
+pub struct OutputTo<'a> {
+    pub dir: &'a Path,
+    pub publish: &'a dyn Fn(&Path) -> PathBuf,
+}
+
+/// Writes a finished fit's outputs into `to.dir` (pictures from frame `view`, `fit-summary.json`
+/// with `import` where poses or a mesh were imported); `started` is when the whole run began.
 pub fn export_fit(
     session: &Session,
     poses: &[(u64, Isometry3<f64>)],
     fit: SessionFit,
-    out: &Path,
+    to: OutputTo<'_>,
     view: Option<u64>,
     started: Instant,
-    publish: &dyn Fn(&Path) -> PathBuf,
+    import: Option<&serde_json::Value>,
 ) -> anyhow::Result<FitRun> {
+    let (out, publish) = (to.dir, to.publish);
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     // every posed frame that gave nothing is said, with its reason, and counted in the summary
     for s in &fit.observe.skipped {
@@ -457,6 +507,9 @@ pub fn export_fit(
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });
+    if let Some(import) = import {
+        json["import"] = import.clone();
+    }
     // every path in the summary is relative to its own folder
     super::out::paths_relative_to(&mut json, out);
     ellipso_report::atomic_file::write(&summary, serde_json::to_vec_pretty(&json)?)

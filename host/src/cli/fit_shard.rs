@@ -181,10 +181,13 @@ pub fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
         &session,
         &poses,
         fit,
-        out.path(),
+        super::fit::OutputTo {
+            dir: out.path(),
+            publish: &|p| out.published(p),
+        },
         args.view,
         started,
-        &|p| out.published(p),
+        None,
     )?;
     let published = out.commit()?;
     super::fit::print_results(&published, &result, false);

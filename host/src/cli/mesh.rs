@@ -58,7 +58,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
-    let (mesh, mut report) = mesh_of_session(&session, &config)?;
+    let (mesh, mut report) = mesh_of_session(&session, None, &config)?;
     report.peak_rss_bytes = super::memory::peak_rss_bytes();
     mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;
@@ -92,12 +92,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Tracks the session if it has no poses, then carves its mesh.
+/// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
+/// has none).
 pub fn mesh_of_session(
     session: &Session,
+    poses: Option<&[(u64, nalgebra::Isometry3<f64>)]>,
     config: &MeshConfig,
 ) -> anyhow::Result<(TriangleMesh, MeshReport)> {
-    let poses = super::fit::poses_of(session)?;
+    let poses = match poses {
+        Some(p) => p.to_vec(),
+        None => super::fit::poses_of(session)?,
+    };
     let progress = super::progress::Progress::spinner("mesh");
     let result = build_mesh(session, &poses, config, &mut |stage| {
         progress.set_message(stage)

@@ -12,6 +12,7 @@ pub mod demo;
 pub mod devices;
 pub mod export;
 pub mod fit;
+pub mod fit_import;
 pub mod fit_shard;
 pub mod interrupt;
 pub mod limits;

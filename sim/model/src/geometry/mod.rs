@@ -1,5 +1,6 @@
 //! Geometry for the simulator: rays, hits, bounding boxes, a binned-SAH BVH, triangle meshes
-//! (PLY / OBJ loading, procedural assets), analytic shapes and per-object affine transforms.
+//! (PLY / OBJ loading, procedural assets), analytic shapes, per-object affine transforms and the
+//! similarity between two reconstructions of the same cameras.
 //!
 //! Contract:
 //! - All geometry is `f64`. Lengths are metres wherever a scene supplies them.
@@ -19,6 +20,7 @@ pub mod obj;
 pub mod ply;
 pub mod procedural;
 pub mod shapes;
+pub mod similarity;
 pub mod transform;
 
 use nalgebra::{Point3, Unit, Vector3};
