@@ -316,6 +316,11 @@ pub enum FitFlag {
     /// η was fitted with the material's pooled η as a prior (the vertex's own estimate is kept
     /// in [`VertexFit::eta_unpooled`]).
     EtaPooled,
+    /// No fitted frame gave the vertex a single sample (not in view, occluded, in the flash's
+    /// shadow or at grazing in every frame, or every sample gated): what no view sees — the
+    /// underside, the contact with the board. Its parameters are the prior's and its position
+    /// follows its observed neighbours (docs/fit-shape.md "Surface update").
+    Unobserved,
 }
 
 /// The fitted parameters of one vertex, with standard errors.

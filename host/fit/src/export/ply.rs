@@ -4,7 +4,8 @@
 //! `x y z` (refined position, world, metres), `nx ny nz` (refined unit normal), `eta sigma_s
 //! sigma_ss rho_s rho_ss_r rho_ss_g rho_ss_b rho_d_r rho_d_g rho_d_b`, their standard errors
 //! `std_eta … std_rho_d_b` (same order; +inf where not identifiable), `normal_std_deg`,
-//! `uint samples`, `uint flags` (bit k set = [`FLAG_BITS`]`[k]`). Faces: `uchar`-counted `int`
+//! `uint samples`, `uint flags` (bit k set = [`FLAG_BITS`]`[k]`; bit 9: unobserved, no fitted view
+//! sees the vertex). Faces: `uchar`-counted `int`
 //! lists, as the simulator's PLY reader expects, so `fit.ply` also loads as a plain mesh.
 //! [`read_fit_ply`] reads back exactly what [`write_fit_ply`] wrote (f32 precision).
 
@@ -15,7 +16,7 @@ use ellipso_model::geometry::TriangleMesh;
 use crate::data::{FitFlag, VertexFit};
 
 /// Flag bit order of the `flags` property.
-pub const FLAG_BITS: [FitFlag; 9] = [
+pub const FLAG_BITS: [FitFlag; 10] = [
     FitFlag::TooFewViews,
     FitFlag::UnderDetermined,
     FitFlag::Dark,
@@ -25,6 +26,7 @@ pub const FLAG_BITS: [FitFlag; 9] = [
     FitFlag::AtBound,
     FitFlag::NotConverged,
     FitFlag::EtaPooled,
+    FitFlag::Unobserved,
 ];
 
 /// Parameter property names in `VertexFit::std_error` order.
