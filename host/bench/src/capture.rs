@@ -48,7 +48,8 @@ pub fn render_session(
 ) -> Result<(), BenchError> {
     let renderer = Renderer::new(scene, options).map_err(|e| BenchError::Render(e.to_string()))?;
     let camera = *renderer.camera();
-    let scene_file = std::fs::canonicalize(scene_path).map_err(|e| BenchError::io(scene_path, e))?;
+    let scene_file =
+        std::fs::canonicalize(scene_path).map_err(|e| BenchError::io(scene_path, e))?;
     let mut manifest = Manifest::new(
         SessionSource::Simulator {
             scene: scene_file.display().to_string(),

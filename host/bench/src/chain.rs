@@ -209,8 +209,8 @@ impl Bench {
                 p
             }
         };
-        let mesh = match spec.mesh {
-            MeshSource::True => true_mesh(&scene)?,
+        let (mesh, hull) = match spec.mesh {
+            MeshSource::True => (true_mesh(&scene)?, None),
             MeshSource::Carved => {
                 progress(&format!("{}: carving", spec.name));
                 let started = Instant::now();
@@ -220,15 +220,14 @@ impl Bench {
                     &ellipso_mesh::MeshConfig::default(),
                     &mut |_| {},
                 )
-                .map_err(|e| BenchError::stage("mesh", e))?
-                .mesh;
+                .map_err(|e| BenchError::stage("mesh", e))?;
                 times.mesh_s = started.elapsed().as_secs_f64();
-                m
+                (m.mesh, Some(std::sync::Arc::new(m.hull)))
             }
         };
         progress(&format!("{}: fitting", spec.name));
         let started = Instant::now();
-        let fit = self.fit(&session, &scene, &mesh, &poses, spec)?;
+        let fit = self.fit(&session, &scene, &mesh, hull, &poses, spec)?;
         times.fit_s = started.elapsed().as_secs_f64();
         let truth = truth_for_scoring(&scene)?;
         let at = truth_at(&truth, fit.mesh.positions());
@@ -263,15 +262,21 @@ impl Bench {
         session: &Session,
         scene: &Scene,
         mesh: &TriangleMesh,
+        hull: Option<std::sync::Arc<ellipso_fit::shape::hull::HullField>>,
         poses: &[(u64, Isometry3<f64>)],
         spec: &RunSpec,
     ) -> Result<SessionFit, BenchError> {
         let mut config = self.fit.clone();
+        // the carved mesh's hull constrains the surface update (none with the true mesh)
+        config.hull = hull;
         if std::env::var("ELLIPSO_TRUTH_LABELS").is_ok() {
             let truth = truth_for_scoring(scene)?;
             let at = truth_at(&truth, mesh.positions());
-            config.observe.vertex_labels =
-                Some(at.iter().map(|t| t.map_or(u32::MAX, |t| t.material as u32)).collect());
+            config.observe.vertex_labels = Some(
+                at.iter()
+                    .map(|t| t.map_or(u32::MAX, |t| t.material as u32))
+                    .collect(),
+            );
         }
         let config = &config;
         let fit_error = |e| BenchError::stage("fit", e);
@@ -337,8 +342,14 @@ fn session_key(edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]
 }
 
 /// Path helper for callers: the work directory's session of a spec.
-pub fn session_dir(work: &Path, edit: &SceneEdit, supersampling: u32, resolution: Option<[u32; 2]>) -> PathBuf {
-    work.join(session_key(edit, supersampling, resolution)).join("session")
+pub fn session_dir(
+    work: &Path,
+    edit: &SceneEdit,
+    supersampling: u32,
+    resolution: Option<[u32; 2]>,
+) -> PathBuf {
+    work.join(session_key(edit, supersampling, resolution))
+        .join("session")
 }
 
 /// The runs of the error budget for `scene` captured at `supersampling` (module doc): the full
@@ -389,7 +400,11 @@ pub fn budget_specs(scene: &Scene, supersampling: u32) -> Vec<RunSpec> {
         s.mesh = MeshSource::True;
     };
     for on_true_geometry in [false, true] {
-        let suffix = if on_true_geometry { " | true geometry" } else { "" };
+        let suffix = if on_true_geometry {
+            " | true geometry"
+        } else {
+            ""
+        };
         let stage = |name: &str, f: &dyn Fn(&mut RunSpec)| {
             with(&format!("{name}{suffix}"), &|s| {
                 if on_true_geometry {

@@ -136,8 +136,11 @@ pub fn score_fit(
     let unpooled = |f: &VertexFit| f.eta_unpooled.map_or(f.params.eta, |u| u[0]);
     let mut materials = Vec::new();
     for (m, name) in names.iter().enumerate() {
-        let members: Vec<(usize, &VertexTruth)> =
-            scored.iter().copied().filter(|(_, t)| t.material == m).collect();
+        let members: Vec<(usize, &VertexTruth)> = scored
+            .iter()
+            .copied()
+            .filter(|(_, t)| t.material == m)
+            .collect();
         let Some(&(_, first)) = members.first() else {
             continue;
         };
@@ -164,10 +167,18 @@ pub fn score_fit(
                     .map(|&(v, t)| rho_d_error_pct(&fits[v], t, colour))
                     .collect(),
             ),
-            sigma_s_median: median(members.iter().map(|&(v, _)| fits[v].params.sigma_s).collect()),
+            sigma_s_median: median(
+                members
+                    .iter()
+                    .map(|&(v, _)| fits[v].params.sigma_s)
+                    .collect(),
+            ),
             sigma_s_true: first.params.sigma_s,
             sigma_ss_median: median(
-                members.iter().map(|&(v, _)| fits[v].params.sigma_ss).collect(),
+                members
+                    .iter()
+                    .map(|&(v, _)| fits[v].params.sigma_ss)
+                    .collect(),
             ),
             sigma_ss_true: first.params.sigma_ss,
             normal_median_deg: median(
@@ -313,7 +324,9 @@ pub fn truth_residuals(
         gates: ellipso_fit::data::GateCounts,
     }
     let mut acc = vec![Acc::default(); names.len()];
-    let mut dump = std::env::var("ELLIPSO_DUMP").ok().map(|p| std::fs::File::create(p).unwrap());
+    let mut dump = std::env::var("ELLIPSO_DUMP")
+        .ok()
+        .map(|p| std::fs::File::create(p).unwrap());
     let min_boundary_m: f64 = std::env::var("ELLIPSO_BOUNDARY_MM")
         .ok()
         .and_then(|v| v.parse::<f64>().ok())
@@ -333,8 +346,7 @@ pub fn truth_residuals(
             let Some(frames) = SampleFrames::new(view, vs.position_world) else {
                 continue;
             };
-            let Some(unit) =
-                unit_sample_at(&frames, t.normal_world, p.eta, p.sigma_s, p.sigma_ss)
+            let Some(unit) = unit_sample_at(&frames, t.normal_world, p.eta, p.sigma_s, p.sigma_ss)
             else {
                 continue;
             };
@@ -362,10 +374,30 @@ pub fn truth_residuals(
                 if let Some(f) = dump.as_mut() {
                     use std::io::Write;
                     let n_t = nalgebra::Vector3::from(t.normal_world);
-                    let g = view.geometry_at(&nalgebra::Point3::from(vs.position_world)).unwrap();
+                    let g = view
+                        .geometry_at(&nalgebra::Point3::from(vs.position_world))
+                        .unwrap();
                     let co = n_t.dot(&nalgebra::Vector3::from(g.to_camera));
                     let ci = n_t.dot(&nalgebra::Vector3::from(g.to_light));
-                    writeln!(f, "{},{},{},{},{},{},{},{},{},{},{},{},{},{}", vs.vertex, t.material, c, vs.position_world[2], co, ci, t.boundary_m, s.view, o[0], m[0], o[1], m[1], o[2], m[2]).unwrap();
+                    writeln!(
+                        f,
+                        "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                        vs.vertex,
+                        t.material,
+                        c,
+                        vs.position_world[2],
+                        co,
+                        ci,
+                        t.boundary_m,
+                        s.view,
+                        o[0],
+                        m[0],
+                        o[1],
+                        m[1],
+                        o[2],
+                        m[2]
+                    )
+                    .unwrap();
                 }
                 for k in 0..4 {
                     let z = (o[k] - m[k]) / vars[k].sqrt();

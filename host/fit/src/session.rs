@@ -306,10 +306,16 @@ fn surface_step(
     config: &SessionFitConfig,
 ) -> Result<Option<TriangleMesh>, SessionFitError> {
     let observed = observed_vertices(set, mesh.positions().len());
+    let cameras: Vec<nalgebra::Point3<f64>> = set
+        .views
+        .iter()
+        .map(|v| nalgebra::Point3::from(v.camera_position_world))
+        .collect();
     Ok(surface.step(
         mesh,
         fits,
         &observed,
+        &cameras,
         config.hull.as_deref(),
         &config.surface,
     )?)

@@ -302,7 +302,7 @@ fn fit_and_score(
     let dir = out.join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
-    let (mesh, mesh_report) =
+    let (mesh, mesh_report, hull) =
         super::mesh::mesh_of_session(session, &ellipso_mesh::MeshConfig::default())?;
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
@@ -313,7 +313,12 @@ fn fit_and_score(
         mesh_report.frames_used,
     );
     let config = ellipso_fit::session::SessionFitConfig {
-        outer_iterations: if quick { 1 } else { 2 },
+        outer_iterations: if quick {
+            1
+        } else {
+            ellipso_fit::session::SessionFitConfig::default().outer_iterations
+        },
+        hull: Some(std::sync::Arc::new(hull)),
         ..Default::default()
     };
     let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;

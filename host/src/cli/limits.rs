@@ -9,6 +9,7 @@
 //! - the photo interval: a finite number of ms in `(0, 3_600_000]`; the board then checks it
 //!   against the exposure before anything is recorded;
 //! - outer iterations of the fit: `1..=20` (each is a full solve and shape update);
+//! - mesh vertex counts: `16..=2_000_000`;
 //! - real-valued settings: finite, inside the range their help text states.
 
 use std::fmt::Display;
@@ -21,6 +22,9 @@ use ellipso_sim::scene::rig::MAX_SIDE_PX;
 pub const MAX_COUNT: u64 = 1_000_000;
 /// Largest number of outer fit iterations.
 pub const MAX_OUTER: u64 = 20;
+/// Largest mesh vertex count a flag may ask for (the fit holds ~60 samples of 56 B per vertex:
+/// two million vertices are several GB).
+pub const MAX_VERTICES: u64 = 2_000_000;
 /// Longest photo interval, ms (one hour).
 pub const MAX_INTERVAL_MS: f64 = 3_600_000.0;
 
@@ -89,6 +93,11 @@ pub fn outer_iterations(s: &str) -> Result<usize, String> {
     integer_in(s, 1, MAX_OUTER)
 }
 
+/// A mesh's target vertex count, `16..=2_000_000`.
+pub fn vertices(s: &str) -> Result<usize, String> {
+    integer_in(s, 16, MAX_VERTICES)
+}
+
 /// The silhouette edge inset of `ellipso mesh`, superpixels: finite, in `[0, 2]` (beyond two
 /// pixels it would carve the object itself).
 pub fn edge_inset_px(s: &str) -> Result<f64, String> {
@@ -141,6 +150,8 @@ mod tests {
         assert!(count::<u32>("4294967296").is_err());
         assert!(outer_iterations("4294967295").is_err());
         assert_eq!(outer_iterations("2"), Ok(2));
+        assert_eq!(vertices("300000"), Ok(300_000));
+        assert!(vertices("8").is_err() && vertices("3000000").is_err());
         for bad in ["0", "-5", "nan", "inf", "1e300", "abc"] {
             assert!(interval_ms(bad).is_err(), "{bad}");
         }

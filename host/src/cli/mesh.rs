@@ -12,6 +12,7 @@ use anyhow::Context;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 
+use ellipso_fit::shape::hull::HullField;
 use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
 use ellipso_session::reader::Session;
 
@@ -23,8 +24,9 @@ pub struct Args {
     /// Output mesh (PLY).
     #[arg(long, default_value = "mesh.ply")]
     pub out: PathBuf,
-    /// Target vertex count of the mesh.
-    #[arg(long, default_value_t = 2500)]
+    /// Target vertex count of the mesh, 16..=2000000 (a few hundred thousand follow the
+    /// paper's Poisson depth 8–9; docs/mesh-bench.md has the fit's time and memory for each).
+    #[arg(long, default_value_t = 2500, value_parser = super::limits::vertices)]
     pub vertices: usize,
     /// Views that must see the board through a voxel to carve it.
     #[arg(long, default_value_t = 3)]
@@ -52,9 +54,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or(MeshConfig::default().edge_inset_px),
         ..MeshConfig::default()
     };
-    config.remesh.target_vertices = args.vertices.max(16);
+    config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
-    let (mesh, mut report) = mesh_of_session(&session, &config)?;
+    let (mesh, mut report, _) = mesh_of_session(&session, &config)?;
     report.peak_rss_bytes = super::memory::peak_rss_bytes();
     let json = write_mesh(&mesh, &report, &args.out)?;
     if args.json {
@@ -86,11 +88,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Tracks the session if it has no poses, then carves its mesh.
+/// Tracks the session if it has no poses, then carves its mesh; also returns the carved hull
+/// (the fit's surface update stays inside it).
 pub fn mesh_of_session(
     session: &Session,
     config: &MeshConfig,
-) -> anyhow::Result<(TriangleMesh, MeshReport)> {
+) -> anyhow::Result<(TriangleMesh, MeshReport, HullField)> {
     let poses = super::fit::poses_of(session)?;
     let progress = super::progress::Progress::spinner("mesh");
     let result = build_mesh(session, &poses, config, &mut |stage| {
@@ -101,7 +104,7 @@ pub fn mesh_of_session(
         "{} vertices from {} frames",
         result.report.vertices, result.report.frames_used
     ));
-    Ok((result.mesh, result.report))
+    Ok((result.mesh, result.report, result.hull))
 }
 
 /// Writes the mesh (binary PLY) and its report (`<stem>-report.json`); returns the report path.

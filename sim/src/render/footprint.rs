@@ -97,7 +97,12 @@ impl<'s> Renderer<'s> {
     }
 
     /// One row of DN of `frame`; returns the row's stage counts.
-    pub(super) fn render_row(&self, y: u32, row: &mut [f32], frame: &FrameSetup<'_>) -> StageCounts {
+    pub(super) fn render_row(
+        &self,
+        y: u32,
+        row: &mut [f32],
+        frame: &FrameSetup<'_>,
+    ) -> StageCounts {
         let mut counts = StageCounts::default();
         let mut rng = ChaCha8Rng::seed_from_u64(frame.seed);
         rng.set_stream(u64::from(y));
@@ -183,7 +188,11 @@ impl PointFrame<'_, '_> {
             Footprint::Point => 1,
         };
         let bands: &[Option<Channel>] = if r.layout.colour_at(0, 0).is_some() {
-            &[Some(Channel::Red), Some(Channel::Green), Some(Channel::Blue)]
+            &[
+                Some(Channel::Red),
+                Some(Channel::Green),
+                Some(Channel::Blue),
+            ]
         } else {
             &[None]
         };

@@ -402,9 +402,7 @@ impl<'s> Renderer<'s> {
         let row_counts: Vec<StageCounts> = dn
             .par_chunks_mut(w)
             .enumerate()
-            .map(|(y, row)| {
-                self.render_row(y as u32, row, &frame)
-            })
+            .map(|(y, row)| self.render_row(y as u32, row, &frame))
             .collect();
         let mut counts = StageCounts::default();
         for c in &row_counts {

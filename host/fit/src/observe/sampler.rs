@@ -170,7 +170,11 @@ impl DnImage {
                         b.iter().map(|b| 2.0 * b.1 as f64).sum::<f64>() / n,
                     );
                     b.iter()
-                        .map(|b| (2.0 * b.0 as f64 - mx).abs().max((2.0 * b.1 as f64 - my).abs()))
+                        .map(|b| {
+                            (2.0 * b.0 as f64 - mx)
+                                .abs()
+                                .max((2.0 * b.1 as f64 - my).abs())
+                        })
                         .fold(0.0, f64::max)
                 })
                 .fold(0.0, f64::max),
@@ -466,8 +470,7 @@ impl<'a> FrameSampler<'a> {
         }
         let px_m = depth_m / self.session.camera.intrinsics.fx.abs().max(1e-9);
         // A corner is r·√2 px off; on the tangent plane that stretches by at most 1/cos θ.
-        let reach_m =
-            r * std::f64::consts::SQRT_2 * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
+        let reach_m = r * std::f64::consts::SQRT_2 * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
         let origin = Point3::from(self.view.camera_position_world);
         for (dx, dy) in [
             (-1.0, -1.0),

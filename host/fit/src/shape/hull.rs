@@ -46,7 +46,11 @@ impl GridGeometry {
 
 /// The trilinear interpolant of `field` on `grid` at `p` and its gradient, or `None` outside
 /// the grid (or on a grid with fewer than 2 nodes along an axis).
-pub fn trilinear(grid: &GridGeometry, field: &[f32], p: Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+pub fn trilinear(
+    grid: &GridGeometry,
+    field: &[f32],
+    p: Vector3<f64>,
+) -> Option<(f64, Vector3<f64>)> {
     let h = grid.spacing_m;
     if grid.n.iter().any(|&n| n < 2) || field.len() < grid.len() || h.is_nan() || h <= 0.0 {
         return None;
@@ -237,8 +241,11 @@ pub(crate) mod tests {
         // inside the sphere but below the board: outside
         let (v, g) = hull.value_volume(Vector3::new(0.0, 0.0, -0.002));
         assert!((v - 0.002).abs() < 1e-12 && g == -Vector3::z());
+        // at the centre the board (1 cm below) is nearer than the sphere's surface (2 cm)
         let (v, _) = hull.value_volume(Vector3::new(0.0, 0.0, 0.01));
-        assert!(v < -0.019);
+        assert!((v + 0.01).abs() < 1e-9, "{v}");
+        let (v, _) = hull.value_volume(Vector3::new(0.0, 0.0, 0.025));
+        assert!((v + 0.005).abs() < 1e-6, "{v}");
         assert_eq!(hull.value_volume(Vector3::new(1.0, 0.0, 0.01)).0, 1.0);
         let bad = HullField::new(Isometry3::identity(), hull.grid, vec![0.0; 3], 1.0);
         assert!(matches!(bad, Err(HullError::Length { .. })));

@@ -5,12 +5,15 @@
 //!
 //! # Energy (over displacements d = p − p⁰ from the current positions p⁰)
 //! ```text
-//! E(d) = Σ_v w_v ‖p_v − a_v‖²                              screening to the anchors a_v
+//! E(d) = Σ_v w_v (n_v · (p_v − a_v))²                      screening to the anchors a_v
+//!      + τ Σ_v ‖(I − n_v n_vᵀ) d_v‖²                         tangential hold
 //!      + Σ_edges(u,v) c_uv (n̄_uv · (p_u − p_v))²            edges ⟂ the refined normals
 //!      + λ_smooth Σ_edges(u,v) ‖d_u − d_v‖²                 smooth displacement
 //!      + κ Σ_v∈A (ĝ_v · (p_v − p*_v) + ĥ_v)²                hull, active vertices only
 //! ```
-//! The first three terms are the parent module's (same midpoint normals, confidences and
+//! n_v is the current mesh's vertex normal: the screening acts along it, and the tangential
+//! position — which neither the normals nor the hull inform — is held where it is. The normal
+//! and smoothness terms are the parent module's (same midpoint normals, confidences and
 //! smoothness); the screening weight is `w_v = λ_pos · s_v · a_v/D²` with a per-vertex factor
 //! `s_v ∈ [0, 1]` (0: no position information — a vertex no view observes follows its
 //! neighbours' displacement) floored at [`MIN_SCREENING`] of the full weight so the system stays
@@ -20,10 +23,12 @@
 //!
 //! The hull term is the one-sided penalty `κ max(0, h(p))²` of the hull value h
 //! ([`super::hull::HullField::value_world`], the board plane included), minimised by an active
-//! set: h is linearised at the current solution p* (`ĝ = ∇h/|∇h|`, `ĥ = h/|∇h|`), the vertices
-//! with h > 0 form the active set A, the quadratic is solved (block-Jacobi CG, warm-started), and
-//! the set is recomputed, until it no longer changes or [`IntegrateConfig::max_rounds`] is
-//! reached. κ is dimensionless (per vertex, like the normal term's weights), large against the
+//! set: h is linearised at the current solution p* along the vertex normal n (`ĝ = n`,
+//! `ĥ = h/(∇h·n)`; along `∇h/|∇h|` where the normal runs almost along the hull, and along n by h
+//! where the field is flat), the quadratic is solved (block-Jacobi CG, warm-started), and the
+//! set is recomputed as the vertices with h > 0, until it no longer changes or
+//! [`IntegrateConfig::max_rounds`] is reached. The first round holds every vertex on or outside
+//! the hull: one the other terms pull inward ends a hair inside and is released. κ is dimensionless (per vertex, like the normal term's weights), large against the
 //! normal term: what remains outside is about the force on the vertex over κ.
 //!
 //! Contract: input errors as [`super::refine_vertex_positions`]; the result is finite; every
@@ -42,6 +47,9 @@ use super::{ShapeConfig, ShapeError, clamp_moves, scaled};
 /// positive definite where the factor is 0).
 pub const MIN_SCREENING: f64 = 1e-3;
 
+/// Vertices within this of the hull's surface (or outside it) start held, metres.
+const START_MARGIN_M: f64 = 1e-6;
+
 /// Settings of [`integrate`].
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct IntegrateConfig {
@@ -51,18 +59,28 @@ pub struct IntegrateConfig {
     pub hull_weight: f64,
     /// Most active-set rounds (≥ 1).
     pub max_rounds: usize,
+    /// Weight of the hold on each vertex's tangential position (dimensionless, per vertex, ≥ 0):
+    /// the normals and the hull say nothing about where along the surface a vertex sits, so
+    /// without it the surface can slide along itself.
+    #[serde(default = "default_tangent_weight")]
+    pub tangent_weight: f64,
+}
+
+fn default_tangent_weight() -> f64 {
+    1.0
 }
 
 impl Default for IntegrateConfig {
     fn default() -> Self {
         Self {
             weights: ShapeConfig {
-                lambda_position: 1.0,
+                lambda_position: 0.2,
                 max_displacement_m: 0.003,
                 ..ShapeConfig::default()
             },
             hull_weight: 1e3,
             max_rounds: 8,
+            tangent_weight: default_tangent_weight(),
         }
     }
 }
@@ -109,6 +127,9 @@ pub struct Targets<'a> {
     pub anchors: &'a [Point3<f64>],
     /// Screening factor s_v in [0, 1].
     pub screening: &'a [f64],
+    /// Vertices the hull holds from both sides (on a silhouette: the surface touches the hull
+    /// there), or empty for none.
+    pub on_silhouette: &'a [bool],
 }
 
 /// One hull-constrained screened integration (module doc).
@@ -156,13 +177,18 @@ pub fn integrate(
         return Err(ShapeError::NonFinitePosition { vertex: vertex % n });
     }
     let graph = MeshGraph::new(positions, triangles)?;
-    let (normals, conf, skipped_vertices) = usable_normals(targets.normals_world, targets.confidence);
+    let (normals, conf, skipped_vertices) =
+        usable_normals(targets.normals_world, targets.confidence);
     let full = anchor_weights(positions, triangles, weights.lambda_position);
     let screening: Vec<f64> = full
         .iter()
         .zip(targets.screening)
         .map(|(w, s)| {
-            let s = if s.is_finite() { s.clamp(0.0, 1.0) } else { 0.0 };
+            let s = if s.is_finite() {
+                s.clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
             w * s.max(MIN_SCREENING)
         })
         .collect();
@@ -171,9 +197,29 @@ pub fn integrate(
     // The quadratic without the hull: A₀ d = b₀.
     let mut base = BlockCsr::from_edges(n, &graph.edges);
     let mut b0 = vec![0.0; 3 * n];
+    let normal_at = vertex_normals(positions, triangles);
     for (v, &w) in problem.anchor.iter().enumerate() {
-        base.add_diagonal(v as u32, &scaled(&IDENTITY, w));
+        // Screening along the vertex normal towards the anchor, the tangential hold at the
+        // current position (a vertex without a normal is screened in every direction).
+        let nv = normal_at[v];
+        let wt = config.tangent_weight;
+        let block: Block = if nv.norm() > 0.5 {
+            std::array::from_fn(|r| {
+                std::array::from_fn(|c| {
+                    let nn = nv[r] * nv[c];
+                    w * nn + wt * (IDENTITY[r][c] - nn)
+                })
+            })
+        } else {
+            scaled(&IDENTITY, w)
+        };
+        base.add_diagonal(v as u32, &block);
         let pull = targets.anchors[v] - positions[v];
+        let pull = if nv.norm() > 0.5 {
+            nv * nv.dot(&pull)
+        } else {
+            pull
+        };
         for k in 0..3 {
             b0[3 * v + k] += w * pull[k];
         }
@@ -201,10 +247,20 @@ pub fn integrate(
     let mut cg_iterations = 0;
     let mut cg_converged = true;
     let mut rounds = 0;
-    let normal_at = vertex_normals(positions, triangles);
-    // The first round is unconstrained; then the vertices outside form the active set.
-    let mut active: Vec<bool> = vec![false; n];
-    let at = |d: &[f64], v: usize| positions[v] + Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
+    let held = |v: usize| targets.on_silhouette.get(v).copied().unwrap_or(false);
+    // The first round holds every vertex at or outside the hull (a start on the carved surface
+    // is on it); a vertex the other terms pull inward ends a hair inside and is released, one
+    // they push outward ends a hair outside and stays.
+    let mut active: Vec<bool> = match hull {
+        Some(h) => positions
+            .iter()
+            .enumerate()
+            .map(|(v, p)| held(v) || h.value_world(p).0 > -START_MARGIN_M)
+            .collect(),
+        None => vec![false; n],
+    };
+    let at =
+        |d: &[f64], v: usize| positions[v] + Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
     loop {
         rounds += 1;
         let mut a = base.clone();
@@ -219,18 +275,23 @@ pub fn integrate(
                 let n = normal_at[v];
                 let slope = g.dot(&n);
                 let len = g.norm();
-                // Guard: no direction where the gradient vanishes (beyond the hull's grid).
-                if !(len > 1e-9) {
-                    continue;
-                }
-                // Where the normal runs almost along the hull (slope < 0.3 |∇h|), the gradient.
-                let (gu, hu) = if slope > 0.3 * len {
+                let (gu, hu) = if !(len > 1e-9) {
+                    // The field is flat (truncated far from the surface, or beyond its grid):
+                    // h is then a lower bound of the distance; move in along the normal by it
+                    // and look again next round. A vertex without a normal stays.
+                    if n.norm() < 0.5 {
+                        continue;
+                    }
+                    (n, h)
+                } else if slope > 0.3 * len {
                     (n, h / slope)
                 } else {
+                    // the normal runs almost along the hull (slope < 0.3 |∇h|): the gradient
                     (g / len, h / len)
                 };
                 let kappa = config.hull_weight;
-                let block: Block = std::array::from_fn(|r| std::array::from_fn(|c| kappa * gu[r] * gu[c]));
+                let block: Block =
+                    std::array::from_fn(|r| std::array::from_fn(|c| kappa * gu[r] * gu[c]));
                 a.add_diagonal(v as u32, &block);
                 // ½∇ of κ(ĝ·(d − d*) + ĥ)²: κĝĝᵀ d = κĝ(ĝ·d* − ĥ).
                 let dv = Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
@@ -247,14 +308,14 @@ pub fn integrate(
             return Err(ShapeError::NonFiniteSolution { vertex: i / 3 });
         }
         let Some(hull) = hull else { break };
-        let next: Vec<bool> = (0..n).map(|v| hull.value_world(&at(&d, v)).0 > 0.0).collect();
+        let next: Vec<bool> = (0..n)
+            .map(|v| held(v) || hull.value_world(&at(&d, v)).0 > 0.0)
+            .collect();
         if next == active || rounds >= config.max_rounds.max(1) {
             break;
         }
-        // Semi-smooth Newton on the one-sided penalty: the set is the vertices outside now (a
-        // held vertex sits a hair outside and stays; one the other terms pull inward ends a
-        // hair inside and is released). After half the rounds the set only grows, so the last
-        // rounds cannot cycle.
+        // Semi-smooth Newton on the one-sided penalty: the set is the vertices outside now.
+        // After half the rounds the set only grows, so the last rounds cannot cycle.
         if rounds * 2 >= config.max_rounds {
             for (a, nx) in active.iter_mut().zip(&next) {
                 *a |= *nx;

@@ -48,6 +48,12 @@ pub struct SurfaceConfig {
     pub divergence_ratio: f64,
     /// A vertex further outside the hull than this after a step has left it, metres.
     pub hull_tolerance_m: f64,
+    /// A view sees a vertex on its silhouette when its ray runs within this angle of the
+    /// vertex's tangent plane, degrees.
+    pub silhouette_angle_deg: f64,
+    /// The hull's surface normal and the refined normal of a vertex on a silhouette agree
+    /// within this, degrees.
+    pub silhouette_normal_deg: f64,
     /// A step that increases the median angle between the refined normals and the mesh
     /// normals by more than this diverges, degrees.
     pub misfit_increase_deg: f64,
@@ -61,6 +67,8 @@ impl Default for SurfaceConfig {
             divergence_ratio: 1.5,
             hull_tolerance_m: 5e-5,
             misfit_increase_deg: 0.5,
+            silhouette_angle_deg: 3.0,
+            silhouette_normal_deg: 3.0,
         }
     }
 }
@@ -89,6 +97,8 @@ pub struct SurfaceIteration {
     pub misfit_after_deg: f64,
     /// Vertices held by the hull or the board.
     pub hull_active: usize,
+    /// Vertices on a silhouette (held from both sides).
+    pub on_silhouette: usize,
     /// Largest hull value over the vertices after the step, metres (≤ 0 inside).
     pub max_outside_m: f64,
     /// CG iterations (all active-set rounds).
@@ -118,8 +128,8 @@ impl SurfaceIteration {
             s += &format!(", normals changed {c:.2}°");
         }
         s += &format!(
-            ", {} of {} vertices observed, {} held by the hull",
-            self.observed, self.vertices, self.hull_active
+            ", {} of {} vertices observed, {} held by the hull ({} on a silhouette)",
+            self.observed, self.vertices, self.hull_active, self.on_silhouette
         );
         if let Some(why) = &self.stopped {
             s += &format!(" — {why}");
@@ -155,7 +165,10 @@ fn median_angle_deg(pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -
     let mut angles: Vec<f64> = pairs
         .map(|(a, b)| {
             // clamp: rounding can put |cos| a hair above 1
-            (a.dot(&b) / (a.norm() * b.norm()).max(1e-300)).clamp(-1.0, 1.0).acos().to_degrees()
+            (a.dot(&b) / (a.norm() * b.norm()).max(1e-300))
+                .clamp(-1.0, 1.0)
+                .acos()
+                .to_degrees()
         })
         .filter(|x| x.is_finite())
         .collect();
@@ -164,6 +177,44 @@ fn median_angle_deg(pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -
     }
     angles.sort_by(f64::total_cmp);
     angles[angles.len() / 2]
+}
+
+/// Whether the hull touches the surface at `p` (refined normal `n`): `p` lies on the hull's
+/// surface (within half a grid spacing), the hull's normal there agrees with `n`, and a camera
+/// looks past `p` along the tangent plane with nothing of the hull on that ray on either side
+/// of `p` — the ray is a silhouette ray, and a silhouette is where a hull is exact.
+fn on_silhouette(
+    hull: &HullField,
+    p: &Point3<f64>,
+    n: &Vector3<f64>,
+    cameras: &[Point3<f64>],
+    config: &SurfaceConfig,
+) -> bool {
+    let h = hull.grid.spacing_m;
+    let (value, grad) = hull.value_world(p);
+    if value.abs() > 0.5 * h || grad.norm() < 1e-9 {
+        return false;
+    }
+    let n = n.normalize();
+    if grad.normalize().dot(&n) < config.silhouette_normal_deg.to_radians().cos() {
+        return false;
+    }
+    let tangent = config.silhouette_angle_deg.to_radians().sin();
+    cameras.iter().any(|c| {
+        let r = (c - p).normalize();
+        r.dot(&n).abs() < tangent
+            && [3.0, 6.0, 12.0, 24.0, 48.0]
+                .iter()
+                .flat_map(|t| [t * h, -t * h])
+                .all(|t| {
+                    hull.silhouette_volume(
+                        hull.world_from_volume
+                            .inverse_transform_point(&(p + r * t))
+                            .coords,
+                    )
+                    .0 > 0.0
+                })
+    })
 }
 
 /// Triangles whose orientation reverses between `before` and `after`.
@@ -197,7 +248,10 @@ impl SurfaceState {
 
     /// Why the update stopped, if it did before converging.
     pub fn stopped(&self) -> Option<&str> {
-        self.iterations.iter().rev().find_map(|i| i.stopped.as_deref())
+        self.iterations
+            .iter()
+            .rev()
+            .find_map(|i| i.stopped.as_deref())
     }
 
     /// One step (module contract): the new mesh, or `None` when the step is refused or the
@@ -207,6 +261,7 @@ impl SurfaceState {
         mesh: &TriangleMesh,
         fits: &[VertexFit],
         observed: &[bool],
+        cameras: &[Point3<f64>],
         hull: Option<&HullField>,
         config: &SurfaceConfig,
     ) -> Result<Option<TriangleMesh>, ShapeError> {
@@ -229,10 +284,23 @@ impl SurfaceState {
                 *c = 0.0;
             }
         }
-        let screening: Vec<f64> = observed.iter().map(|&o| if o { 1.0 } else { 0.0 }).collect();
+        let screening: Vec<f64> = observed
+            .iter()
+            .map(|&o| if o { 1.0 } else { 0.0 })
+            .collect();
         let trusted: Vec<Option<Vector3<f64>>> = (0..n)
             .map(|v| (confidence[v] > 0.0).then(|| Vector3::from(targets.normals_world[v])))
             .collect();
+        let on_silhouette: Vec<bool> = match hull {
+            Some(h) => (0..n)
+                .map(|v| {
+                    trusted[v].is_some_and(|nv| {
+                        on_silhouette(h, &mesh.positions()[v], &nv, cameras, config)
+                    })
+                })
+                .collect(),
+            None => Vec::new(),
+        };
         let solved = integrate(
             mesh.positions(),
             mesh.triangles(),
@@ -241,6 +309,7 @@ impl SurfaceState {
                 confidence: &confidence,
                 anchors: &self.anchors,
                 screening: &screening,
+                on_silhouette: &on_silhouette,
             },
             hull,
             &config.integrate,
@@ -271,6 +340,7 @@ impl SurfaceState {
             misfit_before_deg: misfit(mesh),
             misfit_after_deg: misfit(&new_mesh),
             hull_active: solved.active_vertices,
+            on_silhouette: 0,
             max_outside_m: solved.max_outside_m,
             cg_iterations: solved.cg_iterations,
             rounds: solved.rounds,
@@ -290,10 +360,9 @@ impl SurfaceState {
             Some(format!(
                 "stopped: the step would turn {flipped} triangles over; the last good mesh is kept"
             ))
-        } else if let Some(prev) = self
-            .previous_rms_m
-            .filter(|p| solved.rms_displacement_m > config.divergence_ratio * p.max(config.converged_rms_m))
-        {
+        } else if let Some(prev) = self.previous_rms_m.filter(|p| {
+            solved.rms_displacement_m > config.divergence_ratio * p.max(config.converged_rms_m)
+        }) {
             Some(format!(
                 "stopped: diverging — this step would move the surface {:.3} mm RMS after {:.3} mm \
                  in the previous one; the last good mesh is kept",
@@ -309,6 +378,7 @@ impl SurfaceState {
         } else {
             None
         };
+        report.on_silhouette = on_silhouette.iter().filter(|s| **s).count();
         report.seconds = started.elapsed().as_secs_f64();
         if let Some(why) = refused {
             report.stopped = Some(why);

@@ -72,7 +72,10 @@ fn a_sphere_started_2_mm_too_large_converges_onto_it() {
         .collect();
     let mut mesh = TriangleMesh::new(start, None, None, triangles).unwrap();
     // seen: normals a view at 25° or more sees within 80° of its axis
-    let observed: Vec<bool> = dirs.iter().map(|d| d.z > -(55f64.to_radians().sin())).collect();
+    let observed: Vec<bool> = dirs
+        .iter()
+        .map(|d| d.z > -(55f64.to_radians().sin()))
+        .collect();
     let fits: Vec<_> = dirs
         .iter()
         .enumerate()
@@ -94,24 +97,49 @@ fn a_sphere_started_2_mm_too_large_converges_onto_it() {
     };
     let before = error(&mesh);
     for _ in 0..6 {
-        match state.step(&mesh, &fits, &observed, Some(&hull), &config).unwrap() {
+        match state
+            .step(
+                &mesh,
+                &fits,
+                &observed,
+                &cameras()
+                    .into_iter()
+                    .map(nalgebra::Point3::from)
+                    .collect::<Vec<_>>(),
+                Some(&hull),
+                &config,
+            )
+            .unwrap()
+        {
             Some(m) => mesh = m,
             None => break,
         }
     }
     let after = error(&mesh);
-    eprintln!("mean |r − R| over the observed surface: {:.4} mm → {:.4} mm", before * 1e3, after * 1e3);
+    eprintln!(
+        "mean |r − R| over the observed surface: {:.4} mm → {:.4} mm",
+        before * 1e3,
+        after * 1e3
+    );
     let steps = &state.iterations;
     for s in steps {
         eprintln!("{}", s.describe());
     }
     assert!((before - 0.002).abs() < 1e-4, "{before}");
-    assert!(after < 1e-4, "mean |r − R| over the observed surface {after} m after {} steps", steps.len());
+    assert!(
+        after < 1e-4,
+        "mean |r − R| over the observed surface {after} m after {} steps",
+        steps.len()
+    );
     // the first step does the work, later ones move less and less until convergence
     assert!(steps.len() >= 2);
     assert!(steps.iter().all(|s| s.applied));
     assert!(steps.windows(2).all(|w| w[1].rms_move_m < w[0].rms_move_m));
     assert!(state.done() && state.stopped().is_some_and(|s| s.starts_with("converged")));
     // nothing left the hull or went below the board
-    assert!(mesh.positions().iter().all(|p| hull.value_world(p).0 < config.hull_tolerance_m));
+    assert!(
+        mesh.positions()
+            .iter()
+            .all(|p| hull.value_world(p).0 < config.hull_tolerance_m)
+    );
 }
