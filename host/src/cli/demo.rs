@@ -322,12 +322,15 @@ fn fit_and_score(
         ..Default::default()
     };
     let run = super::fit::fit_and_export(session, &mesh, &dir, None, &config)?;
+    let config = super::fit::with_session_sensor(session, &config);
 
     // Only now the truth.
     let truth = super::bench_mesh::truth_object(scene)?;
     let score = score_against_truth(&truth, &run.fit.outcome.fits, &run.fit.mesh);
     let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
     let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
+    crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
+    let scores = super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
     let summary = serde_json::json!({
         "vertices": run.fit.outcome.fits.len(),
         "fitted": score.fitted,
@@ -336,6 +339,13 @@ fn fit_and_score(
         "times_s": run.fit.outcome.times,
         "mesh_before_fit": before,
         "mesh_after_fit": after,
+        "surface": {
+            "before": scores.before,
+            "after": scores.after,
+            "update": scores.surface_update,
+        },
+        "eta_carved_vs_true_mesh": scores.eta,
+        "true_mesh_fit_s": scores.true_mesh_fit_s,
         "eta_median_error_pct": score.eta_median_error_pct,
         "normal_median_error_deg": score.normal_median_error_deg,
         "normal_p90_error_deg": score.normal_p90_error_deg,
@@ -349,6 +359,27 @@ fn fit_and_score(
         before.hausdorff_m * 1e3,
         after.hausdorff_m * 1e3,
     );
+    crate::outln!(
+        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
+        scores.after.observed_vertices,
+        scores.before.observed_mean_m * 1e3,
+        scores.after.observed_mean_m * 1e3,
+        scores.after.observed_p90_m * 1e3,
+        scores.after.unobserved_vertices,
+        scores.before.unobserved_mean_m * 1e3,
+        scores.after.unobserved_mean_m * 1e3,
+        scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+        scores.before.mesh_normal_median_deg,
+    );
+    for m in &scores.eta {
+        crate::outln!(
+            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} points)",
+            m.name,
+            m.carved_pct,
+            m.true_mesh_pct,
+            (m.carved_pct - m.true_mesh_pct).abs()
+        );
+    }
     crate::outln!(
         "fit          {}/{} vertices in {:.1} s · η error median {:.2} % · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
         score.fitted,
