@@ -58,7 +58,7 @@ pub fn run(args: ChainArgs) -> anyhow::Result<()> {
     };
     let mut specs = budget_specs(&bench.scene, args.supersampling);
     if !args.runs.is_empty() {
-        specs.retain(|s| args.runs.iter().any(|r| s.name == *r));
+        specs.retain(|s| args.runs.contains(&s.name));
     }
     anyhow::ensure!(!specs.is_empty(), "no run matches --runs {:?}", args.runs);
     let mut results = Vec::new();

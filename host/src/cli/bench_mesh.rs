@@ -18,9 +18,9 @@ use ellipso_sim::scene::Scene;
 
 use super::capture;
 use super::demo::shipped_scene;
-use ellipso_fit::truth::TruthObject;
 use ellipso_bench::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
 use ellipso_fit::session::{SessionFit, SessionFitConfig};
+use ellipso_fit::truth::TruthObject;
 use ellipso_mesh::MeshReport;
 use ellipso_mesh::distance::{MeshDistance, mesh_distance};
 
@@ -246,8 +246,10 @@ fn bench_scene(
         let session = ellipso_session::reader::open(session_dir)?;
         let (_, _, hull) =
             super::mesh::mesh_of_session(&session, &ellipso_mesh::MeshConfig::default())?;
-        let mut config = SessionFitConfig::default();
-        config.hull = Some(std::sync::Arc::new(hull));
+        let config = SessionFitConfig {
+            hull: Some(std::sync::Arc::new(hull)),
+            ..SessionFitConfig::default()
+        };
         let config = super::fit::with_session_sensor(&session, &config);
         let poses = super::fit::poses_of(&session)?;
         let t0 = Instant::now();
@@ -345,11 +347,21 @@ fn scale_run(
         .with_context(|| format!("reading the JSON of ellipso fit --vertices {vertices}"))?;
     let summary = &json["summary"];
     let fitted = ellipso_fit::export::ply::read_fit_ply(&out.join("fit.ply"))?;
-    let unobserved_bit = ellipso_fit::export::ply::flag_mask(&[ellipso_fit::data::FitFlag::Unobserved]);
-    let observed: Vec<bool> = fitted.iter().map(|v| v.flags & unobserved_bit == 0).collect();
+    let unobserved_bit =
+        ellipso_fit::export::ply::flag_mask(&[ellipso_fit::data::FitFlag::Unobserved]);
+    let observed: Vec<bool> = fitted
+        .iter()
+        .map(|v| v.flags & unobserved_bit == 0)
+        .collect();
     let positions: Vec<nalgebra::Point3<f64>> = fitted
         .iter()
-        .map(|v| nalgebra::Point3::new(v.position[0].into(), v.position[1].into(), v.position[2].into()))
+        .map(|v| {
+            nalgebra::Point3::new(
+                v.position[0].into(),
+                v.position[1].into(),
+                v.position[2].into(),
+            )
+        })
         .collect();
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
     let at = ellipso_bench::truth_map::truth_at(&truth, &positions);
@@ -378,7 +390,12 @@ fn scale_run(
     Ok(result)
 }
 
-fn markdown(results: &[SceneResult], scale: &[ScaleResult], args: &MeshArgs, total_s: f64) -> String {
+fn markdown(
+    results: &[SceneResult],
+    scale: &[ScaleResult],
+    args: &MeshArgs,
+    total_s: f64,
+) -> String {
     let mut s = String::new();
     let _ = writeln!(s, "# Built-in mesh: accuracy and cost\n");
     let _ = writeln!(
@@ -478,7 +495,10 @@ fn markdown(results: &[SceneResult], scale: &[ScaleResult], args: &MeshArgs, tot
              mesh beside a fit of the same session on the true mesh (target: within 0.2 \
              points):\n"
         );
-        let _ = writeln!(s, "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) |");
+        let _ = writeln!(
+            s,
+            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) |"
+        );
         let _ = writeln!(s, "|---|---|---:|---:|---:|---:|");
         for r in results {
             let Some(f) = &r.fit else { continue };
@@ -510,10 +530,17 @@ fn markdown(results: &[SceneResult], scale: &[ScaleResult], args: &MeshArgs, tot
              `ellipso fit` (carving, outer loop with the surface update, final steps, held-out \
              score, pictures) as its own process; peak memory is its VmHWM.\n"
         );
-        let _ = writeln!(s, "| target | vertices | wall (s) | observe (s) | joint solve (s) | surface (s) | peak memory (MB) | observed surface (mm) |");
+        let _ = writeln!(
+            s,
+            "| target | vertices | wall (s) | observe (s) | joint solve (s) | surface (s) | peak memory (MB) | observed surface (mm) |"
+        );
         let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---:|---:|");
         for r in scale {
-            let t = |k: &str| r.times_s[k].as_f64().map_or("—".into(), |v| format!("{v:.1}"));
+            let t = |k: &str| {
+                r.times_s[k]
+                    .as_f64()
+                    .map_or("—".into(), |v| format!("{v:.1}"))
+            };
             let _ = writeln!(
                 s,
                 "| {} | {} | {:.0} | {} | {} | {} | {} | {:.3} |",

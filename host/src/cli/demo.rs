@@ -330,7 +330,8 @@ fn fit_and_score(
     let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
     let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
     crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
-    let scores = super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
+    let scores =
+        super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
     let summary = serde_json::json!({
         "vertices": run.fit.outcome.fits.len(),
         "fitted": score.fitted,

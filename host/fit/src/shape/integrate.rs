@@ -275,7 +275,7 @@ pub fn integrate(
                 let n = normal_at[v];
                 let slope = g.dot(&n);
                 let len = g.norm();
-                let (gu, hu) = if !(len > 1e-9) {
+                let (gu, hu) = if len.is_nan() || len <= 1e-9 {
                     // The field is flat (truncated far from the surface, or beyond its grid):
                     // h is then a lower bound of the distance; move in along the normal by it
                     // and look again next round. A vertex without a normal stays.

@@ -23,6 +23,9 @@
 //!   words ([`SurfaceIteration::stopped`]).
 //! - Once a step moves less than [`SurfaceConfig::converged_rms_m`] (RMS) the surface has
 //!   converged and no later step runs.
+//! - Without a hull (a caller that has none) the screening is
+//!   [`SurfaceConfig::lambda_position_without_hull`]: the positions then hold the long
+//!   wavelengths, as in the one-call update.
 //! - Connectivity is kept, so per-vertex results carry over by index.
 
 use ellipso_model::geometry::TriangleMesh;
@@ -48,6 +51,9 @@ pub struct SurfaceConfig {
     pub divergence_ratio: f64,
     /// A vertex further outside the hull than this after a step has left it, metres.
     pub hull_tolerance_m: f64,
+    /// λ_pos without a hull: with no silhouettes the positions are the only position
+    /// information, so they hold the long wavelengths as in the one-call update (its default).
+    pub lambda_position_without_hull: f64,
     /// A view sees a vertex on its silhouette when its ray runs within this angle of the
     /// vertex's tangent plane, degrees.
     pub silhouette_angle_deg: f64,
@@ -67,6 +73,7 @@ impl Default for SurfaceConfig {
             divergence_ratio: 1.5,
             hull_tolerance_m: 5e-5,
             misfit_increase_deg: 0.5,
+            lambda_position_without_hull: 25.0,
             silhouette_angle_deg: 3.0,
             silhouette_normal_deg: 3.0,
         }
@@ -301,6 +308,10 @@ impl SurfaceState {
                 .collect(),
             None => Vec::new(),
         };
+        let mut integrate_config = config.integrate.clone();
+        if hull.is_none() {
+            integrate_config.weights.lambda_position = config.lambda_position_without_hull;
+        }
         let solved = integrate(
             mesh.positions(),
             mesh.triangles(),
@@ -312,7 +323,7 @@ impl SurfaceState {
                 on_silhouette: &on_silhouette,
             },
             hull,
-            &config.integrate,
+            &integrate_config,
         )?;
         let new_mesh = mesh_with_positions(mesh, solved.positions.clone())?;
         let misfit = |m: &TriangleMesh| {

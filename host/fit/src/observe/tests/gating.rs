@@ -173,8 +173,16 @@ fn vertices_no_view_sees_are_labelled_unobserved() {
         .filter(|t| t.iter().all(|&i| (i as usize) < sphere))
         .copied()
         .collect();
-    let mesh = ellipso_model::geometry::TriangleMesh::new(positions, None, None, triangles).unwrap();
-    let out = extract(&session, &mesh, &poses, &ObserveConfig::default(), &|_, _| {}).unwrap();
+    let mesh =
+        ellipso_model::geometry::TriangleMesh::new(positions, None, None, triangles).unwrap();
+    let out = extract(
+        &session,
+        &mesh,
+        &poses,
+        &ObserveConfig::default(),
+        &|_, _| {},
+    )
+    .unwrap();
     let set = &out.samples;
     let observed = crate::shape::surface::observed_vertices(set, mesh.positions().len());
     let fits = crate::solve::fit_all(set, None, None, &crate::solve::SolverConfig::default());
@@ -196,9 +204,16 @@ fn vertices_no_view_sees_are_labelled_unobserved() {
         }
         // geometry: a vertex facing away from every camera, or at the board contact, is never
         // observed; one that every camera sees well above the board is
-        let facing = cameras.iter().filter(|c| n.dot(&(*c - p).normalize()) > 0.05).count();
+        let facing = cameras
+            .iter()
+            .filter(|c| n.dot(&(*c - p).normalize()) > 0.05)
+            .count();
         if facing == 0 || p.z < 0.005 {
-            assert!(unobserved, "vertex {v} at z = {:.4} m faces {facing} views", p.z);
+            assert!(
+                unobserved,
+                "vertex {v} at z = {:.4} m faces {facing} views",
+                p.z
+            );
             underside += 1;
         } else if n.z > 0.5 {
             assert!(!unobserved, "vertex {v}: {:?}", set.vertices[v].gates);
