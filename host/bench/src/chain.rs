@@ -209,8 +209,8 @@ impl Bench {
                 p
             }
         };
-        let mesh = match spec.mesh {
-            MeshSource::True => true_mesh(&scene)?,
+        let (mesh, hull) = match spec.mesh {
+            MeshSource::True => (true_mesh(&scene)?, None),
             MeshSource::Carved => {
                 progress(&format!("{}: carving", spec.name));
                 let started = Instant::now();
@@ -220,15 +220,14 @@ impl Bench {
                     &ellipso_mesh::MeshConfig::default(),
                     &mut |_| {},
                 )
-                .map_err(|e| BenchError::stage("mesh", e))?
-                .mesh;
+                .map_err(|e| BenchError::stage("mesh", e))?;
                 times.mesh_s = started.elapsed().as_secs_f64();
-                m
+                (m.mesh, Some(std::sync::Arc::new(m.hull)))
             }
         };
         progress(&format!("{}: fitting", spec.name));
         let started = Instant::now();
-        let fit = self.fit(&session, &scene, &mesh, &poses, spec)?;
+        let fit = self.fit(&session, &scene, &mesh, hull, &poses, spec)?;
         times.fit_s = started.elapsed().as_secs_f64();
         let truth = truth_for_scoring(&scene)?;
         let at = truth_at(&truth, fit.mesh.positions());
@@ -258,10 +257,14 @@ impl Bench {
         session: &Session,
         scene: &Scene,
         mesh: &TriangleMesh,
+        hull: Option<std::sync::Arc<ellipso_fit::shape::hull::HullField>>,
         poses: &[(u64, Isometry3<f64>)],
         spec: &RunSpec,
     ) -> Result<SessionFit, BenchError> {
-        let config = &self.fit;
+        let mut config = self.fit.clone();
+        // the carved mesh's hull constrains the surface update (none with the true mesh)
+        config.hull = hull;
+        let config = &config;
         let fit_error = |e| BenchError::stage("fit", e);
         match spec.pixels {
             Pixels::Mosaic => {

@@ -13,6 +13,7 @@
 //! | [`ideal`] | a session's frames as an ideal polarisation sensor sees them (no mosaic) |
 //! | [`truth_map`] | the truth at the vertices of any mesh (closest point of the true surface) |
 //! | [`score`] | per-material and per-vertex errors, held-out re-render beside the truth's own, residuals at the truth |
+//! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
 
@@ -21,6 +22,7 @@ pub mod chain;
 pub mod ideal;
 pub mod report;
 pub mod score;
+pub mod surface;
 pub mod truth_map;
 pub mod variant;
 

@@ -322,6 +322,11 @@ pub enum FitFlag {
     /// η was fitted with the material's pooled η as a prior (the vertex's own estimate is kept
     /// in [`VertexFit::eta_unpooled`]).
     EtaPooled,
+    /// No fitted frame gave the vertex a single sample (not in view, occluded, in the flash's
+    /// shadow or at grazing in every frame, or every sample gated): what no view sees — the
+    /// underside, the contact with the board. Its parameters are the prior's and its position
+    /// follows its observed neighbours (docs/fit-shape.md "Surface update").
+    Unobserved,
 }
 
 /// The largest angular standard error an output reports, degrees: an angle's uncertainty cannot
@@ -333,7 +338,7 @@ impl FitFlag {
     /// `flags`, `maps.exr`'s `flags` channel, the view): bit k = `ALL[k]`. A new flag is one
     /// entry at the end (and one line in [`FitFlag::withholds_vertex`] or
     /// [`FitFlag::withholds_eta`] when it withholds values).
-    pub const ALL: [FitFlag; 11] = [
+    pub const ALL: [FitFlag; 12] = [
         FitFlag::TooFewViews,
         FitFlag::UnderDetermined,
         FitFlag::Dark,
@@ -345,6 +350,7 @@ impl FitFlag {
         FitFlag::AlbedoAtCap,
         FitFlag::NormalUnconstrained,
         FitFlag::EtaPooled,
+        FitFlag::Unobserved,
     ];
 
     /// This flag's bit in the bitmask ([`FitFlag::ALL`] order).
@@ -370,7 +376,10 @@ impl FitFlag {
     /// Whether this flag withholds every parameter of the vertex: no output reports them as a
     /// measurement (standard errors +inf, grey in every picture and in the view).
     pub fn withholds_vertex(self) -> bool {
-        matches!(self, FitFlag::TooFewViews | FitFlag::AlbedoAtCap)
+        matches!(
+            self,
+            FitFlag::TooFewViews | FitFlag::AlbedoAtCap | FitFlag::Unobserved
+        )
     }
 
     /// Whether this flag withholds η (standard error +inf, grey η maps), beyond

@@ -32,9 +32,9 @@ use super::observe::{
     extract_from, extract_shard, radiometry_of,
 };
 use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
-use super::shape::{
-    ShapeConfig, ShapeError, ShapeUpdate, mesh_with_positions, normal_targets, refine_positions,
-};
+use super::shape::ShapeError;
+use super::shape::hull::HullField;
+use super::shape::surface::{SurfaceConfig, SurfaceIteration, SurfaceState, observed_vertices};
 use super::shard::Shard;
 use super::solve::fit_all;
 use ellipso_session::reader::Session;
@@ -46,10 +46,16 @@ pub struct SessionFitConfig {
     pub observe: ObserveConfig,
     /// The per-vertex fit.
     pub fit: FitConfig,
-    /// Outer iterations (solve ↔ shape); 1 = no shape update.
+    /// Outer iterations (solve ↔ surface update); 1 = no surface update. The loop ends early
+    /// once the surface has converged or a step was refused.
     pub outer_iterations: usize,
-    /// The shape update between outer iterations.
-    pub shape: ShapeConfig,
+    /// The surface update between outer iterations.
+    #[serde(default)]
+    pub surface: SurfaceConfig,
+    /// The visual hull (and the board plane) the surface must stay inside (`None`: the update
+    /// runs unconstrained; `ellipso-mesh` carves one with the mesh).
+    #[serde(skip)]
+    pub hull: Option<std::sync::Arc<HullField>>,
     /// Fraction of the posed frames held out for validation (default 0.1; 0 fits all).
     pub holdout_fraction: f64,
 }
@@ -59,8 +65,9 @@ impl Default for SessionFitConfig {
         Self {
             observe: ObserveConfig::default(),
             fit: FitConfig::default(),
-            outer_iterations: 2,
-            shape: ShapeConfig::default(),
+            outer_iterations: 4,
+            surface: SurfaceConfig::default(),
+            hull: None,
             holdout_fraction: 0.1,
         }
     }
@@ -141,8 +148,10 @@ pub struct SessionFit {
     pub set: SampleSet,
     /// The last iteration's fit (steps A, B, C) with stage timings summed over iterations.
     pub outcome: FitOutcome,
-    /// One entry per shape update.
-    pub shape_updates: Vec<ShapeUpdate>,
+    /// One entry per surface update step (convergence, refusals).
+    pub surface: Vec<SurfaceIteration>,
+    /// Per vertex of `mesh`: observed by at least one fitted frame (a kept sample).
+    pub observed: Vec<bool>,
     /// Gate counts of the last extraction, summed over vertices.
     pub gates: GateCounts,
     /// The last extraction's report (frames used and skipped, with reasons).
@@ -188,7 +197,6 @@ pub fn fit_session_with(
     let poses = fitted.as_slice();
     let mut mesh = mesh.clone();
     let mut previous: Option<Vec<VertexFit>> = None;
-    let mut shape_updates = Vec::new();
     let mut observe_s = 0.0;
     let mut joint_s = 0.0;
     let mut shape_s = 0.0;
@@ -227,6 +235,7 @@ pub fn fit_session_with(
             mesh.positions().len()
         )
     };
+    let mut surface = SurfaceState::new(&mesh);
     for k in 1..iterations {
         progress(&announce(k, &mesh));
         let (extraction, seconds) = observe(&mesh, &observe_config)?;
@@ -240,20 +249,21 @@ pub fn fit_session_with(
         joint_s += started.elapsed().as_secs_f64();
         observe_config.vertex_labels = Some(labels_of(&fits, mesh.positions().len(), config));
         progress(&format!(
-            "outer iteration {k}/{iterations}: shape update from refined normals"
+            "outer iteration {k}/{iterations}: surface update from the refined normals"
         ));
         let started = Instant::now();
-        let targets = normal_targets(&mesh, &fits, &config.shape)?;
-        let update = refine_positions(
-            &mesh,
-            &targets.normals_world,
-            &targets.confidence,
-            &config.shape,
-        )?;
-        mesh = mesh_with_positions(&mesh, update.positions.clone())?;
-        shape_updates.push(update);
+        let moved = surface_step(&mut surface, &mesh, &fits, &set, config)?;
         shape_s += started.elapsed().as_secs_f64();
+        if let Some(step) = surface.iterations.last() {
+            progress(&step.describe());
+        }
         previous = Some(fits);
+        if let Some(m) = moved {
+            mesh = m;
+        }
+        if surface.done() {
+            break;
+        }
     }
     progress(&announce(iterations, &mesh));
     let (extraction, seconds) = observe(&mesh, &observe_config)?;
@@ -278,11 +288,13 @@ pub fn fit_session_with(
         Some(held.samples)
     };
     let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;
+    let observed = observed_vertices(&set, mesh.positions().len());
     Ok(SessionFit {
         mesh,
         set,
         outcome,
-        shape_updates,
+        surface: surface.iterations,
+        observed,
         gates,
         observe: extraction.report,
         poses_fitted: fitted,
@@ -305,6 +317,33 @@ fn labels_of(fits: &[VertexFit], vertices: usize, config: &SessionFitConfig) -> 
         .into_iter()
         .map(|l| l.map_or(UNLABELLED, |l| l as u32))
         .collect()
+}
+
+/// One surface step of the outer loop ([`super::shape::surface`]): the mesh moved towards the
+/// refined normals inside the hull, or `None` when the step was refused or the surface has
+/// converged (the reason is in `surface.iterations`). Vertex identity is kept, so the fits of
+/// this iteration warm-start the next one by index.
+fn surface_step(
+    surface: &mut SurfaceState,
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    set: &SampleSet,
+    config: &SessionFitConfig,
+) -> Result<Option<TriangleMesh>, SessionFitError> {
+    let observed = observed_vertices(set, mesh.positions().len());
+    let cameras: Vec<nalgebra::Point3<f64>> = set
+        .views
+        .iter()
+        .map(|v| nalgebra::Point3::from(v.camera_position_world))
+        .collect();
+    Ok(surface.step(
+        mesh,
+        fits,
+        &observed,
+        &cameras,
+        config.hull.as_deref(),
+        &config.surface,
+    )?)
 }
 
 /// Poses by frame id (`world_from_camera`).
@@ -458,11 +497,13 @@ pub fn finish_from_joint(
         gates.add(&v.gates);
     }
     let holdout = score_held_out(session, held_out_set.as_ref(), &outcome.fits, config)?;
+    let observed = observed_vertices(&set, mesh.positions().len());
     Ok(SessionFit {
         mesh: mesh.clone(),
         set,
         outcome,
-        shape_updates: Vec::new(),
+        surface: Vec::new(),
+        observed,
         gates,
         observe: extraction.report,
         poses_fitted: fitted,

@@ -68,8 +68,11 @@
 //! - Returned positions are always finite.
 
 mod energy;
+pub mod hull;
+pub mod integrate;
 mod perturb;
 mod sparse;
+pub mod surface;
 #[cfg(test)]
 mod tests;
 

@@ -56,6 +56,15 @@ impl Grid {
         self.n[0] * self.n[1] * self.n[2]
     }
 
+    /// The grid as the fit's hull constraint describes it (same layout).
+    pub fn geometry(&self) -> ellipso_fit::shape::hull::GridGeometry {
+        ellipso_fit::shape::hull::GridGeometry {
+            origin_m: self.origin_m,
+            spacing_m: self.spacing_m,
+            n: self.n,
+        }
+    }
+
     /// True for a grid without nodes.
     pub fn is_empty(&self) -> bool {
         self.len() == 0

@@ -10,6 +10,7 @@
 use nalgebra::Vector3;
 
 use super::carve::Grid;
+use ellipso_fit::shape::hull::trilinear;
 
 /// The implicit surface of a grid field.
 pub struct Implicit<'a> {
@@ -28,39 +29,9 @@ impl<'a> Implicit<'a> {
         }
     }
 
-    /// φ and its gradient at `p` (trilinear).
+    /// φ and its gradient at `p` (trilinear, the fit's interpolation of a grid field).
     fn hull(&self, p: Vector3<f64>) -> (f64, Vector3<f64>) {
-        let g = self.grid;
-        let h = g.spacing_m;
-        let u: [f64; 3] = std::array::from_fn(|a| (p[a] - g.origin_m[a]) / h);
-        if (0..3).any(|a| !(u[a] >= 0.0 && u[a] <= (g.n[a] - 1) as f64)) {
-            return (self.outside, Vector3::zeros());
-        }
-        let i: [usize; 3] = std::array::from_fn(|a| (u[a] as usize).min(g.n[a] - 2));
-        let f: [f64; 3] = std::array::from_fn(|a| u[a] - i[a] as f64);
-        let at = |di: usize, dj: usize, dk: usize| {
-            f64::from(self.field[g.index(i[0] + di, i[1] + dj, i[2] + dk)])
-        };
-        let c: [[[f64; 2]; 2]; 2] = std::array::from_fn(|di| {
-            std::array::from_fn(|dj| std::array::from_fn(|dk| at(di, dj, dk)))
-        });
-        let w = |d: usize, t: f64| if d == 0 { 1.0 - t } else { t };
-        let mut value = 0.0;
-        let mut grad = Vector3::zeros();
-        for (di, plane) in c.iter().enumerate() {
-            for (dj, row) in plane.iter().enumerate() {
-                for (dk, &v) in row.iter().enumerate() {
-                    let (wx, wy, wz) = (w(di, f[0]), w(dj, f[1]), w(dk, f[2]));
-                    // d/du of (1 − u) is −1, of u is +1
-                    let s = |d: usize| if d == 0 { -1.0 } else { 1.0 };
-                    value += wx * wy * wz * v;
-                    grad.x += s(di) * wy * wz * v / h;
-                    grad.y += wx * s(dj) * wz * v / h;
-                    grad.z += wx * wy * s(dk) * v / h;
-                }
-            }
-        }
-        (value, grad)
+        trilinear(&self.grid.geometry(), self.field, p).unwrap_or((self.outside, Vector3::zeros()))
     }
 
     /// The value and gradient of the implicit function (module contract).

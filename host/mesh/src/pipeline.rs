@@ -22,6 +22,7 @@ use super::volume::{Volume, plane_hit};
 use super::{MeshConfig, MeshError, MeshReport};
 use ellipso_fit::observe::radiometry::radiometry_of;
 use ellipso_fit::observe::{SkippedFrame, camera_of};
+use ellipso_fit::shape::hull::HullField;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::Session;
 
@@ -32,6 +33,9 @@ pub struct MeshResult {
     pub mesh: TriangleMesh,
     /// What happened.
     pub report: MeshReport,
+    /// The carved hull with the board plane under it, world-placed: the constraint the fit's
+    /// surface update keeps the surface inside.
+    pub hull: HullField,
 }
 
 /// Everything the passes share.
@@ -123,7 +127,14 @@ fn run(
     progress("surface and remeshing");
     let mesh = surface(&setup, &fine, &field, config, &mut report)?;
     lap(&mut report, "surface");
-    Ok(MeshResult { mesh, report })
+    let hull = HullField::new(
+        setup.volume.world_from_volume,
+        fine.geometry(),
+        field,
+        3.0 * fine.spacing_m,
+    )
+    .map_err(|e| MeshError::Surface(e.to_string()))?;
+    Ok(MeshResult { mesh, report, hull })
 }
 
 fn setup<'a>(

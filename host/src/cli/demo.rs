@@ -300,7 +300,7 @@ fn fit_and_score(
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
-    let (mesh, mesh_report) =
+    let (mesh, mesh_report, hull) =
         super::mesh::mesh_of_session(session, None, &ellipso_mesh::MeshConfig::default())?;
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
@@ -311,11 +311,17 @@ fn fit_and_score(
         mesh_report.frames_used,
     );
     let config = ellipso_fit::session::SessionFitConfig {
-        outer_iterations: if quick { 1 } else { 2 },
+        outer_iterations: if quick {
+            1
+        } else {
+            ellipso_fit::session::SessionFitConfig::default().outer_iterations
+        },
+        hull: Some(std::sync::Arc::new(hull)),
         ..Default::default()
     };
     let run =
         super::fit::fit_and_export(session, &mesh, &dir, None, &config, &|p| out.published(p))?;
+    let config = super::fit::with_session_sensor(session, &config);
 
     // Only now the truth.
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
@@ -333,6 +339,9 @@ fn fit_and_score(
     });
     let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
     let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
+    crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
+    let scores =
+        super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
     let summary = serde_json::json!({
         "vertices": fits.len(),
         "fitted": score.scored,
@@ -351,6 +360,13 @@ fn fit_and_score(
         "rho_d_median_error_pct": score.rho_d_median_pct,
         "held_out_beside_truth": held_out,
         "input_mesh": "fit/mesh.ply",
+        "surface": {
+            "before": scores.before,
+            "after": scores.after,
+            "update": scores.surface_update,
+        },
+        "eta_carved_vs_true_mesh": scores.eta,
+        "true_mesh_fit_s": scores.true_mesh_fit_s,
     });
     crate::outln!(
         "mesh vs truth  Chamfer {:.3} mm before the fit, {:.3} mm after its shape refinement (Hausdorff {:.2} → {:.2} mm)",
@@ -359,6 +375,27 @@ fn fit_and_score(
         before.hausdorff_m * 1e3,
         after.hausdorff_m * 1e3,
     );
+    crate::outln!(
+        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
+        scores.after.observed_vertices,
+        scores.before.observed_mean_m * 1e3,
+        scores.after.observed_mean_m * 1e3,
+        scores.after.observed_p90_m * 1e3,
+        scores.after.unobserved_vertices,
+        scores.before.unobserved_mean_m * 1e3,
+        scores.after.unobserved_mean_m * 1e3,
+        scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+        scores.before.mesh_normal_median_deg,
+    );
+    for m in &scores.eta {
+        crate::outln!(
+            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} points)",
+            m.name,
+            m.carved_pct,
+            m.true_mesh_pct,
+            (m.carved_pct - m.true_mesh_pct).abs()
+        );
+    }
     crate::outln!(
         "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
         score.scored,

@@ -37,10 +37,17 @@ pub struct Args {
     /// Frame id of the view the pictures are rendered from (default: the first posed frame).
     #[arg(long)]
     pub view: Option<u64>,
-    /// Outer iterations (solve ↔ shape update), 1..=20; 1 keeps the input geometry (default 2;
-    /// a shard runs 1).
+    /// Outer iterations (solve ↔ surface update), 1..=20; 1 keeps the input geometry (default
+    /// 4, fewer when the surface converges; a shard runs 1).
     #[arg(long, value_parser = super::limits::outer_iterations)]
     pub outer: Option<usize>,
+    /// Target vertex count of the mesh carved without `--mesh`, 16..=2000000.
+    #[arg(long, default_value_t = 2500, value_parser = super::limits::vertices)]
+    pub vertices: usize,
+    /// Do not carve the visual hull for a `--mesh` (the surface update then runs without the
+    /// silhouettes' constraint); without `--mesh` the hull comes with the carved mesh.
+    #[arg(long)]
+    pub no_hull: bool,
     /// Step A alone: no clusters, virtual samples or pooled η (the paper's shared steps are
     /// on by default; docs/fit.md).
     #[arg(long)]
@@ -141,15 +148,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let out = out_dir.path().to_path_buf();
     let (given_mesh, import) = super::fit_import::apply(models, &session, given_mesh, &out)?;
     let imported_poses = import.as_ref().and_then(|i| i.poses.as_deref());
-    let mesh = match given_mesh {
-        Some(mesh) => mesh,
-        None => {
-            crate::errln!("no --mesh: carving the object's mesh from the frames first…");
-            let (mesh, report) = super::mesh::mesh_of_session(
+    let (mesh, hull) = match given_mesh {
+        Some(mesh) if args.no_hull => (mesh, None),
+        Some(mesh) => {
+            crate::errln!(
+                "carving the visual hull from the frames (the surface update stays inside it)…"
+            );
+            match super::mesh::mesh_of_session(
                 &session,
                 imported_poses,
                 &ellipso_mesh::MeshConfig::default(),
-            )?;
+            ) {
+                Ok((_, _, hull)) => (mesh, Some(hull)),
+                Err(e) => {
+                    crate::errln!(
+                        "warning: no visual hull ({e:#}); the surface update runs without the \
+                         silhouettes' constraint"
+                    );
+                    (mesh, None)
+                }
+            }
+        }
+        None => {
+            crate::errln!("no --mesh: carving the object's mesh from the frames first…");
+            let mut mesh_config = ellipso_mesh::MeshConfig::default();
+            mesh_config.remesh.target_vertices = args.vertices;
+            let (mesh, report, hull) =
+                super::mesh::mesh_of_session(&session, imported_poses, &mesh_config)?;
             let path = out.join("mesh.ply");
             super::mesh::write_mesh(&mesh, &report, &path)?;
             crate::errln!(
@@ -157,10 +182,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 out_dir.published(&path).display(),
                 report.vertices
             );
-            mesh
+            (mesh, Some(hull))
         }
     };
-    let config = config_of(&args)?;
+    let mut config = config_of(&args)?;
+    config.hull = hull.map(std::sync::Arc::new);
     let result = fit_and_export_with(
         &session,
         &mesh,
@@ -236,9 +262,11 @@ fn shard_of(args: &Args) -> anyhow::Result<Option<Shard>> {
 /// The fit's settings from the flags (shared by whole and sharded runs).
 fn config_of(args: &Args) -> anyhow::Result<SessionFitConfig> {
     let mut config = SessionFitConfig {
-        outer_iterations: args
-            .outer
-            .unwrap_or(if args.shard.is_some() { 1 } else { 2 }),
+        outer_iterations: args.outer.unwrap_or(if args.shard.is_some() {
+            1
+        } else {
+            SessionFitConfig::default().outer_iterations
+        }),
         holdout_fraction: args.holdout,
         ..SessionFitConfig::default()
     };
@@ -377,6 +405,14 @@ pub fn fit_and_export_with(
         mesh.positions().len(),
         fit.observe.frames_posed
     ));
+    for step in &fit.surface {
+        let refused = !step.applied;
+        crate::errln!(
+            "{}{}",
+            if refused { "warning: " } else { "  " },
+            step.describe()
+        );
+    }
     export_fit(
         session,
         &poses,
@@ -503,7 +539,10 @@ pub fn export_fit(
         "times_s": fit.outcome.times,
         "wall_s": wall_s,
         "gates": fit.gates,
-        "shape_updates_rms_mm": fit.shape_updates.iter().map(|u| u.rms_displacement_m * 1e3).collect::<Vec<_>>(),
+        "surface_update": fit.surface,
+        "surface_stopped": fit.surface.iter().rev().find_map(|s| s.stopped.clone()),
+        "observed_vertices": fit.observed.iter().filter(|o| **o).count(),
+        "peak_rss_bytes": super::memory::peak_rss_bytes(),
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });

@@ -9,6 +9,7 @@
 //! - the photo interval: a finite number of ms in `(0, 3_600_000]`; the board then checks it
 //!   against the exposure before anything is recorded;
 //! - outer iterations of the fit: `1..=20` (each is a full solve and shape update);
+//! - mesh vertex counts: `16..=2_000_000`;
 //! - real-valued settings: finite, inside the range their help text states.
 
 use std::fmt::Display;
@@ -21,6 +22,9 @@ use ellipso_sim::scene::rig::MAX_SIDE_PX;
 pub const MAX_COUNT: u64 = 1_000_000;
 /// Largest number of outer fit iterations.
 pub const MAX_OUTER: u64 = 20;
+/// Largest mesh vertex count a flag may ask for (the fit holds ~60 samples of 56 B per vertex:
+/// two million vertices are several GB).
+pub const MAX_VERTICES: u64 = 2_000_000;
 /// Longest photo interval, ms (one hour).
 pub const MAX_INTERVAL_MS: f64 = 3_600_000.0;
 
@@ -89,12 +93,6 @@ pub fn outer_iterations(s: &str) -> Result<usize, String> {
     integer_in(s, 1, MAX_OUTER)
 }
 
-/// Target vertex count of a carved mesh, `100..=500_000` (fewer cannot hold an object's shape;
-/// more is beyond what the fit's per-vertex solve is sized for).
-pub fn mesh_vertices(s: &str) -> Result<usize, String> {
-    integer_in(s, 100, 500_000)
-}
-
 /// Views that must agree to carve a voxel, `1..=100`.
 pub fn votes(s: &str) -> Result<usize, String> {
     integer_in(s, 1, 100)
@@ -103,6 +101,12 @@ pub fn votes(s: &str) -> Result<usize, String> {
 /// Worker threads, `1..=256`.
 pub fn threads(s: &str) -> Result<usize, String> {
     integer_in(s, 1, 256)
+}
+
+/// A mesh's target vertex count, `100..=2_000_000` (fewer cannot hold an object's shape; more
+/// is beyond [`MAX_VERTICES`]).
+pub fn vertices(s: &str) -> Result<usize, String> {
+    integer_in(s, 100, MAX_VERTICES)
 }
 
 /// The silhouette edge inset of `ellipso mesh`, superpixels: finite, in `[0, 2]` (beyond two
@@ -157,14 +161,16 @@ mod tests {
         assert!(count::<u32>("4294967296").is_err());
         assert!(outer_iterations("4294967295").is_err());
         assert_eq!(outer_iterations("2"), Ok(2));
+        assert_eq!(vertices("300000"), Ok(300_000));
+        assert!(vertices("8").is_err() && vertices("3000000").is_err());
         for bad in ["0", "-5", "nan", "inf", "1e300", "abc"] {
             assert!(interval_ms(bad).is_err(), "{bad}");
         }
         assert_eq!(interval_ms("50"), Ok(50.0));
         assert!(unit_f32("NaN").is_err() && unit_f32("1.5").is_err());
         assert!(drift_ppm("-inf").is_err());
-        for bad in ["0", "10000000", "-1"] {
-            assert!(mesh_vertices(bad).is_err(), "{bad}");
+        for bad in ["0", "99", "10000000", "-1"] {
+            assert!(vertices(bad).is_err(), "{bad}");
         }
         assert!(threads("100000").is_err() && threads("0").is_err());
         assert_eq!(votes("3"), Ok(3));

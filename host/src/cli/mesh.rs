@@ -14,6 +14,7 @@ use anyhow::Context;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 
+use ellipso_fit::shape::hull::HullField;
 use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
 use ellipso_report::output::{FileFormat, OutputFile};
 use ellipso_session::reader::Session;
@@ -26,8 +27,9 @@ pub struct Args {
     /// Output mesh: `.ply` (binary PLY) or `.obj` (Wavefront OBJ).
     #[arg(long, default_value = "mesh.ply")]
     pub out: PathBuf,
-    /// Target vertex count of the mesh, 100..=500000.
-    #[arg(long, default_value_t = 2500, value_parser = super::limits::mesh_vertices)]
+    /// Target vertex count of the mesh, 100..=2000000 (a few hundred thousand follow the
+    /// paper's Poisson depth 8–9; docs/mesh-bench.md has the fit's time and memory for each).
+    #[arg(long, default_value_t = 2500, value_parser = super::limits::vertices)]
     pub vertices: usize,
     /// Views that must see the board through a voxel to carve it, 1..=100.
     #[arg(long, default_value_t = 3, value_parser = super::limits::votes)]
@@ -58,7 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
-    let (mesh, mut report) = mesh_of_session(&session, None, &config)?;
+    let (mesh, mut report, _) = mesh_of_session(&session, None, &config)?;
     report.peak_rss_bytes = super::memory::peak_rss_bytes();
     mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;
@@ -93,12 +95,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 }
 
 /// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
-/// has none).
+/// has none); also returns the carved hull (the fit's surface update stays inside it).
 pub fn mesh_of_session(
     session: &Session,
     poses: Option<&[(u64, nalgebra::Isometry3<f64>)]>,
     config: &MeshConfig,
-) -> anyhow::Result<(TriangleMesh, MeshReport)> {
+) -> anyhow::Result<(TriangleMesh, MeshReport, HullField)> {
     let poses = match poses {
         Some(p) => p.to_vec(),
         None => super::fit::poses_of(session)?,
@@ -112,7 +114,7 @@ pub fn mesh_of_session(
         "{} vertices from {} frames",
         result.report.vertices, result.report.frames_used
     ));
-    Ok((result.mesh, result.report))
+    Ok((result.mesh, result.report, result.hull))
 }
 
 /// The report's path beside a mesh file: `<stem>-report.json`.

@@ -587,8 +587,8 @@ pub fn bound_cases() -> Vec<Case> {
     }
     for (flag, value, needle) in [
         ("--threads", "100000", "1..=256"),
-        ("--vertices", "10000000", "100..=500000"),
-        ("--vertices", "0", "100..=500000"),
+        ("--vertices", "10000000", "100..=2000000"),
+        ("--vertices", "0", "100..=2000000"),
         ("--votes", "0", "1..=100"),
     ] {
         cases.push(case(

@@ -478,7 +478,7 @@ fn moves_are_clamped_per_call() {
     }
 }
 
-fn fit(vertex: u32, normal: [f64; 3], sigma_deg: f64, flags: Vec<FitFlag>) -> VertexFit {
+pub(super) fn fit(vertex: u32, normal: [f64; 3], sigma_deg: f64, flags: Vec<FitFlag>) -> VertexFit {
     VertexFit {
         vertex,
         params: PbrdfParams {

@@ -6,6 +6,7 @@ use std::f64::consts::SQRT_2;
 use nalgebra::{Point3, Vector3};
 
 use super::{CENTRE, RADIUS_M, SceneSpec, make_session, open, segment_distance, sphere_and_board};
+use crate::data::FitFlag;
 use crate::observe::{ObserveConfig, camera_of, extract};
 
 #[test]
@@ -216,4 +217,70 @@ fn board_border_distance_px(
         })
         .map(|q| (q[0] - px[0]).hypot(q[1] - px[1]))
         .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn vertices_no_view_sees_are_labelled_unobserved() {
+    let dir = tempfile::tempdir().unwrap();
+    // The sphere rests on the board (contact at z = 0); five views from 50° elevation and above.
+    let spec = SceneSpec::paint_mono();
+    let (session_dir, _, poses) = make_session(dir.path(), &spec);
+    let session = open(&session_dir);
+    let (sphere_mesh, sphere) = sphere_and_board(3, 0.1, 2);
+    let positions = sphere_mesh.positions()[..sphere].to_vec();
+    let triangles: Vec<[u32; 3]> = sphere_mesh
+        .triangles()
+        .iter()
+        .filter(|t| t.iter().all(|&i| (i as usize) < sphere))
+        .copied()
+        .collect();
+    let mesh =
+        ellipso_model::geometry::TriangleMesh::new(positions, None, None, triangles).unwrap();
+    let out = extract(
+        &session,
+        &mesh,
+        &poses,
+        &ObserveConfig::default(),
+        &|_, _| {},
+    )
+    .unwrap();
+    let set = &out.samples;
+    let observed = crate::shape::surface::observed_vertices(set, mesh.positions().len());
+    let fits = crate::solve::fit_all(set, None, None, &crate::solve::SolverConfig::default());
+    let cameras: Vec<Point3<f64>> = set
+        .views
+        .iter()
+        .map(|v| Point3::from(v.camera_position_world))
+        .collect();
+    let (mut underside, mut seen) = (0, 0);
+    for (v, fit) in fits.iter().enumerate() {
+        let p = mesh.positions()[v];
+        let n = mesh.normals()[v].into_inner();
+        let unobserved = fit.flags.contains(&FitFlag::Unobserved);
+        // the label, the samples and the flag say the same
+        assert_eq!(unobserved, set.vertices[v].samples.is_empty(), "vertex {v}");
+        assert_eq!(observed[v], !unobserved, "vertex {v}");
+        if unobserved {
+            assert!(fit.flags.contains(&FitFlag::TooFewViews));
+        }
+        // geometry: a vertex facing away from every camera, or at the board contact, is never
+        // observed; one that every camera sees well above the board is
+        let facing = cameras
+            .iter()
+            .filter(|c| n.dot(&(*c - p).normalize()) > 0.05)
+            .count();
+        if facing == 0 || p.z < 0.005 {
+            assert!(
+                unobserved,
+                "vertex {v} at z = {:.4} m faces {facing} views",
+                p.z
+            );
+            underside += 1;
+        } else if n.z > 0.5 {
+            assert!(!unobserved, "vertex {v}: {:?}", set.vertices[v].gates);
+            seen += 1;
+        }
+    }
+    eprintln!("underside {underside}, seen from above {seen}");
+    assert!(underside > 50 && seen > 150);
 }

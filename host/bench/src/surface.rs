@@ -1,0 +1,130 @@
+//! A fitted surface against the simulator's truth, split into what the views observe and what
+//! they do not (docs/mesh-bench.md): the carved mesh before the fit and the refined mesh after
+//! it are scored on the same vertex labels (the surface update keeps vertex identity).
+//!
+//! Contract: distances are from each vertex to the closest point of the true surface
+//! ([`crate::truth_map::truth_at`]), in metres; normal errors are angles between the fit's
+//! refined normal (or the mesh's own normal) and the true normal there, degrees, over the
+//! observed vertices. Empty sets give 0.
+
+use ellipso_fit::data::VertexFit;
+use ellipso_fit::truth::TruthObject;
+use ellipso_model::geometry::TriangleMesh;
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::truth_map::truth_at;
+
+/// One mesh's distance and normal errors, observed and unobserved apart.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct SurfaceScore {
+    /// Vertices the fit observed.
+    pub observed_vertices: usize,
+    /// Vertices no fitted view observed.
+    pub unobserved_vertices: usize,
+    /// Mean distance of the observed vertices to the true surface, m.
+    pub observed_mean_m: f64,
+    /// 90th percentile of the same, m.
+    pub observed_p90_m: f64,
+    /// Mean distance of the unobserved vertices, m.
+    pub unobserved_mean_m: f64,
+    /// Median angle between the mesh's normals and the truth at observed vertices, degrees.
+    pub mesh_normal_median_deg: f64,
+    /// Median angle between the fit's refined normals and the truth at observed vertices,
+    /// degrees (`None` when no fit was given).
+    pub fit_normal_median_deg: Option<f64>,
+    /// 90th percentile of the same.
+    pub fit_normal_p90_deg: Option<f64>,
+}
+
+fn mean(v: &[f64]) -> f64 {
+    if v.is_empty() {
+        0.0
+    } else {
+        v.iter().sum::<f64>() / v.len() as f64
+    }
+}
+
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    ellipso_report::percentile(v, q)
+}
+
+fn angle_deg(a: Vector3<f64>, b: Vector3<f64>) -> f64 {
+    // cosine clamped into acos's domain; zero vectors give 90°
+    (a.dot(&b) / (a.norm() * b.norm()).max(1e-300))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
+}
+
+/// Scores `mesh` (and the refined normals of `fits`, one per vertex in order, if given) against
+/// `truth` with the labels `observed` (module contract).
+pub fn surface_score(
+    truth: &TruthObject,
+    mesh: &TriangleMesh,
+    fits: Option<&[VertexFit]>,
+    observed: &[bool],
+) -> SurfaceScore {
+    let at = truth_at(truth, mesh.positions());
+    let (mut seen, mut unseen, mut mesh_n, mut fit_n) = (vec![], vec![], vec![], vec![]);
+    for (v, t) in at.iter().enumerate() {
+        let Some(t) = t else { continue };
+        let truth_n = Vector3::from(t.normal_world);
+        if observed.get(v).copied().unwrap_or(false) {
+            seen.push(t.distance_m);
+            mesh_n.push(angle_deg(mesh.normals()[v].into_inner(), truth_n));
+            if let Some(f) = fits.and_then(|f| f.get(v)) {
+                fit_n.push(angle_deg(Vector3::from(f.normal_world), truth_n));
+            }
+        } else {
+            unseen.push(t.distance_m);
+        }
+    }
+    SurfaceScore {
+        observed_vertices: seen.len(),
+        unobserved_vertices: unseen.len(),
+        observed_mean_m: mean(&seen),
+        observed_p90_m: percentile(&mut seen, 0.9),
+        unobserved_mean_m: mean(&unseen),
+        mesh_normal_median_deg: percentile(&mut mesh_n, 0.5),
+        fit_normal_median_deg: fits.map(|_| percentile(&mut fit_n, 0.5)),
+        fit_normal_p90_deg: fits.map(|_| percentile(&mut fit_n, 0.9)),
+    }
+}
+
+/// Per-material η error of a fit on the carved-and-refined mesh beside the fit of the same
+/// session on the true mesh, percent.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct EtaBeside {
+    /// Material name.
+    pub name: String,
+    /// True η.
+    pub eta_true: f64,
+    /// Error of the material's median η on the carved mesh, %.
+    pub carved_pct: f64,
+    /// The same on the true mesh, %.
+    pub true_mesh_pct: f64,
+}
+
+/// The materials of two scores side by side (materials missing from either are left out).
+pub fn eta_beside(
+    carved: &crate::score::FitScores,
+    true_mesh: &crate::score::FitScores,
+) -> Vec<EtaBeside> {
+    carved
+        .materials
+        .iter()
+        .filter_map(|c| {
+            let t = true_mesh.materials.iter().find(|t| t.name == c.name)?;
+            Some(EtaBeside {
+                name: c.name.clone(),
+                eta_true: c.eta_true,
+                carved_pct: c.eta_error_pct,
+                true_mesh_pct: t.eta_error_pct,
+            })
+        })
+        .collect()
+}

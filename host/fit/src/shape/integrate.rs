@@ -1,0 +1,370 @@
+//! Screened normal integration with the visual hull as a one-sided constraint: the positions
+//! that best agree with the refined normals, held to *anchor* positions only weakly (the
+//! screening), and kept inside the hull and above the board (docs/fit-shape.md "Surface
+//! update").
+//!
+//! # Energy (over displacements d = p − p⁰ from the current positions p⁰)
+//! ```text
+//! E(d) = Σ_v w_v (n_v · (p_v − a_v))²                      screening to the anchors a_v
+//!      + τ Σ_v ‖(I − n_v n_vᵀ) d_v‖²                         tangential hold
+//!      + Σ_edges(u,v) c_uv (n̄_uv · (p_u − p_v))²            edges ⟂ the refined normals
+//!      + λ_smooth Σ_edges(u,v) ‖d_u − d_v‖²                 smooth displacement
+//!      + κ Σ_v∈A (ĝ_v · (p_v − p*_v) + ĥ_v)²                hull, active vertices only
+//! ```
+//! n_v is the current mesh's vertex normal: the screening acts along it, and the tangential
+//! position — which neither the normals nor the hull inform — is held where it is. The normal
+//! and smoothness terms are the parent module's (same midpoint normals, confidences and
+//! smoothness); the screening weight is `w_v = λ_pos · s_v · a_v/D²` with a per-vertex factor
+//! `s_v ∈ [0, 1]` (0: no position information — a vertex no view observes follows its
+//! neighbours' displacement) floored at [`MIN_SCREENING`] of the full weight so the system stays
+//! positive definite. The anchors need not be the current positions: the outer loop anchors to
+//! the carved mesh, an upper bound of the surface, so the screening presses outward and the hull
+//! stops the surface where the silhouettes touch it.
+//!
+//! The hull term is the one-sided penalty `κ max(0, h(p))²` of the hull value h
+//! ([`super::hull::HullField::value_world`], the board plane included), minimised by an active
+//! set: h is linearised at the current solution p* along the vertex normal n (`ĝ = n`,
+//! `ĥ = h/(∇h·n)`; along `∇h/|∇h|` where the normal runs almost along the hull, and along n by h
+//! where the field is flat), the quadratic is solved (block-Jacobi CG, warm-started), and the
+//! set is recomputed as the vertices with h > 0, until it no longer changes or
+//! [`IntegrateConfig::max_rounds`] is reached. The first round holds every vertex on or outside
+//! the hull: one the other terms pull inward ends a hair inside and is released. κ is dimensionless (per vertex, like the normal term's weights), large against the
+//! normal term: what remains outside is about the force on the vertex over κ.
+//!
+//! Contract: input errors as [`super::refine_vertex_positions`]; the result is finite; every
+//! per-vertex move is clamped to [`super::ShapeConfig::max_displacement_m`]; the largest hull
+//! value after the solve is reported ([`Integrated::max_outside_m`]) — the caller decides whether
+//! the surface left the hull. Deterministic for any thread count (as the CG).
+
+use nalgebra::{Point3, Vector3};
+
+use super::energy::{MeshGraph, Problem, anchor_weights, usable_normals};
+use super::hull::HullField;
+use super::sparse::{Block, BlockCsr, IDENTITY, pcg};
+use super::{ShapeConfig, ShapeError, clamp_moves, scaled};
+
+/// Smallest screening weight of a vertex, as a fraction of its full weight (keeps the system
+/// positive definite where the factor is 0).
+pub const MIN_SCREENING: f64 = 1e-3;
+
+/// Vertices within this of the hull's surface (or outside it) start held, metres.
+const START_MARGIN_M: f64 = 1e-6;
+
+/// Settings of [`integrate`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct IntegrateConfig {
+    /// Weights, CG limits and the per-vertex move clamp (λ_pos is the screening weight).
+    pub weights: ShapeConfig,
+    /// κ: weight of the hull penalty per active vertex (dimensionless, > 0).
+    pub hull_weight: f64,
+    /// Most active-set rounds (≥ 1).
+    pub max_rounds: usize,
+    /// Weight of the hold on each vertex's tangential position (dimensionless, per vertex, ≥ 0):
+    /// the normals and the hull say nothing about where along the surface a vertex sits, so
+    /// without it the surface can slide along itself.
+    #[serde(default = "default_tangent_weight")]
+    pub tangent_weight: f64,
+}
+
+fn default_tangent_weight() -> f64 {
+    1.0
+}
+
+impl Default for IntegrateConfig {
+    fn default() -> Self {
+        Self {
+            weights: ShapeConfig {
+                lambda_position: 0.2,
+                max_displacement_m: 0.003,
+                ..ShapeConfig::default()
+            },
+            hull_weight: 1e3,
+            max_rounds: 8,
+            tangent_weight: default_tangent_weight(),
+        }
+    }
+}
+
+/// What [`integrate`] did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Integrated {
+    /// New positions (finite).
+    pub positions: Vec<Point3<f64>>,
+    /// RMS vertex move, metres.
+    pub rms_displacement_m: f64,
+    /// Largest vertex move, metres.
+    pub max_displacement_m: f64,
+    /// Vertices whose move was clamped.
+    pub clamped_vertices: usize,
+    /// CG iterations over all rounds.
+    pub cg_iterations: u32,
+    /// Every round's CG reached its tolerance.
+    pub cg_converged: bool,
+    /// Active-set rounds run.
+    pub rounds: usize,
+    /// Vertices held by the hull in the last round.
+    pub active_vertices: usize,
+    /// Largest hull value over the vertices after the solve, metres (≤ 0: all inside; 0
+    /// without a hull).
+    pub max_outside_m: f64,
+    /// Normal misfit before (confidence-weighted RMS sine of the edge–tangent-plane angle).
+    pub residual_before: f64,
+    /// Normal misfit after.
+    pub residual_after: f64,
+    /// Edges with a normal constraint.
+    pub constrained_edges: usize,
+    /// Vertices without a usable normal.
+    pub skipped_vertices: usize,
+}
+
+/// The per-vertex inputs of [`integrate`], all of the mesh's length.
+pub struct Targets<'a> {
+    /// Refined normals, world (need not be unit; unusable ones are skipped).
+    pub normals_world: &'a [[f64; 3]],
+    /// Their confidence in [0, 1].
+    pub confidence: &'a [f64],
+    /// Anchor positions a_v, world.
+    pub anchors: &'a [Point3<f64>],
+    /// Screening factor s_v in [0, 1].
+    pub screening: &'a [f64],
+    /// Vertices the hull holds from both sides (on a silhouette: the surface touches the hull
+    /// there), or empty for none.
+    pub on_silhouette: &'a [bool],
+}
+
+/// One hull-constrained screened integration (module doc).
+pub fn integrate(
+    positions: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    targets: &Targets<'_>,
+    hull: Option<&HullField>,
+    config: &IntegrateConfig,
+) -> Result<Integrated, ShapeError> {
+    let weights = &config.weights;
+    weights.validate()?;
+    if !(config.hull_weight.is_finite() && config.hull_weight > 0.0) {
+        return Err(ShapeError::InvalidConfig {
+            field: "hull_weight",
+            value: config.hull_weight,
+        });
+    }
+    let n = positions.len();
+    if n == 0 || triangles.is_empty() {
+        return Err(ShapeError::EmptyMesh {
+            vertices: n,
+            triangles: triangles.len(),
+        });
+    }
+    for (what, got) in [
+        ("normals_world", targets.normals_world.len()),
+        ("confidence", targets.confidence.len()),
+        ("anchors", targets.anchors.len()),
+        ("screening", targets.screening.len()),
+    ] {
+        if got != n {
+            return Err(ShapeError::LengthMismatch {
+                what,
+                expected: n,
+                got,
+            });
+        }
+    }
+    if let Some(vertex) = positions
+        .iter()
+        .chain(targets.anchors)
+        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+    {
+        return Err(ShapeError::NonFinitePosition { vertex: vertex % n });
+    }
+    let graph = MeshGraph::new(positions, triangles)?;
+    let (normals, conf, skipped_vertices) =
+        usable_normals(targets.normals_world, targets.confidence);
+    let full = anchor_weights(positions, triangles, weights.lambda_position);
+    let screening: Vec<f64> = full
+        .iter()
+        .zip(targets.screening)
+        .map(|(w, s)| {
+            let s = if s.is_finite() {
+                s.clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            w * s.max(MIN_SCREENING)
+        })
+        .collect();
+    let problem = Problem::new(positions, &graph.edges, &normals, &conf, screening, weights);
+
+    // The quadratic without the hull: A₀ d = b₀.
+    let mut base = BlockCsr::from_edges(n, &graph.edges);
+    let mut b0 = vec![0.0; 3 * n];
+    let normal_at = vertex_normals(positions, triangles);
+    for (v, &w) in problem.anchor.iter().enumerate() {
+        // Screening along the vertex normal towards the anchor, the tangential hold at the
+        // current position (a vertex without a normal is screened in every direction).
+        let nv = normal_at[v];
+        let wt = config.tangent_weight;
+        let block: Block = if nv.norm() > 0.5 {
+            std::array::from_fn(|r| {
+                std::array::from_fn(|c| {
+                    let nn = nv[r] * nv[c];
+                    w * nn + wt * (IDENTITY[r][c] - nn)
+                })
+            })
+        } else {
+            scaled(&IDENTITY, w)
+        };
+        base.add_diagonal(v as u32, &block);
+        let pull = targets.anchors[v] - positions[v];
+        let pull = if nv.norm() > 0.5 {
+            nv * nv.dot(&pull)
+        } else {
+            pull
+        };
+        for k in 0..3 {
+            b0[3 * v + k] += w * pull[k];
+        }
+    }
+    let smooth = scaled(&IDENTITY, weights.lambda_smooth);
+    let mut next_constraint = problem.constraints.iter().peekable();
+    for &(u, v) in &graph.edges {
+        let mut m = smooth;
+        if let Some(c) = next_constraint.next_if(|c| (c.u, c.v) == (u, v)) {
+            for (r, row) in m.iter_mut().enumerate() {
+                for (col, x) in row.iter_mut().enumerate() {
+                    *x += c.weight * c.axis[r] * c.axis[col];
+                }
+            }
+            let g = c.weight * c.axis_dot_edge0;
+            for k in 0..3 {
+                b0[3 * u as usize + k] -= g * c.axis[k];
+                b0[3 * v as usize + k] += g * c.axis[k];
+            }
+        }
+        base.add_edge(u, v, &m);
+    }
+
+    let mut d = vec![0.0; 3 * n];
+    let mut cg_iterations = 0;
+    let mut cg_converged = true;
+    let mut rounds = 0;
+    let held = |v: usize| targets.on_silhouette.get(v).copied().unwrap_or(false);
+    // The first round holds every vertex at or outside the hull (a start on the carved surface
+    // is on it); a vertex the other terms pull inward ends a hair inside and is released, one
+    // they push outward ends a hair outside and stays.
+    let mut active: Vec<bool> = match hull {
+        Some(h) => positions
+            .iter()
+            .enumerate()
+            .map(|(v, p)| held(v) || h.value_world(p).0 > -START_MARGIN_M)
+            .collect(),
+        None => vec![false; n],
+    };
+    let at =
+        |d: &[f64], v: usize| positions[v] + Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
+    loop {
+        rounds += 1;
+        let mut a = base.clone();
+        let mut b = b0.clone();
+        if let Some(hull) = hull {
+            for v in (0..n).filter(|&v| active[v]) {
+                let p = at(&d, v);
+                let (h, g) = hull.value_world(&p);
+                // The hull holds the vertex along its own normal (the hull's gradient at a
+                // ridge between two views' cones points sideways, and a push along it would
+                // slide the vertex over its neighbours): h(p + t n) ≈ h + (∇h·n) t.
+                let n = normal_at[v];
+                let slope = g.dot(&n);
+                let len = g.norm();
+                let (gu, hu) = if len.is_nan() || len <= 1e-9 {
+                    // The field is flat (truncated far from the surface, or beyond its grid):
+                    // h is then a lower bound of the distance; move in along the normal by it
+                    // and look again next round. A vertex without a normal stays.
+                    if n.norm() < 0.5 {
+                        continue;
+                    }
+                    (n, h)
+                } else if slope > 0.3 * len {
+                    (n, h / slope)
+                } else {
+                    // the normal runs almost along the hull (slope < 0.3 |∇h|): the gradient
+                    (g / len, h / len)
+                };
+                let kappa = config.hull_weight;
+                let block: Block =
+                    std::array::from_fn(|r| std::array::from_fn(|c| kappa * gu[r] * gu[c]));
+                a.add_diagonal(v as u32, &block);
+                // ½∇ of κ(ĝ·(d − d*) + ĥ)²: κĝĝᵀ d = κĝ(ĝ·d* − ĥ).
+                let dv = Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
+                let rhs = kappa * (gu.dot(&dv) - hu);
+                for k in 0..3 {
+                    b[3 * v + k] += rhs * gu[k];
+                }
+            }
+        }
+        let report = pcg(&a, &b, &mut d, weights.max_cg_iterations, weights.tolerance);
+        cg_iterations += report.iterations;
+        cg_converged &= report.converged;
+        if let Some(i) = d.iter().position(|x| !x.is_finite()) {
+            return Err(ShapeError::NonFiniteSolution { vertex: i / 3 });
+        }
+        let Some(hull) = hull else { break };
+        let next: Vec<bool> = (0..n)
+            .map(|v| held(v) || hull.value_world(&at(&d, v)).0 > 0.0)
+            .collect();
+        if next == active || rounds >= config.max_rounds.max(1) {
+            break;
+        }
+        // Semi-smooth Newton on the one-sided penalty: the set is the vertices outside now.
+        // After half the rounds the set only grows, so the last rounds cannot cycle.
+        if rounds * 2 >= config.max_rounds {
+            for (a, nx) in active.iter_mut().zip(&next) {
+                *a |= *nx;
+            }
+        } else {
+            active = next;
+        }
+    }
+    let clamped_vertices = clamp_moves(&mut d, weights.max_displacement_m);
+    let new_positions: Vec<Point3<f64>> = (0..n).map(|v| at(&d, v)).collect();
+    let moves: Vec<f64> = d
+        .chunks(3)
+        .map(|dv| (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]).sqrt())
+        .collect();
+    let max_outside_m = hull.map_or(0.0, |h| {
+        new_positions
+            .iter()
+            .map(|p| h.value_world(p).0)
+            .fold(f64::NEG_INFINITY, f64::max)
+    });
+    Ok(Integrated {
+        residual_before: problem.normal_misfit(positions),
+        residual_after: problem.normal_misfit(&new_positions),
+        positions: new_positions,
+        rms_displacement_m: (moves.iter().map(|m| m * m).sum::<f64>() / n as f64).sqrt(),
+        max_displacement_m: moves.iter().copied().fold(0.0, f64::max),
+        clamped_vertices,
+        cg_iterations,
+        cg_converged,
+        rounds,
+        active_vertices: active.iter().filter(|a| **a).count(),
+        max_outside_m,
+        constrained_edges: problem.constraints.len(),
+        skipped_vertices,
+    })
+}
+
+/// Area-weighted unit vertex normals of `positions` (zero where a vertex has no area).
+fn vertex_normals(positions: &[Point3<f64>], triangles: &[[u32; 3]]) -> Vec<Vector3<f64>> {
+    let mut normals = vec![Vector3::zeros(); positions.len()];
+    for t in triangles {
+        let [a, b, c] = t.map(|i| positions[i as usize]);
+        let face = (b - a).cross(&(c - a));
+        for &i in t {
+            normals[i as usize] += face;
+        }
+    }
+    normals
+        .into_iter()
+        .map(|n| n.try_normalize(0.0).unwrap_or_default())
+        .collect()
+}

@@ -1,0 +1,145 @@
+//! The surface update on a sphere: started 2 mm too large, with the true normals (an offset
+//! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
+//! it converges onto the sphere where the views see it.
+
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::geometry::procedural::icosphere;
+use nalgebra::{Isometry3, Point3, Vector3};
+
+use super::super::hull::{GridGeometry, HullField};
+use super::super::tests::fit;
+use super::{SurfaceConfig, SurfaceState};
+
+const RADIUS: f64 = 0.02;
+
+fn centre() -> Vector3<f64> {
+    Vector3::new(0.0, 0.0, RADIUS)
+}
+
+/// Camera centres on two rings around the sphere (elevations 25° and 55°), 0.45 m away.
+fn cameras() -> Vec<Vector3<f64>> {
+    let mut c = Vec::new();
+    for (e, count) in [(25.0f64, 24), (55.0, 16)] {
+        for k in 0..count {
+            let a = (k as f64 / count as f64) * std::f64::consts::TAU;
+            let e = e.to_radians();
+            c.push(centre() + 0.45 * Vector3::new(e.cos() * a.cos(), e.cos() * a.sin(), e.sin()));
+        }
+    }
+    c
+}
+
+/// The visual hull of the sphere seen from `cameras()`: per node the largest over views of the
+/// metric distance outside the view's silhouette cone (the classic hull's field), the board
+/// under it.
+fn hull() -> HullField {
+    let h = 0.0005;
+    let lo = Vector3::new(-0.03, -0.03, -0.002);
+    let n = [121, 121, 105];
+    let grid = GridGeometry {
+        origin_m: lo.into(),
+        spacing_m: h,
+        n,
+    };
+    let cams = cameras();
+    let mut values = vec![0.0f32; grid.len()];
+    for k in 0..n[2] {
+        for j in 0..n[1] {
+            for i in 0..n[0] {
+                let p = lo + Vector3::new(i as f64, j as f64, k as f64) * h;
+                let phi = cams
+                    .iter()
+                    .map(|c| {
+                        let (to_p, to_s) = (p - c, centre() - c);
+                        let angle = to_p.angle(&to_s);
+                        let cone = (RADIUS / to_s.norm()).asin();
+                        (angle - cone).sin() * to_p.norm()
+                    })
+                    .fold(f64::NEG_INFINITY, f64::max);
+                values[grid.index(i, j, k)] = phi.max(-p.z) as f32;
+            }
+        }
+    }
+    HullField::new(Isometry3::identity(), grid, values, 0.01).unwrap()
+}
+
+#[test]
+fn a_sphere_started_2_mm_too_large_converges_onto_it() {
+    let (dirs, triangles) = icosphere(4);
+    let start: Vec<Point3<f64>> = dirs
+        .iter()
+        .map(|d| Point3::from(centre() + d.into_inner() * (RADIUS + 0.002)))
+        .collect();
+    let mut mesh = TriangleMesh::new(start, None, None, triangles).unwrap();
+    // seen: normals a view at 25° or more sees within 80° of its axis
+    let observed: Vec<bool> = dirs
+        .iter()
+        .map(|d| d.z > -(55f64.to_radians().sin()))
+        .collect();
+    let fits: Vec<_> = dirs
+        .iter()
+        .enumerate()
+        .filter(|(v, _)| observed[*v])
+        .map(|(v, d)| fit(v as u32, d.into_inner().into(), 0.5, vec![]))
+        .collect();
+    let hull = hull();
+    let config = SurfaceConfig::default();
+    let mut state = SurfaceState::new(&mesh);
+    let error = |m: &TriangleMesh| {
+        let e: Vec<f64> = m
+            .positions()
+            .iter()
+            .zip(&observed)
+            .filter(|(_, o)| **o)
+            .map(|(p, _)| ((p.coords - centre()).norm() - RADIUS).abs())
+            .collect();
+        e.iter().sum::<f64>() / e.len() as f64
+    };
+    let before = error(&mesh);
+    for _ in 0..6 {
+        match state
+            .step(
+                &mesh,
+                &fits,
+                &observed,
+                &cameras()
+                    .into_iter()
+                    .map(nalgebra::Point3::from)
+                    .collect::<Vec<_>>(),
+                Some(&hull),
+                &config,
+            )
+            .unwrap()
+        {
+            Some(m) => mesh = m,
+            None => break,
+        }
+    }
+    let after = error(&mesh);
+    eprintln!(
+        "mean |r − R| over the observed surface: {:.4} mm → {:.4} mm",
+        before * 1e3,
+        after * 1e3
+    );
+    let steps = &state.iterations;
+    for s in steps {
+        eprintln!("{}", s.describe());
+    }
+    assert!((before - 0.002).abs() < 1e-4, "{before}");
+    assert!(
+        after < 1e-4,
+        "mean |r − R| over the observed surface {after} m after {} steps",
+        steps.len()
+    );
+    // the first step does the work, later ones move less and less until convergence
+    assert!(steps.len() >= 2);
+    assert!(steps.iter().all(|s| s.applied));
+    assert!(steps.windows(2).all(|w| w[1].rms_move_m < w[0].rms_move_m));
+    assert!(state.done() && state.stopped().is_some_and(|s| s.starts_with("converged")));
+    // nothing left the hull or went below the board
+    assert!(
+        mesh.positions()
+            .iter()
+            .all(|p| hull.value_world(p).0 < config.hull_tolerance_m)
+    );
+}
