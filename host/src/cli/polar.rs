@@ -147,6 +147,8 @@ pub fn run(mut args: Args) -> anyhow::Result<()> {
 /// Processes the frame and writes every output into `args.out` without printing them (the
 /// demo lists the folder once, `run` claims the folder first).
 pub fn write(args: &Args) -> anyhow::Result<Written> {
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
     let name = args.frame.display().to_string();
     let loaded = load::load_frame(
         &args.frame,
