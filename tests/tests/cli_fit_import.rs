@@ -206,7 +206,16 @@ fn poses_and_a_mesh_from_another_frame_come_into_the_fit() {
     let frame_of = |name: &str| -> u64 { name.trim_end_matches(".png").parse().unwrap() };
     let (failed, moved) = (frame_of(&exported.images[5].name), 3usize);
     // tracking failed on one frame: the log says so, as a tracking run that rejected it would
-    let mut log = std::fs::read_to_string(session.join("events.jsonl")).unwrap();
+    // (its pose event gone: a log with both a pose and a rejection of one frame is refused)
+    let mut log: String = std::fs::read_to_string(session.join("events.jsonl"))
+        .unwrap()
+        .lines()
+        .filter(|l| {
+            let e: serde_json::Value = serde_json::from_str(l).unwrap();
+            !(e["type"] == "pose" && e["frame_id"] == failed)
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
     log += &format!(
         "{{\"type\":\"pose_rejected\",\"t_host_us\":1,\"frame_id\":{failed},\"reason\":\"test\"}}\n"
     );
@@ -337,7 +346,7 @@ fn poses_and_a_mesh_from_another_frame_come_into_the_fit() {
         "--shard".as_ref(),
         "0/2".as_ref(),
         "--out".as_ref(),
-        t.join("part").as_os_str(),
+        t.join("x.part").as_os_str(),
     ]));
     assert!(e.contains("not taken with --shard"), "{e}");
     // a model whose images are named otherwise

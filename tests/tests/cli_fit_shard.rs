@@ -58,7 +58,7 @@ fn figures(dir: &Path) -> serde_json::Value {
     let mut s: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("fit-summary.json")).unwrap()).unwrap();
     let o = s.as_object_mut().unwrap();
-    for k in ["session", "times_s", "wall_s", "export"] {
+    for k in ["session", "times_s", "wall_s", "export", "peak_rss_bytes"] {
         o.remove(k);
     }
     o.get_mut("observe")

@@ -545,8 +545,12 @@ fn every_flag_the_docs_show_exists() {
                 assert!(o.status.success(), "ellipso {key} --help failed ({file})");
                 String::from_utf8_lossy(&o.stdout).into_owned()
             });
-            // every --flag on the rest of the line, comments included
-            for flag in tokens[i + 1..].iter().filter_map(|t| {
+            // every --flag up to the next command on the line, comments included
+            let end = tokens[i + 1..]
+                .iter()
+                .position(|t| t.trim_matches('`') == "ellipso")
+                .map_or(tokens.len(), |k| i + 1 + k);
+            for flag in tokens[i + 1..end].iter().filter_map(|t| {
                 let t = t.trim_start_matches(['[', '(', '`']);
                 let t = t.split(['=', ']', ')', ',', '`', '|']).next().unwrap_or("");
                 (t.starts_with("--") && t.len() > 2).then_some(t)
@@ -556,7 +560,6 @@ fn every_flag_the_docs_show_exists() {
                     missing.push(format!("{file}: ellipso {key} {flag}"));
                 }
             }
-            break;
         }
     }
     assert!(checked > 20, "only {checked} documented flags found");
