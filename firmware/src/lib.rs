@@ -120,6 +120,7 @@
 //! ```
 #![cfg_attr(not(test), no_std)]
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod board;
 pub mod config;

@@ -16,6 +16,7 @@
 //! host refuses a board with another version at `Hello`, with both versions in the error.
 #![no_std]
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
 
 pub mod bracket;
 pub mod framing;

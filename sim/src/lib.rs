@@ -12,6 +12,7 @@
 //!   radiometry shared with the fit.
 //!
 //! - [`rig`]: the virtual rig — trigger board, camera, wire, clocks, faults.
+#![cfg_attr(not(test), forbid(unsafe_code))] // the tests compare with the C apriltag library
 
 pub mod effects;
 pub mod render;

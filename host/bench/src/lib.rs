@@ -16,6 +16,7 @@
 //! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
+#![forbid(unsafe_code)]
 
 pub mod capture;
 pub mod chain;

@@ -29,6 +29,7 @@
 //!   samples, simulated captures and error metrics (benchmarks and tests).
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit and
 //!   novel views, the re-render comparison).
+#![forbid(unsafe_code)]
 
 pub mod accuracy;
 pub mod augment;

@@ -24,6 +24,7 @@
 //! coordinates, metres, closed, 2-manifold, counter-clockwise from outside; memory is bounded
 //! by the board's size (texels, grid nodes) and one bit per pixel per view; the result does not
 //! depend on the thread count.
+#![forbid(unsafe_code)]
 
 pub mod appearance;
 pub mod carve;

@@ -11,6 +11,7 @@
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
 //!   pixel.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
+#![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
 pub mod file_io;

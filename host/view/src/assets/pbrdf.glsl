@@ -1,4 +1,4 @@
-// pbrdf.glsl — a port of ellipso_sim::optics to GLSL ES 3.00 (single precision).
+// pbrdf.glsl — a port of ellipso_model::optics to GLSL ES 3.00 (single precision).
 //
 // Same equations, same order of operations, same clamps as the Rust model:
 //   fresnel.rs     FresnelTerms::dielectric (conjugate-denominator forms, R− without cancellation)
