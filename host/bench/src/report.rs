@@ -67,6 +67,11 @@ fn eta_error(r: &RunResult, name: &str) -> f64 {
         .map_or(f64::NAN, |m| m.eta_error_pct)
 }
 
+/// `text` as one cell of a Markdown table (a `|` in a run's name would split it).
+fn cell(text: &str) -> String {
+    text.replace('|', "\\|")
+}
+
 /// The markdown report of `runs` (module doc).
 pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
     let mut s = String::new();
@@ -138,7 +143,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         let sc = &r.scores;
         let mut row = format!(
             "| {} | {}/{} | {} |",
-            r.spec.name, r.frames_posed, r.frames, sc.scored
+            cell(&r.spec.name),
+            r.frames_posed,
+            r.frames,
+            sc.scored
         );
         for m in &materials {
             let cell = sc
@@ -181,7 +189,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         "The change each replacement makes to every material's η, in points (percent of η): \
          the row's error minus the error of the run it was replaced in (the full chain, or \
          the true geometry). A stage whose replacement moves η by more than {LIMIT_POINTS} \
-         points is a limit of the run it was replaced in and is named so.\n"
+         points is a limit of the run it was replaced in and is named so. A sensor effect \
+         removed in the full chain re-renders the frames, and the mesh is carved again from \
+         them: its Δη there carries the carved mesh's change too (a different mesh from \
+         different noise); the same effect's row on the true geometry is its own cost.\n"
     );
     let mut head = String::from("| stage replaced | in |");
     let mut rule = String::from("|---|---|");
@@ -189,14 +200,14 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         head += &format!(" Δη {m} |");
         rule += "---:|";
     }
-    head += " largest |Δη| | verdict |";
+    head += " largest \\|Δη\\| | verdict |";
     rule += "---:|---|";
     let _ = writeln!(s, "{head}\n{rule}");
     for r in runs {
         let Some(base) = reference(r, runs) else {
             continue;
         };
-        let mut row = format!("| {} | {} |", r.spec.name, base.spec.name);
+        let mut row = format!("| {} | {} |", cell(&r.spec.name), cell(&base.spec.name));
         let mut largest: f64 = 0.0;
         for m in &materials {
             let d = eta_error(r, m) - eta_error(base, m);
@@ -240,7 +251,7 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
             let _ = writeln!(
                 s,
                 "| {} | {} | {} | {:.4} | {:.4} | {:.4} | {:.4} | {:.2} | {:.2} | {:.2} | {} / {} |",
-                r.spec.name,
+                cell(&r.spec.name),
                 m.name,
                 m.samples,
                 m.gain[0],
