@@ -205,7 +205,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     })?;
     crate::outln!(
         "  {} ({} files: s0, DoLP, AoLP, I^d/I^s/I^α, mask per band, stokes.exr)",
-        pictures.join("frame0-polarisation").display(),
+        out.published(&pictures.join("frame0-polarisation"))
+            .display(),
         polar.files.len()
     );
     let path_plot = pictures.join("camera-path.png");

@@ -107,6 +107,8 @@ pub struct Integrated {
     /// Largest hull value over the vertices after the solve, metres (≤ 0: all inside; 0
     /// without a hull).
     pub max_outside_m: f64,
+    /// Vertices the solve left outside the hull and [`project_inside`] moved onto it.
+    pub projected_vertices: usize,
     /// Normal misfit before (confidence-weighted RMS sine of the edge–tangent-plane angle).
     pub residual_before: f64,
     /// Normal misfit after.
@@ -325,10 +327,15 @@ pub fn integrate(
         }
     }
     let clamped_vertices = clamp_moves(&mut d, weights.max_displacement_m);
-    let new_positions: Vec<Point3<f64>> = (0..n).map(|v| at(&d, v)).collect();
-    let moves: Vec<f64> = d
-        .chunks(3)
-        .map(|dv| (dv[0] * dv[0] + dv[1] * dv[1] + dv[2] * dv[2]).sqrt())
+    let mut new_positions: Vec<Point3<f64>> = (0..n).map(|v| at(&d, v)).collect();
+    // The penalty leaves a vertex outside by about its force over κ, and an active set that
+    // has not settled in `max_rounds` can leave more (a ridge between two views' cones): what is
+    // still outside is projected onto the hull along its gradient.
+    let projected_vertices = hull.map_or(0, |h| project_inside(h, &mut new_positions));
+    let moves: Vec<f64> = new_positions
+        .iter()
+        .zip(positions)
+        .map(|(p, p0)| (p - p0).norm())
         .collect();
     let max_outside_m = hull.map_or(0.0, |h| {
         new_positions
@@ -348,9 +355,35 @@ pub fn integrate(
         rounds,
         active_vertices: active.iter().filter(|a| **a).count(),
         max_outside_m,
+        projected_vertices,
         constrained_edges: problem.constraints.len(),
         skipped_vertices,
     })
+}
+
+/// Newton steps of the projection onto the hull per vertex.
+const PROJECTION_STEPS: usize = 6;
+
+/// Moves every point with a positive hull value onto the hull (h ≤ 0) by Newton steps along
+/// the gradient, p ← p − h ∇h/|∇h|² (a flat field — |∇h| below 1e-9 — leaves the point where it
+/// is: the caller's check then sees it outside). Returns how many points moved.
+fn project_inside(hull: &HullField, positions: &mut [Point3<f64>]) -> usize {
+    let mut moved = 0;
+    for p in positions.iter_mut() {
+        let mut stepped = false;
+        for _ in 0..PROJECTION_STEPS {
+            let (h, g) = hull.value_world(p);
+            let g2 = g.norm_squared();
+            if h <= 0.0 || !(g2 > 1e-18) || !h.is_finite() {
+                break;
+            }
+            // a hair past the surface so the linearisation's error lands inside
+            *p -= g * ((h + START_MARGIN_M) / g2);
+            stepped = true;
+        }
+        moved += usize::from(stepped);
+    }
+    moved
 }
 
 /// Area-weighted unit vertex normals of `positions` (zero where a vertex has no area).

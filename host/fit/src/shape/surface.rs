@@ -114,6 +114,9 @@ pub struct SurfaceIteration {
     pub rounds: usize,
     /// Vertices whose move was clamped.
     pub clamped: usize,
+    /// Vertices the solve left outside the hull, projected onto it.
+    #[serde(default)]
+    pub projected: usize,
     /// Seconds.
     pub seconds: f64,
     /// Why the update stopped here (refused step or convergence), in words.
@@ -138,6 +141,9 @@ impl SurfaceIteration {
             ", {} of {} vertices observed, {} held by the hull ({} on a silhouette)",
             self.observed, self.vertices, self.hull_active, self.on_silhouette
         );
+        if self.projected > 0 {
+            s += &format!(", {} projected onto it", self.projected);
+        }
         if let Some(why) = &self.stopped {
             s += &format!(" — {why}");
         }
@@ -356,6 +362,7 @@ impl SurfaceState {
             cg_iterations: solved.cg_iterations,
             rounds: solved.rounds,
             clamped: solved.clamped_vertices,
+            projected: solved.projected_vertices,
             seconds: 0.0,
             stopped: None,
         };

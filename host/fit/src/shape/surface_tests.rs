@@ -143,3 +143,53 @@ fn a_sphere_started_2_mm_too_large_converges_onto_it() {
             .all(|p| hull.value_world(p).0 < config.hull_tolerance_m)
     );
 }
+
+#[test]
+fn what_the_penalty_cannot_hold_is_projected_onto_the_hull() {
+    // A sphere 1 mm inside its hull with normals that push it 3 mm out: with a penalty too weak
+    // to hold it (κ = 0.01) the solve ends outside, and the step still stays inside the hull.
+    let (dirs, triangles) = icosphere(3);
+    let start: Vec<Point3<f64>> = dirs
+        .iter()
+        .map(|d| Point3::from(centre() + d.into_inner() * (RADIUS - 0.001)))
+        .collect();
+    let mesh = TriangleMesh::new(start, None, None, triangles).unwrap();
+    let hull = hull();
+    let mut config = SurfaceConfig::default();
+    config.integrate.hull_weight = 0.01;
+    config.integrate.weights.lambda_position = 1e4;
+    // anchors 3 mm out: the screening pulls the surface out through the hull
+    let anchors: Vec<Point3<f64>> = dirs
+        .iter()
+        .map(|d| Point3::from(centre() + d.into_inner() * (RADIUS + 0.002)))
+        .collect();
+    let normals: Vec<[f64; 3]> = dirs.iter().map(|d| d.into_inner().into()).collect();
+    let confidence = vec![1.0; dirs.len()];
+    let screening = vec![1.0; dirs.len()];
+    let solved = super::super::integrate::integrate(
+        mesh.positions(),
+        mesh.triangles(),
+        &super::super::integrate::Targets {
+            normals_world: &normals,
+            confidence: &confidence,
+            anchors: &anchors,
+            screening: &screening,
+            on_silhouette: &[],
+        },
+        Some(&hull),
+        &config.integrate,
+    )
+    .unwrap();
+    assert!(
+        solved.projected_vertices > 0,
+        "moved {} m RMS, {} active, {} m outside",
+        solved.rms_displacement_m,
+        solved.active_vertices,
+        solved.max_outside_m
+    );
+    assert!(
+        solved.max_outside_m <= 0.0,
+        "left outside by {} m",
+        solved.max_outside_m
+    );
+}
