@@ -374,7 +374,7 @@ fn project_inside(hull: &HullField, positions: &mut [Point3<f64>]) -> usize {
         for _ in 0..PROJECTION_STEPS {
             let (h, g) = hull.value_world(p);
             let g2 = g.norm_squared();
-            if h <= 0.0 || !(g2 > 1e-18) || !h.is_finite() {
+            if h <= 0.0 || g2.is_nan() || g2 <= 1e-18 || !h.is_finite() {
                 break;
             }
             // a hair past the surface so the linearisation's error lands inside
