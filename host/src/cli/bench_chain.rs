@@ -23,7 +23,7 @@ pub struct ChainArgs {
     /// Rays per raw pixel per axis, 1..=8 (default 2, as the demo).
     #[arg(long, default_value_t = 2, value_parser = super::limits::supersampling)]
     pub supersampling: u32,
-    /// Only the runs whose names contain one of these (comma-separated).
+    /// Only the runs named here (comma-separated, whole names as the report lists them).
     #[arg(long, value_delimiter = ',')]
     pub runs: Vec<String>,
     /// Where to write the report (default docs/error-budget.md when every run is made; with
