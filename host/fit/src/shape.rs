@@ -387,26 +387,8 @@ pub fn refine_vertex_positions(
     for (v, &w) in problem.anchor.iter().enumerate() {
         a.add_diagonal(v as u32, &scaled(&IDENTITY, w));
     }
-    let smooth = scaled(&IDENTITY, config.lambda_smooth);
     let mut b = vec![0.0; 3 * n];
-    let mut next_constraint = problem.constraints.iter().peekable();
-    for &(u, v) in &graph.edges {
-        let mut m = smooth;
-        if let Some(c) = next_constraint.next_if(|c| (c.u, c.v) == (u, v)) {
-            // ½∇ of c (a·(e⁰ + d_u − d_v))²: c a aᵀ coupling, right-hand side ∓ c a (a·e⁰).
-            for (r, row) in m.iter_mut().enumerate() {
-                for (col, x) in row.iter_mut().enumerate() {
-                    *x += c.weight * c.axis[r] * c.axis[col];
-                }
-            }
-            let g = c.weight * c.axis_dot_edge0;
-            for k in 0..3 {
-                b[3 * u as usize + k] -= g * c.axis[k];
-                b[3 * v as usize + k] += g * c.axis[k];
-            }
-        }
-        a.add_edge(u, v, &m);
-    }
+    problem.add_edge_terms(&mut a, &mut b);
 
     let mut d = vec![0.0; 3 * n];
     let report = pcg(&a, &b, &mut d, config.max_cg_iterations, config.tolerance);

@@ -5,7 +5,8 @@
 //! Contract: everything here is deterministic and in input order — edges sorted `(u, v)` with
 //! `u < v`, constraints in edge order — so the assembled system is identical run to run.
 
-use super::{ShapeConfig, ShapeError};
+use super::sparse::{BlockCsr, IDENTITY};
+use super::{ShapeConfig, ShapeError, scaled};
 use nalgebra::{Point3, Vector3};
 
 /// The undirected edges of a triangle list, and its degenerate-triangle count.
@@ -146,6 +147,30 @@ impl<'a> Problem<'a> {
             skipped_edges,
             anchor,
             lambda_smooth: config.lambda_smooth,
+        }
+    }
+
+    /// Adds the edge terms of E to the normal equations `a d = b`: the smoothness block of every
+    /// edge and, on a constrained edge, ½∇ of c (a·(e⁰ + d_u − d_v))² — the c a aᵀ coupling and
+    /// the right-hand side ∓ c a (a·e⁰). `a` holds `edges`' pattern.
+    pub(super) fn add_edge_terms(&self, a: &mut BlockCsr, b: &mut [f64]) {
+        let smooth = scaled(&IDENTITY, self.lambda_smooth);
+        let mut next_constraint = self.constraints.iter().peekable();
+        for &(u, v) in self.edges {
+            let mut m = smooth;
+            if let Some(c) = next_constraint.next_if(|c| (c.u, c.v) == (u, v)) {
+                for (r, row) in m.iter_mut().enumerate() {
+                    for (col, x) in row.iter_mut().enumerate() {
+                        *x += c.weight * c.axis[r] * c.axis[col];
+                    }
+                }
+                let g = c.weight * c.axis_dot_edge0;
+                for k in 0..3 {
+                    b[3 * u as usize + k] -= g * c.axis[k];
+                    b[3 * v as usize + k] += g * c.axis[k];
+                }
+            }
+            a.add_edge(u, v, &m);
         }
     }
 

@@ -226,24 +226,7 @@ pub fn integrate(
             b0[3 * v + k] += w * pull[k];
         }
     }
-    let smooth = scaled(&IDENTITY, weights.lambda_smooth);
-    let mut next_constraint = problem.constraints.iter().peekable();
-    for &(u, v) in &graph.edges {
-        let mut m = smooth;
-        if let Some(c) = next_constraint.next_if(|c| (c.u, c.v) == (u, v)) {
-            for (r, row) in m.iter_mut().enumerate() {
-                for (col, x) in row.iter_mut().enumerate() {
-                    *x += c.weight * c.axis[r] * c.axis[col];
-                }
-            }
-            let g = c.weight * c.axis_dot_edge0;
-            for k in 0..3 {
-                b0[3 * u as usize + k] -= g * c.axis[k];
-                b0[3 * v as usize + k] += g * c.axis[k];
-            }
-        }
-        base.add_edge(u, v, &m);
-    }
+    problem.add_edge_terms(&mut base, &mut b0);
 
     let mut d = vec![0.0; 3 * n];
     let mut cg_iterations = 0;
