@@ -338,11 +338,11 @@ fn fit_and_score(
             ellipso_fit::accuracy::full_scale_dn(scene),
         )
     });
-    let before = ellipso_mesh::distance::mesh_distance(&mesh, &truth.mesh, 50_000, 1);
-    let after = ellipso_mesh::distance::mesh_distance(&run.fit.mesh, &truth.mesh, 50_000, 1);
     crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
     let scores =
         super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
+    // the carved and refined meshes against the truth, as the mesh bench scores them
+    let (before, after) = (&scores.distance_before, &scores.distance_after);
     let summary = serde_json::json!({
         "vertices": fits.len(),
         "fitted": score.scored,
