@@ -80,7 +80,7 @@ pub use perturb::perturb_mesh;
 
 use super::data::{FitFlag, VertexFit};
 use ellipso_model::geometry::{MeshError, TriangleMesh};
-use energy::{MeshGraph, Problem, anchor_weights, usable_normals};
+use energy::{MeshGraph, Problem, anchor_weights, check_inputs, usable_normals};
 use nalgebra::{Point3, Vector3};
 use sparse::{Block, BlockCsr, IDENTITY, pcg};
 
@@ -353,31 +353,15 @@ pub fn refine_vertex_positions(
     config: &ShapeConfig,
 ) -> Result<ShapeUpdate, ShapeError> {
     config.validate()?;
+    check_inputs(
+        triangles,
+        &[
+            ("normals_world", normals_world.len()),
+            ("confidence", confidence.len()),
+        ],
+        &[positions],
+    )?;
     let n = positions.len();
-    if n == 0 || triangles.is_empty() {
-        return Err(ShapeError::EmptyMesh {
-            vertices: n,
-            triangles: triangles.len(),
-        });
-    }
-    for (what, got) in [
-        ("normals_world", normals_world.len()),
-        ("confidence", confidence.len()),
-    ] {
-        if got != n {
-            return Err(ShapeError::LengthMismatch {
-                what,
-                expected: n,
-                got,
-            });
-        }
-    }
-    if let Some(vertex) = positions
-        .iter()
-        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
-    {
-        return Err(ShapeError::NonFinitePosition { vertex });
-    }
     let graph = MeshGraph::new(positions, triangles)?;
     let (normals, weights, skipped_vertices) = usable_normals(normals_world, confidence);
     let anchor = anchor_weights(positions, triangles, config.lambda_position);

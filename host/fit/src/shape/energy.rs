@@ -55,6 +55,41 @@ impl MeshGraph {
     }
 }
 
+/// The per-vertex input checks every solve of this module makes: a mesh with vertices and
+/// triangles, each `(name, length)` of `per_vertex` one entry per vertex, and every point of
+/// `points` (the positions first) finite — the error names the vertex.
+pub(super) fn check_inputs(
+    triangles: &[[u32; 3]],
+    per_vertex: &[(&'static str, usize)],
+    points: &[&[Point3<f64>]],
+) -> Result<(), ShapeError> {
+    let n = points.first().map_or(0, |p| p.len());
+    if n == 0 || triangles.is_empty() {
+        return Err(ShapeError::EmptyMesh {
+            vertices: n,
+            triangles: triangles.len(),
+        });
+    }
+    for &(what, got) in per_vertex {
+        if got != n {
+            return Err(ShapeError::LengthMismatch {
+                what,
+                expected: n,
+                got,
+            });
+        }
+    }
+    for set in points {
+        if let Some(vertex) = set
+            .iter()
+            .position(|p| !p.coords.iter().all(|c| c.is_finite()))
+        {
+            return Err(ShapeError::NonFinitePosition { vertex });
+        }
+    }
+    Ok(())
+}
+
 /// Unit normals and confidences with unusable entries zeroed: `(normals, weights, skipped)`.
 pub(super) fn usable_normals(
     normals_world: &[[f64; 3]],

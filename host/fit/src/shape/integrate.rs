@@ -38,7 +38,7 @@
 
 use nalgebra::{Point3, Vector3};
 
-use super::energy::{MeshGraph, Problem, anchor_weights, usable_normals};
+use super::energy::{MeshGraph, Problem, anchor_weights, check_inputs, usable_normals};
 use super::hull::HullField;
 use super::sparse::{Block, BlockCsr, IDENTITY, pcg};
 use super::{ShapeConfig, ShapeError, clamp_moves, scaled};
@@ -150,34 +150,17 @@ pub fn integrate(
             value: config.hull_weight,
         });
     }
+    check_inputs(
+        triangles,
+        &[
+            ("normals_world", targets.normals_world.len()),
+            ("confidence", targets.confidence.len()),
+            ("anchors", targets.anchors.len()),
+            ("screening", targets.screening.len()),
+        ],
+        &[positions, targets.anchors],
+    )?;
     let n = positions.len();
-    if n == 0 || triangles.is_empty() {
-        return Err(ShapeError::EmptyMesh {
-            vertices: n,
-            triangles: triangles.len(),
-        });
-    }
-    for (what, got) in [
-        ("normals_world", targets.normals_world.len()),
-        ("confidence", targets.confidence.len()),
-        ("anchors", targets.anchors.len()),
-        ("screening", targets.screening.len()),
-    ] {
-        if got != n {
-            return Err(ShapeError::LengthMismatch {
-                what,
-                expected: n,
-                got,
-            });
-        }
-    }
-    if let Some(vertex) = positions
-        .iter()
-        .chain(targets.anchors)
-        .position(|p| !p.coords.iter().all(|c| c.is_finite()))
-    {
-        return Err(ShapeError::NonFinitePosition { vertex: vertex % n });
-    }
     let graph = MeshGraph::new(positions, triangles)?;
     let (normals, conf, skipped_vertices) =
         usable_normals(targets.normals_world, targets.confidence);
