@@ -77,7 +77,7 @@ pub use clock::LinearClock;
 pub use flash_meter::FlashMeter;
 pub use link_fault::{Disconnect, LinkFaults};
 pub use sim_camera::{FrameSource, FrameTruth, PoseIndexSource, SimCamera, SimFrame};
-pub use wire::{TriggerEdge, WireServer, connect_wire};
+pub use wire::{TriggerEdge, WireProblems, WireServer, connect_wire, connect_wire_reporting};
 
 /// Errors of the virtual rig.
 #[derive(Debug, thiserror::Error)]

@@ -28,6 +28,10 @@
 //! connected reader (a reader whose `connect` returned before an edge was published gets that
 //! edge); a reader that stops reading for 1 s is disconnected rather than stalling the board.
 //! [`connect_wire`] (a camera's side) turns the socket back into a channel of edges.
+//!
+//! Neither side prints: what goes wrong on their background threads (a failed `accept`, a
+//! malformed record) is kept as a [`RigError`] in a [`WireProblems`] list that the owner reads
+//! ([`WireServer::problems`], [`connect_wire_reporting`]).
 
 use std::io::{ErrorKind, Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
@@ -117,10 +121,26 @@ pub fn wire() -> (Sender<TriggerEdge>, Receiver<TriggerEdge>) {
     crossbeam_channel::unbounded()
 }
 
+/// What went wrong on a wire's background thread, in order, for its owner to read.
+#[derive(Clone, Debug, Default)]
+pub struct WireProblems(Arc<Mutex<Vec<RigError>>>);
+
+impl WireProblems {
+    fn push(&self, e: RigError) {
+        self.0.lock().unwrap_or_else(|p| p.into_inner()).push(e);
+    }
+
+    /// The problems recorded since the last call (oldest first).
+    pub fn take(&self) -> Vec<RigError> {
+        std::mem::take(&mut *self.0.lock().unwrap_or_else(|p| p.into_inner()))
+    }
+}
+
 /// Broadcasts edges from a channel to every reader connected to a unix socket.
 pub struct WireServer {
     path: PathBuf,
     clients: Arc<Mutex<Vec<UnixStream>>>,
+    problems: WireProblems,
     stop: Arc<AtomicBool>,
     threads: Vec<JoinHandle<()>>,
 }
@@ -140,16 +160,18 @@ impl WireServer {
         listener.set_nonblocking(true).map_err(io_err)?;
         let clients: Arc<Mutex<Vec<UnixStream>>> = Arc::default();
         let stop = Arc::new(AtomicBool::new(false));
+        let problems = WireProblems::default();
         let forward = {
-            let (clients, stop) = (clients.clone(), stop.clone());
+            let (clients, stop, problems) = (clients.clone(), stop.clone(), problems.clone());
             std::thread::Builder::new()
                 .name("wire-forward".into())
-                .spawn(move || forward_loop(&listener, &edges, &clients, &stop))
+                .spawn(move || forward_loop(&listener, &edges, &clients, &stop, &problems))
                 .map_err(io_err)?
         };
         Ok(Self {
             path: path.to_path_buf(),
             clients,
+            problems,
             stop,
             threads: vec![forward],
         })
@@ -158,6 +180,11 @@ impl WireServer {
     /// The socket's path.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Failed `accept`s of readers since the last call (oldest first).
+    pub fn problems(&self) -> Vec<RigError> {
+        self.problems.take()
     }
 
     /// Readers connected now.
@@ -190,7 +217,11 @@ fn lock_clients(c: &Mutex<Vec<UnixStream>>) -> std::sync::MutexGuard<'_, Vec<Uni
 }
 
 /// Registers every reader whose `connect` has completed (non-blocking).
-fn accept_pending(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>) {
+fn accept_pending(
+    listener: &UnixListener,
+    clients: &Mutex<Vec<UnixStream>>,
+    problems: &WireProblems,
+) {
     loop {
         match listener.accept() {
             Ok((stream, _)) => {
@@ -204,7 +235,10 @@ fn accept_pending(listener: &UnixListener, clients: &Mutex<Vec<UnixStream>>) {
             }
             Err(e) if e.kind() == ErrorKind::WouldBlock => return,
             Err(e) => {
-                eprintln!("trigger wire: accept failed: {e}");
+                problems.push(RigError::Io {
+                    what: "trigger wire: accepting a reader".into(),
+                    source: e,
+                });
                 return;
             }
         }
@@ -218,10 +252,11 @@ fn forward_loop(
     edges: &Receiver<TriggerEdge>,
     clients: &Mutex<Vec<UnixStream>>,
     stop: &AtomicBool,
+    problems: &WireProblems,
 ) {
     while !stop.load(Ordering::Acquire) {
         let edge = edges.recv_timeout(Duration::from_millis(20));
-        accept_pending(listener, clients);
+        accept_pending(listener, clients, problems);
         let edge = match edge {
             Ok(e) => e,
             Err(crossbeam_channel::RecvTimeoutError::Timeout) => continue,
@@ -233,22 +268,36 @@ fn forward_loop(
 }
 
 /// Connects to a [`WireServer`] at `path`; edges arrive on the returned channel until the server
-/// goes away (then the channel disconnects). A malformed record ends the stream.
+/// goes away (then the channel disconnects). A malformed record ends the stream
+/// ([`connect_wire_reporting`] also says why).
 pub fn connect_wire(path: &Path) -> Result<Receiver<TriggerEdge>, RigError> {
+    connect_wire_reporting(path).map(|(edges, _)| edges)
+}
+
+/// [`connect_wire`], with the list where a malformed record that ended the stream is kept
+/// ([`RigError::WireRecord`]).
+pub fn connect_wire_reporting(
+    path: &Path,
+) -> Result<(Receiver<TriggerEdge>, WireProblems), RigError> {
+    let problems = WireProblems::default();
     let io_err = |e: std::io::Error| RigError::Io {
         what: format!("trigger wire socket {}", path.display()),
         source: e,
     };
     let mut stream = UnixStream::connect(path).map_err(io_err)?;
     let (tx, rx) = crossbeam_channel::unbounded();
+    let reader_problems = problems.clone();
     std::thread::Builder::new()
         .name("wire-read".into())
         .spawn(move || {
             let mut record = [0u8; EDGE_RECORD_LEN];
             while stream.read_exact(&mut record).is_ok() {
-                let Ok(edge) = TriggerEdge::from_record(&record) else {
-                    eprintln!("trigger wire: malformed record {record:02x?}");
-                    return;
+                let edge = match TriggerEdge::from_record(&record) {
+                    Ok(edge) => edge,
+                    Err(e) => {
+                        reader_problems.push(e);
+                        return;
+                    }
                 };
                 if tx.send(edge).is_err() {
                     return;
@@ -256,7 +305,7 @@ pub fn connect_wire(path: &Path) -> Result<Receiver<TriggerEdge>, RigError> {
             }
         })
         .map_err(io_err)?;
-    Ok(rx)
+    Ok((rx, problems))
 }
 
 #[cfg(test)]
@@ -280,6 +329,29 @@ mod tests {
                 "byte {byte} = {value}"
             );
         }
+    }
+
+    #[test]
+    fn a_malformed_record_ends_the_stream_and_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("wire.sock");
+        let listener = UnixListener::bind(&path).unwrap();
+        let (camera, problems) = connect_wire_reporting(&path).unwrap();
+        let (mut board, _) = listener.accept().unwrap();
+        board
+            .write_all(&TriggerEdge::trigger(5, true).to_record())
+            .unwrap();
+        board.write_all(&[b'X'; EDGE_RECORD_LEN]).unwrap();
+        let first = camera.recv_timeout(Duration::from_secs(5)).unwrap();
+        assert_eq!(first, TriggerEdge::trigger(5, true));
+        // the reader stops at the garbage: the channel disconnects and says why
+        assert!(camera.recv_timeout(Duration::from_secs(5)).is_err());
+        let got = problems.take();
+        assert!(
+            matches!(got.as_slice(), [RigError::WireRecord { .. }]),
+            "{got:?}"
+        );
+        assert!(problems.take().is_empty());
     }
 
     #[test]
