@@ -10,6 +10,7 @@
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere
 //!   highlights.
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
+#![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
 pub mod calibrate;
 pub mod pose;

@@ -91,6 +91,17 @@ pub struct FakeGigeCamera {
     fill: Option<Box<Box<FillFn>>>,
 }
 
+/// The fill callback aravis' fake camera calls for each frame; it forwards to the installed
+/// [`FillFn`].
+///
+/// # Safety
+///
+/// Only aravis calls it, as the fill pattern `serve_on_loopback` installs with `user` pointing
+/// at that camera's `Box<FillFn>`.
+// SAFETY: `unsafe` because the caller must pass a live `ArvBuffer` and the `user` pointer
+// installed with it. That holds: the only caller is the fake camera's fill hook, installed in
+// `serve_on_loopback` with `user` = the boxed closure that `FakeGigeCamera::fill` keeps alive,
+// and uninstalled in `Drop` before that box is freed; aravis passes the frame's own buffer.
 unsafe extern "C" fn fill_trampoline(
     buffer: *mut aravis_sys::ArvBuffer,
     user: *mut c_void,
