@@ -98,7 +98,7 @@ pub struct FitScores {
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
-    ellipso_report::percentile(&mut v, 0.5)
+    ellipso_model::stats::median(&mut v)
 }
 
 fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {

@@ -294,9 +294,8 @@ fn fit_cluster(
         Some(eta) => (eta, dop.len()),
         None => {
             let mut etas: Vec<f64> = members.iter().map(|&v| fit_of(v).params.eta).collect();
-            etas.sort_by(f64::total_cmp);
             let (lo, hi) = eta_fit::ETA_RANGE;
-            (etas[etas.len() / 2].clamp(lo, hi), 0)
+            (ellipso_model::stats::median(&mut etas).clamp(lo, hi), 0)
         }
     };
     let mut rng = ChaCha8Rng::seed_from_u64(stream_seed(config.seed, 11, index as u64));

@@ -134,12 +134,9 @@ pub struct FitOutcome {
     pub times: StageTimes,
 }
 
+/// The shared median (NaN when empty) of an owned vector.
 fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    ellipso_model::stats::median(&mut v)
 }
 
 /// Runs steps A, B, C on `set`; `init` warm-starts step A (one entry per vertex).

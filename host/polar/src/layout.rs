@@ -67,13 +67,7 @@ pub fn detect(width: usize, height: usize, samples: &[u16]) -> LayoutEvidence {
         }
     }
     let tiles = rg.len();
-    let median = |v: &mut Vec<f64>| {
-        if v.is_empty() {
-            return f64::NAN;
-        }
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    use ellipso_model::stats::median;
     let (rg, gg) = (median(&mut rg), median(&mut gg));
     let detection = if tiles < 4 || !(rg.is_finite() && gg.is_finite()) {
         Detection::Unsure

@@ -73,11 +73,7 @@ fn save_rgb(img: &image::RgbImage, path: &std::path::Path) -> Result<(), ReportE
     })
 }
 
-/// The `p`-quantile (0..=1, nearest rank) of `values`, sorting them in place; NaN when empty.
-pub fn percentile(values: &mut [f64], p: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    values.sort_by(f64::total_cmp);
-    values[((values.len() - 1) as f64 * p.clamp(0.0, 1.0)).round() as usize]
-}
+/// The `p`-quantile (0..=1, nearest rank) of `values`, sorting them in place; NaN when empty —
+/// the model's one percentile ([`ellipso_model::stats`]), re-exported where result tables are
+/// made.
+pub use ellipso_model::stats::percentile;

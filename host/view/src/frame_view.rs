@@ -50,7 +50,7 @@ pub fn render(frame_id: u64, frame: &RawFrame) -> Result<FrameView, String> {
         for x in (0..w).step_by(step) {
             let px = pixel(&image, y * w + x);
             let saturated = px.mask & MaskReason::Saturated.bit() != 0;
-            let g = srgb((px.s0 / 2.0).clamp(0.0, 1.0));
+            let g = ellipso_model::colour::srgb_u8(f64::from(px.s0) / 2.0);
             s0_rgb.extend(if saturated { [255, 40, 40] } else { [g, g, g] });
             let valid = px.mask == 0;
             let dolp = valid.then_some(f64::from(px.dolp));
@@ -130,15 +130,6 @@ fn pixel(image: &PolarImage, i: usize) -> Px {
         p.aolp_rad = (0.5 * s2.atan2(s1)).rem_euclid(std::f32::consts::PI);
     }
     p
-}
-
-fn srgb(v: f32) -> u8 {
-    let s = if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 
 fn png(w: usize, h: usize, rgb: &[u8]) -> Result<Vec<u8>, String> {

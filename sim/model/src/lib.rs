@@ -10,11 +10,15 @@
 //! - [`geometry`]: rays, BVH, triangle meshes (PLY/OBJ), analytic shapes, object transforms.
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
 //!   pixel.
+//! - [`stats`]: the one median and percentile (nearest rank) every crate reports with.
+//! - [`colour`]: the one sRGB encoder (linear → 8-bit code) for every picture.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
 #![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
+pub mod colour;
 pub mod file_io;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;
+pub mod stats;

@@ -125,8 +125,7 @@ impl FeatureScaling {
         let max_median = (0..3)
             .map(|c| {
                 let mut v: Vec<f64> = rho_d.iter().map(|r| r[c]).collect();
-                v.sort_by(f64::total_cmp);
-                v[v.len() / 2]
+                ellipso_model::stats::median(&mut v)
             })
             .fold(0.0, f64::max);
         let rho_d_clip = if max_median > 0.0 {

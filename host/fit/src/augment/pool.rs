@@ -143,10 +143,7 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
     if usable.len() < MIN_VERTICES {
         return Pooled::default();
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
+    let median = |mut v: Vec<f64>| ellipso_model::stats::median(&mut v);
     let centre = median(usable.iter().map(|p| p.0).collect());
     let mad = median(usable.iter().map(|p| (p.0 - centre).abs()).collect());
     let s2 = median(usable.iter().map(|p| p.1 * p.1).collect());

@@ -59,8 +59,7 @@ fn fit(scene: &Scene, c: &SimulatedCapture) -> Vec<VertexFit> {
 
 fn median(mut v: Vec<f64>) -> f64 {
     assert!(!v.is_empty());
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    ellipso_model::stats::median(&mut v)
 }
 
 /// η of the vertices that report it (not withheld by the identifiability rule), with their

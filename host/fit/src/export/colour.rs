@@ -1,5 +1,6 @@
-//! Display ranges and sRGB encoding for the fit's pictures (the colour maps, frames and colour
-//! bars are `ellipso_report`'s).
+//! Display ranges for the fit's pictures (the colour maps, frames and colour bars are
+//! `ellipso_report`'s; the sRGB encoder is the model's [`ellipso_model::colour::srgb_u8`],
+//! re-exported here as [`srgb`]).
 //!
 //! Contract: [`robust_range`] always returns a finite range with lo < hi; [`srgb`] takes any
 //! f64 (NaN included) and returns a valid 8-bit value.
@@ -71,32 +72,12 @@ impl MapRanges {
     }
 }
 
-/// sRGB encoding of a linear value in [0, 1] (IEC 61966-2-1).
-pub fn srgb(linear: f64) -> u8 {
-    let l = if linear.is_finite() {
-        linear.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let s = if l <= 0.003_130_8 {
-        12.92 * l
-    } else {
-        1.055 * l.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
-}
+/// sRGB encoding of a linear value (IEC 61966-2-1): the model's one encoder.
+pub use ellipso_model::colour::srgb_u8 as srgb;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn srgb_is_total_and_monotone() {
-        assert_eq!(srgb(0.0), 0);
-        assert_eq!(srgb(1.0), 255);
-        assert_eq!(srgb(f64::NAN), 0);
-        assert!(srgb(0.2) < srgb(0.5) && srgb(0.5) < srgb(0.9));
-    }
 
     #[test]
     fn robust_range_survives_degenerate_input() {

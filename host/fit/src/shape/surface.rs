@@ -188,8 +188,7 @@ fn median_angle_deg(pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -
     if angles.is_empty() {
         return 0.0;
     }
-    angles.sort_by(f64::total_cmp);
-    angles[angles.len() / 2]
+    ellipso_model::stats::median(&mut angles)
 }
 
 /// Whether the hull touches the surface at `p` (refined normal `n`): `p` lies on the hull's

@@ -199,12 +199,12 @@ impl<T> Scratch<T> {
     }
 }
 
+/// The shared median of an owned vector, 0 when empty (a scale that then stays at its floor).
 fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
+    ellipso_model::stats::median(&mut v)
 }
 
 impl<'a> Problem<'a> {

@@ -340,8 +340,7 @@ pub fn calibrate(
             .map(|(p, c)| (c / p.points.len() as f64).sqrt())
             .collect();
         let view_rms = rms.clone();
-        rms.sort_by(f64::total_cmp);
-        let median = rms[rms.len() / 2];
+        let median = ellipso_model::stats::median(&mut rms);
         let threshold = (config.outlier_factor * median).max(config.outlier_floor_px);
         let outliers: Vec<usize> = (0..kept.len())
             .filter(|&i| view_rms[i] > threshold)

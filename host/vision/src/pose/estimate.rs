@@ -207,8 +207,7 @@ fn outlier_tag(
         .map(|(t, (s, n))| (t, (s / n as f64).sqrt()))
         .collect();
     let mut sorted: Vec<f64> = rms.iter().map(|r| r.1).collect();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted[sorted.len() / 2];
+    let median = ellipso_model::stats::median(&mut sorted);
     rms.sort_by(|a, b| b.1.total_cmp(&a.1));
     let (tag, worst) = rms[0];
     (worst > config.max_rms_px && worst > config.tag_outlier_factor * median)

@@ -140,15 +140,11 @@ pub fn random_pose(rng: &mut ChaCha8Rng, near_fronto: bool) -> Pose {
     )
 }
 
-/// Rotation error (deg) and translation error (mm) of an estimate.
+/// Rotation error (deg) and translation error (mm) of an estimate: the model's one
+/// [`ellipso_model::geometry::pose_error`], as the tuple the tests destructure.
 pub fn pose_error(estimate: &Pose, truth: &Pose) -> (f64, f64) {
-    let rot_deg = estimate.rotation.angle_to(&truth.rotation).to_degrees();
-    let trans_mm = (estimate.translation.vector - truth.translation.vector).norm() * 1e3;
-    (rot_deg, trans_mm)
+    let e = ellipso_model::geometry::pose_error(estimate, truth);
+    (e.rotation_deg, e.translation_mm)
 }
 
-/// Median of a non-empty slice (sorts it).
-pub fn median(values: &mut [f64]) -> f64 {
-    values.sort_by(f64::total_cmp);
-    values[values.len() / 2]
-}
+pub use ellipso_model::stats::median;

@@ -1,6 +1,6 @@
 //! Geometry for the simulator: rays, hits, bounding boxes, a binned-SAH BVH, triangle meshes
 //! (PLY / OBJ loading, procedural assets), analytic shapes, per-object affine transforms and the
-//! similarity between two reconstructions of the same cameras.
+//! similarity between two reconstructions of the same cameras, and the error between two poses.
 //!
 //! Contract:
 //! - All geometry is `f64`. Lengths are metres wherever a scene supplies them.
@@ -18,6 +18,7 @@ pub mod bvh;
 pub mod mesh;
 pub mod obj;
 pub mod ply;
+pub mod pose_error;
 pub mod procedural;
 pub mod shapes;
 pub mod similarity;
@@ -28,6 +29,7 @@ use nalgebra::{Point3, Unit, Vector3};
 pub use aabb::Aabb;
 pub use bvh::Bvh;
 pub use mesh::{MeshError, TriangleMesh};
+pub use pose_error::{PoseError, pose_error};
 pub use shapes::{Plane, Sphere};
 pub use transform::ObjectTransform;
 

@@ -296,16 +296,10 @@ pub fn apply_to_pose(
 /// The residual of one pair under `sim` (flags left false).
 fn residual(sim: &Similarity3<f64>, pair: &PosePair) -> PoseResidual {
     let aligned = apply_to_pose(sim, &pair.source_from_camera);
-    let position_mm =
-        (aligned.translation.vector - pair.target_from_camera.translation.vector).norm() * 1e3;
-    let rotation_deg = pair
-        .target_from_camera
-        .rotation
-        .angle_to(&aligned.rotation)
-        .to_degrees();
+    let e = super::pose_error(&aligned, &pair.target_from_camera);
     PoseResidual {
-        position_mm,
-        rotation_deg,
+        position_mm: e.translation_mm,
+        rotation_deg: e.rotation_deg,
         inlier: false,
     }
 }
