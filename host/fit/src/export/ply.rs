@@ -15,11 +15,15 @@
 //! property and show the object in its colours. Faces: `uchar`-counted `int` lists, so
 //! `fit.ply` also loads as a plain mesh. [`read_fit_ply`] reads back what [`write_fit_ply`]
 //! wrote, by property name (older files with `float` positions and `uint` flags too).
+//!
+//! This module is the fit's schema only: the bytes are written by the model's one PLY writer
+//! (`ellipso_model::geometry::ply::write_table`) and read by its one reader
+//! (`read_vertex_table`).
 
 use std::path::Path;
 
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::geometry::ply::read_vertex_table;
+use ellipso_model::geometry::ply::{PlyColumn, PlyFormat, read_vertex_table, write_table};
 use nalgebra::Point3;
 
 use crate::data::{FitFlag, Identifiable, VertexFit};
@@ -82,38 +86,8 @@ pub fn params_of(f: &VertexFit) -> [f64; 10] {
     ]
 }
 
-/// The PLY scalar types `fit.ply` uses.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PlyType {
-    /// `float` (f32).
-    Float,
-    /// `double` (f64).
-    Double,
-    /// `int` (i32; Open3D drops unsigned properties).
-    Int,
-    /// `uchar` (u8).
-    Uchar,
-}
-
-impl PlyType {
-    fn name(self) -> &'static str {
-        match self {
-            PlyType::Float => "float",
-            PlyType::Double => "double",
-            PlyType::Int => "int",
-            PlyType::Uchar => "uchar",
-        }
-    }
-
-    fn put(self, v: f64, out: &mut Vec<u8>) {
-        match self {
-            PlyType::Float => out.extend((v as f32).to_le_bytes()),
-            PlyType::Double => out.extend(v.to_le_bytes()),
-            PlyType::Int => out.extend((v as i32).to_le_bytes()),
-            PlyType::Uchar => out.push(v.clamp(0.0, 255.0) as u8),
-        }
-    }
-}
+/// The PLY scalar types `fit.ply` uses: the model's PLY module's.
+pub use ellipso_model::geometry::ply::PlyScalar as PlyType;
 
 /// What one vertex row is computed from.
 pub struct Row<'a> {
@@ -205,37 +179,32 @@ pub fn write_fit_ply(path: &Path, mesh: &TriangleMesh, fits: &[VertexFit]) -> Re
         return Err(PlyError::Count(fits.len(), n));
     }
     let schema = schema();
-    let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment ellipso fit: per-vertex polarimetric SVBRDF\nelement vertex {n}\n"
+    let columns: Vec<PlyColumn> = schema
+        .iter()
+        .map(|p| PlyColumn::new(p.name.clone(), p.ty))
+        .collect();
+    let bytes = write_table(
+        PlyFormat::BinaryLittleEndian,
+        "ellipso fit: per-vertex polarimetric SVBRDF",
+        &columns,
+        n,
+        |v, values| {
+            let f = &fits[v];
+            let mask = f.output_mask();
+            let identifiable = Identifiable::of_mask(mask);
+            let row = Row {
+                position: mesh.positions()[v],
+                fit: f,
+                mask,
+                identifiable,
+                std_error: identifiable.std_error(&f.std_error),
+            };
+            for (value, prop) in values.iter_mut().zip(&schema) {
+                *value = (prop.value)(&row);
+            }
+        },
+        mesh.triangles(),
     );
-    for p in &schema {
-        header += &format!("property {} {}\n", p.ty.name(), p.name);
-    }
-    header += &format!(
-        "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        mesh.triangles().len()
-    );
-    let mut bytes = header.into_bytes();
-    for (p, f) in mesh.positions().iter().zip(fits) {
-        let mask = f.output_mask();
-        let identifiable = Identifiable::of_mask(mask);
-        let row = Row {
-            position: *p,
-            fit: f,
-            mask,
-            identifiable,
-            std_error: identifiable.std_error(&f.std_error),
-        };
-        for prop in &schema {
-            prop.ty.put((prop.value)(&row), &mut bytes);
-        }
-    }
-    for t in mesh.triangles() {
-        bytes.push(3);
-        for &i in t {
-            bytes.extend((i as i32).to_le_bytes());
-        }
-    }
     ellipso_report::atomic_file::write(path, bytes).map_err(|source| PlyError::Io {
         path: path.display().to_string(),
         source,
@@ -322,15 +291,14 @@ mod tests {
     use ellipso_model::optics::pbrdf::PbrdfParams;
     use nalgebra::Point3;
 
-    #[test]
-    fn round_trip_and_loads_as_a_plain_mesh() {
-        let (dirs, faces) = icosphere(1);
+    fn fixture(subdivisions: u32) -> (TriangleMesh, Vec<VertexFit>) {
+        let (dirs, faces) = icosphere(subdivisions);
         let pos: Vec<_> = dirs
             .iter()
             .map(|d| Point3::from(d.into_inner() * 0.05))
             .collect();
         let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
-        let fits: Vec<VertexFit> = (0..mesh.positions().len())
+        let mut fits: Vec<VertexFit> = (0..mesh.positions().len())
             .map(|v| VertexFit {
                 vertex: v as u32,
                 params: PbrdfParams {
@@ -339,7 +307,7 @@ mod tests {
                     sigma_ss: 0.3,
                     rho_s: 0.5,
                     rho_ss: [0.1, 0.2, 0.3],
-                    rho_d: [0.4, 0.5, 0.6],
+                    rho_d: [0.4, 0.5 - 0.03 * v as f64, 0.06],
                 },
                 normal_world: mesh.normals()[v].into_inner().into(),
                 std_error: [0.01; 10].map(|x| if v == 3 { f64::INFINITY } else { x }),
@@ -352,11 +320,31 @@ mod tests {
                     4 => vec![FitFlag::AlbedoAtCap],
                     _ => vec![],
                 },
-                eta_unpooled: None,
+                eta_unpooled: (v == 6).then_some([1.52, 0.04]),
             })
             .collect();
-        let mut fits = fits;
         fits[5].normal_std_error_deg = 500.0;
+        (mesh, fits)
+    }
+
+    /// The bytes of a small `fit.ply` as the fit's own writer wrote them before `fit.ply`
+    /// became a schema over the model's PLY writer (captured at commit f22c554).
+    #[test]
+    fn fit_ply_bytes_are_those_the_previous_writer_wrote() {
+        let (mesh, fits) = fixture(0);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fit.ply");
+        write_fit_ply(&path, &mesh, &fits).unwrap();
+        let got = std::fs::read(&path).unwrap();
+        assert!(
+            got == include_bytes!("testdata/fit_small.ply"),
+            "fit.ply bytes changed"
+        );
+    }
+
+    #[test]
+    fn round_trip_and_loads_as_a_plain_mesh() {
+        let (mesh, fits) = fixture(1);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("fit.ply");
         write_fit_ply(&path, &mesh, &fits).unwrap();

@@ -1,4 +1,8 @@
-//! PLY reading (ascii, binary little- and big-endian) and writing (ascii, binary little-endian).
+//! PLY reading (ascii, binary little- and big-endian) and writing (ascii, binary little-endian):
+//! ellipso's one PLY module. Its schemas: the mesh (`x y z [nx ny nz] [region]` + faces; read by
+//! [`parse_ply`], written by [`write_ply`]) here, and the fit's `fit.ply` and the Mitsuba split
+//! mesh in `ellipso-fit`, which write through [`write_table`] and read through
+//! [`read_vertex_table`]. The writer's contract is in [`write`].
 //!
 //! Read contract: the `vertex` element must have `x y z`; `nx ny nz` are used when all three are
 //! present; the first of the properties `region`, `region_id`, `material`, `material_index`,
@@ -9,7 +13,10 @@
 
 use super::{MeshError, TriangleMesh};
 use nalgebra::{Point3, Vector3};
-use std::fmt::Write as _;
+
+pub mod write;
+
+pub use write::{PlyColumn, PlyFormat, PlyScalar, write_ply, write_table};
 
 /// Names accepted for the per-vertex region id property, in priority order.
 pub const REGION_PROPERTY_NAMES: [&str; 5] = [
@@ -413,77 +420,6 @@ pub fn read_vertex_table(bytes: &[u8]) -> Result<VertexTable, MeshError> {
         }
     }
     Err(err("file has no `vertex` element"))
-}
-
-/// PLY body encodings this module writes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PlyFormat {
-    /// Human-readable text.
-    Ascii,
-    /// Binary little-endian.
-    BinaryLittleEndian,
-}
-
-/// Writes a mesh as PLY: `x y z nx ny nz` as `float` (`f32`) or `double`, the region id as
-/// `uint region` when present, faces as `uchar`-counted `int` lists.
-pub fn write_ply(mesh: &TriangleMesh, format: PlyFormat, double: bool) -> Vec<u8> {
-    let ty = if double { "double" } else { "float" };
-    let mut h = String::from("ply\n");
-    let _ = writeln!(
-        h,
-        "format {} 1.0",
-        if format == PlyFormat::Ascii {
-            "ascii"
-        } else {
-            "binary_little_endian"
-        }
-    );
-    let _ = writeln!(h, "comment written by ellipso-sim");
-    let _ = writeln!(h, "element vertex {}", mesh.positions().len());
-    for p in ["x", "y", "z", "nx", "ny", "nz"] {
-        let _ = writeln!(h, "property {ty} {p}");
-    }
-    if mesh.regions().is_some() {
-        let _ = writeln!(h, "property uint region");
-    }
-    let _ = writeln!(h, "element face {}", mesh.triangles().len());
-    let _ = writeln!(h, "property list uchar int vertex_indices\nend_header");
-    let mut out = h.into_bytes();
-    let put = |out: &mut Vec<u8>, v: f64| {
-        if format == PlyFormat::Ascii {
-            out.extend_from_slice(format!("{v} ").as_bytes());
-        } else if double {
-            out.extend_from_slice(&v.to_le_bytes());
-        } else {
-            out.extend_from_slice(&(v as f32).to_le_bytes());
-        }
-    };
-    for (i, (p, n)) in mesh.positions().iter().zip(mesh.normals()).enumerate() {
-        for v in p.coords.iter().chain(n.iter()) {
-            put(&mut out, *v);
-        }
-        if let Some(r) = &mesh.regions() {
-            if format == PlyFormat::Ascii {
-                out.extend_from_slice(r[i].to_string().as_bytes());
-            } else {
-                out.extend_from_slice(&r[i].to_le_bytes());
-            }
-        }
-        if format == PlyFormat::Ascii {
-            out.push(b'\n');
-        }
-    }
-    for t in mesh.triangles() {
-        if format == PlyFormat::Ascii {
-            out.extend_from_slice(format!("3 {} {} {}\n", t[0], t[1], t[2]).as_bytes());
-        } else {
-            out.push(3);
-            for i in t {
-                out.extend_from_slice(&(*i as i32).to_le_bytes());
-            }
-        }
-    }
-    out
 }
 
 #[cfg(test)]

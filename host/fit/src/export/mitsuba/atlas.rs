@@ -14,7 +14,11 @@
 //! and the scalar properties `eta_0` and `alpha_0`, which Mitsuba's loader exposes as the mesh
 //! attributes `vertex_eta` and `vertex_alpha` (a bare `eta`, or a name starting with a
 //! postfix letter such as `sigma_s`, is dropped by it with a warning). `v` is measured from the
-//! top row of the bitmap, as Mitsuba's bitmap texture reads it.
+//! top row of the bitmap, as Mitsuba's bitmap texture reads it. The bytes are written by the
+//! model's one PLY writer (`ellipso_model::geometry::ply::write_table`); this module owns the
+//! schema.
+
+use ellipso_model::geometry::ply::{PlyColumn, PlyFormat, PlyScalar, write_table};
 
 /// A mesh with its vertices split per face (vertex `3f + k` is corner `k` of face `f`).
 pub struct SplitMesh {
@@ -120,37 +124,33 @@ pub fn bake(faces: &[[u32; 3]], values: &[[f32; 3]]) -> Atlas {
 impl SplitMesh {
     /// The PLY file of the split mesh (module doc).
     pub fn ply_bytes(&self) -> Vec<u8> {
-        let n = self.positions.len();
-        let mut header = String::from("ply\nformat binary_little_endian 1.0\n");
-        header.push_str("comment ellipso fit for Mitsuba 3: vertices split per face; eta_0 = relative refractive index, alpha_0 = GGX alpha; diffuse and specular albedo in the bitmaps\n");
-        header.push_str(&format!("element vertex {n}\n"));
-        for p in [
+        let names = [
             "x", "y", "z", "nx", "ny", "nz", "u", "v", "eta_0", "alpha_0",
-        ] {
-            header.push_str(&format!("property float {p}\n"));
-        }
-        header.push_str(&format!(
-            "element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-            n / 3
-        ));
-        let mut out = header.into_bytes();
-        for i in 0..n {
-            let values = self.positions[i]
-                .iter()
-                .chain(&self.normals[i])
-                .chain(&self.uv[i])
-                .chain([&self.eta[i], &self.alpha[i]]);
-            for v in values {
-                out.extend_from_slice(&v.to_le_bytes());
-            }
-        }
-        for f in 0..n / 3 {
-            out.push(3);
-            for k in 0..3 {
-                out.extend_from_slice(&((3 * f + k) as i32).to_le_bytes());
-            }
-        }
-        out
+        ];
+        let columns: Vec<PlyColumn> = names
+            .into_iter()
+            .map(|n| PlyColumn::new(n, PlyScalar::Float))
+            .collect();
+        let faces: Vec<[u32; 3]> = (0..self.positions.len() as u32 / 3)
+            .map(|f| [3 * f, 3 * f + 1, 3 * f + 2])
+            .collect();
+        write_table(
+            PlyFormat::BinaryLittleEndian,
+            "ellipso fit for Mitsuba 3: vertices split per face; eta_0 = relative refractive index, alpha_0 = GGX alpha; diffuse and specular albedo in the bitmaps",
+            &columns,
+            self.positions.len(),
+            |i, row| {
+                let values = self.positions[i]
+                    .iter()
+                    .chain(&self.normals[i])
+                    .chain(&self.uv[i])
+                    .chain([&self.eta[i], &self.alpha[i]]);
+                for (r, &v) in row.iter_mut().zip(values) {
+                    *r = f64::from(v);
+                }
+            },
+            &faces,
+        )
     }
 }
 
@@ -215,6 +215,39 @@ mod tests {
             }
             assert_eq!(mesh.eta[3 * f + 1], scalars[face[1] as usize]);
         }
+    }
+
+    fn fixture() -> SplitMesh {
+        let positions = [
+            [0.0, 0.0, 0.0],
+            [0.01, 0.0, 0.0],
+            [0.0, 0.02, 0.0],
+            [0.013, 0.017, 0.004],
+        ];
+        let normals = [
+            [0.0, 0.0, 1.0],
+            [0.0, 0.6, 0.8],
+            [0.6, 0.0, 0.8],
+            [0.36, 0.48, 0.8],
+        ];
+        split(
+            &positions,
+            &normals,
+            &[[0, 1, 2], [2, 1, 3]],
+            &[1.5, 1.45, 1.61, 1.333],
+            &[0.2, 0.05, 0.31, 0.125],
+        )
+    }
+
+    /// The bytes of a small split mesh as `ply_bytes` wrote them itself before it became a
+    /// schema over the model's PLY writer (captured at commit f22c554).
+    #[test]
+    fn ply_bytes_are_those_the_previous_writer_wrote() {
+        let got = fixture().ply_bytes();
+        assert!(
+            got == include_bytes!("../testdata/mitsuba_small.ply"),
+            "PLY bytes changed"
+        );
     }
 
     #[test]
