@@ -9,10 +9,12 @@
 //!   refused, from their tracked neighbours.
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere
 //!   highlights.
+//! - `lm`: the one Levenberg–Marquardt loop of pose refinement and the calibration bundle.
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 #![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
 pub mod calibrate;
+mod lm;
 pub mod pose;
 pub mod process;
 pub mod rig_file;

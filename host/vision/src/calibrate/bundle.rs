@@ -9,11 +9,15 @@
 //! cost the same per view as 3. S is Jacobi-scaled before its Cholesky solve because its diagonal
 //! spans ~14 orders of magnitude (fx² vs k3). Fixed parameters have their columns zeroed and
 //! unit diagonals, so their steps are exactly 0. At the solution, σ²·S⁻¹ (undamped) is the
-//! marginal covariance of the camera parameters.
+//! marginal covariance of the camera parameters. The loop (λ schedule from 1e-3, acceptance,
+//! stops) is the crate's one [`crate::lm::minimise`]; it stops once an accepted step lowers the
+//! cost by ≤ 1e-14 relatively. The damping is Marquardt's on U and on each Vᵢ, without the pose
+//! refinement's diagonal floor (a camera parameter without information is fixed instead).
 
 use ellipso_model::camera::{CAMERA_PARAM_COUNT, CameraModel, Pose};
 use nalgebra::{Matrix6, Point3, SMatrix, SVector, Vector2, Vector6};
 
+use crate::lm::{Schedule, Step, minimise};
 use crate::pose::refine::{apply_left_update, d_point_d_left_update};
 
 type CamMat = SMatrix<f64, CAMERA_PARAM_COUNT, CAMERA_PARAM_COUNT>;
@@ -154,59 +158,64 @@ pub fn bundle_adjust(
     free: &[bool; CAMERA_PARAM_COUNT],
     max_iterations: usize,
 ) -> Option<BundleResult> {
-    let mut cam = *camera;
-    let mut poses = poses.to_vec();
-    let mut ne = build(&cam, &poses, views, free)?;
-    let mut lambda = 1e-3;
-    let mut iterations = 0;
-    while iterations < max_iterations {
-        iterations += 1;
-        let step = schur(&ne, lambda, free)
-            .and_then(|(s, rhs, v_inv)| Some((solve_scaled(&s, &rhs)?, v_inv)));
-        let Some((d_cam, v_inv)) = step else {
-            lambda *= 10.0;
-            if lambda > 1e12 {
-                break;
-            }
-            continue;
-        };
-        let mut trial_params = cam.params();
-        for (p, d) in trial_params.iter_mut().zip(d_cam.iter()) {
-            *p += d;
-        }
-        let trial_cam = cam.with_params(&trial_params);
-        let trial_poses: Vec<Pose> = poses
-            .iter()
-            .enumerate()
-            .map(|(i, pose)| {
-                let d_pose = v_inv[i] * (-ne.g_p[i] - ne.w[i].transpose() * d_cam);
-                apply_left_update(pose, &d_pose)
-            })
-            .collect();
-        let trial = if trial_cam.validate().is_ok() {
-            build(&trial_cam, &trial_poses, views, free)
-        } else {
-            None
-        };
-        match trial {
-            Some(t) if t.cost <= ne.cost => {
-                let converged = ne.cost - t.cost <= 1e-14 * ne.cost.max(1e-300);
-                cam = trial_cam;
-                poses = trial_poses;
-                ne = t;
-                lambda = (lambda * 0.1).max(1e-12);
-                if converged {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    break;
-                }
-            }
-        }
+    /// The loop's state: camera, poses and their normal equations (with the cost).
+    struct State {
+        cam: CameraModel,
+        poses: Vec<Pose>,
+        ne: Normal,
     }
+    let schedule = Schedule {
+        initial_damping: 1e-3,
+        relative_cost_tolerance: 1e-14,
+        step_tolerance: 0.0,
+    };
+    let start = State {
+        cam: *camera,
+        poses: poses.to_vec(),
+        ne: build(camera, poses, views, free)?,
+    };
+    let (state, iterations) = minimise(
+        start,
+        |s: &State| s.ne.cost,
+        &schedule,
+        max_iterations,
+        |s, lambda| {
+            let ne = &s.ne;
+            let step = schur(ne, lambda, free)
+                .and_then(|(sc, rhs, v_inv)| Some((solve_scaled(&sc, &rhs)?, v_inv)));
+            let Some((d_cam, v_inv)) = step else {
+                return Step::Singular;
+            };
+            let mut trial_params = s.cam.params();
+            for (p, d) in trial_params.iter_mut().zip(d_cam.iter()) {
+                *p += d;
+            }
+            let trial_cam = s.cam.with_params(&trial_params);
+            let trial_poses: Vec<Pose> = s
+                .poses
+                .iter()
+                .enumerate()
+                .map(|(i, pose)| {
+                    let d_pose = v_inv[i] * (-ne.g_p[i] - ne.w[i].transpose() * d_cam);
+                    apply_left_update(pose, &d_pose)
+                })
+                .collect();
+            let trial = if trial_cam.validate().is_ok() {
+                build(&trial_cam, &trial_poses, views, free).map(|ne| State {
+                    cam: trial_cam,
+                    poses: trial_poses,
+                    ne,
+                })
+            } else {
+                None
+            };
+            Step::Tried {
+                trial,
+                step_norm: 0.0,
+            }
+        },
+    );
+    let State { cam, poses, ne } = state;
     let (schur_undamped, _, _) = schur(&ne, 0.0, free)?;
     Some(BundleResult {
         camera: cam,

@@ -8,11 +8,14 @@
 //!
 //! Parametrisation: the minimal 6-vector δ = (ω, υ) is a **left** perturbation in the camera
 //! frame, `camera_from_board ← (exp([ω]×), υ) · camera_from_board`, i.e. X_c ↦ exp([ω]×)·X_c + υ,
-//! so ∂X_c/∂δ = [−[X_c]× | I₃]. Damping is Marquardt's: (JᵀJ + λ·diag(JᵀJ)) δ = −Jᵀr.
-//! Converged when an accepted step lowers the cost by < 1e-10 relatively or ‖δ‖ < 1e-12
-//! (rad, m).
+//! so ∂X_c/∂δ = [−[X_c]× | I₃]. Damping is Marquardt's: (JᵀJ + λ·diag(JᵀJ)) δ = −Jᵀr, the
+//! diagonal floored at 1e-12. The loop (λ schedule, acceptance, stops) is the crate's one
+//! [`crate::lm::minimise`]; converged when an accepted step lowers the cost by ≤ 1e-10
+//! relatively or ‖δ‖ < 1e-12 (rad, m).
 
 use ellipso_model::camera::{CameraModel, Pose};
+
+use crate::lm::{Schedule, Step, minimise};
 use nalgebra::{
     Matrix2x3, Matrix3, Matrix6, Point3, SMatrix, Translation3, UnitQuaternion, Vector3, Vector6,
 };
@@ -24,8 +27,6 @@ const COST_TOLERANCE: f64 = 1e-10;
 const STEP_TOLERANCE: f64 = 1e-12;
 /// Initial Marquardt damping.
 const INITIAL_DAMPING: f64 = 1e-4;
-/// Damping above which no descent step exists at this precision: stop.
-const MAX_DAMPING: f64 = 1e12;
 
 /// Result of refining one pose.
 #[derive(Debug, Clone)]
@@ -120,48 +121,51 @@ pub fn refine_pose(
     pixels: &[[f64; 2]],
     max_iterations: usize,
 ) -> Option<RefinedPose> {
-    let mut pose = *initial;
-    let (mut jtj, mut jtr, mut cost) = normal_equations(camera, &pose, points_board, pixels)?;
-    let mut lambda = INITIAL_DAMPING;
-    let mut iterations = 0;
-    while iterations < max_iterations {
-        iterations += 1;
-        let mut damped = jtj;
-        for k in 0..6 {
-            // Marquardt scaling; the floor keeps a zero diagonal (no information) from making
-            // the damped system singular.
-            damped[(k, k)] += lambda * jtj[(k, k)].max(1e-12);
-        }
-        let Some(chol) = damped.cholesky() else {
-            lambda *= 10.0;
-            if lambda > MAX_DAMPING {
-                break;
-            }
-            continue;
-        };
-        let delta = -chol.solve(&jtr);
-        let trial = apply_left_update(&pose, &delta);
-        match normal_equations(camera, &trial, points_board, pixels) {
-            Some((jtj_t, jtr_t, cost_t)) if cost_t <= cost => {
-                let small_change = cost - cost_t <= COST_TOLERANCE * cost.max(1e-300);
-                let small_step = delta.norm() < STEP_TOLERANCE;
-                pose = trial;
-                jtj = jtj_t;
-                jtr = jtr_t;
-                cost = cost_t;
-                lambda = (lambda * 0.1).max(1e-12);
-                if small_change || small_step {
-                    break;
-                }
-            }
-            _ => {
-                lambda *= 10.0;
-                if lambda > MAX_DAMPING {
-                    break;
-                }
-            }
-        }
+    /// The loop's state: the pose with its normal equations and cost.
+    struct State {
+        pose: Pose,
+        jtj: Matrix6<f64>,
+        jtr: Vector6<f64>,
+        cost: f64,
     }
+    let at = |pose: Pose| {
+        normal_equations(camera, &pose, points_board, pixels).map(|(jtj, jtr, cost)| State {
+            pose,
+            jtj,
+            jtr,
+            cost,
+        })
+    };
+    let schedule = Schedule {
+        initial_damping: INITIAL_DAMPING,
+        relative_cost_tolerance: COST_TOLERANCE,
+        step_tolerance: STEP_TOLERANCE,
+    };
+    let (state, iterations) = minimise(
+        at(*initial)?,
+        |s: &State| s.cost,
+        &schedule,
+        max_iterations,
+        |s, lambda| {
+            let mut damped = s.jtj;
+            for k in 0..6 {
+                // Marquardt scaling; the floor keeps a zero diagonal (no information) from
+                // making the damped system singular.
+                damped[(k, k)] += lambda * s.jtj[(k, k)].max(1e-12);
+            }
+            let Some(chol) = damped.cholesky() else {
+                return Step::Singular;
+            };
+            let delta = -chol.solve(&s.jtr);
+            Step::Tried {
+                trial: at(apply_left_update(&s.pose, &delta)),
+                step_norm: delta.norm(),
+            }
+        },
+    );
+    let State {
+        pose, jtj, cost, ..
+    } = state;
     let residuals_px = points_board
         .iter()
         .zip(pixels)
