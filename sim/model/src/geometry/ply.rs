@@ -222,59 +222,49 @@ fn parse_header(bytes: &[u8]) -> Result<(Encoding, Vec<Element>, usize), MeshErr
     Ok((encoding, elements, body))
 }
 
-/// Parses a PLY file into a mesh.
-pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
+/// What a reader does with the body's elements ([`walk`]).
+trait Visit {
+    /// Called at the start of each element (before its rows); an error ends the walk.
+    fn start(&mut self, el: &Element) -> Result<(), MeshError>;
+    /// One row: `scalars[k]` is scalar property `k` (list positions hold 0) and `indices` the
+    /// values of the row's `vertex_indices` (or `vertex_index`) list, empty without one.
+    fn row(
+        &mut self,
+        el: &Element,
+        row: usize,
+        scalars: &[f64],
+        indices: &[f64],
+    ) -> Result<(), MeshError>;
+    /// Whether the walk ends after this element's rows.
+    fn done_after(&mut self, _el: &Element) -> bool {
+        false
+    }
+}
+
+/// The one body reader under both schemas: parses the header, then reads every element's rows
+/// in order (any encoding), handing them to `visit`. Truncated or malformed values are
+/// [`MeshError::Ply`] naming the element, row and property; elements without properties take
+/// no bytes and are skipped whatever their claimed count (a hostile count must not spin the
+/// row loop).
+fn walk(bytes: &[u8], visit: &mut impl Visit) -> Result<(), MeshError> {
     let (encoding, elements, start) = parse_header(bytes)?;
     let mut body = Body {
         bytes: &bytes[start..],
         pos: 0,
         encoding,
     };
-    let mut positions = Vec::new();
-    let mut normals: Option<Vec<Vector3<f64>>> = None;
-    let mut regions: Option<Vec<u32>> = None;
-    let mut triangles = Vec::new();
-    let mut saw_vertex = false;
-    let mut saw_face = false;
-    // A row needs at least one byte: cap preallocation by the body size against hostile counts.
-    let cap = |n: usize| n.min(bytes.len());
     for el in &elements {
-        let col = |name: &str| el.properties.iter().position(|p| p.name == name);
-        let (vx, vy, vz) = (col("x"), col("y"), col("z"));
-        let normal_cols = match (col("nx"), col("ny"), col("nz")) {
-            (Some(a), Some(b), Some(c)) => Some([a, b, c]),
-            _ => None,
-        };
-        let region_col = REGION_PROPERTY_NAMES.iter().find_map(|n| col(n));
-        let face_col = col("vertex_indices").or_else(|| col("vertex_index"));
-        let is_vertex = el.name == "vertex";
-        let is_face = el.name == "face";
-        if is_vertex {
-            saw_vertex = true;
-            if vx.is_none() || vy.is_none() || vz.is_none() {
-                return Err(err("element `vertex` lacks one of the properties x, y, z"));
-            }
-            positions.reserve(cap(el.count));
-            if normal_cols.is_some() {
-                normals = Some(Vec::with_capacity(cap(el.count)));
-            }
-            if region_col.is_some() {
-                regions = Some(Vec::with_capacity(cap(el.count)));
-            }
-        }
-        if is_face {
-            saw_face = true;
-            if face_col.is_none() {
-                return Err(err("element `face` lacks the list property vertex_indices"));
-            }
-        }
-        // An element without properties occupies no bytes: skip it whatever its claimed count
-        // (a hostile count must not spin the row loop).
+        visit.start(el)?;
         if el.properties.is_empty() {
             continue;
         }
+        let index_col = el
+            .properties
+            .iter()
+            .position(|p| p.name == "vertex_indices")
+            .or_else(|| el.properties.iter().position(|p| p.name == "vertex_index"));
         let mut scalars = vec![0.0; el.properties.len()];
-        let mut list: Vec<f64> = Vec::new();
+        let mut indices: Vec<f64> = Vec::new();
         for row in 0..el.count {
             for (k, p) in el.properties.iter().enumerate() {
                 let missing = || {
@@ -293,21 +283,95 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
                         let values: Result<Vec<f64>, _> = (0..n as usize)
                             .map(|_| body.read(p.value).ok_or_else(missing))
                             .collect();
-                        if Some(k) == face_col {
-                            list = values?;
+                        if Some(k) == index_col {
+                            indices = values?;
                         } else {
                             values?;
                         }
                     }
                 }
             }
-            if is_vertex {
-                let (x, y, z) = (vx.unwrap_or(0), vy.unwrap_or(0), vz.unwrap_or(0));
-                positions.push(Point3::new(scalars[x], scalars[y], scalars[z]));
-                if let (Some(n), Some([a, b, c])) = (normals.as_mut(), normal_cols) {
+            visit.row(el, row, &scalars, &indices)?;
+        }
+        if visit.done_after(el) {
+            return Ok(());
+        }
+    }
+    Ok(())
+}
+
+/// The mesh schema's reader state ([`parse_ply`]).
+#[derive(Default)]
+struct MeshReader {
+    /// Columns of the current element: x y z, the normal's, the region's.
+    xyz: [usize; 3],
+    normal_cols: Option<[usize; 3]>,
+    region_col: Option<usize>,
+    positions: Vec<Point3<f64>>,
+    normals: Option<Vec<Vector3<f64>>>,
+    regions: Option<Vec<u32>>,
+    triangles: Vec<[u32; 3]>,
+    saw_vertex: bool,
+    saw_face: bool,
+    /// The body's size: a row needs at least one byte, so preallocation is capped by it
+    /// against hostile counts.
+    body_len: usize,
+}
+
+impl Visit for MeshReader {
+    fn start(&mut self, el: &Element) -> Result<(), MeshError> {
+        let col = |name: &str| el.properties.iter().position(|p| p.name == name);
+        let cap = el.count.min(self.body_len);
+        match el.name.as_str() {
+            "vertex" => {
+                self.saw_vertex = true;
+                let (Some(x), Some(y), Some(z)) = (col("x"), col("y"), col("z")) else {
+                    return Err(err("element `vertex` lacks one of the properties x, y, z"));
+                };
+                self.xyz = [x, y, z];
+                self.normal_cols = match (col("nx"), col("ny"), col("nz")) {
+                    (Some(a), Some(b), Some(c)) => Some([a, b, c]),
+                    _ => None,
+                };
+                self.region_col = REGION_PROPERTY_NAMES.iter().find_map(|n| col(n));
+                self.positions.reserve(cap);
+                if self.normal_cols.is_some() {
+                    self.normals = Some(Vec::with_capacity(cap));
+                }
+                if self.region_col.is_some() {
+                    self.regions = Some(Vec::with_capacity(cap));
+                }
+            }
+            "face" => {
+                self.saw_face = true;
+                if col("vertex_indices")
+                    .or_else(|| col("vertex_index"))
+                    .is_none()
+                {
+                    return Err(err("element `face` lacks the list property vertex_indices"));
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn row(
+        &mut self,
+        el: &Element,
+        row: usize,
+        scalars: &[f64],
+        list: &[f64],
+    ) -> Result<(), MeshError> {
+        match el.name.as_str() {
+            "vertex" => {
+                let [x, y, z] = self.xyz;
+                self.positions
+                    .push(Point3::new(scalars[x], scalars[y], scalars[z]));
+                if let (Some(n), Some([a, b, c])) = (self.normals.as_mut(), self.normal_cols) {
                     n.push(Vector3::new(scalars[a], scalars[b], scalars[c]));
                 }
-                if let (Some(r), Some(c)) = (regions.as_mut(), region_col) {
+                if let (Some(r), Some(c)) = (self.regions.as_mut(), self.region_col) {
                     let v = scalars[c];
                     if !(v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f64) {
                         return Err(err(format!(
@@ -316,7 +380,8 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
                     }
                     r.push(v as u32);
                 }
-            } else if is_face {
+            }
+            "face" => {
                 if list.len() < 3 {
                     return Err(err(format!(
                         "face {row} has {} vertices (need ≥ 3)",
@@ -329,15 +394,32 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
                     )));
                 }
                 for i in 1..list.len() - 1 {
-                    triangles.push([list[0] as u32, list[i] as u32, list[i + 1] as u32]);
+                    self.triangles
+                        .push([list[0] as u32, list[i] as u32, list[i + 1] as u32]);
                 }
             }
+            _ => {}
         }
+        Ok(())
     }
-    if !saw_vertex || !saw_face {
+}
+
+/// Parses a PLY file into a mesh (the mesh schema, module doc).
+pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
+    let mut reader = MeshReader {
+        body_len: bytes.len(),
+        ..MeshReader::default()
+    };
+    walk(bytes, &mut reader)?;
+    if !reader.saw_vertex || !reader.saw_face {
         return Err(err("file needs both a `vertex` and a `face` element"));
     }
-    TriangleMesh::new(positions, normals, regions, triangles)
+    TriangleMesh::new(
+        reader.positions,
+        reader.normals,
+        reader.regions,
+        reader.triangles,
+    )
 }
 
 /// The scalar properties of a PLY file's `vertex` element, by name, as f64 (integers exact).
@@ -358,51 +440,13 @@ impl VertexTable {
     }
 }
 
-/// Reads every scalar property of the `vertex` element (any encoding), for files whose
-/// per-vertex properties carry more than geometry (the fit's `fit.ply`). Errors as
-/// [`parse_ply`].
-pub fn read_vertex_table(bytes: &[u8]) -> Result<VertexTable, MeshError> {
-    let (encoding, elements, start) = parse_header(bytes)?;
-    let mut body = Body {
-        bytes: &bytes[start..],
-        pos: 0,
-        encoding,
-    };
-    for el in &elements {
-        let is_vertex = el.name == "vertex";
-        let mut rows = Vec::new();
-        if el.properties.is_empty() {
-            continue;
-        }
-        for row in 0..el.count {
-            let mut values = Vec::new();
-            for p in &el.properties {
-                let missing = || {
-                    err(format!(
-                        "element `{}` row {row} property `{}`: missing or malformed value",
-                        el.name, p.name
-                    ))
-                };
-                match p.list_count {
-                    None => values.push(body.read(p.value).ok_or_else(missing)?),
-                    Some(count_ty) => {
-                        let n = body.read(count_ty).ok_or_else(missing)?;
-                        if n.is_nan() || n < 0.0 {
-                            return Err(missing());
-                        }
-                        for _ in 0..n as usize {
-                            body.read(p.value).ok_or_else(missing)?;
-                        }
-                    }
-                }
-            }
-            if is_vertex {
-                rows.push(values);
-            }
-        }
-        if is_vertex {
+/// The vertex table's reader state ([`read_vertex_table`]): the first `vertex` element with
+/// properties, once it starts.
+impl Visit for Option<VertexTable> {
+    fn start(&mut self, el: &Element) -> Result<(), MeshError> {
+        if el.name == "vertex" && !el.properties.is_empty() {
             let scalar = |p: &&Property| p.list_count.is_none();
-            return Ok(VertexTable {
+            *self = Some(VertexTable {
                 names: el
                     .properties
                     .iter()
@@ -415,138 +459,46 @@ pub fn read_vertex_table(bytes: &[u8]) -> Result<VertexTable, MeshError> {
                     .filter(scalar)
                     .map(|p| format!("{:?}", p.value).to_lowercase())
                     .collect(),
-                rows,
+                rows: Vec::new(),
             });
         }
-    }
-    Err(err("file has no `vertex` element"))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::geometry::procedural::bumpy_icosphere;
-
-    fn assert_same(a: &TriangleMesh, b: &TriangleMesh, tol: f64) {
-        assert_eq!(a.triangles(), b.triangles());
-        assert_eq!(a.regions(), b.regions());
-        for (p, q) in a.positions().iter().zip(b.positions()) {
-            assert!((p - q).norm() <= tol, "{p} vs {q} tol {tol}");
-        }
-        for (p, q) in a.normals().iter().zip(b.normals()) {
-            assert!((p.into_inner() - q.into_inner()).norm() <= tol * 10.0 + 1e-15);
-        }
+        Ok(())
     }
 
-    #[test]
-    fn round_trips_ascii_and_binary() {
-        let mesh = bumpy_icosphere(2, 0.1, 3, 5);
-        for (fmt, double, tol) in [
-            (PlyFormat::Ascii, true, 0.0),
-            (PlyFormat::BinaryLittleEndian, true, 0.0),
-            (PlyFormat::BinaryLittleEndian, false, 1e-6),
-        ] {
-            let back = parse_ply(&write_ply(&mesh, fmt, double)).expect("round trip parses");
-            assert_same(&mesh, &back, tol);
-        }
-    }
-
-    #[test]
-    fn reads_quads_extra_elements_and_big_endian() {
-        let text = "ply\nformat ascii 1.0\ncomment a quad\nelement vertex 4\nproperty float x\n\
-            property float y\nproperty float z\nproperty uchar material_index\nproperty float u\n\
-            element face 1\nproperty list uchar int vertex_index\nelement edge 1\n\
-            property int v1\nproperty int v2\nend_header\n\
-            0 0 0 0 0.1\n1 0 0 1 0.2\n1 1 0 1 0.3\n0 1 0 2 0.4\n4 0 1 2 3\n0 1\n";
-        let m = parse_ply(text.as_bytes()).expect("parses");
-        assert_eq!(m.triangles(), vec![[0, 1, 2], [0, 2, 3]]);
-        assert_eq!(m.regions(), Some(&[0, 1, 1, 2][..]));
-        assert!(
-            (m.normals()[0].z - 1.0).abs() < 1e-12,
-            "computed normal is +z"
+    fn row(
+        &mut self,
+        el: &Element,
+        _row: usize,
+        scalars: &[f64],
+        _list: &[f64],
+    ) -> Result<(), MeshError> {
+        let Some(table) = self.as_mut().filter(|_| el.name == "vertex") else {
+            return Ok(());
+        };
+        table.rows.push(
+            el.properties
+                .iter()
+                .zip(scalars)
+                .filter(|(p, _)| p.list_count.is_none())
+                .map(|(_, &v)| v)
+                .collect(),
         );
-
-        let mut be = b"ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty double x\n\
-            property double y\nproperty double z\nelement face 1\n\
-            property list uchar uint vertex_indices\nend_header\n"
-            .to_vec();
-        for v in [0.0f64, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 3.0, 0.0] {
-            be.extend_from_slice(&v.to_be_bytes());
-        }
-        be.push(3);
-        for i in [0u32, 1, 2] {
-            be.extend_from_slice(&i.to_be_bytes());
-        }
-        let m = parse_ply(&be).expect("big endian parses");
-        assert_eq!(m.positions()[2], Point3::new(0.0, 3.0, 0.0));
+        Ok(())
     }
 
-    #[test]
-    fn malformed_files_name_the_problem() {
-        let cases: [(&[u8], &str); 6] = [
-            (b"obj\n", "end_header"),
-            (
-                b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n",
-                "x, y, z",
-            ),
-            (
-                b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
-                  property float z\nelement face 0\nproperty list uchar int vertex_indices\n\
-                  end_header\n0 0 0\n1 1\n",
-                "row 1 property `z`",
-            ),
-            (b"ply\nformat ebcdic 1.0\nend_header\n", "unknown format"),
-            (
-                b"ply\nformat ascii 1.0\nelement junk 18446744073709551615\nend_header\n",
-                "both a `vertex` and a `face`",
-            ),
-            (
-                b"ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\n\
-                  property float y\nproperty float z\nelement face 1\n\
-                  property list uchar int vertex_indices\nend_header\n\x00\x00",
-                "row 0 property `x`",
-            ),
-        ];
-        for (bytes, needle) in cases {
-            let e = parse_ply(bytes).expect_err("must fail").to_string();
-            assert!(e.contains(needle), "`{e}` should mention `{needle}`");
-        }
+    fn done_after(&mut self, el: &Element) -> bool {
+        el.name == "vertex"
     }
+}
+
+/// Reads every scalar property of the `vertex` element (any encoding), for files whose
+/// per-vertex properties carry more than geometry (the fit's `fit.ply`); the elements after it
+/// are not read. Errors as [`parse_ply`].
+pub fn read_vertex_table(bytes: &[u8]) -> Result<VertexTable, MeshError> {
+    let mut table: Option<VertexTable> = None;
+    walk(bytes, &mut table)?;
+    table.ok_or_else(|| err("file has no `vertex` element"))
 }
 
 #[cfg(test)]
-mod robustness {
-    use super::*;
-    use crate::geometry::procedural::bumpy_icosphere;
-    use proptest::prelude::*;
-
-    proptest! {
-        #![proptest_config(ProptestConfig::with_cases(64))]
-
-        /// Corrupted or truncated PLY bytes give an error or a valid mesh, never a panic.
-        #[test]
-        fn corrupted_ply_never_panics(
-            cut in 0usize..4000,
-            flips in proptest::collection::vec((0usize..4000, any::<u8>()), 0..8),
-            ascii in any::<bool>(),
-        ) {
-            let mesh = bumpy_icosphere(1, 0.05, 2, 1);
-            let fmt = if ascii { PlyFormat::Ascii } else { PlyFormat::BinaryLittleEndian };
-            let mut bytes = write_ply(&mesh, fmt, false);
-            for (at, b) in flips {
-                let n = bytes.len();
-                bytes[at % n] = b;
-            }
-            bytes.truncate(cut.max(1).min(bytes.len()));
-            if let Ok(m) = parse_ply(&bytes) {
-                prop_assert!(m.triangles().iter().flatten().all(|&i| (i as usize) < m.positions().len()));
-            }
-        }
-
-        /// Arbitrary text never panics the OBJ reader.
-        #[test]
-        fn arbitrary_obj_never_panics(text in "(v( -?[0-9]{1,2}(\\.[0-9])?){3}\n|vn 0 0 1\n|f( -?[0-9]{1,2}(/[0-9]?(/[0-9])?)?){2,5}\n|usemtl [ab]\n|# x\n){0,30}") {
-            let _ = crate::geometry::obj::parse_obj(text.as_bytes());
-        }
-    }
-}
+mod tests;
