@@ -102,10 +102,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let (a, b) = (Vector3::from(a), Vector3::from(b));
-    // The cosine clamped into acos's domain; zero vectors give 90°.
-    let c = a.dot(&b) / (a.norm() * b.norm()).max(1e-300);
-    c.clamp(-1.0, 1.0).acos().to_degrees()
+    ellipso_model::geometry::angle_between_deg(&Vector3::from(a), &Vector3::from(b))
 }
 
 fn rho_d_error_pct(fit: &VertexFit, truth: &VertexTruth, colour: bool) -> f64 {

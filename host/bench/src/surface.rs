@@ -53,11 +53,7 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
 }
 
 fn angle_deg(a: Vector3<f64>, b: Vector3<f64>) -> f64 {
-    // cosine clamped into acos's domain; zero vectors give 90°
-    (a.dot(&b) / (a.norm() * b.norm()).max(1e-300))
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees()
+    ellipso_model::geometry::angle_between_deg(&a, &b)
 }
 
 /// Scores `mesh` (and the refined normals of `fits`, one per vertex in order, if given) against

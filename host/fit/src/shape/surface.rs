@@ -176,13 +176,7 @@ pub fn observed_vertices(set: &SampleSet, vertices: usize) -> Vec<bool> {
 /// Median of the angles between `a[i]` and `b[i]` where both exist, degrees (0 without any).
 fn median_angle_deg(pairs: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -> f64 {
     let mut angles: Vec<f64> = pairs
-        .map(|(a, b)| {
-            // clamp: rounding can put |cos| a hair above 1
-            (a.dot(&b) / (a.norm() * b.norm()).max(1e-300))
-                .clamp(-1.0, 1.0)
-                .acos()
-                .to_degrees()
-        })
+        .map(|(a, b)| ellipso_model::geometry::angle_between_deg(&a, &b))
         .filter(|x| x.is_finite())
         .collect();
     if angles.is_empty() {

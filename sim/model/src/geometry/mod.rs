@@ -29,7 +29,7 @@ use nalgebra::{Point3, Unit, Vector3};
 pub use aabb::Aabb;
 pub use bvh::Bvh;
 pub use mesh::{MeshError, TriangleMesh};
-pub use pose_error::{PoseError, pose_error};
+pub use pose_error::{PoseError, angle_between_deg, pose_error};
 pub use shapes::{Plane, Sphere};
 pub use transform::ObjectTransform;
 
