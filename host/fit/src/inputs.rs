@@ -236,8 +236,7 @@ pub fn check_mesh(
         .map(|(_, w)| (w.translation.vector - centre.coords).norm())
         .collect();
     if !distances.is_empty() {
-        distances.sort_by(f64::total_cmp);
-        let d = distances[distances.len() / 2].max(f64::MIN_POSITIVE);
+        let d = ellipso_model::stats::median(&mut distances).max(f64::MIN_POSITIVE);
         let px = camera.intrinsics.fx * extent_m / d;
         if px < MESH_MIN_PX {
             return bad(format!(

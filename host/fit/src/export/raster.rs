@@ -9,6 +9,12 @@
 //!   deterministic) and returns, per pixel, the hit triangle's vertex indices and barycentric
 //!   weights, the world point and the camera-frame depth, or `None` for background.
 //! - Values are interpolated with [`Hit::interpolate`]; normals are renormalised by the caller.
+//!
+//! The ray–mesh intersection is the model's one (`TriangleMesh`'s BVH and Möller–Trumbore, as
+//! the renderer's). The pixel rays stay this module's own: an ideal pinhole with the pixel
+//! centre at `x + ½` about the image middle, where the camera model's `unproject_to_ray` puts
+//! pixel centres on integers (`cx = w/2 − ½`) and undistorts; the same ray in that form rounds
+//! differently and would move the bytes of every picture and float map.
 
 use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
 use nalgebra::{Isometry3, Point3, Vector3};
