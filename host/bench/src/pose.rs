@@ -6,13 +6,11 @@
 //! Frames are rendered once and tracked with each detection image, so the comparison is on the
 //! same pixels. Writes `pose-bench.json` and prints a table.
 //!
-//! `ellipso bench calibration` ([`calibration`]) checks the camera calibration the same way;
-//! `ellipso bench view` ([`view`]) measures what the live view costs a capture.
+//! `ellipso bench calibration` ([`crate::calibration`]) checks the camera calibration the same
+//! way on frames rendered by [`render_raw`]; `ellipso bench view` ([`crate::view_cost`])
+//! measures what the live view costs a capture.
 //! `--seed S` replaces the scene's seed: the poses of seeded capture paths (orbit phase, hand-held
 //! walk) and the sensor noise both change.
-
-pub mod calibration;
-pub mod view;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -22,44 +20,22 @@ use ellipso_sim::scene::Scene;
 use ellipso_sim::scene::error::Located;
 
 use ellipso_polar::frame::RawFrame;
+
+use crate::error::{RunError, Say, ensure, say};
 use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
 
-/// `ellipso bench` subcommands.
-#[derive(Debug, clap::Subcommand)]
-pub enum Args {
-    /// Pose accuracy and speed on rendered frames of a scene.
-    Pose(PoseArgs),
-    /// What accuracy costs in time: fit error against seconds on simulated captures with known
-    /// truth (photo count, solver effort, vertex count sweeps); writes docs/accuracy-vs-time.md.
-    Accuracy(super::bench_accuracy::AccuracyArgs),
-    /// The error budget of the whole chain: rendered frames, mosaic, tracked poses, carved mesh
-    /// and fit, then one stage at a time replaced by its truth; writes docs/error-budget.md.
-    Chain(super::bench_chain::ChainArgs),
-    /// Camera calibration accuracy on a rendered calibration capture.
-    Calibration(calibration::CalibrationArgs),
-    /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
-    /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
-    Mesh(super::bench_mesh::MeshArgs),
-    /// What the live view costs a simulated capture: the same capture without and with `--view`.
-    View(view::ViewArgs),
-}
-
-/// Arguments of `ellipso bench pose`.
-#[derive(Debug, clap::Args)]
-pub struct PoseArgs {
+/// What `ellipso bench pose` runs (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
+pub struct PoseOptions {
     /// Scene file.
     pub scene: PathBuf,
     /// Frames to render (spread over the capture path), ≥ 1.
-    #[arg(long, default_value_t = 20, value_parser = super::limits::count::<usize>)]
     pub frames: usize,
     /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
-    #[arg(long, value_parser = super::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
-    #[arg(long)]
     pub seed: Option<u64>,
     /// Where to write pose-bench.json.
-    #[arg(long, default_value = ".")]
     pub out: PathBuf,
 }
 
@@ -88,20 +64,8 @@ pub struct ImageResult {
     pub rejected: std::collections::BTreeMap<String, usize>,
 }
 
-/// Runs `ellipso bench`.
-pub fn run(args: Args) -> anyhow::Result<()> {
-    match args {
-        Args::Pose(a) => pose(a),
-        Args::Accuracy(a) => super::bench_accuracy::run(a),
-        Args::Calibration(a) => calibration::run(a),
-        Args::Chain(a) => super::bench_chain::run(a),
-        Args::Mesh(a) => super::bench_mesh::run(a),
-        Args::View(a) => view::run(a),
-    }
-}
-
 /// Loads a scene; with `seed`, recomputes its capture poses and noise seed from that seed.
-pub fn load_scene(path: &Path, seed: Option<u64>) -> anyhow::Result<Scene> {
+pub fn load_scene(path: &Path, seed: Option<u64>) -> Result<Scene, RunError> {
     let mut scene = Scene::load(path)?;
     if let Some(seed) = seed {
         let text =
@@ -126,14 +90,14 @@ pub fn renderer_and_boards<'s>(
     scene: &'s Scene,
     resolution: Option<[u32; 2]>,
     path: &std::path::Path,
-) -> anyhow::Result<(Renderer<'s>, Vec<TrackedBoard>)> {
+) -> Result<(Renderer<'s>, Vec<TrackedBoard>), RunError> {
     let options = RenderOptions {
         resolution_px: resolution,
         ..RenderOptions::default()
     };
     let renderer = Renderer::new(scene, options)?;
     let boards: Vec<TrackedBoard> = scene.boards.iter().map(TrackedBoard::from_placed).collect();
-    anyhow::ensure!(
+    ensure!(
         !boards.is_empty(),
         "{}: the scene has no AprilTag boards",
         path.display()
@@ -142,7 +106,7 @@ pub fn renderer_and_boards<'s>(
 }
 
 /// Pose `k` of the scene rendered as the camera delivers it.
-pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::Result<RawFrame> {
+pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> Result<RawFrame, RunError> {
     let f = renderer.render_frame(k)?;
     Ok(RawFrame::new(
         f.width,
@@ -153,7 +117,9 @@ pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::R
     )?)
 }
 
-fn pose(args: PoseArgs) -> anyhow::Result<()> {
+/// Runs `ellipso bench pose`: renders, tracks with each detection image, writes
+/// `pose-bench.json` and says the table.
+pub fn run(args: &PoseOptions, say: &dyn Say) -> Result<(), RunError> {
     let out = ellipso_report::output::OutputFile::claim(
         &args.out.join("pose-bench.json"),
         "bench-pose",
@@ -165,7 +131,8 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
     let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let camera = *renderer.camera();
     let indices = spread(scene.camera_poses.len(), Some(args.frames));
-    crate::outln!(
+    say!(
+        say,
         "rendering {} frames of {} at {}×{}, seed {}…",
         indices.len(),
         args.scene.display(),
@@ -218,12 +185,14 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             rejected,
         });
     }
-    crate::outln!(
+    say!(
+        say,
         "| image | posed | median rot (°) | p90 rot (°) | median trans (mm) | p90 trans (mm) | flipped | ms/frame |"
     );
-    crate::outln!("|---|---|---|---|---|---|---|---|");
+    say!(say, "|---|---|---|---|---|---|---|---|");
     for r in &results {
-        crate::outln!(
+        say!(
+            say,
             "| {:?} | {}/{} | {:.4} | {:.4} | {:.3} | {:.3} | {} | {:.1} |",
             r.image,
             r.posed,
@@ -236,11 +205,11 @@ fn pose(args: PoseArgs) -> anyhow::Result<()> {
             r.ms_per_frame
         );
         for (why, count) in &r.rejected {
-            crate::outln!("|   rejected: {why} ({count}) |||||||");
+            say!(say, "|   rejected: {why} ({count}) |||||||");
         }
     }
     out.write(serde_json::to_vec_pretty(&results)?)?;
     let path = out.shown();
-    crate::outln!("written {}", path.display());
+    say!(say, "written {}", path.display());
     Ok(())
 }

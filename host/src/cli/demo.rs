@@ -340,7 +340,7 @@ fn fit_and_score(
     });
     crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
     let scores =
-        super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
+        super::bench::mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
     // the carved and refined meshes against the truth, as the mesh bench scores them
     let (before, after) = (&scores.distance_before, &scores.distance_after);
     let summary = serde_json::json!({

@@ -109,6 +109,19 @@ pub fn relative_path(path: &std::path::Path, base: &std::path::Path) -> Option<s
     Some(out)
 }
 
+/// The library bodies' lines ([`ellipso_bench::error::Say`]) printed as [`outln!`] and
+/// [`errln!`] print them.
+pub struct Printed;
+
+impl ellipso_bench::error::Say for Printed {
+    fn out(&self, line: std::fmt::Arguments<'_>) {
+        crate::outln!("{line}");
+    }
+    fn err(&self, line: std::fmt::Arguments<'_>) {
+        crate::errln!("{line}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
