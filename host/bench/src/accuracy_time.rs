@@ -19,7 +19,8 @@ use ellipso_report::output::{FileFormat, OutputFile};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::error::{Context, RunError, Say, ensure, say};
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
 
 pub mod report;
 
@@ -358,7 +359,7 @@ fn one_run(
     // the fit and its scoring.
     let rss_reset = ellipso_report::memory::reset_peak_rss();
     let t = Instant::now();
-    let full = simulate(scene, case).map_err(|e| RunError::Other(e.into()))?;
+    let full = simulate(scene, case).map_err(|e| RunError::from_boxed(e.into()))?;
     let simulate_s = t.elapsed().as_secs_f64();
     // The held-out views are taken out before the fit sees anything.
     let (train, held) = ellipso_fit::holdout::split_set(&full.set, holdout);

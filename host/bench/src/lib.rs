@@ -20,14 +20,12 @@
 //! | [`pose`] | `ellipso bench pose`: pose accuracy and speed per detection image; the rendered frames of the other benches |
 //! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
-//! | [`error`] | the commands' error ([`error::RunError`]) and where their lines go ([`error::Say`]) |
 #![forbid(unsafe_code)]
 
 pub mod accuracy_time;
 pub mod calibration;
 pub mod capture;
 pub mod chain;
-pub mod error;
 pub mod ideal;
 pub mod pose;
 pub mod report;

@@ -21,7 +21,8 @@ use ellipso_sim::scene::error::Located;
 
 use ellipso_polar::frame::RawFrame;
 
-use crate::error::{RunError, Say, ensure, say};
+use ellipso_model::run_error::{RunError, Say};
+use ellipso_model::{ensure, say};
 use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
 
 /// What `ellipso bench pose` runs (its flags, parsed by the binary).

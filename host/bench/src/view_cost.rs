@@ -19,7 +19,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::error::{Context, RunError, Say, ensure, say};
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
 
 /// The command's result.
 type Result<T> = std::result::Result<T, RunError>;

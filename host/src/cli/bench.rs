@@ -39,7 +39,7 @@ pub enum Args {
 /// Runs `ellipso bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
-        Args::Pose(a) => Ok(ellipso_bench::pose::run(
+        Args::Pose(a) => ellipso_bench::pose::run(
             &PoseOptions {
                 scene: a.scene,
                 frames: a.frames,
@@ -48,8 +48,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 out: a.out,
             },
             &out::Printed,
-        )?),
-        Args::Accuracy(a) => Ok(ellipso_bench::accuracy_time::run(
+        )
+        .map_err(out::failed),
+        Args::Accuracy(a) => ellipso_bench::accuracy_time::run(
             AccuracyOptions {
                 scenes: a.scenes,
                 report: a.report,
@@ -62,8 +63,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 holdout: a.holdout,
             },
             &out::Printed,
-        )?),
-        Args::Calibration(a) => Ok(ellipso_bench::calibration::run(
+        )
+        .map_err(out::failed),
+        Args::Calibration(a) => ellipso_bench::calibration::run(
             &CalibrationOptions {
                 scene: a.scene,
                 frames: a.frames,
@@ -74,10 +76,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 out: a.out,
             },
             &out::Printed,
-        )?),
+        )
+        .map_err(out::failed),
         Args::Chain(a) => chain::run(a),
         Args::Mesh(a) => mesh::run(a),
-        Args::View(a) => Ok(ellipso_bench::view_cost::run(
+        Args::View(a) => ellipso_bench::view_cost::run(
             ViewOptions {
                 scene: a.scene,
                 photos: a.photos,
@@ -90,7 +93,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 children_cpu_s,
             },
             &out::Printed,
-        )?),
+        )
+        .map_err(out::failed),
     }
 }
 

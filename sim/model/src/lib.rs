@@ -11,6 +11,8 @@
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
 //!   pixel.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
+//! - [`run_error`]: the error of the library functions a subcommand calls (anyhow's chain of
+//!   contexts, as a typed error), and [`run_error::Say`], where their lines go.
 #![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
@@ -18,3 +20,4 @@ pub mod file_io;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;
+pub mod run_error;
