@@ -2,7 +2,7 @@
 //!
 //! Reads a raw IMX250MZR/MYR mosaic (grey PNG, TIFF — 8/16/32-bit or float — or `.npy`, as
 //! the camera delivered it; [`load`] settles its bit depth and layout), runs
-//! [`ellipso_polar::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
+//! [`crate::process`] and writes into DIR, per band (suffix `_r/_g/_b` for colour):
 //!
 //! | file | content | encoding |
 //! |---|---|---|
@@ -19,92 +19,63 @@
 //! top `height` rows are pixel-aligned with the demosaiced output. Masked pixels are the
 //! pictures' no-data grey in every false-colour image (DoLP and AoLP included). Errors name the file and what is wrong, in one line.
 
-mod load;
+pub mod load;
 mod render;
-mod stokes_exr;
+pub mod stokes_exr;
 mod summary;
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, anyhow};
+use ellipso_model::run_error::{Context, RunError, Say};
+
+/// The conversion's result.
+type Result<T> = std::result::Result<T, RunError>;
 use ellipso_model::mosaic::SensorLayout;
 
-use ellipso_polar::{
+use crate::{
     AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
     StokesBand, process,
 };
 use ellipso_report::{ColourMap, Key, Rgb};
 use render::MASKED;
 
-/// Sensor layout names on the command line.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum LayoutArg {
-    /// IMX250MZR: monochrome polarisation mosaic (2×2: 90 45 / 135 0).
-    Mono,
-    /// IMX250MYR: 2×2 polariser blocks under a Bayer RGGB colour pattern (4×4 tile).
-    Colour,
-}
-
-impl From<LayoutArg> for SensorLayout {
-    fn from(arg: LayoutArg) -> SensorLayout {
-        match arg {
-            LayoutArg::Mono => SensorLayout::MonoPolar,
-            LayoutArg::Colour => SensorLayout::ColourPolar,
-        }
-    }
-}
-
-/// Arguments of `ellipso polar`.
-#[derive(Debug, clap::Args)]
+/// What `ellipso polar` converts, and how (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
 pub struct Args {
     /// Raw mosaic frame exactly as the camera delivered it: grey PNG (8/16-bit), TIFF
     /// (8/16/32-bit unsigned, 32/64-bit float) or NumPy `.npy` (u1/u2/u4/f4/f8, 2-D).
     pub frame: PathBuf,
     /// Directory to write the images and summary.json into (created if missing).
-    #[arg(long)]
     pub out: PathBuf,
     /// Sensor mosaic layout [default: the session manifest's for a frame inside a session,
     /// else detected from the pixels; refused when unclear].
-    #[arg(long, value_enum)]
-    pub layout: Option<LayoutArg>,
+    pub layout: Option<SensorLayout>,
     /// Bits per sample the camera delivered [default: 8 for 8-bit containers, 12 for 16-bit
     /// ones, 16 for floats].
-    #[arg(long, value_parser = parse_bit_depth)]
     pub bit_depth: Option<u8>,
     /// Demosaic method: superpixel (half resolution, no interpolation; for measuring) or
     /// bilinear (full resolution; for viewing).
-    #[arg(long, value_enum, default_value = "superpixel")]
     pub demosaic: DemosaicMethod,
     /// Black level subtracted from every raw sample, in DN (0..=65535).
-    #[arg(long, default_value_t = 0.0, value_parser = crate::cli::limits::dn_level)]
     pub dark_level: f32,
     /// Raw samples at or above this DN are saturated [default: full scale of the bit depth].
-    #[arg(long)]
     pub saturation: Option<u16>,
     /// Pixels whose mean analyser intensity (s0/2, normalised to full scale) is below this are
     /// masked dark.
-    #[arg(long, default_value_t = ellipso_polar::DEFAULT_DARK_INTENSITY, value_parser = crate::cli::limits::unit_f32)]
     pub dark_intensity: f32,
     /// Mask pixels whose |I0 + I90 − I45 − I135| (normalised) exceeds this, in [0, 2] (off by
     /// default).
-    #[arg(long, value_parser = |s: &str| crate::cli::limits::real_in(s, 0.0_f32, 2.0))]
     pub max_residual: Option<f32>,
     /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
     /// aolp_rad, residual, i_d; mask as u8 bits).
-    #[arg(long)]
     pub npy: bool,
     /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
     /// 0°, 45°, 90°, 135° order); default: ideal analysers.
-    #[arg(long)]
     pub calibration: Option<PathBuf>,
-    /// Print `summary.json`'s object (with the files written) on one line instead of the text
-    /// report.
-    #[arg(long)]
-    pub json: bool,
 }
 
-/// Parses `--bit-depth`: one of the depths an IMX250 camera delivers.
-fn parse_bit_depth(text: &str) -> Result<u8, String> {
+/// Parses `--bit-depth` (the binary's value parser): one of the depths an IMX250 camera delivers.
+pub fn parse_bit_depth(text: &str) -> std::result::Result<u8, String> {
     text.parse::<u8>()
         .ok()
         .filter(|b| load::BIT_DEPTHS.contains(b))
@@ -121,43 +92,32 @@ pub struct Written {
     pub summary: serde_json::Value,
 }
 
-/// Runs `ellipso polar`.
-pub fn run(mut args: Args) -> anyhow::Result<()> {
+/// Runs `ellipso polar`: claims `args.out` (docs/reliability.md), writes every output into it
+/// and swaps it in whole; warnings go to `say`, the caller prints what was written.
+pub fn run(args: &Args, say: &dyn Say) -> Result<Written> {
     // the output directory is claimed first and written whole (docs/reliability.md)
     let mut inputs: Vec<&Path> = vec![&args.frame];
     inputs.extend(args.calibration.as_deref());
     let claimed = ellipso_report::output::OutputDir::claim(&args.out, "polar", &inputs)?;
-    let shown_out = std::mem::replace(&mut args.out, claimed.path().to_path_buf());
-    let written = write(&args)?;
+    let args = Args {
+        out: claimed.path().to_path_buf(),
+        ..args.clone()
+    };
+    let written = write(&args, say)?;
     claimed.commit()?;
-    if args.json {
-        crate::outln!(
-            "{}",
-            serde_json::json!({ "out": shown_out.display().to_string(), "summary": written.summary })
-        );
-        return Ok(());
-    }
-    crate::outln!("{}", written.headline);
-    for (file, what) in &written.files {
-        crate::outln!("  wrote {}  ({what})", shown_out.join(file).display());
-    }
-    Ok(())
+    Ok(written)
 }
 
 /// Processes the frame and writes every output into `args.out` without printing them (the
 /// demo lists the folder once, `run` claims the folder first).
-pub fn write(args: &Args) -> anyhow::Result<Written> {
+pub fn write(args: &Args, say: &dyn Say) -> Result<Written> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let name = args.frame.display().to_string();
-    let loaded = load::load_frame(
-        &args.frame,
-        args.layout.map(SensorLayout::from),
-        args.bit_depth,
-    )
-    .map_err(|msg| anyhow!("{name}: {msg}"))?;
+    let loaded = load::load_frame(&args.frame, args.layout, args.bit_depth)
+        .map_err(|msg| RunError::msg(format!("{name}: {msg}")))?;
     for w in &loaded.warnings {
-        crate::errln!("warning: {name}: {w}");
+        say.err(format_args!("warning: {name}: {w}"));
     }
     let calibration = match &args.calibration {
         None => None,
@@ -171,7 +131,8 @@ pub fn write(args: &Args) -> anyhow::Result<Written> {
         max_residual: args.max_residual,
         calibration,
     };
-    let image = process(&loaded.frame, &config).map_err(|e| anyhow!("{name}: {e}"))?;
+    let image =
+        process(&loaded.frame, &config).map_err(|e| RunError::msg(format!("{name}: {e}")))?;
 
     let mut files = Vec::new();
     let mut band_stats = Vec::new();
@@ -220,15 +181,15 @@ pub fn write(args: &Args) -> anyhow::Result<Written> {
 }
 
 /// Reads and checks an analyser calibration file; errors name the file.
-fn read_calibration(path: &Path) -> anyhow::Result<AnalyserCalibration> {
+fn read_calibration(path: &Path) -> Result<AnalyserCalibration> {
     let name = path.display();
     let text = ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)
-        .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+        .map_err(|e| RunError::msg(format!("{name}: cannot read: {e}")))?;
     let calibration: AnalyserCalibration = serde_json::from_str(&text)
-        .map_err(|e| anyhow!("{name}: not an analyser calibration: {e}"))?;
+        .map_err(|e| RunError::msg(format!("{name}: not an analyser calibration: {e}")))?;
     calibration
         .stokes_matrix()
-        .map_err(|e| anyhow!("{name}: {e}"))?;
+        .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
     Ok(calibration)
 }
 
@@ -240,7 +201,7 @@ fn write_band(
     band: &StokesBand,
     suffix: &str,
     files: &mut Vec<FileEntry>,
-) -> anyhow::Result<serde_json::Value> {
+) -> Result<serde_json::Value> {
     let (w, h) = (band.width(), band.height());
     let masks = band.mask.data();
     let out = &args.out;
@@ -402,7 +363,7 @@ fn write_npy(
     band: &StokesBand,
     suffix: &str,
     files: &mut Vec<FileEntry>,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let (w, h) = (band.width(), band.height());
     for (stem, plane, what) in [
         ("s0", &band.s0, "s0, f32"),
@@ -461,7 +422,7 @@ fn symmetric_range(values: &[f32], masks: &[PixelMask]) -> f32 {
     nth.max(1e-6)
 }
 
-fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> anyhow::Result<()> {
+fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> Result<()> {
     let (w, h) = (image.width(), image.height());
     let mut rgb = Vec::with_capacity(3 * w * h);
     for i in 0..w * h {
@@ -487,13 +448,13 @@ fn save_png<P>(
     buf: Option<image::ImageBuffer<P, Vec<P::Subpixel>>>,
     files: &mut Vec<FileEntry>,
     what: &str,
-) -> anyhow::Result<()>
+) -> Result<()>
 where
     P: image::PixelWithColorType,
     [P::Subpixel]: image::EncodableLayout,
 {
     let path = out.join(name);
-    let buf = buf.ok_or_else(|| anyhow!("internal: {name} buffer size"))?;
+    let buf = buf.ok_or_else(|| RunError::msg(format!("internal: {name} buffer size")))?;
     ellipso_report::atomic_file::write_png(&path, &buf)
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
@@ -508,7 +469,7 @@ fn save_gray16(
     data: Vec<u16>,
     files: &mut Vec<FileEntry>,
     what: &str,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data);
     save_png(out, name, buf, files, what)
 }
