@@ -9,11 +9,13 @@
 //!   refused, from their tracked neighbours.
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere
 //!   highlights.
+//! - [`replay`]: the replay report of a recorded session (`ellipso replay`).
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 
 pub mod calibrate;
 pub mod pose;
 pub mod process;
+pub mod replay;
 pub mod rig_file;
 pub mod short_pulse_poses;
 pub mod track;

@@ -1,29 +1,17 @@
-//! `ellipso replay DIR`: a recorded session through the same stages as a live capture.
-//!
-//! Prints what reading the session found (a crash leaves a truncated log, frames without
-//! metadata…), the capture's own figures (frames, flagged, pairings and pairing errors, link
-//! losses), then runs the stages after capture (pose tracking) and writes `replay.json` in
-//! `--out` (default: `DIR/replay`). Deterministic: replaying twice writes identical files.
+//! The replay report of a recorded session (`replay.json` of `ellipso replay DIR`; also said
+//! after `capture` and in the demo): what reading the session found (a crash leaves a truncated
+//! log, frames without metadata…), the capture's own figures (frames, flagged, pairings and
+//! pairing errors), and the stages after capture (pose tracking) run again.
+//! Deterministic: the same session gives the same report.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
-use anyhow::Context;
+use ellipso_model::run_error::RunError;
 
+use crate::process::{self, TrackedFrame};
+use crate::track::TrackConfig;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader;
-use ellipso_vision::process::{self, TrackedFrame};
-use ellipso_vision::track::TrackConfig;
-
-/// Arguments of `ellipso replay`.
-#[derive(Debug, clap::Args)]
-pub struct Args {
-    /// Session directory.
-    pub session: PathBuf,
-    /// Where to write the replay report (default: SESSION/replay).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-}
 
 /// The replay report (`replay.json`).
 #[derive(Debug, serde::Serialize)]
@@ -69,7 +57,7 @@ pub struct FrameLine {
 pub fn report(
     dir: &std::path::Path,
     tracked: Option<&[TrackedFrame]>,
-) -> anyhow::Result<ReplayReport> {
+) -> Result<ReplayReport, RunError> {
     let session = reader::open(dir)?;
     let mut pairing_errors = BTreeMap::new();
     let (mut pulses, mut paired) = (0, 0);
@@ -130,51 +118,4 @@ pub fn report(
         median_pose_rms_px: rms.get(rms.len() / 2).copied(),
         per_frame,
     })
-}
-
-/// Prints the human summary of a report.
-pub fn print_summary(r: &ReplayReport) {
-    crate::outln!("session      {}", r.session);
-    crate::outln!("read         {}", r.read);
-    crate::outln!("frames       {} ({} complete)", r.frames, r.complete);
-    crate::outln!("pulses       {}   paired {}", r.pulses, r.paired);
-    for (k, n) in &r.pairing_errors {
-        crate::outln!("  {k:<22} {n}");
-    }
-    match r.median_pose_rms_px {
-        Some(rms) => crate::outln!(
-            "poses        {} of {} frames (median reprojection {rms:.3} px)",
-            r.posed,
-            r.complete
-        ),
-        None => crate::outln!("poses        {} of {} frames", r.posed, r.complete),
-    }
-    for (k, n) in &r.pose_rejected {
-        crate::outln!("  rejected: {k} ({n})");
-    }
-}
-
-/// Runs `ellipso replay`.
-pub fn run(args: Args) -> anyhow::Result<()> {
-    // a path that is no session is said as such first (opening reads only its manifest and log)
-    ellipso_session::reader::open(&args.session)?;
-    // the session's own `replay/` by default (docs/session-format.md, "Derived outputs")
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| args.session.join("replay"));
-    let claimed = ellipso_report::output::OutputDir::claim_in_session(
-        &out,
-        "replay",
-        &[&args.session],
-        Some("replay"),
-    )?;
-    let r = report(&args.session, None)?;
-    print_summary(&r);
-    let path = claimed.path().join("replay.json");
-    ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
-        .with_context(|| format!("writing {}", claimed.published(&path).display()))?;
-    let published = claimed.commit()?;
-    crate::outln!("report       {}", published.join("replay.json").display());
-    Ok(())
 }

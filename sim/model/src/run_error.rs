@@ -137,8 +137,8 @@ macro_rules! ensure {
 }
 
 /// Where a subcommand's lines go: the binary prints them (stdout, stderr); the libraries never
-/// print themselves.
-pub trait Say {
+/// print themselves. `Sync`: parallel stages say lines too.
+pub trait Say: Sync {
     /// One line of the command's output (stdout), without its newline.
     fn out(&self, line: fmt::Arguments<'_>);
     /// One line of progress or warning (stderr), without its newline.

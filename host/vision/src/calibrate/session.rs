@@ -1,4 +1,4 @@
-//! `ellipso calibrate SESSION`: camera intrinsics and Brown–Conrady distortion from the board
+//! `ellipso calibrate SESSION` ([`run`]): camera intrinsics and Brown–Conrady distortion from the board
 //! frames of a recorded session (Zhang's closed form, then Levenberg–Marquardt over all frames).
 //!
 //! Tags are detected on every complete frame; each frame contributes the corners of the board
@@ -9,70 +9,47 @@
 //! With `--sphere R,X,Y,Z` (a glossy sphere of radius R m centred at (X, Y, Z) m in the world
 //! frame of the session's boards — the base board's frame when it sits at the world origin) it
 //! also finds the flash's specular highlight on the sphere in every calibrated frame
-//! ([`ellipso_vision::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
-//! position in the camera frame ([`ellipso_vision::calibrate::flash`]) and writes the `[flash]` section
+//! ([`crate::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
+//! position in the camera frame ([`crate::calibrate::flash`]) and writes the `[flash]` section
 //! below the camera section. Frames whose highlight is rejected are listed with the reason.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
 use ellipso_model::camera::CAMERA_PARAM_NAMES;
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
 use rayon::prelude::*;
 
+use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};
+use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
+use crate::calibrate::views::board_view;
+use crate::calibrate::{CalibConfig, calibrate};
+use crate::pose::DetectorConfig;
+use crate::track::{DetectImage, FamilyDetectors};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::reader;
 use ellipso_session::rig::layout_of;
-use ellipso_vision::calibrate::flash::{HighlightObservation, estimate_flash_position};
-use ellipso_vision::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
-use ellipso_vision::calibrate::views::board_view;
-use ellipso_vision::calibrate::{CalibConfig, calibrate};
-use ellipso_vision::pose::DetectorConfig;
-use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
-/// Arguments of `ellipso calibrate`.
-#[derive(Debug, clap::Args)]
+/// What `ellipso calibrate` runs (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
 pub struct Args {
     /// Session directory (frames of AprilTag boards).
     pub session: PathBuf,
     /// Where to write the `[camera]` section.
-    #[arg(long)]
     pub out: Option<PathBuf>,
     /// Detection image.
-    #[arg(long, value_enum, default_value_t = DetectImage::S0)]
     pub image: DetectImage,
     /// Also estimate k3 (needs corners out to the image corners).
-    #[arg(long)]
     pub free_k3: bool,
     /// Estimate the flash position from highlights on a glossy sphere: RADIUS,X,Y,Z in metres,
     /// the centre in the world frame of the session's boards.
-    #[arg(long, value_parser = parse_sphere, value_name = "R,X,Y,Z")]
     pub sphere: Option<Sphere>,
-}
-
-/// Parses `R,X,Y,Z` (metres) into a sphere.
-pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>().map_err(|e| format!("'{p}': {e}")))
-        .collect::<Result<_, _>>()?;
-    let [radius_m, x, y, z] = v[..] else {
-        return Err(format!("expected R,X,Y,Z (4 numbers), got {}", v.len()));
-    };
-    if !(radius_m.is_finite() && radius_m > 0.0 && [x, y, z].iter().all(|c| c.is_finite())) {
-        return Err(format!(
-            "radius {radius_m} must be positive and the centre finite"
-        ));
-    }
-    Ok(Sphere {
-        radius_m,
-        centre_m: nalgebra::Point3::new(x, y, z),
-    })
 }
 
 /// What the frames gave, in words: unreadable frames by reason, frames without a board's tag,
 /// frames with too few corners.
 fn frame_causes(
-    detected: &[Result<(ellipso_vision::calibrate::views::View, Option<usize>), String>],
+    detected: &[Result<(crate::calibrate::views::View, Option<usize>), String>],
 ) -> String {
     let mut unreadable: std::collections::BTreeMap<&str, usize> = Default::default();
     let (mut no_tags, mut few, mut good) = (0, 0, 0);
@@ -109,8 +86,9 @@ fn frame_causes(
     parts.join(", ")
 }
 
-/// Runs `ellipso calibrate`.
-pub fn run(args: Args) -> anyhow::Result<()> {
+/// Runs `ellipso calibrate`: claims the output, detects, calibrates, writes the rig sections;
+/// every line of the report goes to `say`.
+pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
     // claimed first: the session's own `calibration/` by default, never elsewhere inside it
     let out = args
         .out
@@ -125,44 +103,44 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
-    let boards = ellipso_vision::process::boards_of(&session)?;
+    let boards = crate::process::boards_of(&session)?;
     let layout = layout_of(&session.manifest)?;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
-    anyhow::ensure!(
+    ensure!(
         !frames.is_empty(),
         "{}: no complete frame to calibrate from ({} frames on disk, {} flagged incomplete)",
         args.session.display(),
         session.frames.len(),
         session.frames.iter().filter(|f| !f.complete).count()
     );
-    crate::outln!(
+    say!(
+        say,
         "detecting tags on {} frames ({:?} image)…",
         frames.len(),
         args.image
     );
     // per frame: its view, or why it has none (kept, so a failed calibration can say why)
-    let detected: Vec<Result<(ellipso_vision::calibrate::views::View, Option<usize>), String>> =
-        frames
-            .par_iter()
-            .map_init(
-                || FamilyDetectors::new(&boards, DetectorConfig::default()),
-                |detectors, entry| {
-                    let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
-                    let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
-                    let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
-                        .map_err(|e| format!("{}: {e}", entry.path.display()))?;
-                    board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
-                },
-            )
-            .collect();
+    let detected: Vec<Result<(crate::calibrate::views::View, Option<usize>), String>> = frames
+        .par_iter()
+        .map_init(
+            || FamilyDetectors::new(&boards, DetectorConfig::default()),
+            |detectors, entry| {
+                let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
+                let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
+                let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
+                    .map_err(|e| format!("{}: {e}", entry.path.display()))?;
+                board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
+            },
+        )
+        .collect();
     let views: Vec<_> = detected
         .iter()
         .map(|d| d.as_ref().map(|(v, _)| v.clone()).unwrap_or_default())
         .collect();
     let usable = views.iter().filter(|v| v.len() >= 8).count();
     let causes = frame_causes(&detected);
-    crate::outln!("{usable} frames with ≥ 2 tags of one board ({causes})");
+    say!(say, "{usable} frames with ≥ 2 tags of one board ({causes})");
     let config = CalibConfig {
         fix_k3: !args.free_k3,
         ..CalibConfig::default()
@@ -173,7 +151,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .into_iter()
         .map(|d| d.unwrap_or_default())
         .collect();
-    crate::outln!(
+    say!(
+        say,
         "reprojection RMS {:.4} px over {} views ({} rejected)",
         cal.rms_px,
         cal.views.len(),
@@ -182,19 +161,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let params = cal.camera.params();
     for (k, name) in CAMERA_PARAM_NAMES.iter().enumerate() {
         if cal.estimated[k] {
-            crate::outln!(
+            say!(
+                say,
                 "  {name:<3} = {:>14.6} ± {:.6}",
                 params[k],
                 cal.std_errors[k]
             );
         } else {
-            crate::outln!("  {name:<3} = {:>14.6}   (fixed)", params[k]);
+            say!(say, "  {name:<3} = {:>14.6}   (fixed)", params[k]);
         }
     }
     for r in &cal.rejected {
-        crate::outln!("  view {} rejected: {}", r.index, r.reason);
+        say!(say, "  view {} rejected: {}", r.index, r.reason);
     }
-    crate::outln!(
+    say!(
+        say,
         "views: board tilt spread {:.2}°, out of one plane {:.3}° (common direction {:.3?})",
         cal.spread.tilt_spread_deg,
         cal.spread.out_of_plane_deg,
@@ -235,7 +216,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         highlight_px: h.pixel,
                     }),
                     Err(why) => {
-                        crate::outln!("  frame {}: no highlight: {why}", entry.frame_id);
+                        say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
                         None
                     }
                 }
@@ -245,7 +226,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .context("estimating the flash position")?;
         let p = flash.flash_camera_m.coords * 1e3;
         let sd = flash.std_m.map(|v| v * 1e3);
-        crate::outln!(
+        say!(
+            say,
             "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
             p.x,
             sd[0],
@@ -260,6 +242,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         text.push_str(&flash.to_toml_flash_section());
     }
     out.write(text)?;
-    crate::outln!("rig sections written to {}", out.shown().display());
+    say!(say, "rig sections written to {}", out.shown().display());
     Ok(())
 }
