@@ -19,6 +19,7 @@
 //! | [`accuracy_time`] | `ellipso bench accuracy`: fit error against seconds on simulated captures, and its report |
 //! | [`pose`] | `ellipso bench pose`: pose accuracy and speed per detection image; the rendered frames of the other benches |
 //! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
+//! | [`sim_render`] | `ellipso sim render`: a scene's capture as raw frames, `truth.json` and per-pixel truth |
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
 #![forbid(unsafe_code)]
 
@@ -30,6 +31,7 @@ pub mod ideal;
 pub mod pose;
 pub mod report;
 pub mod score;
+pub mod sim_render;
 pub mod surface;
 pub mod truth_map;
 pub mod variant;
