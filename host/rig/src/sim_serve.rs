@@ -1,4 +1,4 @@
-//! `ellipso sim serve SCENE --pty [--wire PATH] [--ber X]`: a virtual trigger board on a
+//! `ellipso sim serve SCENE --pty [--wire PATH] [--ber X]` ([`serve`]): a virtual trigger board on a
 //! pseudo-terminal, for running the host (or another process) against the simulator.
 //!
 //! Contract:
@@ -17,36 +17,30 @@
 //!   on a USB hub. Frames the board sends while no host is reading wait in the pty (a few KiB),
 //!   then are dropped and counted.
 
-use std::io::Write;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use anyhow::{Context, bail};
+use ellipso_model::bail;
+use ellipso_model::run_error::{Context, RunError};
 use ellipso_sim::rig::{BoardTruth, VirtualBoard, VirtualBoardConfig, WireServer, wire};
 use ellipso_sim::scene::Scene;
 use serialport::{SerialPort, TTYPort};
 
-/// Arguments of `ellipso sim serve`.
-#[derive(Debug, Clone, clap::Args)]
+/// What `ellipso sim serve` serves (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
 pub struct ServeArgs {
     /// Scene file (TOML): its seed and link faults drive the board.
     pub scene: PathBuf,
     /// Serve on a new pseudo-terminal and print its path (the only transport so far).
-    #[arg(long)]
     pub pty: bool,
     /// Also publish the camera-trigger edges on this unix socket.
-    #[arg(long, value_name = "PATH")]
     pub wire: Option<PathBuf>,
     /// Board → host bit error rate in [0, 0.5], overriding the scene's `link_corruption`.
-    #[arg(long, value_name = "X", value_parser = |s: &str| super::limits::real_in(s, 0.0, 0.5))]
     pub ber: Option<f64>,
     /// Device clock rate error against the host, ppm.
-    #[arg(long, default_value_t = 25.0, allow_negative_numbers = true, value_parser = super::limits::drift_ppm)]
     pub drift_ppm: f64,
     /// Device clock reading when serving starts, µs (default ≈ 11.6 days of uptime).
-    #[arg(long, default_value_t = 1_000_000_000_000)]
     pub offset_us: u64,
 }
 
@@ -59,43 +53,13 @@ pub struct ServeEndpoints {
     pub wire: Option<PathBuf>,
 }
 
-/// `ellipso sim serve`: prints the endpoints on stdout, serves until SIGINT/SIGTERM.
-pub fn run(args: ServeArgs) -> anyhow::Result<()> {
-    // serving ends cleanly on the signal itself (the board's truth is printed)
-    let _deferred = super::interrupt::Deferred::take();
-    let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.clone())
-            .with_context(|| format!("cannot install the handler for signal {signal}"))?;
-    }
-    let truth = serve(&args, &stop, |endpoints| {
-        let mut out = std::io::stdout().lock();
-        writeln!(out, "pty: {}", endpoints.pty)?;
-        if let Some(w) = &endpoints.wire {
-            writeln!(out, "wire: {}", w.display())?;
-        }
-        out.flush()?;
-        Ok(())
-    })?;
-    crate::errln!(
-        "sim serve: {} pulses, {} frames sent ({} corrupted, {} lost, {} stalled); {}",
-        truth.pulses.len(),
-        truth.frames_sent,
-        truth.frames_corrupted,
-        truth.frames_lost,
-        truth.frames_stalled,
-        truth.end_reason.as_deref().unwrap_or("ended")
-    );
-    Ok(())
-}
-
 /// Runs the server until `stop` is set or the board ends by itself; `ready` is called once with
 /// the endpoints as soon as a host may connect. Returns what the board did.
 pub fn serve(
     args: &ServeArgs,
     stop: &AtomicBool,
     ready: impl FnOnce(&ServeEndpoints) -> std::io::Result<()>,
-) -> anyhow::Result<BoardTruth> {
+) -> Result<BoardTruth, RunError> {
     if !args.pty {
         bail!("sim serve needs a transport: pass --pty (the only one so far)");
     }
@@ -145,8 +109,9 @@ pub fn serve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_rig::link::{LinkConfig, TriggerLink};
+    use crate::link::{LinkConfig, TriggerLink};
     use ellipso_session::time::HostClock;
+    use std::sync::Arc;
 
     fn scene_file(dir: &std::path::Path) -> PathBuf {
         let path = dir.join("scene.toml");
@@ -240,10 +205,10 @@ elevation_deg = [30.0, 60.0]
                 let mut triggers = Vec::new();
                 while triggers.len() < 3 {
                     match link.events().recv_timeout(Duration::from_secs(5)).unwrap() {
-                        ellipso_rig::link::LinkEvent::Pulse { event, .. } => {
+                        crate::link::LinkEvent::Pulse { event, .. } => {
                             triggers.push(event.t_trigger_us)
                         }
-                        ellipso_rig::link::LinkEvent::Disconnected { reason } => panic!("{reason}"),
+                        crate::link::LinkEvent::Disconnected { reason } => panic!("{reason}"),
                         _ => {}
                     }
                 }
