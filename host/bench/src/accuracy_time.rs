@@ -244,7 +244,7 @@ pub fn run(args: AccuracyOptions, say: &dyn Say) -> Result<()> {
     }
     if !args.quick && !args.no_large && wants("large") {
         // Throughput and scale (issue 19): 100 000 × 150, then the two runs the 500 000 × 300
-        // extrapolation rests on (bench_report::scale_section).
+        // extrapolation rests on (report::scale_section).
         let scene = Scene::load(&ellipso_sim::scene::shipped_scene("sphere.toml"))?;
         for (vertices, photos) in LARGE_RUNS {
             let case = CaptureCase {
