@@ -16,16 +16,26 @@
 //! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
+//! | [`accuracy_time`] | `ellipso bench accuracy`: fit error against seconds on simulated captures, and its report |
+//! | [`pose`] | `ellipso bench pose`: pose accuracy and speed per detection image; the rendered frames of the other benches |
+//! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
+//! | [`sim_render`] | `ellipso sim render`: a scene's capture as raw frames, `truth.json` and per-pixel truth |
+//! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
 #![forbid(unsafe_code)]
 
+pub mod accuracy_time;
+pub mod calibration;
 pub mod capture;
 pub mod chain;
 pub mod ideal;
+pub mod pose;
 pub mod report;
 pub mod score;
+pub mod sim_render;
 pub mod surface;
 pub mod truth_map;
 pub mod variant;
+pub mod view_cost;
 
 use std::path::{Path, PathBuf};
 

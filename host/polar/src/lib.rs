@@ -9,6 +9,9 @@
 //!          └────── process(): either method fused row by row, no full-size intermediate ──┘
 //! ```
 //!
+//! [`convert`] is `ellipso polar`: one raw frame file (PNG, TIFF, `.npy`) read, processed and
+//! written as pictures, `stokes.exr` and `summary.json` into an owned folder.
+//!
 //! ```
 //! use ellipso_polar::{PolarConfig, process, synthetic::mosaic_from_stokes};
 //! use ellipso_model::mosaic::SensorLayout;
@@ -55,6 +58,7 @@
 mod bilinear;
 pub mod calibration;
 pub mod channels;
+pub mod convert;
 pub mod demosaic;
 pub mod frame;
 pub mod intensity;

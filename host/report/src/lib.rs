@@ -13,6 +13,7 @@ pub mod colour;
 pub mod exr_image;
 pub mod figure;
 pub mod font;
+pub mod memory;
 pub mod npy;
 pub mod output;
 pub mod plot;

@@ -1,28 +1,20 @@
-//! `ellipso bench pose SCENE`: pose-tracking accuracy and speed on rendered frames with known
-//! truth — per detection image (I90 cross-polarised, I0 co-polarised, s0), the median and 90th
-//! percentile rotation/translation errors against the simulator's camera poses, flipped poses,
-//! rejections by reason, and milliseconds per frame for detection + pose (one thread).
-//!
-//! Frames are rendered once and tracked with each detection image, so the comparison is on the
-//! same pixels. Writes `pose-bench.json` and prints a table.
-//!
-//! `ellipso bench calibration` ([`calibration`]) checks the camera calibration the same way;
-//! `ellipso bench view` ([`view`]) measures what the live view costs a capture.
-//! `--seed S` replaces the scene's seed: the poses of seeded capture paths (orbit phase, hand-held
-//! walk) and the sensor noise both change.
+//! `ellipso bench …`: the benchmarks' flags. Each subcommand parses its flags into the options
+//! of one library function ([`ellipso_bench`]: `pose`, `accuracy_time`, `calibration`,
+//! `view_cost`, `chain`) and prints through [`out::Printed`]; the bodies and their report files
+//! live in the library.
 
-pub mod calibration;
-pub mod view;
+use std::path::PathBuf;
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use ellipso_bench::accuracy_time::AccuracyOptions;
+use ellipso_bench::calibration::CalibrationOptions;
+use ellipso_bench::pose::PoseOptions;
+use ellipso_bench::view_cost::ViewOptions;
+use ellipso_vision::track::DetectImage;
 
-use ellipso_sim::render::{RenderOptions, Renderer};
-use ellipso_sim::scene::Scene;
-use ellipso_sim::scene::error::Located;
+use super::{limits, out};
 
-use ellipso_polar::frame::RawFrame;
-use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
+pub mod chain;
+pub mod mesh;
 
 /// `ellipso bench` subcommands.
 #[derive(Debug, clap::Subcommand)]
@@ -31,17 +23,79 @@ pub enum Args {
     Pose(PoseArgs),
     /// What accuracy costs in time: fit error against seconds on simulated captures with known
     /// truth (photo count, solver effort, vertex count sweeps); writes docs/accuracy-vs-time.md.
-    Accuracy(super::bench_accuracy::AccuracyArgs),
+    Accuracy(AccuracyArgs),
     /// The error budget of the whole chain: rendered frames, mosaic, tracked poses, carved mesh
     /// and fit, then one stage at a time replaced by its truth; writes docs/error-budget.md.
-    Chain(super::bench_chain::ChainArgs),
+    Chain(chain::ChainArgs),
     /// Camera calibration accuracy on a rendered calibration capture.
-    Calibration(calibration::CalibrationArgs),
+    Calibration(CalibrationArgs),
     /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
     /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
-    Mesh(super::bench_mesh::MeshArgs),
+    Mesh(mesh::MeshArgs),
     /// What the live view costs a simulated capture: the same capture without and with `--view`.
-    View(view::ViewArgs),
+    View(ViewArgs),
+}
+
+/// Runs `ellipso bench`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    match args {
+        Args::Pose(a) => ellipso_bench::pose::run(
+            &PoseOptions {
+                scene: a.scene,
+                frames: a.frames,
+                resolution: a.resolution,
+                seed: a.seed,
+                out: a.out,
+            },
+            &out::Printed,
+        )
+        .map_err(out::failed),
+        Args::Accuracy(a) => ellipso_bench::accuracy_time::run(
+            AccuracyOptions {
+                scenes: a.scenes,
+                report: a.report,
+                quick: a.quick,
+                no_large: a.no_large,
+                seed: a.seed,
+                work: a.work,
+                sweeps: a.sweeps,
+                photos: a.photos,
+                holdout: a.holdout,
+            },
+            &out::Printed,
+        )
+        .map_err(out::failed),
+        Args::Calibration(a) => ellipso_bench::calibration::run(
+            &CalibrationOptions {
+                scene: a.scene,
+                frames: a.frames,
+                resolution: a.resolution,
+                seed: a.seed,
+                image: a.image,
+                free_k3: a.free_k3,
+                out: a.out,
+            },
+            &out::Printed,
+        )
+        .map_err(out::failed),
+        Args::Chain(a) => chain::run(a),
+        Args::Mesh(a) => mesh::run(a),
+        Args::View(a) => ellipso_bench::view_cost::run(
+            ViewOptions {
+                scene: a.scene,
+                photos: a.photos,
+                interval_ms: a.interval_ms,
+                resolution: a.resolution,
+                runs: a.runs,
+                bin: a.bin,
+                keep_sessions: a.keep_sessions,
+                out: a.out,
+                children_cpu_s,
+            },
+            &out::Printed,
+        )
+        .map_err(out::failed),
+    }
 }
 
 /// Arguments of `ellipso bench pose`.
@@ -50,10 +104,10 @@ pub struct PoseArgs {
     /// Scene file.
     pub scene: PathBuf,
     /// Frames to render (spread over the capture path), ≥ 1.
-    #[arg(long, default_value_t = 20, value_parser = super::limits::count::<usize>)]
+    #[arg(long, default_value_t = 20, value_parser = limits::count::<usize>)]
     pub frames: usize,
     /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
-    #[arg(long, value_parser = super::limits::resolution)]
+    #[arg(long, value_parser = limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
     #[arg(long)]
@@ -63,184 +117,110 @@ pub struct PoseArgs {
     pub out: PathBuf,
 }
 
-/// One detection image's results.
-#[derive(Debug, serde::Serialize)]
-pub struct ImageResult {
+/// Arguments of `ellipso bench accuracy`.
+#[derive(Debug, clap::Args)]
+pub struct AccuracyArgs {
+    /// Scenes to sweep (default: the shipped sphere and multi-material scenes).
+    #[arg(long, value_delimiter = ',')]
+    pub scenes: Vec<PathBuf>,
+    /// Report file (Markdown); plots and JSON are written beside it (plots under `img/`).
+    #[arg(long, default_value = "docs/accuracy-vs-time.md")]
+    pub report: PathBuf,
+    /// Small sweep for a smoke test (few vertices and photos; no large run).
+    #[arg(long)]
+    pub quick: bool,
+    /// Skip the large runs (100 000 vertices × 150 and × 300 views, 500 000 × 60).
+    #[arg(long)]
+    pub no_large: bool,
+    /// Noise and normal-tilt seed.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Work directory of the end-to-end sweep's rendered sessions (kept and reused; shared with
+    /// `ellipso bench chain`).
+    #[arg(long, default_value = "ellipso-bench-chain")]
+    pub work: PathBuf,
+    /// Which sweeps to run (default all): photos, solver, vertices, bracket, large,
+    /// end_to_end (rendered frames of the demo scene through tracking, carving and the fit).
+    #[arg(long, value_delimiter = ',')]
+    pub sweeps: Vec<String>,
+    /// Photos of the solver and vertex sweeps (default 100; 25 with --quick).
+    #[arg(long)]
+    pub photos: Option<usize>,
+    /// Fraction of the views held out of every fit and scored as a re-render (default 0.1).
+    #[arg(long, default_value_t = 0.1)]
+    pub holdout: f64,
+}
+
+/// Arguments of `ellipso bench calibration`.
+#[derive(Debug, clap::Args)]
+pub struct CalibrationArgs {
+    /// Scene file (a board-only calibration capture).
+    #[arg(default_value = "sim/scenes/calibration.toml")]
+    pub scene: PathBuf,
+    /// Frames to use (spread over the capture path; default all), ≥ 1.
+    #[arg(long, value_parser = limits::count::<usize>)]
+    pub frames: Option<usize>,
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
+    #[arg(long, value_parser = limits::resolution)]
+    pub resolution: Option<[u32; 2]>,
+    /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Detection image.
+    #[arg(long, value_enum, default_value_t = DetectImage::S0)]
     pub image: DetectImage,
-    /// Frames tracked.
-    pub frames: usize,
-    /// Frames posed.
-    pub posed: usize,
-    /// Median rotation error, degrees.
-    pub median_rotation_deg: f64,
-    /// 90th percentile rotation error, degrees.
-    pub p90_rotation_deg: f64,
-    /// Median translation error, mm.
-    pub median_translation_mm: f64,
-    /// 90th percentile translation error, mm.
-    pub p90_translation_mm: f64,
-    /// Poses more than 10° from the truth (a flipped planar solution).
-    pub flipped: usize,
-    /// Mean detection + pose time per frame, ms (one thread).
-    pub ms_per_frame: f64,
-    /// Rejections by reason.
-    pub rejected: std::collections::BTreeMap<String, usize>,
+    /// Also estimate k3.
+    #[arg(long)]
+    pub free_k3: bool,
+    /// Where to write calibration-bench.json.
+    #[arg(long, default_value = ".")]
+    pub out: PathBuf,
 }
 
-/// Runs `ellipso bench`.
-pub fn run(args: Args) -> anyhow::Result<()> {
-    match args {
-        Args::Pose(a) => pose(a),
-        Args::Accuracy(a) => super::bench_accuracy::run(a),
-        Args::Calibration(a) => calibration::run(a),
-        Args::Chain(a) => super::bench_chain::run(a),
-        Args::Mesh(a) => super::bench_mesh::run(a),
-        Args::View(a) => view::run(a),
-    }
+/// Arguments of `ellipso bench view`.
+#[derive(Debug, clap::Args)]
+pub struct ViewArgs {
+    /// Scene file.
+    #[arg(default_value = "sim/scenes/sphere.toml")]
+    pub scene: PathBuf,
+    /// Photos per capture.
+    #[arg(long, default_value_t = 100)]
+    pub photos: u32,
+    /// Time between photos, ms (50: 20 fps).
+    #[arg(long, default_value_t = 50)]
+    pub interval_ms: u32,
+    /// Frame size.
+    #[arg(long, value_parser = limits::resolution, default_value = "306x256")]
+    pub resolution: [u32; 2],
+    /// Rounds (each: one capture without and one with the view).
+    #[arg(long, default_value_t = 3)]
+    pub runs: usize,
+    /// The `ellipso` binary that captures (default: this one), e.g. an older build to compare.
+    #[arg(long)]
+    pub bin: Option<PathBuf>,
+    /// Keep the recorded sessions (under OUT/view-bench-sessions).
+    #[arg(long)]
+    pub keep_sessions: bool,
+    /// Where to write view-bench.json.
+    #[arg(long, default_value = ".")]
+    pub out: PathBuf,
 }
 
-/// Loads a scene; with `seed`, recomputes its capture poses and noise seed from that seed.
-pub fn load_scene(path: &Path, seed: Option<u64>) -> anyhow::Result<Scene> {
-    let mut scene = Scene::load(path)?;
-    if let Some(seed) = seed {
-        let text =
-            ellipso_model::file_io::read_bounded_text(path, ellipso_model::file_io::caps::SCENE)?;
-        let loc = Located::new(&text, path);
-        scene.camera_poses = scene.capture.camera_poses(seed, &loc)?;
-        scene.seed = seed;
-    }
-    Ok(scene)
-}
-
-/// `frames` indices spread evenly over `n` poses (all of them for `None`).
-pub fn spread(n: usize, frames: Option<usize>) -> Vec<usize> {
-    let frames = frames.unwrap_or(n).clamp(1, n.max(1));
-    // floor(i·n/frames): distinct, increasing, first 0, covering the whole path
-    (0..frames.min(n)).map(|i| i * n / frames).collect()
-}
-
-/// The renderer of `scene` (at `resolution` when given) and the scene's AprilTag boards as
-/// tracking sees them; an error names `path` when the scene has no board.
-pub fn renderer_and_boards<'s>(
-    scene: &'s Scene,
-    resolution: Option<[u32; 2]>,
-    path: &std::path::Path,
-) -> anyhow::Result<(Renderer<'s>, Vec<TrackedBoard>)> {
-    let options = RenderOptions {
-        resolution_px: resolution,
-        ..RenderOptions::default()
-    };
-    let renderer = Renderer::new(scene, options)?;
-    let boards: Vec<TrackedBoard> = scene.boards.iter().map(TrackedBoard::from_placed).collect();
-    anyhow::ensure!(
-        !boards.is_empty(),
-        "{}: the scene has no AprilTag boards",
-        path.display()
-    );
-    Ok((renderer, boards))
-}
-
-/// Pose `k` of the scene rendered as the camera delivers it.
-pub fn render_raw(renderer: &Renderer<'_>, scene: &Scene, k: usize) -> anyhow::Result<RawFrame> {
-    let f = renderer.render_frame(k)?;
-    Ok(RawFrame::new(
-        f.width,
-        f.height,
-        scene.rig.camera.bit_depth,
-        renderer.layout(),
-        f.raw(),
-    )?)
-}
-
-fn pose(args: PoseArgs) -> anyhow::Result<()> {
-    let out = ellipso_report::output::OutputFile::claim(
-        &args.out.join("pose-bench.json"),
-        "bench-pose",
-        ellipso_report::output::FileFormat::JSON,
-        &[&args.scene],
-        None,
-    )?;
-    let scene = load_scene(&args.scene, args.seed)?;
-    let (renderer, boards) = renderer_and_boards(&scene, args.resolution, &args.scene)?;
-    let camera = *renderer.camera();
-    let indices = spread(scene.camera_poses.len(), Some(args.frames));
-    crate::outln!(
-        "rendering {} frames of {} at {}×{}, seed {}…",
-        indices.len(),
-        args.scene.display(),
-        camera.width,
-        camera.height,
-        scene.seed
-    );
-    let mut frames = Vec::new();
-    for &k in &indices {
-        frames.push((k, render_raw(&renderer, &scene, k)?));
-    }
-    let mut results = Vec::new();
-    for image in [DetectImage::I90, DetectImage::I0, DetectImage::S0] {
-        let mut config = TrackConfig {
-            image,
-            ..TrackConfig::default()
+/// CPU seconds (user + system) of this process's waited-for children.
+fn children_cpu_s() -> f64 {
+    #[cfg(unix)]
+    {
+        // SAFETY: getrusage writes one rusage into the zeroed struct it is given
+        let usage = unsafe {
+            let mut u: libc::rusage = std::mem::zeroed();
+            libc::getrusage(libc::RUSAGE_CHILDREN, &mut u);
+            u
         };
-        config.detector.threads = 1;
-        let mut tracker = Tracker::new(camera, boards.clone(), config)?;
-        let (mut rot, mut trans) = (Vec::new(), Vec::new());
-        let mut rejected = std::collections::BTreeMap::new();
-        let mut flipped = 0;
-        let started = Instant::now();
-        for (k, raw) in &frames {
-            match tracker.track(raw) {
-                Ok(p) => {
-                    let truth = scene.camera_poses[*k].world_from_camera;
-                    let delta = truth.inverse() * p.world_from_camera;
-                    let r = delta.rotation.angle().to_degrees();
-                    if r > 10.0 {
-                        flipped += 1;
-                    }
-                    rot.push(r);
-                    trans.push(delta.translation.vector.norm() * 1e3);
-                }
-                Err(e) => *rejected.entry(e.to_string()).or_insert(0) += 1,
-            }
-        }
-        let ms = started.elapsed().as_secs_f64() * 1e3 / frames.len().max(1) as f64;
-        results.push(ImageResult {
-            image,
-            frames: frames.len(),
-            posed: rot.len(),
-            median_rotation_deg: ellipso_report::percentile(&mut rot, 0.5),
-            p90_rotation_deg: ellipso_report::percentile(&mut rot, 0.9),
-            median_translation_mm: ellipso_report::percentile(&mut trans, 0.5),
-            p90_translation_mm: ellipso_report::percentile(&mut trans, 0.9),
-            flipped,
-            ms_per_frame: ms,
-            rejected,
-        });
+        let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+        s(usage.ru_utime) + s(usage.ru_stime)
     }
-    crate::outln!(
-        "| image | posed | median rot (°) | p90 rot (°) | median trans (mm) | p90 trans (mm) | flipped | ms/frame |"
-    );
-    crate::outln!("|---|---|---|---|---|---|---|---|");
-    for r in &results {
-        crate::outln!(
-            "| {:?} | {}/{} | {:.4} | {:.4} | {:.3} | {:.3} | {} | {:.1} |",
-            r.image,
-            r.posed,
-            r.frames,
-            r.median_rotation_deg,
-            r.p90_rotation_deg,
-            r.median_translation_mm,
-            r.p90_translation_mm,
-            r.flipped,
-            r.ms_per_frame
-        );
-        for (why, count) in &r.rejected {
-            crate::outln!("|   rejected: {why} ({count}) |||||||");
-        }
+    #[cfg(not(unix))]
+    {
+        f64::NAN
     }
-    out.write(serde_json::to_vec_pretty(&results)?)?;
-    let path = out.shown();
-    crate::outln!("written {}", path.display());
-    Ok(())
 }

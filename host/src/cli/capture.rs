@@ -663,7 +663,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     print_report(&captured.report);
     if let Some(tracked) = &captured.tracked {
-        let summary = crate::cli::replay::report(&captured.dir, Some(tracked))?;
+        let summary = ellipso_vision::replay::report(&captured.dir, Some(tracked))
+            .map_err(super::out::failed)?;
         crate::cli::replay::print_summary(&summary);
     }
     crate::outln!("session      {}", captured.dir.display());

@@ -186,23 +186,30 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .find(|f| f.complete)
         .context("no complete frame was captured")?;
     // the polarisation pictures of the first frame, listed once below (not file by file)
-    let polar = crate::cli::polar::write(&crate::cli::polar::Args {
-        frame: first.path.clone(),
-        out: pictures.join("frame0-polarisation"),
-        layout: Some(match scene.rig.camera.sensor {
-            ellipso_sim::scene::SensorKind::MonoPolar => crate::cli::polar::LayoutArg::Mono,
-            ellipso_sim::scene::SensorKind::ColourPolar => crate::cli::polar::LayoutArg::Colour,
-        }),
-        bit_depth: Some(session.manifest.sensor.bit_depth),
-        demosaic: ellipso_polar::demosaic::DemosaicMethod::Superpixel,
-        dark_level: 0.0,
-        saturation: None,
-        dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
-        max_residual: None,
-        json: false,
-        npy: false,
-        calibration: None,
-    })?;
+    let polar = ellipso_polar::convert::write(
+        &ellipso_polar::convert::Args {
+            frame: first.path.clone(),
+            out: pictures.join("frame0-polarisation"),
+            layout: Some(match scene.rig.camera.sensor {
+                ellipso_sim::scene::SensorKind::MonoPolar => {
+                    ellipso_model::mosaic::SensorLayout::MonoPolar
+                }
+                ellipso_sim::scene::SensorKind::ColourPolar => {
+                    ellipso_model::mosaic::SensorLayout::ColourPolar
+                }
+            }),
+            bit_depth: Some(session.manifest.sensor.bit_depth),
+            demosaic: ellipso_polar::demosaic::DemosaicMethod::Superpixel,
+            dark_level: 0.0,
+            saturation: None,
+            dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
+            max_residual: None,
+            npy: false,
+            calibration: None,
+        },
+        &super::out::Printed,
+    )
+    .map_err(super::out::failed)?;
     crate::outln!(
         "  {} ({} files: s0, DoLP, AoLP, I^d/I^s/I^α, mask per band, stokes.exr)",
         out.published(&pictures.join("frame0-polarisation"))
@@ -340,7 +347,7 @@ fn fit_and_score(
     });
     crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");
     let scores =
-        super::bench_mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
+        super::bench::mesh::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config)?;
     // the carved and refined meshes against the truth, as the mesh bench scores them
     let (before, after) = (&scores.distance_before, &scores.distance_after);
     let summary = serde_json::json!({

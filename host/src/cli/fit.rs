@@ -542,7 +542,7 @@ pub fn export_fit(
         "surface_update": fit.surface,
         "surface_stopped": fit.surface.iter().rev().find_map(|s| s.stopped.clone()),
         "observed_vertices": fit.observed.iter().filter(|o| **o).count(),
-        "peak_rss_bytes": super::memory::peak_rss_bytes(),
+        "peak_rss_bytes": ellipso_report::memory::peak_rss_bytes(),
         "clusters": fit.outcome.augmentation.as_ref().map(|a| &a.clusters),
         "export": report,
     });

@@ -61,7 +61,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
     let (mesh, mut report, _) = mesh_of_session(&session, None, &config)?;
-    report.peak_rss_bytes = super::memory::peak_rss_bytes();
+    report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
     mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;
     let json = report_file.shown().to_path_buf();

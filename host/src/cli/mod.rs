@@ -2,10 +2,6 @@
 
 pub mod allocator;
 pub mod bench;
-pub mod bench_accuracy;
-pub mod bench_chain;
-pub mod bench_mesh;
-pub mod bench_report;
 pub mod calibrate;
 pub mod capture;
 pub mod demo;
@@ -16,7 +12,6 @@ pub mod fit_import;
 pub mod fit_shard;
 pub mod interrupt;
 pub mod limits;
-pub mod memory;
 pub mod mesh;
 pub mod model;
 pub mod out;

@@ -109,6 +109,24 @@ pub fn relative_path(path: &std::path::Path, base: &std::path::Path) -> Option<s
     Some(out)
 }
 
+/// A library function's error as the binary's: its text and causes unchanged.
+pub fn failed(e: ellipso_model::run_error::RunError) -> anyhow::Error {
+    anyhow::anyhow!(e.into_boxed())
+}
+
+/// The library bodies' lines ([`ellipso_model::run_error::Say`]) printed as [`outln!`] and
+/// [`errln!`] print them.
+pub struct Printed;
+
+impl ellipso_model::run_error::Say for Printed {
+    fn out(&self, line: std::fmt::Arguments<'_>) {
+        crate::outln!("{line}");
+    }
+    fn err(&self, line: std::fmt::Arguments<'_>) {
+        crate::errln!("{line}");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -10,6 +10,7 @@
 //! - [`calibrate`]: camera calibration (Zhang + bundle LM) and flash position from sphere
 //!   highlights.
 //! - `lm`: the one Levenberg–Marquardt loop of pose refinement and the calibration bundle.
+//! - [`replay`]: the replay report of a recorded session (`ellipso replay`).
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
 #![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
@@ -17,6 +18,7 @@ pub mod calibrate;
 mod lm;
 pub mod pose;
 pub mod process;
+pub mod replay;
 pub mod rig_file;
 pub mod short_pulse_poses;
 pub mod track;

@@ -13,6 +13,8 @@
 //! - [`stats`]: the one median and percentile (nearest rank) every crate reports with.
 //! - [`colour`]: the one sRGB encoder (linear → 8-bit code) for every picture.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
+//! - [`run_error`]: the error of the library functions a subcommand calls (anyhow's chain of
+//!   contexts, as a typed error), and [`run_error::Say`], where their lines go.
 #![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
@@ -22,3 +24,4 @@ pub mod geometry;
 pub mod mosaic;
 pub mod optics;
 pub mod stats;
+pub mod run_error;

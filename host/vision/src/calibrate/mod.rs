@@ -15,13 +15,15 @@
 //!    point known only roughly, or uncertainties the cost's shape contradicts (a near-degenerate
 //!    view set, [`spread`]), are refused with how to take calibration photos.
 //!
-//! [`flash`] estimates the flash position in the camera frame.
+//! [`flash`] estimates the flash position in the camera frame; [`session`] is `ellipso
+//! calibrate`: both on a recorded session, the rig file's sections written.
 
 pub mod bundle;
 pub mod determined;
 pub mod flash;
 pub mod highlight;
 pub mod report;
+pub mod session;
 pub mod spread;
 pub mod views;
 pub mod zhang;

@@ -1,4 +1,4 @@
-//! `ellipso sim` CLI tests: files written, PNGs hold exactly the renderer's raw frames, truth
+//! `ellipso sim render` tests: files written, PNGs hold exactly the renderer's raw frames, truth
 //! and plan JSON parse, bad frame indices are errors naming the range.
 
 use super::*;
@@ -6,7 +6,7 @@ use std::fs;
 
 fn scene(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../sim/scenes")
+        .join("../../sim/scenes")
         .join(name)
 }
 
@@ -27,7 +27,7 @@ fn render_args(out: &Path) -> RenderArgs {
 #[test]
 fn render_writes_raw_pngs_truth_json_and_pixel_truth() {
     let dir = tempfile::tempdir().unwrap();
-    run(Args::Render(render_args(dir.path()))).unwrap();
+    render(&render_args(dir.path()), &mut |_, _| {}).unwrap();
     let s = Scene::load(&scene("sphere.toml")).unwrap();
     let r = Renderer::new(
         &s,
@@ -75,7 +75,7 @@ fn a_frame_past_the_capture_is_an_error_naming_the_range() {
     let mut a = render_args(dir.path());
     a.frames = None;
     a.frame = Some(100_000);
-    let e = run(Args::Render(a)).unwrap_err().to_string();
+    let e = render(&a, &mut |_, _| {}).unwrap_err().to_string();
     assert!(e.contains("100000") && e.contains("150 frames"), "{e}");
 }
 
@@ -91,9 +91,4 @@ fn plan_json_lists_stages_and_omissions() {
         .map(|o| o["stage"].as_str().unwrap())
         .collect();
     assert!(omitted.contains(&"polarisation") && omitted.contains(&"shot_noise"));
-    run(Args::Plan(PlanArgs {
-        scene: scene("s0_only.toml"),
-        json: true,
-    }))
-    .unwrap();
 }

@@ -21,7 +21,10 @@ pub(super) fn picture(w: usize, h: usize, pixels: Vec<Rgb>) -> Picture {
 }
 
 /// `picture` with `key` underneath, rendered.
-pub(super) fn with_key(picture: Picture, key: Key) -> anyhow::Result<image::RgbImage> {
+pub(super) fn with_key(
+    picture: Picture,
+    key: Key,
+) -> Result<image::RgbImage, ellipso_model::run_error::RunError> {
     Ok(Figure::bare().image("", picture).key(key).render()?)
 }
 

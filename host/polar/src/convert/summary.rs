@@ -4,7 +4,7 @@
 use serde_json::json;
 
 use super::{Args, FileEntry, load};
-use ellipso_polar::{MaskReason, MaskSummary, PolarConfig, PolarImage, StokesBand};
+use crate::{MaskReason, MaskSummary, PolarConfig, PolarImage, StokesBand};
 
 pub(super) fn band_statistics(
     band: &StokesBand,

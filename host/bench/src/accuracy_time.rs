@@ -19,7 +19,13 @@ use ellipso_report::output::{FileFormat, OutputFile};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context;
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
+
+pub mod report;
+
+/// The commands' result.
+type Result<T> = std::result::Result<T, RunError>;
 use ellipso_sim::scene::Scene;
 
 use ellipso_fit::accuracy::specular::LobeScores;
@@ -30,37 +36,28 @@ use ellipso_report::plot::{LegendPosition, LinePlot};
 /// Photo counts of the end-to-end sweep (the demo scene's capture path; 150 is its own).
 const END_TO_END_PHOTOS: [usize; 3] = [50, 100, 150];
 
-/// Arguments of `ellipso bench accuracy`.
-#[derive(Debug, clap::Args)]
-pub struct AccuracyArgs {
+/// What `ellipso bench accuracy` runs (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
+pub struct AccuracyOptions {
     /// Scenes to sweep (default: the shipped sphere and multi-material scenes).
-    #[arg(long, value_delimiter = ',')]
     pub scenes: Vec<PathBuf>,
     /// Report file (Markdown); plots and JSON are written beside it (plots under `img/`).
-    #[arg(long, default_value = "docs/accuracy-vs-time.md")]
     pub report: PathBuf,
     /// Small sweep for a smoke test (few vertices and photos; no large run).
-    #[arg(long)]
     pub quick: bool,
     /// Skip the large runs (100 000 vertices × 150 and × 300 views, 500 000 × 60).
-    #[arg(long)]
     pub no_large: bool,
     /// Noise and normal-tilt seed.
-    #[arg(long, default_value_t = 7)]
     pub seed: u64,
     /// Work directory of the end-to-end sweep's rendered sessions (kept and reused; shared with
     /// `ellipso bench chain`).
-    #[arg(long, default_value = "ellipso-bench-chain")]
     pub work: PathBuf,
     /// Which sweeps to run (default all): photos, solver, vertices, bracket, large,
     /// end_to_end (rendered frames of the demo scene through tracking, carving and the fit).
-    #[arg(long, value_delimiter = ',')]
     pub sweeps: Vec<String>,
     /// Photos of the solver and vertex sweeps (default 100; 25 with --quick).
-    #[arg(long)]
     pub photos: Option<usize>,
     /// Fraction of the views held out of every fit and scored as a re-render (default 0.1).
-    #[arg(long, default_value_t = 0.1)]
     pub holdout: f64,
 }
 
@@ -149,13 +146,13 @@ fn solver_settings() -> Vec<SolverSetting> {
 pub const LARGE_RUNS: [(usize, usize); 3] = [(100_000, 150), (100_000, 300), (500_000, 60)];
 
 /// Runs `ellipso bench accuracy`.
-pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
+pub fn run(args: AccuracyOptions, say: &dyn Say) -> Result<()> {
     // the report's files are claimed before the hour of fitting, not after it
     let files = ReportFiles::claim(&args.report)?;
     let scenes = if args.scenes.is_empty() {
         vec![
-            super::demo::shipped_scene("sphere.toml"),
-            super::demo::shipped_scene("multi_material.toml"),
+            ellipso_sim::scene::shipped_scene("sphere.toml"),
+            ellipso_sim::scene::shipped_scene("multi_material.toml"),
         ]
     } else {
         args.scenes.clone()
@@ -172,7 +169,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
         };
     let wants = |sweep: &str| args.sweeps.is_empty() || args.sweeps.iter().any(|s| s == sweep);
     for s in &args.sweeps {
-        anyhow::ensure!(
+        ensure!(
             [
                 "photos",
                 "solver",
@@ -185,7 +182,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
             "--sweeps: unknown sweep `{s}` (photos, solver, vertices, bracket, large, end_to_end)"
         );
     }
-    anyhow::ensure!(
+    ensure!(
         (0.0..0.9).contains(&args.holdout),
         "--holdout {}: must be in [0, 0.9)",
         args.holdout
@@ -209,7 +206,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 ..CaptureCase::default()
             };
             results.push(one_run(
-                &scene, &name, "photos", "default", &case, &default, holdout,
+                &scene, &name, "photos", "default", &case, &default, holdout, say,
             )?);
         }
         for setting in solver_settings().into_iter().filter(|_| wants("solver")) {
@@ -227,6 +224,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 &case,
                 &setting.config,
                 holdout,
+                say,
             )?);
         }
         for &s in subdivision_sweep.iter().filter(|_| wants("vertices")) {
@@ -237,17 +235,17 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 ..CaptureCase::default()
             };
             results.push(one_run(
-                &scene, &name, "vertices", "default", &case, &default, holdout,
+                &scene, &name, "vertices", "default", &case, &default, holdout, say,
             )?);
         }
     }
     if wants("bracket") {
-        results.extend(bracket_sweep(&args, base_subdivisions, holdout)?);
+        results.extend(bracket_sweep(&args, base_subdivisions, holdout, say)?);
     }
     if !args.quick && !args.no_large && wants("large") {
         // Throughput and scale (issue 19): 100 000 × 150, then the two runs the 500 000 × 300
-        // extrapolation rests on (bench_report::scale_section).
-        let scene = Scene::load(&super::demo::shipped_scene("sphere.toml"))?;
+        // extrapolation rests on (report::scale_section).
+        let scene = Scene::load(&ellipso_sim::scene::shipped_scene("sphere.toml"))?;
         for (vertices, photos) in LARGE_RUNS {
             let case = CaptureCase {
                 photos,
@@ -265,24 +263,25 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
                 &case,
                 &FitConfig::default(),
                 holdout,
+                say,
             )?);
         }
     }
     // What a capture really gives: rendered frames through the whole chain (not in --quick:
     // each capture renders 50–150 frames at 1224×1024).
     let end_to_end = if !args.quick && wants("end_to_end") {
-        let scene_path = super::demo::shipped_scene("demo.toml");
+        let scene_path = ellipso_sim::scene::shipped_scene("demo.toml");
         let scene = Scene::load(&scene_path)?;
         let [w, h] = scene.rig.camera.resolution_px;
-        let bench = ellipso_bench::chain::Bench {
+        let bench = crate::chain::Bench {
             scene_path,
             scene,
             work: args.work.clone(),
             resolution: Some([w / 2, h / 2]),
             fit: ellipso_fit::session::SessionFitConfig::default(),
         };
-        ellipso_bench::chain::photo_sweep(&bench, &END_TO_END_PHOTOS, &mut |stage| {
-            eprintln!("  end to end: {stage}")
+        crate::chain::photo_sweep(&bench, &END_TO_END_PHOTOS, &mut |stage| {
+            say.err(format_args!("  end to end: {stage}"))
         })?
     } else {
         Vec::new()
@@ -293,6 +292,7 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
         &end_to_end,
         started.elapsed().as_secs_f64(),
         &command_line(&args),
+        say,
     )?;
     Ok(())
 }
@@ -301,12 +301,13 @@ pub fn run(args: AccuracyArgs) -> anyhow::Result<()> {
 /// budget in seconds, and the bracket scene's views at full energy. Each scene keeps its own
 /// photo count (a third of it with `--quick`).
 fn bracket_sweep(
-    args: &AccuracyArgs,
+    args: &AccuracyOptions,
     subdivisions: Option<u32>,
     holdout: f64,
-) -> anyhow::Result<Vec<RunResult>> {
-    let load = |name: &str| -> anyhow::Result<Scene> {
-        let path = super::demo::shipped_scene(name);
+    say: &dyn Say,
+) -> Result<Vec<RunResult>> {
+    let load = |name: &str| -> Result<Scene> {
+        let path = ellipso_sim::scene::shipped_scene(name);
         Scene::load(&path).with_context(|| format!("loading {}", path.display()))
     };
     let single = load("multi_material.toml")?;
@@ -337,11 +338,13 @@ fn bracket_sweep(
             &case,
             &FitConfig::default(),
             holdout,
+            say,
         )?);
     }
     Ok(results)
 }
 
+#[allow(clippy::too_many_arguments)] // the run's labels, its case and settings, and the printer
 fn one_run(
     scene: &Scene,
     name: &str,
@@ -350,12 +353,13 @@ fn one_run(
     case: &CaptureCase,
     config: &FitConfig,
     holdout: f64,
-) -> anyhow::Result<RunResult> {
+    say: &dyn Say,
+) -> Result<RunResult> {
     // The run's own peak memory: the simulated capture (what a session's samples would be),
     // the fit and its scoring.
-    let rss_reset = super::memory::reset_peak_rss();
+    let rss_reset = ellipso_report::memory::reset_peak_rss();
     let t = Instant::now();
-    let full = simulate(scene, case)?;
+    let full = simulate(scene, case).map_err(|e| RunError::from_boxed(e.into()))?;
     let simulate_s = t.elapsed().as_secs_f64();
     // The held-out views are taken out before the fit sees anything.
     let (train, held) = ellipso_fit::holdout::split_set(&full.set, holdout);
@@ -381,7 +385,7 @@ fn one_run(
         let t = Instant::now();
         let checksum = forward_all(&capture.set, &outcome.fits);
         let s = t.elapsed().as_secs_f64().max(1e-9);
-        anyhow::ensure!(
+        ensure!(
             checksum.is_finite(),
             "forward evaluation produced a non-finite value"
         );
@@ -390,7 +394,7 @@ fn one_run(
         repetitions += 1;
     }
     let scores = evaluate(&capture, &outcome.fits);
-    let peak_rss_bytes = super::memory::peak_rss_bytes().filter(|_| rss_reset);
+    let peak_rss_bytes = ellipso_report::memory::peak_rss_bytes().filter(|_| rss_reset);
     let lobes = ellipso_fit::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
     let bracket = case
         .bracket
@@ -423,7 +427,8 @@ fn one_run(
         bracket,
         lobes,
     };
-    crate::outln!(
+    say!(
+        say,
         "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
         r.scene,
         r.sweep,
@@ -446,7 +451,8 @@ fn one_run(
             .map_or("n/a".into(), |h| format!("{:.4}", h.s0.relative_rmse))
     );
     if let (Some(p), Some((virt, prior))) = (&r.pooling, r.guided) {
-        crate::outln!(
+        say!(
+            say,
             "    {} clusters, {virt} vertices with virtual samples, {prior} with a pooled η prior; median η se {:.4} → {:.4}",
             r.clusters.len(),
             p.median_eta_se_before,
@@ -454,7 +460,8 @@ fn one_run(
         );
     }
     for c in &r.clusters {
-        crate::outln!(
+        say!(
+            say,
             "    cluster ({} members): η {:.4} (pooled {:.4} ± {:.4}, median {:.4}, τ {:.4}, {} used, {} trimmed)  σs {:.3}  σss {:.3}  ρs {:.3}",
             c.members,
             c.eta,
@@ -470,7 +477,8 @@ fn one_run(
         );
     }
     for c in &r.lobes.clusters {
-        crate::outln!(
+        say!(
+            say,
             "    {:<16} cluster σs {:.4} (true {:.3}, {:+.1} %, {:.0} % of its vertices in that cluster)",
             c.material,
             c.sigma_s_cluster,
@@ -480,7 +488,8 @@ fn one_run(
         );
     }
     for p in &r.lobes.peaks {
-        crate::outln!(
+        say!(
+            say,
             "    {:<16} lobe peak: {} of {} vertices with a near-mirror view kept a peak sample ({} of {} near-mirror samples kept)",
             p.material,
             p.vertices_with_peak_kept,
@@ -489,11 +498,12 @@ fn one_run(
             p.near_mirror_views
         );
         for (energy, views, kept) in &p.by_energy {
-            crate::outln!("        at energy {energy}: {kept} of {views} kept");
+            say!(say, "        at energy {energy}: {kept} of {views} kept");
         }
     }
     for m in &r.scores.materials {
-        crate::outln!(
+        say!(
+            say,
             "    {:<16} η {:.4} (true {:.3}, {:+.3} %; vertex median {:.2} %)  σs {:.3}  σss {:.3}  normal {:.2}°",
             m.name,
             m.eta_median,
@@ -509,7 +519,7 @@ fn one_run(
 }
 
 /// The command that reproduces a report made with `args` (options at their defaults left out).
-fn command_line(args: &AccuracyArgs) -> String {
+fn command_line(args: &AccuracyOptions) -> String {
     let mut c = String::from("bench accuracy");
     let list = |v: &[String]| v.join(",");
     if !args.scenes.is_empty() {
@@ -555,7 +565,7 @@ struct ReportFiles {
 }
 
 impl ReportFiles {
-    fn claim(path: &Path) -> anyhow::Result<Self> {
+    fn claim(path: &Path) -> Result<Self> {
         let dir = path
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
@@ -586,10 +596,11 @@ impl ReportFiles {
 fn write_report(
     files: &ReportFiles,
     results: &[RunResult],
-    end_to_end: &[ellipso_bench::chain::RunResult],
+    end_to_end: &[crate::chain::RunResult],
     total_s: f64,
     command: &str,
-) -> anyhow::Result<()> {
+    say: &dyn Say,
+) -> Result<()> {
     let path = files.markdown.shown();
     let dir = path
         .parent()
@@ -629,17 +640,18 @@ fn write_report(
             .write(serde_json::to_vec_pretty(end_to_end)?)?;
     }
     let plots = plotted.then_some((eta_png.as_path(), normal_png.as_path()));
-    let md = super::bench_report::markdown(results, end_to_end, total_s, command, plots, dir);
+    let md = report::markdown(results, end_to_end, total_s, command, plots, dir);
     files.markdown.write(md)?;
-    crate::outln!("\nreport  {}", path.display());
+    say!(say, "\nreport  {}", path.display());
     if plotted {
-        crate::outln!(
+        say!(
+            say,
             "plots   {}\n        {}",
             eta_png.display(),
             normal_png.display()
         );
     }
-    crate::outln!("data    {}", json.display());
+    say!(say, "data    {}", json.display());
     Ok(())
 }
 
@@ -650,7 +662,7 @@ fn plot(
     y_label: &str,
     metric: impl Fn(&Scores) -> f64,
     end_to_end: impl Iterator<Item = (f64, f64)>,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let points = results.iter().filter(|r| r.sweep != "large").map(|r| {
         (
             r.scene.as_str(),
@@ -670,7 +682,7 @@ fn plot_points<'a>(
     out: &Path,
     title: &str,
     y_label: &str,
-) -> anyhow::Result<()> {
+) -> Result<()> {
     let mut p = LinePlot::new(title)
         .x_label("fit wall time (s, log scale)")
         .y_label(y_label)
@@ -695,7 +707,7 @@ fn plot_points<'a>(
 }
 
 /// The committed report's plots redrawn from its JSON (`ELLIPSO_DOCS_IMG=docs/img cargo test
-/// -p ellipso redraw_committed`), so a change of drawing needs no re-run of the benchmark.
+/// -p ellipso-bench redraw_committed`), so a change of drawing needs no re-run of the benchmark.
 #[cfg(test)]
 mod redraw {
     #[test]
@@ -703,7 +715,7 @@ mod redraw {
         let Some(img) = std::env::var_os("ELLIPSO_DOCS_IMG") else {
             return;
         };
-        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs");
+        let docs = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs");
         for stem in ["accuracy-vs-time", "accuracy-bracket"] {
             let text = std::fs::read_to_string(docs.join(format!("{stem}.json"))).unwrap();
             let runs: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();

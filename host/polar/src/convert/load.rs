@@ -12,7 +12,7 @@
 //!   integer-DN from the sensor on). The maximum value only ever produces warnings or hints,
 //!   never a silent change of depth.
 //! - Layout: `--layout` wins; without it, a frame inside a session takes the session manifest's,
-//!   and any other frame is examined ([`ellipso_polar::layout::detect`]): a Bayer pattern of
+//!   and any other frame is examined ([`crate::layout::detect`]): a Bayer pattern of
 //!   polariser blocks is read as colour, none as mono, and an unclear one is refused — a colour
 //!   frame is never silently read as mono.
 
@@ -20,8 +20,8 @@ use std::path::Path;
 
 use ellipso_model::mosaic::SensorLayout;
 
-use ellipso_polar::layout::{Detection, detect};
-use ellipso_polar::{FrameError, RawFrame, frame::full_scale_dn};
+use crate::layout::{Detection, detect};
+use crate::{FrameError, RawFrame, frame::full_scale_dn};
 
 /// Bit depth assumed for 16-bit containers when `--bit-depth` is not given.
 pub(super) const DEFAULT_BIT_DEPTH_16_BIT_CONTAINER: u8 = 12;

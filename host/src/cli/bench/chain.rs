@@ -18,10 +18,10 @@ pub struct ChainArgs {
     #[arg(long, default_value = "ellipso-bench-chain")]
     pub work: PathBuf,
     /// Render at WIDTHxHEIGHT (default: half the scene's resolution, as the demo captures).
-    #[arg(long, value_parser = super::limits::resolution)]
+    #[arg(long, value_parser = crate::cli::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Rays per raw pixel per axis, 1..=8 (default 2, as the demo).
-    #[arg(long, default_value_t = 2, value_parser = super::limits::supersampling)]
+    #[arg(long, default_value_t = 2, value_parser = crate::cli::limits::supersampling)]
     pub supersampling: u32,
     /// Only the runs named here (comma-separated, whole names as the report lists them).
     #[arg(long, value_delimiter = ',')]

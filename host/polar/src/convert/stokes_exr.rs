@@ -13,8 +13,8 @@
 
 use std::path::Path;
 
-use anyhow::Context;
-use ellipso_polar::{PolarImage, StokesBand};
+use crate::{PolarImage, StokesBand};
+use ellipso_model::run_error::{Context, RunError};
 use ellipso_report::exr_image::FloatImage;
 
 /// The channel name of `plane` for `band` (module doc).
@@ -26,7 +26,7 @@ fn name(plane: &str, band: &StokesBand) -> String {
 }
 
 /// The float image of every band of `image` (module doc).
-pub fn stokes_image(image: &PolarImage) -> anyhow::Result<FloatImage> {
+pub fn stokes_image(image: &PolarImage) -> Result<FloatImage, RunError> {
     let mut exr = FloatImage::new(image.width(), image.height())?;
     for band in &image.bands {
         let channels = band.observation_channels();
@@ -57,7 +57,7 @@ pub fn stokes_image(image: &PolarImage) -> anyhow::Result<FloatImage> {
 }
 
 /// Writes `stokes.exr` into `out` and returns its name.
-pub fn write(out: &Path, image: &PolarImage) -> anyhow::Result<String> {
+pub fn write(out: &Path, image: &PolarImage) -> Result<String, RunError> {
     let name = "stokes.exr";
     let path = out.join(name);
     stokes_image(image)?

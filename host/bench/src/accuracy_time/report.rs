@@ -4,13 +4,13 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use super::bench_accuracy::RunResult;
+use super::RunResult;
 
 /// The report text. `command` is the command line that made it (without the program name);
 /// `dir` is the report's folder (plots are linked relative to it).
 pub fn markdown(
     results: &[RunResult],
-    end_to_end: &[ellipso_bench::chain::RunResult],
+    end_to_end: &[crate::chain::RunResult],
     total_s: f64,
     command: &str,
     plots: Option<(&Path, &Path)>,
@@ -56,7 +56,7 @@ pub fn markdown(
          estimate is worth) and per material (the error of the material's median η, averaged \
          over materials: the paper's measure, 1.49 % on real objects).\n"
     );
-    s += &ellipso_bench::report::end_to_end_section(end_to_end);
+    s += &crate::report::end_to_end_section(end_to_end);
     if let Some((eta_png, normal_png)) = plots {
         let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
         let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));

@@ -19,38 +19,37 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use anyhow::Context;
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
+
+/// The command's result.
+type Result<T> = std::result::Result<T, RunError>;
 
 use ellipso_session::events::SessionEvent;
 use ellipso_session::time::DeviceTimeUs;
 
-/// Arguments of `ellipso bench view`.
-#[derive(Debug, clap::Args)]
-pub struct ViewArgs {
+/// What `ellipso bench view` runs (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
     /// Scene file.
-    #[arg(default_value = "sim/scenes/sphere.toml")]
     pub scene: PathBuf,
     /// Photos per capture.
-    #[arg(long, default_value_t = 100)]
     pub photos: u32,
     /// Time between photos, ms (50: 20 fps).
-    #[arg(long, default_value_t = 50)]
     pub interval_ms: u32,
     /// Frame size.
-    #[arg(long, value_parser = crate::cli::limits::resolution, default_value = "306x256")]
     pub resolution: [u32; 2],
     /// Rounds (each: one capture without and one with the view).
-    #[arg(long, default_value_t = 3)]
     pub runs: usize,
     /// The `ellipso` binary that captures (default: this one), e.g. an older build to compare.
-    #[arg(long)]
     pub bin: Option<PathBuf>,
     /// Keep the recorded sessions (under OUT/view-bench-sessions).
-    #[arg(long)]
     pub keep_sessions: bool,
     /// Where to write view-bench.json.
-    #[arg(long, default_value = ".")]
     pub out: PathBuf,
+    /// CPU seconds (user + system) of this process's waited-for children: the binary's
+    /// `getrusage` (this crate has no unsafe code).
+    pub children_cpu_s: fn() -> f64,
 }
 
 /// One capture's figures.
@@ -89,7 +88,7 @@ pub struct RunResult {
 }
 
 /// Runs `ellipso bench view`.
-pub fn run(args: ViewArgs) -> anyhow::Result<()> {
+pub fn run(args: ViewOptions, say: &dyn Say) -> Result<()> {
     let bin = match &args.bin {
         Some(b) => b.clone(),
         None => std::env::current_exe().context("locating this binary")?,
@@ -123,7 +122,8 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
                 std::fs::remove_dir_all(&dir).with_context(|| dir.display().to_string())?;
             }
             let r = capture(&bin, &args, &dir, round, view)?;
-            crate::outln!(
+            say!(
+                say,
                 "round {round} {:<13} load {:>5.2}  {} frames  {:.2} fps  latency p50 {:.1} / p95 {:.1} / max {:.1} ms  paired {} (wrong {})  pairing errors {}  cpu {:.2} s{}",
                 if view { "with view" } else { "without view" },
                 r.load_before,
@@ -155,7 +155,7 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
         claimed.commit()?;
     }
     let summary = summary(&results);
-    crate::outln!("{summary}");
+    say!(say, "{summary}");
     let report = serde_json::json!({
         "scene": args.scene.display().to_string(),
         "photos": args.photos,
@@ -166,17 +166,17 @@ pub fn run(args: ViewArgs) -> anyhow::Result<()> {
         "summary": summary,
     });
     report_file.write(serde_json::to_string_pretty(&report)?)?;
-    crate::outln!("wrote {}", report_file.shown().display());
+    say!(say, "wrote {}", report_file.shown().display());
     Ok(())
 }
 
 fn capture(
     bin: &Path,
-    args: &ViewArgs,
+    args: &ViewOptions,
     dir: &Path,
     round: usize,
     view: bool,
-) -> anyhow::Result<RunResult> {
+) -> Result<RunResult> {
     let load_before = load_average();
     let mut cmd = Command::new(bin);
     cmd.args(["capture", "--sim"])
@@ -196,7 +196,7 @@ fn capture(
     if view {
         cmd.arg("--view");
     }
-    let cpu_before = children_cpu_s();
+    let cpu_before = (args.children_cpu_s)();
     let started = Instant::now();
     let mut child = cmd
         .spawn()
@@ -222,7 +222,7 @@ fn capture(
             }
         }
     }
-    for line in lines.map_while(Result::ok) {
+    for line in lines.map_while(std::result::Result::ok) {
         // the capture's last line before it closes the view: let go of the stream, as a page
         // closed at the end would (older builds waited for every open stream before exiting)
         if line.starts_with("session ") {
@@ -231,13 +231,13 @@ fn capture(
     }
     let status = child.wait()?;
     let wall_s = started.elapsed().as_secs_f64();
-    let cpu_s = children_cpu_s() - cpu_before;
+    let cpu_s = (args.children_cpu_s)() - cpu_before;
     done.store(true, Ordering::Release);
     let (view_updates, view_pictures, view_posed) = client
         .map(|c| c.join().unwrap_or_default())
         .unwrap_or_default();
     let err = stderr.and_then(|h| h.join().ok()).unwrap_or_default();
-    anyhow::ensure!(status.success(), "capture failed ({status}): {err}");
+    ensure!(status.success(), "capture failed ({status}): {err}");
     let mut r = read_session(dir)?;
     r.round = round;
     r.view = view;
@@ -330,7 +330,7 @@ fn get(addr: &str, path: &str) -> bool {
     out.starts_with(b"HTTP/1.1 200")
 }
 
-fn read_session(dir: &Path) -> anyhow::Result<RunResult> {
+fn read_session(dir: &Path) -> Result<RunResult> {
     let s = ellipso_session::reader::open(dir).with_context(|| dir.display().to_string())?;
     let mut fits: Vec<(u64, f64, f64)> = Vec::new();
     let mut triggers = std::collections::BTreeMap::new();
@@ -371,7 +371,7 @@ fn read_session(dir: &Path) -> anyhow::Result<RunResult> {
             _ => {}
         }
     }
-    anyhow::ensure!(!fits.is_empty(), "{}: no clock fit recorded", dir.display());
+    ensure!(!fits.is_empty(), "{}: no clock fit recorded", dir.display());
     // the latest fit made before the frame arrived (the first one for earlier frames)
     let host_us = |t: DeviceTimeUs, at: u64| {
         let (_, gain, offset) = fits.iter().rev().find(|f| f.0 <= at).unwrap_or(&fits[0]);
@@ -457,23 +457,4 @@ fn load_average() -> f64 {
         .ok()
         .and_then(|s| s.split_whitespace().next()?.parse().ok())
         .unwrap_or(f64::NAN)
-}
-
-/// CPU seconds (user + system) of this process's waited-for children.
-fn children_cpu_s() -> f64 {
-    #[cfg(unix)]
-    {
-        // SAFETY: getrusage writes one rusage into the zeroed struct it is given
-        let usage = unsafe {
-            let mut u: libc::rusage = std::mem::zeroed();
-            libc::getrusage(libc::RUSAGE_CHILDREN, &mut u);
-            u
-        };
-        let s = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
-        s(usage.ru_utime) + s(usage.ru_stime)
-    }
-    #[cfg(not(unix))]
-    {
-        f64::NAN
-    }
 }

@@ -16,34 +16,30 @@ use ellipso_vision::calibrate::{CalibConfig, Calibration, calibrate};
 use ellipso_vision::pose::DetectorConfig;
 use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
+use ellipso_model::run_error::{RunError, Say};
+use ellipso_model::say;
+
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;
 /// Relative-error target for k1.
 pub const K1_TARGET: f64 = 2e-2;
 
-/// Arguments of `ellipso bench calibration`.
-#[derive(Debug, clap::Args)]
-pub struct CalibrationArgs {
+/// What `ellipso bench calibration` runs (its flags, parsed by the binary).
+#[derive(Debug, Clone)]
+pub struct CalibrationOptions {
     /// Scene file (a board-only calibration capture).
-    #[arg(default_value = "sim/scenes/calibration.toml")]
     pub scene: PathBuf,
     /// Frames to use (spread over the capture path; default all), ≥ 1.
-    #[arg(long, value_parser = crate::cli::limits::count::<usize>)]
     pub frames: Option<usize>,
     /// Render at WIDTHxHEIGHT instead of the scene's resolution (even sides, 2..=16384).
-    #[arg(long, value_parser = crate::cli::limits::resolution)]
     pub resolution: Option<[u32; 2]>,
     /// Scene seed (capture poses of seeded paths and sensor noise); default the scene's.
-    #[arg(long)]
     pub seed: Option<u64>,
     /// Detection image.
-    #[arg(long, value_enum, default_value_t = DetectImage::S0)]
     pub image: DetectImage,
     /// Also estimate k3.
-    #[arg(long)]
     pub free_k3: bool,
     /// Where to write calibration-bench.json.
-    #[arg(long, default_value = ".")]
     pub out: PathBuf,
 }
 
@@ -230,16 +226,17 @@ pub fn meets_targets(rows: &[ParamRow]) -> bool {
 }
 
 /// Renders, detects and calibrates (see the module doc).
-pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
-    let scene = super::load_scene(&args.scene, args.seed)?;
-    let (renderer, boards) = super::renderer_and_boards(&scene, args.resolution, &args.scene)?;
+pub fn run_bench(args: &CalibrationOptions) -> Result<CalibrationBench, RunError> {
+    let scene = crate::pose::load_scene(&args.scene, args.seed)?;
+    let (renderer, boards) =
+        crate::pose::renderer_and_boards(&scene, args.resolution, &args.scene)?;
     let truth = *renderer.camera();
-    let indices = super::spread(scene.camera_poses.len(), args.frames);
+    let indices = crate::pose::spread(scene.camera_poses.len(), args.frames);
     let mut detector = FamilyDetectors::new(&boards, DetectorConfig::default())?;
     let mut views: Vec<View> = Vec::new();
     let mut truth_views = Vec::new();
     for &k in &indices {
-        let raw = super::render_raw(&renderer, &scene, k)?;
+        let raw = crate::pose::render_raw(&renderer, &scene, k)?;
         let (view, board) = board_view(&mut detector, &raw, &boards, args.image)?;
         let camera_from_board = board.map(|b| {
             scene.camera_poses[k].world_from_camera.inverse() * boards[b].world_from_board()
@@ -273,7 +270,7 @@ pub fn run_bench(args: &CalibrationArgs) -> anyhow::Result<CalibrationBench> {
 }
 
 /// Runs `ellipso bench calibration`.
-pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
+pub fn run(args: &CalibrationOptions, say: &dyn Say) -> Result<(), RunError> {
     let out = ellipso_report::output::OutputFile::claim(
         &args.out.join("calibration-bench.json"),
         "bench-calibration",
@@ -281,12 +278,14 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
         &[&args.scene],
         None,
     )?;
-    crate::outln!(
+    say!(
+        say,
         "calibrating from rendered frames of {}…",
         args.scene.display()
     );
-    let b = run_bench(&args)?;
-    crate::outln!(
+    let b = run_bench(args)?;
+    say!(
+        say,
         "{} frames at {}×{}, seed {}: {} views kept, {} corners, reprojection RMS {:.4} px",
         b.frames,
         b.resolution[0],
@@ -296,8 +295,11 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
         b.points,
         b.rms_px
     );
-    crate::outln!("| param | true | estimated | relative error | std error | error/σ |");
-    crate::outln!("|---|---|---|---|---|---|");
+    say!(
+        say,
+        "| param | true | estimated | relative error | std error | error/σ |"
+    );
+    say!(say, "|---|---|---|---|---|---|");
     for r in &b.params {
         let rel = if r.relative_error.is_finite() {
             format!("{:.2e}", r.relative_error)
@@ -305,7 +307,8 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
             "—".into()
         };
         if r.estimated {
-            crate::outln!(
+            say!(
+                say,
                 "| {} | {:.6} | {:.6} | {rel} | {:.2e} | {:.2} |",
                 r.name,
                 r.truth,
@@ -314,7 +317,8 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
                 r.error_sigmas
             );
         } else {
-            crate::outln!(
+            say!(
+                say,
                 "| {} | {:.6} | {:.6} (fixed) | {rel} | — | — |",
                 r.name,
                 r.truth,
@@ -323,7 +327,8 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
         }
     }
     let c = &b.corner_error;
-    crate::outln!(
+    say!(
+        say,
         "corners vs truth ({}): mean ({:+.3}, {:+.3}) px, RMS {:.3} px, mean radial {:+.3} px, \
          mean outward from tag centre {:+.3} px",
         c.count,
@@ -334,16 +339,17 @@ pub fn run(args: CalibrationArgs) -> anyhow::Result<()> {
         c.mean_outward_px
     );
     for why in &b.rejected {
-        crate::outln!("  rejected: {why}");
+        say!(say, "  rejected: {why}");
     }
-    crate::outln!(
+    say!(
+        say,
         "targets (fx, fy, cx, cy ≤ {:.1} %, k1 ≤ {:.0} %): {}",
         INTRINSIC_TARGET * 100.0,
         K1_TARGET * 100.0,
         if b.meets_targets { "met" } else { "MISSED" }
     );
     out.write(serde_json::to_vec_pretty(&b)?)?;
-    crate::outln!("written {}", out.shown().display());
+    say!(say, "written {}", out.shown().display());
     Ok(())
 }
 

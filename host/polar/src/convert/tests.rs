@@ -7,23 +7,30 @@ use std::path::Path;
 use ellipso_model::mosaic::{Channel, SensorLayout};
 
 use super::*;
-use ellipso_polar::synthetic::mosaic_from_stokes;
+use crate::synthetic::mosaic_from_stokes;
 
 fn args(frame: &Path, out: &Path) -> Args {
     Args {
         frame: frame.to_path_buf(),
         out: out.to_path_buf(),
-        layout: Some(LayoutArg::Mono),
+        layout: Some(SensorLayout::MonoPolar),
         bit_depth: None,
         demosaic: DemosaicMethod::Superpixel,
         dark_level: 0.0,
         saturation: None,
-        dark_intensity: ellipso_polar::DEFAULT_DARK_INTENSITY,
+        dark_intensity: crate::DEFAULT_DARK_INTENSITY,
         max_residual: None,
-        json: false,
         calibration: None,
         npy: false,
     }
+}
+
+/// Warnings are not what these tests look at.
+struct Quiet;
+
+impl ellipso_model::run_error::Say for Quiet {
+    fn out(&self, _: std::fmt::Arguments<'_>) {}
+    fn err(&self, _: std::fmt::Arguments<'_>) {}
 }
 
 fn write_png16(path: &Path, w: u32, h: u32, data: Vec<u16>) {
@@ -34,8 +41,8 @@ fn write_png16(path: &Path, w: u32, h: u32, data: Vec<u16>) {
 }
 
 fn error_of(a: Args) -> String {
-    match run(a) {
-        Ok(()) => panic!("expected an error"),
+    match run(&a, &Quiet) {
+        Ok(_) => panic!("expected an error"),
         Err(e) => {
             let line = e.to_string();
             assert!(!line.contains('\n'), "one line: {line}");
@@ -62,7 +69,7 @@ fn mono_frame_produces_every_file_and_a_truthful_summary() {
     data[10 * 64 + 41] = 4095;
     write_png16(&frame_path, 64, 32, data);
     let out = dir.path().join("out");
-    run(args(&frame_path, &out)).expect("run");
+    run(&args(&frame_path, &out), &Quiet).expect("run");
 
     for f in [
         "s0.png",
@@ -155,10 +162,10 @@ fn colour_bilinear_writes_per_band_files() {
     write_png16(&frame_path, 16, 8, frame.into_data());
     let out = dir.path().join("out");
     let mut a = args(&frame_path, &out);
-    a.layout = Some(LayoutArg::Colour);
+    a.layout = Some(SensorLayout::ColourPolar);
     a.demosaic = DemosaicMethod::Bilinear;
     a.npy = true;
-    run(a).expect("run");
+    run(&a, &Quiet).expect("run");
     // full-precision planes: the R band's s0 is exactly 3000/4095 in the interior
     let bytes = fs::read(out.join("s0_r.npy")).expect("npy");
     let header_len = usize::from(u16::from_le_bytes([bytes[8], bytes[9]]));
@@ -248,7 +255,7 @@ fn bad_inputs_fail_with_one_line_naming_file_and_problem() {
     );
     let mut a = args(&shifted, &out);
     a.bit_depth = Some(16);
-    run(a).expect("16-bit accepted");
+    run(&a, &Quiet).expect("16-bit accepted");
 
     let eight = dir.path().join("eight.png");
     image::GrayImage::new(4, 4).save(&eight).expect("write");
@@ -315,7 +322,7 @@ fn documented_sphere_example_reproduces() {
     let out = dir.path().join("out");
     let mut a = args(&frame_path, &out);
     a.max_residual = Some(0.05);
-    run(a).expect("run");
+    run(&a, &Quiet).expect("run");
     // the pictures of docs/polar.md: `ELLIPSO_DOCS_IMG=docs/img` (a folder) copies them there
     if let Some(img) = std::env::var_os("ELLIPSO_DOCS_IMG") {
         for stem in ["aolp", "i_s", "dolp", "mask"] {
@@ -373,7 +380,7 @@ fn calibration_file_is_applied_and_recorded_or_rejected_by_name() {
     .expect("write");
     let mut a = args(&frame_path, &out);
     a.calibration = Some(good);
-    run(a).expect("run");
+    run(&a, &Quiet).expect("run");
     let summary = fs::read_to_string(out.join("summary.json")).expect("summary");
     assert!(summary.contains("\"extinction_ratio\""), "{summary}");
 
@@ -417,7 +424,7 @@ fn bit_depth_defaults_and_warnings_are_recorded() {
         .expect("size")
         .save(&eight)
         .expect("write");
-    run(args(&eight, &out)).expect("8-bit");
+    run(&args(&eight, &out), &Quiet).expect("8-bit");
     let s = read_summary(&out);
     assert_eq!(s["raw"]["bit_depth"], 8);
     assert_eq!(s["levels"]["full_scale_dn"], 255);
@@ -426,7 +433,7 @@ fn bit_depth_defaults_and_warnings_are_recorded() {
     // 16-bit PNG whose values fit 10 bits: still 12-bit by default, with a warning saying so
     let dim = dir.path().join("dim.png");
     write_png16(&dim, 4, 4, vec![900; 16]);
-    run(args(&dim, &out)).expect("dim");
+    run(&args(&dim, &out), &Quiet).expect("dim");
     let s = read_summary(&out);
     assert_eq!(s["raw"]["bit_depth"], 12);
     let warning = s["raw"]["warnings"][0].as_str().unwrap_or("").to_string();
@@ -435,7 +442,7 @@ fn bit_depth_defaults_and_warnings_are_recorded() {
     // the flag wins and the summary says why
     let mut a = args(&dim, &out);
     a.bit_depth = Some(10);
-    run(a).expect("flag");
+    run(&a, &Quiet).expect("flag");
     let s = read_summary(&out);
     assert_eq!(s["raw"]["bit_depth"], 10);
     assert_eq!(s["raw"]["bit_depth_source"], "--bit-depth");
@@ -498,7 +505,7 @@ fn tiff_npy_and_float_mosaics_read_like_png_and_colour_is_never_read_as_mono() {
         a.layout = None;
         a.bit_depth = bit_depth;
         a.npy = true;
-        let w = write(&a).expect("write");
+        let w = write(&a, &Quiet).expect("write");
         assert!(w.headline.contains("MonoPolar"), "{}", w.headline);
         let bytes = fs::read(out.join("s0.npy")).unwrap();
         ellipso_report::npy::decode(&bytes).unwrap().data
@@ -528,7 +535,7 @@ fn tiff_npy_and_float_mosaics_read_like_png_and_colour_is_never_read_as_mono() {
     write_png16(&cpath, 64, 32, colour.into_data());
     let mut a = args(&cpath, &dir.path().join("c"));
     a.layout = None;
-    let w = write(&a).expect("colour frame");
+    let w = write(&a, &Quiet).expect("colour frame");
     assert!(
         w.headline.contains("ColourPolar") && w.headline.contains("detected"),
         "{}",

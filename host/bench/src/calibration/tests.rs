@@ -3,7 +3,7 @@
 use super::*;
 
 fn scene_path() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../sim/scenes/calibration.toml")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/calibration.toml")
 }
 
 /// A third of the resolution (816×680), 8 of the 40 listed poses — the whole chain (render,
@@ -17,7 +17,7 @@ fn scene_path() -> PathBuf {
 /// - all 8 views kept (border-clipped tags made views outliers at up to 27 px).
 #[test]
 fn reduced_resolution_calibration_recovers_the_rendered_camera() {
-    let args = CalibrationArgs {
+    let args = CalibrationOptions {
         scene: scene_path(),
         frames: Some(8),
         resolution: Some([816, 680]),
@@ -70,9 +70,9 @@ fn reduced_resolution_calibration_recovers_the_rendered_camera() {
 
 #[test]
 fn spread_covers_the_path_without_repeats() {
-    assert_eq!(super::super::spread(7, None), vec![0, 1, 2, 3, 4, 5, 6]);
-    assert_eq!(super::super::spread(150, Some(4)), vec![0, 37, 75, 112]);
-    assert_eq!(super::super::spread(3, Some(10)), vec![0, 1, 2]);
+    assert_eq!(crate::pose::spread(7, None), vec![0, 1, 2, 3, 4, 5, 6]);
+    assert_eq!(crate::pose::spread(150, Some(4)), vec![0, 37, 75, 112]);
+    assert_eq!(crate::pose::spread(3, Some(10)), vec![0, 1, 2]);
 }
 
 #[test]

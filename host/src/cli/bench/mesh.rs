@@ -17,13 +17,13 @@ use anyhow::Context;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_sim::scene::Scene;
 
-use super::capture;
-use super::demo::shipped_scene;
+use crate::cli::capture;
 use ellipso_bench::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
 use ellipso_fit::session::{SessionFit, SessionFitConfig};
 use ellipso_fit::truth::TruthObject;
 use ellipso_mesh::MeshReport;
 use ellipso_mesh::distance::{MeshDistance, mesh_distance};
+use ellipso_sim::scene::shipped_scene;
 
 /// Arguments of `ellipso bench mesh`.
 #[derive(Debug, clap::Args)]
@@ -36,7 +36,7 @@ pub struct MeshArgs {
     )]
     pub scenes: Vec<String>,
     /// Capture resolution (the demo's: half the scenes' 2448×2048).
-    #[arg(long, value_parser = super::limits::resolution, default_value = "1224x1024")]
+    #[arg(long, value_parser = crate::cli::limits::resolution, default_value = "1224x1024")]
     pub resolution: [u32; 2],
     /// Photos per capture (default: each scene's path).
     #[arg(long)]
@@ -53,7 +53,7 @@ pub struct MeshArgs {
     pub fit: bool,
     /// Also run `ellipso fit` as its own process on the demo session at these carved-mesh
     /// vertex counts and report its time, peak memory and observed-surface distance.
-    #[arg(long, value_delimiter = ',', value_parser = super::limits::vertices)]
+    #[arg(long, value_delimiter = ',', value_parser = crate::cli::limits::vertices)]
     pub scale_vertices: Vec<usize>,
     /// The Markdown report.
     #[arg(long, default_value = "docs/mesh-bench.md")]
@@ -254,14 +254,17 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
-        let (_, _, hull) =
-            super::mesh::mesh_of_session(&session, None, &ellipso_mesh::MeshConfig::default())?;
+        let (_, _, hull) = crate::cli::mesh::mesh_of_session(
+            &session,
+            None,
+            &ellipso_mesh::MeshConfig::default(),
+        )?;
         let config = SessionFitConfig {
             hull: Some(std::sync::Arc::new(hull)),
             ..SessionFitConfig::default()
         };
-        let config = super::fit::with_session_sensor(&session, &config);
-        let poses = super::fit::poses_of(&session)?;
+        let config = crate::cli::fit::with_session_sensor(&session, &config);
+        let poses = crate::cli::fit::poses_of(&session)?;
         let t0 = Instant::now();
         let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
         let fit_s = t0.elapsed().as_secs_f64();
@@ -303,7 +306,7 @@ pub fn mesh_scores(
     config: &SessionFitConfig,
 ) -> anyhow::Result<MeshScores> {
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
-    let poses = super::fit::poses_of(session)?;
+    let poses = crate::cli::fit::poses_of(session)?;
     let true_config = SessionFitConfig {
         hull: None,
         ..config.clone()
