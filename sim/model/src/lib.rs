@@ -11,6 +11,10 @@
 //! - [`mosaic`]: the sensor mosaic (IMX250MZR/MYR): analyser angle and colour filter per raw
 //!   pixel.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
+//! - [`rig`]: the camera settings and the flash of a rig, as scene files and session
+//!   manifests spell them.
+//! - [`radiometry`]: the camera equation from model intensity to electrons and DN (the
+//!   normaliser N), shared by the renderer and the fit.
 #![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
@@ -18,3 +22,5 @@ pub mod file_io;
 pub mod geometry;
 pub mod mosaic;
 pub mod optics;
+pub mod radiometry;
+pub mod rig;
