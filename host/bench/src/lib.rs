@@ -8,6 +8,8 @@
 //!
 //! | module | what it does |
 //! |---|---|
+//! | [`truth`] | a scene's object with its true parameters per vertex, and the views of its capture path |
+//! | [`accuracy`] | observation-level simulated captures with known truth, and a fit's errors against it (`ellipso bench accuracy`) |
 //! | [`variant`] | scene files with effects removed (or seed, photo count changed) |
 //! | [`capture`] | a scene rendered straight into a session; true poses of a recorded session |
 //! | [`ideal`] | a session's frames as an ideal polarisation sensor sees them (no mosaic) |
@@ -18,12 +20,14 @@
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
 #![forbid(unsafe_code)]
 
+pub mod accuracy;
 pub mod capture;
 pub mod chain;
 pub mod ideal;
 pub mod report;
 pub mod score;
 pub mod surface;
+pub mod truth;
 pub mod truth_map;
 pub mod variant;
 

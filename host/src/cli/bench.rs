@@ -22,7 +22,7 @@ use ellipso_sim::scene::Scene;
 use ellipso_sim::scene::error::Located;
 
 use ellipso_polar::frame::RawFrame;
-use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
+use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, TrackedBoardExt, Tracker};
 
 /// `ellipso bench` subcommands.
 #[derive(Debug, clap::Subcommand)]

@@ -20,8 +20,8 @@ use ellipso_sim::scene::Scene;
 use super::capture;
 use super::demo::shipped_scene;
 use ellipso_bench::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
+use ellipso_bench::truth::TruthObject;
 use ellipso_fit::session::{SessionFit, SessionFitConfig};
-use ellipso_fit::truth::TruthObject;
 use ellipso_mesh::MeshReport;
 use ellipso_mesh::distance::{MeshDistance, mesh_distance};
 

@@ -21,7 +21,6 @@ use rayon::prelude::*;
 
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::reader;
-use ellipso_session::rig::layout_of;
 use ellipso_vision::calibrate::flash::{HighlightObservation, estimate_flash_position};
 use ellipso_vision::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
 use ellipso_vision::calibrate::views::board_view;
@@ -126,7 +125,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
     let boards = ellipso_vision::process::boards_of(&session)?;
-    let layout = layout_of(&session.manifest)?;
+    let layout = session.manifest.sensor.layout;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
     anyhow::ensure!(

@@ -69,8 +69,8 @@ pub fn normaliser(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_model::rig::FlashProfileKind;
     use crate::scene::Scene;
+    use ellipso_model::rig::FlashProfileKind;
     use std::path::Path;
 
     fn sphere_scene() -> Scene {
