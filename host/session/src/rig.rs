@@ -37,10 +37,11 @@ pub enum RadiometryRecord {
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RigRecord {
     /// The camera model (full raw resolution).
+    #[serde(deserialize_with = "named::camera")]
     pub camera: CameraModel,
     /// The flash as configured (position relative to the camera, polariser, intensity,
     /// profile); `None` when the rig's flash was never measured.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "named::flash")]
     pub flash: Option<FlashSpec>,
     /// The radiometry of the frames; absent in sessions recorded before it was written.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -52,6 +53,22 @@ pub struct RigRecord {
     /// Extinction ratio of the on-chip analysers where known (`None`: ideal analysers).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analyser_extinction_ratio: Option<f64>,
+}
+
+/// Field readers whose errors name the manifest key (serde's own name only the type).
+mod named {
+    use ellipso_model::camera::CameraModel;
+    use ellipso_model::rig::FlashSpec;
+    use serde::de::Error;
+    use serde::{Deserialize, Deserializer};
+
+    pub fn camera<'de, D: Deserializer<'de>>(d: D) -> Result<CameraModel, D::Error> {
+        CameraModel::deserialize(d).map_err(|e| D::Error::custom(format!("rig.camera: {e}")))
+    }
+
+    pub fn flash<'de, D: Deserializer<'de>>(d: D) -> Result<Option<FlashSpec>, D::Error> {
+        Option::<FlashSpec>::deserialize(d).map_err(|e| D::Error::custom(format!("rig.flash: {e}")))
+    }
 }
 
 impl RigRecord {
