@@ -190,11 +190,21 @@ fn radiometry_follows_the_session_source() {
         }
         other => panic!("{other:?}"),
     }
-    // Hardware: relative normaliser, full scale at 10 ms, 0 dB, 0.5 m on the flash axis.
+    // Hardware: relative normaliser, full scale at 10 ms, 0 dB, 0.5 m on the flash axis —
+    // as a hardware capture records it, and as a hardware session of an older build (no
+    // radiometry recorded) reads.
     session.manifest.source = SessionSource::Hardware {
         trigger_port: "/dev/null".into(),
         camera: "test".into(),
     };
+    let rig = session.manifest.rig.as_mut().unwrap();
+    *rig = ellipso_session::rig::RigRecord::relative(rig.camera, rig.flash.clone());
+    let mut old_hardware = session.clone();
+    old_hardware.manifest.rig.as_mut().unwrap().radiometry = None;
+    assert_eq!(
+        radiometry_of(&old_hardware).unwrap(),
+        radiometry_of(&session).unwrap()
+    );
     let r = radiometry_of(&session).unwrap();
     let n = |exposure_us, gain_db, d_m, angle_deg: f64| {
         r.for_frame(exposure_us, gain_db)
