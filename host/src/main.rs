@@ -42,6 +42,9 @@ enum Command {
     Devices(cli::devices::Args),
     /// Replay a recorded session through the stages after capture (pose tracking).
     Replay(cli::replay::Args),
+    /// Recorded sessions: upgrade one written by an older ellipso.
+    #[command(subcommand)]
+    Session(cli::session::Args),
     /// The simulator: render a scene's capture, or show which effects it needs.
     #[command(subcommand)]
     Sim(cli::sim::Args),
@@ -128,6 +131,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Model(args) => cli::model::run(args),
         Command::Polar(args) => cli::polar::run(args),
         Command::Replay(args) => cli::replay::run(args),
+        Command::Session(args) => cli::session::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),

@@ -91,7 +91,7 @@ fn a_bracketed_capture_over_a_pty_records_every_frame_with_the_energy_that_lit_i
             seed: 11,
         },
         SensorInfo {
-            layout: "mono_polar".into(),
+            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
             width: 16,
             height: 8,
             bit_depth: 16,

@@ -8,7 +8,7 @@
 //! seconds, one exposure (`multi_material.toml`, 200 photos at 500 ms) with the 3-step
 //! flash-energy bracket (`multi_material_bracket.toml`, 600 photos, 1, ¼, 1⁄16 in turn), plus
 //! the bracket scene's 600 views all at full energy (more views without the bracket), and scores
-//! the clusters' σs and the samples kept at the lobe peak ([`ellipso_fit::accuracy::specular`]).
+//! the clusters' σs and the samples kept at the lobe peak ([`crate::accuracy::specular`]).
 //!
 //! Every figure in one report comes from one run of this command on one machine, so ratios
 //! between rows are meaningful even on a shared, noisy machine; absolute seconds are not
@@ -28,8 +28,8 @@ pub mod report;
 type Result<T> = std::result::Result<T, RunError>;
 use ellipso_sim::scene::Scene;
 
-use ellipso_fit::accuracy::specular::LobeScores;
-use ellipso_fit::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
+use crate::accuracy::specular::LobeScores;
+use crate::accuracy::{CaptureCase, Scores, evaluate, forward_all, simulate};
 use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
 use ellipso_report::plot::{LegendPosition, LinePlot};
 
@@ -363,16 +363,16 @@ fn one_run(
     let simulate_s = t.elapsed().as_secs_f64();
     // The held-out views are taken out before the fit sees anything.
     let (train, held) = ellipso_fit::holdout::split_set(&full.set, holdout);
-    let capture = ellipso_fit::accuracy::SimulatedCapture {
+    let capture = crate::accuracy::SimulatedCapture {
         truth: full.truth,
         set: train,
         flash_energy_rel: full.flash_energy_rel,
         near_mirror: full.near_mirror,
     };
     let mut config = config.clone();
-    config.solver.sensor = ellipso_fit::accuracy::sensor_model(scene);
+    config.solver.sensor = crate::accuracy::sensor_model(scene);
     let outcome = fit_sample_set(&capture.set, None, &config, &mut |_| {});
-    let full_scale = ellipso_fit::accuracy::full_scale_dn(scene);
+    let full_scale = crate::accuracy::full_scale_dn(scene);
     let holdout = (!held.views.is_empty())
         .then(|| ellipso_fit::holdout::score(&held, &outcome.fits, full_scale).overall);
     let fit_s = outcome.times.fit_s();
@@ -395,7 +395,7 @@ fn one_run(
     }
     let scores = evaluate(&capture, &outcome.fits);
     let peak_rss_bytes = ellipso_report::memory::peak_rss_bytes().filter(|_| rss_reset);
-    let lobes = ellipso_fit::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
+    let lobes = crate::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
     let bracket = case
         .bracket
         .clone()

@@ -3,7 +3,8 @@
 //!
 //! Contract:
 //! - [`render_session`] writes the session `ellipso capture --sim` writes — the same manifest
-//!   (simulator source naming the scene file, sensor layout, camera model, flash, boards) and
+//!   (simulator source naming the scene file, sensor layout, the rig record with camera model,
+//!   flash, radiometry and noise, boards) and
 //!   the same raw frames (the simulated camera renders frame k with the same renderer, options
 //!   and noise seed, so its PNGs are byte-identical: `capture_frames_equal_direct_renders` in
 //!   `tests/`) — without the trigger board, the pty and the real-time pacing, which cannot
@@ -19,23 +20,14 @@ use std::path::Path;
 
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader::Session;
-use ellipso_session::rig::RigRecord;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::{FrameRecord, SessionWriter};
 use ellipso_sim::render::{RenderOptions, Renderer};
 use ellipso_sim::scene::Scene;
-use ellipso_vision::track::TrackedBoard;
+use ellipso_vision::process::{boards_of_scene, rig_record_of_scene};
 use nalgebra::Isometry3;
 
 use crate::BenchError;
-
-/// The manifest's name of a sensor layout (the camera backends' spelling).
-pub fn layout_name(layout: ellipso_model::mosaic::SensorLayout) -> &'static str {
-    match layout {
-        ellipso_model::mosaic::SensorLayout::MonoPolar => "mono_polar",
-        ellipso_model::mosaic::SensorLayout::ColourPolar => "colour_polar",
-    }
-}
 
 /// Renders `scene` (loaded from `scene_path`) with `options` into a new session at `dir`
 /// (module doc); `progress(done, total)` after each frame.
@@ -56,25 +48,15 @@ pub fn render_session(
             seed: scene.seed,
         },
         SensorInfo {
-            layout: layout_name(renderer.layout()).into(),
+            layout: renderer.layout(),
             width: camera.width,
             height: camera.height,
             bit_depth: scene.rig.camera.bit_depth,
         },
         0,
     );
-    let json = |e: serde_json::Error| BenchError::Session(e.to_string());
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera,
-        flash: serde_json::to_value(&scene.rig.flash).map_err(json)?,
-    })
-    .map_err(json)?;
-    manifest.boards = scene
-        .boards
-        .iter()
-        .map(|b| serde_json::to_value(TrackedBoard::from_placed(b)))
-        .collect::<Result<_, _>>()
-        .map_err(json)?;
+    manifest.rig = Some(rig_record_of_scene(scene, camera));
+    manifest.boards = boards_of_scene(scene);
     let session = |e: ellipso_session::SessionError| BenchError::Session(e.to_string());
     let mut writer = SessionWriter::create(dir, manifest).map_err(session)?;
     let total = renderer.frame_count();

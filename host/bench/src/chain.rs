@@ -19,9 +19,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use crate::truth::TruthObject;
 use ellipso_fit::observe::{MosaicFrames, poses_from_session};
 use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session_with};
-use ellipso_fit::truth::TruthObject;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_session::reader::Session;
 use ellipso_sim::render::{Footprint, RenderOptions, Renderer};
@@ -233,12 +233,12 @@ impl Bench {
         let at = truth_at(&truth, fit.mesh.positions());
         let colour = fit.set.colour;
         let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
-        let full_scale = ellipso_fit::accuracy::full_scale_dn(&scene);
+        let full_scale = crate::accuracy::full_scale_dn(&scene);
         let holdout = fit
             .held_out_set
             .as_ref()
             .map(|held| holdout_beside_truth(held, &fit.outcome.fits, &at, full_scale));
-        let sensor = ellipso_fit::accuracy::sensor_model(&scene);
+        let sensor = crate::accuracy::sensor_model(&scene);
         let residuals = truth_residuals(&fit.set, &at, &truth.material_names, &sensor);
         Ok(RunResult {
             spec: spec.clone(),

@@ -8,6 +8,8 @@
 //!
 //! | module | what it does |
 //! |---|---|
+//! | [`truth`] | a scene's object with its true parameters per vertex, and the views of its capture path |
+//! | [`accuracy`] | observation-level simulated captures with known truth, and a fit's errors against it (`ellipso bench accuracy`) |
 //! | [`variant`] | scene files with effects removed (or seed, photo count changed) |
 //! | [`capture`] | a scene rendered straight into a session; true poses of a recorded session |
 //! | [`ideal`] | a session's frames as an ideal polarisation sensor sees them (no mosaic) |
@@ -23,6 +25,7 @@
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
 #![forbid(unsafe_code)]
 
+pub mod accuracy;
 pub mod accuracy_time;
 pub mod calibration;
 pub mod capture;
@@ -33,6 +36,7 @@ pub mod report;
 pub mod score;
 pub mod sim_render;
 pub mod surface;
+pub mod truth;
 pub mod truth_map;
 pub mod variant;
 pub mod view_cost;

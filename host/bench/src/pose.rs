@@ -23,7 +23,7 @@ use ellipso_polar::frame::RawFrame;
 
 use ellipso_model::run_error::{RunError, Say};
 use ellipso_model::{ensure, say};
-use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
+use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, TrackedBoardExt, Tracker};
 
 /// What `ellipso bench pose` runs (its flags, parsed by the binary).
 #[derive(Debug, Clone)]

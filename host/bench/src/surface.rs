@@ -7,8 +7,8 @@
 //! refined normal (or the mesh's own normal) and the true normal there, degrees, over the
 //! observed vertices. Empty sets give 0.
 
+use crate::truth::TruthObject;
 use ellipso_fit::data::VertexFit;
-use ellipso_fit::truth::TruthObject;
 use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Vector3;
 use serde::Serialize;

@@ -7,7 +7,7 @@
 //! the nearest corner too), the true normal interpolated over the triangle and normalised, and
 //! the distance. A position with no closest point (empty truth) gets `None`.
 
-use ellipso_fit::truth::TruthObject;
+use crate::truth::TruthObject;
 use ellipso_mesh::distance::ClosestPoints;
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::{Point3, Vector3};

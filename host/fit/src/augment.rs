@@ -53,8 +53,6 @@ pub mod virtual_samples;
 
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_pool;
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

@@ -10,7 +10,7 @@
 //!   z = ω_o, y = image up. The flash Stokes vector is then `[1, 1, 0, 0]` (polarised) or
 //!   `[1, 0, 0, 0]` ([`ViewGeometry::flash_polariser`]).
 //! - A [`Sample`] holds the observation channels (I^d, I^s, I^α and I^t = I45 + I135 per RGB
-//!   channel, docs/model.md "Measurement") already divided by the radiometric normaliser N (`ellipso_sim::render::radiometry`), i.e. in
+//!   channel, docs/model.md "Measurement") already divided by the radiometric normaliser N (`ellipso_model::radiometry`), i.e. in
 //!   the units of `ellipso_model::optics::measure::observe` with a unit flash. On a monochrome
 //!   sensor all three colour entries are equal and [`SampleSet::colour`] is false.
 //! - `normaliser` (DN per model unit) is kept so the solver can weight by expected noise; it is
@@ -87,7 +87,7 @@ impl ViewGeometry {
     pub fn from_rig(
         frame_id: u64,
         world_from_camera: &nalgebra::Isometry3<f64>,
-        flash: &ellipso_sim::scene::FlashSpec,
+        flash: &ellipso_model::rig::FlashSpec,
     ) -> Self {
         let up = world_from_camera.transform_vector(&Vector3::new(0.0, -1.0, 0.0));
         let axis = world_from_camera.transform_vector(&Vector3::z());

@@ -25,13 +25,13 @@
 //! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
 //! - [`shard`]: sharded fits for job arrays (observations and step A per shard, part files, the
 //!   merge that runs the global steps once; docs/scale.md).
-//! - [`truth`], [`synthetic`], [`accuracy`]: the simulator's truth as the fit sees it, synthetic
-//!   samples, simulated captures and error metrics (benchmarks and tests).
+//! - [`synthetic`]: samples of one vertex synthesised through the renderer's radiometry (the
+//!   solver's tests and benches). The simulator's truth, simulated captures and error metrics
+//!   live in `ellipso-bench`: this crate does not depend on the simulator.
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit and
 //!   novel views, the re-render comparison).
 #![forbid(unsafe_code)]
 
-pub mod accuracy;
 pub mod augment;
 pub mod data;
 pub mod export;
@@ -46,4 +46,3 @@ pub mod shape;
 pub mod shard;
 pub mod solve;
 pub mod synthetic;
-pub mod truth;

@@ -42,15 +42,12 @@
 pub mod radiometry;
 pub mod sampler;
 
-#[cfg(test)]
-mod tests;
-
 use std::path::PathBuf;
 
 use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::mosaic::SensorLayout;
-use ellipso_sim::scene::FlashSpec;
+use ellipso_model::rig::FlashSpec;
 use nalgebra::Isometry3;
 use rayon::prelude::*;
 
@@ -62,9 +59,10 @@ use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
-use ellipso_session::rig::RigRecord;
 
-pub use radiometry::{PointNormaliser, SessionRadiometry, flash_of, radiometry_of};
+pub use radiometry::{
+    PointNormaliser, SessionRadiometry, flash_of, radiometry_of, sensor_noise_of,
+};
 pub use sampler::SampleKernel;
 use sampler::{AnalyserPixels, DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
 
@@ -138,14 +136,6 @@ pub enum ObserveError {
         /// The manifest file.
         path: PathBuf,
     },
-    /// The scene file of a simulator session cannot be used.
-    #[error("scene {}: {what}", path.display())]
-    Scene {
-        /// The scene file.
-        path: PathBuf,
-        /// What is wrong.
-        what: String,
-    },
     /// A pose is not a finite rigid transform, or a frame has two poses.
     #[error("pose of frame {frame_id}: {what}")]
     Pose {
@@ -213,12 +203,14 @@ fn manifest_path(session: &Session) -> PathBuf {
 
 /// The camera model recorded in the session (`rig.camera`), checked against the frame size.
 pub fn camera_of(session: &Session) -> Result<CameraModel, ObserveError> {
-    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone()).map_err(|e| {
-        ObserveError::Manifest {
+    let rig = session
+        .manifest
+        .rig
+        .as_ref()
+        .ok_or_else(|| ObserveError::Manifest {
             path: manifest_path(session),
-            what: format!("`rig` has no usable camera model: {e}"),
-        }
-    })?;
+            what: "`rig` is not recorded: no camera model".into(),
+        })?;
     let s = &session.manifest.sensor;
     if (rig.camera.width, rig.camera.height) != (s.width, s.height) {
         return Err(ObserveError::Manifest {
@@ -390,12 +382,7 @@ pub struct MosaicFrames<'a> {
 impl<'a> MosaicFrames<'a> {
     /// The recorded frames of `session` read with `config`'s dark level and sample point.
     pub fn new(session: &'a Session, config: &ObserveConfig) -> Result<Self, ObserveError> {
-        let layout = ellipso_session::rig::layout_of(&session.manifest).map_err(|e| {
-            ObserveError::Manifest {
-                path: manifest_path(session),
-                what: e.to_string(),
-            }
-        })?;
+        let layout = session.manifest.sensor.layout;
         Ok(Self {
             session,
             layout,
@@ -473,11 +460,7 @@ pub fn extract_from(
     progress: &dyn Fn(usize, usize),
 ) -> Result<Extraction, ObserveError> {
     let camera = camera_of(session)?;
-    let layout =
-        ellipso_session::rig::layout_of(&session.manifest).map_err(|e| ObserveError::Manifest {
-            path: manifest_path(session),
-            what: e.to_string(),
-        })?;
+    let layout = session.manifest.sensor.layout;
     if u32::try_from(mesh.positions().len()).is_err() {
         return Err(ObserveError::Mesh(format!(
             "{} vertices exceed the sample format's u32 index",

@@ -21,7 +21,7 @@ use ellipso_model::optics::Stokes;
 use ellipso_model::optics::Vec3;
 use ellipso_model::optics::measure::SensorIntensities;
 use ellipso_model::optics::pbrdf::{PbrdfParams, apply};
-use ellipso_sim::render::radiometry::Radiometry;
+use ellipso_model::radiometry::Radiometry;
 use nalgebra::{Point3, Vector3};
 use rand_distr::{Distribution, StandardNormal};
 

@@ -269,8 +269,7 @@ pub fn export_colmap(
     options: ColmapOptions,
 ) -> Result<ColmapReport, ColmapError> {
     let camera = camera_of(session).map_err(|e| ColmapError::Session(e.to_string()))?;
-    let layout = ellipso_session::rig::layout_of(&session.manifest)
-        .map_err(|e| ColmapError::Session(e.to_string()))?;
+    let layout = session.manifest.sensor.layout;
     // full resolution: one image pixel per raw pixel
     let tile = 1;
     let (frames, mut skipped) = posed_frames(session, poses);

@@ -145,7 +145,7 @@ fn setup<'a>(
 ) -> Result<Setup<'a>, MeshError> {
     let camera = camera_of(session).map_err(session_error)?;
     let boards = ellipso_vision::process::boards_of(session).map_err(session_error)?;
-    let layout = ellipso_session::rig::layout_of(&session.manifest).map_err(session_error)?;
+    let layout = session.manifest.sensor.layout;
     let radiometry = radiometry_of(session).map_err(session_error)?;
     let (frames, skipped) = posed_frames(session, poses);
     report.skipped = skipped;

@@ -14,7 +14,6 @@ use super::halfedge::HalfEdgeMesh;
 use super::{MeshConfig, MeshError, build_mesh};
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader::{self, Session};
-use ellipso_session::rig::RigRecord;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::{FrameRecord, SessionWriter};
 
@@ -112,23 +111,15 @@ pub fn render_session_with(
             seed: scene.seed,
         },
         SensorInfo {
-            layout: "mono_polar".into(),
+            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
             width: camera.width,
             height: camera.height,
             bit_depth: 12,
         },
         0,
     );
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera,
-        flash: serde_json::to_value(&scene.rig.flash).unwrap(),
-    })
-    .unwrap();
-    manifest.boards = scene
-        .boards
-        .iter()
-        .map(|b| serde_json::to_value(ellipso_vision::track::TrackedBoard::from_placed(b)).unwrap())
-        .collect();
+    manifest.rig = Some(ellipso_vision::process::rig_record_of_scene(&scene, camera));
+    manifest.boards = ellipso_vision::process::boards_of_scene(&scene);
     let session_dir = dir.join("session");
     let mut writer = SessionWriter::create(&session_dir, manifest).unwrap();
     let mut poses = Vec::new();

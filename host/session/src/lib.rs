@@ -40,6 +40,8 @@ pub const SCHEMA_VERSION: u32 = 1;
 pub mod paths {
     /// The manifest.
     pub const MANIFEST: &str = "manifest.json";
+    /// The manifest as it was before `ellipso session upgrade` rewrote it.
+    pub const MANIFEST_BACKUP: &str = "manifest.json.pre-upgrade";
     /// The event log.
     pub const EVENTS: &str = "events.jsonl";
     /// The frames directory.

@@ -1,18 +1,58 @@
 //! `manifest.json`: what a session captured, with what, by which software, in which schema.
 //!
-//! The rig, calibration and board sections are stored as the JSON of the configuration they were
-//! captured with (the scene's or rig file's sections), so a session is self-describing without
-//! this module depending on every configuration type. Readers parse them with the owning module's
-//! types.
+//! Every section is typed: the sensor ([`SensorInfo`], its layout a
+//! [`SensorLayout`]), the rig ([`RigRecord`]: camera, flash, radiometry, noise) and the boards
+//! ([`TrackedBoard`]), so a session is self-describing and is parsed in one place, when it is
+//! opened. Sections older sessions wrote differently are still read (`docs/session-format.md`).
 
+use ellipso_model::mosaic::SensorLayout;
 use serde::{Deserialize, Serialize};
+
+use crate::rig::{RigRecord, TrackedBoard};
+
+/// The sensor layout as a manifest spells it: `mono_polar` / `colour_polar` written; the
+/// simulator's older `monopolar` / `colourpolar` also read. An unknown name is refused with
+/// the field's name.
+mod layout_name {
+    use ellipso_model::mosaic::SensorLayout;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(layout: &SensorLayout, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(name(*layout))
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<SensorLayout, D::Error> {
+        let text = String::deserialize(d)?;
+        match text.as_str() {
+            "mono_polar" | "monopolar" => Ok(SensorLayout::MonoPolar),
+            "colour_polar" | "colourpolar" => Ok(SensorLayout::ColourPolar),
+            other => Err(serde::de::Error::custom(format!(
+                "sensor.layout: '{other}' is not a sensor layout (mono_polar or colour_polar)"
+            ))),
+        }
+    }
+
+    /// The written name of `layout`.
+    pub fn name(layout: SensorLayout) -> &'static str {
+        match layout {
+            SensorLayout::MonoPolar => "mono_polar",
+            SensorLayout::ColourPolar => "colour_polar",
+        }
+    }
+}
+
+/// The name a manifest writes for `layout` (`mono_polar`, `colour_polar`).
+pub fn layout_name(layout: SensorLayout) -> &'static str {
+    layout_name::name(layout)
+}
 
 /// How the sensor's raw frames are laid out.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorInfo {
-    /// Mosaic layout name, e.g. `mono_polar` (IMX250MZR) or `colour_polar` (IMX250MYR).
-    pub layout: String,
+    /// Mosaic layout, written `mono_polar` (IMX250MZR) or `colour_polar` (IMX250MYR).
+    #[serde(with = "layout_name")]
+    pub layout: SensorLayout,
     /// Frame width, px.
     pub width: u32,
     /// Frame height, px.
@@ -25,20 +65,10 @@ pub struct SensorInfo {
 pub const MAX_SIDE_PX: u32 = 16_384;
 
 impl SensorInfo {
-    /// Checks the fields against what a raw mosaic frame can be: a known layout, even sides in
-    /// `2..=16384` (2×2 polariser blocks), 1–16 significant bits in the 16-bit container.
-    /// `Err((field, what))` names the field.
+    /// Checks the fields against what a raw mosaic frame can be (the layout is checked when
+    /// it is parsed): even sides in `2..=16384` (2×2 polariser blocks), 1–16 significant bits in
+    /// the 16-bit container. `Err((field, what))` names the field.
     pub fn check(&self) -> Result<(), (&'static str, String)> {
-        const LAYOUTS: [&str; 4] = ["mono_polar", "colour_polar", "monopolar", "colourpolar"];
-        if !LAYOUTS.contains(&self.layout.as_str()) {
-            return Err((
-                "sensor.layout",
-                format!(
-                    "'{}' is not a sensor layout (mono_polar or colour_polar)",
-                    self.layout
-                ),
-            ));
-        }
         for (field, v) in [("sensor.width", self.width), ("sensor.height", self.height)] {
             if !(2..=MAX_SIDE_PX).contains(&v) || v % 2 != 0 {
                 return Err((
@@ -113,15 +143,13 @@ pub struct Manifest {
     pub source: SessionSource,
     /// Sensor layout of the raw frames.
     pub sensor: SensorInfo,
-    /// Rig description (camera model, flash offset, polariser…), as configured.
+    /// The rig: camera model, flash, radiometry, noise ([`RigRecord`]); `None` when the
+    /// capture recorded none.
     #[serde(default)]
-    pub rig: serde_json::Value,
-    /// Calibration in force, if any.
+    pub rig: Option<RigRecord>,
+    /// AprilTag boards of the capture, as tracking needs them.
     #[serde(default)]
-    pub calibration: Option<serde_json::Value>,
-    /// AprilTag boards of the capture.
-    #[serde(default)]
-    pub boards: Vec<serde_json::Value>,
+    pub boards: Vec<TrackedBoard>,
     /// Set when the session ended cleanly; absent (not `null`) otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub end: Option<EndRecord>,
@@ -136,8 +164,7 @@ impl Manifest {
             host_epoch_unix_us,
             source,
             sensor,
-            rig: serde_json::Value::Null,
-            calibration: None,
+            rig: None,
             boards: Vec::new(),
             end: None,
         }

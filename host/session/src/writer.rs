@@ -221,6 +221,26 @@ pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
     }
 }
 
+/// Replaces the manifest of the recorded session in `dir` with `manifest` (`ellipso session
+/// upgrade`: an older session given the sections this build records), keeping the old file as
+/// [`paths::MANIFEST_BACKUP`]. Refuses when a backup is already there (an earlier upgrade's:
+/// it is never overwritten). Nothing else in the session is touched. Returns the backup's path.
+pub fn replace_manifest(dir: &Path, manifest: &Manifest) -> Result<PathBuf, SessionError> {
+    let path = dir.join(paths::MANIFEST);
+    let backup = dir.join(paths::MANIFEST_BACKUP);
+    let old = fs::read(&path).map_err(SessionError::io(&path))?;
+    let mut file = fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&backup)
+        .map_err(SessionError::io(&backup))?;
+    file.write_all(&old)
+        .and_then(|()| file.sync_all())
+        .map_err(SessionError::io(&backup))?;
+    write_manifest(dir, manifest)?;
+    Ok(backup)
+}
+
 fn write_manifest(dir: &Path, manifest: &Manifest) -> Result<(), SessionError> {
     let path = dir.join(paths::MANIFEST);
     let tmp = dir.join(".manifest.json.partial");

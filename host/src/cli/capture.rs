@@ -41,7 +41,7 @@ use ellipso_session::rig::RigRecord;
 use ellipso_session::time::HostClock;
 use ellipso_session::writer::SessionWriter;
 use ellipso_vision::process;
-use ellipso_vision::track::{TrackConfig, TrackedBoard};
+use ellipso_vision::track::TrackConfig;
 
 /// Arguments of `ellipso capture`.
 #[derive(Debug, Clone, clap::Args)]
@@ -269,22 +269,16 @@ pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
             seed: scene.seed,
         },
         SensorInfo {
-            layout: info.layout.clone(),
+            layout,
             width: size.0,
             height: size.1,
             bit_depth: info.bit_depth,
         },
         clock.wall_at_epoch_unix_us(),
     );
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera: camera_model,
-        flash: serde_json::to_value(&scene.rig.flash).unwrap_or_default(),
-    })?;
-    manifest.boards = scene
-        .boards
-        .iter()
-        .map(|b| serde_json::to_value(TrackedBoard::from_placed(b)))
-        .collect::<Result<_, _>>()?;
+    // the record the fit reads instead of the scene file: flash, radiometry, noise
+    manifest.rig = Some(process::rig_record_of_scene(scene, camera_model));
+    manifest.boards = process::boards_of_scene(scene);
     check_plan(&link, board_cfg)?;
     let session = SessionWriter::create(&args.out, manifest)?;
 
@@ -496,26 +490,23 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
             camera: format!("{}:{}", info.backend, rig.sensor.address),
         },
         SensorInfo {
-            layout: layout_name(rig.sensor.layout).to_string(),
+            layout: rig.sensor.layout,
             width: info.width,
             height: info.height,
             bit_depth: rig.sensor.bit_depth,
         },
         clock.wall_at_epoch_unix_us(),
     );
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera: rig.camera,
+    manifest.rig = Some(RigRecord::relative(
+        rig.camera,
         // The flash as `ellipso calibrate --sphere` measured it (the fit needs it); the rest of
         // the flash description takes the rig's defaults (polarised parallel to the 0° analyser).
-        flash: rig
-            .flash
-            .map(|f| serde_json::json!({ "offset_m": f.offset_m }))
-            .unwrap_or(serde_json::Value::Null),
-    })?;
-    manifest.boards = boards
-        .iter()
-        .map(serde_json::to_value)
-        .collect::<Result<_, _>>()?;
+        rig.flash.map(|f| ellipso_model::rig::FlashSpec {
+            offset_m: f.offset_m,
+            ..Default::default()
+        }),
+    ));
+    manifest.boards = boards.clone();
     let mut board_cfg = rig.board_config();
     if let Some(bracket) = args.bracket {
         board_cfg.bracket = bracket;

@@ -342,7 +342,7 @@ fn fit_and_score(
             held,
             fits,
             &at,
-            ellipso_fit::accuracy::full_scale_dn(scene),
+            ellipso_bench::accuracy::full_scale_dn(scene),
         )
     });
     crate::outln!("scoring: the same session fitted on the true mesh, for η beside it…");

@@ -424,12 +424,12 @@ pub fn fit_and_export_with(
     )
 }
 
-/// The sensor model the solver weights by: the session's where it says it (simulator
+/// The sensor model the solver weights by: the session's where it records it (simulator
 /// sessions), the documented default otherwise.
 pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> SessionFitConfig {
     let mut config = config.clone();
-    if let Some(scene) = ellipso_fit::observe::radiometry::scene_of(session) {
-        config.fit.solver.sensor = ellipso_fit::accuracy::sensor_model(&scene);
+    if let Some(sensor) = ellipso_fit::observe::sensor_noise_of(session) {
+        config.fit.solver.sensor = sensor;
     }
     config
 }
@@ -493,10 +493,9 @@ pub fn export_fit(
             h.overall.alpha.relative_rmse
         );
     }
-    let rig: ellipso_session::rig::RigRecord = serde_json::from_value(session.manifest.rig.clone())
+    let rig = (session.manifest.rig.as_ref())
         .context("the session's manifest has no usable rig section")?;
-    let flash: ellipso_sim::scene::FlashSpec = serde_json::from_value(rig.flash.clone())
-        .context("the session's manifest has no usable flash section")?;
+    let flash = ellipso_fit::observe::flash_of(session)?;
     crate::errln!("pictures from frame {frame_id}…");
     let captured_s0 =
         match ellipso_fit::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {

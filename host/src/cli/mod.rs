@@ -18,6 +18,7 @@ pub mod out;
 pub mod polar;
 pub mod progress;
 pub mod replay;
+pub mod session;
 pub mod sim;
 pub mod sim_serve;
 pub mod view;

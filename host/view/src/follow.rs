@@ -34,7 +34,7 @@ use super::priority::{self, Pacer};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::manifest::Manifest;
 use ellipso_session::{frame_png, paths};
-use ellipso_vision::process::{RigRecord, layout_of};
+use ellipso_vision::process::RigRecord;
 use ellipso_vision::track::{TrackConfig, TrackedBoard, Tracker};
 
 mod json;
@@ -352,26 +352,19 @@ impl FollowState {
     }
 
     fn setup_rig(&mut self, manifest: &Manifest) {
-        let rig = serde_json::from_value::<RigRecord>(manifest.rig.clone());
-        self.boards = manifest
-            .boards
-            .iter()
-            .filter_map(|b| serde_json::from_value(b.clone()).ok())
-            .collect();
-        if let Ok(rig) = &rig {
+        let rig: Option<&RigRecord> = manifest.rig.as_ref();
+        self.boards = manifest.boards.clone();
+        if let Some(rig) = rig {
             self.camera = Some(rig.camera);
-            if let Some(o) = rig.flash.get("offset_m").and_then(|v| v.as_array())
-                && let [x, y, z] = o.as_slice()
-                && let (Some(x), Some(y), Some(z)) = (x.as_f64(), y.as_f64(), z.as_f64())
-            {
-                self.flash_offset_m = Vector3::new(x, y, z);
+            if let Some(flash) = &rig.flash {
+                self.flash_offset_m = Vector3::from(flash.offset_m);
             }
         }
         if self.config.track {
-            self.tracker = Some(match (&rig, self.boards.is_empty()) {
-                (Err(e), _) => Err(format!("no camera model in the manifest: {e}")),
+            self.tracker = Some(match (rig, self.boards.is_empty()) {
+                (None, _) => Err("no camera model in the manifest".into()),
                 (_, true) => Err("no AprilTag boards in the manifest".into()),
-                (Ok(rig), false) => {
+                (Some(rig), false) => {
                     Tracker::new(rig.camera, self.boards.clone(), TrackConfig::default())
                         .map_err(|e| e.to_string())
                 }
@@ -387,7 +380,7 @@ impl FollowState {
             .map_or_else(|| paths::frame_file(frame_id), |f| f.file.clone());
         let path = self.config.session.join(paths::FRAMES).join(file);
         let (w, h, px) = frame_png::read(&path).map_err(|e| e.to_string())?;
-        let layout = layout_of(manifest).map_err(|e| e.to_string())?;
+        let layout = manifest.sensor.layout;
         RawFrame::new(w, h, manifest.sensor.bit_depth, layout, px).map_err(|e| e.to_string())
     }
 

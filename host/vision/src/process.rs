@@ -19,7 +19,30 @@ use ellipso_session::reader::Session;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::SessionAppender;
 
-pub use ellipso_session::rig::{RigRecord, layout_of};
+pub use ellipso_session::rig::RigRecord;
+
+/// The rig record a simulated capture of `scene` writes, with `camera` the model of the frames
+/// it renders (the scene's camera, or the resolution override's): the flash, and the
+/// radiometry, sensor noise and analyser extinction the renderer simulates, so the session's
+/// fit needs no scene file.
+pub fn rig_record_of_scene(scene: &ellipso_sim::scene::Scene, camera: CameraModel) -> RigRecord {
+    let sensor = ellipso_sim::render::radiometry::recorded_sensor(scene);
+    RigRecord {
+        camera,
+        flash: Some(scene.rig.flash.clone()),
+        radiometry: Some(ellipso_session::rig::RadiometryRecord::Absolute(
+            sensor.radiometry,
+        )),
+        noise: Some(sensor.noise),
+        analyser_extinction_ratio: sensor.analyser_extinction_ratio,
+    }
+}
+
+/// The boards a simulated capture of `scene` records, as tracking needs them.
+pub fn boards_of_scene(scene: &ellipso_sim::scene::Scene) -> Vec<TrackedBoard> {
+    use crate::track::TrackedBoardExt;
+    scene.boards.iter().map(TrackedBoard::from_placed).collect()
+}
 
 /// Errors of the processing stages.
 #[derive(Debug, thiserror::Error)]
@@ -35,9 +58,6 @@ pub enum ProcessError {
     /// Reading or appending to the session failed.
     #[error(transparent)]
     Session(#[from] SessionError),
-    /// The manifest's sensor section names no known layout.
-    #[error(transparent)]
-    Layout(#[from] ellipso_session::rig::LayoutError),
 }
 
 fn manifest_error(session: &Session, what: String) -> ProcessError {
@@ -51,16 +71,7 @@ fn manifest_error(session: &Session, what: String) -> ProcessError {
 
 /// The AprilTag boards recorded in a session's manifest (at least one).
 pub fn boards_of(session: &Session) -> Result<Vec<TrackedBoard>, ProcessError> {
-    let boards = session
-        .manifest
-        .boards
-        .iter()
-        .enumerate()
-        .map(|(i, b)| {
-            serde_json::from_value::<TrackedBoard>(b.clone())
-                .map_err(|e| manifest_error(session, format!("`boards[{i}]`: {e}")))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
+    let boards = session.manifest.boards.clone();
     if boards.is_empty() {
         return Err(manifest_error(
             session,
@@ -72,8 +83,10 @@ pub fn boards_of(session: &Session) -> Result<Vec<TrackedBoard>, ProcessError> {
 
 /// The camera model and boards recorded in a session's manifest.
 pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), ProcessError> {
-    let rig: RigRecord = serde_json::from_value(session.manifest.rig.clone())
-        .map_err(|e| manifest_error(session, format!("`rig` has no usable camera model: {e}")))?;
+    let rig =
+        session.manifest.rig.as_ref().ok_or_else(|| {
+            manifest_error(session, "`rig` is not recorded: no camera model".into())
+        })?;
     Ok((rig.camera, boards_of(session)?))
 }
 
@@ -120,7 +133,7 @@ pub fn track_frames(
     select: impl Fn(u64) -> bool,
 ) -> Result<Vec<TrackedFrame>, ProcessError> {
     let (camera, boards) = rig_of(session)?;
-    let layout = layout_of(&session.manifest)?;
+    let layout = session.manifest.sensor.layout;
     let bit_depth = session.manifest.sensor.bit_depth;
     let frames: Vec<_> = session
         .frames

@@ -307,10 +307,12 @@ impl RigFile {
                     Translation3::new(tx, ty, tz),
                     UnitQuaternion::from_euler_angles(rx, ry, rz),
                 );
-                Ok(TrackedBoard::from_placed(&PlacedBoard {
-                    board,
-                    world_from_board,
-                }))
+                Ok(
+                    <TrackedBoard as crate::track::TrackedBoardExt>::from_placed(&PlacedBoard {
+                        board,
+                        world_from_board,
+                    }),
+                )
             })
             .collect()
     }

@@ -337,7 +337,7 @@ mod tests {
                 seed: 1,
             },
             SensorInfo {
-                layout: "mono_polar".into(),
+                layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
                 width: 4,
                 height: 2,
                 bit_depth: 12,

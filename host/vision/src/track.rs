@@ -17,11 +17,9 @@
 //!    keep the board with the most corners, and express the pose in the world through that
 //!    board's `world_from_board`.
 
-use std::collections::BTreeMap;
-
 use ellipso_model::camera::CameraModel;
 use ellipso_sim::tags::PlacedBoard;
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3};
 
 use crate::pose::{
     BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetection, TagDetector,
@@ -80,32 +78,19 @@ pub enum TrackRejection {
     Frame(String),
 }
 
-/// What tracking needs of a board — its tag corners and its place in the world — in the form a
-/// session manifest records (`boards`), so a recorded session can be tracked without its scene.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct TrackedBoard {
-    /// Board name, if any.
-    #[serde(default)]
-    pub name: Option<String>,
-    /// Tag family (`tag36h11`, `tag25h9`, `tag16h5`); sessions written before it was recorded
-    /// used tag36h11, the only family tracked then.
-    #[serde(default = "default_family")]
-    pub family: String,
-    /// Tag id → its four corners in the board frame, metres, AprilTag detection order.
-    pub corners_board_m: BTreeMap<u32, [[f64; 3]; 4]>,
-    /// Board origin in the world, metres.
-    pub world_from_board_translation_m: [f64; 3],
-    /// Board rotation into the world, axis-angle, radians.
-    pub world_from_board_rotation: [f64; 3],
-}
+pub use ellipso_session::rig::TrackedBoard;
 
-fn default_family() -> String {
-    "tag36h11".into()
-}
-
-impl TrackedBoard {
+/// What tracking adds to a recorded board: its detector family, and the record of a scene's
+/// placed board.
+pub trait TrackedBoardExt: Sized {
     /// The detector family of this board's tags.
-    pub fn tag_family(&self) -> Result<TagFamily, DetectError> {
+    fn tag_family(&self) -> Result<TagFamily, DetectError>;
+    /// From a scene's placed board.
+    fn from_placed(placed: &PlacedBoard) -> Self;
+}
+
+impl TrackedBoardExt for TrackedBoard {
+    fn tag_family(&self) -> Result<TagFamily, DetectError> {
         match self.family.as_str() {
             "tag36h11" => Ok(TagFamily::Tag36h11),
             "tag25h9" => Ok(TagFamily::Tag25h9),
@@ -117,8 +102,7 @@ impl TrackedBoard {
         }
     }
 
-    /// From a scene's placed board.
-    pub fn from_placed(placed: &PlacedBoard) -> Self {
+    fn from_placed(placed: &PlacedBoard) -> Self {
         let corners_board_m = placed
             .board
             .tags
@@ -134,16 +118,6 @@ impl TrackedBoard {
             world_from_board_translation_m: [t.x, t.y, t.z],
             world_from_board_rotation: [r.x, r.y, r.z],
         }
-    }
-
-    /// Board frame → world frame.
-    pub fn world_from_board(&self) -> Isometry3<f64> {
-        let [tx, ty, tz] = self.world_from_board_translation_m;
-        let [rx, ry, rz] = self.world_from_board_rotation;
-        Isometry3::from_parts(
-            Translation3::new(tx, ty, tz),
-            UnitQuaternion::from_scaled_axis(Vector3::new(rx, ry, rz)),
-        )
     }
 }
 

@@ -15,6 +15,10 @@
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
 //! - [`run_error`]: the error of the library functions a subcommand calls (anyhow's chain of
 //!   contexts, as a typed error), and [`run_error::Say`], where their lines go.
+//! - [`rig`]: the camera settings and the flash of a rig, as scene files and session
+//!   manifests spell them.
+//! - [`radiometry`]: the camera equation from model intensity to electrons and DN (the
+//!   normaliser N), shared by the renderer and the fit.
 #![cfg_attr(not(test), forbid(unsafe_code))] // a test makes a FIFO with libc
 
 pub mod camera;
@@ -25,3 +29,5 @@ pub mod mosaic;
 pub mod optics;
 pub mod stats;
 pub mod run_error;
+pub mod radiometry;
+pub mod rig;

@@ -25,7 +25,7 @@ use ellipso_model::optics::Vec3;
 use ellipso_model::optics::measure::FlashPolariser;
 use ellipso_model::optics::pbrdf::{Geometry, PbrdfParams, apply, evaluate, evaluate_s0};
 use ellipso_model::optics::{Frame, Stokes};
-use ellipso_sim::scene::FlashSpec;
+use ellipso_model::rig::FlashSpec;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;
 

@@ -29,7 +29,7 @@ use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::optics::measure::FlashPolariser;
 use ellipso_model::optics::pbrdf::apply;
-use ellipso_sim::scene::FlashSpec;
+use ellipso_model::rig::FlashSpec;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
@@ -170,7 +170,7 @@ pub fn captured_s0(
         .find(|f| f.frame_id == frame_id)
         .ok_or_else(|| format!("frame {frame_id} is not in the session"))?;
     let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
-    let layout = ellipso_session::rig::layout_of(&session.manifest).map_err(|e| e.to_string())?;
+    let layout = session.manifest.sensor.layout;
     let raw =
         ellipso_polar::frame::RawFrame::new(w, h, session.manifest.sensor.bit_depth, layout, px)
             .map_err(|e| e.to_string())?;

@@ -4,7 +4,6 @@ use super::*;
 use crate::data::FitFlag;
 use ellipso_model::geometry::procedural::icosphere;
 use ellipso_model::optics::pbrdf::PbrdfParams;
-use ellipso_sim::scene::Scene;
 
 fn sphere() -> TriangleMesh {
     let (dirs, faces) = icosphere(3);
@@ -55,12 +54,30 @@ fn pose() -> Isometry3<f64> {
     )
 }
 
-fn sphere_scene() -> Scene {
-    Scene::load(&ellipso_sim::scene::shipped_scene("sphere.toml")).unwrap()
+/// The shipped sphere scene's `[rig]` table, read without the simulator.
+fn sphere_rig() -> toml::Value {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/sphere.toml");
+    let text = std::fs::read_to_string(path).expect("sphere scene reads");
+    let scene: toml::Table = toml::from_str(&text).expect("sphere scene parses");
+    scene["rig"].clone()
 }
 
+/// The sphere scene's flash.
 fn flash() -> FlashSpec {
-    sphere_scene().rig.flash
+    sphere_rig()["flash"]
+        .clone()
+        .try_into()
+        .expect("the sphere scene's flash")
+}
+
+/// The sphere scene's camera model.
+fn sphere_camera() -> ellipso_model::camera::CameraModel {
+    let camera: ellipso_model::rig::CameraSpec = sphere_rig()["camera"]
+        .clone()
+        .try_into()
+        .expect("the sphere scene's camera");
+    camera.camera_model()
 }
 
 #[test]
@@ -68,7 +85,7 @@ fn every_output_is_written_and_readable() {
     let mesh = sphere();
     let fits = fits(&mesh);
     let dir = tempfile::tempdir().unwrap();
-    let camera = sphere_scene().rig.camera.camera_model();
+    let camera = sphere_camera();
     let config = ExportConfig {
         picture_px: 48,
         ..ExportConfig::default()
@@ -169,7 +186,7 @@ fn one_rule_for_the_ply_and_the_float_maps() {
         }
     }
     let dir = tempfile::tempdir().unwrap();
-    let camera = sphere_scene().rig.camera.camera_model();
+    let camera = sphere_camera();
     let config = ExportConfig {
         picture_px: 48,
         ..ExportConfig::default()

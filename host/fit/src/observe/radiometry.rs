@@ -1,17 +1,18 @@
 //! The radiometry of a recorded session: how raw digital numbers become model units, i.e. the
 //! normaliser N (docs/model.md §11 "Inputs and the normaliser N") per (vertex, view), and the
 //! analyser model the observation channels are computed with. One place, [`radiometry_of`],
-//! decides it from the manifest.
+//! decides it from the session's rig record (`ellipso_session::rig::RigRecord`); the fit never
+//! opens the scene or rig file a session was captured from.
 //!
 //! Contract:
-//! - **Simulator sessions** (absolute): the manifest names the scene file; it is loaded for the
-//!   `CameraSpec` (f-number, QE, pitch, full well, bit depth) and the effect plan (vignetting
-//!   exponent, polariser extinction). N is then exactly the renderer's
-//!   [`ellipso_sim::render::radiometry::Radiometry::normaliser`] with the frame's recorded
-//!   exposure and gain in place of the scene's, so a noise-free render divided by N gives
-//!   `ellipso_model::optics::measure::observe` of the true material.
-//!   The scene's flash must equal the flash recorded in the manifest (an edited scene file
-//!   would silently change the units otherwise).
+//! - **Simulator sessions** (absolute): the manifest records the camera-equation parameters
+//!   (f-number, QE, pitch, full well, bit depth, the vignetting exponent the renderer applied)
+//!   and the analysers' extinction ratio, as the capture took them from the scene. N is then
+//!   exactly the renderer's [`ellipso_model::radiometry::Radiometry::normaliser`] with the
+//!   frame's recorded exposure and gain, so a noise-free render divided by N gives
+//!   `ellipso_model::optics::measure::observe` of the true material. A simulator session
+//!   recorded before these were written is refused with the command that upgrades it
+//!   (`ellipso session upgrade`).
 //! - **Hardware and replayed sessions** (relative): no absolute radiometric calibration exists,
 //!   so N is a documented relative normaliser
 //!   `N_rel = full_scale_dn · (t / 10 ms) · 10^(gain_dB/20) · profile(θ_flash) · (0.5 m / d)²`:
@@ -32,15 +33,15 @@
 //!   short pulse's sample its larger relative noise (docs/fit-observe.md, "Flash-energy
 //!   bracket"). Frames with `E = 0` hold no flash signal and are never sampled.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use ellipso_sim::effects::{EffectPlan, Stage, StageParams};
-use ellipso_sim::render::radiometry::Radiometry;
-use ellipso_sim::scene::{CameraSpec, FlashSpec, Scene};
+use ellipso_model::radiometry::{CameraRadiometry, Radiometry, full_scale_dn as full_scale};
+use ellipso_model::rig::FlashSpec;
 
 use super::ObserveError;
-use ellipso_session::manifest::SessionSource;
+use crate::solve::SensorNoiseModel;
 use ellipso_session::reader::Session;
+use ellipso_session::rig::{FitInputs, RadiometryRecord};
 
 /// Exposure at which the relative normaliser maps model intensity 1 to full scale, µs.
 pub const RELATIVE_REFERENCE_EXPOSURE_US: f64 = 10_000.0;
@@ -53,13 +54,9 @@ const MIN_FLASH_DISTANCE_M: f64 = 1e-3;
 /// Where the normaliser's absolute scale comes from.
 #[derive(Clone, Debug, PartialEq)]
 pub enum NormaliserKind {
-    /// The renderer's camera equation (simulator sessions).
-    Absolute {
-        /// The scene's camera (exposure and gain are replaced per frame).
-        camera: CameraSpec,
-        /// Vignetting exponent n of cos^n(field angle), when the scene plans vignetting.
-        vignetting_exponent: Option<f64>,
-    },
+    /// The renderer's camera equation (simulator sessions) with these parameters (vignetting
+    /// exponent included); exposure and gain come from each frame.
+    Absolute(CameraRadiometry),
     /// The relative normaliser of the module doc (hardware sessions).
     Relative,
 }
@@ -174,26 +171,21 @@ impl PointNormaliser {
 }
 
 impl SessionRadiometry {
-    /// The absolute radiometry of a scene's rig, as its renderer uses it.
-    pub fn from_scene(scene: &Scene) -> Self {
-        let plan = EffectPlan::from_scene(scene);
-        let vignetting_exponent = match plan.params(Stage::Vignetting) {
-            Some(StageParams::Vignetting(v)) => Some(v.exponent),
-            _ => None,
+    /// The radiometry a session's rig record describes, for frames of `bit_depth` bits.
+    pub fn from_inputs(inputs: &FitInputs, bit_depth: u8) -> Self {
+        let kind = match &inputs.radiometry {
+            RadiometryRecord::Absolute(camera) => NormaliserKind::Absolute(camera.clone()),
+            RadiometryRecord::Relative => NormaliserKind::Relative,
         };
-        let analyser_extinction = match plan.params(Stage::PolariserExtinction) {
-            Some(StageParams::PolariserExtinction(x)) if x.ratio >= 1.0 => 1.0 / x.ratio,
+        let analyser_extinction = match inputs.analyser_extinction_ratio {
+            Some(ratio) if ratio >= 1.0 => 1.0 / ratio,
             _ => 0.0,
         };
-        let camera = scene.rig.camera.clone();
         Self {
-            flash: scene.rig.flash.clone(),
-            full_scale_dn: full_scale(camera.bit_depth),
-            kind: NormaliserKind::Absolute {
-                camera,
-                vignetting_exponent,
-            },
+            flash: inputs.flash.clone(),
+            kind,
             analyser_extinction,
+            full_scale_dn: full_scale(bit_depth),
         }
     }
 
@@ -210,21 +202,12 @@ impl SessionRadiometry {
     /// The normaliser of a frame exposed for `exposure_us` at `gain_db`.
     pub fn for_frame(&self, exposure_us: f64, gain_db: f64) -> FrameRadiometry {
         match &self.kind {
-            NormaliserKind::Absolute {
+            NormaliserKind::Absolute(camera) => FrameRadiometry::Absolute(Radiometry::of_exposure(
                 camera,
-                vignetting_exponent,
-            } => {
-                let camera = CameraSpec {
-                    exposure_us,
-                    gain_db,
-                    ..camera.clone()
-                };
-                FrameRadiometry::Absolute(Radiometry::new(
-                    &camera,
-                    &self.flash,
-                    *vignetting_exponent,
-                ))
-            }
+                exposure_us,
+                gain_db,
+                &self.flash,
+            )),
             NormaliserKind::Relative => FrameRadiometry::Relative {
                 flash: self.flash.clone(),
                 scale: self.full_scale_dn * exposure_us / RELATIVE_REFERENCE_EXPOSURE_US
@@ -251,86 +234,49 @@ impl SessionRadiometry {
     }
 }
 
-fn full_scale(bit_depth: u8) -> f64 {
-    // bit depths are 1..=16 wherever a frame was readable; clamp keeps the shift defined.
-    f64::from((1u32 << u32::from(bit_depth).clamp(1, 16)) - 1)
-}
-
 fn manifest_path(session: &Session) -> PathBuf {
     session.dir.join(ellipso_session::paths::MANIFEST)
 }
 
 /// The flash recorded in the session's manifest (`rig.flash`).
 pub fn flash_of(session: &Session) -> Result<FlashSpec, ObserveError> {
-    let flash = session
+    session
         .manifest
         .rig
-        .get("flash")
-        .cloned()
-        .unwrap_or(serde_json::Value::Null);
-    if flash.is_null() {
-        return Err(ObserveError::MissingFlash {
+        .as_ref()
+        .and_then(|r| r.flash.clone())
+        .ok_or_else(|| ObserveError::MissingFlash {
             path: manifest_path(session),
-        });
-    }
-    serde_json::from_value(flash).map_err(|e| ObserveError::Manifest {
-        path: manifest_path(session),
-        what: format!("`rig.flash` is not a flash description: {e}"),
-    })
-}
-
-/// The scene file a simulator session names, resolved: as recorded, else relative to the
-/// session directory's parent and the session directory.
-fn resolve_scene(session: &Session, recorded: &str) -> Option<PathBuf> {
-    let p = Path::new(recorded);
-    if p.is_file() {
-        return Some(p.to_path_buf());
-    }
-    if p.is_relative() {
-        let parent = session.dir.parent().map(|d| d.join(p));
-        let inside = Some(session.dir.join(p));
-        return [parent, inside].into_iter().flatten().find(|c| c.is_file());
-    }
-    None
-}
-
-/// The scene a simulator session was captured from, when its file is still found.
-pub fn scene_of(session: &Session) -> Option<Scene> {
-    match &session.manifest.source {
-        SessionSource::Simulator { scene, .. } => Scene::load(&resolve_scene(session, scene)?).ok(),
-        _ => None,
-    }
+        })
 }
 
 /// The radiometry of `session` (see the module doc for the rules per source).
 pub fn radiometry_of(session: &Session) -> Result<SessionRadiometry, ObserveError> {
-    let flash = flash_of(session)?;
-    match &session.manifest.source {
-        SessionSource::Simulator { scene, .. } => {
-            let path = resolve_scene(session, scene).ok_or_else(|| ObserveError::Scene {
-                path: PathBuf::from(scene),
-                what: "the scene file of this simulator session is not found (needed for the \
-                       camera's f-number, QE, pixel pitch and full well)"
-                    .into(),
-            })?;
-            let loaded = Scene::load(&path).map_err(|e| ObserveError::Scene {
-                path: path.clone(),
+    let inputs = session
+        .manifest
+        .fit_inputs(&session.dir)
+        .map_err(|e| match e {
+            ellipso_session::rig::RigError::MissingFlash => ObserveError::MissingFlash {
+                path: manifest_path(session),
+            },
+            e => ObserveError::Manifest {
+                path: manifest_path(session),
                 what: e.to_string(),
-            })?;
-            if loaded.rig.flash != flash {
-                return Err(ObserveError::Scene {
-                    path,
-                    what: "its flash differs from the flash recorded in the session: the scene \
-                           was edited after the capture"
-                        .into(),
-                });
-            }
-            let mut r = SessionRadiometry::from_scene(&loaded);
-            r.full_scale_dn = full_scale(session.manifest.sensor.bit_depth);
-            Ok(r)
-        }
-        SessionSource::Hardware { .. } | SessionSource::Replay { .. } => Ok(
-            SessionRadiometry::relative(flash, session.manifest.sensor.bit_depth),
-        ),
-    }
+            },
+        })?;
+    Ok(SessionRadiometry::from_inputs(
+        &inputs,
+        session.manifest.sensor.bit_depth,
+    ))
+}
+
+/// The sensor noise the solver weights `session`'s samples by, where the session records it
+/// (simulator sessions): shot noise through the recorded conversion gain, read noise in DN.
+pub fn sensor_noise_of(session: &Session) -> Option<SensorNoiseModel> {
+    let noise = session.manifest.rig.as_ref()?.noise.as_ref()?;
+    let dn_per_electron = noise.dn_per_electron();
+    Some(SensorNoiseModel {
+        dn_per_electron,
+        read_noise_dn: noise.read_noise_e * dn_per_electron,
+    })
 }

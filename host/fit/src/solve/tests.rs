@@ -5,8 +5,8 @@ use std::path::Path;
 use std::sync::OnceLock;
 
 use ellipso_model::optics::pbrdf::PbrdfParams;
-use ellipso_sim::render::radiometry::Radiometry;
-use ellipso_sim::scene::Scene;
+use ellipso_model::radiometry::Radiometry;
+use ellipso_model::rig::{CameraSpec, FlashSpec};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
@@ -18,30 +18,44 @@ use super::super::model::coaxial_unit_specular;
 use super::super::synthetic::{SensorNoise, orbit_views, synthesize_vertex};
 use super::*;
 
-pub(super) fn scene() -> &'static Scene {
-    static SCENE: OnceLock<Scene> = OnceLock::new();
+/// The shipped multi-material scene file, as TOML (its materials and camera; read without the
+/// simulator, which this crate does not depend on).
+fn scene() -> &'static toml::Table {
+    static SCENE: OnceLock<toml::Table> = OnceLock::new();
     SCENE.get_or_init(|| {
         let path =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/scenes/multi_material.toml");
-        Scene::load(&path).expect("multi_material scene loads")
+        let text = std::fs::read_to_string(&path).expect("multi_material scene reads");
+        toml::from_str(&text).expect("multi_material scene parses")
     })
 }
 
 pub(crate) fn material(name: &str) -> PbrdfParams<f64> {
-    scene()
-        .materials
-        .iter()
-        .find(|m| m.name == name)
-        .expect("material exists")
-        .params
-        .to_pbrdf()
+    let m = &scene()["materials"][name];
+    let number = |key: &str| m[key].as_float().expect("material number");
+    let rgb = |key: &str| -> [f64; 3] {
+        let a = m[key].as_array().expect("material RGB");
+        std::array::from_fn(|i| a[i].as_float().expect("material RGB number"))
+    };
+    PbrdfParams {
+        eta: number("eta"),
+        sigma_s: number("sigma_s"),
+        sigma_ss: number("sigma_ss"),
+        rho_s: number("rho_s"),
+        rho_ss: rgb("rho_ss"),
+        rho_d: rgb("rho_d"),
+    }
 }
 
 pub(super) const MATERIALS: [&str; 4] = ["glossy_plastic", "ceramic", "rubber", "glaze"];
 
 pub(super) fn radiometry() -> Radiometry {
-    let s = scene();
-    Radiometry::new(&s.rig.camera, &s.rig.flash, None)
+    let camera: CameraSpec = scene()["rig"]["camera"]
+        .clone()
+        .try_into()
+        .expect("the scene's camera");
+    // the scene configures no flash: the default one
+    Radiometry::new(&camera, &FlashSpec::default(), None)
 }
 
 /// The scene's 12-bit sensor with shot noise and 2.3 e⁻ read noise.

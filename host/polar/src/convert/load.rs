@@ -338,7 +338,7 @@ fn settle_layout(
         let manifest = std::fs::read(dir.join(ellipso_session::paths::MANIFEST))
             .ok()
             .and_then(|b| serde_json::from_slice::<ellipso_session::manifest::Manifest>(&b).ok());
-        if let Some(l) = manifest.and_then(|m| ellipso_session::rig::layout_of(&m).ok()) {
+        if let Some(l) = manifest.map(|m| m.sensor.layout) {
             return Ok((l, format!("the session manifest in {}", dir.display())));
         }
     }

@@ -15,7 +15,7 @@ fn manifest() -> Manifest {
             seed: 7,
         },
         SensorInfo {
-            layout: "mono_polar".into(),
+            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
             width: 8,
             height: 6,
             bit_depth: 12,
@@ -362,12 +362,23 @@ fn recorded_floats_read_back_exactly() {
     let dir = tmp.path().join("s");
     let mut m = manifest();
     let x = 1.875_766_871_165_644_1_f64;
-    m.rig = serde_json::json!({ "flash": { "radiant_intensity_w_per_sr": x } });
+    let flash = ellipso_model::rig::FlashSpec {
+        radiant_intensity_w_per_sr: x,
+        ..Default::default()
+    };
+    m.rig = Some(crate::rig::RigRecord::relative(
+        crate::rig::tests::camera(),
+        Some(flash),
+    ));
     drop(SessionWriter::create(&dir, m).unwrap());
     let s = open(&dir).unwrap();
-    let back = s.manifest.rig["flash"]["radiant_intensity_w_per_sr"]
-        .as_f64()
-        .unwrap();
+    let back = s
+        .manifest
+        .rig
+        .unwrap()
+        .flash
+        .unwrap()
+        .radiant_intensity_w_per_sr;
     assert_eq!(back.to_bits(), x.to_bits());
 }
 

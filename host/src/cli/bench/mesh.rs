@@ -19,8 +19,8 @@ use ellipso_sim::scene::Scene;
 
 use crate::cli::capture;
 use ellipso_bench::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
+use ellipso_bench::truth::TruthObject;
 use ellipso_fit::session::{SessionFit, SessionFitConfig};
-use ellipso_fit::truth::TruthObject;
 use ellipso_mesh::MeshReport;
 use ellipso_mesh::distance::{MeshDistance, mesh_distance};
 use ellipso_sim::scene::shipped_scene;

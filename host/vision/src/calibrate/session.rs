@@ -28,7 +28,6 @@ use crate::pose::DetectorConfig;
 use crate::track::{DetectImage, FamilyDetectors};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::reader;
-use ellipso_session::rig::layout_of;
 
 /// What `ellipso calibrate` runs (its flags, parsed by the binary).
 #[derive(Debug, Clone)]
@@ -104,7 +103,7 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
     let boards = crate::process::boards_of(&session)?;
-    let layout = layout_of(&session.manifest)?;
+    let layout = session.manifest.sensor.layout;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
     ensure!(

@@ -2,7 +2,7 @@
 //! shipped sphere scene (noise on) at two resolutions, for a sphere + board mesh: ms per view
 //! per 1000 vertices, samples per second, and the accounted peak memory, on 1 and 2 threads.
 //!
-//! Run: `cargo bench -p ellipso-fit --bench observe`. Prints a table; no assertions.
+//! Run: `cargo bench -p ellipso-bench --bench observe`. Prints a table; no assertions.
 
 use std::path::Path;
 use std::time::Instant;
@@ -12,7 +12,6 @@ use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::procedural::icosphere;
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader;
-use ellipso_session::rig::RigRecord;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::{FrameRecord, SessionWriter};
 use ellipso_sim::render::{RenderOptions, Renderer};
@@ -38,18 +37,14 @@ fn session(dir: &Path, resolution: [u32; 2]) -> Vec<(u64, Isometry3<f64>)> {
             seed: scene.seed,
         },
         SensorInfo {
-            layout: "monopolar".into(),
+            layout: renderer.layout(),
             width: camera.width,
             height: camera.height,
             bit_depth: scene.rig.camera.bit_depth,
         },
         0,
     );
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera,
-        flash: serde_json::to_value(&scene.rig.flash).expect("flash"),
-    })
-    .expect("rig");
+    manifest.rig = Some(ellipso_vision::process::rig_record_of_scene(&scene, camera));
     let mut writer = SessionWriter::create(dir, manifest).expect("session");
     let mut poses = Vec::new();
     // Every 19th pose of the two-turn orbit: views spread around the sphere.

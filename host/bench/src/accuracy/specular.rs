@@ -22,7 +22,7 @@ use std::collections::BTreeSet;
 use ellipso_model::optics::microfacet::ggx_d;
 
 use super::SimulatedCapture;
-use crate::augment::Augmentation;
+use ellipso_fit::augment::Augmentation;
 
 /// Materials with a true σs at or below this are glossy (the glaze 0.08 and the glossy plastic
 /// 0.03 of the four-material blob; the ceramic's 0.2 is not).

@@ -5,11 +5,11 @@
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::scene::{Scene, shipped_scene};
 
-use crate::accuracy::{CaptureCase, SimulatedCapture, sensor_model, simulate_with_truth};
-use crate::data::{FitFlag, VertexFit};
-use crate::pipeline::{FitConfig, fit_sample_set};
-use crate::solve::SolverConfig;
-use crate::truth::TruthObject;
+use ellipso_bench::accuracy::{CaptureCase, SimulatedCapture, sensor_model, simulate_with_truth};
+use ellipso_bench::truth::TruthObject;
+use ellipso_fit::data::{FitFlag, VertexFit};
+use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
+use ellipso_fit::solve::SolverConfig;
 
 /// The glaze of the shipped scenes (blue, a σs = 0.08 lobe) with refractive index `eta`.
 fn glaze(eta: f64) -> PbrdfParams<f64> {

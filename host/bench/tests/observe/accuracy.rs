@@ -9,8 +9,8 @@ use ellipso_sim::scene::{Scene, SurfaceKind};
 use nalgebra::{Point3, Vector3};
 
 use super::{CENTRE, RADIUS_M, SceneSpec, make_session, open, segment_distance, sphere_and_board};
-use crate::data::SampleSet;
-use crate::observe::{ObserveConfig, SamplePoint, extract};
+use ellipso_fit::data::SampleSet;
+use ellipso_fit::observe::{ObserveConfig, SamplePoint, extract};
 
 /// Errors of one comparison: per sample the largest |observed − predicted| of the three
 /// channels relative to the predicted I^d of that colour.

@@ -6,8 +6,8 @@ use std::f64::consts::SQRT_2;
 use nalgebra::{Point3, Vector3};
 
 use super::{CENTRE, RADIUS_M, SceneSpec, make_session, open, segment_distance, sphere_and_board};
-use crate::data::FitFlag;
-use crate::observe::{ObserveConfig, camera_of, extract};
+use ellipso_fit::data::FitFlag;
+use ellipso_fit::observe::{ObserveConfig, camera_of, extract};
 
 #[test]
 fn hidden_back_facing_and_shadowed_vertices_are_gated_with_their_reason() {
@@ -165,7 +165,7 @@ fn saturated_highlights_are_gated_as_saturated() {
         let peak = set.vertices[..sphere]
             .iter()
             .max_by(|a, b| {
-                let cos_h = |vs: &crate::data::VertexSamples| {
+                let cos_h = |vs: &ellipso_fit::data::VertexSamples| {
                     let g = view.geometry_at(&Point3::from(vs.position_world)).unwrap();
                     let h = (Vector3::from(g.to_light) + Vector3::from(g.to_camera)).normalize();
                     Vector3::from(vs.normal_world).dot(&h)
@@ -245,8 +245,13 @@ fn vertices_no_view_sees_are_labelled_unobserved() {
     )
     .unwrap();
     let set = &out.samples;
-    let observed = crate::shape::surface::observed_vertices(set, mesh.positions().len());
-    let fits = crate::solve::fit_all(set, None, None, &crate::solve::SolverConfig::default());
+    let observed = ellipso_fit::shape::surface::observed_vertices(set, mesh.positions().len());
+    let fits = ellipso_fit::solve::fit_all(
+        set,
+        None,
+        None,
+        &ellipso_fit::solve::SolverConfig::default(),
+    );
     let cameras: Vec<Point3<f64>> = set
         .views
         .iter()

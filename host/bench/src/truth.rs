@@ -20,7 +20,7 @@ use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_sim::scene::{CameraPose, MaterialBinding, ObjectGeometry, Scene};
 use nalgebra::{Point3, Vector3};
 
-use super::data::ViewGeometry;
+use ellipso_fit::data::ViewGeometry;
 
 /// Why a scene has no usable truth object.
 #[derive(Debug, thiserror::Error)]

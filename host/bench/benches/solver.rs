@@ -9,7 +9,7 @@
 //! by 5°. Presets are measured in interleaved rounds and reported as the median round, so a
 //! burst of load from other processes hits them alike; CPU time comes from
 //! `/proc/thread-self/schedstat` where available (wall time otherwise).
-//! Run: `cargo bench -p ellipso-fit --bench solver`.
+//! Run: `cargo bench -p ellipso-bench --bench solver`.
 
 use std::hint::black_box;
 use std::path::Path;

@@ -17,9 +17,9 @@ use nalgebra::{Isometry3, Point3, Vector3};
 use ellipso_session::events::SessionEvent;
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader::{self, Session};
-use ellipso_session::rig::RigRecord;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::{FrameRecord, SessionWriter};
+use ellipso_vision::process::rig_record_of_scene;
 
 /// Sphere centre and radius of every test scene, world metres.
 pub const CENTRE: [f64; 3] = [0.0, 0.0, 0.04];
@@ -152,22 +152,14 @@ saturation = {{}}
             seed: scene.seed,
         },
         SensorInfo {
-            layout: serde_json::to_value(renderer.layout())
-                .unwrap()
-                .as_str()
-                .unwrap()
-                .to_string(),
+            layout: renderer.layout(),
             width: camera.width,
             height: camera.height,
             bit_depth: 12,
         },
         0,
     );
-    manifest.rig = serde_json::to_value(RigRecord {
-        camera,
-        flash: serde_json::to_value(&scene.rig.flash).unwrap(),
-    })
-    .unwrap();
+    manifest.rig = Some(rig_record_of_scene(&scene, camera));
     let session_dir = dir.join("session");
     let mut writer = SessionWriter::create(&session_dir, manifest).unwrap();
     let mut poses = Vec::new();

@@ -6,12 +6,12 @@ use std::path::Path;
 use ellipso_model::optics::Stokes;
 use ellipso_model::optics::camera_up_from_opencv;
 use ellipso_model::optics::measure::SensorIntensities;
-use ellipso_sim::scene::FlashSpec;
+use ellipso_model::rig::FlashSpec;
 use nalgebra::Vector3;
 
 use super::{SceneSpec, make_session, open, sphere_and_board};
-use crate::observe::radiometry::SessionRadiometry;
-use crate::observe::{
+use ellipso_fit::observe::radiometry::{FrameRadiometry, SessionRadiometry};
+use ellipso_fit::observe::{
     ObserveConfig, ObserveError, extract, poses_from_session, radiometry_of, views_of,
 };
 use ellipso_session::events::SessionEvent;
@@ -94,7 +94,7 @@ fn output_is_identical_for_any_thread_count_and_frames_in_flight() {
     assert_eq!(one.report.gates, two.report.gates);
     // The memory account covers the samples and at least one frame.
     assert!(one.report.peak_bytes > one.report.sample_bytes + 256 * 200 * 2);
-    let per_sample = std::mem::size_of::<crate::data::Sample>() as u64;
+    let per_sample = std::mem::size_of::<ellipso_fit::data::Sample>() as u64;
     assert_eq!(one.report.sample_bytes, one.report.samples * per_sample);
 }
 
@@ -161,26 +161,50 @@ fn radiometry_follows_the_session_source() {
     let dir = tempfile::tempdir().unwrap();
     let (session_dir, scene, _) = make_session(dir.path(), &SceneSpec::paint_mono());
     let mut session = open(&session_dir);
-    // Simulator: absolute, the scene's chain.
+    // Simulator: absolute, the renderer's chain, from the session's record alone.
     let r = radiometry_of(&session).unwrap();
-    assert_eq!(r, SessionRadiometry::from_scene(&scene));
-    // Simulator whose scene file is gone: the error names it.
+    let camera = &scene.rig.camera;
+    let sensor = ellipso_sim::render::radiometry::recorded_sensor(&scene);
+    let chain = ellipso_sim::render::radiometry::Radiometry::new(
+        camera,
+        &scene.rig.flash,
+        sensor.radiometry.vignetting_exponent,
+    );
+    match r.for_frame(camera.exposure_us, camera.gain_db) {
+        FrameRadiometry::Absolute(frame) => assert_eq!(frame, chain),
+        other => panic!("{other:?}"),
+    }
+    // The scene file is never read again: a session whose scene is gone keeps its radiometry.
     let mut moved = session.clone();
     moved.manifest.source = SessionSource::Simulator {
         scene: "/nonexistent/scene.toml".into(),
         seed: 1,
     };
-    match radiometry_of(&moved) {
-        Err(ObserveError::Scene { path, .. }) => {
-            assert_eq!(path, Path::new("/nonexistent/scene.toml"))
+    assert_eq!(radiometry_of(&moved).unwrap(), r);
+    // A simulator session recorded before the radiometry was: the error names the upgrade.
+    let mut old = session.clone();
+    old.manifest.rig.as_mut().unwrap().radiometry = None;
+    match radiometry_of(&old) {
+        Err(ObserveError::Manifest { what, .. }) => {
+            assert!(what.contains("ellipso session upgrade"), "{what}")
         }
         other => panic!("{other:?}"),
     }
-    // Hardware: relative normaliser, full scale at 10 ms, 0 dB, 0.5 m on the flash axis.
+    // Hardware: relative normaliser, full scale at 10 ms, 0 dB, 0.5 m on the flash axis —
+    // as a hardware capture records it, and as a hardware session of an older build (no
+    // radiometry recorded) reads.
     session.manifest.source = SessionSource::Hardware {
         trigger_port: "/dev/null".into(),
         camera: "test".into(),
     };
+    let rig = session.manifest.rig.as_mut().unwrap();
+    *rig = ellipso_session::rig::RigRecord::relative(rig.camera, rig.flash.clone());
+    let mut old_hardware = session.clone();
+    old_hardware.manifest.rig.as_mut().unwrap().radiometry = None;
+    assert_eq!(
+        radiometry_of(&old_hardware).unwrap(),
+        radiometry_of(&session).unwrap()
+    );
     let r = radiometry_of(&session).unwrap();
     let n = |exposure_us, gain_db, d_m, angle_deg: f64| {
         r.for_frame(exposure_us, gain_db)
@@ -192,7 +216,7 @@ fn radiometry_follows_the_session_source() {
     // cos¹ profile of the scene's flash at 60°.
     assert!((n(10_000.0, 0.0, 0.5, 60.0) / 4095.0 - 0.5).abs() < 1e-12);
     // No flash recorded: no geometry can be built.
-    session.manifest.rig["flash"] = serde_json::Value::Null;
+    session.manifest.rig.as_mut().unwrap().flash = None;
     assert!(matches!(
         radiometry_of(&session),
         Err(ObserveError::MissingFlash { .. })

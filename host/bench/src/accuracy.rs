@@ -7,8 +7,8 @@
 //!   path (with `photos` poses), the four analyser intensities come from the same optics the
 //!   renderer uses, through the scene's radiometry (the renderer's normaliser N) and sensor
 //!   (full well, read noise, bit depth: 12-bit shot + read noise for the shipped scenes),
-//!   quantised and clipped, then gated by the shared rules ([`super::gate`]) —
-//!   [`super::synthetic::synthesize_vertex`] does one vertex. Visibility: the view must see
+//!   quantised and clipped, then gated by the shared rules ([`ellipso_fit::gate`]) —
+//!   [`ellipso_fit::synthetic::synthesize_vertex`] does one vertex. Visibility: the view must see
 //!   the vertex's front side, and no other part of the object may block the camera or the flash
 //!   (ray cast against the truth mesh). The fit starts from normals perturbed by
 //!   `normal_noise_deg` (an imperfect scanned mesh).
@@ -40,10 +40,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::data::{FitFlag, SampleGeometry, SampleSet, VertexFit, VertexSamples, ViewGeometry};
-use super::gate::GateConfig;
-use super::synthetic::{SensorNoise, synthesize_vertex};
-use super::truth::{TruthObject, views_of_scene};
+use ellipso_fit::data::{
+    FitFlag, SampleGeometry, SampleSet, VertexFit, VertexSamples, ViewGeometry,
+};
+use ellipso_fit::gate::GateConfig;
+use ellipso_fit::synthetic::{SensorNoise, synthesize_vertex};
+
+use crate::BenchError;
+use crate::truth::{TruthObject, views_of_scene};
 
 pub mod specular;
 
@@ -168,10 +172,10 @@ pub struct Scores {
 }
 
 /// The solver's noise model for a scene's camera (DN per electron with its gain, read noise).
-pub fn sensor_model(scene: &Scene) -> super::solve::SensorNoiseModel {
+pub fn sensor_model(scene: &Scene) -> ellipso_fit::solve::SensorNoiseModel {
     let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
     let r = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
-    super::solve::SensorNoiseModel {
+    ellipso_fit::solve::SensorNoiseModel {
         dn_per_electron: r.dn_per_electron(),
         read_noise_dn: read_noise_e(scene) * r.dn_per_electron(),
     }
@@ -189,8 +193,9 @@ fn read_noise_e(scene: &Scene) -> f64 {
 }
 
 /// Simulates `case` on `scene` (see the module doc).
-pub fn simulate(scene: &Scene, case: &CaptureCase) -> anyhow::Result<SimulatedCapture> {
-    let truth = TruthObject::from_scene(scene, case.subdivisions)?;
+pub fn simulate(scene: &Scene, case: &CaptureCase) -> Result<SimulatedCapture, BenchError> {
+    let truth = TruthObject::from_scene(scene, case.subdivisions)
+        .map_err(|e| BenchError::stage("truth", e))?;
     simulate_with_truth(scene, case, truth)
 }
 
@@ -201,7 +206,7 @@ pub fn simulate_with_truth(
     scene: &Scene,
     case: &CaptureCase,
     mut truth: TruthObject,
-) -> anyhow::Result<SimulatedCapture> {
+) -> Result<SimulatedCapture, BenchError> {
     let scene = with_photo_count(scene, case.photos)?;
     let views = views_of_scene(&scene, &scene.camera_poses);
     let vignetting = scene.effects.vignetting.as_ref().map(|v| v.exponent);
@@ -359,16 +364,21 @@ fn tilt(n: Vector3<f64>, deg: f64, rng: &mut ChaCha8Rng) -> Vector3<f64> {
 }
 
 /// The scene with `photos` poses along its capture path (same path, denser or sparser).
-pub fn with_photo_count(scene: &Scene, photos: usize) -> anyhow::Result<Scene> {
+pub fn with_photo_count(scene: &Scene, photos: usize) -> Result<Scene, BenchError> {
     if photos == scene.camera_poses.len() {
         return Ok(scene.clone());
     }
-    let text = std::fs::read_to_string(&scene.source)?;
-    let mut table: toml::Table = toml::from_str(&text)?;
+    let bad = |what: String| BenchError::Scene {
+        path: scene.source.clone(),
+        what,
+    };
+    let text =
+        std::fs::read_to_string(&scene.source).map_err(|e| BenchError::io(&scene.source, e))?;
+    let mut table: toml::Table = toml::from_str(&text).map_err(|e| bad(e.to_string()))?;
     let capture = table
         .get_mut("capture")
         .and_then(|c| c.as_table_mut())
-        .ok_or_else(|| anyhow::anyhow!("{}: no [capture] table", scene.source.display()))?;
+        .ok_or_else(|| bad("no [capture] table".into()))?;
     capture.insert("photo_count".into(), toml::Value::Integer(photos as i64));
     // Link faults are indexed by frame and play no part in observation-level captures.
     if let Some(effects) = table.get_mut("effects").and_then(|e| e.as_table_mut()) {
@@ -376,10 +386,8 @@ pub fn with_photo_count(scene: &Scene, photos: usize) -> anyhow::Result<Scene> {
         effects.remove("link_corruption");
         effects.remove("frame_drops");
     }
-    Ok(Scene::from_toml_str(
-        &toml::to_string(&table)?,
-        &scene.source,
-    )?)
+    let text = toml::to_string(&table).map_err(|e| bad(e.to_string()))?;
+    Scene::from_toml_str(&text, &scene.source).map_err(|e| bad(e.to_string()))
 }
 
 /// Angle between two vectors, degrees (the cosine clamped into acos's domain).

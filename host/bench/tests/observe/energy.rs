@@ -3,7 +3,7 @@
 //! flash did not light are skipped and counted.
 
 use super::{SceneSpec, make_session_lit, open, sphere_and_board};
-use crate::observe::{NO_FLASH_REASON, ObserveConfig, SkippedFrame, extract};
+use ellipso_fit::observe::{NO_FLASH_REASON, ObserveConfig, SkippedFrame, extract};
 
 /// Three frames from one camera position: full energy, a quarter pulse, no flash.
 const ENERGIES: [f64; 3] = [1.0, 0.25, 0.0];
