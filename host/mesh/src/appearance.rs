@@ -23,15 +23,6 @@
 //!   a noise floor of `tolerance_dn` DN (converted to each view's units), and, where both are
 //!   brighter than `min_polarised_dn`, `p` within `tolerance_polarisation`. A pixel is
 //!   *board-consistent* when it agrees with its texel's learned value.
-//! - **Dark texels.** A pixel whose agreement is only with learned texels darker than
-//!   `min_carve_fraction` of the board's white level (the 90th percentile of the learned
-//!   texels) is *ambiguous*: black ink (albedo 0.04), the void past the sheet or a dark table
-//!   looks the same as the unlit rim of a dark object in front of it (black rubber 0.05, dark
-//!   glass 0.02; with a near-coaxial flash every rim is unlit). An ambiguous pixel is board —
-//!   open space seen against dark surround still carves — except within `dark_guard_px`
-//!   feature-image pixels of a pixel that disagrees with the board (the object's lit part):
-//!   there it may be the object's rim and does not carve (silhouette.rs). Counting those rims
-//!   as board carved the glass sphere up to 1 mm inside its true surface.
 //! - **Memory** is bounded by `max_texels × reservoir × 24 B`; the texel size grows when the
 //!   region would need more texels.
 
@@ -57,23 +48,6 @@ pub struct AppearanceConfig {
     pub min_polarised_dn: f64,
     /// Fewest agreeing samples for a texel to be learned.
     pub min_support: usize,
-    /// A learned texel darker than this fraction of the board's white level (summed bands, in
-    /// board units) cannot tell a dark object from itself: a pixel that agrees with it is
-    /// ambiguous and never carves (module doc, "Dark texels").
-    #[serde(default = "default_min_carve_fraction")]
-    pub min_carve_fraction: f64,
-    /// Ambiguous pixels within this many feature-image pixels (square neighbourhood) of a
-    /// pixel that disagrees with the board do not carve: a dark object's unlit rim.
-    #[serde(default = "default_dark_guard_px")]
-    pub dark_guard_px: usize,
-}
-
-fn default_dark_guard_px() -> usize {
-    4
-}
-
-fn default_min_carve_fraction() -> f64 {
-    0.25
 }
 
 impl Default for AppearanceConfig {
@@ -87,8 +61,6 @@ impl Default for AppearanceConfig {
             tolerance_polarisation: 0.08,
             min_polarised_dn: 200.0,
             min_support: 3,
-            min_carve_fraction: default_min_carve_fraction(),
-            dark_guard_px: default_dark_guard_px(),
         }
     }
 }
@@ -286,7 +258,7 @@ impl Reservoirs {
     }
 
     /// The learned board (see the module contract).
-    pub fn learn(self, rule: &Agreement, min_support: usize, min_carve_fraction: f64) -> Board {
+    pub fn learn(self, rule: &Agreement, min_support: usize) -> Board {
         let r = self.per_texel;
         let texels: Vec<Option<TexelSample>> = self
             .seen
@@ -298,13 +270,10 @@ impl Reservoirs {
             })
             .collect();
         let learned = texels.iter().filter(|t| t.is_some()).count();
-        let white = white_level(&texels);
         Board {
             grid: self.grid,
             texels,
             learned,
-            min_carve_value: (min_carve_fraction.max(0.0) as f32) * white,
-            dark_guard_px: 0,
         }
     }
 }
@@ -337,30 +306,6 @@ fn mode(kept: &[TexelSample], rule: &Agreement, min_support: usize) -> Option<Te
     Some(mean)
 }
 
-/// The board's white level: the 90th percentile of the learned texels' summed band values
-/// (board units; 0 when none is learned). A percentile, not the maximum, so a few specular
-/// texels do not set it.
-fn white_level(texels: &[Option<TexelSample>]) -> f32 {
-    let mut v: Vec<f32> = texels
-        .iter()
-        .flatten()
-        .map(TexelSample::brightness)
-        .filter(|x| x.is_finite())
-        .collect();
-    if v.is_empty() {
-        return 0.0;
-    }
-    let k = (v.len() * 9 / 10).min(v.len() - 1);
-    *v.select_nth_unstable_by(k, f32::total_cmp).1
-}
-
-impl TexelSample {
-    /// Summed band values (board units).
-    pub fn brightness(&self) -> f32 {
-        self.value.iter().sum()
-    }
-}
-
 /// The learned board appearance.
 pub struct Board {
     /// The texel grid.
@@ -369,20 +314,6 @@ pub struct Board {
     pub texels: Vec<Option<TexelSample>>,
     /// Number of learned texels.
     pub learned: usize,
-    /// Learned texels darker than this (summed bands, board units) are ambiguous.
-    pub min_carve_value: f32,
-    /// Ambiguous pixels this close (feature-image pixels, square neighbourhood) to a pixel that
-    /// disagrees with the board do not carve.
-    pub dark_guard_px: usize,
-}
-
-impl Board {
-    /// Whether a pixel's agreement with `learned` alone means "board": the texel is bright, so a
-    /// dark object in front of it would disagree. Agreement with a darker texel (black ink, the
-    /// void past the sheet, a dark table) is ambiguous (module doc, "Dark texels").
-    pub fn carves(&self, learned: &TexelSample) -> bool {
-        learned.brightness() >= self.min_carve_value
-    }
 }
 
 impl Board {

@@ -332,8 +332,7 @@ fn learn_board(setup: &Setup<'_>, config: &MeshConfig, report: &mut MeshReport) 
         reservoirs.add(i as u32, &samples);
     });
     report.peak_bytes = report.peak_bytes.max((reservoirs.bytes() + held) as u64);
-    let mut board = reservoirs.learn(&rule, a.min_support, a.min_carve_fraction);
-    board.dark_guard_px = a.dark_guard_px;
+    let board = reservoirs.learn(&rule, a.min_support);
     if let Some(dir) = &config.debug_dir {
         let _ = std::fs::create_dir_all(dir);
         let _ = super::debug::write_board(dir, &board);

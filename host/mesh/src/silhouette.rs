@@ -81,56 +81,6 @@ impl Silhouette {
     }
 }
 
-/// Un-boards the ambiguous pixels `ambiguous` (board pixels that agree only with dark texels)
-/// that lie within `guard` pixels (square neighbourhood) of a pixel that disagrees with the
-/// board: the unlit rim of a dark object in front of dark board looks like the board.
-fn guard_dark_rims(s: &mut Silhouette, ambiguous: &[usize], guard: usize) {
-    if guard == 0 || ambiguous.is_empty() || s.disagree_px == 0 {
-        return;
-    }
-    let (w, h) = (s.width, s.height);
-    // separable square dilation of the disagree mask: rows, then columns (running counts)
-    let mut rows = vec![false; w * h];
-    for y in 0..h {
-        let mut count = 0usize;
-        let at = |x: usize| s.disagree[(y * w + x) / 64] >> ((y * w + x) % 64) & 1 == 1;
-        for x in 0..guard.min(w) {
-            count += usize::from(at(x));
-        }
-        for x in 0..w {
-            if x + guard < w {
-                count += usize::from(at(x + guard));
-            }
-            if x > guard {
-                count -= usize::from(at(x - guard - 1));
-            }
-            rows[y * w + x] = count > 0;
-        }
-    }
-    let mut near = vec![false; w * h];
-    for x in 0..w {
-        let mut count = 0usize;
-        for y in 0..guard.min(h) {
-            count += usize::from(rows[y * w + x]);
-        }
-        for y in 0..h {
-            if y + guard < h {
-                count += usize::from(rows[(y + guard) * w + x]);
-            }
-            if y > guard {
-                count -= usize::from(rows[(y - guard - 1) * w + x]);
-            }
-            near[y * w + x] = count > 0;
-        }
-    }
-    for &k in ambiguous {
-        if near[k] {
-            s.set(k, false);
-            s.board_px -= 1;
-        }
-    }
-}
-
 /// Classifies every pixel of a view (see the module contract).
 #[expect(
     clippy::too_many_arguments,
@@ -158,53 +108,33 @@ pub fn classify(
         disagree_px: 0,
         removed_island_px: 0,
     };
-    let mut ambiguous_px = Vec::new();
     for k in 0..w * h {
         let Some((texel, sample)) = pixel_sample(&board.grid, rays, view, image, k, floor_dn)
         else {
             continue;
         };
-        // Some((true, ambiguous)): board (ambiguous: it agrees only with dark texels);
-        // Some((false, _)): something else; None: unknown
         let verdict = match &board.texels[texel] {
-            Some(learned) => {
-                let agree = rule.agree(&sample, learned);
-                Some((agree, agree && !board.carves(learned)))
-            }
+            Some(learned) => Some(rule.agree(&sample, learned)),
             // an unknown texel: its learned neighbours speak for it (texels far from the
             // cameras are hit by fewer pixels than texels)
-            None => {
-                let mut verdict: Option<(bool, bool)> = None;
-                for learned in
-                    neighbours(&board.grid, texel).filter_map(|n| board.texels[n].as_ref())
-                {
-                    let agree = rule.agree(&sample, learned);
-                    let (any, ambiguous) = verdict.unwrap_or((false, true));
-                    verdict = Some(if agree {
-                        (true, ambiguous && !board.carves(learned))
-                    } else {
-                        (any, ambiguous)
-                    });
-                }
-                verdict.map(|(any, ambiguous)| (any, any && ambiguous))
-            }
+            None => neighbours(&board.grid, texel)
+                .filter_map(|n| board.texels[n].as_ref())
+                .fold(None, |v, learned| {
+                    Some(v.unwrap_or(false) || rule.agree(&sample, learned))
+                }),
         };
         match verdict {
-            Some((true, ambiguous)) => {
+            Some(true) => {
                 s.set(k, true);
                 s.board_px += 1;
-                if ambiguous {
-                    ambiguous_px.push(k);
-                }
             }
-            Some((false, _)) => {
+            Some(false) => {
                 s.disagree[k / 64] |= 1 << (k % 64);
                 s.disagree_px += 1;
             }
             None => {}
         }
     }
-    guard_dark_rims(&mut s, &ambiguous_px, board.dark_guard_px);
     remove_islands(&mut s, min_island_px, max_enclosed_fraction);
     s
 }

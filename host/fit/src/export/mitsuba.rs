@@ -478,7 +478,7 @@ fn objects_xml(
 }
 
 /// The README written beside the scene.
-const README: &str = include_str!("README.md");
+const README: &str = include_str!("mitsuba/README.md");
 
 #[cfg(test)]
 mod tests {
