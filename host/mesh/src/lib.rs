@@ -40,6 +40,7 @@ pub mod frames;
 pub mod halfedge;
 pub mod implicit;
 pub mod pipeline;
+pub mod poses;
 pub mod remesh;
 pub mod silhouette;
 pub mod volume;

@@ -103,7 +103,8 @@ pub fn mesh_of_session(
 ) -> anyhow::Result<(TriangleMesh, MeshReport, HullField)> {
     let poses = match poses {
         Some(p) => p.to_vec(),
-        None => super::fit::poses_of(session)?,
+        None => ellipso_mesh::poses::poses_of(session, &super::out::Printed)
+            .map_err(super::out::failed)?,
     };
     let progress = super::progress::Progress::spinner("mesh");
     let result = build_mesh(session, &poses, config, &mut |stage| {

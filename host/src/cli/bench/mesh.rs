@@ -264,7 +264,8 @@ fn bench_scene(
             ..SessionFitConfig::default()
         };
         let config = crate::cli::fit::with_session_sensor(&session, &config);
-        let poses = crate::cli::fit::poses_of(&session)?;
+        let poses = ellipso_mesh::poses::poses_of(&session, &crate::cli::out::Printed)
+            .map_err(crate::cli::out::failed)?;
         let t0 = Instant::now();
         let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
         let fit_s = t0.elapsed().as_secs_f64();
@@ -306,7 +307,8 @@ pub fn mesh_scores(
     config: &SessionFitConfig,
 ) -> anyhow::Result<MeshScores> {
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
-    let poses = crate::cli::fit::poses_of(session)?;
+    let poses = ellipso_mesh::poses::poses_of(session, &crate::cli::out::Printed)
+        .map_err(crate::cli::out::failed)?;
     let true_config = SessionFitConfig {
         hull: None,
         ..config.clone()
