@@ -39,6 +39,7 @@ pub mod extract;
 pub mod frames;
 pub mod halfedge;
 pub mod implicit;
+pub mod output;
 pub mod pipeline;
 pub mod poses;
 pub mod remesh;

@@ -153,12 +153,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             crate::errln!(
                 "carving the visual hull from the frames (the surface update stays inside it)…"
             );
-            match super::mesh::mesh_of_session(
+            let progress = super::progress::Progress::spinner("mesh");
+            match ellipso_mesh::output::mesh_of_session(
                 &session,
                 imported_poses,
                 &ellipso_mesh::MeshConfig::default(),
-            ) {
-                Ok((_, _, hull)) => (mesh, Some(hull)),
+                &super::out::Printed,
+                &mut |stage| progress.set_message(stage),
+            )
+            .map_err(super::out::failed)
+            {
+                Ok((_, report, hull)) => {
+                    progress.finish(format!(
+                        "{} vertices from {} frames",
+                        report.vertices, report.frames_used
+                    ));
+                    (mesh, Some(hull))
+                }
                 Err(e) => {
                     crate::errln!(
                         "warning: no visual hull ({e:#}); the surface update runs without the \
@@ -172,10 +183,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             crate::errln!("no --mesh: carving the object's mesh from the frames first…");
             let mut mesh_config = ellipso_mesh::MeshConfig::default();
             mesh_config.remesh.target_vertices = args.vertices;
-            let (mesh, report, hull) =
-                super::mesh::mesh_of_session(&session, imported_poses, &mesh_config)?;
+            let progress = super::progress::Progress::spinner("mesh");
+            let (mesh, report, hull) = ellipso_mesh::output::mesh_of_session(
+                &session,
+                imported_poses,
+                &mesh_config,
+                &super::out::Printed,
+                &mut |stage| progress.set_message(stage),
+            )
+            .map_err(super::out::failed)?;
+            progress.finish(format!(
+                "{} vertices from {} frames",
+                report.vertices, report.frames_used
+            ));
             let path = out.join("mesh.ply");
-            super::mesh::write_mesh(&mesh, &report, &path)?;
+            ellipso_mesh::output::write_mesh(&mesh, &report, &path).map_err(super::out::failed)?;
             crate::errln!(
                 "  {} ({} vertices)",
                 out_dir.published(&path).display(),

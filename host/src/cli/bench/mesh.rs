@@ -254,11 +254,19 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
-        let (_, _, hull) = crate::cli::mesh::mesh_of_session(
+        let progress = crate::cli::progress::Progress::spinner("mesh");
+        let (_, report, hull) = ellipso_mesh::output::mesh_of_session(
             &session,
             None,
             &ellipso_mesh::MeshConfig::default(),
-        )?;
+            &crate::cli::out::Printed,
+            &mut |stage| progress.set_message(stage),
+        )
+        .map_err(crate::cli::out::failed)?;
+        progress.finish(format!(
+            "{} vertices from {} frames",
+            report.vertices, report.frames_used
+        ));
         let config = SessionFitConfig {
             hull: Some(std::sync::Arc::new(hull)),
             ..SessionFitConfig::default()
