@@ -14,7 +14,9 @@
 //! 6. [`extract`], [`remesh`]: marching tetrahedra, isotropic remeshing onto the carved surface
 //!    to the target vertex count, Taubin smoothing; the bottom is the board plane.
 //!
-//! Also here: [`distance`] (Chamfer / Hausdorff between meshes, for the bench), [`colmap`]
+//! Also here: [`poses`] (the session's poses, tracked first where the log has none; it appends
+//! them to the event log), [`output`] (the mesh as the subcommands take and write it),
+//! [`distance`] (Chamfer / Hausdorff between meshes, for the bench), [`colmap`]
 //! (the session as a COLMAP sparse model with undistorted images, for photogrammetry users) and
 //! the way back: [`colmap_model`] reads a COLMAP model (text or binary), [`colmap_import`]
 //! aligns its poses, and a mesh in its frame, to the board frame.
@@ -39,7 +41,9 @@ pub mod extract;
 pub mod frames;
 pub mod halfedge;
 pub mod implicit;
+pub mod output;
 pub mod pipeline;
+pub mod poses;
 pub mod remesh;
 pub mod silhouette;
 pub mod volume;

@@ -308,11 +308,23 @@ fn fit_and_score(
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
-    let (mesh, mesh_report, hull) =
-        super::mesh::mesh_of_session(session, None, &ellipso_mesh::MeshConfig::default())?;
+    let progress = super::progress::Progress::spinner("mesh");
+    let (mesh, mesh_report, hull) = ellipso_mesh::output::mesh_of_session(
+        session,
+        None,
+        &ellipso_mesh::MeshConfig::default(),
+        &super::out::Printed,
+        &mut |stage| progress.set_message(stage),
+    )
+    .map_err(super::out::failed)?;
+    progress.finish(format!(
+        "{} vertices from {} frames",
+        mesh_report.vertices, mesh_report.frames_used
+    ));
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
-    super::mesh::write_mesh(&mesh, &mesh_report, &mesh_path)?;
+    ellipso_mesh::output::write_mesh(&mesh, &mesh_report, &mesh_path)
+        .map_err(super::out::failed)?;
     crate::outln!(
         "mesh         {} vertices carved from {} frames in {mesh_s:.1} s",
         mesh.positions().len(),

@@ -88,7 +88,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Args::Colmap(a) => {
             let out = OutputDir::claim(&a.out, "export-colmap", &[&a.session])?;
             let session = ellipso_session::reader::open(&a.session)?;
-            let poses = super::fit::poses_of(&session)?;
+            let poses = ellipso_mesh::poses::poses_of(&session, &super::out::Printed)
+                .map_err(super::out::failed)?;
             let report = export_colmap(
                 &session,
                 &poses,

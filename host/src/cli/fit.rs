@@ -16,7 +16,6 @@ use anyhow::Context;
 use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
-use ellipso_fit::observe::poses_from_session;
 use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session};
 use ellipso_fit::shard::Shard;
 use ellipso_session::reader::Session;
@@ -154,12 +153,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             crate::errln!(
                 "carving the visual hull from the frames (the surface update stays inside it)…"
             );
-            match super::mesh::mesh_of_session(
+            let progress = super::progress::Progress::spinner("mesh");
+            match ellipso_mesh::output::mesh_of_session(
                 &session,
                 imported_poses,
                 &ellipso_mesh::MeshConfig::default(),
-            ) {
-                Ok((_, _, hull)) => (mesh, Some(hull)),
+                &super::out::Printed,
+                &mut |stage| progress.set_message(stage),
+            )
+            .map_err(super::out::failed)
+            {
+                Ok((_, report, hull)) => {
+                    progress.finish(format!(
+                        "{} vertices from {} frames",
+                        report.vertices, report.frames_used
+                    ));
+                    (mesh, Some(hull))
+                }
                 Err(e) => {
                     crate::errln!(
                         "warning: no visual hull ({e:#}); the surface update runs without the \
@@ -173,10 +183,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             crate::errln!("no --mesh: carving the object's mesh from the frames first…");
             let mut mesh_config = ellipso_mesh::MeshConfig::default();
             mesh_config.remesh.target_vertices = args.vertices;
-            let (mesh, report, hull) =
-                super::mesh::mesh_of_session(&session, imported_poses, &mesh_config)?;
+            let progress = super::progress::Progress::spinner("mesh");
+            let (mesh, report, hull) = ellipso_mesh::output::mesh_of_session(
+                &session,
+                imported_poses,
+                &mesh_config,
+                &super::out::Printed,
+                &mut |stage| progress.set_message(stage),
+            )
+            .map_err(super::out::failed)?;
+            progress.finish(format!(
+                "{} vertices from {} frames",
+                report.vertices, report.frames_used
+            ));
             let path = out.join("mesh.ply");
-            super::mesh::write_mesh(&mesh, &report, &path)?;
+            ellipso_mesh::output::write_mesh(&mesh, &report, &path).map_err(super::out::failed)?;
             crate::errln!(
                 "  {} ({} vertices)",
                 out_dir.published(&path).display(),
@@ -300,59 +321,6 @@ pub struct FitRun {
     pub summary: serde_json::Value,
 }
 
-/// The session's recorded poses (`pose` events), tracking first every complete frame that has
-/// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
-pub fn poses_of(session: &Session) -> anyhow::Result<Vec<(u64, Isometry3<f64>)>> {
-    let mut untracked = ellipso_vision::process::untracked_frames(session);
-    let mut poses = poses_from_session(session);
-    // one run tracks a session at a time; a second waits and takes the first one's poses
-    let _lock = if untracked.is_empty() {
-        None
-    } else {
-        let lock = ellipso_session::writer::LogLock::acquire(&session.dir, || {
-            crate::errln!(
-                "{}: another run is tracking this session's poses; waiting for it…",
-                session.dir.display()
-            )
-        })?;
-        let now = ellipso_session::reader::open(&session.dir)?;
-        untracked = ellipso_vision::process::untracked_frames(&now);
-        poses = poses_from_session(&now);
-        lock
-    };
-    if !untracked.is_empty() {
-        crate::errln!(
-            "{} of {} complete frames have no pose yet: tracking their AprilTags first…",
-            untracked.len(),
-            session.frames.iter().filter(|f| f.complete).count()
-        );
-        let tracked = ellipso_vision::process::track_frames(
-            session,
-            &ellipso_vision::track::TrackConfig::default(),
-            |id| untracked.contains(&id),
-        )?;
-        ellipso_vision::process::append_poses(
-            &session.dir,
-            &tracked,
-            ellipso_session::time::HostClock::new().now(),
-        )
-        .context(
-            "recording the new poses failed part-way (every line written is whole; the next \
-             fit tracks the frames still without one)",
-        )?;
-        poses = poses_from_session(&ellipso_session::reader::open(&session.dir)?);
-    }
-    anyhow::ensure!(
-        !poses.is_empty(),
-        "{}: no frame could be posed from the AprilTags",
-        session.dir.display()
-    );
-    // what every stage that takes poses needs: a possible camera, possible poses
-    ellipso_fit::inputs::check_camera(&ellipso_fit::observe::camera_of(session)?)?;
-    ellipso_fit::inputs::check_poses(&poses)?;
-    Ok(poses)
-}
-
 /// Fits `mesh` to `session` and writes the outputs into `out` (see the module doc); `publish`
 /// maps a path under `out` to where it will be once the output is committed (recorded paths).
 pub fn fit_and_export(
@@ -380,7 +348,8 @@ pub fn fit_and_export_with(
     let started = Instant::now();
     let poses = match import.and_then(|i| i.poses.clone()) {
         Some(poses) => poses,
-        None => poses_of(session)?,
+        None => ellipso_mesh::poses::poses_of(session, &super::out::Printed)
+            .map_err(super::out::failed)?,
     };
     // the pictures' frame is checked before the long work, not after it
     if let Some(id) = view {

@@ -125,7 +125,8 @@ pub fn apply(
     let Some(models) = models else {
         return Ok((mesh, None));
     };
-    let tracked = super::fit::poses_of(session)?;
+    let tracked =
+        ellipso_mesh::poses::poses_of(session, &super::out::Printed).map_err(super::out::failed)?;
     let frame_ids: BTreeSet<u64> = session.frames.iter().map(|f| f.frame_id).collect();
     let camera = ellipso_fit::observe::camera_of(session)?;
     let align = |model: &ColmapModel| -> anyhow::Result<ModelImport> {

@@ -10,14 +10,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::Context;
-use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::geometry::ply::{PlyFormat, write_ply};
-
-use ellipso_fit::shape::hull::HullField;
-use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
+use ellipso_mesh::MeshConfig;
 use ellipso_report::output::{FileFormat, OutputFile};
-use ellipso_session::reader::Session;
 
 /// Arguments of `ellipso mesh`.
 #[derive(Debug, clap::Args)]
@@ -60,9 +54,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.remesh.target_vertices = args.vertices;
     let started = Instant::now();
-    let (mesh, mut report, _) = mesh_of_session(&session, None, &config)?;
+    let progress = super::progress::Progress::spinner("mesh");
+    let (mesh, mut report, _) = ellipso_mesh::output::mesh_of_session(
+        &session,
+        None,
+        &config,
+        &super::out::Printed,
+        &mut |stage| progress.set_message(stage),
+    )
+    .map_err(super::out::failed)?;
+    progress.finish(format!(
+        "{} vertices from {} frames",
+        report.vertices, report.frames_used
+    ));
     report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
-    mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
+    mesh_file.write(ellipso_mesh::output::mesh_bytes(&mesh, mesh_file.format()))?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;
     let json = report_file.shown().to_path_buf();
     if args.json {
@@ -94,35 +100,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
-/// has none); also returns the carved hull (the fit's surface update stays inside it).
-pub fn mesh_of_session(
-    session: &Session,
-    poses: Option<&[(u64, nalgebra::Isometry3<f64>)]>,
-    config: &MeshConfig,
-) -> anyhow::Result<(TriangleMesh, MeshReport, HullField)> {
-    let poses = match poses {
-        Some(p) => p.to_vec(),
-        None => super::fit::poses_of(session)?,
-    };
-    let progress = super::progress::Progress::spinner("mesh");
-    let result = build_mesh(session, &poses, config, &mut |stage| {
-        progress.set_message(stage)
-    })
-    .with_context(|| format!("meshing {}", session.dir.display()))?;
-    progress.finish(format!(
-        "{} vertices from {} frames",
-        result.report.vertices, result.report.frames_used
-    ));
-    Ok((result.mesh, result.report, result.hull))
-}
-
-/// The report's path beside a mesh file: `<stem>-report.json`.
-fn report_path(out: &Path) -> PathBuf {
-    let stem = out.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh");
-    out.with_file_name(format!("{stem}-report.json"))
-}
-
 /// Claims the mesh file (PLY or OBJ by its extension) and its report for `ellipso mesh`.
 fn claim_mesh_files(out: &Path, session: &Path) -> anyhow::Result<(OutputFile, OutputFile)> {
     let is_obj = out
@@ -135,35 +112,11 @@ fn claim_mesh_files(out: &Path, session: &Path) -> anyhow::Result<(OutputFile, O
     };
     let mesh = OutputFile::claim(out, "mesh", format, &[session], None)?;
     let report = OutputFile::claim(
-        &report_path(out),
+        &ellipso_mesh::output::report_path(out),
         "mesh",
         FileFormat::JSON,
         &[session],
         None,
     )?;
     Ok((mesh, report))
-}
-
-/// A mesh's bytes in `format` (binary PLY unless OBJ).
-fn mesh_bytes(mesh: &TriangleMesh, format: FileFormat) -> Vec<u8> {
-    if format == FileFormat::OBJ {
-        ellipso_model::geometry::obj::write_obj(mesh)
-    } else {
-        // double: a fit on this file sees exactly the geometry the fit that wrote it used
-        write_ply(mesh, PlyFormat::BinaryLittleEndian, true)
-    }
-}
-
-/// Writes the mesh (binary PLY) and its report (`<stem>-report.json`) into a directory the
-/// caller owns (a fit's or the demo's staging directory), each whole; returns the report path.
-pub fn write_mesh(mesh: &TriangleMesh, report: &MeshReport, out: &Path) -> anyhow::Result<PathBuf> {
-    if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    ellipso_report::atomic_file::write(out, mesh_bytes(mesh, FileFormat::PLY))
-        .with_context(|| format!("writing {}", out.display()))?;
-    let json = report_path(out);
-    ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(report)?)
-        .with_context(|| format!("writing {}", json.display()))?;
-    Ok(json)
 }

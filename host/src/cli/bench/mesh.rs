@@ -254,17 +254,26 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
-        let (_, _, hull) = crate::cli::mesh::mesh_of_session(
+        let progress = crate::cli::progress::Progress::spinner("mesh");
+        let (_, report, hull) = ellipso_mesh::output::mesh_of_session(
             &session,
             None,
             &ellipso_mesh::MeshConfig::default(),
-        )?;
+            &crate::cli::out::Printed,
+            &mut |stage| progress.set_message(stage),
+        )
+        .map_err(crate::cli::out::failed)?;
+        progress.finish(format!(
+            "{} vertices from {} frames",
+            report.vertices, report.frames_used
+        ));
         let config = SessionFitConfig {
             hull: Some(std::sync::Arc::new(hull)),
             ..SessionFitConfig::default()
         };
         let config = crate::cli::fit::with_session_sensor(&session, &config);
-        let poses = crate::cli::fit::poses_of(&session)?;
+        let poses = ellipso_mesh::poses::poses_of(&session, &crate::cli::out::Printed)
+            .map_err(crate::cli::out::failed)?;
         let t0 = Instant::now();
         let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
         let fit_s = t0.elapsed().as_secs_f64();
@@ -306,7 +315,8 @@ pub fn mesh_scores(
     config: &SessionFitConfig,
 ) -> anyhow::Result<MeshScores> {
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;
-    let poses = crate::cli::fit::poses_of(session)?;
+    let poses = ellipso_mesh::poses::poses_of(session, &crate::cli::out::Printed)
+        .map_err(crate::cli::out::failed)?;
     let true_config = SessionFitConfig {
         hull: None,
         ..config.clone()
