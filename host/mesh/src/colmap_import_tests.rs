@@ -510,6 +510,9 @@ pub(crate) fn mapper_model_comes_back_onto_the_board(
     let p = |x: &Path| x.display().to_string();
     let mapped = c.join("mapped");
     let mapped_txt = c.join("mapped-txt");
+    // a fresh model each call (the caller may try the non-deterministic mapper again)
+    let _ = std::fs::remove_dir_all(&mapped);
+    let _ = std::fs::remove_dir_all(&mapped_txt);
     std::fs::create_dir_all(&mapped).unwrap();
     std::fs::create_dir_all(&mapped_txt).unwrap();
     // the lens is known: COLMAP keeps the exported camera, as a user with a calibration would

@@ -508,7 +508,22 @@ fn colmap_pipeline_both_ways() {
         "{above_board} of {n} points on or above the board plane"
     );
     let camera = ellipso_fit::observe::camera_of(&session).unwrap();
-    super::colmap_import::tests::mapper_model_comes_back_onto_the_board(
-        &c, &poses, &camera, &colmap,
-    );
+    // COLMAP's mapper is multi-threaded and not deterministic: now and then (3 of ~8 runs on a
+    // loaded 2-core machine) its model sits 2.1–2.3 mm RMS off the tracked poses, above the
+    // alignment's 2 mm limit, and the import rightly refuses it. The mapper gets three tries;
+    // the import's checks are the same on each.
+    let mut tries = 0;
+    loop {
+        tries += 1;
+        let attempt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            super::colmap_import::tests::mapper_model_comes_back_onto_the_board(
+                &c, &poses, &camera, &colmap,
+            )
+        }));
+        match attempt {
+            Ok(()) => break,
+            Err(e) if tries >= 3 => std::panic::resume_unwind(e),
+            Err(_) => println!("mapper try {tries} failed; mapping again"),
+        }
+    }
 }
