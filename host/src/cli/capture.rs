@@ -16,6 +16,7 @@
 //!
 //! [`Camera`]: ellipso_rig::camera::Camera
 
+use ellipso_session::manifest::layout_name;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -451,14 +452,6 @@ impl Drop for StopOnSignal {
         for id in self.ids.drain(..) {
             signal_hook::low_level::unregister(id);
         }
-    }
-}
-
-/// The manifest's name of a sensor layout (docs/session-format.md).
-pub fn layout_name(layout: ellipso_model::mosaic::SensorLayout) -> &'static str {
-    match layout {
-        ellipso_model::mosaic::SensorLayout::MonoPolar => "mono_polar",
-        ellipso_model::mosaic::SensorLayout::ColourPolar => "colour_polar",
     }
 }
 
