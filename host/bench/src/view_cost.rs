@@ -385,13 +385,6 @@ fn read_session(dir: &Path) -> Result<RunResult> {
                 .map(|&trig| (*t as f64 - host_us(trig, *t)) * 1e-3)
         })
         .collect();
-    latency_ms.sort_by(f64::total_cmp);
-    let pct = |q: f64| {
-        latency_ms
-            .get(((latency_ms.len() as f64 - 1.0) * q).round() as usize)
-            .copied()
-            .unwrap_or(f64::NAN)
-    };
     let times: Vec<u64> = arrivals.iter().map(|a| a.1).collect();
     let fps = match (times.iter().min(), times.iter().max()) {
         (Some(&a), Some(&b)) if b > a => (times.len() - 1) as f64 / ((b - a) as f64 * 1e-6),
@@ -404,7 +397,7 @@ fn read_session(dir: &Path) -> Result<RunResult> {
         frames: s.frames.len(),
         flagged,
         fps,
-        latency_ms: [pct(0.5), pct(0.95), pct(1.0)],
+        latency_ms: [0.5, 0.95, 1.0].map(|q| ellipso_model::stats::percentile(&mut latency_ms, q)),
         paired,
         wrong_pairs: wrong,
         pairing_errors: errors,
@@ -423,8 +416,7 @@ type Row<'a> = (&'a str, &'a dyn Fn(&RunResult) -> f64);
 fn summary(results: &[RunResult]) -> String {
     let median = |view: bool, f: &dyn Fn(&RunResult) -> f64| {
         let mut v: Vec<f64> = results.iter().filter(|r| r.view == view).map(f).collect();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+        ellipso_model::stats::median(&mut v)
     };
     let rows: [Row; 8] = [
         ("frames", &|r| r.frames as f64),
