@@ -84,7 +84,6 @@ pub fn report(
         .iter()
         .filter_map(|t| t.result.as_ref().ok().map(|p| p.board_pose.rms_px))
         .collect();
-    rms.sort_by(f64::total_cmp);
     let per_frame = tracked
         .iter()
         .map(|t| match &t.result {
@@ -115,7 +114,7 @@ pub fn report(
         pairing_errors,
         posed,
         pose_rejected,
-        median_pose_rms_px: rms.get(rms.len() / 2).copied(),
+        median_pose_rms_px: (!rms.is_empty()).then(|| ellipso_model::stats::median(&mut rms)),
         per_frame,
     })
 }
