@@ -39,6 +39,7 @@
 //!   by view. [`ObserveReport::peak_bytes`] accounts the largest memory held at once (samples +
 //!   frames in flight + per-frame results + mesh rings).
 
+pub mod frames;
 pub mod radiometry;
 pub mod sampler;
 
@@ -54,17 +55,15 @@ use rayon::prelude::*;
 use crate::data::{GateCounts, Sample, SampleSet, VertexSamples, ViewGeometry};
 use crate::gate::GateConfig;
 use crate::shard::Shard;
-use ellipso_polar::PolarConfig;
-use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
-use ellipso_polar::frame::RawFrame;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
 
+pub use frames::{FrameImages, MosaicFrames};
 pub use radiometry::{
     PointNormaliser, SessionRadiometry, flash_of, radiometry_of, sensor_noise_of,
 };
 pub use sampler::SampleKernel;
-use sampler::{AnalyserPixels, DnImage, FrameSampler, Outcome, SessionContext, VertexRings};
+use sampler::{FrameSampler, Outcome, SessionContext, VertexRings};
 
 /// Where in its superpixel tile each analyser sample is taken to sit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -359,67 +358,6 @@ pub fn extract_with(
         Shard::ALL,
         progress,
     )
-}
-
-/// Where an extraction gets each posed frame's analyser pixels.
-pub trait FrameImages: Sync {
-    /// The analyser pixels of `entry` (a complete, lit frame of the session) and the bytes
-    /// held while they are in use; an unreadable frame is an `Err` with the reason, and the
-    /// extraction skips it.
-    fn load(&self, entry: &FrameEntry) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String>;
-}
-
-/// The session's recorded frames: PNG → raw mosaic → superpixel demosaic → [`DnImage`]
-/// (sampled at the analysers' lattice positions or the tile centres, [`SamplePoint`]).
-pub struct MosaicFrames<'a> {
-    session: &'a Session,
-    layout: SensorLayout,
-    polar: PolarConfig,
-    sample_point: SamplePoint,
-    sample_kernel: SampleKernel,
-}
-
-impl<'a> MosaicFrames<'a> {
-    /// The recorded frames of `session` read with `config`'s dark level and sample point.
-    pub fn new(session: &'a Session, config: &ObserveConfig) -> Result<Self, ObserveError> {
-        let layout = session.manifest.sensor.layout;
-        Ok(Self {
-            session,
-            layout,
-            polar: PolarConfig {
-                demosaic: DemosaicMethod::Superpixel,
-                dark_level_dn: config.dark_level_dn,
-                ..PolarConfig::default()
-            },
-            sample_point: config.sample_point,
-            sample_kernel: config.sample_kernel,
-        })
-    }
-}
-
-impl FrameImages for MosaicFrames<'_> {
-    fn load(&self, entry: &FrameEntry) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String> {
-        let (w, h, px) = self.session.load_frame(entry).map_err(|e| e.to_string())?;
-        let bit_depth = self.session.manifest.sensor.bit_depth;
-        let raw = RawFrame::new(w, h, bit_depth, self.layout, px)
-            .map_err(|e| format!("{}: {e}", entry.path.display()))?;
-        let levels = self.polar.levels(&raw).map_err(|e| e.to_string())?;
-        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
-        let image = DnImage::new(
-            &raw,
-            &analysers,
-            &levels,
-            self.sample_point,
-            self.sample_kernel,
-        );
-        // Held together at this point: the raw frame, the demosaic (4 f32 planes and a mask
-        // byte per band and superpixel) and its DN copy.
-        let superpixels = analysers.bands.first().map_or(0, |b| b.mask.data().len());
-        let bytes = raw.data_dn().len() * 2
-            + analysers.bands.len() * superpixels * (4 * 4 + 1)
-            + image.bytes();
-        Ok((Box::new(image), bytes))
-    }
 }
 
 /// [`extract_with`] for the vertices `shard` owns ([`Shard::owns`]): the set's `vertices` hold
