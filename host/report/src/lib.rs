@@ -1,5 +1,6 @@
 //! `ellipso-report`: the files every stage writes — result directories and files a command owns
-//! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
+//! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), paths
+//! inside a summary relative to its folder ([`paths`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
 //! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
 //! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`].
 //!
@@ -16,6 +17,7 @@ pub mod font;
 pub mod memory;
 pub mod npy;
 pub mod output;
+pub mod paths;
 pub mod plot;
 
 pub use colour::{ColourMap, Rgb};
