@@ -339,9 +339,18 @@ fn fit_and_score(
         hull: Some(std::sync::Arc::new(hull)),
         ..Default::default()
     };
+    let to = ellipso_fit::output::OutputTo {
+        dir: &dir,
+        publish: &|p| out.published(p),
+    };
+    let (steps, say) = (
+        &mut super::progress::Spinners::default(),
+        &super::out::Printed,
+    );
     let run =
-        super::fit::fit_and_export(session, &mesh, &dir, None, &config, &|p| out.published(p))?;
-    let config = super::fit::with_session_sensor(session, &config);
+        ellipso_mesh::fit_run::fit_and_export(session, &mesh, None, to, None, &config, steps, say)
+            .map_err(super::out::failed)?;
+    let config = ellipso_fit::session::with_session_sensor(session, &config);
 
     // Only now the truth.
     let truth = ellipso_bench::chain::truth_for_scoring(scene)?;

@@ -271,7 +271,7 @@ fn bench_scene(
             hull: Some(std::sync::Arc::new(hull)),
             ..SessionFitConfig::default()
         };
-        let config = crate::cli::fit::with_session_sensor(&session, &config);
+        let config = ellipso_fit::session::with_session_sensor(&session, &config);
         let poses = ellipso_mesh::poses::poses_of(&session, &crate::cli::out::Printed)
             .map_err(crate::cli::out::failed)?;
         let t0 = Instant::now();
