@@ -347,12 +347,13 @@ pub fn print_report(r: &CaptureReport) {
 pub fn run(args: Args) -> anyhow::Result<()> {
     // The live view follows the session directory from its own threads (read-only).
     let view = if args.view {
-        let v = crate::cli::view::start_live(
+        let v = ellipso_view::live::start_live(
             args.out.clone(),
             args.view_mesh.clone(),
             true,
-            &Default::default(),
-        )?;
+            Default::default(),
+        )
+        .map_err(out::failed)?;
         crate::outln!("live view    open {}", v.server.url());
         Some(v)
     } else {
@@ -367,7 +368,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(tracked) = &captured.tracked {
         let summary =
             ellipso_vision::replay::report(&captured.dir, Some(tracked)).map_err(out::failed)?;
-        crate::cli::replay::print_summary(&summary);
+        for line in summary.summary_lines() {
+            crate::outln!("{line}");
+        }
     }
     crate::outln!("session      {}", captured.dir.display());
     if let Some(signal) = captured.signal {
