@@ -18,6 +18,7 @@
 //! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
+//! | [`budget`] | `ellipso bench chain`: the budget's runs on a scene and its report files |
 //! | [`accuracy_time`] | `ellipso bench accuracy`: fit error against seconds on simulated captures, and its report |
 //! | [`pose`] | `ellipso bench pose`: pose accuracy and speed per detection image; the rendered frames of the other benches |
 //! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
@@ -27,6 +28,7 @@
 
 pub mod accuracy;
 pub mod accuracy_time;
+pub mod budget;
 pub mod calibration;
 pub mod capture;
 pub mod chain;

@@ -2,7 +2,8 @@
 //! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), paths
 //! inside a summary relative to its folder ([`paths`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
 //! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
-//! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`].
+//! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`]; the docs' DoP plot
+//! of `ellipso model plot` ([`dop_plot`]).
 //!
 //! Contract: all drawing goes through `plotters` (pure-Rust bitmap backend) with the font
 //! bundled in [`font`], so pictures look the same on every machine and need no system font;
@@ -11,6 +12,7 @@
 
 pub mod atomic_file;
 pub mod colour;
+pub mod dop_plot;
 pub mod exr_image;
 pub mod figure;
 pub mod font;

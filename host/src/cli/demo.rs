@@ -151,7 +151,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 
     crate::outln!("[2/4] tracking camera poses from the AprilTags…");
-    let tracked = capture::track_and_append(&dir)?;
+    let tracked = ellipso_vision::process::track_and_append(&dir, &super::out::Printed)
+        .map_err(super::out::failed)?;
     let session = ellipso_session::reader::open(&dir)?;
     let pairs: std::collections::BTreeMap<u64, u64> = session
         .frames

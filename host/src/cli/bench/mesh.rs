@@ -200,7 +200,8 @@ fn capture_session(scene: &Path, dir: &Path, args: &MeshArgs) -> anyhow::Result<
         view_mesh: None,
     };
     capture::capture_sim(&capture_args, true)?;
-    capture::track_and_append(dir)?;
+    ellipso_vision::process::track_and_append(dir, &crate::cli::out::Printed)
+        .map_err(crate::cli::out::failed)?;
     Ok(())
 }
 
