@@ -24,6 +24,9 @@
 //! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
 //! | [`sim_render`] | `ellipso sim render`: a scene's capture as raw frames, `truth.json` and per-pixel truth |
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
+//! | [`rig_capture`] | a scene captured on the simulated rig (pty link, pairing), recorded by the caller |
+//! | [`demo`] | `ellipso demo`: capture, tracking, carving and fit, scored against the truth; pictures and `summary.json` |
+//! | [`mesh_bench`] | `ellipso bench mesh`: the built-in mesh (and with `--fit` the refined one) against the truth, its cost, `docs/mesh-bench.md` |
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
@@ -32,9 +35,12 @@ pub mod budget;
 pub mod calibration;
 pub mod capture;
 pub mod chain;
+pub mod demo;
 pub mod ideal;
+pub mod mesh_bench;
 pub mod pose;
 pub mod report;
+pub mod rig_capture;
 pub mod score;
 pub mod sim_render;
 pub mod surface;

@@ -17,16 +17,14 @@
 //! [`Camera`]: ellipso_rig::camera::Camera
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use super::out;
-use super::progress::Progress;
+use super::record::Recording;
 use anyhow::Context;
 use ellipso_protocol::Bracket;
 use ellipso_rig::acquire::capture::CaptureReport;
 use ellipso_rig::acquire::hardware::{self, HardwareRig};
-use ellipso_rig::acquire::ready::ReadyCapture;
+use ellipso_rig::acquire::ready::{Recorded, Recorder, report_lines};
 use ellipso_rig::acquire::sim_rig::{self, ExternalBoard, SimCaptureOptions};
 use ellipso_rig::camera::CameraSettings;
 use ellipso_vision::process;
@@ -100,9 +98,8 @@ pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
 }
 
 /// Records a simulated capture into `args.out` ([`sim_rig::prepare`], the session's rig record
-/// and boards from [`process`]) with a progress bar (none when `quiet`) and the signal
-/// handlers, then tracks its poses unless `--no-track` or stopped by a signal.
-pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
+/// and boards from [`process`]) with a progress bar and the signal handlers ([`Recording`]), then tracks its poses unless `--no-track` or stopped by a signal.
+pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
     let scene = args
         .sim
         .clone()
@@ -130,7 +127,13 @@ pub fn capture_sim(args: &Args, quiet: bool) -> anyhow::Result<Captured> {
         )
     })
     .map_err(out::failed)?;
-    let (report, dir, signal) = run_with_progress(ready, quiet)?;
+    let Recorded {
+        report,
+        dir,
+        signal,
+    } = Recording { quiet: false }
+        .record(ready)
+        .map_err(out::failed)?;
     // after a stop by signal the user wants the process to end: poses can be tracked later
     let tracked = if args.no_track || signal.is_some() {
         None
@@ -166,95 +169,6 @@ pub struct Interrupted {
     pub signal: i32,
     /// The session directory.
     pub dir: PathBuf,
-}
-
-/// Runs the capture with a progress bar (hidden when quiet or not on a terminal) and the
-/// signal handlers of [`StopOnSignal`]; returns the report, the session and the stopping signal.
-fn run_with_progress(
-    ready: ReadyCapture,
-    quiet: bool,
-) -> anyhow::Result<(CaptureReport, PathBuf, Option<i32>)> {
-    let bar = if quiet {
-        Progress::hidden()
-    } else {
-        Progress::bar("capture", u64::from(ready.photos()), "frames")
-    };
-    let stop = StopOnSignal::install()?;
-    let result = ready.run(stop.flag(), |p| {
-        bar.set_position(p.frames);
-        bar.set_message(format!(
-            "{:.1} fps · paired {} · pairing errors {} · flagged {}",
-            p.fps, p.paired, p.pairing_errors, p.camera_drops
-        ));
-    });
-    match &result {
-        Ok((report, _)) => bar.finish(format!("{} frames", report.frames)),
-        Err(_) => drop(bar),
-    }
-    let signal = stop.signal();
-    drop(stop);
-    let (report, dir) = result?;
-    Ok((report, dir, signal))
-}
-
-/// SIGINT and SIGTERM stop a running capture cleanly: the stop flag is set, the board is told
-/// to stop, frames in flight are drained and the end record written. A second SIGINT while it
-/// winds down ends the process at once. Dropping this restores the default handling.
-struct StopOnSignal {
-    stop: Arc<AtomicBool>,
-    signal: Arc<AtomicUsize>,
-    ids: Vec<signal_hook::SigId>,
-    /// The process-wide watcher leaves the signals to this capture (dropped after `ids`).
-    _deferred: super::interrupt::Deferred,
-}
-
-impl StopOnSignal {
-    fn install() -> anyhow::Result<Self> {
-        use signal_hook::consts::{SIGINT, SIGTERM};
-        let deferred = super::interrupt::Deferred::take();
-        let stop = Arc::new(AtomicBool::new(false));
-        let signal = Arc::new(AtomicUsize::new(0));
-        let mut ids = Vec::new();
-        for sig in [SIGINT, SIGTERM] {
-            let context = || format!("cannot install the handler for signal {sig}");
-            // registered first, so it sees the flag as it was before this signal
-            ids.push(
-                signal_hook::flag::register_conditional_shutdown(sig, 130, stop.clone())
-                    .with_context(context)?,
-            );
-            ids.push(
-                signal_hook::flag::register_usize(sig, signal.clone(), sig as usize)
-                    .with_context(context)?,
-            );
-            ids.push(signal_hook::flag::register(sig, stop.clone()).with_context(context)?);
-        }
-        Ok(Self {
-            stop,
-            signal,
-            ids,
-            _deferred: deferred,
-        })
-    }
-
-    fn flag(&self) -> &AtomicBool {
-        &self.stop
-    }
-
-    /// The signal that stopped the capture, if one did.
-    fn signal(&self) -> Option<i32> {
-        match self.signal.load(Ordering::Acquire) {
-            0 => None,
-            s => i32::try_from(s).ok(),
-        }
-    }
-}
-
-impl Drop for StopOnSignal {
-    fn drop(&mut self) {
-        for id in self.ids.drain(..) {
-            signal_hook::low_level::unregister(id);
-        }
-    }
 }
 
 /// Records a capture on the physical rig described by `--rig` ([`RigFile`] read here, then
@@ -294,7 +208,13 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
         boards,
     };
     let ready = hardware::prepare(&hardware_rig, &args.out).map_err(out::failed)?;
-    let (report, dir, signal) = run_with_progress(ready, false)?;
+    let Recorded {
+        report,
+        dir,
+        signal,
+    } = Recording { quiet: false }
+        .record(ready)
+        .map_err(out::failed)?;
     let tracked = if args.no_track || hardware_rig.boards.is_empty() || signal.is_some() {
         None
     } else {
@@ -306,41 +226,6 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
         tracked,
         signal,
     })
-}
-
-/// Prints the capture summary.
-pub fn print_report(r: &CaptureReport) {
-    crate::outln!("capture      {} in {:.1} s", r.end_reason, r.duration_s);
-    crate::outln!(
-        "frames       {} written ({} flagged), {} pulses",
-        r.frames,
-        r.flagged,
-        r.pulses
-    );
-    let p = &r.pairing;
-    crate::outln!(
-        "pairing      {} paired · {} frames without pulse · {} pulses without frame · {} duplicates",
-        p.paired,
-        p.frame_without_pulse,
-        p.pulse_without_frame,
-        p.duplicate_frames + p.duplicate_pulses
-    );
-    crate::outln!(
-        "link         {} frames ok · {} bad frames dropped",
-        r.link.frames_ok,
-        r.link.bad_frames()
-    );
-    if let Some(c) = &r.clock {
-        crate::outln!(
-            "clock        drift {:+.1} ppm · residual rms {:.0} µs",
-            c.drift_ppm(),
-            c.rms_us
-        );
-    }
-    if r.paired_per_step.len() > 1 {
-        let steps: Vec<String> = r.paired_per_step.iter().map(u64::to_string).collect();
-        crate::outln!("bracket      paired frames per step {}", steps.join(" / "));
-    }
 }
 
 /// Runs `ellipso capture`.
@@ -362,9 +247,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let captured = if args.rig.is_some() {
         capture_hw(&args)?
     } else {
-        capture_sim(&args, false)?
+        capture_sim(&args)?
     };
-    print_report(&captured.report);
+    for line in report_lines(&captured.report) {
+        crate::outln!("{line}");
+    }
     if let Some(tracked) = &captured.tracked {
         let summary =
             ellipso_vision::replay::report(&captured.dir, Some(tracked)).map_err(out::failed)?;

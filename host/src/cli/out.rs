@@ -65,10 +65,6 @@ macro_rules! out {
     };
 }
 
-/// The summaries' rule for paths (relative to the summary's own folder), one copy, in
-/// `ellipso_report::paths`.
-pub use ellipso_report::paths::paths_relative_to;
-
 /// A library function's error as the binary's: its text and causes unchanged.
 pub fn failed(e: ellipso_model::run_error::RunError) -> anyhow::Error {
     anyhow::anyhow!(e.into_boxed())

@@ -6,7 +6,8 @@
 //! before the session is created; [`ReadyCapture::run`] records through
 //! [`super::capture::capture`] and then closes the link and stops an in-process virtual board,
 //! in that order. The stop flag and the progress display are the caller's (the binary's signal
-//! handlers and progress bar); nothing here prints.
+//! handlers and progress bar, a [`Recorder`] for the libraries that capture); nothing here
+//! prints: [`report_lines`] are the summary's lines for the caller to print.
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -96,4 +97,62 @@ pub fn capture_plan(board: CaptureConfig, camera: CameraSettings, photos: u32) -
             u64::from(photos) * u64::from(board.frame_period_us) / 1_000_000 + 600,
         ),
     }
+}
+
+/// A capture run to its end, or to a stop by signal.
+#[derive(Debug)]
+pub struct Recorded {
+    /// What happened.
+    pub report: CaptureReport,
+    /// The session directory.
+    pub dir: PathBuf,
+    /// The signal (SIGINT, SIGTERM) that stopped the capture, if one did.
+    pub signal: Option<i32>,
+}
+
+/// How a caller records a [`ReadyCapture`]: its stop flag (the binary's signal handlers) and
+/// its progress display, around [`ReadyCapture::run`]. The libraries that capture on the
+/// simulated rig (the demo, `ellipso bench mesh`) take one.
+pub trait Recorder {
+    /// Runs `ready` to its end (or a stop) and says how it went.
+    fn record(&mut self, ready: ReadyCapture) -> Result<Recorded, RunError>;
+}
+
+/// The capture summary's lines, as `ellipso capture` and the demo print them.
+pub fn report_lines(r: &CaptureReport) -> Vec<String> {
+    let mut lines = vec![
+        format!("capture      {} in {:.1} s", r.end_reason, r.duration_s),
+        format!(
+            "frames       {} written ({} flagged), {} pulses",
+            r.frames, r.flagged, r.pulses
+        ),
+    ];
+    let p = &r.pairing;
+    lines.push(format!(
+        "pairing      {} paired · {} frames without pulse · {} pulses without frame · {} duplicates",
+        p.paired,
+        p.frame_without_pulse,
+        p.pulse_without_frame,
+        p.duplicate_frames + p.duplicate_pulses
+    ));
+    lines.push(format!(
+        "link         {} frames ok · {} bad frames dropped",
+        r.link.frames_ok,
+        r.link.bad_frames()
+    ));
+    if let Some(c) = &r.clock {
+        lines.push(format!(
+            "clock        drift {:+.1} ppm · residual rms {:.0} µs",
+            c.drift_ppm(),
+            c.rms_us
+        ));
+    }
+    if r.paired_per_step.len() > 1 {
+        let steps: Vec<String> = r.paired_per_step.iter().map(u64::to_string).collect();
+        lines.push(format!(
+            "bracket      paired frames per step {}",
+            steps.join(" / ")
+        ));
+    }
+    lines
 }
