@@ -99,7 +99,7 @@ pub struct PoseAccuracy {
 
 /// Scores tracked poses against the scene's capture path (frame k ↔ pose k of a clean capture;
 /// frames are matched through their pairing to pulses, pulse seq k ↔ pose k), each with
-/// [`pose_error`].
+/// [`pose_error()`].
 pub fn pose_accuracy(
     scene: &Scene,
     tracked: &[TrackedFrame],
