@@ -1,11 +1,14 @@
-//! `ellipso capture --sim SCENE --out DIR`: a capture on the simulated rig, recorded as a session.
+//! `ellipso capture --sim SCENE --out DIR` / `--rig RIG.toml`: a capture on the simulated or the
+//! physical rig, recorded as a session.
 //!
-//! The simulated rig is assembled from the same parts as a hardware capture: the trigger board is
-//! the real firmware core running in a virtual board behind a **real pseudo-terminal**, driven by
-//! the host's real serial code; the camera is the simulator's camera behind the [`Camera`] trait,
-//! exposing on the board's trigger edges and rendering with the polarimetric renderer. With
-//! `--trigger PTY --wire SOCKET` the board is an external `ellipso sim serve` process instead.
-//! After recording, poses are tracked and appended to the session (unless `--no-track`).
+//! The rigs are assembled in `ellipso-rig` ([`sim_rig::prepare`]: the real firmware core in a
+//! virtual board behind a real pseudo-terminal, or an external `ellipso sim serve` with
+//! `--trigger PTY --wire SOCKET`, and the simulator's camera; [`hardware::prepare`]: the serial
+//! trigger board and the camera backend of the rig file) and run with this binary's progress bar
+//! and signal handlers. After recording, poses are tracked and appended to the session
+//! ([`process::track_and_append`]) unless `--no-track`; the session's rig record and boards come
+//! from `ellipso-vision` too, so the binary composes the two crates (the rig crate does not link
+//! the tracker).
 //!
 //! `--bracket 1,0.25,0.0625` asks the trigger board for a flash-energy bracket: frame `k` is lit
 //! by step `k mod len` of the full pulse (the same exposure, a shorter LED on-time). 1 to 8
@@ -13,8 +16,6 @@
 //! make the first frame of each cycle the brightest). `--photos` counts frames, so 600 photos with
 //! a 3-step bracket are 200 per step. A simulated capture takes the scene's `capture.bracket`
 //! unless `--bracket` is given; its camera renders every frame at the energy it really received.
-//!
-//! [`Camera`]: ellipso_rig::camera::Camera
 
 use std::path::PathBuf;
 
