@@ -18,21 +18,29 @@
 //! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
 //! | [`report`] | the budget as docs/error-budget.md, its JSON and a plot |
+//! | [`budget`] | `ellipso bench chain`: the budget's runs on a scene and its report files |
 //! | [`accuracy_time`] | `ellipso bench accuracy`: fit error against seconds on simulated captures, and its report |
 //! | [`pose`] | `ellipso bench pose`: pose accuracy and speed per detection image; the rendered frames of the other benches |
 //! | [`calibration`] | `ellipso bench calibration`: the camera calibration against the renderer's camera |
 //! | [`sim_render`] | `ellipso sim render`: a scene's capture as raw frames, `truth.json` and per-pixel truth |
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
+//! | [`rig_capture`] | a scene captured on the simulated rig (pty link, pairing), recorded by the caller |
+//! | [`demo`] | `ellipso demo`: capture, tracking, carving and fit, scored against the truth; pictures and `summary.json` |
+//! | [`mesh_bench`] | `ellipso bench mesh`: the built-in mesh (and with `--fit` the refined one) against the truth, its cost, `docs/mesh-bench.md` |
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
 pub mod accuracy_time;
+pub mod budget;
 pub mod calibration;
 pub mod capture;
 pub mod chain;
+pub mod demo;
 pub mod ideal;
+pub mod mesh_bench;
 pub mod pose;
 pub mod report;
+pub mod rig_capture;
 pub mod score;
 pub mod sim_render;
 pub mod surface;

@@ -30,6 +30,8 @@
 //!   live in `ellipso-bench`: this crate does not depend on the simulator.
 //! - [`export`]: the fit's outputs (PLY with per-vertex parameters, maps, Mueller grid, relit and
 //!   novel views, the re-render comparison).
+//! - [`output`]: a finished session fit's files as the subcommands write them (the pictures from
+//!   one view and [`summary`]: `fit-summary.json`, a typed, documented schema).
 #![forbid(unsafe_code)]
 
 pub mod augment;
@@ -40,9 +42,11 @@ pub mod holdout;
 pub mod inputs;
 pub mod model;
 pub mod observe;
+pub mod output;
 pub mod pipeline;
 pub mod session;
 pub mod shape;
 pub mod shard;
 pub mod solve;
+pub mod summary;
 pub mod synthetic;

@@ -73,6 +73,16 @@ impl Default for SessionFitConfig {
     }
 }
 
+/// `config` with the sensor model the solver weights samples by: the session's where it
+/// records one (simulator sessions), the documented default otherwise.
+pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> SessionFitConfig {
+    let mut config = config.clone();
+    if let Some(sensor) = crate::observe::sensor_noise_of(session) {
+        config.fit.solver.sensor = sensor;
+    }
+    config
+}
+
 /// Errors of a session fit.
 #[derive(Debug, thiserror::Error)]
 pub enum SessionFitError {

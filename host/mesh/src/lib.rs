@@ -19,7 +19,10 @@
 //! [`distance`] (Chamfer / Hausdorff between meshes, for the bench), [`colmap`]
 //! (the session as a COLMAP sparse model with undistorted images, for photogrammetry users) and
 //! the way back: [`colmap_model`] reads a COLMAP model (text or binary), [`colmap_import`]
-//! aligns its poses, and a mesh in its frame, to the board frame.
+//! aligns its poses, and a mesh in its frame, to the board frame. The fit of a session as the
+//! subcommands run it lives here too, since it takes these poses and the hull: [`fit_run`]
+//! (`ellipso fit`, the demo's fit), [`fit_import`] (its `--poses`/`--mesh-frame` flags),
+//! [`fit_shard`] (`fit --shard`, `fit-merge`).
 //!
 //! Contract: [`build_mesh`] reads the session (frames twice, streamed, at most
 //! `frames_in_flight` at once) and never writes to it; the mesh is in world (board)
@@ -38,6 +41,9 @@ pub mod debug;
 pub mod distance;
 pub mod error;
 pub mod extract;
+pub mod fit_import;
+pub mod fit_run;
+pub mod fit_shard;
 pub mod frames;
 pub mod halfedge;
 pub mod implicit;

@@ -6,7 +6,9 @@
 //! and reports each stage to the caller's callback; it never prints. [`write_mesh`] writes the
 //! binary PLY and its `<stem>-report.json` ([`report_path`]) whole, into a directory the caller
 //! owns; [`mesh_bytes`] is the one encoding of a mesh file (binary little-endian PLY with
-//! double coordinates, or OBJ).
+//! double coordinates, or OBJ). [`mesh_command`] is `ellipso mesh` whole: both files claimed
+//! before the work (never inside the session, never over a file of another format), the mesh
+//! carved (its step on the caller's [`Steps`]) and both written whole.
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +20,7 @@ use ellipso_report::output::FileFormat;
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
+use crate::fit_run::Steps;
 use crate::{MeshConfig, MeshReport, build_mesh};
 
 /// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
@@ -71,4 +74,63 @@ pub fn write_mesh(
     ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(report)?)
         .with_context(|| format!("writing {}", json.display()))?;
     Ok(json)
+}
+
+/// What `ellipso mesh` wrote.
+#[derive(Debug)]
+pub struct MeshWritten {
+    /// The mesh's report (`peak_rss_bytes` filled in).
+    pub report: MeshReport,
+    /// The mesh file, as shown.
+    pub mesh_file: PathBuf,
+    /// The report file, as shown.
+    pub report_file: PathBuf,
+    /// Seconds from the session's opening to both files written.
+    pub wall_s: f64,
+}
+
+/// `ellipso mesh SESSION --out OUT`: the mesh (PLY, or OBJ for an `.obj` name) and its report
+/// claimed, the session opened and carved with `config`, both written (module contract).
+pub fn mesh_command(
+    session_dir: &Path,
+    out: &Path,
+    config: &MeshConfig,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<MeshWritten, RunError> {
+    use ellipso_report::output::OutputFile;
+    let is_obj = out
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    let format = if is_obj {
+        FileFormat::OBJ
+    } else {
+        FileFormat::PLY
+    };
+    let mesh_file = OutputFile::claim(out, "mesh", format, &[session_dir], None)?;
+    let report_file = OutputFile::claim(
+        &report_path(out),
+        "mesh",
+        FileFormat::JSON,
+        &[session_dir],
+        None,
+    )?;
+    let session = ellipso_session::reader::open(session_dir)?;
+    let started = std::time::Instant::now();
+    steps.begin("mesh");
+    let (mesh, mut report, _) =
+        mesh_of_session(&session, None, config, say, &mut |stage| steps.stage(stage))?;
+    steps.end(&format!(
+        "{} vertices from {} frames",
+        report.vertices, report.frames_used
+    ));
+    report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
+    mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
+    report_file.write(serde_json::to_vec_pretty(&report)?)?;
+    Ok(MeshWritten {
+        report,
+        mesh_file: mesh_file.shown().to_path_buf(),
+        report_file: report_file.shown().to_path_buf(),
+        wall_s: started.elapsed().as_secs_f64(),
+    })
 }

@@ -1,7 +1,9 @@
 //! `ellipso-report`: the files every stage writes — result directories and files a command owns
-//! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
+//! and swaps in whole ([`output`]), result files written whole or not at all ([`atomic_file`]), paths
+//! inside a summary relative to its folder ([`paths`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
 //! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
-//! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`].
+//! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`]; the docs' DoP plot
+//! of `ellipso model plot` ([`dop_plot`]).
 //!
 //! Contract: all drawing goes through `plotters` (pure-Rust bitmap backend) with the font
 //! bundled in [`font`], so pictures look the same on every machine and need no system font;
@@ -10,12 +12,14 @@
 
 pub mod atomic_file;
 pub mod colour;
+pub mod dop_plot;
 pub mod exr_image;
 pub mod figure;
 pub mod font;
 pub mod memory;
 pub mod npy;
 pub mod output;
+pub mod paths;
 pub mod plot;
 
 pub use colour::{ColourMap, Rgb};

@@ -170,3 +170,14 @@ impl Manifest {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn manifests_name_layouts_as_the_session_format_does() {
+        assert_eq!(layout_name(SensorLayout::MonoPolar), "mono_polar");
+        assert_eq!(layout_name(SensorLayout::ColourPolar), "colour_polar");
+    }
+}

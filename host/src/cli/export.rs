@@ -1,5 +1,5 @@
 //! `ellipso export colmap SESSION --out DIR`: the session as a COLMAP sparse model with known
-//! poses and undistorted s0 images (`ellipso_mesh::colmap`), for users who prefer
+//! poses and undistorted s0 images (`ellipso_mesh::colmap::export_session`), for users who prefer
 //! photogrammetry: COLMAP's `point_triangulator`, dense and meshing steps then give a mesh in
 //! board coordinates that `ellipso fit --mesh` takes unchanged (docs/mesh.md).
 //!
@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use ellipso_mesh::colmap::{ColmapOptions, export_colmap};
+use ellipso_mesh::colmap::{ColmapOptions, export_session};
 use ellipso_report::output::OutputDir;
 
 /// `ellipso export` subcommands.
@@ -86,19 +86,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Ok(())
         }
         Args::Colmap(a) => {
-            let out = OutputDir::claim(&a.out, "export-colmap", &[&a.session])?;
-            let session = ellipso_session::reader::open(&a.session)?;
-            let poses = ellipso_mesh::poses::poses_of(&session, &super::out::Printed)
-                .map_err(super::out::failed)?;
-            let report = export_colmap(
-                &session,
-                &poses,
-                out.path(),
+            let (report, published) = export_session(
+                &a.session,
+                &a.out,
                 ColmapOptions {
                     keep_distortion: a.keep_distortion,
                 },
+                &super::out::Printed,
             )
-            .with_context(|| format!("exporting {} for COLMAP", a.session.display()))?;
+            .map_err(super::out::failed)?;
             crate::outln!(
                 "colmap       {} images, camera `{}`",
                 report.images,
@@ -111,7 +107,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     ellipso_mesh::error::skipped_list(&report.skipped, 4)
                 );
             }
-            let published = out.commit()?;
             crate::outln!("  {}", published.join("sparse").display());
             crate::outln!("  {}", published.join("images").display());
             Ok(())

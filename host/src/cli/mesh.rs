@@ -1,5 +1,5 @@
 //! `ellipso mesh SESSION --out mesh.ply [--vertices N]`: the object's watertight mesh carved
-//! from the session's posed frames (`ellipso_mesh`), written as a binary PLY (or, for an `.obj`
+//! from the session's posed frames (`ellipso_mesh::output::mesh_command`), written as a binary PLY (or, for an `.obj`
 //! name, Wavefront OBJ) in board coordinates (metres), with `<out stem>-report.json` beside it.
 //! Both files are claimed before the work starts (never inside the session, never over a file of
 //! another format) and written whole.
@@ -7,11 +7,9 @@
 //! Poses come from the session's `pose` events (tracked now and appended when the log has none,
 //! as `ellipso fit` does).
 
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
 use ellipso_mesh::MeshConfig;
-use ellipso_report::output::{FileFormat, OutputFile};
 
 /// Arguments of `ellipso mesh`.
 #[derive(Debug, clap::Args)]
@@ -42,8 +40,6 @@ pub struct Args {
 
 /// Runs `ellipso mesh`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let (mesh_file, report_file) = claim_mesh_files(&args.out, &args.session)?;
-    let session = ellipso_session::reader::open(&args.session)?;
     let mut config = MeshConfig {
         votes: args.votes,
         threads: args.threads,
@@ -53,29 +49,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..MeshConfig::default()
     };
     config.remesh.target_vertices = args.vertices;
-    let started = Instant::now();
-    let progress = super::progress::Progress::spinner("mesh");
-    let (mesh, mut report, _) = ellipso_mesh::output::mesh_of_session(
-        &session,
-        None,
+    let done = ellipso_mesh::output::mesh_command(
+        &args.session,
+        &args.out,
         &config,
+        &mut super::progress::Spinners::default(),
         &super::out::Printed,
-        &mut |stage| progress.set_message(stage),
     )
     .map_err(super::out::failed)?;
-    progress.finish(format!(
-        "{} vertices from {} frames",
-        report.vertices, report.frames_used
-    ));
-    report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
-    mesh_file.write(ellipso_mesh::output::mesh_bytes(&mesh, mesh_file.format()))?;
-    report_file.write(serde_json::to_vec_pretty(&report)?)?;
-    let json = report_file.shown().to_path_buf();
+    let report = &done.report;
     if args.json {
         let object = serde_json::json!({
-            "mesh": mesh_file.shown().display().to_string(),
-            "report_file": json.display().to_string(),
-            "wall_s": started.elapsed().as_secs_f64(),
+            "mesh": done.mesh_file.display().to_string(),
+            "report_file": done.report_file.display().to_string(),
+            "wall_s": done.wall_s,
             "report": report,
         });
         crate::outln!("{object}");
@@ -87,7 +74,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.triangles,
         report.volume_m3 * 1e6,
         report.frames_used,
-        started.elapsed().as_secs_f64()
+        done.wall_s
     );
     if !report.skipped.is_empty() {
         crate::outln!(
@@ -96,27 +83,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ellipso_mesh::error::skipped_list(&report.skipped, 4)
         );
     }
-    crate::outln!("  {}\n  {}", args.out.display(), json.display());
+    crate::outln!("  {}\n  {}", args.out.display(), done.report_file.display());
     Ok(())
-}
-
-/// Claims the mesh file (PLY or OBJ by its extension) and its report for `ellipso mesh`.
-fn claim_mesh_files(out: &Path, session: &Path) -> anyhow::Result<(OutputFile, OutputFile)> {
-    let is_obj = out
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
-    let format = if is_obj {
-        FileFormat::OBJ
-    } else {
-        FileFormat::PLY
-    };
-    let mesh = OutputFile::claim(out, "mesh", format, &[session], None)?;
-    let report = OutputFile::claim(
-        &ellipso_mesh::output::report_path(out),
-        "mesh",
-        FileFormat::JSON,
-        &[session],
-        None,
-    )?;
-    Ok((mesh, report))
 }

@@ -65,50 +65,6 @@ macro_rules! out {
     };
 }
 
-/// Every string in `value` that names an existing file or directory (written relative to the
-/// working directory, or absolute) rewritten relative to `base`: the summaries' rule that a
-/// path inside a summary file is relative to that file's own folder, so the folder can be moved
-/// or read from anywhere. Other strings are left alone.
-pub fn paths_relative_to(value: &mut serde_json::Value, base: &std::path::Path) {
-    match value {
-        serde_json::Value::String(s) => {
-            let p = std::path::Path::new(s.as_str());
-            let looks_like_path = s.contains(std::path::MAIN_SEPARATOR) || p.extension().is_some();
-            if looks_like_path && p.exists() {
-                if let Some(r) = relative_path(p, base) {
-                    *s = r.display().to_string();
-                }
-            }
-        }
-        serde_json::Value::Array(a) => a.iter_mut().for_each(|v| paths_relative_to(v, base)),
-        serde_json::Value::Object(o) => o.values_mut().for_each(|v| paths_relative_to(v, base)),
-        _ => {}
-    }
-}
-
-/// `path` relative to the directory `base` (both resolved; `..` where needed), or `None` when
-/// either cannot be resolved.
-pub fn relative_path(path: &std::path::Path, base: &std::path::Path) -> Option<std::path::PathBuf> {
-    let path = path.canonicalize().ok()?;
-    let base = base.canonicalize().ok()?;
-    let common = path
-        .components()
-        .zip(base.components())
-        .take_while(|(a, b)| a == b)
-        .count();
-    let mut out = std::path::PathBuf::new();
-    for _ in base.components().skip(common) {
-        out.push("..");
-    }
-    for c in path.components().skip(common) {
-        out.push(c);
-    }
-    if out.as_os_str().is_empty() {
-        out.push(".");
-    }
-    Some(out)
-}
-
 /// A library function's error as the binary's: its text and causes unchanged.
 pub fn failed(e: ellipso_model::run_error::RunError) -> anyhow::Error {
     anyhow::anyhow!(e.into_boxed())
@@ -124,29 +80,5 @@ impl ellipso_model::run_error::Say for Printed {
     }
     fn err(&self, line: std::fmt::Arguments<'_>) {
         crate::errln!("{line}");
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn summary_paths_become_relative_to_the_summary_folder() {
-        let tmp = tempfile::tempdir().unwrap();
-        let out = tmp.path().join("demo").join("fit");
-        std::fs::create_dir_all(&out).unwrap();
-        let session = tmp.path().join("demo").join("session");
-        std::fs::create_dir_all(&session).unwrap();
-        std::fs::write(out.join("fit.ply"), b"x").unwrap();
-        let mut v = serde_json::json!({
-            "session": session.display().to_string(),
-            "files": [out.join("fit.ply").display().to_string()],
-            "note": "intact",
-        });
-        paths_relative_to(&mut v, &out);
-        assert_eq!(v["session"], "../session");
-        assert_eq!(v["files"][0], "fit.ply");
-        assert_eq!(v["note"], "intact");
     }
 }

@@ -100,6 +100,27 @@ impl Drop for Progress {
     }
 }
 
+/// A library run's long steps ([`ellipso_mesh::fit_run::Steps`]) shown as one
+/// [`Progress::spinner`] each; a step not ended is cleared when the next begins.
+#[derive(Default)]
+pub struct Spinners(Option<Progress>);
+
+impl ellipso_mesh::fit_run::Steps for Spinners {
+    fn begin(&mut self, label: &str) {
+        self.0 = Some(Progress::spinner(label));
+    }
+    fn stage(&mut self, name: &str) {
+        if let Some(p) = &self.0 {
+            p.set_message(name);
+        }
+    }
+    fn end(&mut self, summary: &str) {
+        if let Some(p) = self.0.take() {
+            p.finish(summary);
+        }
+    }
+}
+
 /// stderr when it is a terminal, nothing otherwise.
 fn target() -> ProgressDrawTarget {
     if std::io::stderr().is_terminal() {

@@ -19,28 +19,6 @@ pub struct Args {
     pub out: Option<PathBuf>,
 }
 
-/// Prints the human summary of a report.
-pub fn print_summary(r: &replay::ReplayReport) {
-    crate::outln!("session      {}", r.session);
-    crate::outln!("read         {}", r.read);
-    crate::outln!("frames       {} ({} complete)", r.frames, r.complete);
-    crate::outln!("pulses       {}   paired {}", r.pulses, r.paired);
-    for (k, n) in &r.pairing_errors {
-        crate::outln!("  {k:<22} {n}");
-    }
-    match r.median_pose_rms_px {
-        Some(rms) => crate::outln!(
-            "poses        {} of {} frames (median reprojection {rms:.3} px)",
-            r.posed,
-            r.complete
-        ),
-        None => crate::outln!("poses        {} of {} frames", r.posed, r.complete),
-    }
-    for (k, n) in &r.pose_rejected {
-        crate::outln!("  rejected: {k} ({n})");
-    }
-}
-
 /// Runs `ellipso replay`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     // a path that is no session is said as such first (opening reads only its manifest and log)
@@ -57,7 +35,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some("replay"),
     )?;
     let r = replay::report(&args.session, None).map_err(super::out::failed)?;
-    print_summary(&r);
+    for line in r.summary_lines() {
+        crate::outln!("{line}");
+    }
     let path = claimed.path().join("replay.json");
     ellipso_report::atomic_file::write(&path, serde_json::to_vec_pretty(&r)?)
         .with_context(|| format!("writing {}", claimed.published(&path).display()))?;

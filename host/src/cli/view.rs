@@ -2,7 +2,7 @@
 //! material for a fit directory (or `fit.ply`). `docs/view.md` is the guide.
 //!
 //! Prints the page's URL (with its per-run token) on stdout and serves until interrupted.
-//! [`start_live`] is also what `ellipso capture --view` calls.
+//! The live mode is [`ellipso_view::live::start_live`], which `ellipso capture --view` calls too.
 
 use std::net::{IpAddr, SocketAddr};
 use std::path::PathBuf;
@@ -10,10 +10,11 @@ use std::sync::Arc;
 
 use anyhow::Context;
 
-use ellipso_view::follow::{self, FollowConfig, Follower};
+use ellipso_view::follow;
+use ellipso_view::live::start_live;
 use ellipso_view::material::{self, MaterialMesh};
 use ellipso_view::security::{DEFAULT_BIND, Token};
-use ellipso_view::server::{self, Content, MaterialPayload, ServerConfig, ViewServer};
+use ellipso_view::server::{self, Content, MaterialPayload, ServerConfig};
 
 /// Arguments of `ellipso view`.
 #[derive(Debug, Clone, clap::Args)]
@@ -35,8 +36,8 @@ pub struct Args {
     pub wait: bool,
 }
 
-/// Where and to whom the page is served (shared with `ellipso capture --view`).
-#[derive(Debug, Clone, Default, clap::Args)]
+/// Where and to whom the page is served.
+#[derive(Debug, Clone, clap::Args)]
 pub struct ServeArgs {
     /// Address to listen on, `IP` or `IP:PORT` (default 127.0.0.1 on a free port). Anything
     /// but loopback opens the page to the network: the token still guards it.
@@ -66,31 +67,6 @@ fn parse_bind(s: &str) -> Result<SocketAddr, String> {
         .map_err(|_| format!("'{s}' is not an IP address or IP:PORT"))
 }
 
-/// A live view: the follower and its server (dropping it stops both).
-pub struct LiveView {
-    /// The server.
-    pub server: ViewServer,
-    _follower: Follower,
-}
-
-/// Starts the live view of `session` (which may not exist yet).
-pub fn start_live(
-    session: PathBuf,
-    mesh: Option<PathBuf>,
-    track: bool,
-    serve: &ServeArgs,
-) -> anyhow::Result<LiveView> {
-    let mut config = FollowConfig::new(session);
-    config.mesh = mesh;
-    config.track = track;
-    let (hub, follower) = follow::spawn(config)?;
-    let server = server::start(serve.config(), Content::Live(hub))?;
-    Ok(LiveView {
-        server,
-        _follower: follower,
-    })
-}
-
 fn announce(what: &str, url: &str, addr: SocketAddr) {
     crate::outln!("ellipso view: {what}");
     if !addr.ip().is_loopback() {
@@ -107,7 +83,13 @@ fn announce(what: &str, url: &str, addr: SocketAddr) {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = &args.path;
     if follow::is_session(path) || (args.wait && !path.exists()) {
-        let live = start_live(path.clone(), args.mesh.clone(), !args.no_track, &args.serve)?;
+        let live = start_live(
+            path.clone(),
+            args.mesh.clone(),
+            !args.no_track,
+            args.serve.config(),
+        )
+        .map_err(super::out::failed)?;
         announce(
             &format!("live session {}", path.display()),
             live.server.url(),

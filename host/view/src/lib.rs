@@ -12,6 +12,8 @@
 //! The live mode's threads run at the lowest priority and pace their work while a capture runs
 //! ([`priority`]).
 //!
+//! [`live`] starts the live mode's follower and server together.
+//!
 //! [`server`] serves both behind [`security`]: loopback by default, a per-run token, and a
 //! Host-header allow-list. The page's files are embedded in the binary ([`assets`]); nothing is
 //! loaded from elsewhere. `docs/view.md` is the user's guide.
@@ -21,6 +23,7 @@ pub mod check;
 pub mod coverage;
 pub mod follow;
 pub mod frame_view;
+pub mod live;
 pub mod material;
 pub mod priority;
 pub mod security;

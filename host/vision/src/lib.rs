@@ -12,6 +12,8 @@
 //! - `lm`: the one Levenberg–Marquardt loop of pose refinement and the calibration bundle.
 //! - [`replay`]: the replay report of a recorded session (`ellipso replay`).
 //! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
+//! - [`session_upgrade`]: the rig record an older session lacks, from its scene file
+//!   (`ellipso session upgrade`).
 #![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
 pub mod calibrate;
@@ -20,5 +22,6 @@ pub mod pose;
 pub mod process;
 pub mod replay;
 pub mod rig_file;
+pub mod session_upgrade;
 pub mod short_pulse_poses;
 pub mod track;

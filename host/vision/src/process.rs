@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use ellipso_model::camera::CameraModel;
+use ellipso_model::run_error::{RunError, Say};
 use rayon::prelude::*;
 
 use crate::track::{FramePose, TrackConfig, TrackRejection, TrackedBoard, Tracker};
@@ -164,6 +165,27 @@ pub fn track_frames(
         )
         .collect();
     Ok(results)
+}
+
+/// Tracks every complete frame of the recorded session in `dir` and appends the poses to its
+/// log (`ellipso capture` after recording, the demo, `bench mesh`); short-pulse frames of a
+/// bracketed capture that tracking refused borrow a pose from their tracked neighbours
+/// ([`crate::short_pulse_poses`]), logged as `pose_interpolated`, and their count is said on
+/// `say`'s output. Returns what tracking found, frame by frame.
+pub fn track_and_append(dir: &Path, say: &dyn Say) -> Result<Vec<TrackedFrame>, RunError> {
+    let session = ellipso_session::reader::open(dir)?;
+    let tracked = track_session(&session, &TrackConfig::default())?;
+    let now = ellipso_session::time::HostClock::new().now();
+    append_poses(dir, &tracked, now)?;
+    let borrowed = crate::short_pulse_poses::borrow_short_pulse_poses(&session, &tracked);
+    crate::short_pulse_poses::append_borrowed_poses(dir, &borrowed, now)?;
+    if !borrowed.is_empty() {
+        say.out(format_args!(
+            "poses        {} short-pulse frames posed from their tracked neighbours",
+            borrowed.len()
+        ));
+    }
+    Ok(tracked)
 }
 
 /// Appends `pose` / `pose_rejected` events for `tracked` to the session's log, one whole line

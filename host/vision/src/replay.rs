@@ -40,6 +40,32 @@ pub struct ReplayReport {
     pub per_frame: Vec<FrameLine>,
 }
 
+impl ReplayReport {
+    /// The human summary, line by line (`ellipso replay` and `ellipso capture` print it).
+    pub fn summary_lines(&self) -> Vec<String> {
+        let mut lines = vec![
+            format!("session      {}", self.session),
+            format!("read         {}", self.read),
+            format!("frames       {} ({} complete)", self.frames, self.complete),
+            format!("pulses       {}   paired {}", self.pulses, self.paired),
+        ];
+        for (k, n) in &self.pairing_errors {
+            lines.push(format!("  {k:<22} {n}"));
+        }
+        lines.push(match self.median_pose_rms_px {
+            Some(rms) => format!(
+                "poses        {} of {} frames (median reprojection {rms:.3} px)",
+                self.posed, self.complete
+            ),
+            None => format!("poses        {} of {} frames", self.posed, self.complete),
+        });
+        for (k, n) in &self.pose_rejected {
+            lines.push(format!("  rejected: {k} ({n})"));
+        }
+        lines
+    }
+}
+
 /// One frame of the report.
 #[derive(Debug, serde::Serialize)]
 pub struct FrameLine {

@@ -27,11 +27,15 @@
 //!   ρ_ss, ρ_s);
 //! - [`measure::dop_diffuse`] / [`measure::dop_diffuse_with_d_eta`] (closed-form ∂/∂η);
 //! - [`coaxial::terms`] (DS, SS, DPα, DPβ) for the coaxial approximation.
+//!
+//! Inspection (`ellipso model`): [`inspect`] (Fresnel terms, diffuse DoP and the lobes' Mueller
+//! matrices at one input, range-checked, typed).
 
 pub mod coaxial;
 mod dual;
 mod frame;
 pub mod fresnel;
+pub mod inspect;
 pub mod measure;
 pub mod microfacet;
 pub mod pbrdf;

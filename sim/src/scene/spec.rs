@@ -45,8 +45,8 @@ pub struct SceneFile {
 }
 
 /// Largest specular and single-scattering albedo a material may have (far above any real
-/// surface; it keeps every rendered value finite).
-pub const MAX_LOBE_ALBEDO: f64 = 1_000.0;
+/// surface; it keeps every rendered value finite): the model's, which `ellipso model` checks too.
+pub use ellipso_model::optics::inspect::MAX_LOBE_ALBEDO;
 
 /// Polarimetric BRDF parameters of one material ([`MaterialSpec::to_pbrdf`] gives the optics
 /// model's `PbrdfParams`).

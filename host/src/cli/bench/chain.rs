@@ -1,12 +1,11 @@
-//! `ellipso bench chain`: the error budget of the whole chain on a scene (`ellipso_bench::chain`):
-//! the full chain, then one stage at a time replaced by its truth; prints one row per run and
-//! writes the report.
+//! `ellipso bench chain`: the error budget of the whole chain on a scene
+//! ([`ellipso_bench::budget::run`]): the full chain, then one stage at a time replaced by its
+//! truth; the binary keeps the flags and prints one row per run and the report's files.
 
 use std::path::PathBuf;
 
-use anyhow::Context;
-use ellipso_bench::chain::{Bench, RunResult, budget_specs};
-use ellipso_sim::scene::Scene;
+use ellipso_bench::budget::BudgetOptions;
+use ellipso_bench::chain::RunResult;
 
 /// Arguments of `ellipso bench chain`.
 #[derive(Debug, clap::Args)]
@@ -38,100 +37,30 @@ pub struct ChainArgs {
 
 /// Runs `ellipso bench chain`.
 pub fn run(args: ChainArgs) -> anyhow::Result<()> {
-    let scene_path = args
-        .scene
-        .clone()
-        .unwrap_or_else(|| ellipso_sim::scene::shipped_scene("demo.toml"));
-    let scene = Scene::load(&scene_path)?;
-    let [w, h] = scene.rig.camera.resolution_px;
-    let resolution = args.resolution.unwrap_or([w / 2, h / 2]);
-    let bench = Bench {
-        scene_path: scene_path.clone(),
-        scene,
-        work: args.work.clone(),
-        resolution: Some(resolution),
-        fit: ellipso_fit::session::SessionFitConfig::default(),
+    let options = BudgetOptions {
+        scene: args.scene,
+        work: args.work,
+        resolution: args.resolution,
+        supersampling: args.supersampling,
+        runs: args.runs,
+        report: args.report,
+        json: args.json,
     };
-    let mut specs = budget_specs(&bench.scene, args.supersampling);
-    if !args.runs.is_empty() {
-        specs.retain(|s| args.runs.contains(&s.name));
-    }
-    anyhow::ensure!(!specs.is_empty(), "no run matches --runs {:?}", args.runs);
-    let report = args.report.clone().or_else(|| {
-        args.runs
-            .is_empty()
-            .then(|| PathBuf::from("docs/error-budget.md"))
-    });
-    let started = std::time::Instant::now();
-    let mut results = Vec::new();
-    for spec in &specs {
-        let r = bench
-            .run(spec, &mut |stage| eprintln!("  {stage}"))
-            .with_context(|| format!("run '{}'", spec.name))?;
-        print_row(&r);
-        results.push(r);
-        if let Some(path) = &args.json {
-            std::fs::write(path, serde_json::to_vec_pretty(&results)?)
-                .with_context(|| format!("writing {}", path.display()))?;
-        }
-    }
-    if let Some(path) = report {
-        let meta = ellipso_bench::report::ReportMeta {
-            command: command_line(&args),
-            scene: scene_path.file_name().map_or_else(
-                || scene_path.display().to_string(),
-                |n| n.to_string_lossy().into(),
-            ),
-            resolution,
-            photos: bench.scene.camera_poses.len(),
-            supersampling: args.supersampling,
-            total_s: started.elapsed().as_secs_f64(),
-            threads: rayon::current_num_threads(),
-        };
-        let md = ellipso_bench::report::markdown(&results, &meta);
-        ellipso_report::atomic_file::write(&path, md.as_bytes())
-            .with_context(|| format!("writing {}", path.display()))?;
-        let json = path.with_extension("json");
-        ellipso_report::atomic_file::write(&json, serde_json::to_vec_pretty(&(&meta, &results))?)
-            .with_context(|| format!("writing {}", json.display()))?;
-        let stem = path
-            .file_stem()
-            .map_or("error-budget".into(), |s| s.to_string_lossy());
-        let png = path
-            .parent()
-            .unwrap_or_else(|| std::path::Path::new("."))
-            .join("img")
-            .join(format!("{stem}.png"));
-        if let Some(dir) = png.parent() {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        }
-        ellipso_bench::report::plot(&results, &png)?;
+    let files = ellipso_bench::budget::run(
+        &options,
+        &mut |stage| crate::errln!("  {stage}"),
+        &mut print_row,
+    )
+    .map_err(super::super::out::failed)?;
+    if let Some(f) = files {
         crate::outln!(
             "wrote {}, {} and {}",
-            path.display(),
-            json.display(),
-            png.display()
+            f.report.display(),
+            f.json.display(),
+            f.png.display()
         );
     }
     Ok(())
-}
-
-/// The command that regenerates the report (as the report states it).
-fn command_line(args: &ChainArgs) -> String {
-    let mut c = String::from("ellipso bench chain");
-    if let Some(s) = &args.scene {
-        c += &format!(" --scene {}", s.display());
-    }
-    if let Some([w, h]) = args.resolution {
-        c += &format!(" --resolution {w}x{h}");
-    }
-    if args.supersampling != 2 {
-        c += &format!(" --supersampling {}", args.supersampling);
-    }
-    if !args.runs.is_empty() {
-        c += &format!(" --runs \"{}\"", args.runs.join(","));
-    }
-    c
 }
 
 fn print_row(r: &RunResult) {

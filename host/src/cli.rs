@@ -17,6 +17,7 @@ pub mod model;
 pub mod out;
 pub mod polar;
 pub mod progress;
+pub mod record;
 pub mod replay;
 pub mod session;
 pub mod sim;

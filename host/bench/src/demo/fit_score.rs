@@ -1,0 +1,207 @@
+//! The demo's fit and its scores: the object's mesh carved from the session's frames
+//! (`ellipso mesh`), the fit on it (`ellipso fit`, its files and pictures), and only then the
+//! simulator's truth — the mesh against the true surface before and after the fit's shape
+//! refinement, each fitted vertex against the truth at the closest point of the true surface,
+//! and the same session fitted on the true mesh for the η beside it.
+//!
+//! Contract: the truth is read only after the fit's files are written; the `fit` object of
+//! `summary.json` ([`DemoFit::summary`]) keeps its keys (alphabetical, as `json!` orders them).
+
+use std::path::PathBuf;
+
+use ellipso_mesh::fit_run::Steps;
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::say;
+use ellipso_sim::scene::Scene;
+
+/// The demo's fit: where it went and its scores.
+pub struct DemoFit {
+    /// The fit's folder (staged).
+    pub dir: PathBuf,
+    /// The fitted model (staged).
+    pub ply: PathBuf,
+    /// The `fit` object of `summary.json`.
+    pub summary: serde_json::Value,
+}
+
+/// Builds the object's mesh from the session's frames (`ellipso mesh`), fits it (`ellipso fit`)
+/// and only then compares with the simulator's truth: the mesh's distance to the true surface
+/// before and after the fit's shape refinement, and each fitted vertex's parameters and normal
+/// against the truth at the closest point of the true surface.
+pub fn fit_and_score(
+    scene: &Scene,
+    session: &ellipso_session::reader::Session,
+    out: &ellipso_report::output::OutputDir,
+    quick: bool,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<DemoFit, RunError> {
+    let dir = out.path().join("fit");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let started = std::time::Instant::now();
+    steps.begin("mesh");
+    let (mesh, mesh_report, hull) = ellipso_mesh::output::mesh_of_session(
+        session,
+        None,
+        &ellipso_mesh::MeshConfig::default(),
+        say,
+        &mut |stage| steps.stage(stage),
+    )?;
+    steps.end(&format!(
+        "{} vertices from {} frames",
+        mesh_report.vertices, mesh_report.frames_used
+    ));
+    let mesh_s = started.elapsed().as_secs_f64();
+    let mesh_path = dir.join("mesh.ply");
+    ellipso_mesh::output::write_mesh(&mesh, &mesh_report, &mesh_path)?;
+    say!(
+        say,
+        "mesh         {} vertices carved from {} frames in {mesh_s:.1} s",
+        mesh.positions().len(),
+        mesh_report.frames_used,
+    );
+    let config = ellipso_fit::session::SessionFitConfig {
+        outer_iterations: if quick {
+            1
+        } else {
+            ellipso_fit::session::SessionFitConfig::default().outer_iterations
+        },
+        hull: Some(std::sync::Arc::new(hull)),
+        ..Default::default()
+    };
+    let to = ellipso_fit::output::OutputTo {
+        dir: &dir,
+        publish: &|p| out.published(p),
+    };
+    let run =
+        ellipso_mesh::fit_run::fit_and_export(session, &mesh, None, to, None, &config, steps, say)?;
+    let config = ellipso_fit::session::with_session_sensor(session, &config);
+
+    // Only now the truth.
+    let truth = crate::chain::truth_for_scoring(scene)?;
+    let at = crate::truth_map::truth_at(&truth, run.fit.mesh.positions());
+    let fits = &run.fit.outcome.fits;
+    let score = crate::score::score_fit(fits, &at, &truth.material_names, run.fit.set.colour);
+    let held_out = run.fit.held_out_set.as_ref().map(|held| {
+        crate::score::holdout_beside_truth(held, fits, &at, crate::accuracy::full_scale_dn(scene))
+    });
+    say!(
+        say,
+        "scoring: the same session fitted on the true mesh, for η beside it…"
+    );
+    let scores =
+        crate::mesh_bench::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config, say)?;
+    // the carved and refined meshes against the truth, as the mesh bench scores them
+    let (before, after) = (&scores.distance_before, &scores.distance_after);
+    let summary = serde_json::json!({
+        "vertices": fits.len(),
+        "fitted": score.scored,
+        "mesh_s": mesh_s,
+        "wall_s": run.wall_s,
+        "times_s": run.fit.outcome.times,
+        "mesh_before_fit": before,
+        "mesh_after_fit": after,
+        "materials": score.materials,
+        "eta_material_mean_abs_error_pct": score.eta_material_mean_pct,
+        "eta_material_max_abs_error_pct": score.eta_material_max_pct,
+        "eta_vertex_median_error_pct": score.eta_vertex_median_pct,
+        "eta_vertex_unpooled_median_error_pct": score.eta_vertex_unpooled_median_pct,
+        "normal_median_error_deg": score.normal_median_deg,
+        "normal_p90_error_deg": score.normal_p90_deg,
+        "rho_d_median_error_pct": score.rho_d_median_pct,
+        "held_out_beside_truth": held_out,
+        "input_mesh": "fit/mesh.ply",
+        "surface": {
+            "before": scores.before,
+            "after": scores.after,
+            "update": scores.surface_update,
+        },
+        "eta_carved_vs_true_mesh": scores.eta,
+        "true_mesh_fit_s": scores.true_mesh_fit_s,
+    });
+    say!(
+        say,
+        "mesh vs truth  Chamfer {:.3} mm before the fit, {:.3} mm after its shape refinement (Hausdorff {:.2} → {:.2} mm)",
+        before.chamfer_m * 1e3,
+        after.chamfer_m * 1e3,
+        before.hausdorff_m * 1e3,
+        after.hausdorff_m * 1e3,
+    );
+    say!(
+        say,
+        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
+        scores.after.observed_vertices,
+        scores.before.observed_mean_m * 1e3,
+        scores.after.observed_mean_m * 1e3,
+        scores.after.observed_p90_m * 1e3,
+        scores.after.unobserved_vertices,
+        scores.before.unobserved_mean_m * 1e3,
+        scores.after.unobserved_mean_m * 1e3,
+        scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+        scores.before.mesh_normal_median_deg,
+    );
+    for m in &scores.eta {
+        say!(
+            say,
+            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} points)",
+            m.name,
+            m.carved_pct,
+            m.true_mesh_pct,
+            (m.carved_pct - m.true_mesh_pct).abs()
+        );
+    }
+    say!(
+        say,
+        "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
+        score.scored,
+        fits.len(),
+        run.wall_s,
+        score.normal_median_deg,
+        score.normal_p90_deg,
+        score.rho_d_median_pct,
+    );
+    say!(
+        say,
+        "η per material (median over the vertices that report η, against the truth):"
+    );
+    for m in &score.materials {
+        let verdict = if m.vertices == 0 {
+            "unidentified: no vertex's data fix η".to_string()
+        } else {
+            format!(
+                "{:.4} (true {:.4}, {:+.2} %; before pooling {:+.2} %)",
+                m.eta_median, m.eta_true, m.eta_error_pct, m.eta_unpooled_error_pct
+            )
+        };
+        say!(
+            say,
+            "  {:16} {verdict} · {} vertices report η, {} withheld",
+            m.name,
+            m.vertices,
+            m.unidentified_vertices
+        );
+    }
+    say!(
+        say,
+        "η per vertex  median error {:.2} % (before pooling {:.2} %)",
+        score.eta_vertex_median_pct,
+        score.eta_vertex_unpooled_median_pct
+    );
+    if let Some(h) = &held_out {
+        say!(
+            say,
+            "held-out     re-render relative RMSE, fit / the truth's own on the same samples: s0 {:.3} / {:.3} · I^s {:.3} / {:.3} · I^α {:.3} / {:.3}",
+            h.fit.s0.relative_rmse,
+            h.truth.s0.relative_rmse,
+            h.fit.specular.relative_rmse,
+            h.truth.specular.relative_rmse,
+            h.fit.alpha.relative_rmse,
+            h.truth.alpha.relative_rmse,
+        );
+    }
+    Ok(DemoFit {
+        ply: dir.join("fit.ply"),
+        dir,
+        summary,
+    })
+}

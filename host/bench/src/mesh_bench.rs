@@ -1,0 +1,422 @@
+//! `ellipso bench mesh`: how close the built-in mesh (`ellipso mesh`) comes to the simulator's
+//! true object on the shipped scenes, and what it costs — Chamfer and Hausdorff distance to the
+//! truth, wall time and peak memory of `ellipso mesh` run as its own process; with `--fit`,
+//! also the distance after the fit's shape refinement on that mesh ([`mesh_scores`], which the
+//! demo scores its fit with too); with `--scale-vertices`, `ellipso fit --vertices N` as its own
+//! process on the demo session.
+//!
+//! Sessions are captured on the simulated rig (real pty link, pairing, tracking:
+//! [`crate::rig_capture`]) into the work folder, once: an existing session there is reused, so
+//! the report can be re-made without re-rendering. Writes `mesh-bench.json` and a Markdown
+//! report ([`markdown`]).
+//!
+//! Contract: the report and its JSON are claimed before any capture; the processes run are the
+//! request's executable; nothing here prints (lines to the caller's [`Say`], the fit's mesh
+//! step to its [`Steps`], the captures recorded by its [`Recorder`]).
+
+pub mod markdown;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use ellipso_fit::session::{SessionFit, SessionFitConfig};
+use ellipso_mesh::MeshReport;
+use ellipso_mesh::distance::{MeshDistance, mesh_distance};
+use ellipso_mesh::fit_run::Steps;
+use ellipso_model::geometry::TriangleMesh;
+use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_model::{ensure, say};
+use ellipso_report::output::{FileFormat, OutputFile};
+use ellipso_rig::acquire::ready::Recorder;
+use ellipso_sim::scene::{Scene, shipped_scene};
+
+use crate::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
+use crate::truth::TruthObject;
+
+/// What `ellipso bench mesh` is asked (its flags, parsed), and the binary to run as its own
+/// process.
+#[derive(Debug, Clone)]
+pub struct MeshBenchRequest {
+    /// Shipped scenes (`sim/scenes/NAME.toml`).
+    pub scenes: Vec<String>,
+    /// Capture resolution.
+    pub resolution: [u32; 2],
+    /// Photos per capture (default: each scene's path).
+    pub photos: Option<u32>,
+    /// Where sessions are captured (and reused from).
+    pub work: PathBuf,
+    /// Worker threads given to `ellipso mesh`.
+    pub threads: usize,
+    /// Also fit each session on its built-in mesh and score the refined shape.
+    pub fit: bool,
+    /// `ellipso fit --vertices N` runs on the demo session, one per count.
+    pub scale_vertices: Vec<usize>,
+    /// The Markdown report.
+    pub report: PathBuf,
+    /// The `ellipso` executable that `ellipso mesh` and `ellipso fit` run as (the binary passes
+    /// its own, `std::env::current_exe`).
+    pub exe: PathBuf,
+}
+
+/// The files written, as shown to the user.
+#[derive(Debug, Clone)]
+pub struct MeshBenchFiles {
+    /// The Markdown report.
+    pub report: PathBuf,
+    /// `mesh-bench.json`.
+    pub json: PathBuf,
+}
+
+/// One scene's result.
+#[derive(Debug, serde::Serialize)]
+pub struct SceneResult {
+    /// Scene name.
+    pub scene: String,
+    /// Frames carved from.
+    pub frames: usize,
+    /// Vertices of the mesh.
+    pub vertices: usize,
+    /// Distance of the built-in mesh to the truth.
+    pub before_fit: MeshDistance,
+    /// Wall time of `ellipso mesh`, s.
+    pub mesh_s: f64,
+    /// Peak resident memory of `ellipso mesh`, bytes (Linux).
+    pub peak_rss_bytes: Option<u64>,
+    /// The mesh's own report.
+    pub report: MeshReport,
+    /// The fit's scores (with `--fit`).
+    pub fit: Option<MeshScores>,
+}
+
+/// A fit on the carved mesh scored against the truth (`ellipso bench mesh --fit` and the demo).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MeshScores {
+    /// The carved mesh (before the surface update).
+    pub before: SurfaceScore,
+    /// The refined mesh (after it).
+    pub after: SurfaceScore,
+    /// Chamfer/Hausdorff of the carved mesh.
+    pub distance_before: MeshDistance,
+    /// Chamfer/Hausdorff of the refined mesh.
+    pub distance_after: MeshDistance,
+    /// The surface update, step by step.
+    pub surface_update: Vec<ellipso_fit::shape::surface::SurfaceIteration>,
+    /// Per-material η on the carved-and-refined mesh beside the true mesh's fit.
+    pub eta: Vec<EtaBeside>,
+    /// Wall time of the fit on the carved mesh, s.
+    pub fit_s: f64,
+    /// Wall time of the fit on the true mesh, s.
+    pub true_mesh_fit_s: f64,
+}
+
+/// One `ellipso fit --vertices N` run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ScaleResult {
+    /// Target vertex count.
+    pub target_vertices: usize,
+    /// Vertices of the carved mesh.
+    pub vertices: usize,
+    /// Wall time of the whole `ellipso fit` (carving included), s.
+    pub wall_s: f64,
+    /// The fit's own stage times.
+    pub times_s: serde_json::Value,
+    /// Peak resident memory of the process, bytes.
+    pub peak_rss_bytes: Option<u64>,
+    /// Mean distance of the observed vertices of the refined mesh to the truth, m.
+    pub observed_mean_m: f64,
+    /// Vertices observed.
+    pub observed: usize,
+}
+
+/// Runs `ellipso bench mesh` (module doc).
+pub fn run(
+    args: &MeshBenchRequest,
+    recorder: &mut dyn Recorder,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<MeshBenchFiles, RunError> {
+    let started = Instant::now();
+    // the report and its data are claimed first (the work directory is a cache of sessions
+    // that each capture creates fresh and later runs reuse)
+    let json = OutputFile::claim(
+        &args.work.join("mesh-bench.json"),
+        "bench-mesh",
+        FileFormat::JSON,
+        &[],
+        None,
+    )?;
+    let report = OutputFile::claim(&args.report, "bench-mesh", FileFormat::MARKDOWN, &[], None)?;
+    let mut results = Vec::new();
+    for name in &args.scenes {
+        let scene_path = shipped_scene(&format!("{name}.toml"));
+        ensure!(
+            scene_path.is_file(),
+            "scene {} not found",
+            scene_path.display()
+        );
+        let scene = Scene::load(&scene_path)?;
+        let session_dir = args.work.join(name);
+        if !session_dir.join("manifest.json").is_file() {
+            say!(
+                say,
+                "[{name}] capturing at {}×{}…",
+                args.resolution[0],
+                args.resolution[1]
+            );
+            capture_session(&scene_path, &session_dir, args, recorder, say)?;
+        } else {
+            say!(say, "[{name}] reusing {}", session_dir.display());
+        }
+        results.push(bench_scene(name, &scene, &session_dir, args, steps, say)?);
+    }
+    let mut scale = Vec::new();
+    for &n in &args.scale_vertices {
+        let scene = Scene::load(&shipped_scene("demo.toml"))?;
+        let session_dir = args.work.join("demo");
+        ensure!(
+            session_dir.join("manifest.json").is_file(),
+            "--scale-vertices runs on the demo session: add demo to --scenes"
+        );
+        scale.push(scale_run(&scene, &session_dir, n, args, say)?);
+    }
+    json.write(serde_json::to_vec_pretty(
+        &serde_json::json!({"scenes": results, "scale": scale}),
+    )?)?;
+    report.write(markdown::markdown(
+        &results,
+        &scale,
+        args,
+        started.elapsed().as_secs_f64(),
+    ))?;
+    Ok(MeshBenchFiles {
+        report: report.shown().to_path_buf(),
+        json: json.shown().to_path_buf(),
+    })
+}
+
+/// Captures `scene` into the new session `dir` on the simulated rig, quietly, and tracks it.
+fn capture_session(
+    scene: &Path,
+    dir: &Path,
+    args: &MeshBenchRequest,
+    recorder: &mut dyn Recorder,
+    say: &dyn Say,
+) -> Result<(), RunError> {
+    crate::rig_capture::capture_on_sim_rig(scene, dir, args.photos, args.resolution, recorder)?;
+    ellipso_vision::process::track_and_append(dir, say)?;
+    Ok(())
+}
+
+/// The simulator's true object to score a mesh against: the analytic sphere as a fine
+/// icosphere (40 962 vertices), meshes as rendered.
+pub fn truth_object(scene: &Scene) -> Result<TruthObject, RunError> {
+    let sphere = matches!(
+        scene.objects.first().map(|o| &o.geometry),
+        Some(ellipso_sim::scene::ObjectGeometry::Sphere(_))
+    );
+    Ok(TruthObject::from_scene(scene, sphere.then_some(6))?)
+}
+
+fn bench_scene(
+    name: &str,
+    scene: &Scene,
+    session_dir: &Path,
+    args: &MeshBenchRequest,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<SceneResult, RunError> {
+    let out = args.work.join(format!("{name}-mesh.ply"));
+    say!(say, "[{name}] ellipso mesh --threads {}…", args.threads);
+    let t0 = Instant::now();
+    let o = Command::new(&args.exe)
+        .arg("mesh")
+        .arg(session_dir)
+        .arg("--out")
+        .arg(&out)
+        .args(["--threads", &args.threads.to_string()])
+        .output()
+        .context("running ellipso mesh")?;
+    let mesh_s = t0.elapsed().as_secs_f64();
+    ensure!(
+        o.status.success(),
+        "ellipso mesh failed on {name}: {}",
+        String::from_utf8_lossy(&o.stderr).trim()
+    );
+    let report_path = out.with_file_name(format!("{name}-mesh-report.json"));
+    let report: MeshReport = serde_json::from_slice(&std::fs::read(&report_path)?)
+        .with_context(|| format!("reading {}", report_path.display()))?;
+    let peak_rss_bytes = report.peak_rss_bytes;
+    let mesh = TriangleMesh::load(&out)?;
+    let truth = truth_object(scene)?.mesh;
+    let before_fit = mesh_distance(&mesh, &truth, 50_000, 1);
+    say!(
+        say,
+        "[{name}] {} vertices · Chamfer {:.3} mm · Hausdorff {:.3} mm · {:.1} s · peak {:.0} MB",
+        mesh.positions().len(),
+        before_fit.chamfer_m * 1e3,
+        before_fit.hausdorff_m * 1e3,
+        mesh_s,
+        peak_rss_bytes.unwrap_or(0) as f64 / 1e6
+    );
+    let fit = if args.fit {
+        let session = ellipso_session::reader::open(session_dir)?;
+        steps.begin("mesh");
+        let (_, report, hull) = ellipso_mesh::output::mesh_of_session(
+            &session,
+            None,
+            &ellipso_mesh::MeshConfig::default(),
+            say,
+            &mut |stage| steps.stage(stage),
+        )?;
+        steps.end(&format!(
+            "{} vertices from {} frames",
+            report.vertices, report.frames_used
+        ));
+        let config = SessionFitConfig {
+            hull: Some(std::sync::Arc::new(hull)),
+            ..SessionFitConfig::default()
+        };
+        let config = ellipso_fit::session::with_session_sensor(&session, &config);
+        let poses = ellipso_mesh::poses::poses_of(&session, say)?;
+        let t0 = Instant::now();
+        let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
+        let fit_s = t0.elapsed().as_secs_f64();
+        let scores = mesh_scores(scene, &session, &mesh, &fit, fit_s, &config, say)?;
+        say!(
+            say,
+            "[{name}] observed surface {:.3} → {:.3} mm mean, normals {:.2}° median; Chamfer {:.3} → {:.3} mm ({:.0} s)",
+            scores.before.observed_mean_m * 1e3,
+            scores.after.observed_mean_m * 1e3,
+            scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+            scores.distance_before.chamfer_m * 1e3,
+            scores.distance_after.chamfer_m * 1e3,
+            fit_s
+        );
+        Some(scores)
+    } else {
+        None
+    };
+    Ok(SceneResult {
+        scene: name.into(),
+        frames: report.frames_used,
+        vertices: mesh.positions().len(),
+        before_fit,
+        mesh_s,
+        peak_rss_bytes,
+        report,
+        fit,
+    })
+}
+
+/// Scores `fit` (of `session` on the carved mesh `carved`, `fit_s` seconds, settings
+/// `config`) against the scene's truth (lines to `say`), and fits the same session on the true mesh for the
+/// per-material η beside it (the same settings, no hull).
+pub fn mesh_scores(
+    scene: &Scene,
+    session: &ellipso_session::reader::Session,
+    carved: &TriangleMesh,
+    fit: &SessionFit,
+    fit_s: f64,
+    config: &SessionFitConfig,
+    say: &dyn Say,
+) -> Result<MeshScores, RunError> {
+    let truth = crate::chain::truth_for_scoring(scene)?;
+    let poses = ellipso_mesh::poses::poses_of(session, say)?;
+    let true_config = SessionFitConfig {
+        hull: None,
+        ..config.clone()
+    };
+    let true_mesh = crate::chain::true_mesh(scene)?;
+    let t0 = Instant::now();
+    let on_truth =
+        ellipso_fit::session::fit_session(session, &true_mesh, &poses, &true_config, &mut |_| {})?;
+    let true_mesh_fit_s = t0.elapsed().as_secs_f64();
+    let per_material = |f: &SessionFit| {
+        let at = crate::truth_map::truth_at(&truth, f.mesh.positions());
+        crate::score::score_fit(&f.outcome.fits, &at, &truth.material_names, f.set.colour)
+    };
+    Ok(MeshScores {
+        before: surface_score(&truth, carved, None, &fit.observed),
+        after: surface_score(&truth, &fit.mesh, Some(&fit.outcome.fits), &fit.observed),
+        distance_before: mesh_distance(carved, &truth.mesh, 50_000, 1),
+        distance_after: mesh_distance(&fit.mesh, &truth.mesh, 50_000, 1),
+        surface_update: fit.surface.clone(),
+        eta: eta_beside(&per_material(fit), &per_material(&on_truth)),
+        fit_s,
+        true_mesh_fit_s,
+    })
+}
+
+/// `ellipso fit SESSION --vertices N` as its own process: time, memory, observed surface.
+fn scale_run(
+    scene: &Scene,
+    session_dir: &Path,
+    vertices: usize,
+    args: &MeshBenchRequest,
+    say: &dyn Say,
+) -> Result<ScaleResult, RunError> {
+    let out = args.work.join(format!("demo-fit-{vertices}"));
+    say!(say, "[scale] ellipso fit --vertices {vertices}…");
+    let t0 = Instant::now();
+    let o = Command::new(&args.exe)
+        .arg("fit")
+        .arg(session_dir)
+        .arg("--out")
+        .arg(&out)
+        .args(["--vertices", &vertices.to_string(), "--json"])
+        .output()
+        .context("running ellipso fit")?;
+    let wall_s = t0.elapsed().as_secs_f64();
+    ensure!(
+        o.status.success(),
+        "ellipso fit --vertices {vertices} failed: {}",
+        String::from_utf8_lossy(&o.stderr).trim()
+    );
+    let json: serde_json::Value = serde_json::from_slice(&o.stdout)
+        .with_context(|| format!("reading the JSON of ellipso fit --vertices {vertices}"))?;
+    let summary = &json["summary"];
+    let fitted = ellipso_fit::export::ply::read_fit_ply(&out.join("fit.ply"))?;
+    let unobserved_bit =
+        ellipso_fit::export::ply::flag_mask(&[ellipso_fit::data::FitFlag::Unobserved]);
+    let observed: Vec<bool> = fitted
+        .iter()
+        .map(|v| v.flags & unobserved_bit == 0)
+        .collect();
+    let positions: Vec<nalgebra::Point3<f64>> = fitted
+        .iter()
+        .map(|v| {
+            nalgebra::Point3::new(
+                v.position[0].into(),
+                v.position[1].into(),
+                v.position[2].into(),
+            )
+        })
+        .collect();
+    let truth = crate::chain::truth_for_scoring(scene)?;
+    let at = crate::truth_map::truth_at(&truth, &positions);
+    let d: Vec<f64> = at
+        .iter()
+        .zip(&observed)
+        .filter(|(_, o)| **o)
+        .filter_map(|(t, _)| t.map(|t| t.distance_m))
+        .collect();
+    let result = ScaleResult {
+        target_vertices: vertices,
+        vertices: fitted.len(),
+        wall_s,
+        times_s: summary["times_s"].clone(),
+        peak_rss_bytes: summary["peak_rss_bytes"].as_u64(),
+        observed_mean_m: d.iter().sum::<f64>() / d.len().max(1) as f64,
+        observed: d.len(),
+    };
+    say!(
+        say,
+        "[scale] {} vertices: {:.0} s, peak {:.0} MB, observed surface {:.3} mm",
+        result.vertices,
+        wall_s,
+        result.peak_rss_bytes.unwrap_or(0) as f64 / 1e6,
+        result.observed_mean_m * 1e3
+    );
+    Ok(result)
+}

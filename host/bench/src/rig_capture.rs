@@ -1,0 +1,42 @@
+//! A scene captured on the simulated rig (the firmware core behind a real pty, the host's real
+//! link, pairing and session code), for the demo and `ellipso bench mesh`: the capture
+//! `ellipso capture --sim SCENE --no-track` makes, recorded by the caller's [`Recorder`] (the
+//! binary's progress bar and signal handlers).
+//!
+//! Contract: 2×2 rays per raw pixel, the scene's interval and bracket; the session records the
+//! rig and boards of the scene ([`ellipso_vision::process`]); poses are not tracked here.
+
+use std::path::Path;
+
+use ellipso_model::run_error::RunError;
+use ellipso_rig::acquire::ready::{Recorded, Recorder};
+use ellipso_rig::acquire::sim_rig::{self, SimCaptureOptions};
+use ellipso_vision::process;
+
+/// Captures `scene` into the new session `out` (`photos`: at most the scene's path; at
+/// `resolution` instead of the scene's).
+pub fn capture_on_sim_rig(
+    scene: &Path,
+    out: &Path,
+    photos: Option<u32>,
+    resolution: [u32; 2],
+    recorder: &mut dyn Recorder,
+) -> Result<Recorded, RunError> {
+    let options = SimCaptureOptions {
+        scene: scene.to_path_buf(),
+        out: out.to_path_buf(),
+        external: None,
+        photos,
+        resolution: Some(resolution),
+        supersampling: 2,
+        interval_ms: None,
+        bracket: None,
+    };
+    let ready = sim_rig::prepare(&options, |scene, camera| {
+        (
+            process::rig_record_of_scene(scene, camera),
+            process::boards_of_scene(scene),
+        )
+    })?;
+    recorder.record(ready)
+}

@@ -1,0 +1,151 @@
+//! The physical rig of `ellipso capture --rig RIG.toml` ([`prepare`]): the trigger board on its
+//! serial port and the camera through its backend, as the rig file describes them.
+//!
+//! Contract: the rig file is read by the caller (`ellipso_vision::rig_file`, which owns its
+//! format and its boards) and handed over as a [`HardwareRig`]; the camera must deliver the
+//! frame size of the rig's camera model; a backend not compiled in is refused by name with the
+//! cargo feature that adds it. The session records the trigger port, the camera's backend and
+//! address, and a relative-radiometry rig record with the calibrated flash offset. Nothing here
+//! prints.
+
+use std::path::PathBuf;
+
+use ellipso_model::camera::CameraModel;
+use ellipso_model::mosaic::SensorLayout;
+use ellipso_model::run_error::RunError;
+use ellipso_protocol::CaptureConfig;
+use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
+use ellipso_session::rig::{RigRecord, TrackedBoard};
+use ellipso_session::time::HostClock;
+use ellipso_session::writer::SessionWriter;
+
+use super::ready::{ReadyCapture, capture_plan, check_plan};
+use crate::camera::{Camera, CameraSettings};
+use crate::link::{LinkConfig, TriggerLink};
+
+/// Which camera backend drives the sensor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Backend {
+    /// GigE Vision / USB3 Vision through libaravis (feature `aravis`).
+    Aravis,
+    /// UVC through V4L2 (feature `v4l`).
+    V4l,
+}
+
+/// The physical rig as a capture drives it (from a rig file).
+#[derive(Debug, Clone)]
+pub struct HardwareRig {
+    /// The rig file it was read from (named in errors).
+    pub rig_file: PathBuf,
+    /// The trigger board's port (serial device, pty, or `unix:PATH`).
+    pub trigger_port: String,
+    /// The camera backend.
+    pub backend: Backend,
+    /// The camera's address (aravis: IP address; v4l: `/dev/videoN`).
+    pub address: String,
+    /// The sensor's mosaic layout.
+    pub layout: SensorLayout,
+    /// Exposure, gain and bit depth applied to the camera.
+    pub settings: CameraSettings,
+    /// The calibrated camera model.
+    pub camera: CameraModel,
+    /// The flash position in the camera frame, as `ellipso calibrate --sphere` measured it.
+    pub flash_offset_m: Option<[f64; 3]>,
+    /// The board timing.
+    pub board: CaptureConfig,
+    /// Photos to take.
+    pub photos: u32,
+    /// The AprilTag boards of the capture.
+    pub boards: Vec<TrackedBoard>,
+}
+
+/// Opens the camera and the trigger link and creates the session in `out`: a capture ready to
+/// run.
+pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture, RunError> {
+    let clock = HostClock::new();
+    let camera = open_camera(rig, clock)?;
+    let info = camera.info();
+    ellipso_model::ensure!(
+        (info.width, info.height) == (rig.camera.width, rig.camera.height),
+        "{}: the camera delivers {}×{} but the rig's camera model is {}×{}; recalibrate or fix [camera]",
+        rig.rig_file.display(),
+        info.width,
+        info.height,
+        rig.camera.width,
+        rig.camera.height
+    );
+    let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
+    let mut manifest = Manifest::new(
+        SessionSource::Hardware {
+            trigger_port: rig.trigger_port.clone(),
+            camera: format!("{}:{}", info.backend, rig.address),
+        },
+        SensorInfo {
+            layout: rig.layout,
+            width: info.width,
+            height: info.height,
+            bit_depth: rig.settings.bit_depth,
+        },
+        clock.wall_at_epoch_unix_us(),
+    );
+    manifest.rig = Some(RigRecord::relative(
+        rig.camera,
+        // The flash as `ellipso calibrate --sphere` measured it (the fit needs it); the rest of
+        // the flash description takes the rig's defaults (polarised parallel to the 0° analyser).
+        rig.flash_offset_m
+            .map(|offset_m| ellipso_model::rig::FlashSpec {
+                offset_m,
+                ..Default::default()
+            }),
+    ));
+    manifest.boards = rig.boards.clone();
+    check_plan(&link, rig.board)?;
+    let session = SessionWriter::create(out, manifest)?;
+    Ok(ReadyCapture {
+        link,
+        camera,
+        session,
+        plan: capture_plan(rig.board, rig.settings, rig.photos),
+        photos: rig.photos,
+        board: None,
+    })
+}
+
+/// Opens the rig's camera through its backend (features permitting).
+fn open_camera(rig: &HardwareRig, clock: HostClock) -> Result<Box<dyn Camera>, RunError> {
+    match rig.backend {
+        #[cfg(feature = "aravis")]
+        Backend::Aravis => {
+            let options = crate::camera::aravis::AravisOptions {
+                layout: ellipso_session::manifest::layout_name(rig.layout).to_string(),
+                ..Default::default()
+            };
+            Ok(Box::new(crate::camera::aravis::AravisCamera::open(
+                &rig.address,
+                options,
+                clock,
+            )?))
+        }
+        #[cfg(feature = "v4l")]
+        Backend::V4l => Ok(Box::new(crate::camera::v4l::V4lCamera::open(
+            &rig.address,
+            clock,
+        )?)),
+        #[cfg(not(feature = "aravis"))]
+        Backend::Aravis => missing_backend(rig, "aravis", clock),
+        #[cfg(not(feature = "v4l"))]
+        Backend::V4l => missing_backend(rig, "v4l", clock),
+    }
+}
+
+#[cfg(not(all(feature = "aravis", feature = "v4l")))]
+fn missing_backend(
+    rig: &HardwareRig,
+    feature: &str,
+    _clock: HostClock,
+) -> Result<Box<dyn Camera>, RunError> {
+    ellipso_model::bail!(
+        "{}: camera backend `{feature}` is not in this build; rebuild with `--features {feature}`",
+        rig.rig_file.display()
+    )
+}
