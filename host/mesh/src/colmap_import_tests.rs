@@ -506,6 +506,7 @@ pub(crate) fn mapper_model_comes_back_onto_the_board(
     truth: &[(u64, Isometry3<f64>)],
     camera: &CameraModel,
     colmap: &dyn Fn(&[&str]),
+    seed: u32,
 ) {
     let p = |x: &Path| x.display().to_string();
     let mapped = c.join("mapped");
@@ -516,8 +517,11 @@ pub(crate) fn mapper_model_comes_back_onto_the_board(
     std::fs::create_dir_all(&mapped).unwrap();
     std::fs::create_dir_all(&mapped_txt).unwrap();
     // the lens is known: COLMAP keeps the exported camera, as a user with a calibration would
+    let seed = seed.to_string();
     colmap(&[
         "mapper",
+        "--random_seed",
+        &seed,
         "--database_path",
         &p(&c.join("database.db")),
         "--image_path",
