@@ -261,18 +261,13 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
-        steps.begin("mesh");
-        let (_, report, hull) = ellipso_mesh::output::mesh_of_session(
+        let (_, _, hull) = ellipso_mesh::output::mesh_of_session(
             &session,
             None,
             &ellipso_mesh::MeshConfig::default(),
             say,
-            &mut |stage| steps.stage(stage),
+            steps,
         )?;
-        steps.end(&format!(
-            "{} vertices from {} frames",
-            report.vertices, report.frames_used
-        ));
         let config = SessionFitConfig {
             hull: Some(std::sync::Arc::new(hull)),
             ..SessionFitConfig::default()

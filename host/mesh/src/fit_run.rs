@@ -151,21 +151,14 @@ pub fn run(
             say.err(format_args!(
                 "carving the visual hull from the frames (the surface update stays inside it)…"
             ));
-            steps.begin("mesh");
             match mesh_of_session(
                 &session,
                 imported_poses,
                 &crate::MeshConfig::default(),
                 say,
-                &mut |stage| steps.stage(stage),
+                steps,
             ) {
-                Ok((_, report, hull)) => {
-                    steps.end(&format!(
-                        "{} vertices from {} frames",
-                        report.vertices, report.frames_used
-                    ));
-                    (mesh, Some(hull))
-                }
+                Ok((_, _, hull)) => (mesh, Some(hull)),
                 Err(e) => {
                     let e = e.into_boxed();
                     say.err(format_args!(
@@ -183,15 +176,8 @@ pub fn run(
             ));
             let mut mesh_config = crate::MeshConfig::default();
             mesh_config.remesh.target_vertices = vertices;
-            steps.begin("mesh");
             let (mesh, report, hull) =
-                mesh_of_session(&session, imported_poses, &mesh_config, say, &mut |stage| {
-                    steps.stage(stage)
-                })?;
-            steps.end(&format!(
-                "{} vertices from {} frames",
-                report.vertices, report.frames_used
-            ));
+                mesh_of_session(&session, imported_poses, &mesh_config, say, steps)?;
             let path = out.join("mesh.ply");
             write_mesh(&mesh, &report, &path)?;
             say.err(format_args!(

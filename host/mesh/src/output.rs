@@ -24,21 +24,27 @@ use crate::fit_run::Steps;
 use crate::{MeshConfig, MeshReport, build_mesh};
 
 /// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
-/// has none); also returns the carved hull (the fit's surface update stays inside it). Each
-/// stage's name goes to `stage`; the tracking's lines to `say`.
+/// has none); also returns the carved hull (the fit's surface update stays inside it). The
+/// carving is one step on `steps` (`mesh`, its stages, then "N vertices from M frames"; a
+/// failure leaves the step unended, as the trait allows); the tracking's lines go to `say`.
 pub fn mesh_of_session(
     session: &Session,
     poses: Option<&[(u64, Isometry3<f64>)]>,
     config: &MeshConfig,
     say: &dyn Say,
-    stage: &mut (dyn FnMut(&str) + Send),
+    steps: &mut dyn Steps,
 ) -> Result<(TriangleMesh, MeshReport, HullField), RunError> {
+    steps.begin("mesh");
     let poses = match poses {
         Some(p) => p.to_vec(),
         None => crate::poses::poses_of(session, say)?,
     };
-    let result = build_mesh(session, &poses, config, stage)
+    let result = build_mesh(session, &poses, config, &mut |stage| steps.stage(stage))
         .with_context(|| format!("meshing {}", session.dir.display()))?;
+    steps.end(&format!(
+        "{} vertices from {} frames",
+        result.report.vertices, result.report.frames_used
+    ));
     Ok((result.mesh, result.report, result.hull))
 }
 
@@ -117,13 +123,7 @@ pub fn mesh_command(
     )?;
     let session = ellipso_session::reader::open(session_dir)?;
     let started = std::time::Instant::now();
-    steps.begin("mesh");
-    let (mesh, mut report, _) =
-        mesh_of_session(&session, None, config, say, &mut |stage| steps.stage(stage))?;
-    steps.end(&format!(
-        "{} vertices from {} frames",
-        report.vertices, report.frames_used
-    ));
+    let (mesh, mut report, _) = mesh_of_session(&session, None, config, say, steps)?;
     report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
     mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;

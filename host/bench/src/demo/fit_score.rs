@@ -39,18 +39,13 @@ pub fn fit_and_score(
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
-    steps.begin("mesh");
     let (mesh, mesh_report, hull) = ellipso_mesh::output::mesh_of_session(
         session,
         None,
         &ellipso_mesh::MeshConfig::default(),
         say,
-        &mut |stage| steps.stage(stage),
+        steps,
     )?;
-    steps.end(&format!(
-        "{} vertices from {} frames",
-        mesh_report.vertices, mesh_report.frames_used
-    ));
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
     ellipso_mesh::output::write_mesh(&mesh, &mesh_report, &mesh_path)?;
