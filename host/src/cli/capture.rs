@@ -25,7 +25,7 @@ use anyhow::Context;
 use ellipso_protocol::Bracket;
 use ellipso_rig::acquire::capture::CaptureReport;
 use ellipso_rig::acquire::hardware::{self, HardwareRig};
-use ellipso_rig::acquire::ready::{Recorded, Recorder, report_lines};
+use ellipso_rig::acquire::ready::{ReadyCapture, Recorded, Recorder, report_lines};
 use ellipso_rig::acquire::sim_rig::{self, ExternalBoard, SimCaptureOptions};
 use ellipso_rig::camera::CameraSettings;
 use ellipso_vision::process;
@@ -99,7 +99,8 @@ pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
 }
 
 /// Records a simulated capture into `args.out` ([`sim_rig::prepare`], the session's rig record
-/// and boards from [`process`]) with a progress bar and the signal handlers ([`Recording`]), then tracks its poses unless `--no-track` or stopped by a signal.
+/// and boards from [`process`]), then records it and tracks its poses unless `--no-track`
+/// ([`record_and_track`]).
 pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
     let scene = args
         .sim
@@ -128,6 +129,13 @@ pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
         )
     })
     .map_err(out::failed)?;
+    record_and_track(ready, !args.no_track)
+}
+
+/// Records `ready` with a progress bar and the signal handlers ([`Recording`]), then tracks
+/// the session's poses when `track` holds and no signal stopped the capture (after a stop by
+/// signal the user wants the process to end: poses can be tracked later).
+fn record_and_track(ready: ReadyCapture, track: bool) -> anyhow::Result<Captured> {
     let Recorded {
         report,
         dir,
@@ -135,11 +143,10 @@ pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
     } = Recording { quiet: false }
         .record(ready)
         .map_err(out::failed)?;
-    // after a stop by signal the user wants the process to end: poses can be tracked later
-    let tracked = if args.no_track || signal.is_some() {
-        None
-    } else {
+    let tracked = if track && signal.is_none() {
         Some(process::track_and_append(&dir, &out::Printed).map_err(out::failed)?)
+    } else {
+        None
     };
     Ok(Captured {
         report,
@@ -209,24 +216,7 @@ pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
         boards,
     };
     let ready = hardware::prepare(&hardware_rig, &args.out).map_err(out::failed)?;
-    let Recorded {
-        report,
-        dir,
-        signal,
-    } = Recording { quiet: false }
-        .record(ready)
-        .map_err(out::failed)?;
-    let tracked = if args.no_track || hardware_rig.boards.is_empty() || signal.is_some() {
-        None
-    } else {
-        Some(process::track_and_append(&dir, &out::Printed).map_err(out::failed)?)
-    };
-    Ok(Captured {
-        report,
-        dir,
-        tracked,
-        signal,
-    })
+    record_and_track(ready, !args.no_track && !hardware_rig.boards.is_empty())
 }
 
 /// Runs `ellipso capture`.
