@@ -11,6 +11,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use ellipso_model::optics::fresnel::brewster_angle_rad;
 use ellipso_model::optics::inspect::{self, MuellerInputs};
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use serde_json::Value;
 
 /// Arguments of `ellipso model`.
@@ -185,12 +186,14 @@ impl MuellerArgs {
     /// The flags as the library takes them.
     fn inputs(&self) -> MuellerInputs {
         MuellerInputs {
-            eta: self.eta,
-            sigma_s: self.sigma_s,
-            sigma_ss: self.sigma_ss,
-            rho_s: self.rho_s,
-            rho_ss: self.rho_ss,
-            rho_d: self.rho_d,
+            params: PbrdfParams {
+                eta: self.eta,
+                sigma_s: self.sigma_s,
+                sigma_ss: self.sigma_ss,
+                rho_s: self.rho_s,
+                rho_ss: self.rho_ss,
+                rho_d: self.rho_d,
+            },
             normal: self.normal,
             to_light: self.to_light,
             to_camera: self.to_camera,

@@ -57,18 +57,8 @@ pub struct DopTable {
 /// The inputs of `ellipso model mueller` (world directions of any non-zero length).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MuellerInputs {
-    /// Refractive index.
-    pub eta: f64,
-    /// Specular roughness σ_s.
-    pub sigma_s: f64,
-    /// Single-scattering roughness σ_ss.
-    pub sigma_ss: f64,
-    /// Specular albedo ρ_s.
-    pub rho_s: f64,
-    /// Single-scattering albedo per channel.
-    pub rho_ss: [f64; 3],
-    /// Diffuse albedo per channel.
-    pub rho_d: [f64; 3],
+    /// The material (checked against the flags' ranges before the model's own validation).
+    pub params: PbrdfParams<f64>,
     /// Surface normal.
     pub normal: [f64; 3],
     /// Direction surface → light.
@@ -198,7 +188,8 @@ pub fn dop(eta: f64, theta_deg: f64) -> Result<DopTable, RunError> {
 }
 
 /// The Mueller matrices of the three lobes at one geometry (module doc: ranges, frames).
-pub fn mueller(a: &MuellerInputs) -> Result<MuellerTables, RunError> {
+pub fn mueller(inputs: &MuellerInputs) -> Result<MuellerTables, RunError> {
+    let a = &inputs.params;
     check_eta(a.eta)?;
     for (flag, v) in [("--sigma-s", a.sigma_s), ("--sigma-ss", a.sigma_ss)] {
         if !v.is_finite() || !(0.0..=1.0).contains(&v) {
@@ -223,25 +214,17 @@ pub fn mueller(a: &MuellerInputs) -> Result<MuellerTables, RunError> {
             bail!("{flag} components must be in [0, {max}], got {v:?}");
         }
     }
-    let normal = direction("--normal", a.normal)?;
-    let to_light = direction("--to-light", a.to_light)?;
-    let to_camera = direction("--to-camera", a.to_camera)?;
+    let normal = direction("--normal", inputs.normal)?;
+    let to_light = direction("--to-light", inputs.to_light)?;
+    let to_camera = direction("--to-camera", inputs.to_camera)?;
     let default_up = [0.0, 1.0, 0.0];
-    let light_up = direction("--light-up", a.light_up.unwrap_or(default_up))?;
-    let camera_up = direction("--camera-up", a.camera_up.unwrap_or(default_up))?;
+    let light_up = direction("--light-up", inputs.light_up.unwrap_or(default_up))?;
+    let camera_up = direction("--camera-up", inputs.camera_up.unwrap_or(default_up))?;
     let light_frame = Frame::light(to_light, light_up)?;
     let camera_frame = Frame::camera(to_camera, camera_up)?;
     let g = Geometry::new(normal, to_light, to_camera, light_frame, camera_frame)?;
-    let p = PbrdfParams {
-        eta: a.eta,
-        sigma_s: a.sigma_s,
-        sigma_ss: a.sigma_ss,
-        rho_s: a.rho_s,
-        rho_ss: a.rho_ss,
-        rho_d: a.rho_d,
-    };
-    p.validate()?;
-    let lobes = evaluate(&g, &p);
+    a.validate()?;
+    let lobes = evaluate(&g, a);
     let axes = |f: &Frame<f64>| FrameAxes {
         x: f.x.re(),
         y: f.y.re(),

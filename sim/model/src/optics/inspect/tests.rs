@@ -40,12 +40,14 @@ fn dop_matches_table_and_bad_flags_are_named() {
 
 fn inputs() -> MuellerInputs {
     MuellerInputs {
-        eta: 1.5,
-        sigma_s: 0.2,
-        sigma_ss: 0.5,
-        rho_s: 1.0,
-        rho_ss: [0.1; 3],
-        rho_d: [0.5, 0.4, 0.3],
+        params: PbrdfParams {
+            eta: 1.5,
+            sigma_s: 0.2,
+            sigma_ss: 0.5,
+            rho_s: 1.0,
+            rho_ss: [0.1; 3],
+            rho_d: [0.5, 0.4, 0.3],
+        },
         normal: [0.0, 0.0, 1.0],
         to_light: [0.1, 0.0, 1.0],
         to_camera: [-0.1, 0.0, 1.0],
@@ -73,15 +75,15 @@ fn mueller_bad_input_names_the_flag() {
     };
     assert!(err(&|a| a.normal = [0.0; 3]).contains("--normal"));
     assert!(err(&|a| a.to_light = [f64::NAN, 0.0, 1.0]).contains("--to-light"));
-    assert!(err(&|a| a.eta = 0.5).contains("--eta"));
-    assert!(err(&|a| a.sigma_s = 1.5).contains("--sigma-s"));
-    assert!(err(&|a| a.sigma_s = 0.6).contains("--sigma-ss"));
-    assert!(err(&|a| a.rho_d = [0.1, -1.0, 0.0]).contains("--rho-d"));
+    assert!(err(&|a| a.params.eta = 0.5).contains("--eta"));
+    assert!(err(&|a| a.params.sigma_s = 1.5).contains("--sigma-s"));
+    assert!(err(&|a| a.params.sigma_s = 0.6).contains("--sigma-ss"));
+    assert!(err(&|a| a.params.rho_d = [0.1, -1.0, 0.0]).contains("--rho-d"));
     // absurd magnitudes: refused with the range, never NaN
-    assert!(err(&|a| a.eta = 1e200).contains("[1, 5]"));
-    assert!(err(&|a| a.rho_s = 1e308).contains("--rho-s must be in [0, 1000]"));
-    assert!(err(&|a| a.rho_ss[1] = 1e308).contains("--rho-ss"));
-    assert!(err(&|a| a.rho_d = [0.1, 2.0, 0.0]).contains("--rho-d"));
+    assert!(err(&|a| a.params.eta = 1e200).contains("[1, 5]"));
+    assert!(err(&|a| a.params.rho_s = 1e308).contains("--rho-s must be in [0, 1000]"));
+    assert!(err(&|a| a.params.rho_ss[1] = 1e308).contains("--rho-ss"));
+    assert!(err(&|a| a.params.rho_d = [0.1, 2.0, 0.0]).contains("--rho-d"));
     assert!(err(&|a| a.light_up = Some([0.0; 3])).contains("--light-up"));
     // a huge or tiny but valid direction is a direction
     for n in [[0.0, 0.0, 1e300], [0.0, 0.0, 1e-300], [1e300, 0.0, 1e300]] {
