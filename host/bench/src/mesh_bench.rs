@@ -243,7 +243,7 @@ fn bench_scene(
         "ellipso mesh failed on {name}: {}",
         String::from_utf8_lossy(&o.stderr).trim()
     );
-    let report_path = out.with_file_name(format!("{name}-mesh-report.json"));
+    let report_path = ellipso_mesh::output::report_path(&out);
     let report: MeshReport = serde_json::from_slice(&std::fs::read(&report_path)?)
         .with_context(|| format!("reading {}", report_path.display()))?;
     let peak_rss_bytes = report.peak_rss_bytes;
