@@ -4,14 +4,14 @@
 //! binary's progress bar and signal handlers).
 //!
 //! Contract: 2×2 rays per raw pixel, the scene's interval and bracket; the session records the
-//! rig and boards of the scene ([`ellipso_vision::process`]); poses are not tracked here.
+//! rig and boards of the scene ([`ellipso_capture::sim`], the code `ellipso capture` runs);
+//! poses are not tracked here.
 
 use std::path::Path;
 
 use ellipso_model::run_error::RunError;
 use ellipso_rig::acquire::ready::{Recorded, Recorder};
-use ellipso_rig::acquire::sim_rig::{self, SimCaptureOptions};
-use ellipso_vision::process;
+use ellipso_rig::acquire::sim_rig::SimCaptureOptions;
 
 /// Captures `scene` into the new session `out` (`photos`: at most the scene's path; at
 /// `resolution` instead of the scene's).
@@ -32,11 +32,5 @@ pub fn capture_on_sim_rig(
         interval_ms: None,
         bracket: None,
     };
-    let ready = sim_rig::prepare(&options, |scene, camera| {
-        (
-            process::rig_record_of_scene(scene, camera),
-            process::boards_of_scene(scene),
-        )
-    })?;
-    recorder.record(ready)
+    ellipso_capture::sim::record(&options, recorder)
 }

@@ -1,14 +1,11 @@
 //! `ellipso capture --sim SCENE --out DIR` / `--rig RIG.toml`: a capture on the simulated or the
 //! physical rig, recorded as a session.
 //!
-//! The rigs are assembled in `ellipso-rig` ([`sim_rig::prepare`]: the real firmware core in a
+//! The capture itself is [`ellipso_capture`] (the simulated rig: the real firmware core in a
 //! virtual board behind a real pseudo-terminal, or an external `ellipso sim serve` with
-//! `--trigger PTY --wire SOCKET`, and the simulator's camera; [`hardware::prepare`]: the serial
-//! trigger board and the camera backend of the rig file) and run with this binary's progress bar
-//! and signal handlers. After recording, poses are tracked and appended to the session
-//! ([`process::track_and_append`]) unless `--no-track`; the session's rig record and boards come
-//! from `ellipso-vision` too, so the binary composes the two crates (the rig crate does not link
-//! the tracker).
+//! `--trigger PTY --wire SOCKET`, and the simulator's camera; the physical rig: the serial
+//! trigger board and the camera backend of the rig file; then the poses tracked unless
+//! `--no-track`), run with this binary's progress bar and signal handlers ([`Recording`]).
 //!
 //! `--bracket 1,0.25,0.0625` asks the trigger board for a flash-energy bracket: frame `k` is lit
 //! by step `k mod len` of the full pulse (the same exposure, a shorter LED on-time). 1 to 8
@@ -22,14 +19,10 @@ use std::path::PathBuf;
 use super::out;
 use super::record::Recording;
 use anyhow::Context;
+use ellipso_capture::Captured;
 use ellipso_protocol::Bracket;
-use ellipso_rig::acquire::capture::CaptureReport;
-use ellipso_rig::acquire::hardware::{self, HardwareRig};
-use ellipso_rig::acquire::ready::{ReadyCapture, Recorded, Recorder, report_lines};
-use ellipso_rig::acquire::sim_rig::{self, ExternalBoard, SimCaptureOptions};
-use ellipso_rig::camera::CameraSettings;
-use ellipso_vision::process;
-use ellipso_vision::rig_file::{Backend, RigFile};
+use ellipso_rig::acquire::ready::report_lines;
+use ellipso_rig::acquire::sim_rig::{ExternalBoard, SimCaptureOptions};
 
 /// Arguments of `ellipso capture`.
 #[derive(Debug, Clone, clap::Args)]
@@ -71,7 +64,7 @@ pub struct Args {
     pub no_track: bool,
     /// Flash-energy bracket: relative energies in (0, 1], 1 to 8, comma-separated, fired in turn
     /// (e.g. `1,0.25,0.0625`). Default: the scene's `capture.bracket` (simulator), none (rig).
-    #[arg(long, value_name = "E1,E2,…", value_parser = parse_bracket)]
+    #[arg(long, value_name = "E1,E2,…", value_parser = ellipso_capture::bracket::parse_bracket)]
     pub bracket: Option<Bracket>,
     /// Show the live view in the browser while capturing (prints its URL; `docs/view.md`).
     #[arg(long)]
@@ -81,33 +74,28 @@ pub struct Args {
     pub view_mesh: Option<PathBuf>,
 }
 
-/// Parses `--bracket`: 1 to 8 comma-separated relative energies, each in (0, 1].
-pub fn parse_bracket(s: &str) -> Result<Bracket, String> {
-    let energies = s
-        .split(',')
-        .map(|v| {
-            let v = v.trim();
-            v.parse::<f64>()
-                .map_err(|e| format!("'{v}' is not a number: {e}"))
-        })
-        .collect::<Result<Vec<f64>, String>>()?;
-    let bracket = Bracket::from_relative(&energies).map_err(|e| e.to_string())?;
-    if bracket.is_empty() {
-        return Err("a bracket needs at least one step".into());
+/// Records the capture `args` ask for on the simulated rig or the rig file's physical rig
+/// ([`ellipso_capture`]) with the progress bar and signal handlers, tracking its poses unless
+/// `--no-track`.
+fn capture(args: &Args) -> anyhow::Result<Captured> {
+    let recorder = &mut Recording { quiet: false };
+    let track = !args.no_track;
+    if let Some(rig) = &args.rig {
+        return ellipso_capture::hardware::capture(
+            rig,
+            &args.out,
+            args.bracket,
+            track,
+            recorder,
+            &out::Printed,
+        )
+        .map_err(out::failed);
     }
-    Ok(bracket)
-}
-
-/// Records a simulated capture into `args.out` ([`sim_rig::prepare`], the session's rig record
-/// and boards from [`process`]), then records it and tracks its poses unless `--no-track`
-/// ([`record_and_track`]).
-pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
-    let scene = args
-        .sim
-        .clone()
-        .context("--sim SCENE is required for a simulated capture")?;
     let options = SimCaptureOptions {
-        scene,
+        scene: args
+            .sim
+            .clone()
+            .context("--sim SCENE is required for a simulated capture")?,
         out: args.out.clone(),
         external: match (&args.trigger, &args.wire) {
             (Some(trigger), Some(wire)) => Some(ExternalBoard {
@@ -122,50 +110,7 @@ pub fn capture_sim(args: &Args) -> anyhow::Result<Captured> {
         interval_ms: args.interval_ms,
         bracket: args.bracket,
     };
-    let ready = sim_rig::prepare(&options, |scene, camera| {
-        (
-            process::rig_record_of_scene(scene, camera),
-            process::boards_of_scene(scene),
-        )
-    })
-    .map_err(out::failed)?;
-    record_and_track(ready, !args.no_track)
-}
-
-/// Records `ready` with a progress bar and the signal handlers ([`Recording`]), then tracks
-/// the session's poses when `track` holds and no signal stopped the capture (after a stop by
-/// signal the user wants the process to end: poses can be tracked later).
-fn record_and_track(ready: ReadyCapture, track: bool) -> anyhow::Result<Captured> {
-    let Recorded {
-        report,
-        dir,
-        signal,
-    } = Recording { quiet: false }
-        .record(ready)
-        .map_err(out::failed)?;
-    let tracked = if track && signal.is_none() {
-        Some(process::track_and_append(&dir, &out::Printed).map_err(out::failed)?)
-    } else {
-        None
-    };
-    Ok(Captured {
-        report,
-        dir,
-        tracked,
-        signal,
-    })
-}
-
-/// A finished capture.
-pub struct Captured {
-    /// What happened.
-    pub report: CaptureReport,
-    /// The session directory.
-    pub dir: PathBuf,
-    /// Poses tracked after recording (unless `--no-track` or stopped by a signal).
-    pub tracked: Option<Vec<process::TrackedFrame>>,
-    /// The signal (SIGINT, SIGTERM) that stopped the capture, if one did.
-    pub signal: Option<i32>,
+    ellipso_capture::sim::capture(&options, track, recorder, &out::Printed).map_err(out::failed)
 }
 
 /// A capture stopped by SIGINT or SIGTERM (the session is complete up to the stop); the process
@@ -177,46 +122,6 @@ pub struct Interrupted {
     pub signal: i32,
     /// The session directory.
     pub dir: PathBuf,
-}
-
-/// Records a capture on the physical rig described by `--rig` ([`RigFile`] read here, then
-/// [`hardware::prepare`]), then tracks its poses unless `--no-track`, the rig has no boards, or
-/// a signal stopped it.
-pub fn capture_hw(args: &Args) -> anyhow::Result<Captured> {
-    let rig_path = args
-        .rig
-        .as_ref()
-        .context("--rig RIG.toml is required for a hardware capture")?;
-    let rig = RigFile::load(rig_path)?;
-    ellipso_session::writer::check_fresh(&args.out)?;
-    let boards = rig.boards()?;
-    let mut board = rig.board_config();
-    if let Some(bracket) = args.bracket {
-        board.bracket = bracket;
-    }
-    let hardware_rig = HardwareRig {
-        rig_file: rig.path.clone(),
-        trigger_port: rig.trigger.port.clone(),
-        backend: match rig.sensor.backend {
-            Backend::Aravis => hardware::Backend::Aravis,
-            Backend::V4l => hardware::Backend::V4l,
-        },
-        address: rig.sensor.address.clone(),
-        layout: rig.sensor.layout,
-        settings: CameraSettings {
-            exposure_us: rig.sensor.exposure_us,
-            gain_db: rig.sensor.gain_db,
-            bit_depth: rig.sensor.bit_depth,
-            external_trigger: true,
-        },
-        camera: rig.camera,
-        flash_offset_m: rig.flash.map(|f| f.offset_m),
-        board,
-        photos: rig.capture.photos,
-        boards,
-    };
-    let ready = hardware::prepare(&hardware_rig, &args.out).map_err(out::failed)?;
-    record_and_track(ready, !args.no_track && !hardware_rig.boards.is_empty())
 }
 
 /// Runs `ellipso capture`.
@@ -235,11 +140,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     } else {
         None
     };
-    let captured = if args.rig.is_some() {
-        capture_hw(&args)?
-    } else {
-        capture_sim(&args)?
-    };
+    let captured = capture(&args)?;
     for line in report_lines(&captured.report) {
         crate::outln!("{line}");
     }
@@ -263,31 +164,4 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let _ = std::io::stdin().read_line(&mut String::new());
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn bracket_argument_keeps_its_order_and_names_what_is_wrong() {
-        let b = parse_bracket("1, 0.25,0.0625").unwrap();
-        assert_eq!(b.steps_q15(), [0x8000, 0x2000, 0x0800]);
-        let any_order = parse_bracket("0.25,1,0.5").unwrap();
-        assert_eq!(any_order.steps_q15(), [0x2000, 0x8000, 0x4000]);
-        for (bad, fragment) in [
-            ("", "not a number"),
-            ("1,,0.5", "not a number"),
-            ("1,x", "'x' is not a number"),
-            ("1,0", "step 1 is 0"),
-            ("1.5", "(0, 1]"),
-            ("-0.5", "(0, 1]"),
-            ("nan", "(0, 1]"),
-            ("1,1,1,1,1,1,1,1,1", "at most 8"),
-            ("0.00001", "1/65536"),
-        ] {
-            let e = parse_bracket(bad).unwrap_err();
-            assert!(e.contains(fragment), "{bad:?}: {e}");
-        }
-    }
 }
