@@ -9,7 +9,7 @@
 //!   [`Pixels::Ideal`]: an ideal polarisation sensor at the exact sampled point), the poses
 //!   (tracked from the AprilTags, or the scene's) and the mesh (carved from the frames with those
 //!   poses, or the scene's own).
-//! - [`run`] fits one spec with the demo's fit settings and scores it ([`crate::score`]): per
+//! - [`Bench::run`] fits one spec with the demo's fit settings and scores it ([`crate::score`]): per
 //!   material and per vertex, held-out re-render beside the truth's own, residuals at the truth,
 //!   and the wall time of each stage.
 //! - Sessions are rendered once per frame variant into the work directory and reused by every
