@@ -381,6 +381,31 @@ fn numeric_flags_are_checked_against_the_files_limits() {
 }
 
 #[test]
+fn mesh_debug_pictures_never_go_into_the_session() {
+    let tmp = tempfile::tempdir().unwrap();
+    let session = tmp.path().join("session");
+    std::fs::create_dir_all(&session).unwrap();
+    let before = snapshot(&session);
+    let inside = session.join("pictures");
+    let o = ellipso(&[
+        "mesh",
+        session.to_str().unwrap(),
+        "--out",
+        tmp.path().join("mesh.ply").to_str().unwrap(),
+        "--debug",
+        inside.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("inside the session") && stderr(&o).contains("--debug"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!inside.exists(), "the refused folder was created");
+    assert_eq!(snapshot(&session), before);
+}
+
+#[test]
 fn model_on_absurd_input_says_the_range_and_never_prints_nan() {
     let base = [
         "model",

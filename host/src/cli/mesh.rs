@@ -33,6 +33,11 @@ pub struct Args {
     /// pixel boundary (default: the built-in setting, see docs/mesh.md "Edge inset").
     #[arg(long, value_parser = super::limits::edge_inset_px)]
     pub edge_inset_px: Option<f64>,
+    /// Write diagnostic pictures into DIR (created; not inside the session): every view's board
+    /// pixels (`board-FRAMEID.png`, superpixels, white = shows the board as learned), the
+    /// learned board and slices of the carved fields (docs/mesh.md).
+    #[arg(long, value_name = "DIR")]
+    pub debug: Option<PathBuf>,
     /// Print one JSON object (the files and the mesh report) instead of the text report.
     #[arg(long)]
     pub json: bool,
@@ -49,6 +54,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..MeshConfig::default()
     };
     config.remesh.target_vertices = args.vertices;
+    if let Some(dir) = &args.debug {
+        // checked before anything is created; the session's own path is resolved (links)
+        let absolute = |p: &std::path::Path| {
+            p.canonicalize()
+                .or_else(|_| std::path::absolute(p))
+                .unwrap_or_else(|_| p.to_path_buf())
+        };
+        anyhow::ensure!(
+            !absolute(dir).starts_with(absolute(&args.session)),
+            "--debug {}: inside the session {} (a session is never written to)",
+            dir.display(),
+            args.session.display()
+        );
+        std::fs::create_dir_all(dir)
+            .map_err(|e| anyhow::anyhow!("--debug {}: {e}", dir.display()))?;
+        config.debug_dir = Some(dir.clone());
+    }
     let done = ellipso_mesh::output::mesh_command(
         &args.session,
         &args.out,
