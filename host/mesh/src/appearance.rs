@@ -152,6 +152,16 @@ impl Agreement {
         }
     }
 
+    /// Colour bands compared.
+    pub fn bands(&self) -> usize {
+        self.bands
+    }
+
+    /// Relative tolerance of agreement.
+    pub fn tolerance_rel(&self) -> f32 {
+        self.tolerance_rel
+    }
+
     /// Whether two samples agree.
     pub fn agree(&self, a: &TexelSample, b: &TexelSample) -> bool {
         let floor = a.floor.max(b.floor);

@@ -39,6 +39,7 @@ pub mod colmap_model;
 pub mod components;
 pub mod debug;
 pub mod distance;
+pub mod edge;
 pub mod error;
 pub mod extract;
 pub mod fit_import;

@@ -26,6 +26,7 @@
 //!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
 
 use super::appearance::{Agreement, Board, TexelGrid, pixel_sample};
+use super::edge::{EdgeOffsets, EdgePixel, edge_offsets};
 use super::frames::{FeatureImage, RayTable, View};
 
 /// A view's board pixels as a bit mask, with counts.
@@ -46,6 +47,9 @@ pub struct Silhouette {
     pub disagree_px: usize,
     /// Board islands removed, pixels.
     pub removed_island_px: usize,
+    /// Where the edge lies inside the boundary pixels whose cover could be measured
+    /// ([`crate::edge`]).
+    pub edge: EdgeOffsets,
 }
 
 impl Silhouette {
@@ -77,7 +81,7 @@ impl Silhouette {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        (self.bits.len() + self.disagree.len()) * 8
+        (self.bits.len() + self.disagree.len()) * 8 + self.edge.bytes()
     }
 }
 
@@ -107,6 +111,7 @@ pub fn classify(
         board_px: 0,
         disagree_px: 0,
         removed_island_px: 0,
+        edge: EdgeOffsets::default(),
     };
     for k in 0..w * h {
         let Some((texel, sample)) = pixel_sample(&board.grid, rays, view, image, k, floor_dn)
@@ -136,6 +141,20 @@ pub fn classify(
         }
     }
     remove_islands(&mut s, min_island_px, max_enclosed_fraction);
+    s.edge = edge_offsets(
+        rule,
+        w,
+        h,
+        |x, y| s.is_board(x, y),
+        |x, y| s.disagrees(x, y),
+        |k| {
+            let (texel, sample) = pixel_sample(&board.grid, rays, view, image, k, floor_dn)?;
+            Some(EdgePixel {
+                sample,
+                board: board.texels[texel],
+            })
+        },
+    );
     s
 }
 
@@ -304,9 +323,17 @@ impl SignedDistance {
         let not_board: Vec<bool> = board.iter().map(|b| !b).collect();
         let to_not_board = edt_2d(&not_board, w, h);
         let to_board = edt_2d(&board, w, h);
+        let offset = |k: usize| {
+            let (x, y) = (crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize);
+            let inside = x >= 0 && y >= 0 && (x as usize) < s.width && (y as usize) < s.height;
+            inside
+                .then(|| s.edge.get(y as usize * s.width + x as usize))
+                .flatten()
+                .unwrap_or(edge_inset_px)
+        };
         let values = (0..w * h)
             .map(|k| {
-                edge_inset_px
+                offset(k)
                     + if board[k] {
                         to_not_board[k].sqrt() - 0.5
                     } else {
@@ -389,6 +416,7 @@ mod tests {
             board_px: 0,
             disagree_px: 0,
             removed_island_px: 0,
+            edge: EdgeOffsets::default(),
         };
         for y in 0..h {
             for x in 0..w {
