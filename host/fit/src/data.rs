@@ -249,6 +249,19 @@ pub struct GateCounts {
 }
 
 impl GateCounts {
+    /// Samples of frames that saw the vertex lit (kept, or gated for what the pixels showed:
+    /// mixed, grazing, saturated, dark, non-finite, colour outlier); the rest had it out of
+    /// view, occluded or in the flash's shadow.
+    pub fn seen_lit(&self) -> u64 {
+        self.kept
+            + self.mixed
+            + self.grazing
+            + self.saturated
+            + self.dark
+            + self.non_finite
+            + self.colour_outlier
+    }
+
     /// Adds `other` to `self`, reason by reason.
     pub fn add(&mut self, other: &GateCounts) {
         self.not_in_view += other.not_in_view;
@@ -322,10 +335,12 @@ pub enum FitFlag {
     /// η was fitted with the material's pooled η as a prior (the vertex's own estimate is kept
     /// in [`VertexFit::eta_unpooled`]).
     EtaPooled,
-    /// No fitted frame gave the vertex a single sample (not in view, occluded, in the flash's
-    /// shadow or at grazing in every frame, or every sample gated): what no view sees — the
-    /// underside, the contact with the board. Its parameters are the prior's and its position
-    /// follows its observed neighbours (docs/fit-shape.md "Surface update").
+    /// No fitted frame saw the vertex lit: in every frame it was out of view, occluded or in the
+    /// flash's shadow ([`GateCounts::seen_lit`] is 0) — what no view sees: the underside, the
+    /// contact with the board. Its parameters are the prior's and its position follows its
+    /// observed neighbours (docs/fit-shape.md "Surface update"). A vertex the views see but
+    /// whose every sample a gate removed (mixed materials, grazing, dark, saturated) is only
+    /// [`FitFlag::TooFewViews`].
     Unobserved,
 }
 

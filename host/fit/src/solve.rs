@@ -38,7 +38,9 @@
 //! # Flags (exact triggers)
 //! - `TooFewViews`: fewer usable samples than `min_views`; parameters are the prior
 //!   (`init`, else [`SolverConfig::prior`] with ρ_d from the data), std errors ∞.
-//! - `Unobserved` (with `TooFewViews`): no sample at all — no fitted view sees the vertex.
+//! - `Unobserved` (with `TooFewViews`): no sample, and no frame saw the vertex lit (every frame
+//!   had it out of view, occluded or in the flash's shadow): no fitted view sees it. Seen but
+//!   every sample gated is `TooFewViews` alone.
 //! - `UnderDetermined`: fewer samples than unknowns (12 colour, 8 monochrome).
 //! - `Dark`: more samples gated dark than kept, or the kept samples' mean diffuse signal
 //!   (I^d·N) below `dark_signal_dn`.
@@ -374,7 +376,7 @@ pub fn fit_vertex(
     let start_normal = unit(start_normal).unwrap_or([0.0, 0.0, 1.0]);
     if n < config.min_views.max(1) {
         flags.push(FitFlag::TooFewViews);
-        if vertex.samples.is_empty() {
+        if vertex.samples.is_empty() && g.seen_lit() == 0 {
             flags.push(FitFlag::Unobserved);
         }
         return prior_fit(&problem, vertex, start_normal, init, flags, config);

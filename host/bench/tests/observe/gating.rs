@@ -262,9 +262,16 @@ fn vertices_no_view_sees_are_labelled_unobserved() {
         let p = mesh.positions()[v];
         let n = mesh.normals()[v].into_inner();
         let unobserved = fit.flags.contains(&FitFlag::Unobserved);
-        // the label, the samples and the flag say the same
-        assert_eq!(unobserved, set.vertices[v].samples.is_empty(), "vertex {v}");
-        assert_eq!(observed[v], !unobserved, "vertex {v}");
+        // the flag, the samples and the gates say the same: unobserved is no sample and no
+        // frame that saw the vertex lit; a vertex with a kept sample is observed
+        let gates = &set.vertices[v].gates;
+        assert_eq!(
+            unobserved,
+            set.vertices[v].samples.is_empty() && gates.seen_lit() == 0,
+            "vertex {v}: {gates:?}"
+        );
+        assert_eq!(observed[v], !set.vertices[v].samples.is_empty(), "vertex {v}");
+        assert!(!(observed[v] && unobserved), "vertex {v}");
         if unobserved {
             assert!(fit.flags.contains(&FitFlag::TooFewViews));
         }

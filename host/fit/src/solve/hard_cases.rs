@@ -298,6 +298,69 @@ fn very_rough_lobes_at_one() {
 }
 
 #[test]
+fn unobserved_means_no_view_saw_it_lit_not_every_sample_gated() {
+    let views = views();
+    let config = SolverConfig::default();
+    let with_gates = |gates: GateCounts| VertexSamples {
+        vertex: 0,
+        position_world: [0.0; 3],
+        normal_world: UP,
+        samples: Vec::new(),
+        gates,
+    };
+    let fit = |gates| {
+        fit_vertex(
+            &views,
+            &with_gates(gates),
+            true,
+            None,
+            &VertexGuide::default(),
+            &config,
+        )
+    };
+    // out of view, occluded, in the flash's shadow: no view saw it
+    let unseen = fit(GateCounts {
+        not_in_view: 40,
+        occluded: 30,
+        shadowed: 20,
+        ..GateCounts::default()
+    });
+    assert!(
+        unseen.flags.contains(&FitFlag::Unobserved) && unseen.flags.contains(&FitFlag::TooFewViews)
+    );
+    // seen, every sample gated for what its pixels showed
+    for gates in [
+        GateCounts {
+            mixed: 12,
+            occluded: 5,
+            ..GateCounts::default()
+        },
+        GateCounts {
+            grazing: 7,
+            ..GateCounts::default()
+        },
+        GateCounts {
+            dark: 3,
+            saturated: 2,
+            ..GateCounts::default()
+        },
+        GateCounts {
+            colour_outlier: 1,
+            non_finite: 1,
+            ..GateCounts::default()
+        },
+    ] {
+        let f = fit(gates.clone());
+        assert!(f.flags.contains(&FitFlag::TooFewViews), "{gates:?}");
+        assert!(
+            !f.flags.contains(&FitFlag::Unobserved),
+            "{gates:?}: {:?}",
+            f.flags
+        );
+    }
+}
+
+#[test]
 fn adversarial_inputs_never_produce_nan() {
     let views = views();
     let config = SolverConfig::default();
@@ -311,6 +374,7 @@ fn adversarial_inputs_never_produce_nan() {
     let fit = fit_vertex(&views, &empty, true, None, &VertexGuide::default(), &config);
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::TooFewViews));
+    assert!(fit.flags.contains(&FitFlag::Unobserved), "{fit:?}");
     // All-zero channels on every view.
     let zeros = VertexSamples {
         samples: (0..100)
