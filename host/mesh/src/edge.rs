@@ -37,7 +37,7 @@
 //! vote), so it follows the tail of the silhouettes' edge errors, not their mean. With whole
 //! pixels and one fixed inset, each edge is off by up to half a pixel either way, and the
 //! low views' top limbs against the dark void were carved tight: the demo's hull lay 0.12 mm
-//! inside the object where its normal is 0.6–0.9 up (docs/mesh.md "Edge inset").
+//! inside the object where its normal is 0.6–0.9 up (docs/mesh.md "Edge: where inside its boundary pixels").
 
 use super::appearance::{Agreement, TexelSample};
 
@@ -78,10 +78,7 @@ pub struct EdgePixel {
 
 /// The object's cover of a pixel of value `v` over board `t` next to object `o`, or `None`
 /// where the object does not stand out from the board (module contract).
-fn cover(rule: &Agreement, v: &TexelSample,
-    t: &TexelSample,
-    o: &TexelSample,
-) -> Option<f32> {
+fn cover(rule: &Agreement, v: &TexelSample, t: &TexelSample, o: &TexelSample) -> Option<f32> {
     let (mut num, mut den, mut bright) = (0f32, 0f32, 0f32);
     for k in 0..rule.bands() {
         let d = o.value[k] - t.value[k];
@@ -230,6 +227,9 @@ mod tests {
         // a dark object in front of dark ink: it differs (p, say) but not by enough to measure
         let (t, o) = (sample(0.05), sample(0.045));
         assert_eq!(cover(&rule, &sample(0.047), &t, &o), None);
-        assert_eq!(cover(&rule, &sample(0.4), &sample(0.8), &sample(0.0)), Some(0.5));
+        assert_eq!(
+            cover(&rule, &sample(0.4), &sample(0.8), &sample(0.0)),
+            Some(0.5)
+        );
     }
 }

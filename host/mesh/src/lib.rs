@@ -95,11 +95,13 @@ pub struct MeshConfig {
     /// a part of 1 cm³ is already thousands of nodes. A smaller object cannot be meshed.
     pub min_part_m3: f64,
     /// How far (superpixels) the silhouette's edge is moved from the pixel boundary into the
-    /// pixels that do not show the board. A boundary pixel partly covered by the object already
+    /// pixels that do not show the board where it cannot be measured from the pixels' cover
+    /// ([`edge`]: the object does not stand out from the board, or the texel is unknown).
+    /// A boundary pixel partly covered by the object already
     /// disagrees with its texel, so the not-board set is on average larger than the object's
     /// true silhouette by the part of a pixel the object does not cover; and the hull is the
     /// intersection of silhouettes, so it inherits that growth from every side (docs/mesh.md
-    /// "Edge inset"). 0 puts the edge on the pixel boundary.
+    /// "Edge: where inside its boundary pixels"). 0 puts the edge on the pixel boundary.
     pub edge_inset_px: f64,
     /// Frames read at once.
     pub frames_in_flight: usize,

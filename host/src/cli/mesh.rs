@@ -29,8 +29,9 @@ pub struct Args {
     /// Worker threads, 1..=256 (default: all cores).
     #[arg(long, value_parser = super::limits::threads)]
     pub threads: Option<usize>,
-    /// Move each view's silhouette edge this far (superpixels) into the object's side of the
-    /// pixel boundary (default: the built-in setting, see docs/mesh.md "Edge inset").
+    /// Where a view's silhouette edge cannot be measured inside its boundary pixels, move it
+    /// this far (superpixels) into the object's side of the pixel boundary (default: the
+    /// built-in setting; docs/mesh.md "Edge: where inside its boundary pixels").
     #[arg(long, value_parser = super::limits::edge_inset_px)]
     pub edge_inset_px: Option<f64>,
     /// Write diagnostic pictures into DIR (created; not inside the session): every view's board
