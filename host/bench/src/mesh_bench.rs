@@ -372,12 +372,8 @@ fn scale_run(
         .with_context(|| format!("reading the JSON of ellipso fit --vertices {vertices}"))?;
     let summary = &json["summary"];
     let fitted = ellipso_fit::export::ply::read_fit_ply(&out.join("fit.ply"))?;
-    let unobserved_bit =
-        ellipso_fit::export::ply::flag_mask(&[ellipso_fit::data::FitFlag::Unobserved]);
-    let observed: Vec<bool> = fitted
-        .iter()
-        .map(|v| v.flags & unobserved_bit == 0)
-        .collect();
+    // observed as the other rows count it: a kept sample (`shape::surface::observed_vertices`)
+    let observed: Vec<bool> = fitted.iter().map(|v| v.samples > 0).collect();
     let positions: Vec<nalgebra::Point3<f64>> = fitted
         .iter()
         .map(|v| {
