@@ -270,7 +270,11 @@ fn vertices_no_view_sees_are_labelled_unobserved() {
             set.vertices[v].samples.is_empty() && gates.seen_lit() == 0,
             "vertex {v}: {gates:?}"
         );
-        assert_eq!(observed[v], !set.vertices[v].samples.is_empty(), "vertex {v}");
+        assert_eq!(
+            observed[v],
+            !set.vertices[v].samples.is_empty(),
+            "vertex {v}"
+        );
         assert!(!(observed[v] && unobserved), "vertex {v}");
         if unobserved {
             assert!(fit.flags.contains(&FitFlag::TooFewViews));
