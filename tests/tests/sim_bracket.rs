@@ -181,8 +181,5 @@ fn a_bracketed_capture_over_a_pty_records_every_frame_with_the_energy_that_lit_i
         SessionEvent::Configured { config, .. } => Some(config.clone()),
         _ => None,
     });
-    assert_eq!(
-        configured.unwrap()["bracket"],
-        serde_json::json!([32768, 8192, 2048])
-    );
+    assert_eq!(configured.unwrap().bracket, [32768, 8192, 2048]);
 }

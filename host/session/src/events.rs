@@ -25,6 +25,52 @@ pub enum FrameStatus {
     },
 }
 
+/// The capture timing the host sent the trigger board, as the log records it: the wire's
+/// `CaptureConfig` in the session's own type, field for field in the same JSON form (the
+/// session does not link the wire protocol: the fit reads sessions without it). Logs written
+/// before the flash-energy bracket existed have no `bracket` and read as none.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct BoardConfig {
+    /// Flash-energy bracket, Q15 steps (`0x8000` = the full pulse), fired in turn; empty: every
+    /// pulse at energy 1.
+    #[serde(default)]
+    pub bracket: Vec<u16>,
+    /// Exposure (trigger high) length, µs.
+    pub exposure_us: u32,
+    /// Flash-on delay after the trigger's rising edge, µs.
+    pub flash_delay_us: u32,
+    /// Flash-on length, µs (0: no flash).
+    pub flash_duration_us: u32,
+    /// Minimum time between two trigger rising edges, µs.
+    pub frame_period_us: u32,
+    /// How many pulses the capture fires.
+    pub pulses: BoardPulses,
+    /// One edge message per output transition (debug).
+    pub report_edges: bool,
+    /// What fires each pulse.
+    pub trigger: BoardTrigger,
+}
+
+/// How many pulses a capture fires (the wire's `PulseCount`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum BoardPulses {
+    /// Until the host stops it.
+    Continuous,
+    /// Exactly this many.
+    Count(u32),
+}
+
+/// What fires each pulse (the wire's `TriggerSource`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum BoardTrigger {
+    /// One pulse per host command.
+    HostCommand,
+    /// One pulse per press of the grip button.
+    GripButton,
+    /// Pulses every frame period from the start.
+    FreeRun,
+}
+
 /// One line of the log.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
@@ -40,12 +86,12 @@ pub enum SessionEvent {
         /// Protocol version.
         protocol_version: u16,
     },
-    /// The capture configuration sent to the board (as JSON of `CaptureConfig`).
+    /// The capture configuration sent to the board.
     Configured {
         /// Host time.
         t_host_us: HostTimeUs,
         /// The configuration.
-        config: serde_json::Value,
+        config: BoardConfig,
     },
     /// A device→host clock fit.
     ClockFit {

@@ -107,10 +107,9 @@ pub fn frame_timings(session: &Session) -> Vec<FrameTiming> {
 /// + 1, at least 1.
 pub fn bracket_cycle(session: &Session) -> u64 {
     let configured = session.events.iter().rev().find_map(|e| match e {
-        SessionEvent::Configured { config, .. } => config
-            .get("bracket")
-            .and_then(|b| b.as_array())
-            .map(|b| b.len() as u64),
+        SessionEvent::Configured { config, .. } => {
+            (!config.bracket.is_empty()).then_some(config.bracket.len() as u64)
+        }
         _ => None,
     });
     let seen = session
@@ -347,7 +346,16 @@ mod tests {
         let mut w = SessionWriter::create(&dir, manifest).unwrap();
         w.log(&SessionEvent::Configured {
             t_host_us: HostTimeUs(0),
-            config: serde_json::json!({ "bracket": [32768, 8192, 2048] }),
+            config: ellipso_session::events::BoardConfig {
+                bracket: vec![32768, 8192, 2048],
+                exposure_us: 6000,
+                flash_delay_us: 100,
+                flash_duration_us: 5000,
+                frame_period_us: 500_000,
+                pulses: ellipso_session::events::BoardPulses::Count(4),
+                report_edges: false,
+                trigger: ellipso_session::events::BoardTrigger::FreeRun,
+            },
         })
         .unwrap();
         for id in 0..4u64 {

@@ -40,6 +40,8 @@ use crate::link::clock::ClockFit;
 use crate::link::{LinkCounters, LinkError, LinkEvent, TriggerLink, describe_reject};
 use ellipso_session::SessionError;
 use ellipso_session::events::SessionEvent;
+
+use super::board_record::board_config_record;
 use ellipso_session::time::{DeviceTimeUs, HostTimeUs};
 use ellipso_session::writer::{FrameRecord, PreparedFrame, SessionWriter};
 
@@ -225,7 +227,7 @@ fn record(
     })?;
     session.log(&SessionEvent::Configured {
         t_host_us: clock_now(),
-        config: serde_json::to_value(plan.board).unwrap_or_default(),
+        config: board_config_record(&plan.board),
     })?;
 
     // camera thread → bounded queue → writer pool → main loop
