@@ -396,8 +396,4 @@ impl Board {
 }
 
 #[cfg(test)]
-mod proptests;
-#[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_bracket;

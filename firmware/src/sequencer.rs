@@ -614,10 +614,6 @@ fn schedule(cap: &mut Capture, t: u64) {
         .max(t.saturating_add(u64::from(cap.plan.frame_period_us())));
 }
 
-#[cfg(test)]
-mod proptests;
 mod pulse;
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_bracket;

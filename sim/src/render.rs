@@ -39,8 +39,6 @@ pub mod truth;
 
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_invariants;
 
 pub use footprint::{Footprint, IdealPixel, PointFrame};
 pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};

@@ -66,8 +66,6 @@ pub mod wire;
 
 #[cfg(test)]
 mod tests;
-#[cfg(test)]
-mod tests_bracket;
 
 pub use board::{BoardTruth, VirtualBoard, VirtualBoardConfig};
 pub use camera::{

@@ -637,3 +637,7 @@ fn contradictory_board_configs_are_refused_at_construction() {
     c.limits.max_flash_on_us = 0;
     assert_eq!(Board::new(c).err(), Some(ConfigError::ZeroFlashOnTime));
 }
+
+mod bracket;
+
+mod proptests;

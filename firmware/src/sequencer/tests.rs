@@ -610,3 +610,7 @@ fn flash_on_arms_the_hardware_cutoff_with_the_boards_cap() {
     let _ = run_on_time(&mut seq, &mut out, 100);
     assert_eq!(out.armed_max_on_us, [LED_RIG_LIMITS.max_flash_on_us; 2]);
 }
+
+mod bracket;
+
+mod proptests;

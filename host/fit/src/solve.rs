@@ -72,8 +72,6 @@ mod uncertainty;
 mod hard_cases;
 #[cfg(test)]
 pub(crate) mod tests;
-#[cfg(test)]
-mod tests_energy;
 
 use std::cmp::Ordering;
 

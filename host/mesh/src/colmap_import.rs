@@ -376,5 +376,4 @@ pub fn transform_mesh(
 }
 
 #[cfg(test)]
-#[path = "colmap_import_tests.rs"]
 pub(crate) mod tests;

@@ -43,10 +43,6 @@ pub(crate) fn exceeds(value: f64, limit: f64) -> bool {
     value > limit
 }
 
-#[cfg(all(test, feature = "opencv"))]
-mod opencv_tests;
-#[cfg(test)]
-mod pipeline_tests;
 #[cfg(test)]
 pub(crate) mod synthetic;
 #[cfg(test)]

@@ -430,3 +430,5 @@ fn colour_mosaic_pixels_see_their_filter_channel() {
     let (red, blue) = (sum[0] / n[0] as f64, sum[2] / n[2] as f64);
     assert!(red > 3.0 * blue, "red {red}, blue {blue}");
 }
+
+mod invariants;

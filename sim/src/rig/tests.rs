@@ -608,3 +608,5 @@ fn a_paced_camera_never_delivers_a_frame_before_its_arrival() {
     }
     assert_eq!(camera.join().delivered, 5);
 }
+
+mod bracket;

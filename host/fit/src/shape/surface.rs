@@ -32,7 +32,6 @@ use ellipso_model::geometry::TriangleMesh;
 use nalgebra::{Point3, Vector3};
 
 #[cfg(test)]
-#[path = "surface_tests.rs"]
 mod tests;
 
 use super::hull::HullField;

@@ -474,3 +474,5 @@ fn measurement_loss_recovers_eta_without_rice_bias_on_a_dark_material() {
     assert!(measurement.abs() < 0.06, "{measurement}");
     assert!(paper > 0.2, "{paper}");
 }
+
+mod energy;

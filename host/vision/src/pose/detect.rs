@@ -255,5 +255,4 @@ impl TagDetector {
 }
 
 #[cfg(test)]
-#[path = "detect_tests.rs"]
 pub(crate) mod tests;

@@ -378,3 +378,8 @@ fn one_bad_tag_costs_a_tag_not_the_frame() {
     let pose = estimate_board_pose(&cam, &obs, &PoseConfig::default()).unwrap();
     assert!(pose.dropped_tags.is_empty());
 }
+
+mod pipeline;
+
+#[cfg(feature = "opencv")]
+mod opencv;

@@ -524,5 +524,4 @@ pub fn align_poses(pairs: &[PosePair], config: &AlignConfig) -> Result<PoseAlign
 }
 
 #[cfg(test)]
-#[path = "similarity_tests.rs"]
 mod tests;

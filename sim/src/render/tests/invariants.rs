@@ -3,9 +3,9 @@
 //! same value behind every analyser, and the co-/cross-polarised highlight of a glossy sphere
 //! (docs/model.md §6 "Observation channels", rig check).
 
-use super::shade::{PixelSensor, PoseContext};
-use super::tests::{scene_edited, scene_path, small, without_effects};
-use super::*;
+use super::super::shade::{PixelSensor, PoseContext};
+use super::super::tests::{scene_edited, scene_path, small, without_effects};
+use super::super::*;
 use crate::effects::LightTransport;
 use crate::scene::{Scene, SurfaceKind};
 use ellipso_model::optics::measure::Analyser;

@@ -1,8 +1,8 @@
 //! The bracket through the board's command path: its plan check's rejections, and host-command
 //! and grip-button captures stepping through it.
 
-use super::tests::{Rig, ack, config, pulses, rejected};
-use super::*;
+use super::super::tests::{Rig, ack, config, pulses, rejected};
+use super::super::*;
 use ellipso_protocol::{Bracket, ENERGY_ONE_Q15, PulseCount};
 
 fn bracketed(trigger: TriggerSource, n: u32, steps: &[u16]) -> ellipso_protocol::CaptureConfig {

@@ -13,7 +13,7 @@
 //!   pulse event reports that on-time;
 //! - pulse sequence numbers are consecutive from 0 across all captures.
 
-use super::*;
+use super::super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
 use ellipso_protocol::{

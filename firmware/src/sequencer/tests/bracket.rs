@@ -1,8 +1,8 @@
 //! The bracket in the sequencer: step order, per-step on-times, their reports, and the safety
 //! rules applied per step.
 
-use super::tests::{LEAD, faults, plan, pulses, run_on_time, started};
-use super::*;
+use super::super::tests::{LEAD, faults, plan, pulses, run_on_time, started};
+use super::super::*;
 use crate::outputs::RecordingOutputs;
 use ellipso_protocol::{Bracket, ENERGY_ONE_Q15, PulseCount};
 

@@ -3,9 +3,9 @@
 //! must match the one it was rendered with. This checks the corner order, the board frame, the
 //! 0.5 px convention and the distortion handling together.
 
-use super::detect::tests::tag36h11_cells;
-use super::synthetic::{look_at, pose_error};
-use super::*;
+use super::super::detect::tests::tag36h11_cells;
+use super::super::synthetic::{look_at, pose_error};
+use super::super::*;
 use ellipso_model::camera::{CameraModel, Distortion, Intrinsics, Pose};
 use nalgebra::Vector3;
 

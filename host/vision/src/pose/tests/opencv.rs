@@ -16,8 +16,8 @@ use opencv::prelude::*;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use super::estimate::{Correspondence, PoseConfig, estimate_board_pose};
-use super::synthetic::{board, camera_5mp, observe, pose_error, random_pose};
+use super::super::estimate::{Correspondence, PoseConfig, estimate_board_pose};
+use super::super::synthetic::{board, camera_5mp, observe, pose_error, random_pose};
 
 /// `[fx 0 cx; 0 fy cy; 0 0 1]` and `[k1, k2, p1, p2, k3]` (OpenCV order).
 fn opencv_camera(camera: &CameraModel) -> (Mat, Mat) {

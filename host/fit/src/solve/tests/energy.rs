@@ -2,8 +2,8 @@
 //! pulse stores the normaliser E·N (observation extraction), and the measurement-mode weights
 //! must then give its sample the noise of the E-times-smaller DN it was divided from.
 
-use super::tests::{material, synth};
-use super::*;
+use super::super::tests::{material, synth};
+use super::super::*;
 use crate::model::observed_pixels;
 
 /// Relative pulse energy of the short frame.
@@ -12,7 +12,7 @@ const ENERGY: f64 = 0.25;
 /// A noiseless vertex and the same normalised samples as a quarter-pulse frame would give them
 /// (same model-unit channels, normaliser × 1/4).
 fn full_and_quarter() -> (Vec<ViewGeometry>, VertexSamples, VertexSamples) {
-    let views = super::tests::views();
+    let views = super::super::tests::views();
     let full = synth(&views, [0.0, 0.0, 1.0], &material("ceramic"), None, 1.0, 5);
     let mut quarter = full.clone();
     for s in &mut quarter.samples {

@@ -16,7 +16,7 @@
 //!   trigger fell; every exposure is at least `exposure_us` long;
 //! - `TooSoon { wait_us }` is exact: the same request `wait_us` later succeeds.
 
-use super::*;
+use super::super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
 use ellipso_protocol::{Bracket, CaptureConfig, ENERGY_ONE_Q15, PulseCount, PulseEvent};

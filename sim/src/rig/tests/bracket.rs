@@ -7,8 +7,8 @@ use std::time::Duration;
 
 use ellipso_protocol::{Bracket, HostMessage, PULSE_FLASH_SKIPPED};
 
-use super::tests::{capture, fast_board, start_board};
-use super::*;
+use super::super::tests::{capture, fast_board, start_board};
+use super::super::*;
 
 /// 1, 1/4, 1/16 of a 400 µs pulse: 400, 100 and 25 µs.
 fn bracket() -> Bracket {
