@@ -53,14 +53,6 @@ pub const DARK_BOARD_OFFSET_PX: f32 = 0.0;
 pub struct EdgeOffsets(pub Vec<(u32, f32)>);
 
 impl EdgeOffsets {
-    /// The offset of pixel `k`, if it was measured.
-    pub fn get(&self, k: usize) -> Option<f32> {
-        self.0
-            .binary_search_by_key(&(k as u32), |&(i, _)| i)
-            .ok()
-            .map(|i| self.0[i].1)
-    }
-
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         self.0.len() * 8
@@ -101,7 +93,7 @@ pub fn edge_offsets(
     disagrees: impl Fn(isize, isize) -> bool,
     pixel: impl Fn(usize) -> Option<EdgePixel>,
 ) -> EdgeOffsets {
-    let mut sums: Vec<(u32, f32, u32)> = Vec::new();
+    let mut pairs: Vec<(u32, f32)> = Vec::new();
     let index = |x: isize, y: isize| y as usize * width + x as usize;
     for y in 0..height as isize {
         for x in 0..width as isize {
@@ -110,10 +102,8 @@ pub fn edge_offsets(
             }
             for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
                 let (ox, oy, o2x, o2y) = (x + dx, y + dy, x + 2 * dx, y + 2 * dy);
-                if is_board(ox, oy) || !disagrees(ox, oy) || is_board(o2x, o2y) {
-                    continue;
-                }
-                if !disagrees(o2x, o2y) {
+                // a pixel that disagrees is never board (the masks are exclusive)
+                if !disagrees(ox, oy) || !disagrees(o2x, o2y) {
                     continue;
                 }
                 let (Some(b), Some(o), Some(o2)) = (
@@ -140,36 +130,34 @@ pub fn edge_offsets(
                 } else {
                     DARK_BOARD_OFFSET_PX
                 };
-                sums.push((index(x, y) as u32, delta, 1));
-                sums.push((index(ox, oy) as u32, delta, 1));
+                pairs.push((index(x, y) as u32, delta));
+                pairs.push((index(ox, oy) as u32, delta));
             }
         }
     }
-    sums.sort_unstable_by_key(|&(k, _, _)| k);
-    let mut out: Vec<(u32, f32)> = Vec::new();
-    let mut counts: Vec<u32> = Vec::new();
-    for (k, d, n) in sums {
-        match out.last_mut() {
-            Some(last) if last.0 == k => {
-                last.1 += d;
-                *counts.last_mut().expect("one count per entry") += n;
-            }
-            _ => {
-                out.push((k, d));
-                counts.push(n);
-            }
-        }
-    }
-    for (entry, n) in out.iter_mut().zip(&counts) {
-        entry.1 /= *n as f32;
-    }
-    EdgeOffsets(out)
+    // each boundary pixel: the mean δ of its pairs
+    pairs.sort_unstable_by_key(|&(k, _)| k);
+    EdgeOffsets(
+        pairs
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|g| (g[0].0, g.iter().map(|p| p.1).sum::<f32>() / g.len() as f32))
+            .collect(),
+    )
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::appearance::AppearanceConfig;
+
+    /// The offset of pixel `k`, if it was measured.
+    fn get(offsets: &EdgeOffsets, k: usize) -> Option<f32> {
+        offsets
+            .0
+            .iter()
+            .find(|&&(i, _)| i as usize == k)
+            .map(|p| p.1)
+    }
 
     fn sample(v: f32) -> TexelSample {
         TexelSample {
@@ -210,13 +198,16 @@ mod tests {
                 );
                 // the last board pixel and the first one that is not
                 let b = (0..w as isize).take_while(|&x| agrees(x)).last().unwrap();
-                let found = b as f32 + 0.5 + offsets.get(w + b as usize).unwrap();
+                let found = b as f32 + 0.5 + get(&offsets, w + b as usize).unwrap();
                 let expected = if t > o { edge } else { b as f32 + 0.5 };
                 assert!(
                     (found - expected).abs() < 1e-4,
                     "t {t} o {o} edge {edge}: found {found}, expected {expected}"
                 );
-                assert_eq!(offsets.get(w + b as usize), offsets.get(w + b as usize + 1));
+                assert_eq!(
+                    get(&offsets, w + b as usize),
+                    get(&offsets, w + b as usize + 1)
+                );
             }
         }
     }

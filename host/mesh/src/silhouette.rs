@@ -19,8 +19,9 @@
 //! - [`SignedDistance`]: Euclidean distance transform (Felzenszwalb & Huttenlocher, "Distance
 //!   Transforms of Sampled Functions", Theory of Computing 8, 2012), exact, in pixels:
 //!   `d − ½` to the nearest not-board pixel for board pixels (> 0), `−(d − ½)` to the nearest
-//!   board pixel for the others, so the zero crossing lies on the pixel boundary; plus the
-//!   configured edge inset, which moves it into the not-board pixels
+//!   board pixel for the others, so the zero crossing lies on the pixel boundary; plus, at the
+//!   boundary pixels whose cover was measured, the edge's offset inside them ([`crate::edge`]),
+//!   elsewhere the configured edge inset, either moving the crossing into the not-board pixels
 //!   (`MeshConfig::edge_inset_px`). Pixels
 //!   outside the image or the crop count as not board; values within `margin` px of a crop
 //!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
@@ -313,8 +314,8 @@ fn edt_2d(feature: &[bool], w: usize, h: usize) -> Vec<f32> {
 }
 
 impl SignedDistance {
-    /// The signed distance over `crop` of `s`, its zero crossing moved `edge_inset_px` into
-    /// the not-board side (see [`crate::MeshConfig::edge_inset_px`]).
+    /// The signed distance over `crop` of `s`, its zero crossing moved into the not-board side
+    /// by the measured edge offsets, elsewhere by `edge_inset_px` (module contract).
     pub fn new(s: &Silhouette, crop: Crop, edge_inset_px: f32) -> Self {
         let (w, h) = (crop.width, crop.height);
         let board: Vec<bool> = (0..w * h)
@@ -323,17 +324,20 @@ impl SignedDistance {
         let not_board: Vec<bool> = board.iter().map(|b| !b).collect();
         let to_not_board = edt_2d(&not_board, w, h);
         let to_board = edt_2d(&board, w, h);
-        let offset = |k: usize| {
-            let (x, y) = (crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize);
-            let inside = x >= 0 && y >= 0 && (x as usize) < s.width && (y as usize) < s.height;
-            inside
-                .then(|| s.edge.get(y as usize * s.width + x as usize))
-                .flatten()
-                .unwrap_or(edge_inset_px)
-        };
+        // the fixed inset, or the measured offset at the boundary pixels inside the crop
+        let mut offset = vec![edge_inset_px; w * h];
+        for &(k, d) in &s.edge.0 {
+            let (x, y) = (
+                (k as usize % s.width) as isize - crop.x0,
+                (k as usize / s.width) as isize - crop.y0,
+            );
+            if x >= 0 && y >= 0 && (x as usize) < w && (y as usize) < h {
+                offset[y as usize * w + x as usize] = d;
+            }
+        }
         let values = (0..w * h)
             .map(|k| {
-                offset(k)
+                offset[k]
                     + if board[k] {
                         to_not_board[k].sqrt() - 0.5
                     } else {
