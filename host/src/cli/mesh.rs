@@ -56,14 +56,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     config.remesh.target_vertices = args.vertices;
     if let Some(dir) = &args.debug {
-        // checked before anything is created; the session's own path is resolved (links)
-        let absolute = |p: &std::path::Path| {
-            p.canonicalize()
-                .or_else(|_| std::path::absolute(p))
-                .unwrap_or_else(|_| p.to_path_buf())
-        };
+        // checked before anything is created, both paths resolved as every output's are
+        // (links followed, a missing tail lexical)
+        let resolve = ellipso_report::output::place::resolve;
         anyhow::ensure!(
-            !absolute(dir).starts_with(absolute(&args.session)),
+            !resolve(dir)?.starts_with(resolve(&args.session)?),
             "--debug {}: inside the session {} (a session is never written to)",
             dir.display(),
             args.session.display()
