@@ -114,6 +114,29 @@ impl Aabb {
         }
         Some(t0)
     }
+
+    /// [`Aabb::slab`] for a ray whose `inv_dir` is finite on every axis (no component of the
+    /// direction is zero): the same interval without a branch per axis (each axis only raises
+    /// `t0` and lowers `t1`, so testing `t0 > t1` once at the end decides as the per-axis test
+    /// does).
+    #[inline]
+    pub fn slab_finite(
+        &self,
+        origin: &Point3<f64>,
+        inv_dir: &Vector3<f64>,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<f64> {
+        let mut t0 = t_min;
+        let mut t1 = t_max;
+        for axis in 0..3 {
+            let a = (self.min[axis] - origin[axis]) * inv_dir[axis];
+            let b = (self.max[axis] - origin[axis]) * inv_dir[axis];
+            t0 = t0.max(a.min(b));
+            t1 = t1.min(a.max(b));
+        }
+        (t0 <= t1).then_some(t0)
+    }
 }
 
 #[cfg(test)]

@@ -148,13 +148,19 @@ impl Bvh {
             return None;
         }
         let inv_dir: Vector3<f64> = ray.dir.map(|d| 1.0 / d);
+        let finite = inv_dir.iter().all(|v| v.is_finite());
+        let slab = |b: &Aabb, t_max: f64| {
+            if finite {
+                b.slab_finite(&ray.origin, &inv_dir, t_min, t_max)
+            } else {
+                b.slab(&ray.origin, &inv_dir, t_min, t_max)
+            }
+        };
         let mut best: Option<(u32, f64)> = None;
         let mut t_best = t_max;
         let mut stack = [0u32; MAX_DEPTH + 2];
         let mut top = 0usize;
-        self.nodes[0]
-            .bounds
-            .slab(&ray.origin, &inv_dir, t_min, t_best)?;
+        slab(&self.nodes[0].bounds, t_best)?;
         let mut current = 0usize;
         loop {
             let node = &self.nodes[current];
@@ -173,12 +179,8 @@ impl Bvh {
                 }
             } else {
                 let left = node.first as usize;
-                let tl = self.nodes[left]
-                    .bounds
-                    .slab(&ray.origin, &inv_dir, t_min, t_best);
-                let tr = self.nodes[left + 1]
-                    .bounds
-                    .slab(&ray.origin, &inv_dir, t_min, t_best);
+                let tl = slab(&self.nodes[left].bounds, t_best);
+                let tr = slab(&self.nodes[left + 1].bounds, t_best);
                 match (tl, tr) {
                     (Some(a), Some(b)) => {
                         let (near, far) = if a <= b {
@@ -209,11 +211,7 @@ impl Bvh {
                 }
                 top -= 1;
                 let cand = stack[top] as usize;
-                if self.nodes[cand]
-                    .bounds
-                    .slab(&ray.origin, &inv_dir, t_min, t_best)
-                    .is_some()
-                {
+                if slab(&self.nodes[cand].bounds, t_best).is_some() {
                     current = cand;
                     break;
                 }
