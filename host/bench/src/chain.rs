@@ -268,7 +268,7 @@ impl Bench {
         let fit_error = |e| BenchError::stage("fit", e);
         match spec.pixels {
             Pixels::Mosaic => {
-                let frames = MosaicFrames::new(session, &config.observe)
+                let frames = MosaicFrames::caching(session, &config.observe)
                     .map_err(|e| BenchError::stage("fit", e))?;
                 fit_session_with(session, mesh, poses, config, &frames, &mut |_| {})
                     .map_err(fit_error)

@@ -14,7 +14,7 @@
 use std::collections::BTreeMap;
 
 use ellipso_fit::observe::FrameImages;
-use ellipso_fit::observe::sampler::AnalyserPixels;
+use ellipso_fit::observe::image::{AnalyserPixels, PixelRect};
 use ellipso_session::reader::{FrameEntry, Session};
 use ellipso_sim::render::{Footprint, PointFrame, Renderer};
 
@@ -63,7 +63,11 @@ impl AnalyserPixels for IdealImage<'_, '_> {
 }
 
 impl FrameImages for IdealFrames<'_, '_> {
-    fn load(&self, entry: &FrameEntry) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String> {
+    fn load(
+        &self,
+        entry: &FrameEntry,
+        _region: Option<&PixelRect>,
+    ) -> Result<(Box<dyn AnalyserPixels + '_>, usize), String> {
         let k = *self
             .pose_index
             .get(&entry.frame_id)

@@ -37,9 +37,10 @@
 //! - **Output.** [`SampleSet::views`] holds the views of the frames actually read, in frame-id
 //!   order; [`SampleSet::vertices`] one entry per mesh vertex in mesh order with samples ordered
 //!   by view. [`ObserveReport::peak_bytes`] accounts the largest memory held at once (samples +
-//!   frames in flight + per-frame results + mesh rings).
+//!   frames in flight + a frame cache + per-frame results + mesh rings).
 
 pub mod frames;
+pub mod image;
 pub mod radiometry;
 pub mod sampler;
 
@@ -59,10 +60,11 @@ use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
 
 pub use frames::{FrameImages, MosaicFrames};
+use image::PixelRect;
+pub use image::SampleKernel;
 pub use radiometry::{
     PointNormaliser, SessionRadiometry, flash_of, radiometry_of, sensor_noise_of,
 };
-pub use sampler::SampleKernel;
 use sampler::{FrameSampler, Outcome, SessionContext, VertexRings};
 
 /// Where in its superpixel tile each analyser sample is taken to sit.
@@ -98,6 +100,16 @@ pub struct ObserveConfig {
     /// another label's triangles are gated as mixed.
     #[serde(skip)]
     pub vertex_labels: Option<Vec<u32>>,
+    /// Byte budget of the frame cache a fit's outer loop keeps between its extractions
+    /// ([`MosaicFrames::caching`]: each frame's sampled part; 0 decodes every frame at every
+    /// extraction).
+    #[serde(default = "default_frame_cache_bytes")]
+    pub frame_cache_bytes: u64,
+}
+
+/// 2 GiB: the object's part of a few hundred full-resolution frames.
+fn default_frame_cache_bytes() -> u64 {
+    2 << 30
 }
 
 impl Default for ObserveConfig {
@@ -110,6 +122,7 @@ impl Default for ObserveConfig {
             dark_level_dn: 0.0,
             sample_kernel: SampleKernel::default(),
             vertex_labels: None,
+            frame_cache_bytes: default_frame_cache_bytes(),
         }
     }
 }
@@ -493,7 +506,14 @@ pub fn extract_from(
             .filter(|l| l.len() == mesh.positions().len()),
     };
     let run_frame = |job: &Job<'_>| -> FrameResult {
-        let (image, bytes) = frames.load(job.entry)?;
+        // Every pixel the sampler can read: the projections inside the image
+        // (`FrameSampler::observe` samples there and nowhere else).
+        let camera_from_world = job.pose.inverse();
+        let region = PixelRect::around(owned.iter().filter_map(|&v| {
+            let pixel = camera.project(&(camera_from_world * mesh.positions()[v]))?;
+            camera.contains_pixel(pixel).then_some(pixel)
+        }));
+        let (image, bytes) = frames.load(job.entry, region.as_ref())?;
         let view = view_of(&radiometry.flash, job.frame_id, &job.pose);
         let sampler = FrameSampler::new(
             &context,
@@ -546,7 +566,11 @@ pub fn extract_from(
             Some(pool) => pool.install(work),
             None => work(),
         };
-        let held: usize = results.iter().map(|r| r.as_ref().map_or(0, |r| r.2)).sum();
+        let held: usize = results
+            .iter()
+            .map(|r| r.as_ref().map_or(0, |r| r.2))
+            .sum::<usize>()
+            + frames.held_bytes();
         report.peak_bytes = report
             .peak_bytes
             .max(base_bytes + kept * sample_size + held as u64);

@@ -185,7 +185,8 @@ pub fn fit_session(
     config: &SessionFitConfig,
     progress: &mut dyn FnMut(&str),
 ) -> Result<SessionFit, SessionFitError> {
-    let frames = MosaicFrames::new(session, &config.observe)?;
+    // The outer loop reads every frame once per iteration: keep their sampled parts.
+    let frames = MosaicFrames::caching(session, &config.observe)?;
     fit_session_with(session, mesh, poses, config, &frames, progress)
 }
 

@@ -12,8 +12,10 @@ use nalgebra::Vector3;
 use super::{SceneSpec, make_session, open, sphere_and_board};
 use ellipso_fit::observe::radiometry::{FrameRadiometry, SessionRadiometry};
 use ellipso_fit::observe::{
-    ObserveConfig, ObserveError, extract, poses_from_session, radiometry_of, views_of,
+    FrameImages, MosaicFrames, ObserveConfig, ObserveError, extract, extract_from,
+    poses_from_session, radiometry_of, views_of,
 };
+use ellipso_fit::shard::Shard;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::manifest::SessionSource;
 use ellipso_session::time::HostTimeUs;
@@ -96,6 +98,80 @@ fn output_is_identical_for_any_thread_count_and_frames_in_flight() {
     assert!(one.report.peak_bytes > one.report.sample_bytes + 256 * 200 * 2);
     let per_sample = std::mem::size_of::<ellipso_fit::data::Sample>() as u64;
     assert_eq!(one.report.sample_bytes, one.report.samples * per_sample);
+}
+
+#[test]
+fn a_frame_cache_changes_nothing_and_follows_a_mesh_that_moves_out_of_its_crops() {
+    let dir = tempfile::tempdir().unwrap();
+    let (session_dir, _, poses) = make_session(dir.path(), &SceneSpec::paint_mono());
+    // Frame 101 unreadable: never cached, reported at every read.
+    std::fs::write(session_dir.join("frames/00000101.png"), b"\x89PNG garbage").unwrap();
+    let session = open(&session_dir);
+    let config = ObserveConfig::default();
+    let radiometry = radiometry_of(&session).unwrap();
+    // The sphere alone (its crops are a part of each frame), then 30 mm to the side: its
+    // projections leave the first crops.
+    let sphere = |shift_m: [f64; 3]| {
+        let (dirs, triangles) = ellipso_model::geometry::procedural::icosphere(3);
+        let centre = Vector3::from(super::CENTRE) + Vector3::from(shift_m);
+        let positions = dirs
+            .iter()
+            .map(|d| nalgebra::Point3::from(centre + d.into_inner() * super::RADIUS_M))
+            .collect();
+        let normals = dirs.iter().map(|d| d.into_inner()).collect();
+        ellipso_model::geometry::TriangleMesh::new(positions, Some(normals), None, triangles)
+            .unwrap()
+    };
+    let (small, moved) = (sphere([0.0; 3]), sphere([0.03, -0.02, 0.0]));
+    let decoding = MosaicFrames::new(&session, &config).unwrap();
+    let caching = MosaicFrames::caching(&session, &config).unwrap();
+    let run = |mesh, frames: &dyn FrameImages| {
+        extract_from(
+            &session,
+            &radiometry,
+            mesh,
+            &poses,
+            &config,
+            Shard::ALL,
+            frames,
+            &|_, _| {},
+        )
+        .unwrap()
+    };
+    let mut held_after = Vec::new();
+    for mesh in [&small, &moved, &small] {
+        let want = run(mesh, &decoding);
+        let got = run(mesh, &caching);
+        assert!(want.report.samples > 500, "{}", want.report.samples);
+        assert_eq!(got.samples, want.samples);
+        assert_eq!(got.report.gates, want.report.gates);
+        assert_eq!(got.report.skipped, want.report.skipped);
+        assert_eq!(got.report.skipped.len(), 1);
+        // The cache is accounted and holds less than the frames do whole.
+        let held = caching.held_bytes() as u64;
+        assert!(held > 0 && got.report.peak_bytes >= held);
+        // 4 readable frames, whole: 5 planes of (256/2)·(200/2) f32
+        assert!(
+            held < 4 * 5 * (256 / 2) * (200 / 2) * 4,
+            "{held} bytes cached"
+        );
+        held_after.push(held);
+    }
+    assert_ne!(
+        held_after[0], held_after[1],
+        "the moved sphere's crops were not replaced"
+    );
+    // No budget: nothing is kept, and the result is the same.
+    let none = MosaicFrames::caching(
+        &session,
+        &ObserveConfig {
+            frame_cache_bytes: 0,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(run(&small, &none).samples, run(&small, &decoding).samples);
+    assert_eq!(none.held_bytes(), 0);
 }
 
 #[test]

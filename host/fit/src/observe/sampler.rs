@@ -3,17 +3,10 @@
 //! the normaliser.
 //!
 //! Contract:
-//! - [`DnImage`] holds the SUPERPIXEL planes of `ellipso_polar::demosaic` (no demosaic
-//!   interpolation) converted back to dark-subtracted DN, plus per superpixel and colour band the
-//!   largest raw DN of its samples (the saturation test). A raw position `x` maps to superpixel
-//!   coordinate `(x − o)/t` with `t` the tile size and `o` the raw offset of the sample inside
-//!   its tile: with [`SamplePoint::Lattice`] (default) `o` is where that colour-analyser sample
-//!   really sits (a 0° mono sample at raw `2u + 1`; colour G averages its two blocks, so its
-//!   offset is their mean), with [`SamplePoint::SuperpixelCentre`] it is the tile centre
-//!   `(t − 1)/2` for every sample (track.rs step 3). Values are bilinear in those coordinates,
-//!   clamped to the edge superpixels at the border.
-//! - A sample is saturated when any superpixel in its bilinear footprint has a raw DN at or
-//!   above the gate's saturation level, so a clipped neighbour never leaks into an interpolated
+//! - The image is read through [`AnalyserPixels`] (the recorded mosaic's
+//!   [`super::image::DnImage`], or an ideal sensor's), at the vertex's projection only. A
+//!   sample is saturated when any superpixel its value draws on is at or above the gate's
+//!   saturation level, so a clipped neighbour never leaks into an interpolated
 //!   value that looks unclipped. Every gate judges the frame's own DN, before the division by
 //!   the (flash-energy-scaled) normaliser: a highlight that clips at full energy is dropped in
 //!   that frame and kept in a shorter-pulse frame where it does not clip.
@@ -24,15 +17,12 @@
 
 use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
-use ellipso_model::mosaic::{Analyser, SensorLayout};
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::SamplePoint;
+use super::image::AnalyserPixels;
 use super::radiometry::{PointNormaliser, SessionRadiometry};
 use crate::data::{OBSERVATION_CHANNELS, Sample, ViewGeometry};
 use crate::gate::{GateConfig, SampleGate};
-use ellipso_polar::demosaic::{AnalyserImage, Levels};
-use ellipso_polar::frame::RawFrame;
 
 /// Ray parameter margin at both ends of an occlusion or shadow segment (relative to its length).
 pub const RAY_T_EPS: f64 = 1e-7;
@@ -61,252 +51,6 @@ pub enum Outcome {
     Mixed,
     /// A shared sample gate (non-finite, grazing, saturated, dark).
     Gate(SampleGate),
-}
-
-/// The demosaiced frame in dark-subtracted DN (see the module contract).
-#[derive(Clone, Debug)]
-pub struct DnImage {
-    tile_px: f64,
-    kernel: SampleKernel,
-    /// Half-side of the square of raw pixels a sampled value draws on, px.
-    footprint_radius_px: f64,
-    width: usize,
-    height: usize,
-    bands: Vec<DnBand>,
-}
-
-#[derive(Clone, Debug)]
-struct DnBand {
-    /// `[I0, I45, I90, I135]` planes, DN.
-    dn: [Vec<f32>; 4],
-    /// Raw offsets (x, y) of each analyser's sample inside the tile, px.
-    offset_px: [[f64; 2]; 4],
-    /// Largest dark-subtracted raw DN of the band's samples per superpixel.
-    max_dn: Vec<f32>,
-}
-
-impl DnImage {
-    /// From a superpixel demosaic of `raw` with `levels`.
-    pub fn new(
-        raw: &RawFrame,
-        image: &AnalyserImage,
-        levels: &Levels,
-        point: SamplePoint,
-        kernel: SampleKernel,
-    ) -> DnImage {
-        let layout = raw.layout();
-        let t = layout.tile_px() as usize;
-        let (w, h) = (raw.width() as usize / t, raw.height() as usize / t);
-        // DN per normalised unit, from the levels themselves (one definition of the scale).
-        let dn_per_unit = 1.0 / (levels.normalise(1) - levels.normalise(0));
-        let dark = levels.dark_dn();
-        let data = raw.data_dn();
-        let raw_w = raw.width() as usize;
-        let bands = image
-            .bands
-            .iter()
-            .map(|band| {
-                let blocks: &[(usize, usize)] = match (layout, band.colour) {
-                    (SensorLayout::ColourPolar, Some(c)) => c.blocks_in_tile(),
-                    _ => &[(0, 0)],
-                };
-                let offset_px = Analyser::ALL.map(|a| match point {
-                    SamplePoint::SuperpixelCentre => [(t as f64 - 1.0) / 2.0; 2],
-                    SamplePoint::Lattice => {
-                        let (ax, ay) = a.offset_in_block();
-                        let n = blocks.len() as f64;
-                        let mean = |f: &dyn Fn(&(usize, usize)) -> usize| {
-                            blocks.iter().map(|b| f(b) as f64).sum::<f64>() / n
-                        };
-                        [mean(&|b| 2 * b.0 + ax), mean(&|b| 2 * b.1 + ay)]
-                    }
-                });
-                let dn = std::array::from_fn(|k| {
-                    band.intensity[k]
-                        .data()
-                        .iter()
-                        .map(|&v| v * dn_per_unit)
-                        .collect()
-                });
-                // Row by row: for each block of the tile, the two raw rows it covers, and the
-                // largest of its 2×2 samples per tile column (the tiles lie inside the frame:
-                // w·t ≤ raw width, h·t ≤ raw height).
-                let mut max_dn = vec![0f32; w * h];
-                let mut top = vec![0u16; w];
-                for (j, row) in max_dn.chunks_exact_mut(w).enumerate() {
-                    top.fill(0);
-                    for &(bx, by) in blocks {
-                        for dy in 0..2 {
-                            let y = t * j + 2 * by + dy;
-                            let Some(raw_row) = data.get(y * raw_w..(y + 1) * raw_w) else {
-                                continue;
-                            };
-                            for (i, m) in top.iter_mut().enumerate() {
-                                let x = t * i + 2 * bx;
-                                if let Some(pair) = raw_row.get(x..x + 2) {
-                                    *m = (*m).max(pair[0]).max(pair[1]);
-                                }
-                            }
-                        }
-                    }
-                    for (m, &v) in row.iter_mut().zip(&top) {
-                        *m = f32::from(v) - dark;
-                    }
-                }
-                DnBand {
-                    dn,
-                    offset_px,
-                    max_dn,
-                }
-            })
-            .collect();
-        // A value interpolates lattice samples within one tile of the point (two for the
-        // cubic kernel); a colour band's sample averages its blocks, which sit up to `spread`
-        // raw pixels from their mean; every raw pixel covers ±½ px.
-        let spread = match layout {
-            SensorLayout::ColourPolar => ellipso_model::mosaic::Channel::ALL
-                .iter()
-                .map(|c| {
-                    let b = c.blocks_in_tile();
-                    let n = b.len() as f64;
-                    let (mx, my) = (
-                        b.iter().map(|b| 2.0 * b.0 as f64).sum::<f64>() / n,
-                        b.iter().map(|b| 2.0 * b.1 as f64).sum::<f64>() / n,
-                    );
-                    b.iter()
-                        .map(|b| {
-                            (2.0 * b.0 as f64 - mx)
-                                .abs()
-                                .max((2.0 * b.1 as f64 - my).abs())
-                        })
-                        .fold(0.0, f64::max)
-                })
-                .fold(0.0, f64::max),
-            SensorLayout::MonoPolar => 0.0,
-        };
-        DnImage {
-            tile_px: t as f64,
-            kernel,
-            footprint_radius_px: kernel.reach_tiles() * t as f64 + spread + 0.5,
-            width: w,
-            height: h,
-            bands,
-        }
-    }
-
-    /// Number of colour bands (1 mono, 3 colour).
-    pub fn band_count(&self) -> usize {
-        self.bands.len()
-    }
-
-    /// Bytes held by the planes.
-    pub fn bytes(&self) -> usize {
-        self.bands.len() * 5 * self.width * self.height * std::mem::size_of::<f32>()
-    }
-
-    /// Analyser DN `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and
-    /// analyser the largest raw DN in the kernel's footprint.
-    pub fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
-        let mut values = [[0f32; 4]; 3];
-        let mut peaks = [[0f32; 4]; 3];
-        let (w, h) = (self.width, self.height);
-        for (b, band) in self.bands.iter().enumerate().take(3) {
-            for k in 0..4 {
-                let [ox, oy] = band.offset_px[k];
-                let sx = (pixel[0] - ox) / self.tile_px;
-                let sy = (pixel[1] - oy) / self.tile_px;
-                let taps_x = self.kernel.taps(sx, w);
-                let taps_y = self.kernel.taps(sy, h);
-                let plane = &band.dn[k];
-                let mut v = 0.0;
-                let mut peak = f32::NEG_INFINITY;
-                for &(y, wy) in taps_y.iter().filter(|t| t.1 != 0.0) {
-                    for &(x, wx) in taps_x.iter().filter(|t| t.1 != 0.0) {
-                        v += wx * wy * f64::from(plane[y * w + x]);
-                        peak = peak.max(band.max_dn[y * w + x]);
-                    }
-                }
-                values[b][k] = v as f32;
-                peaks[b][k] = peak;
-            }
-        }
-        (values, peaks)
-    }
-}
-
-/// How the analyser planes are interpolated at a sample's lattice coordinate.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SampleKernel {
-    /// Bilinear (2 × 2 superpixels): smooths a shading profile's curvature and a highlight's
-    /// peak by up to a tile on each side (measured: −0.2 … −0.7 % η per material on the demo
-    /// through the true mesh, docs/error-budget.md).
-    Bilinear,
-    /// Catmull–Rom cubic convolution (Keys 1981, a = −½; 4 × 4 superpixels): exact for
-    /// quadratics, so a shading profile's curvature does not bias the value.
-    #[default]
-    CatmullRom,
-}
-
-impl SampleKernel {
-    /// How many lattice steps (tiles) on each side of the point the kernel's taps reach.
-    pub fn reach_tiles(self) -> f64 {
-        match self {
-            SampleKernel::Bilinear => 1.0,
-            SampleKernel::CatmullRom => 2.0,
-        }
-    }
-
-    /// Up to four (index, weight) taps of lattice coordinate `s` in `0..n`; indices are clamped
-    /// to the plane (the edge sample repeats), weights sum to 1.
-    fn taps(self, s: f64, n: usize) -> [(usize, f64); 4] {
-        let hi = n.saturating_sub(1);
-        let s = s.clamp(0.0, hi as f64);
-        let i = (s.floor() as usize).min(n.saturating_sub(2));
-        let f = s - i as f64;
-        let at = |d: isize| (i as isize + d).clamp(0, hi as isize) as usize;
-        match self {
-            SampleKernel::Bilinear => [(at(0), 1.0 - f), (at(1), f), (at(0), 0.0), (at(0), 0.0)],
-            SampleKernel::CatmullRom => {
-                let (f2, f3) = (f * f, f * f * f);
-                [
-                    (at(-1), 0.5 * (-f3 + 2.0 * f2 - f)),
-                    (at(0), 0.5 * (3.0 * f3 - 5.0 * f2 + 2.0)),
-                    (at(1), 0.5 * (-3.0 * f3 + 4.0 * f2 + f)),
-                    (at(2), 0.5 * (f3 - f2)),
-                ]
-            }
-        }
-    }
-}
-
-/// A frame's analyser images as the sampler reads them (the recorded mosaic's [`DnImage`], or
-/// an ideal sensor's in the error budget): per band, the four analysers' dark-subtracted DN at
-/// a raw pixel position, and the largest raw DN of the pixels that value draws on (the
-/// saturation test).
-pub trait AnalyserPixels: Sync {
-    /// Number of colour bands (1 mono, 3 colour).
-    fn band_count(&self) -> usize;
-    /// `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and analyser the
-    /// largest raw DN in the footprint.
-    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]);
-    /// Half-side of the square of raw pixels about the sampled point that a value draws on
-    /// (its footprint), px; 0 for a point sample.
-    fn footprint_radius_px(&self) -> f64;
-}
-
-impl AnalyserPixels for DnImage {
-    fn band_count(&self) -> usize {
-        DnImage::band_count(self)
-    }
-
-    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
-        DnImage::sample(self, pixel)
-    }
-
-    fn footprint_radius_px(&self) -> f64 {
-        self.footprint_radius_px
-    }
 }
 
 /// Vertex → incident triangles (compressed rows).
@@ -482,15 +226,17 @@ impl<'a> FrameSampler<'a> {
         // A corner is r·√2 px off; on the tangent plane that stretches by at most 1/cos θ.
         let reach_m = r * std::f64::consts::SQRT_2 * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
         let origin = Point3::from(self.view.camera_position_world);
+        // Corners first: they reach farthest, so a mixed footprint fails in fewer rays (every
+        // ray must pass, so the order does not change the verdict).
         for (dx, dy) in [
             (-1.0, -1.0),
-            (0.0, -1.0),
             (1.0, -1.0),
+            (-1.0, 1.0),
+            (1.0, 1.0),
+            (0.0, -1.0),
             (-1.0, 0.0),
             (1.0, 0.0),
-            (-1.0, 1.0),
             (0.0, 1.0),
-            (1.0, 1.0),
         ] {
             let Ok(dir) = self
                 .session

@@ -1,0 +1,507 @@
+//! A frame's analyser images as the sampler reads them: the [`AnalyserPixels`] interface, the
+//! recorded mosaic's [`DnImage`] and its interpolation kernel ([`SampleKernel`]).
+//!
+//! Contract:
+//! - [`DnImage`] holds the SUPERPIXEL planes of `ellipso_polar::demosaic` (no demosaic
+//!   interpolation) converted back to dark-subtracted DN, plus per superpixel and colour band the
+//!   largest raw DN of its samples (the saturation test). A raw position `x` maps to superpixel
+//!   coordinate `(x − o)/t` with `t` the tile size and `o` the raw offset of the sample inside
+//!   its tile: with [`SamplePoint::Lattice`] (default) `o` is where that colour-analyser sample
+//!   really sits (a 0° mono sample at raw `2u + 1`; colour G averages its two blocks, so its
+//!   offset is their mean), with [`SamplePoint::SuperpixelCentre`] it is the tile centre
+//!   `(t − 1)/2` for every sample (track.rs step 3). Values are interpolated by the kernel in
+//!   those coordinates, clamped to the edge superpixels at the frame's border.
+//! - A sample is saturated when any superpixel in its kernel's footprint has a raw DN at or
+//!   above the gate's saturation level, so a clipped neighbour never leaks into an interpolated
+//!   value that looks unclipped.
+//! - **Crops.** [`DnImage::crop`] keeps only the superpixels that samples inside a raw-pixel
+//!   rectangle can reach (a fit's frame cache holds the object's part of each frame). A crop
+//!   samples every point whose taps it holds ([`DnImage::covers`]) bit-identically to the whole
+//!   frame — the taps and their clamping at the frame's border are computed in the whole
+//!   frame's coordinates; a point whose taps it does not hold samples as NaN (the non-finite
+//!   gate), never as a neighbour's value.
+
+use ellipso_model::mosaic::{Analyser, SensorLayout};
+use ellipso_polar::demosaic::{AnalyserImage, Levels};
+use ellipso_polar::frame::RawFrame;
+
+use super::SamplePoint;
+
+/// A rectangle of raw pixel positions, `min` to `max` inclusive (`x` right, `y` down).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelRect {
+    /// Smallest x and y, px.
+    pub min: [f64; 2],
+    /// Largest x and y, px.
+    pub max: [f64; 2],
+}
+
+impl PixelRect {
+    /// The smallest rectangle holding every point of `points` (`None` without one).
+    pub fn around(points: impl IntoIterator<Item = [f64; 2]>) -> Option<PixelRect> {
+        let mut rect: Option<PixelRect> = None;
+        for p in points {
+            let r = rect.get_or_insert(PixelRect { min: p, max: p });
+            r.min = [r.min[0].min(p[0]), r.min[1].min(p[1])];
+            r.max = [r.max[0].max(p[0]), r.max[1].max(p[1])];
+        }
+        rect
+    }
+
+    /// This rectangle grown by `margin_px` on every side.
+    pub fn grown(&self, margin_px: f64) -> PixelRect {
+        PixelRect {
+            min: self.min.map(|v| v - margin_px),
+            max: self.max.map(|v| v + margin_px),
+        }
+    }
+}
+
+/// The demosaiced frame in dark-subtracted DN (see the module contract).
+#[derive(Clone, Debug)]
+pub struct DnImage {
+    tile_px: f64,
+    kernel: SampleKernel,
+    /// Half-side of the square of raw pixels a sampled value draws on, px.
+    footprint_radius_px: f64,
+    /// The whole frame's size in superpixels (the taps are clamped to it).
+    frame_size: [usize; 2],
+    /// Superpixel of the held planes' first element (0, 0 for a whole frame).
+    origin: [usize; 2],
+    /// Size of the held planes in superpixels.
+    width: usize,
+    height: usize,
+    bands: Vec<DnBand>,
+}
+
+#[derive(Clone, Debug)]
+struct DnBand {
+    /// `[I0, I45, I90, I135]` planes, DN.
+    dn: [Vec<f32>; 4],
+    /// Raw offsets (x, y) of each analyser's sample inside the tile, px.
+    offset_px: [[f64; 2]; 4],
+    /// Largest dark-subtracted raw DN of the band's samples per superpixel.
+    max_dn: Vec<f32>,
+}
+
+impl DnImage {
+    /// From a superpixel demosaic of `raw` with `levels`.
+    pub fn new(
+        raw: &RawFrame,
+        image: &AnalyserImage,
+        levels: &Levels,
+        point: SamplePoint,
+        kernel: SampleKernel,
+    ) -> DnImage {
+        let layout = raw.layout();
+        let t = layout.tile_px() as usize;
+        let (w, h) = (raw.width() as usize / t, raw.height() as usize / t);
+        // DN per normalised unit, from the levels themselves (one definition of the scale).
+        let dn_per_unit = 1.0 / (levels.normalise(1) - levels.normalise(0));
+        let dark = levels.dark_dn();
+        let data = raw.data_dn();
+        let raw_w = raw.width() as usize;
+        let bands = image
+            .bands
+            .iter()
+            .map(|band| {
+                let blocks: &[(usize, usize)] = match (layout, band.colour) {
+                    (SensorLayout::ColourPolar, Some(c)) => c.blocks_in_tile(),
+                    _ => &[(0, 0)],
+                };
+                let offset_px = Analyser::ALL.map(|a| match point {
+                    SamplePoint::SuperpixelCentre => [(t as f64 - 1.0) / 2.0; 2],
+                    SamplePoint::Lattice => {
+                        let (ax, ay) = a.offset_in_block();
+                        let n = blocks.len() as f64;
+                        let mean = |f: &dyn Fn(&(usize, usize)) -> usize| {
+                            blocks.iter().map(|b| f(b) as f64).sum::<f64>() / n
+                        };
+                        [mean(&|b| 2 * b.0 + ax), mean(&|b| 2 * b.1 + ay)]
+                    }
+                });
+                let dn = std::array::from_fn(|k| {
+                    band.intensity[k]
+                        .data()
+                        .iter()
+                        .map(|&v| v * dn_per_unit)
+                        .collect()
+                });
+                // Row by row: for each block of the tile, the two raw rows it covers, and the
+                // largest of its 2×2 samples per tile column (the tiles lie inside the frame:
+                // w·t ≤ raw width, h·t ≤ raw height).
+                let mut max_dn = vec![0f32; w * h];
+                let mut top = vec![0u16; w];
+                for (j, row) in max_dn.chunks_exact_mut(w).enumerate() {
+                    top.fill(0);
+                    for &(bx, by) in blocks {
+                        for dy in 0..2 {
+                            let y = t * j + 2 * by + dy;
+                            let Some(raw_row) = data.get(y * raw_w..(y + 1) * raw_w) else {
+                                continue;
+                            };
+                            for (i, m) in top.iter_mut().enumerate() {
+                                let x = t * i + 2 * bx;
+                                if let Some(pair) = raw_row.get(x..x + 2) {
+                                    *m = (*m).max(pair[0]).max(pair[1]);
+                                }
+                            }
+                        }
+                    }
+                    for (m, &v) in row.iter_mut().zip(&top) {
+                        *m = f32::from(v) - dark;
+                    }
+                }
+                DnBand {
+                    dn,
+                    offset_px,
+                    max_dn,
+                }
+            })
+            .collect();
+        // A value interpolates lattice samples within one tile of the point (two for the
+        // cubic kernel); a colour band's sample averages its blocks, which sit up to `spread`
+        // raw pixels from their mean; every raw pixel covers ±½ px.
+        let spread = match layout {
+            SensorLayout::ColourPolar => ellipso_model::mosaic::Channel::ALL
+                .iter()
+                .map(|c| {
+                    let b = c.blocks_in_tile();
+                    let n = b.len() as f64;
+                    let (mx, my) = (
+                        b.iter().map(|b| 2.0 * b.0 as f64).sum::<f64>() / n,
+                        b.iter().map(|b| 2.0 * b.1 as f64).sum::<f64>() / n,
+                    );
+                    b.iter()
+                        .map(|b| {
+                            (2.0 * b.0 as f64 - mx)
+                                .abs()
+                                .max((2.0 * b.1 as f64 - my).abs())
+                        })
+                        .fold(0.0, f64::max)
+                })
+                .fold(0.0, f64::max),
+            SensorLayout::MonoPolar => 0.0,
+        };
+        DnImage {
+            tile_px: t as f64,
+            kernel,
+            footprint_radius_px: kernel.reach_tiles() * t as f64 + spread + 0.5,
+            frame_size: [w, h],
+            origin: [0, 0],
+            width: w,
+            height: h,
+            bands,
+        }
+    }
+
+    /// Number of colour bands (1 mono, 3 colour).
+    pub fn band_count(&self) -> usize {
+        self.bands.len()
+    }
+
+    /// Bytes held by the planes.
+    pub fn bytes(&self) -> usize {
+        self.bands.len() * 5 * self.width * self.height * std::mem::size_of::<f32>()
+    }
+
+    /// Analyser DN `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and
+    /// analyser the largest raw DN in the kernel's footprint (NaN where a crop does not hold
+    /// the taps, see the module contract).
+    pub fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
+        let mut values = [[0f32; 4]; 3];
+        let mut peaks = [[0f32; 4]; 3];
+        let [fw, fh] = self.frame_size;
+        let [ox, oy] = self.origin;
+        let w = self.width;
+        let held = |i: usize, o: usize, n: usize| i.checked_sub(o).filter(|&i| i < n);
+        for (b, band) in self.bands.iter().enumerate().take(3) {
+            for k in 0..4 {
+                let [px, py] = band.offset_px[k];
+                let sx = (pixel[0] - px) / self.tile_px;
+                let sy = (pixel[1] - py) / self.tile_px;
+                let taps_x = self.kernel.taps(sx, fw);
+                let taps_y = self.kernel.taps(sy, fh);
+                let plane = &band.dn[k];
+                let mut v = 0.0;
+                let mut peak = f32::NEG_INFINITY;
+                'taps: for &(y, wy) in taps_y.iter().filter(|t| t.1 != 0.0) {
+                    for &(x, wx) in taps_x.iter().filter(|t| t.1 != 0.0) {
+                        let (Some(x), Some(y)) = (held(x, ox, w), held(y, oy, self.height)) else {
+                            v = f64::NAN;
+                            peak = f32::NAN;
+                            break 'taps;
+                        };
+                        v += wx * wy * f64::from(plane[y * w + x]);
+                        peak = peak.max(band.max_dn[y * w + x]);
+                    }
+                }
+                values[b][k] = v as f32;
+                peaks[b][k] = peak;
+            }
+        }
+        (values, peaks)
+    }
+
+    /// The superpixel range `[lo, hi)` per axis whose planes hold every tap of a sample inside
+    /// `rect`, clamped to the frame.
+    fn tap_range(&self, rect: &PixelRect) -> [[usize; 2]; 2] {
+        let reach = self.kernel.reach_tiles();
+        std::array::from_fn(|axis| {
+            let offsets = self.bands.iter().flat_map(|b| b.offset_px.map(|o| o[axis]));
+            let (o_min, o_max) = offsets.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), o| {
+                (a.min(o), b.max(o))
+            });
+            let n = self.frame_size[axis];
+            // The taps of coordinate s are floor(s) − (reach − 1) … floor(s) + reach; one
+            // more on each side absorbs rounding.
+            let lo = ((rect.min[axis] - o_max) / self.tile_px).floor() - reach;
+            let hi = ((rect.max[axis] - o_min) / self.tile_px).floor() + reach + 2.0;
+            let clamp = |v: f64| {
+                if v.is_nan() {
+                    0
+                } else {
+                    v.clamp(0.0, n as f64) as usize
+                }
+            };
+            [clamp(lo), clamp(hi)]
+        })
+    }
+
+    /// Whether every sample inside `rect` reads only superpixels this image holds (always true
+    /// of a whole frame).
+    pub fn covers(&self, rect: &PixelRect) -> bool {
+        let need = self.tap_range(rect);
+        let held = [
+            [self.origin[0], self.origin[0] + self.width],
+            [self.origin[1], self.origin[1] + self.height],
+        ];
+        (0..2).all(|a| need[a][0] >= held[a][0] && need[a][1] <= held[a][1])
+            || (self.width, self.height) == (self.frame_size[0], self.frame_size[1])
+    }
+
+    /// The part of this image that samples inside `rect` read (see the module contract).
+    pub fn crop(&self, rect: &PixelRect) -> DnImage {
+        let [[x0, x1], [y0, y1]] = self.tap_range(rect);
+        // held coordinates of the wanted range (a crop of a crop keeps what it holds)
+        let x0 = x0.max(self.origin[0]);
+        let y0 = y0.max(self.origin[1]);
+        let x1 = x1.min(self.origin[0] + self.width).max(x0);
+        let y1 = y1.min(self.origin[1] + self.height).max(y0);
+        let (w, h) = (x1 - x0, y1 - y0);
+        let copy = |plane: &[f32]| -> Vec<f32> {
+            let mut out = Vec::with_capacity(w * h);
+            for y in y0..y1 {
+                let row = (y - self.origin[1]) * self.width;
+                let from = row + x0 - self.origin[0];
+                out.extend_from_slice(&plane[from..from + w]);
+            }
+            out
+        };
+        DnImage {
+            tile_px: self.tile_px,
+            kernel: self.kernel,
+            footprint_radius_px: self.footprint_radius_px,
+            frame_size: self.frame_size,
+            origin: [x0, y0],
+            width: w,
+            height: h,
+            bands: self
+                .bands
+                .iter()
+                .map(|b| DnBand {
+                    dn: std::array::from_fn(|k| copy(&b.dn[k])),
+                    offset_px: b.offset_px,
+                    max_dn: copy(&b.max_dn),
+                })
+                .collect(),
+        }
+    }
+}
+
+/// How the analyser planes are interpolated at a sample's lattice coordinate.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SampleKernel {
+    /// Bilinear (2 × 2 superpixels): smooths a shading profile's curvature and a highlight's
+    /// peak by up to a tile on each side (measured: −0.2 … −0.7 % η per material on the demo
+    /// through the true mesh, docs/error-budget.md).
+    Bilinear,
+    /// Catmull–Rom cubic convolution (Keys 1981, a = −½; 4 × 4 superpixels): exact for
+    /// quadratics, so a shading profile's curvature does not bias the value.
+    #[default]
+    CatmullRom,
+}
+
+impl SampleKernel {
+    /// How many lattice steps (tiles) on each side of the point the kernel's taps reach.
+    pub fn reach_tiles(self) -> f64 {
+        match self {
+            SampleKernel::Bilinear => 1.0,
+            SampleKernel::CatmullRom => 2.0,
+        }
+    }
+
+    /// Up to four (index, weight) taps of lattice coordinate `s` in `0..n`; indices are clamped
+    /// to the plane (the edge sample repeats), weights sum to 1.
+    fn taps(self, s: f64, n: usize) -> [(usize, f64); 4] {
+        let hi = n.saturating_sub(1);
+        let s = s.clamp(0.0, hi as f64);
+        let i = (s.floor() as usize).min(n.saturating_sub(2));
+        let f = s - i as f64;
+        let at = |d: isize| (i as isize + d).clamp(0, hi as isize) as usize;
+        match self {
+            SampleKernel::Bilinear => [(at(0), 1.0 - f), (at(1), f), (at(0), 0.0), (at(0), 0.0)],
+            SampleKernel::CatmullRom => {
+                let (f2, f3) = (f * f, f * f * f);
+                [
+                    (at(-1), 0.5 * (-f3 + 2.0 * f2 - f)),
+                    (at(0), 0.5 * (3.0 * f3 - 5.0 * f2 + 2.0)),
+                    (at(1), 0.5 * (-3.0 * f3 + 4.0 * f2 + f)),
+                    (at(2), 0.5 * (f3 - f2)),
+                ]
+            }
+        }
+    }
+}
+
+/// A frame's analyser images as the sampler reads them (the recorded mosaic's [`DnImage`], or
+/// an ideal sensor's in the error budget): per band, the four analysers' dark-subtracted DN at
+/// a raw pixel position, and the largest raw DN of the pixels that value draws on (the
+/// saturation test).
+pub trait AnalyserPixels: Sync {
+    /// Number of colour bands (1 mono, 3 colour).
+    fn band_count(&self) -> usize;
+    /// `[I0, I45, I90, I135]` per band at raw pixel `(x, y)`, and per band and analyser the
+    /// largest raw DN in the footprint.
+    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]);
+    /// Half-side of the square of raw pixels about the sampled point that a value draws on
+    /// (its footprint), px; 0 for a point sample.
+    fn footprint_radius_px(&self) -> f64;
+}
+
+impl AnalyserPixels for std::sync::Arc<DnImage> {
+    fn band_count(&self) -> usize {
+        DnImage::band_count(self)
+    }
+
+    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
+        DnImage::sample(self, pixel)
+    }
+
+    fn footprint_radius_px(&self) -> f64 {
+        self.footprint_radius_px
+    }
+}
+
+impl AnalyserPixels for DnImage {
+    fn band_count(&self) -> usize {
+        DnImage::band_count(self)
+    }
+
+    fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
+        DnImage::sample(self, pixel)
+    }
+
+    fn footprint_radius_px(&self) -> f64 {
+        self.footprint_radius_px
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ellipso_polar::PolarConfig;
+    use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
+
+    /// A colour-polarisation frame of seeded noise (every superpixel differs).
+    fn image(kernel: SampleKernel) -> DnImage {
+        let (w, h) = (96u32, 64u32);
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let px: Vec<u16> = (0..w * h)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1);
+                ((state >> 33) % 4000) as u16 + 50
+            })
+            .collect();
+        let raw = RawFrame::new(w, h, 12, SensorLayout::ColourPolar, px).unwrap();
+        let polar = PolarConfig {
+            demosaic: DemosaicMethod::Superpixel,
+            ..PolarConfig::default()
+        };
+        let levels = polar.levels(&raw).unwrap();
+        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+        DnImage::new(&raw, &analysers, &levels, SamplePoint::Lattice, kernel)
+    }
+
+    fn same(a: ([[f32; 4]; 3], [[f32; 4]; 3]), b: ([[f32; 4]; 3], [[f32; 4]; 3])) -> bool {
+        let bits = |v: ([[f32; 4]; 3], [[f32; 4]; 3])| {
+            v.0.iter()
+                .chain(v.1.iter())
+                .flatten()
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        };
+        bits(a) == bits(b)
+    }
+
+    #[test]
+    fn a_crop_samples_its_rectangle_bit_identically_and_nothing_else() {
+        for kernel in [SampleKernel::Bilinear, SampleKernel::CatmullRom] {
+            let whole = image(kernel);
+            let rect = PixelRect {
+                min: [30.3, 20.7],
+                max: [61.9, 41.2],
+            };
+            let crop = whole.crop(&rect);
+            assert!(crop.bytes() < whole.bytes() / 2, "{kernel:?}: not cropped");
+            assert!(crop.covers(&rect) && whole.covers(&rect));
+            // Every point of the rectangle, its corners included, as the whole frame has it.
+            for i in 0..=20 {
+                for j in 0..=20 {
+                    let p = [
+                        rect.min[0] + (rect.max[0] - rect.min[0]) * f64::from(i) / 20.0,
+                        rect.min[1] + (rect.max[1] - rect.min[1]) * f64::from(j) / 20.0,
+                    ];
+                    assert!(same(crop.sample(p), whole.sample(p)), "{kernel:?} at {p:?}");
+                }
+            }
+            // Far outside: NaN, never a neighbour's value.
+            let (values, peaks) = crop.sample([2.0, 2.0]);
+            assert!(values[0].iter().chain(&peaks[0]).all(|v| v.is_nan()));
+            assert!(!crop.covers(&rect.grown(12.0)));
+        }
+    }
+
+    #[test]
+    fn a_crop_at_the_frame_border_clamps_as_the_whole_frame_does() {
+        let whole = image(SampleKernel::CatmullRom);
+        // Reaches past the top-left corner: the taps clamp to the edge superpixels.
+        let rect = PixelRect {
+            min: [-3.0, -2.0],
+            max: [10.0, 9.0],
+        };
+        let crop = whole.crop(&rect);
+        assert!(crop.covers(&rect));
+        for p in [[-3.0, -2.0], [0.0, 0.0], [0.4, 8.9], [10.0, 9.0]] {
+            assert!(same(crop.sample(p), whole.sample(p)), "at {p:?}");
+        }
+        // A crop of a crop keeps what it holds.
+        let inner = crop.crop(&PixelRect {
+            min: [2.0, 2.0],
+            max: [4.0, 4.0],
+        });
+        assert!(same(inner.sample([3.0, 3.0]), whole.sample([3.0, 3.0])));
+    }
+
+    #[test]
+    fn pixel_rect_around_points() {
+        assert_eq!(PixelRect::around(std::iter::empty()), None);
+        let r = PixelRect::around([[3.0, 1.0], [-1.0, 5.0], [2.0, 2.0]]).unwrap();
+        assert_eq!(r.min, [-1.0, 1.0]);
+        assert_eq!(r.max, [3.0, 5.0]);
+        assert_eq!(r.grown(1.0).min, [-2.0, 0.0]);
+    }
+}
