@@ -164,7 +164,7 @@ mod tests {
             assert!(((p - centre).norm() - 0.04).abs() < 1e-12);
             assert!((n.into_inner() - (p - centre) / 0.04).norm() < 1e-9);
         }
-        assert!(t.params.iter().all(|p| (p.eta - 1.5).abs() < 1e-12));
+        assert!(t.params.iter().all(|p| (p.eta - 1.517).abs() < 1e-12));
     }
 
     #[test]

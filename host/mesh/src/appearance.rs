@@ -22,7 +22,11 @@
 //! - **Agreement** of two samples: every band within `tolerance_rel` of the larger value plus
 //!   a noise floor of `tolerance_dn` DN (converted to each view's units), and, where both are
 //!   brighter than `min_polarised_dn`, `p` within `tolerance_polarisation`. A pixel is
-//!   *board-consistent* when it agrees with its texel's learned value.
+//!   *board-consistent* when it agrees with its texel's learned value; where a black pixel
+//!   would agree with it too ([`Verdict::Dark`]: the surround beyond a sheet on a dark table)
+//!   the texel cannot tell an object's limb — which darkens to black under the near-coaxial
+//!   flash — from itself, and the silhouette decides how far such pixels count
+//!   (`silhouette::classify`).
 //! - **Memory** is bounded by `max_texels × reservoir × 24 B`; the texel size grows when the
 //!   region would need more texels.
 
@@ -132,6 +136,22 @@ pub struct TexelSample {
     pub s0_dn: f32,
 }
 
+/// What a pixel says of the board point its ray meets.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    /// It agrees with the learned texel, and a black pixel would not.
+    Board,
+    /// It disagrees: something else is in front of the board.
+    Other,
+    /// It agrees, but so would a black pixel: the texel is too dark to tell an object's limb
+    /// (which darkens to black under the near-coaxial flash) from itself.
+    Dark,
+}
+
+/// A disagreeing pixel is *dim* below this many times the darkest value a black pixel cannot
+/// be told from ([`Agreement::dim`]).
+pub const DIM_FACTOR: f32 = 4.0;
+
 /// The agreement rule of the module contract, fixed for one session.
 #[derive(Clone, Copy, Debug)]
 pub struct Agreement {
@@ -160,6 +180,31 @@ impl Agreement {
     /// Relative tolerance of agreement.
     pub fn tolerance_rel(&self) -> f32 {
         self.tolerance_rel
+    }
+
+    /// What `sample` says of its texel's `learned` value (see [`Verdict`]).
+    pub fn verdict(&self, sample: &TexelSample, learned: &TexelSample) -> Verdict {
+        if !self.agree(sample, learned) {
+            return Verdict::Other;
+        }
+        let black = TexelSample {
+            value: [0.0; 3],
+            s0_dn: 0.0,
+            ..*sample
+        };
+        if self.agree(&black, learned) {
+            Verdict::Dark
+        } else {
+            Verdict::Board
+        }
+    }
+
+    /// Whether `sample` is dim: every band below [`DIM_FACTOR`] times the darkest value a
+    /// black pixel cannot be told from (`floor / (1 − tolerance_rel)`) — a limb that is still
+    /// darkening there.
+    pub fn dim(&self, sample: &TexelSample) -> bool {
+        let limit = DIM_FACTOR * sample.floor / (1.0 - self.tolerance_rel).max(1e-3);
+        sample.value[..self.bands].iter().all(|&v| v < limit)
     }
 
     /// Whether two samples agree.

@@ -26,7 +26,7 @@
 //!   outside the image or the crop count as not board; values within `margin` px of a crop
 //!   edge that the crop cuts are therefore only lower bounds, which is why crops carry a margin.
 
-use super::appearance::{Agreement, Board, TexelGrid, pixel_sample};
+use super::appearance::{Agreement, Board, TexelGrid, TexelSample, Verdict, pixel_sample};
 use super::edge::{EdgeOffsets, EdgePixel, edge_offsets};
 use super::frames::{FeatureImage, RayTable, View};
 
@@ -86,6 +86,57 @@ impl Silhouette {
     }
 }
 
+/// The verdict of a pixel on an unknown texel from its learned neighbours: the board when one
+/// shows it, else dark when one is [`Verdict::Dark`], else something else when one is learned
+/// (`None`: none is).
+fn neighbour_verdict<'a>(
+    learned: impl Iterator<Item = &'a TexelSample>,
+    verdict: impl Fn(&TexelSample) -> Verdict,
+) -> Option<Verdict> {
+    let mut out = None;
+    for texel in learned {
+        match verdict(texel) {
+            Verdict::Board => return Some(Verdict::Board),
+            Verdict::Dark => out = Some(Verdict::Dark),
+            Verdict::Other => out = out.or(Some(Verdict::Other)),
+        }
+    }
+    out
+}
+
+/// Dark-surround pixels ([`Verdict::Dark`]) within this many pixels (Chebyshev) of a dim
+/// pixel of the object do not show the board: the object's limb may still be darkening
+/// there. Measured on the glass sphere (ρd 0.02) in front of the void beyond the board: its
+/// top limb is indistinguishable from the void up to 2.2 superpixels inside its true edge.
+pub const DARK_LIMB_MARGIN_PX: usize = 3;
+
+/// `mask` grown by `r` pixels (a square of side 2r + 1), separably.
+fn dilate(mask: &[bool], w: usize, h: usize, r: usize) -> Vec<bool> {
+    let grow = |get: &dyn Fn(usize) -> bool, n: usize, out: &mut dyn FnMut(usize, bool)| {
+        // running count of set pixels in the window [i − r, i + r]
+        let mut count = (0..r.min(n)).filter(|&j| get(j)).count();
+        for i in 0..n {
+            if i + r < n && get(i + r) {
+                count += 1;
+            }
+            out(i, count > 0);
+            if i >= r && get(i - r) {
+                count -= 1;
+            }
+        }
+    };
+    let mut rows = vec![false; w * h];
+    for y in 0..h {
+        let line = &mask[y * w..(y + 1) * w];
+        grow(&|x| line[x], w, &mut |x, v| rows[y * w + x] = v);
+    }
+    let mut out = vec![false; w * h];
+    for x in 0..w {
+        grow(&|y| rows[y * w + x], h, &mut |y, v| out[y * w + x] = v);
+    }
+    out
+}
+
 /// Classifies every pixel of a view (see the module contract).
 #[expect(
     clippy::too_many_arguments,
@@ -114,31 +165,61 @@ pub fn classify(
         removed_island_px: 0,
         edge: EdgeOffsets::default(),
     };
+    let mut dim_px = Vec::new();
+    let mut dark = Vec::new();
     for k in 0..w * h {
         let Some((texel, sample)) = pixel_sample(&board.grid, rays, view, image, k, floor_dn)
         else {
             continue;
         };
         let verdict = match &board.texels[texel] {
-            Some(learned) => Some(rule.agree(&sample, learned)),
+            Some(learned) => Some(rule.verdict(&sample, learned)),
             // an unknown texel: its learned neighbours speak for it (texels far from the
             // cameras are hit by fewer pixels than texels)
-            None => neighbours(&board.grid, texel)
-                .filter_map(|n| board.texels[n].as_ref())
-                .fold(None, |v, learned| {
-                    Some(v.unwrap_or(false) || rule.agree(&sample, learned))
-                }),
+            None => neighbour_verdict(
+                neighbours(&board.grid, texel).filter_map(|n| board.texels[n].as_ref()),
+                |learned| rule.verdict(&sample, learned),
+            ),
         };
         match verdict {
-            Some(true) => {
+            Some(Verdict::Board) => {
                 s.set(k, true);
                 s.board_px += 1;
             }
-            Some(false) => {
+            Some(Verdict::Other) => {
                 s.disagree[k / 64] |= 1 << (k % 64);
                 s.disagree_px += 1;
+                if rule.dim(&sample) {
+                    dim_px.push(k);
+                }
             }
+            Some(Verdict::Dark) => dark.push(k),
             None => {}
+        }
+    }
+    // A dark-surround pixel shows the board unless a dim object pixel is near: there the
+    // object's limb may still be darkening into it (`DARK_LIMB_MARGIN_PX`).
+    let mut dim = vec![false; w * h];
+    for k in dim_px {
+        dim[k] = true;
+    }
+    // A ramp is two dim object pixels side by side: the mixed pixel on a bright object's edge
+    // is dim alone.
+    let ramp: Vec<bool> = (0..w * h)
+        .map(|k| {
+            let (x, y) = (k % w, k / w);
+            dim[k]
+                && ((x > 0 && dim[k - 1])
+                    || (x + 1 < w && dim[k + 1])
+                    || (y > 0 && dim[k - w])
+                    || (y + 1 < h && dim[k + w]))
+        })
+        .collect();
+    let near_dim = dilate(&ramp, w, h, DARK_LIMB_MARGIN_PX);
+    for k in dark {
+        if !near_dim[k] {
+            s.set(k, true);
+            s.board_px += 1;
         }
     }
     remove_islands(&mut s, min_island_px, max_enclosed_fraction);
@@ -388,6 +469,57 @@ impl SignedDistance {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dilation_matches_brute_force() {
+        let (w, h) = (17, 11);
+        let mask: Vec<bool> = (0..w * h).map(|k| (k * 7919) % 23 == 0).collect();
+        for r in 0..4 {
+            let d = dilate(&mask, w, h, r);
+            for (k, &got) in d.iter().enumerate() {
+                let (x, y) = ((k % w) as isize, (k / w) as isize);
+                let want = (0..w * h).any(|j| {
+                    let (a, b) = ((j % w) as isize, (j / w) as isize);
+                    mask[j] && (a - x).abs() <= r as isize && (b - y).abs() <= r as isize
+                });
+                assert_eq!(got, want, "r {r}, pixel ({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn a_texel_a_black_pixel_matches_is_dark_and_decides_nothing_alone() {
+        let rule = Agreement::new(&crate::appearance::AppearanceConfig::default(), 1, 4095.0);
+        let sample = |v: f32| TexelSample {
+            value: [v, 0.0, 0.0],
+            p: 0.0,
+            floor: 8.0,
+            s0_dn: v,
+        };
+        // paper: a matching pixel shows the board, a dark one does not
+        assert_eq!(
+            rule.verdict(&sample(1650.0), &sample(1640.0)),
+            Verdict::Board
+        );
+        assert_eq!(rule.verdict(&sample(16.0), &sample(1640.0)), Verdict::Other);
+        // ink (80): a black pixel is told from it
+        assert_eq!(rule.verdict(&sample(78.0), &sample(80.0)), Verdict::Board);
+        // the void beyond the sheet (≈ 1): a glass limb at 6 agrees, and so would black
+        assert_eq!(rule.verdict(&sample(6.0), &sample(1.0)), Verdict::Dark);
+        assert_eq!(rule.verdict(&sample(30.0), &sample(1.0)), Verdict::Other);
+        // dim: below 4 × floor / (1 − 0.12) ≈ 36
+        assert!(rule.dim(&sample(16.0)) && !rule.dim(&sample(60.0)));
+        // neighbours: one showing the board decides, else one dark, else other
+        let v = |pixel: f32, vals: &[f32]| {
+            let learned: Vec<TexelSample> = vals.iter().map(|&v| sample(v)).collect();
+            neighbour_verdict(learned.iter(), |l| rule.verdict(&sample(pixel), l))
+        };
+        assert_eq!(v(6.0, &[1.0, 6.5]), Some(Verdict::Dark));
+        assert_eq!(v(80.0, &[1.0, 80.0]), Some(Verdict::Board));
+        assert_eq!(v(6.0, &[1.0, 900.0]), Some(Verdict::Dark));
+        assert_eq!(v(6.0, &[900.0]), Some(Verdict::Other));
+        assert_eq!(v(6.0, &[]), None);
+    }
 
     #[test]
     fn distance_transform_matches_brute_force() {
