@@ -1,6 +1,7 @@
 //! The surface update on a sphere: started 2 mm too large, with the true normals (an offset
 //! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
-//! it converges onto the sphere where the views see it.
+//! it converges onto the sphere where the views see it; a step that folds a triangle is
+//! shortened until it does not.
 
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::procedural::icosphere;
@@ -8,7 +9,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::super::hull::{GridGeometry, HullField};
 use super::super::tests::fit;
-use super::{SurfaceConfig, SurfaceState};
+use super::{SurfaceConfig, SurfaceState, turned_over, unfolded_step};
 
 const RADIUS: f64 = 0.02;
 
@@ -192,4 +193,25 @@ fn what_the_penalty_cannot_hold_is_projected_onto_the_hull() {
         "left outside by {} m",
         solved.max_outside_m
     );
+}
+
+#[test]
+fn a_step_that_folds_a_triangle_is_shortened_until_it_does_not() {
+    let triangles = [[0u32, 1, 2]];
+    let before = [
+        Point3::new(0.0, 0.0, 0.0),
+        Point3::new(1.0, 0.0, 0.0),
+        Point3::new(0.0, 1.0, 0.0),
+    ];
+    // Vertex 2 crosses the opposite edge: folded at 1 and ½, not at ¼.
+    let mut after = before;
+    after[2] = Point3::new(0.0, -1.5, 0.0);
+    assert_eq!(turned_over(&triangles, &before, &after), 1);
+    let (t, positions) = unfolded_step(&triangles, &before, &after).unwrap();
+    assert_eq!(t, 0.25);
+    assert!((positions[2].y - 0.375).abs() < 1e-12);
+    assert_eq!(turned_over(&triangles, &before, &positions), 0);
+    // So far across that every fraction folds it: refused.
+    after[2] = Point3::new(0.0, -100.0, 0.0);
+    assert!(unfolded_step(&triangles, &before, &after).is_none());
 }
