@@ -333,7 +333,7 @@ const PROJECTION_STEPS: usize = 6;
 /// Moves every point with a positive hull value onto the hull (h ≤ 0) by Newton steps along
 /// the gradient, p ← p − h ∇h/|∇h|² (a flat field — |∇h| below 1e-9 — leaves the point where it
 /// is: the caller's check then sees it outside). Returns how many points moved.
-fn project_inside(hull: &HullField, positions: &mut [Point3<f64>]) -> usize {
+pub(super) fn project_inside(hull: &HullField, positions: &mut [Point3<f64>]) -> usize {
     let mut moved = 0;
     for p in positions.iter_mut() {
         let mut stepped = false;

@@ -37,7 +37,7 @@ use nalgebra::{Point3, Vector3};
 mod tests;
 
 use super::hull::HullField;
-use super::integrate::{IntegrateConfig, Targets, integrate};
+use super::integrate::{IntegrateConfig, Targets, integrate, project_inside};
 use super::{ShapeError, mesh_with_positions};
 use crate::data::{SampleSet, VertexFit};
 
@@ -265,10 +265,14 @@ fn unfolded_step(
     triangles: &[[u32; 3]],
     before: &[Point3<f64>],
     after: &[Point3<f64>],
-) -> Option<(f64, Vec<Point3<f64>>)> {
+    hull: Option<&HullField>,
+) -> Option<(f64, Vec<Point3<f64>>, usize)> {
     BACKTRACK_FRACTIONS.iter().find_map(|&t| {
-        let positions = partial_step(before, after, t);
-        (turned_over(triangles, before, &positions) == 0).then_some((t, positions))
+        let mut positions = partial_step(before, after, t);
+        // Between two surfaces inside a hull that is not convex lies a surface that may leave
+        // it: projected back as the solve's own result is.
+        let projected = hull.map_or(0, |h| project_inside(h, &mut positions));
+        (turned_over(triangles, before, &positions) == 0).then_some((t, positions, projected))
     })
 }
 
@@ -373,13 +377,16 @@ impl SurfaceState {
             &integrate_config,
         )?;
         let mut solved = solved;
+        // The divergence and convergence tests judge the whole solved step.
+        let full_step_rms_m = solved.rms_displacement_m;
         let turned_over_full_step =
             turned_over(mesh.triangles(), mesh.positions(), &solved.positions);
         let mut step_fraction = 1.0;
         if turned_over_full_step > 0
-            && let Some((t, positions)) =
-                unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions)
+            && let Some((t, positions, projected)) =
+                unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull)
         {
+            solved.projected_vertices = projected;
             let moves: Vec<f64> = positions
                 .iter()
                 .zip(mesh.positions())
@@ -448,13 +455,14 @@ impl SurfaceState {
                  length; the last good mesh is kept",
                 BACKTRACK_FRACTIONS[BACKTRACK_FRACTIONS.len() - 1] * 100.0
             ))
-        } else if let Some(prev) = self.previous_rms_m.filter(|p| {
-            solved.rms_displacement_m > config.divergence_ratio * p.max(config.converged_rms_m)
-        }) {
+        } else if let Some(prev) = self
+            .previous_rms_m
+            .filter(|p| full_step_rms_m > config.divergence_ratio * p.max(config.converged_rms_m))
+        {
             Some(format!(
                 "stopped: diverging — this step would move the surface {:.3} mm RMS after {:.3} mm \
                  in the previous one; the last good mesh is kept",
-                solved.rms_displacement_m * 1e3,
+                full_step_rms_m * 1e3,
                 prev * 1e3
             ))
         } else if report.misfit_after_deg > report.misfit_before_deg + config.misfit_increase_deg {
@@ -475,16 +483,18 @@ impl SurfaceState {
             return Ok(None);
         }
         report.applied = true;
-        if solved.rms_displacement_m < config.converged_rms_m {
+        if full_step_rms_m < config.converged_rms_m {
             report.stopped = Some(format!(
                 "converged: the step moved {:.4} mm RMS (< {:.4} mm)",
-                solved.rms_displacement_m * 1e3,
+                full_step_rms_m * 1e3,
                 config.converged_rms_m * 1e3
             ));
             self.done = true;
         }
         self.previous_normals = Some(trusted);
-        self.previous_rms_m = Some(solved.rms_displacement_m);
+        // After a shortened step the next one also carries what this one left out, so its
+        // size is not compared with this one's (the misfit and hull tests still apply).
+        self.previous_rms_m = (step_fraction == 1.0).then_some(full_step_rms_m);
         self.iterations.push(report);
         Ok(Some(new_mesh))
     }

@@ -207,11 +207,11 @@ fn a_step_that_folds_a_triangle_is_shortened_until_it_does_not() {
     let mut after = before;
     after[2] = Point3::new(0.0, -1.5, 0.0);
     assert_eq!(turned_over(&triangles, &before, &after), 1);
-    let (t, positions) = unfolded_step(&triangles, &before, &after).unwrap();
+    let (t, positions, _) = unfolded_step(&triangles, &before, &after, None).unwrap();
     assert_eq!(t, 0.25);
     assert!((positions[2].y - 0.375).abs() < 1e-12);
     assert_eq!(turned_over(&triangles, &before, &positions), 0);
     // So far across that every fraction folds it: refused.
     after[2] = Point3::new(0.0, -100.0, 0.0);
-    assert!(unfolded_step(&triangles, &before, &after).is_none());
+    assert!(unfolded_step(&triangles, &before, &after, None).is_none());
 }
