@@ -11,8 +11,8 @@ use super::support::{
 
 pub fn scene_cases() -> Vec<Case> {
     let edits: Vec<(&str, &str, &str, &'static str)> = vec![
-        ("eta NaN", "eta = 1.5", "eta = nan", "eta"),
-        ("eta 1e78", "eta = 1.5", "eta = 1e78", "eta"),
+        ("eta NaN", "eta = 1.517", "eta = nan", "eta"),
+        ("eta 1e78", "eta = 1.517", "eta = 1e78", "eta"),
         ("rho_s 1e308", "rho_s = 1.0", "rho_s = 1e308", "rho_s"),
         (
             "negative radius",
