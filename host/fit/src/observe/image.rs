@@ -380,17 +380,18 @@ pub trait AnalyserPixels: Sync {
     fn footprint_radius_px(&self) -> f64;
 }
 
-impl AnalyserPixels for std::sync::Arc<DnImage> {
+/// A shared image (a frame cache's crop) reads as the image itself.
+impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
     fn band_count(&self) -> usize {
-        DnImage::band_count(self)
+        (**self).band_count()
     }
 
     fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
-        DnImage::sample(self, pixel)
+        (**self).sample(pixel)
     }
 
     fn footprint_radius_px(&self) -> f64 {
-        self.footprint_radius_px
+        (**self).footprint_radius_px()
     }
 }
 

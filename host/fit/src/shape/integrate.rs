@@ -298,33 +298,56 @@ pub fn integrate(
     // has not settled in `max_rounds` can leave more (a ridge between two views' cones): what is
     // still outside is projected onto the hull along its gradient.
     let projected_vertices = hull.map_or(0, |h| project_inside(h, &mut new_positions));
-    let moves: Vec<f64> = new_positions
-        .iter()
-        .zip(positions)
-        .map(|(p, p0)| (p - p0).norm())
-        .collect();
-    let max_outside_m = hull.map_or(0.0, |h| {
-        new_positions
-            .iter()
-            .map(|p| h.value_world(p).0)
-            .fold(f64::NEG_INFINITY, f64::max)
-    });
+    let size = step_size(positions, &new_positions, hull);
     Ok(Integrated {
         residual_before: problem.normal_misfit(positions),
         residual_after: problem.normal_misfit(&new_positions),
         positions: new_positions,
-        rms_displacement_m: (moves.iter().map(|m| m * m).sum::<f64>() / n as f64).sqrt(),
-        max_displacement_m: moves.iter().copied().fold(0.0, f64::max),
+        rms_displacement_m: size.rms_m,
+        max_displacement_m: size.max_m,
         clamped_vertices,
         cg_iterations,
         cg_converged,
         rounds,
         active_vertices: active.iter().filter(|a| **a).count(),
-        max_outside_m,
+        max_outside_m: size.max_outside_m,
         projected_vertices,
         constrained_edges: problem.constraints.len(),
         skipped_vertices,
     })
+}
+
+/// How far a step moved a surface and where it left it.
+pub(super) struct StepSize {
+    /// RMS vertex move, metres.
+    pub rms_m: f64,
+    /// Largest vertex move, metres.
+    pub max_m: f64,
+    /// Largest hull value over the moved vertices, metres (0 without a hull).
+    pub max_outside_m: f64,
+}
+
+/// The [`StepSize`] of the step `before → after` (same vertices).
+pub(super) fn step_size(
+    before: &[Point3<f64>],
+    after: &[Point3<f64>],
+    hull: Option<&HullField>,
+) -> StepSize {
+    let moves: Vec<f64> = after
+        .iter()
+        .zip(before)
+        .map(|(p, p0)| (p - p0).norm())
+        .collect();
+    StepSize {
+        rms_m: (moves.iter().map(|m| m * m).sum::<f64>() / after.len().max(1) as f64).sqrt(),
+        max_m: moves.iter().copied().fold(0.0, f64::max),
+        max_outside_m: hull.map_or(0.0, |h| {
+            after
+                .iter()
+                .map(|p| h.value_world(p).0)
+                .fold(f64::NEG_INFINITY, f64::max)
+        }),
+    }
 }
 
 /// Newton steps of the projection onto the hull per vertex.

@@ -37,7 +37,7 @@ use nalgebra::{Point3, Vector3};
 mod tests;
 
 use super::hull::HullField;
-use super::integrate::{IntegrateConfig, Targets, integrate, project_inside};
+use super::integrate::{IntegrateConfig, Targets, integrate, project_inside, step_size};
 use super::{ShapeError, mesh_with_positions};
 use crate::data::{SampleSet, VertexFit};
 
@@ -363,7 +363,7 @@ impl SurfaceState {
         if hull.is_none() {
             integrate_config.weights.lambda_position = config.lambda_position_without_hull;
         }
-        let solved = integrate(
+        let mut solved = integrate(
             mesh.positions(),
             mesh.triangles(),
             &Targets {
@@ -376,7 +376,6 @@ impl SurfaceState {
             hull,
             &integrate_config,
         )?;
-        let mut solved = solved;
         // The divergence and convergence tests judge the whole solved step.
         let full_step_rms_m = solved.rms_displacement_m;
         let turned_over_full_step =
@@ -386,21 +385,11 @@ impl SurfaceState {
             && let Some((t, positions, projected)) =
                 unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull)
         {
+            let size = step_size(mesh.positions(), &positions, hull);
             solved.projected_vertices = projected;
-            let moves: Vec<f64> = positions
-                .iter()
-                .zip(mesh.positions())
-                .map(|(p, p0)| (p - p0).norm())
-                .collect();
-            solved.rms_displacement_m =
-                (moves.iter().map(|m| m * m).sum::<f64>() / n.max(1) as f64).sqrt();
-            solved.max_displacement_m = moves.iter().copied().fold(0.0, f64::max);
-            if let Some(h) = hull {
-                solved.max_outside_m = positions
-                    .iter()
-                    .map(|p| h.value_world(p).0)
-                    .fold(f64::NEG_INFINITY, f64::max);
-            }
+            solved.rms_displacement_m = size.rms_m;
+            solved.max_displacement_m = size.max_m;
+            solved.max_outside_m = size.max_outside_m;
             solved.positions = positions;
             step_fraction = t;
         }
