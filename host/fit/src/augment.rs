@@ -527,19 +527,26 @@ impl<'f> Clustering<'f> {
 }
 
 /// Step A's fits of `n` vertices grouped into materials as [`augment`] groups them (features,
-/// k-means, choice of k): each vertex's cluster — a member's own, the nearest centroid's for a
-/// vertex with a finite fit that is not a member — or `None` without a finite fit. What the
-/// next outer iteration's extraction uses to gate samples that mix materials
-/// (`ObserveConfig::vertex_labels`).
+/// k-means, choice of k): each vertex's material — the group ([`cluster::separated_groups`])
+/// of its nearest centroid's cluster — or `None` without a finite fit. What the next outer
+/// iteration's extraction uses to gate samples that mix materials
+/// (`ObserveConfig::vertex_labels`), so clusters that one material's spread split apart do
+/// not gate each other.
 pub fn material_labels(n: usize, fits: &[VertexFit], config: &ClusterConfig) -> Vec<Option<usize>> {
     let c = Clustering::new(n, fits, config);
-    let centroids = &c.selection.partition.centroids;
-    if centroids.is_empty() {
+    let partition = &c.selection.partition;
+    if partition.centroids.is_empty() {
         return vec![None; n];
     }
+    let member_features: Vec<Feature> = c
+        .members
+        .iter()
+        .map(|&v| c.features[v].expect("member"))
+        .collect();
+    let groups = cluster::separated_groups(&member_features, partition);
     c.features
         .iter()
-        .map(|f| f.map(|f| cluster::nearest(&f, centroids).0))
+        .map(|f| f.map(|f| groups[cluster::nearest(&f, &partition.centroids).0]))
         .collect()
 }
 

@@ -128,3 +128,29 @@ fn min_cluster_size_scales_with_the_mesh() {
     assert_eq!(effective_min_cluster_vertices(100, 10), 5);
     assert_eq!(effective_min_cluster_vertices(3, 10), 3);
 }
+
+#[test]
+fn gate_groups_keep_materials_apart_and_join_the_splits_of_one() {
+    // Three materials: every cluster its own group.
+    let (pts, _) = blobs(&CENTRES, 150, 0.08, 4);
+    let p = kmeans(&pts, 3, 4, 100, 7);
+    assert_eq!(separated_groups(&pts, &p), vec![0, 1, 2]);
+    // Two materials 0.5 apart with tight spreads: still two.
+    let close = [[1.0, 1.0, 1.0, 3.0], [1.5, 1.0, 1.0, 3.0]];
+    let (pts, _) = blobs(&close, 200, 0.02, 5);
+    let p = kmeans(&pts, 2, 4, 100, 7);
+    assert_eq!(separated_groups(&pts, &p), vec![0, 1]);
+    // One material forced into three clusters: one group, whatever the split.
+    let (one, _) = blobs(&CENTRES[..1], 400, 0.08, 6);
+    let p = kmeans(&one, 3, 4, 100, 7);
+    assert_eq!(p.centroids.len(), 3);
+    assert_eq!(separated_groups(&one, &p), vec![0, 0, 0]);
+    // One material plus a sparse, wide tail beside it (vertices whose albedo the data leave
+    // open): the tail's cluster joins the material.
+    let (mut pts, _) = blobs(&CENTRES[..1], 400, 0.05, 7);
+    let (tail, _) = blobs(&[[1.8, 1.8, 1.8, 3.0]], 40, 0.4, 8);
+    pts.extend(tail);
+    let p = kmeans(&pts, 2, 4, 100, 7);
+    assert_eq!(p.centroids.len(), 2);
+    assert_eq!(separated_groups(&pts, &p), vec![0, 0]);
+}
