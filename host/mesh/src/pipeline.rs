@@ -132,6 +132,7 @@ fn run(
         fine.geometry(),
         field,
         3.0 * fine.spacing_m,
+        config.votes,
     )
     .map_err(|e| MeshError::Surface(e.to_string()))?;
     Ok(MeshResult { mesh, report, hull })

@@ -120,15 +120,21 @@ pub struct HullField {
     pub values: Vec<f32>,
     /// φ beyond the grid, metres (> 0: outside).
     pub outside_m: f64,
+    /// φ at a node is the `votes`-th largest of the views' signed silhouette distances
+    /// (docs/mesh.md "Voting and the signed distance"; 1 for the classic hull, the largest):
+    /// its zero set touches the object only where at least this many views' silhouettes do,
+    /// and lies outside it elsewhere.
+    pub votes: usize,
 }
 
 impl HullField {
-    /// Checks the grid and the values.
+    /// Checks the grid and the values (`votes` below 1 counts as 1).
     pub fn new(
         world_from_volume: Isometry3<f64>,
         grid: GridGeometry,
         values: Vec<f32>,
         outside_m: f64,
+        votes: usize,
     ) -> Result<Self, HullError> {
         if grid.n.iter().any(|&n| n < 2) || !(grid.spacing_m.is_finite() && grid.spacing_m > 0.0) {
             return Err(HullError::Grid {
@@ -150,6 +156,7 @@ impl HullField {
             grid,
             values,
             outside_m,
+            votes: votes.max(1),
         })
     }
 
@@ -209,7 +216,7 @@ pub(crate) mod tests {
                 }
             }
         }
-        HullField::new(Isometry3::identity(), grid, values, 1.0).unwrap()
+        HullField::new(Isometry3::identity(), grid, values, 1.0, 1).unwrap()
     }
 
     #[test]
@@ -247,7 +254,7 @@ pub(crate) mod tests {
         let (v, _) = hull.value_volume(Vector3::new(0.0, 0.0, 0.025));
         assert!((v + 0.005).abs() < 1e-6, "{v}");
         assert_eq!(hull.value_volume(Vector3::new(1.0, 0.0, 0.01)).0, 1.0);
-        let bad = HullField::new(Isometry3::identity(), hull.grid, vec![0.0; 3], 1.0);
+        let bad = HullField::new(Isometry3::identity(), hull.grid, vec![0.0; 3], 1.0, 1);
         assert!(matches!(bad, Err(HullError::Length { .. })));
     }
 }

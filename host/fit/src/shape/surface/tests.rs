@@ -1,7 +1,8 @@
 //! The surface update on a sphere: started 2 mm too large, with the true normals (an offset
 //! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
 //! it converges onto the sphere where the views see it; a step that folds a triangle is
-//! shortened until it does not.
+//! shortened until it does not; a vertex is held on a silhouette only where as many views as
+//! the hull has votes are tangent to it.
 
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::procedural::icosphere;
@@ -9,7 +10,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::super::hull::{GridGeometry, HullField};
 use super::super::tests::fit;
-use super::{SurfaceConfig, SurfaceState, turned_over, unfolded_step};
+use super::{SurfaceConfig, SurfaceState, on_silhouette, turned_over, unfolded_step};
 
 const RADIUS: f64 = 0.02;
 
@@ -61,7 +62,7 @@ fn hull() -> HullField {
             }
         }
     }
-    HullField::new(Isometry3::identity(), grid, values, 0.01).unwrap()
+    HullField::new(Isometry3::identity(), grid, values, 0.01, 1).unwrap()
 }
 
 #[test]
@@ -214,4 +215,30 @@ fn a_step_that_folds_a_triangle_is_shortened_until_it_does_not() {
     // So far across that every fraction folds it: refused.
     after[2] = Point3::new(0.0, -100.0, 0.0);
     assert!(unfolded_step(&triangles, &before, &after, None).is_none());
+}
+
+#[test]
+fn a_vertex_is_held_on_a_silhouette_only_where_as_many_views_as_the_hull_has_votes_touch_it() {
+    let (dirs, _) = icosphere(4);
+    let cameras: Vec<Point3<f64>> = cameras().into_iter().map(Point3::from).collect();
+    let config = SurfaceConfig::default();
+    let mut hull = hull();
+    let mut held = |votes: usize| {
+        hull.votes = votes;
+        dirs.iter()
+            .filter(|d| {
+                let p = Point3::from(centre() + d.into_inner() * RADIUS);
+                on_silhouette(&hull, &p, &d.into_inner(), &cameras, &config)
+            })
+            .count()
+    };
+    let (one, two, all) = (held(1), held(2), held(cameras.len() + 1));
+    // The classic hull (one vote) touches the sphere on every view's silhouette.
+    assert!(one > 100, "{one} vertices held with one vote");
+    // Where a single view is tangent, a hull of two votes stands outside: fewer are held.
+    assert!(
+        two < one && two > 0,
+        "{two} held with two votes, {one} with one"
+    );
+    assert_eq!(all, 0);
 }
