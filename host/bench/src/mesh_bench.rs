@@ -108,6 +108,9 @@ pub struct MeshScores {
     pub fit_s: f64,
     /// Wall time of the fit on the true mesh, s.
     pub true_mesh_fit_s: f64,
+    /// The same session fitted on the true mesh: its refined normals against the truth at its
+    /// observed vertices, median, degrees — what the data give without any shape error.
+    pub true_mesh_normal_median_deg: f64,
 }
 
 /// One `ellipso fit --vertices N` run.
@@ -280,10 +283,11 @@ fn bench_scene(
         let scores = mesh_scores(scene, &session, &mesh, &fit, fit_s, &config, say)?;
         say!(
             say,
-            "[{name}] observed surface {:.3} → {:.3} mm mean, normals {:.2}° median; Chamfer {:.3} → {:.3} mm ({:.0} s)",
+            "[{name}] observed surface {:.3} → {:.3} mm mean, normals {:.2}° median (true mesh {:.2}°); Chamfer {:.3} → {:.3} mm ({:.0} s)",
             scores.before.observed_mean_m * 1e3,
             scores.after.observed_mean_m * 1e3,
             scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+            scores.true_mesh_normal_median_deg,
             scores.distance_before.chamfer_m * 1e3,
             scores.distance_after.chamfer_m * 1e3,
             fit_s
@@ -340,6 +344,14 @@ pub fn mesh_scores(
         eta: eta_beside(&per_material(fit), &per_material(&on_truth)),
         fit_s,
         true_mesh_fit_s,
+        true_mesh_normal_median_deg: surface_score(
+            &truth,
+            &on_truth.mesh,
+            Some(&on_truth.outcome.fits),
+            &on_truth.observed,
+        )
+        .fit_normal_median_deg
+        .unwrap_or(f64::NAN),
     })
 }
 
