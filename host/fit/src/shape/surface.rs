@@ -118,10 +118,14 @@ pub struct SurfaceIteration {
     /// Vertices the solve left outside the hull, projected onto it.
     #[serde(default)]
     pub projected: usize,
-    /// Fraction of the solved step applied: 1, or less where the full step would have turned
-    /// triangles over ([`BACKTRACK_FRACTIONS`]).
+    /// The smallest fraction of its solved move a vertex was given: 1, or less where the full
+    /// step would have turned triangles over ([`BACKTRACK_FRACTIONS`]).
     #[serde(default = "full_step")]
     pub step_fraction: f64,
+    /// Vertices whose move was cut back so that no triangle turns over (the others moved the
+    /// whole solved step).
+    #[serde(default)]
+    pub shortened_vertices: usize,
     /// Triangles the full step would have turned over (0 when none would).
     #[serde(default)]
     pub turned_over_full_step: usize,
@@ -154,7 +158,9 @@ impl SurfaceIteration {
         }
         if self.turned_over_full_step > 0 && self.applied {
             s += &format!(
-                ", {:.0} % of the step (the whole would turn {} triangles over)",
+                ", {} vertices moved only part of the way, down to {:.1} % (the whole step would \
+                 turn {} triangles over)",
+                self.shortened_vertices,
                 self.step_fraction * 100.0,
                 self.turned_over_full_step
             );
@@ -243,52 +249,100 @@ fn on_silhouette(
     tangent_views.take(hull.votes).count() >= hull.votes
 }
 
-/// Triangles whose orientation reverses between `before` and `after`.
-/// A solved step that would turn triangles over is applied at the first of these fractions
-/// that turns none (and keeps the surface inside the hull); a step that turns some at every
-/// fraction is refused. A sliver next to a silhouette can fold under the full step while the
-/// rest of the surface moves as it should, and refusing the whole step ended the update early
-/// (measured: the demo at 9 389 vertices stopped after one step, observed surface 0.25 mm).
+/// The fractions of its solved move a vertex may be cut back to, in turn, where the whole
+/// step would turn one of its triangles over; a triangle still turned over with every corner
+/// at the last one refuses the step. Only the corners of the triangles that fold are cut back
+/// (and then the corners of any triangle the cut folds): a sliver next to a silhouette can
+/// fold under a step that moves the rest of the surface as it should. Refusing the whole step
+/// had ended the update after one step on the demo at 9 389 vertices (observed surface
+/// 0.25 mm); shortening the whole step for one sliver applied half of every step there
+/// (0.131 mm).
 pub const BACKTRACK_FRACTIONS: [f64; 3] = [0.5, 0.25, 0.125];
 
 fn full_step() -> f64 {
     1.0
 }
 
-/// `before + t·(after − before)` per vertex.
-fn partial_step(before: &[Point3<f64>], after: &[Point3<f64>], t: f64) -> Vec<Point3<f64>> {
-    before
-        .iter()
-        .zip(after)
-        .map(|(b, a)| b + (a - b) * t)
-        .collect()
-}
-
-/// The step `before → after` shortened to the first of [`BACKTRACK_FRACTIONS`] that turns no
-/// triangle over: the fraction and the positions (`None`: every fraction turns some).
+/// The step `before → after` with the move of the corners of folding triangles cut back
+/// ([`BACKTRACK_FRACTIONS`]) until no triangle turns over, projected inside the hull: the
+/// smallest fraction applied, the vertices cut back, the positions and the vertices
+/// projected (`None`: a triangle folds with every corner at the last fraction).
 fn unfolded_step(
     triangles: &[[u32; 3]],
     before: &[Point3<f64>],
     after: &[Point3<f64>],
     hull: Option<&HullField>,
-) -> Option<(f64, Vec<Point3<f64>>, usize)> {
-    BACKTRACK_FRACTIONS.iter().find_map(|&t| {
-        let mut positions = partial_step(before, after, t);
+) -> Option<Unfolded> {
+    let fractions = |level: u8| match level {
+        0 => 1.0,
+        l => BACKTRACK_FRACTIONS[usize::from(l) - 1],
+    };
+    let last = BACKTRACK_FRACTIONS.len() as u8;
+    let mut level = vec![0u8; before.len()];
+    loop {
+        let mut positions: Vec<Point3<f64>> = before
+            .iter()
+            .zip(after)
+            .zip(&level)
+            .map(|((b, a), &l)| b + (a - b) * fractions(l))
+            .collect();
         // Between two surfaces inside a hull that is not convex lies a surface that may leave
         // it: projected back as the solve's own result is.
         let projected = hull.map_or(0, |h| project_inside(h, &mut positions));
-        (turned_over(triangles, before, &positions) == 0).then_some((t, positions, projected))
-    })
+        let folded: Vec<&[u32; 3]> = triangles
+            .iter()
+            .filter(|t| turns_over(before, &positions, t))
+            .collect();
+        if folded.is_empty() {
+            let shortened = level.iter().filter(|&&l| l > 0).count();
+            let deepest = level.iter().copied().max().unwrap_or(0);
+            return Some(Unfolded {
+                fraction: fractions(deepest),
+                shortened,
+                positions,
+                projected,
+            });
+        }
+        let mut cut = false;
+        for t in folded {
+            for &v in t {
+                let l = &mut level[v as usize];
+                if *l < last {
+                    *l += 1;
+                    cut = true;
+                }
+            }
+        }
+        if !cut {
+            return None;
+        }
+    }
 }
 
-fn turned_over(triangles: &[[u32; 3]], before: &[Point3<f64>], after: &[Point3<f64>]) -> usize {
-    let normal = |p: &[Point3<f64>], t: &[u32; 3]| {
+/// What [`unfolded_step`] applied.
+struct Unfolded {
+    /// The smallest fraction of a vertex's move applied.
+    fraction: f64,
+    /// Vertices whose move was cut back.
+    shortened: usize,
+    positions: Vec<Point3<f64>>,
+    projected: usize,
+}
+
+/// Whether triangle `t` reverses its orientation between `before` and `after`.
+fn turns_over(before: &[Point3<f64>], after: &[Point3<f64>], t: &[u32; 3]) -> bool {
+    let normal = |p: &[Point3<f64>]| {
         let [a, b, c] = t.map(|i| p[i as usize]);
         (b - a).cross(&(c - a))
     };
+    normal(before).dot(&normal(after)) < 0.0
+}
+
+/// Triangles whose orientation reverses between `before` and `after`.
+fn turned_over(triangles: &[[u32; 3]], before: &[Point3<f64>], after: &[Point3<f64>]) -> usize {
     triangles
         .iter()
-        .filter(|t| normal(before, t).dot(&normal(after, t)) < 0.0)
+        .filter(|t| turns_over(before, after, t))
         .count()
 }
 
@@ -386,17 +440,19 @@ impl SurfaceState {
         let turned_over_full_step =
             turned_over(mesh.triangles(), mesh.positions(), &solved.positions);
         let mut step_fraction = 1.0;
+        let mut shortened_vertices = 0;
         if turned_over_full_step > 0
-            && let Some((t, positions, projected)) =
+            && let Some(u) =
                 unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull)
         {
-            let size = step_size(mesh.positions(), &positions, hull);
-            solved.projected_vertices = projected;
+            let size = step_size(mesh.positions(), &u.positions, hull);
+            solved.projected_vertices = u.projected;
             solved.rms_displacement_m = size.rms_m;
             solved.max_displacement_m = size.max_m;
             solved.max_outside_m = size.max_outside_m;
-            solved.positions = positions;
-            step_fraction = t;
+            solved.positions = u.positions;
+            step_fraction = u.fraction;
+            shortened_vertices = u.shortened;
         }
         let new_mesh = mesh_with_positions(mesh, solved.positions.clone())?;
         let misfit = |m: &TriangleMesh| {
@@ -431,6 +487,7 @@ impl SurfaceState {
             clamped: solved.clamped_vertices,
             projected: solved.projected_vertices,
             step_fraction,
+            shortened_vertices,
             turned_over_full_step,
             seconds: 0.0,
             stopped: None,
@@ -445,8 +502,8 @@ impl SurfaceState {
             ))
         } else if flipped > 0 {
             Some(format!(
-                "stopped: the step would turn {flipped} triangles over even at {:.1} % of its \
-                 length; the last good mesh is kept",
+                "stopped: the step would turn {flipped} triangles over even with their corners \
+                 moved {:.1} % of the way; the last good mesh is kept",
                 BACKTRACK_FRACTIONS[BACKTRACK_FRACTIONS.len() - 1] * 100.0
             ))
         } else if let Some(prev) = self

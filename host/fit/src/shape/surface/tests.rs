@@ -208,13 +208,44 @@ fn a_step_that_folds_a_triangle_is_shortened_until_it_does_not() {
     let mut after = before;
     after[2] = Point3::new(0.0, -1.5, 0.0);
     assert_eq!(turned_over(&triangles, &before, &after), 1);
-    let (t, positions, _) = unfolded_step(&triangles, &before, &after, None).unwrap();
-    assert_eq!(t, 0.25);
-    assert!((positions[2].y - 0.375).abs() < 1e-12);
-    assert_eq!(turned_over(&triangles, &before, &positions), 0);
+    let u = unfolded_step(&triangles, &before, &after, None).unwrap();
+    assert_eq!(u.fraction, 0.25);
+    assert_eq!(u.shortened, 3);
+    assert!((u.positions[2].y - 0.375).abs() < 1e-12);
+    assert_eq!(turned_over(&triangles, &before, &u.positions), 0);
     // So far across that every fraction folds it: refused.
     after[2] = Point3::new(0.0, -100.0, 0.0);
     assert!(unfolded_step(&triangles, &before, &after, None).is_none());
+}
+
+#[test]
+fn only_the_corners_of_a_folding_triangle_are_cut_back() {
+    // Two triangles sharing no vertex: the first folds at the full step, the second moves
+    // 1 m sideways and must move all of it.
+    let triangles = [[0u32, 1, 2], [3, 4, 5]];
+    let before = [
+        Point3::new(0.0, 0.0, 0.0),
+        Point3::new(1.0, 0.0, 0.0),
+        Point3::new(0.0, 1.0, 0.0),
+        Point3::new(5.0, 0.0, 0.0),
+        Point3::new(6.0, 0.0, 0.0),
+        Point3::new(5.0, 1.0, 0.0),
+    ];
+    let mut after = before;
+    after[2] = Point3::new(0.0, -1.5, 0.0);
+    for p in &mut after[3..] {
+        p.x += 1.0;
+    }
+    let u = unfolded_step(&triangles, &before, &after, None).unwrap();
+    assert_eq!(u.fraction, 0.25);
+    assert_eq!(u.shortened, 3);
+    assert!((u.positions[2].y - 0.375).abs() < 1e-12);
+    assert_eq!(
+        u.positions[3..],
+        after[3..],
+        "the second triangle moved the whole step"
+    );
+    assert_eq!(turned_over(&triangles, &before, &u.positions), 0);
 }
 
 #[test]
