@@ -103,6 +103,8 @@ pub struct EtaBeside {
     pub carved_pct: f64,
     /// The same on the true mesh, %.
     pub true_mesh_pct: f64,
+    /// Vertices whose η is reported (identified), carved mesh / true mesh: the median's sample.
+    pub vertices: [usize; 2],
 }
 
 /// The materials of two scores side by side (materials missing from either are left out).
@@ -120,6 +122,7 @@ pub fn eta_beside(
                 eta_true: c.eta_true,
                 carved_pct: c.eta_error_pct,
                 true_mesh_pct: t.eta_error_pct,
+                vertices: [c.vertices, t.vertices],
             })
         })
         .collect()

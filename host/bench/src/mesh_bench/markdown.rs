@@ -119,21 +119,23 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) |"
+            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) | vertices reporting η (carved / true) |"
         );
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---|");
         for r in results {
             let Some(f) = &r.fit else { continue };
             for m in &f.eta {
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} |",
+                    "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {} / {} |",
                     r.scene,
                     m.name,
                     m.eta_true,
                     m.carved_pct,
                     m.true_mesh_pct,
-                    (m.carved_pct - m.true_mesh_pct).abs()
+                    (m.carved_pct - m.true_mesh_pct).abs(),
+                    m.vertices[0],
+                    m.vertices[1]
                 );
             }
         }
