@@ -371,26 +371,12 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
         .iter()
         .map(|list| pool::random_effects(&points_of(list)))
         .collect();
-    // Union-find over clusters of one colour whose identified η agree.
-    let mut group: Vec<usize> = (0..k).collect();
-    fn root(group: &mut [usize], mut i: usize) -> usize {
-        while group[i] != i {
-            group[i] = group[group[i]];
-            i = group[i];
-        }
-        i
-    }
-    for i in 0..k {
-        for j in i + 1..k {
-            let (ci, cj) = (&a.clusters[i].centroid, &a.clusters[j].centroid);
-            let d2: f64 = (0..3).map(|c| (ci[c] - cj[c]).powi(2)).sum();
-            if d2.sqrt() < POOL_COLOUR_DISTANCE && own[i].agrees_with(&own[j]) {
-                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
-                group[ri.max(rj)] = ri.min(rj);
-            }
-        }
-    }
-    let roots: Vec<usize> = (0..k).map(|j| root(&mut group, j)).collect();
+    // Clusters of one colour whose identified η agree pool together.
+    let roots = cluster::join_pairs(k, |i, j| {
+        let (ci, cj) = (&a.clusters[i].centroid, &a.clusters[j].centroid);
+        let d2: f64 = (0..3).map(|c| (ci[c] - cj[c]).powi(2)).sum();
+        d2.sqrt() < POOL_COLOUR_DISTANCE && own[i].agrees_with(&own[j])
+    });
     let mut pooled_members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (j, list) in members.iter().enumerate() {
         pooled_members[roots[j]].extend(list);

@@ -418,27 +418,36 @@ pub fn separated_groups(points: &[Feature], partition: &Partition) -> Vec<usize>
             }
         })
         .collect();
+    join_pairs(k, |i, j| {
+        let d = distance_sq(&partition.centroids[i], &partition.centroids[j]).sqrt();
+        tracing::debug!(
+            "clusters {i} and {j}: centres {d:.3} apart, {:.2} times their spreads",
+            d / (spread[i] + spread[j])
+        );
+        d < GATE_SEPARATION * (spread[i] + spread[j])
+    })
+}
+
+/// Groups of `0..k` joined pairwise (union-find): every pair i < j for which `same(i, j)` holds
+/// lies in one group, transitively. Each index's group is named by its smallest member.
+pub fn join_pairs(k: usize, mut same: impl FnMut(usize, usize) -> bool) -> Vec<usize> {
     let mut group: Vec<usize> = (0..k).collect();
-    fn root(group: &[usize], mut i: usize) -> usize {
+    fn root(group: &mut [usize], mut i: usize) -> usize {
         while group[i] != i {
+            group[i] = group[group[i]];
             i = group[i];
         }
         i
     }
     for i in 0..k {
         for j in i + 1..k {
-            let d = distance_sq(&partition.centroids[i], &partition.centroids[j]).sqrt();
-            tracing::debug!(
-                "clusters {i} and {j}: centres {d:.3} apart, {:.2} times their spreads",
-                d / (spread[i] + spread[j])
-            );
-            if d < GATE_SEPARATION * (spread[i] + spread[j]) {
-                let (ri, rj) = (root(&group, i), root(&group, j));
+            if same(i, j) {
+                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
                 group[ri.max(rj)] = ri.min(rj);
             }
         }
     }
-    (0..k).map(|j| root(&group, j)).collect()
+    (0..k).map(|j| root(&mut group, j)).collect()
 }
 
 /// The chosen partition and how it was chosen.
