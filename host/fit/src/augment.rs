@@ -445,6 +445,8 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
 struct Clustering<'f> {
     by_vertex: Vec<Option<&'f VertexFit>>,
     members: Vec<usize>,
+    /// The members' features, in the order of `members` (what k-means clustered).
+    member_features: Vec<Feature>,
     features: Vec<Option<Feature>>,
     selection: cluster::Selection,
     scaling: FeatureScaling,
@@ -505,6 +507,7 @@ impl<'f> Clustering<'f> {
         Self {
             by_vertex,
             members,
+            member_features,
             features,
             selection,
             scaling,
@@ -524,12 +527,7 @@ pub fn material_labels(n: usize, fits: &[VertexFit], config: &ClusterConfig) -> 
     if partition.centroids.is_empty() {
         return vec![None; n];
     }
-    let member_features: Vec<Feature> = c
-        .members
-        .iter()
-        .map(|&v| c.features[v].expect("member"))
-        .collect();
-    let groups = cluster::separated_groups(&member_features, partition);
+    let groups = cluster::separated_groups(&c.member_features, partition);
     c.features
         .iter()
         .map(|f| f.map(|f| groups[cluster::nearest(&f, &partition.centroids).0]))
@@ -543,6 +541,7 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
     let Clustering {
         by_vertex,
         members,
+        member_features: _,
         features,
         selection,
         scaling,

@@ -19,10 +19,11 @@
 //!   more than [`SurfaceConfig::divergence_ratio`] over the previous step's, or it increases the
 //!   median angle between refined normals and mesh by more than
 //!   [`SurfaceConfig::misfit_increase_deg`]), when the surface leaves the hull by more than
-//!   [`SurfaceConfig::hull_tolerance_m`], or when it turns triangles over even shortened to
-//!   the last of [`BACKTRACK_FRACTIONS`] (a step that folds a sliver at its full length is
-//!   applied at the first fraction that folds none, and the report says so). The reason is
-//!   kept in words ([`SurfaceIteration::stopped`]).
+//!   [`SurfaceConfig::hull_tolerance_m`], or when it turns triangles over even with the
+//!   folding triangles' corners cut back to the last of [`BACKTRACK_FRACTIONS`] (a step that
+//!   folds a sliver at its full length moves those corners only part of the way, every other
+//!   vertex the whole step, and the report says so). The reason is kept in words
+//!   ([`SurfaceIteration::stopped`]).
 //! - Once a step moves less than [`SurfaceConfig::converged_rms_m`] (RMS) the surface has
 //!   converged and no later step runs.
 //! - Without a hull (a caller that has none) the screening is
@@ -441,6 +442,8 @@ impl SurfaceState {
             turned_over(mesh.triangles(), mesh.positions(), &solved.positions);
         let mut step_fraction = 1.0;
         let mut shortened_vertices = 0;
+        // Triangles the applied step turns over: none once the step is unfolded.
+        let mut flipped = turned_over_full_step;
         if turned_over_full_step > 0
             && let Some(u) =
                 unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull)
@@ -453,6 +456,7 @@ impl SurfaceState {
             solved.positions = u.positions;
             step_fraction = u.fraction;
             shortened_vertices = u.shortened;
+            flipped = 0;
         }
         let new_mesh = mesh_with_positions(mesh, solved.positions.clone())?;
         let misfit = |m: &TriangleMesh| {
@@ -492,7 +496,6 @@ impl SurfaceState {
             seconds: 0.0,
             stopped: None,
         };
-        let flipped = turned_over(mesh.triangles(), mesh.positions(), &solved.positions);
         let refused = if hull.is_some() && solved.max_outside_m > config.hull_tolerance_m {
             Some(format!(
                 "stopped: the surface would leave the visual hull by {:.3} mm (tolerance {:.3} mm); \
