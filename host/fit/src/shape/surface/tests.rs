@@ -2,7 +2,7 @@
 //! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
 //! it converges onto the sphere where the views see it; a step that folds a triangle is
 //! shortened until it does not; a vertex is held on a silhouette only where as many views as
-//! the hull has votes are tangent to it.
+//! the hull has votes are tangent to it; its hold gives way inward, never outward.
 
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::procedural::icosphere;
@@ -272,4 +272,68 @@ fn a_vertex_is_held_on_a_silhouette_only_where_as_many_views_as_the_hull_has_vot
         "{two} held with two votes, {one} with one"
     );
     assert_eq!(all, 0);
+}
+
+#[test]
+fn a_silhouette_hold_gives_way_inward_to_consistent_normals_but_never_outward() {
+    // Every vertex of the sphere marked as on a silhouette, a strong screening pulling it 0.5 mm in
+    // (anchors inside) or out (anchors outside), the true normals: inward the hold gives way
+    // (κ_sil), outward it is the hull's full weight.
+    let (dirs, triangles) = icosphere(3);
+    let on_sphere: Vec<Point3<f64>> = dirs
+        .iter()
+        .map(|d| Point3::from(centre() + d.into_inner() * RADIUS))
+        .collect();
+    let hull = hull();
+    let normals: Vec<[f64; 3]> = dirs.iter().map(|d| d.into_inner().into()).collect();
+    let confidence = vec![1.0; dirs.len()];
+    let screening = vec![1.0; dirs.len()];
+    let held = vec![true; dirs.len()];
+    let solve = |offset_m: f64, config: &super::super::integrate::IntegrateConfig| {
+        let anchors: Vec<Point3<f64>> = dirs
+            .iter()
+            .map(|d| Point3::from(centre() + d.into_inner() * (RADIUS + offset_m)))
+            .collect();
+        let solved = super::super::integrate::integrate(
+            &on_sphere,
+            &triangles,
+            &super::super::integrate::Targets {
+                normals_world: &normals,
+                confidence: &confidence,
+                anchors: &anchors,
+                screening: &screening,
+                on_silhouette: &held,
+            },
+            Some(&hull),
+            config,
+        )
+        .unwrap();
+        let radial: Vec<f64> = solved
+            .positions
+            .iter()
+            .map(|p| (p.coords - centre()).norm() - RADIUS)
+            .collect();
+        (radial.iter().sum::<f64>() / radial.len() as f64, solved)
+    };
+    let mut config = SurfaceConfig::default().integrate;
+    config.weights.lambda_position = 1e4;
+    let (inward, _) = solve(-0.0005, &config);
+    let (outward, out) = solve(0.0005, &config);
+    let mut rigid = config.clone();
+    rigid.silhouette_hold_weight = rigid.hull_weight;
+    let (inward_rigid, _) = solve(-0.0005, &rigid);
+    eprintln!(
+        "mean radial move: inward {:.4} mm (rigid hold {:.4} mm), outward {:.4} mm",
+        inward * 1e3,
+        inward_rigid * 1e3,
+        outward * 1e3
+    );
+    assert!(inward < -0.1e-3, "the hold gave way only {inward} m");
+    assert!(inward_rigid > 0.25 * inward, "{inward_rigid} vs {inward}");
+    assert!(
+        out.max_outside_m <= SurfaceConfig::default().hull_tolerance_m,
+        "left the hull by {} m",
+        out.max_outside_m
+    );
+    assert!(outward < 0.05e-3, "moved out {outward} m");
 }
