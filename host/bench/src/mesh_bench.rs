@@ -52,6 +52,10 @@ pub struct MeshBenchRequest {
     pub fit: bool,
     /// `ellipso fit --vertices N` runs on the demo session, one per count.
     pub scale_vertices: Vec<usize>,
+    /// Each scene is also captured with these scene seeds (another capture path where the
+    /// scene's is seeded, other sensor noise) and benched as its own row: how much of a
+    /// difference one capture shows is that capture's.
+    pub seeds: Vec<u64>,
     /// The Markdown report.
     pub report: PathBuf,
     /// The `ellipso` executable that `ellipso mesh` and `ellipso fit` run as (the binary passes
@@ -71,8 +75,10 @@ pub struct MeshBenchFiles {
 /// One scene's result.
 #[derive(Debug, serde::Serialize)]
 pub struct SceneResult {
-    /// Scene name.
+    /// Row label: the scene name, with ` seed N` for a capture with another seed.
     pub scene: String,
+    /// The shipped scene's name (rows of one scene share it).
+    pub base_scene: String,
     /// Frames carved from.
     pub frames: usize,
     /// Vertices of the mesh.
@@ -160,18 +166,30 @@ pub fn run(
         );
         let scene = Scene::load(&scene_path)?;
         let session_dir = args.work.join(name);
-        if !session_dir.join("manifest.json").is_file() {
-            say!(
-                say,
-                "[{name}] capturing at {}×{}…",
-                args.resolution[0],
-                args.resolution[1]
-            );
-            capture_session(&scene_path, &session_dir, args, recorder, say)?;
-        } else {
-            say!(say, "[{name}] reusing {}", session_dir.display());
+        ensure_captured(name, &scene_path, &session_dir, args, recorder, say)?;
+        results.push(bench_scene(
+            name,
+            name,
+            &scene,
+            &session_dir,
+            args,
+            steps,
+            say,
+        )?);
+        for &seed in &args.seeds {
+            let label = format!("{name}-seed{seed}");
+            let variant = args.work.join(format!("{label}.toml"));
+            let edit = crate::variant::SceneEdit {
+                seed: Some(seed),
+                ..Default::default()
+            };
+            let scene = crate::variant::write_variant(&scene_path, &edit, &variant)?;
+            let session_dir = args.work.join(&label);
+            ensure_captured(&label, &variant, &session_dir, args, recorder, say)?;
+            let mut result = bench_scene(&label, name, &scene, &session_dir, args, steps, say)?;
+            result.scene = format!("{name} seed {seed}");
+            results.push(result);
         }
-        results.push(bench_scene(name, &scene, &session_dir, args, steps, say)?);
     }
     let mut scale = Vec::new();
     for &n in &args.scale_vertices {
@@ -196,6 +214,28 @@ pub fn run(
         report: report.shown().to_path_buf(),
         json: json.shown().to_path_buf(),
     })
+}
+
+/// Captures `scene_path` into `session_dir` unless a session is there already (then reused).
+fn ensure_captured(
+    label: &str,
+    scene_path: &Path,
+    session_dir: &Path,
+    args: &MeshBenchRequest,
+    recorder: &mut dyn Recorder,
+    say: &dyn Say,
+) -> Result<(), RunError> {
+    if session_dir.join("manifest.json").is_file() {
+        say!(say, "[{label}] reusing {}", session_dir.display());
+        return Ok(());
+    }
+    say!(
+        say,
+        "[{label}] capturing at {}×{}…",
+        args.resolution[0],
+        args.resolution[1]
+    );
+    capture_session(scene_path, session_dir, args, recorder, say)
 }
 
 /// Captures `scene` into the new session `dir` on the simulated rig, quietly, and tracks it.
@@ -223,6 +263,7 @@ pub fn truth_object(scene: &Scene) -> Result<TruthObject, RunError> {
 
 fn bench_scene(
     name: &str,
+    base_scene: &str,
     scene: &Scene,
     session_dir: &Path,
     args: &MeshBenchRequest,
@@ -298,6 +339,7 @@ fn bench_scene(
     };
     Ok(SceneResult {
         scene: name.into(),
+        base_scene: base_scene.into(),
         frames: report.frames_used,
         vertices: mesh.positions().len(),
         before_fit,

@@ -50,6 +50,11 @@ pub struct MaterialScore {
     pub eta_unpooled_median: f64,
     /// (unpooled median − truth)/truth, %, signed.
     pub eta_unpooled_error_pct: f64,
+    /// Standard error of the material's η from its own data, % of the true η: that of the median
+    /// of the reporting vertices' unpooled η (`ellipso_model::stats::median_standard_error`) —
+    /// the pooled η is shrunk to that median, so its own spread would understate it. NaN below
+    /// two vertices.
+    pub eta_median_se_pct: f64,
     /// The median sits at the start value η = 1.5 (to 1e-4).
     pub at_start_value: bool,
     /// Scored vertices of the material whose η the rule withholds.
@@ -161,6 +166,14 @@ pub fn score_fit(
             eta_error_pct: 100.0 * (eta_median - eta_true) / eta_true,
             eta_unpooled_median,
             eta_unpooled_error_pct: 100.0 * (eta_unpooled_median - eta_true) / eta_true,
+            eta_median_se_pct: 100.0
+                * ellipso_model::stats::median_standard_error(
+                    &mut identified
+                        .iter()
+                        .map(|&v| unpooled(&fits[v]))
+                        .collect::<Vec<_>>(),
+                )
+                / eta_true,
             at_start_value: (eta_median - ETA_START).abs() < 1e-4,
             unidentified_vertices: members.len() - identified.len(),
             rho_d_error_pct: median(

@@ -105,6 +105,10 @@ pub struct EtaBeside {
     pub true_mesh_pct: f64,
     /// Vertices whose η is reported (identified), carved mesh / true mesh: the median's sample.
     pub vertices: [usize; 2],
+    /// 1σ of the difference from the two medians' own standard errors, points:
+    /// √(se_carved² + se_true²) (`MaterialScore::eta_median_se_pct`). Both fits read the same
+    /// frames but mostly at different points, so they are treated as independent.
+    pub noise_points: f64,
 }
 
 /// The materials of two scores side by side (materials missing from either are left out).
@@ -123,6 +127,7 @@ pub fn eta_beside(
                 carved_pct: c.eta_error_pct,
                 true_mesh_pct: t.eta_error_pct,
                 vertices: [c.vertices, t.vertices],
+                noise_points: c.eta_median_se_pct.hypot(t.eta_median_se_pct),
             })
         })
         .collect()

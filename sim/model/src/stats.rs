@@ -8,6 +8,11 @@
 //! - [`median`] is `percentile(values, 0.5)`: for even `n` the upper of the two middle samples
 //!   (index `n/2`; `round` takes halves away from zero), for odd `n` the middle one. Every
 //!   median the fit, vision and bench report is this one, so their numbers agree.
+//! - [`median_standard_error`] is the large-sample standard error of that median,
+//!   1.2533·σ̂/√n with the robust scale σ̂ = 1.4826·MAD (median absolute deviation about the
+//!   median): exact for normal samples (Kendall & Stuart, *The Advanced Theory of
+//!   Statistics*, §10.10: var(median) → πσ²/2n), and MAD keeps a few gross outliers from
+//!   inflating it. NaN for fewer than two samples.
 //!
 //! Not a crate dependency: the few lines here fix the convention (upper median, nearest rank,
 //! NaN when empty) that recorded results already use; `statrs` and friends interpolate.
@@ -25,6 +30,17 @@ pub fn percentile(values: &mut [f64], p: f64) -> f64 {
 /// NaN when empty).
 pub fn median(values: &mut [f64]) -> f64 {
     percentile(values, 0.5)
+}
+
+/// The standard error of [`median`] of `values` (module doc; reorders them; NaN below two).
+pub fn median_standard_error(values: &mut [f64]) -> f64 {
+    let n = values.len();
+    if n < 2 {
+        return f64::NAN;
+    }
+    let centre = median(values);
+    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+    1.2533 * 1.4826 * median(&mut deviations) / (n as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -52,5 +68,27 @@ mod tests {
         assert_eq!(percentile(&mut v, -1.0), 1.0);
         let mut with_nan = vec![f64::NAN, 1.0, 2.0];
         assert_eq!(percentile(&mut with_nan, 0.0), 1.0);
+    }
+
+    #[test]
+    fn the_median_standard_error_follows_the_spread_and_the_count() {
+        // Median 10, absolute deviations {3, 2, 1, 0, 1, 2, 3}: MAD = 2.
+        let seven = [7.0, 8.0, 9.0, 10.0, 11.0, 12.0, 13.0];
+        let se = median_standard_error(&mut seven.clone());
+        assert!(
+            (se - 1.2533 * 1.4826 * 2.0 / 7f64.sqrt()).abs() < 1e-12,
+            "{se}"
+        );
+        // Twice the spread, twice the error; four times the samples, half of it.
+        let wide: Vec<f64> = seven.iter().map(|v| 10.0 + 2.0 * (v - 10.0)).collect();
+        assert!((median_standard_error(&mut wide.clone()) / se - 2.0).abs() < 1e-12);
+        let many: Vec<f64> = seven.iter().copied().cycle().take(28).collect();
+        assert!((median_standard_error(&mut many.clone()) / se - 0.5).abs() < 1e-12);
+        // One sample thrown far away leaves MAD where it was (the standard deviation would not).
+        let mut outlier = many.clone();
+        outlier[0] = 1e9;
+        assert!((median_standard_error(&mut outlier) / se - 0.5).abs() < 1e-12);
+        assert!(median_standard_error(&mut [1.0]).is_nan());
+        assert!(median_standard_error(&mut []).is_nan());
     }
 }

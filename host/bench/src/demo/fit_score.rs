@@ -138,11 +138,12 @@ pub fn fit_and_score(
     for m in &scores.eta {
         say!(
             say,
-            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} points; from {} / {} vertices)",
+            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} ± {:.2} points, 1σ noise; from {} / {} vertices)",
             m.name,
             m.carved_pct,
             m.true_mesh_pct,
             (m.carved_pct - m.true_mesh_pct).abs(),
+            m.noise_points,
             m.vertices[0],
             m.vertices[1]
         );

@@ -38,6 +38,11 @@ pub struct MeshArgs {
     /// vertex counts and report its time, peak memory and observed-surface distance.
     #[arg(long, value_delimiter = ',', value_parser = crate::cli::limits::vertices)]
     pub scale_vertices: Vec<usize>,
+    /// Also capture each scene with these scene seeds (another capture path where the scene's
+    /// is seeded, other sensor noise) and bench each capture as its own row: the spread of the
+    /// rows is what one capture's figures are worth.
+    #[arg(long, value_delimiter = ',')]
+    pub seeds: Vec<u64>,
     /// The Markdown report.
     #[arg(long, default_value = "docs/mesh-bench.md")]
     pub report: PathBuf,
@@ -53,6 +58,7 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         threads: args.threads,
         fit: args.fit,
         scale_vertices: args.scale_vertices,
+        seeds: args.seeds,
         report: args.report,
         exe: std::env::current_exe()?,
     };
