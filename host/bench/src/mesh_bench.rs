@@ -3,7 +3,8 @@
 //! truth, wall time and peak memory of `ellipso mesh` run as its own process; with `--fit`,
 //! also the distance after the fit's shape refinement on that mesh ([`mesh_scores`], which the
 //! demo scores its fit with too); with `--scale-vertices`, `ellipso fit --vertices N` as its own
-//! process on the demo session.
+//! process on the demo session; with `--seeds`, each scene captured again with those scene
+//! seeds and benched as its own row, so one capture's figures can be told from the method's.
 //!
 //! Sessions are captured on the simulated rig (real pty link, pairing, tracking:
 //! [`crate::rig_capture`]) into the work folder, once: an existing session there is reused, so
