@@ -8,11 +8,12 @@
 //! - [`median`] is `percentile(values, 0.5)`: for even `n` the upper of the two middle samples
 //!   (index `n/2`; `round` takes halves away from zero), for odd `n` the middle one. Every
 //!   median the fit, vision and bench report is this one, so their numbers agree.
+//! - [`robust_sigma`] is 1.4826·MAD, the median absolute deviation about [`median`] scaled to
+//!   estimate σ of a normal sample (Hampel 1974); a few gross outliers cannot inflate it, as
+//!   they would the standard deviation. NaN when empty.
 //! - [`median_standard_error`] is the large-sample standard error of that median,
-//!   1.2533·σ̂/√n with the robust scale σ̂ = 1.4826·MAD (median absolute deviation about the
-//!   median): exact for normal samples (Kendall & Stuart, *The Advanced Theory of
-//!   Statistics*, §10.10: var(median) → πσ²/2n), and MAD keeps a few gross outliers from
-//!   inflating it. NaN for fewer than two samples.
+//!   1.2533·[`robust_sigma`]/√n: exact for normal samples (Kendall & Stuart, *The Advanced
+//!   Theory of Statistics*, §10.10: var(median) → πσ²/2n). NaN for fewer than two samples.
 //!
 //! Not a crate dependency: the few lines here fix the convention (upper median, nearest rank,
 //! NaN when empty) that recorded results already use; `statrs` and friends interpolate.
@@ -32,15 +33,20 @@ pub fn median(values: &mut [f64]) -> f64 {
     percentile(values, 0.5)
 }
 
+/// 1.4826·MAD of `values` about their [`median`] (module doc; reorders them; NaN when empty).
+pub fn robust_sigma(values: &mut [f64]) -> f64 {
+    let centre = median(values);
+    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
+    1.4826 * median(&mut deviations)
+}
+
 /// The standard error of [`median`] of `values` (module doc; reorders them; NaN below two).
 pub fn median_standard_error(values: &mut [f64]) -> f64 {
     let n = values.len();
     if n < 2 {
         return f64::NAN;
     }
-    let centre = median(values);
-    let mut deviations: Vec<f64> = values.iter().map(|v| (v - centre).abs()).collect();
-    1.2533 * 1.4826 * median(&mut deviations) / (n as f64).sqrt()
+    1.2533 * robust_sigma(values) / (n as f64).sqrt()
 }
 
 #[cfg(test)]
@@ -88,6 +94,8 @@ mod tests {
         let mut outlier = many.clone();
         outlier[0] = 1e9;
         assert!((median_standard_error(&mut outlier) / se - 0.5).abs() < 1e-12);
+        assert!(robust_sigma(&mut []).is_nan());
+        assert!((robust_sigma(&mut seven.clone()) - 1.4826 * 2.0).abs() < 1e-12);
         assert!(median_standard_error(&mut [1.0]).is_nan());
         assert!(median_standard_error(&mut []).is_nan());
     }
