@@ -157,7 +157,8 @@ pub fn score_fit(
             .filter(|&v| fits[v].eta_identified())
             .collect();
         let eta_median = median(identified.iter().map(|&v| fits[v].params.eta).collect());
-        let eta_unpooled_median = median(identified.iter().map(|&v| unpooled(&fits[v])).collect());
+        let mut unpooled_etas: Vec<f64> = identified.iter().map(|&v| unpooled(&fits[v])).collect();
+        let eta_unpooled_median = median(unpooled_etas.clone());
         materials.push(MaterialScore {
             name: name.clone(),
             eta_true,
@@ -167,12 +168,7 @@ pub fn score_fit(
             eta_unpooled_median,
             eta_unpooled_error_pct: 100.0 * (eta_unpooled_median - eta_true) / eta_true,
             eta_median_se_pct: 100.0
-                * ellipso_model::stats::median_standard_error(
-                    &mut identified
-                        .iter()
-                        .map(|&v| unpooled(&fits[v]))
-                        .collect::<Vec<_>>(),
-                )
+                * ellipso_model::stats::median_standard_error(&mut unpooled_etas)
                 / eta_true,
             at_start_value: (eta_median - ETA_START).abs() < 1e-4,
             unidentified_vertices: members.len() - identified.len(),

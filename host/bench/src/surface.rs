@@ -111,6 +111,13 @@ pub struct EtaBeside {
     pub noise_points: f64,
 }
 
+impl EtaBeside {
+    /// |carved − true mesh|, points: what issue 27's 0.2-point target is about.
+    pub fn difference_points(&self) -> f64 {
+        (self.carved_pct - self.true_mesh_pct).abs()
+    }
+}
+
 /// The materials of two scores side by side (materials missing from either are left out).
 pub fn eta_beside(
     carved: &crate::score::FitScores,

@@ -142,7 +142,7 @@ pub fn fit_and_score(
             m.name,
             m.carved_pct,
             m.true_mesh_pct,
-            (m.carved_pct - m.true_mesh_pct).abs(),
+            m.difference_points(),
             m.noise_points,
             m.vertices[0],
             m.vertices[1]

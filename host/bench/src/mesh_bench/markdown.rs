@@ -8,6 +8,7 @@
 use std::fmt::Write as _;
 
 use super::{MeshBenchRequest, ScaleResult, SceneResult};
+use crate::surface::EtaBeside;
 
 /// The report (module doc); `total_s`: the whole run's wall time.
 pub fn markdown(
@@ -24,30 +25,8 @@ pub fn markdown(
          the command. Method and limits: [mesh.md](mesh.md); the surface update: \
          [fit-shape.md](fit-shape.md).\n",
         if args.fit { " --fit" } else { "" },
-        if args.seeds.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " --seeds {}",
-                args.seeds
-                    .iter()
-                    .map(|v| v.to_string())
-                    .collect::<Vec<_>>()
-                    .join(",")
-            )
-        },
-        if args.scale_vertices.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " --scale-vertices {}",
-                args.scale_vertices
-                    .iter()
-                    .map(|v| v.to_string())
-                    .collect::<Vec<_>>()
-                    .join(",")
-            )
-        },
+        list_flag("--seeds", &args.seeds),
+        list_flag("--scale-vertices", &args.scale_vertices),
         total_s
     );
     let _ = writeln!(
@@ -141,7 +120,7 @@ pub fn markdown(
         for r in results {
             let Some(f) = &r.fit else { continue };
             for m in &f.eta {
-                let difference = (m.carved_pct - m.true_mesh_pct).abs();
+                let difference = m.difference_points();
                 let _ = writeln!(
                     s,
                     "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {:.2} | {} | {} / {} |",
@@ -235,22 +214,27 @@ fn eta_verdict(difference: f64, noise: f64) -> &'static str {
     }
 }
 
+/// ` FLAG a,b,c` as the command line had it, or nothing for an empty list.
+fn list_flag<T: ToString>(flag: &str, values: &[T]) -> String {
+    if values.is_empty() {
+        return String::new();
+    }
+    let values: Vec<String> = values.iter().map(ToString::to_string).collect();
+    format!(" {flag} {}", values.join(","))
+}
+
 /// With `--seeds`: each scene's η differences over its captures side by side (nothing when
 /// every scene was captured once).
 fn across_captures(s: &mut String, results: &[SceneResult]) {
-    let mut scenes: Vec<&str> = Vec::new();
-    for r in results {
-        if r.fit.is_some() && !scenes.contains(&r.base_scene.as_str()) {
-            scenes.push(&r.base_scene);
+    // The fitted rows of each shipped scene, in the order the scenes first appear.
+    let mut scenes: Vec<(&str, Vec<&SceneResult>)> = Vec::new();
+    for r in results.iter().filter(|r| r.fit.is_some()) {
+        match scenes.iter_mut().find(|(name, _)| *name == r.base_scene) {
+            Some((_, rows)) => rows.push(r),
+            None => scenes.push((&r.base_scene, vec![r])),
         }
     }
-    let rows = |scene: &str| -> Vec<&SceneResult> {
-        results
-            .iter()
-            .filter(|r| r.base_scene == scene && r.fit.is_some())
-            .collect()
-    };
-    if scenes.iter().all(|scene| rows(scene).len() < 2) {
+    if scenes.iter().all(|(_, rows)| rows.len() < 2) {
         return;
     }
     let _ = writeln!(
@@ -263,8 +247,7 @@ fn across_captures(s: &mut String, results: &[SceneResult]) {
         "| scene | material | difference per capture (points) | mean | captures within 0.2 points |"
     );
     let _ = writeln!(s, "|---|---|---|---:|---|");
-    for scene in scenes {
-        let captures = rows(scene);
+    for (scene, captures) in scenes {
         let Some(first) = captures[0].fit.as_ref() else {
             continue;
         };
@@ -272,7 +255,7 @@ fn across_captures(s: &mut String, results: &[SceneResult]) {
             let differences: Vec<f64> = captures
                 .iter()
                 .filter_map(|r| r.fit.as_ref()?.eta.iter().find(|e| e.name == m.name))
-                .map(|e| (e.carved_pct - e.true_mesh_pct).abs())
+                .map(EtaBeside::difference_points)
                 .collect();
             let mean = differences.iter().sum::<f64>() / differences.len() as f64;
             let _ = writeln!(
@@ -295,7 +278,7 @@ fn across_captures(s: &mut String, results: &[SceneResult]) {
 
 #[cfg(test)]
 mod tests {
-    use super::eta_verdict;
+    use super::{eta_verdict, list_flag};
 
     #[test]
     fn the_eta_verdict_holds_the_target_and_says_where_the_noise_stands() {
@@ -304,5 +287,11 @@ mod tests {
         assert_eq!(eta_verdict(0.3, 0.15), "not met, within 2σ of the noise");
         assert_eq!(eta_verdict(0.31, 0.15), "not met");
         assert_eq!(eta_verdict(0.3, f64::NAN), "not met");
+    }
+
+    #[test]
+    fn a_list_flag_is_written_as_typed_or_left_out() {
+        assert_eq!(list_flag("--seeds", &[2u64, 3]), " --seeds 2,3");
+        assert_eq!(list_flag::<u64>("--seeds", &[]), "");
     }
 }
