@@ -142,6 +142,7 @@ pub fn export_fit(
         gates: fit.gates.clone(),
         held_out: fit.holdout.clone(),
         import,
+        normal_combination: fit.normal_combination.clone(),
         observe: fit.observe.clone(),
         observed_vertices: fit.observed.iter().filter(|o| **o).count(),
         peak_rss_bytes: ellipso_report::memory::peak_rss_bytes(),

@@ -16,6 +16,9 @@
 //!   prior), and — except after the last iteration — move the vertices towards the refined
 //!   normals. The last iteration runs the whole pipeline
 //!   ([`super::pipeline::fit_sample_set`]: step A, and B + C when enabled).
+//! - After it, when a surface step was applied and `combine_normals` is on, each fit's normal
+//!   is its refined normal combined with the final surface's by their precisions
+//!   ([`super::shape::combine`]); the held-out views are scored with those normals.
 //! - The session is only read; nothing recorded is changed.
 //! - Deterministic for a given input on any thread count.
 
@@ -33,6 +36,7 @@ use super::observe::{
 };
 use super::pipeline::{FitConfig, FitOutcome, fit_sample_set, fit_shared_steps};
 use super::shape::ShapeError;
+use super::shape::combine::{NormalCombination, combine_with_surface, surface_normal_std_deg};
 use super::shape::hull::HullField;
 use super::shape::surface::{SurfaceConfig, SurfaceIteration, SurfaceState, observed_vertices};
 use super::shard::Shard;
@@ -58,6 +62,14 @@ pub struct SessionFitConfig {
     pub hull: Option<std::sync::Arc<HullField>>,
     /// Fraction of the posed frames held out for validation (default 0.1; 0 fits all).
     pub holdout_fraction: f64,
+    /// After the outer loop, report each vertex's refined normal combined with the refined
+    /// surface's normal by their precisions ([`crate::shape::combine`]; default on).
+    #[serde(default = "default_true")]
+    pub combine_normals: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl Default for SessionFitConfig {
@@ -65,10 +77,11 @@ impl Default for SessionFitConfig {
         Self {
             observe: ObserveConfig::default(),
             fit: FitConfig::default(),
-            outer_iterations: 4,
+            outer_iterations: 8,
             surface: SurfaceConfig::default(),
             hull: None,
             holdout_fraction: 0.1,
+            combine_normals: true,
         }
     }
 }
@@ -160,6 +173,9 @@ pub struct SessionFit {
     pub outcome: FitOutcome,
     /// One entry per surface update step (convergence, refusals).
     pub surface: Vec<SurfaceIteration>,
+    /// How the reported normals were combined with the refined surface's (`None`: no surface
+    /// step was applied, or `combine_normals` is off; the normals are the solve's).
+    pub normal_combination: Option<NormalCombination>,
     /// Per vertex of `mesh`: observed by at least one fitted frame (a kept sample).
     pub observed: Vec<bool>,
     /// Gate counts of the last extraction, summed over vertices.
@@ -281,6 +297,14 @@ pub fn fit_session_with(
     let set = extraction.samples;
     observe_s += seconds;
     let mut outcome = fit_sample_set(&set, previous.as_deref(), &config.fit, progress);
+    let normal_combination = match surface_normal_std_deg(&surface.iterations) {
+        Some(sigma) if config.combine_normals => {
+            let c = combine_with_surface(&mut outcome.fits, mesh.normals(), sigma)?;
+            progress(&c.describe());
+            Some(c)
+        }
+        _ => None,
+    };
     outcome.times.observe_s = observe_s;
     outcome.times.joint_s += joint_s;
     outcome.times.shape_s = shape_s;
@@ -305,6 +329,7 @@ pub fn fit_session_with(
         set,
         outcome,
         surface: surface.iterations,
+        normal_combination,
         observed,
         gates,
         observe: extraction.report,
@@ -514,6 +539,7 @@ pub fn finish_from_joint(
         set,
         outcome,
         surface: Vec::new(),
+        normal_combination: None,
         observed,
         gates,
         observe: extraction.report,

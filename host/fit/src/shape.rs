@@ -67,6 +67,7 @@
 //!   index or zero area (counted; their proper edges still take part).
 //! - Returned positions are always finite.
 
+pub mod combine;
 mod energy;
 pub mod hull;
 pub mod integrate;

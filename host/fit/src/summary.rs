@@ -20,6 +20,7 @@ use crate::export::ExportReport;
 use crate::holdout::HoldoutReport;
 use crate::observe::{ObserveReport, SkippedFrame};
 use crate::pipeline::{PoolingSummary, StageTimes};
+use crate::shape::combine::NormalCombination;
 use crate::shape::surface::SurfaceIteration;
 
 /// The contents of `fit-summary.json` (module doc). Fields in alphabetical order, as the file
@@ -54,6 +55,9 @@ pub struct FitSummary {
     /// comes after this one); absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub import: Option<serde_json::Value>,
+    /// How the reported normals were combined with the refined surface's
+    /// (`shape::combine`); `null` when no surface step was applied.
+    pub normal_combination: Option<NormalCombination>,
     /// The last extraction's whole report (frames posed, used, skipped with reasons).
     pub observe: ObserveReport,
     /// Number of vertices observed by at least one fitted frame (a kept sample).

@@ -31,7 +31,7 @@ pub struct Args {
     #[arg(long)]
     pub view: Option<u64>,
     /// Outer iterations (solve ↔ surface update), 1..=20; 1 keeps the input geometry (default
-    /// 4, fewer when the surface converges; a shard runs 1).
+    /// 8, fewer when the surface converges; a shard runs 1).
     #[arg(long, value_parser = super::limits::outer_iterations)]
     pub outer: Option<usize>,
     /// Target vertex count of the mesh carved without `--mesh`, 16..=2000000.

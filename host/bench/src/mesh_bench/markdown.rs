@@ -71,9 +71,10 @@ pub fn markdown(
              samples, the others (the underside, the contact with the board) are scored apart. \
              Distance: vertex to the closest point of the true surface, mean (p90). Normals: \
              median angle to the true normal over observed vertices — the carved mesh's own \
-             before, the fit's refined normals after, and beside them the refined normals of \
-             the same session fitted on the true mesh (what the data give without a shape \
-             error). Targets (issue 27): observed surface ≤ 0.3 mm mean on the demo and the \
+             before, the fit's normals after (each refined normal combined with the refined \
+             surface's by their precisions, fit-shape.md \"The reported normal\"), and beside \
+             them the normals of the same session fitted on the true mesh (what the data give \
+             without a shape error). Targets (issue 27): observed surface ≤ 0.3 mm mean on the demo and the \
              sphere with 150 photos (≤ 0.5 mm with 60), normals ≤ 1° median.\n"
         );
         let _ = writeln!(
