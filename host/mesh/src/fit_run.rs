@@ -272,6 +272,9 @@ pub fn fit_and_export(
             step.describe()
         ));
     }
+    if let Some(c) = &fit.normal_combination {
+        say.err(format_args!("  {}", c.describe()));
+    }
     let import = import
         .map(|i| serde_json::to_value(&i.summary))
         .transpose()?;
