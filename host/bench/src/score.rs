@@ -158,7 +158,7 @@ pub fn score_fit(
             .collect();
         let eta_median = median(identified.iter().map(|&v| fits[v].params.eta).collect());
         let mut unpooled_etas: Vec<f64> = identified.iter().map(|&v| unpooled(&fits[v])).collect();
-        let eta_unpooled_median = median(unpooled_etas.clone());
+        let eta_unpooled_median = ellipso_model::stats::median(&mut unpooled_etas);
         materials.push(MaterialScore {
             name: name.clone(),
             eta_true,

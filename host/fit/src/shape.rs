@@ -133,6 +133,16 @@ pub const NORMAL_VOIDING_FLAGS: [FitFlag; 5] = [
     FitFlag::NotConverged,
 ];
 
+/// Whether a refined normal is a measurement the shape steps may use: no flag of
+/// [`NORMAL_VOIDING_FLAGS`] and a finite, non-negative standard error (an unidentifiable normal
+/// reports `f64::INFINITY`). The one rule behind [`ShapeConfig::confidence`] and
+/// [`combine::combine_with_surface`].
+pub fn normal_trusted(normal_std_error_deg: f64, flags: &[FitFlag]) -> bool {
+    !flags.iter().any(|f| NORMAL_VOIDING_FLAGS.contains(f))
+        && normal_std_error_deg.is_finite()
+        && normal_std_error_deg >= 0.0
+}
+
 impl ShapeConfig {
     /// Checks every field's range.
     pub fn validate(&self) -> Result<(), ShapeError> {
@@ -162,10 +172,7 @@ impl ShapeConfig {
     /// [`NORMAL_VOIDING_FLAGS`] is set or σ_n is not a finite non-negative number (an
     /// unidentifiable normal reports `f64::INFINITY`).
     pub fn confidence(&self, normal_std_error_deg: f64, flags: &[FitFlag]) -> f64 {
-        if flags.iter().any(|f| NORMAL_VOIDING_FLAGS.contains(f)) {
-            return 0.0;
-        }
-        if !(normal_std_error_deg.is_finite() && normal_std_error_deg >= 0.0) {
+        if !normal_trusted(normal_std_error_deg, flags) {
             return 0.0;
         }
         // σ_ref > 0 (validated), so the ratio is finite.

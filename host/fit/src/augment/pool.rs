@@ -145,7 +145,7 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
     }
     let median = |mut v: Vec<f64>| ellipso_model::stats::median(&mut v);
     let mut etas: Vec<f64> = usable.iter().map(|p| p.0).collect();
-    let centre = median(etas.clone());
+    let centre = ellipso_model::stats::median(&mut etas);
     let s2 = median(usable.iter().map(|p| p.1 * p.1).collect());
     let tau2 = (ellipso_model::stats::robust_sigma(&mut etas).powi(2) - s2).max(0.0);
     let kept: Vec<(f64, f64)> = usable

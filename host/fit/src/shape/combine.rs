@@ -17,16 +17,17 @@
 //!   combination leans towards the refined normal, never past what the data say.
 //! - [`combine_with_surface`] replaces `normal_world` of every fit by
 //!   `normalise(n_r/σ_r² + n_s/σ_s²)` (σ_r the fit's `normal_std_error_deg`, σ_s the surface's).
-//!   Left as they are, and counted: a refined normal the shape update does not trust either (a
-//!   flag of [`super::NORMAL_VOIDING_FLAGS`], a non-finite or negative σ_r, or no direction) —
-//!   the vertex's parameters were fitted with it, and its normal is no measurement to improve;
+//!   Left as they are, and counted: a refined normal the shape update does not trust either
+//!   ([`super::normal_trusted`]: a flag of [`super::NORMAL_VOIDING_FLAGS`], a non-finite or
+//!   negative σ_r; or no direction) — the vertex's parameters were fitted with it, and its
+//!   normal is no measurement to improve;
 //!   a pair 90° or more apart (no tangent plane to average in); σ_r < 10⁻⁹° (exact).
 //! - `normal_std_error_deg` is left as the refined normal's own: the surface was built from
 //!   the same samples, so the two are not independent and the textbook combined σ would claim
 //!   more than the data give.
 //! - Errors: `surface_normals` not one per fitted vertex, or σ_s not finite and > 0.
 
-use super::{NORMAL_VOIDING_FLAGS, ShapeError};
+use super::{ShapeError, normal_trusted};
 use crate::data::VertexFit;
 use crate::shape::surface::SurfaceIteration;
 use nalgebra::{Unit, Vector3};
@@ -96,9 +97,8 @@ pub fn combine_with_surface(
             });
         };
         let sigma = fit.normal_std_error_deg;
-        let voided = fit.flags.iter().any(|f| NORMAL_VOIDING_FLAGS.contains(f));
         let refined = Unit::try_new(Vector3::from(fit.normal_world), 1e-12);
-        let Some(refined) = refined.filter(|_| !voided && sigma.is_finite() && sigma >= 0.0) else {
+        let Some(refined) = refined.filter(|_| normal_trusted(sigma, &fit.flags)) else {
             report.untrusted += 1;
             continue;
         };
@@ -106,11 +106,11 @@ pub fn combine_with_surface(
             // exact for any use (and 1/σ² would overflow)
             continue;
         }
-        let weight_refined = sigma.powi(-2);
         if refined.dot(surface) <= 0.0 {
             report.opposed += 1;
             continue;
         }
+        let weight_refined = sigma.powi(-2);
         // Both weights are finite and positive (σ_s > 0 checked, σ_r > 0 here), the unit vectors
         // less than 90° apart: the sum has a positive length.
         let sum = refined.into_inner() * weight_refined + surface.into_inner() * weight_surface;
