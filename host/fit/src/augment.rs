@@ -155,6 +155,10 @@ pub struct PartitionSummary {
     pub tried: Vec<(usize, Option<f64>)>,
     /// Minimum members for a cluster model.
     pub min_cluster_vertices: usize,
+    /// The silhouette's k when clusters of it that were not separated were joined into one
+    /// material (`cluster::join_unseparated`); absent when the partition stands as chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub joined_from: Option<usize>,
     /// Feature normalisation.
     pub scaling: FeatureScaling,
 }
@@ -627,6 +631,7 @@ pub fn augment(set: &SampleSet, fits: &[VertexFit], config: &AugmentConfig) -> A
             silhouette: selection.silhouette,
             tried: selection.tried.clone(),
             min_cluster_vertices: selection.min_cluster_vertices,
+            joined_from: selection.joined_from,
             scaling,
         },
         clusters,

@@ -154,3 +154,66 @@ fn gate_groups_keep_materials_apart_and_join_the_splits_of_one() {
     assert_eq!(p.centroids.len(), 2);
     assert_eq!(separated_groups(&pts, &p), vec![0, 0]);
 }
+
+#[test]
+fn automatic_k_joins_the_splits_of_one_material_and_keeps_materials_apart() {
+    // One grey material whose albedo drifts over the object (model error, a shading bias):
+    // spread along one direction, unimodal. The silhouette takes a k ≥ 2 split; its clusters
+    // are not separated, so they are joined into one.
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let drift = Normal::new(0.0, 0.15).unwrap();
+    let noise = Normal::new(0.0, 0.01).unwrap();
+    let one: Vec<Feature> = (0..600)
+        .map(|_| {
+            let d = drift.sample(&mut rng);
+            [
+                2.0 + d + noise.sample(&mut rng),
+                2.0 + d + noise.sample(&mut rng),
+                2.0 + d + noise.sample(&mut rng),
+                3.0 + noise.sample(&mut rng),
+            ]
+        })
+        .collect();
+    let config = ClusterConfig::default();
+    let s = select(&one, &config);
+    let split = s.tried.iter().filter_map(|t| t.1).fold(0.0, f64::max);
+    assert!(split >= config.min_silhouette, "tried {:?}", s.tried);
+    assert_eq!(s.partition.centroids.len(), 1, "tried {:?}", s.tried);
+    assert!(s.joined_from.is_some_and(|k| k >= 2));
+    assert!(s.silhouette.is_none());
+    // Two such materials far apart: the splits inside each are joined, the two stay apart.
+    let mut two = one.clone();
+    two.extend(
+        one.iter()
+            .map(|p| [p[0] + 3.0, p[1] + 3.0, p[2] + 3.0, p[3] + 1.0]),
+    );
+    let s = select(&two, &config);
+    assert_eq!(s.partition.centroids.len(), 2, "tried {:?}", s.tried);
+    assert_eq!(s.partition.sizes, vec![600, 600]);
+    assert!(s.silhouette.unwrap() > 0.8);
+    // Three separated blobs are left as the silhouette chose them.
+    let (pts, _) = blobs(&CENTRES, 150, 0.08, 2);
+    let s = select(&pts, &config);
+    assert_eq!((s.partition.centroids.len(), s.joined_from), (3, None));
+}
+
+#[test]
+fn joining_keeps_every_point_and_recomputes_the_centres() {
+    let (one, _) = blobs(&CENTRES[..1], 400, 0.08, 6);
+    let forced = kmeans(&one, 3, 4, 100, 7);
+    let joined = join_unseparated(&one, forced);
+    assert_eq!(joined.centroids.len(), 1);
+    assert_eq!(joined.sizes, vec![400]);
+    assert!(joined.labels.iter().all(|&l| l == 0));
+    let mean: Vec<f64> = (0..FEATURE_DIM)
+        .map(|d| one.iter().map(|p| p[d]).sum::<f64>() / 400.0)
+        .collect();
+    for (c, m) in joined.centroids[0].iter().zip(&mean) {
+        assert!((c - m).abs() < 1e-12);
+    }
+    let inertia: f64 = one
+        .iter()
+        .map(|p| distance_sq(p, &joined.centroids[0]))
+        .sum();
+    assert!((joined.inertia - inertia).abs() < 1e-9 * inertia);
+}
