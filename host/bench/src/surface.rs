@@ -26,6 +26,9 @@ pub struct SurfaceScore {
     pub observed_mean_m: f64,
     /// 90th percentile of the same, m.
     pub observed_p90_m: f64,
+    /// Median signed distance of the observed vertices (negative: inside the true surface),
+    /// m: the bias the mean distance hides.
+    pub observed_signed_median_m: f64,
     /// Mean distance of the unobserved vertices, m.
     pub unobserved_mean_m: f64,
     /// Median angle between the mesh's normals and the truth at observed vertices, degrees.
@@ -66,11 +69,13 @@ pub fn surface_score(
 ) -> SurfaceScore {
     let at = truth_at(truth, mesh.positions());
     let (mut seen, mut unseen, mut mesh_n, mut fit_n) = (vec![], vec![], vec![], vec![]);
+    let mut seen_signed = vec![];
     for (v, t) in at.iter().enumerate() {
         let Some(t) = t else { continue };
         let truth_n = Vector3::from(t.normal_world);
         if observed.get(v).copied().unwrap_or(false) {
             seen.push(t.distance_m);
+            seen_signed.push(t.signed_distance_m);
             mesh_n.push(angle_deg(mesh.normals()[v].into_inner(), truth_n));
             if let Some(f) = fits.and_then(|f| f.get(v)) {
                 fit_n.push(angle_deg(Vector3::from(f.normal_world), truth_n));
@@ -84,6 +89,7 @@ pub fn surface_score(
         unobserved_vertices: unseen.len(),
         observed_mean_m: mean(&seen),
         observed_p90_m: percentile(&mut seen, 0.9),
+        observed_signed_median_m: percentile(&mut seen_signed, 0.5),
         unobserved_mean_m: mean(&unseen),
         mesh_normal_median_deg: percentile(&mut mesh_n, 0.5),
         fit_normal_median_deg: fits.map(|_| percentile(&mut fit_n, 0.5)),

@@ -143,6 +143,11 @@ pub fn export_fit(
         held_out: fit.holdout.clone(),
         import,
         normal_combination: fit.normal_combination.clone(),
+        partition: fit
+            .outcome
+            .augmentation
+            .as_ref()
+            .map(|a| a.partition.clone()),
         observe: fit.observe.clone(),
         observed_vertices: fit.observed.iter().filter(|o| **o).count(),
         peak_rss_bytes: ellipso_report::memory::peak_rss_bytes(),

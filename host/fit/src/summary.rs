@@ -14,7 +14,7 @@ use std::path::Path;
 use ellipso_model::run_error::{Context, RunError};
 use ellipso_report::paths::{paths_relative_to, relative_if_path};
 
-use crate::augment::ClusterModel;
+use crate::augment::{ClusterModel, PartitionSummary};
 use crate::data::GateCounts;
 use crate::export::ExportReport;
 use crate::holdout::HoldoutReport;
@@ -62,6 +62,10 @@ pub struct FitSummary {
     pub observe: ObserveReport,
     /// Number of vertices observed by at least one fitted frame (a kept sample).
     pub observed_vertices: usize,
+    /// How step B partitioned the vertices into materials: k, sizes, the silhouette of every
+    /// k tried, `joined_from` when clusters that were not separated were joined; `null` when
+    /// step B did not run.
+    pub partition: Option<PartitionSummary>,
     /// The process's peak resident memory, bytes (`null` where the system does not say).
     pub peak_rss_bytes: Option<u64>,
     /// The standard error of η before and after pooling; `null` when step B did not run.

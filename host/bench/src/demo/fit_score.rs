@@ -124,11 +124,12 @@ pub fn fit_and_score(
     );
     say!(
         say,
-        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
+        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm, signed median {:+.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
         scores.after.observed_vertices,
         scores.before.observed_mean_m * 1e3,
         scores.after.observed_mean_m * 1e3,
         scores.after.observed_p90_m * 1e3,
+        scores.after.observed_signed_median_m * 1e3,
         scores.after.unobserved_vertices,
         scores.before.unobserved_mean_m * 1e3,
         scores.after.unobserved_mean_m * 1e3,

@@ -69,7 +69,9 @@ pub fn markdown(
             "\n## After the fit's surface update\n\nThe fit (default settings, the carved hull as \
              constraint) on the carved mesh; *observed* vertices are those a fitted frame \
              samples, the others (the underside, the contact with the board) are scored apart. \
-             Distance: vertex to the closest point of the true surface, mean (p90). Normals: \
+             Distance: vertex to the closest point of the true surface, mean (p90), and the \
+             median signed distance (negative: inside the true surface — a bias the mean \
+             hides, and the one the glaze's η answers to, fit-shape.md). Normals: \
              median angle to the true normal over observed vertices — the carved mesh's own \
              before, the fit's normals after (each refined normal combined with the refined \
              surface's by their precisions, fit-shape.md \"The reported normal\"), and beside \
@@ -79,20 +81,21 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| scene | observed / unobserved vertices | observed: before → after (mm) | p90 after (mm) | unobserved: before → after (mm) | normals: mesh before → fit after (°) | normals on the true mesh (°) | Chamfer before → after (mm) | fit (s) |"
+            "| scene | observed / unobserved vertices | observed: before → after (mm) | p90 after (mm) | signed median after (mm) | unobserved: before → after (mm) | normals: mesh before → fit after (°) | normals on the true mesh (°) | Chamfer before → after (mm) | fit (s) |"
         );
-        let _ = writeln!(s, "|---|---|---|---:|---|---|---:|---|---:|");
+        let _ = writeln!(s, "|---|---|---|---:|---:|---|---|---:|---|---:|");
         for r in results {
             let Some(f) = &r.fit else { continue };
             let _ = writeln!(
                 s,
-                "| {} | {} / {} | {:.3} → {:.3} | {:.3} | {:.3} → {:.3} | {:.2} → {:.2} | {:.2} | {:.3} → {:.3} | {:.0} |",
+                "| {} | {} / {} | {:.3} → {:.3} | {:.3} | {:+.3} | {:.3} → {:.3} | {:.2} → {:.2} | {:.2} | {:.3} → {:.3} | {:.0} |",
                 r.scene,
                 f.after.observed_vertices,
                 f.after.unobserved_vertices,
                 f.before.observed_mean_m * 1e3,
                 f.after.observed_mean_m * 1e3,
                 f.after.observed_p90_m * 1e3,
+                f.after.observed_signed_median_m * 1e3,
                 f.before.unobserved_mean_m * 1e3,
                 f.after.unobserved_mean_m * 1e3,
                 f.before.mesh_normal_median_deg,
