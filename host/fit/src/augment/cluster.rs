@@ -235,19 +235,26 @@ fn assign(points: &[Feature], centres: &[Feature]) -> Vec<usize> {
     points.par_iter().map(|p| nearest(p, centres).0).collect()
 }
 
+/// Per cluster of `labels` (`0..k`): the sum of its members' features and their count, summed
+/// serially in point order (deterministic for any thread count).
+fn member_sums(points: &[Feature], labels: &[usize], k: usize) -> (Vec<Feature>, Vec<usize>) {
+    let mut sums = vec![[0.0; FEATURE_DIM]; k];
+    let mut counts = vec![0usize; k];
+    for (p, &l) in points.iter().zip(labels) {
+        counts[l] += 1;
+        for (s, v) in sums[l].iter_mut().zip(p) {
+            *s += v;
+        }
+    }
+    (sums, counts)
+}
+
 /// Lloyd iterations from `centres`; returns the compacted partition.
 fn lloyd(points: &[Feature], mut centres: Vec<Feature>, max_iterations: usize) -> Partition {
     let k = centres.len();
     let mut labels = assign(points, &centres);
     for _ in 0..max_iterations {
-        let mut sums = vec![[0.0; FEATURE_DIM]; k];
-        let mut counts = vec![0usize; k];
-        for (p, &l) in points.iter().zip(&labels) {
-            counts[l] += 1;
-            for (s, v) in sums[l].iter_mut().zip(p) {
-                *s += v;
-            }
-        }
+        let (sums, mut counts) = member_sums(points, &labels, k);
         let mut reseeded = false;
         for j in 0..k {
             if counts[j] > 0 {
@@ -491,31 +498,14 @@ pub fn join_unseparated(points: &[Feature], mut partition: Partition) -> Partiti
             .map(|g| roots.binary_search(g).expect("a root of the groups"))
             .collect();
         let labels: Vec<usize> = partition.labels.iter().map(|&l| renumber[l]).collect();
-        let mut sums = vec![[0.0; FEATURE_DIM]; roots.len()];
-        let mut sizes = vec![0usize; roots.len()];
-        for (p, &l) in points.iter().zip(&labels) {
-            sizes[l] += 1;
-            for (s, v) in sums[l].iter_mut().zip(p) {
-                *s += v;
-            }
-        }
+        let (sums, sizes) = member_sums(points, &labels, roots.len());
         // Every group holds at least one non-empty cluster, so no size is 0.
         let centroids: Vec<Feature> = sums
             .iter()
             .zip(&sizes)
             .map(|(s, &n)| s.map(|v| v / n as f64))
             .collect();
-        let inertia = points
-            .iter()
-            .zip(&labels)
-            .map(|(p, &l)| distance_sq(p, &centroids[l]))
-            .sum();
-        partition = Partition {
-            centroids,
-            labels,
-            sizes,
-            inertia,
-        };
+        partition = compact(points, centroids, labels);
     }
 }
 
@@ -579,9 +569,9 @@ pub fn select(points: &[Feature], config: &ClusterConfig) -> Selection {
     match chosen {
         Some((s, partition)) if best >= config.min_silhouette => {
             let k = partition.centroids.len();
-            let joined = join_unseparated(points, partition);
-            let kept = joined.centroids.len();
-            let partition = if kept == 1 { run(1) } else { joined };
+            // Joined down to one cluster, this is what `run(1)` gives: the members' mean.
+            let partition = join_unseparated(points, partition);
+            let kept = partition.centroids.len();
             Selection {
                 silhouette: if kept == k {
                     Some(s)

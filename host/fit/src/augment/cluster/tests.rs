@@ -181,6 +181,8 @@ fn automatic_k_joins_the_splits_of_one_material_and_keeps_materials_apart() {
     assert_eq!(s.partition.centroids.len(), 1, "tried {:?}", s.tried);
     assert!(s.joined_from.is_some_and(|k| k >= 2));
     assert!(s.silhouette.is_none());
+    // Joined down to one, the partition is k-means' own k = 1 (the members' mean), bit for bit.
+    assert_eq!(s.partition, kmeans(&one, 1, 1, 100, 0));
     // Two such materials far apart: the splits inside each are joined, the two stay apart.
     let mut two = one.clone();
     two.extend(
