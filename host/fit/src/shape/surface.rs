@@ -18,12 +18,13 @@
 //!   stays the last good one and no later step runs — when it diverges (its RMS move grows by
 //!   more than [`SurfaceConfig::divergence_ratio`] over the previous step's, or it increases the
 //!   median angle between refined normals and mesh by more than
-//!   [`SurfaceConfig::misfit_increase_deg`]), when the surface leaves the hull by more than
-//!   [`SurfaceConfig::hull_tolerance_m`], or when it turns triangles over even with the
-//!   folding triangles' corners cut back to the last of [`BACKTRACK_FRACTIONS`] (a step that
-//!   folds a sliver at its full length moves those corners only part of the way, every other
-//!   vertex the whole step, and the report says so). The reason is kept in words
-//!   ([`SurfaceIteration::stopped`]).
+//!   [`SurfaceConfig::misfit_increase_deg`]), or when a vertex would end further outside the
+//!   hull than it was by more than [`SurfaceConfig::hull_tolerance_m`]. The reason is kept in
+//!   words ([`SurfaceIteration::stopped`]).
+//! - A step never turns a triangle over: where the full step would, the folding triangles'
+//!   corners move only part of the way ([`BACKTRACK_FRACTIONS`], down to not at all: such a
+//!   corner stays exactly where the last good mesh had it), every other vertex the whole step,
+//!   and the report says so.
 //! - Once a step moves less than [`SurfaceConfig::converged_rms_m`] (RMS) the surface has
 //!   converged and no later step runs.
 //! - Without a hull (a caller that has none) the screening is
@@ -51,7 +52,8 @@ pub struct SurfaceConfig {
     pub converged_rms_m: f64,
     /// A step whose RMS move exceeds this multiple of the previous step's diverges.
     pub divergence_ratio: f64,
-    /// A vertex further outside the hull than this after a step has left it, metres.
+    /// A vertex that ends a step further outside the hull than this, beyond where it was
+    /// before the step, has left it, metres.
     pub hull_tolerance_m: f64,
     /// λ_pos without a hull: with no silhouettes the positions are the only position
     /// information, so they hold the long wavelengths as in the one-call update (its default).
@@ -251,29 +253,33 @@ fn on_silhouette(
 }
 
 /// The fractions of its solved move a vertex may be cut back to, in turn, where the whole
-/// step would turn one of its triangles over; a triangle still turned over with every corner
-/// at the last one refuses the step. Only the corners of the triangles that fold are cut back
-/// (and then the corners of any triangle the cut folds): a sliver next to a silhouette can
-/// fold under a step that moves the rest of the surface as it should. Refusing the whole step
-/// had ended the update after one step on the demo at 9 389 vertices (observed surface
-/// 0.25 mm); shortening the whole step for one sliver applied half of every step there
-/// (0.131 mm).
-pub const BACKTRACK_FRACTIONS: [f64; 3] = [0.5, 0.25, 0.125];
+/// step would turn one of its triangles over. Only the corners of the triangles that fold are
+/// cut back (and then the corners of any triangle the cut folds): a sliver next to a
+/// silhouette can fold under a step that moves the rest of the surface as it should. Refusing
+/// the whole step had ended the update after one step on the demo at 9 389 vertices (observed
+/// surface 0.25 mm); shortening the whole step for one sliver applied half of every step there
+/// (0.131 mm). The last fraction is 0: the corner stays exactly where it was (not even
+/// projected onto the hull), so a triangle with every corner there is the last good mesh's and
+/// cannot fold. Refusing the step when ⅛ still folded ended the update before its first step
+/// on a 60-photo capture of the demo, where the projection onto the hull folded two slivers of
+/// the unobserved underside (observed surface 0.521 mm, normals 1.80°).
+pub const BACKTRACK_FRACTIONS: [f64; 4] = [0.5, 0.25, 0.125, 0.0];
 
 fn full_step() -> f64 {
     1.0
 }
 
 /// The step `before → after` with the move of the corners of folding triangles cut back
-/// ([`BACKTRACK_FRACTIONS`]) until no triangle turns over, projected inside the hull: the
-/// smallest fraction applied, the vertices cut back, the positions and the vertices
-/// projected (`None`: a triangle folds with every corner at the last fraction).
+/// ([`BACKTRACK_FRACTIONS`]) until no triangle turns over, projected inside the hull (except
+/// the corners that do not move): the smallest fraction applied, the vertices cut back, the
+/// positions and the vertices projected. Ends: each round raises a corner's level, and a
+/// triangle with every corner at the last level is the one `before` had.
 fn unfolded_step(
     triangles: &[[u32; 3]],
     before: &[Point3<f64>],
     after: &[Point3<f64>],
     hull: Option<&HullField>,
-) -> Option<Unfolded> {
+) -> Unfolded {
     let fractions = |level: u8| match level {
         0 => 1.0,
         l => BACKTRACK_FRACTIONS[usize::from(l) - 1],
@@ -290,6 +296,11 @@ fn unfolded_step(
         // Between two surfaces inside a hull that is not convex lies a surface that may leave
         // it: projected back as the solve's own result is.
         let projected = hull.map_or(0, |h| project_inside(h, &mut positions));
+        for ((p, b), &l) in positions.iter_mut().zip(before).zip(&level) {
+            if l == last {
+                *p = *b;
+            }
+        }
         let folded: Vec<&[u32; 3]> = triangles
             .iter()
             .filter(|t| turns_over(before, &positions, t))
@@ -297,27 +308,34 @@ fn unfolded_step(
         if folded.is_empty() {
             let shortened = level.iter().filter(|&&l| l > 0).count();
             let deepest = level.iter().copied().max().unwrap_or(0);
-            return Some(Unfolded {
+            return Unfolded {
                 fraction: fractions(deepest),
                 shortened,
                 positions,
                 projected,
-            });
+            };
         }
-        let mut cut = false;
         for t in folded {
             for &v in t {
                 let l = &mut level[v as usize];
-                if *l < last {
-                    *l += 1;
-                    cut = true;
-                }
+                // A folded triangle has a corner below the last level (module doc).
+                *l = (*l + 1).min(last);
             }
         }
-        if !cut {
-            return None;
-        }
     }
+}
+
+/// How far a step `before → after` takes a vertex further outside the hull than it was (or
+/// than the hull's surface, for one that was inside), metres; ≤ 0 when none goes out. A vertex
+/// of the input mesh that lies outside (a mesh from elsewhere, the carved mesh's own
+/// extraction error, a corner held in place by [`unfolded_step`]) is not a step leaving it.
+fn left_hull_by(hull: &HullField, before: &[Point3<f64>], after: &[Point3<f64>]) -> f64 {
+    before
+        .iter()
+        .zip(after)
+        .map(|(b, a)| hull.value_world(a).0 - hull.value_world(b).0.max(0.0))
+        .filter(|d| !d.is_nan())
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// What [`unfolded_step`] applied.
@@ -442,12 +460,8 @@ impl SurfaceState {
             turned_over(mesh.triangles(), mesh.positions(), &solved.positions);
         let mut step_fraction = 1.0;
         let mut shortened_vertices = 0;
-        // Triangles the applied step turns over: none once the step is unfolded.
-        let mut flipped = turned_over_full_step;
-        if turned_over_full_step > 0
-            && let Some(u) =
-                unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull)
-        {
+        if turned_over_full_step > 0 {
+            let u = unfolded_step(mesh.triangles(), mesh.positions(), &solved.positions, hull);
             let size = step_size(mesh.positions(), &u.positions, hull);
             solved.projected_vertices = u.projected;
             solved.rms_displacement_m = size.rms_m;
@@ -456,7 +470,6 @@ impl SurfaceState {
             solved.positions = u.positions;
             step_fraction = u.fraction;
             shortened_vertices = u.shortened;
-            flipped = 0;
         }
         let new_mesh = mesh_with_positions(mesh, solved.positions.clone())?;
         let misfit = |m: &TriangleMesh| {
@@ -496,18 +509,15 @@ impl SurfaceState {
             seconds: 0.0,
             stopped: None,
         };
-        let refused = if hull.is_some() && solved.max_outside_m > config.hull_tolerance_m {
+        let left_m = hull.map_or(0.0, |h| {
+            left_hull_by(h, mesh.positions(), &solved.positions)
+        });
+        let refused = if left_m > config.hull_tolerance_m {
             Some(format!(
                 "stopped: the surface would leave the visual hull by {:.3} mm (tolerance {:.3} mm); \
                  the last good mesh is kept",
-                solved.max_outside_m * 1e3,
+                left_m * 1e3,
                 config.hull_tolerance_m * 1e3
-            ))
-        } else if flipped > 0 {
-            Some(format!(
-                "stopped: the step would turn {flipped} triangles over even with their corners \
-                 moved {:.1} % of the way; the last good mesh is kept",
-                BACKTRACK_FRACTIONS[BACKTRACK_FRACTIONS.len() - 1] * 100.0
             ))
         } else if let Some(prev) = self
             .previous_rms_m

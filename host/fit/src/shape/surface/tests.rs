@@ -1,7 +1,7 @@
 //! The surface update on a sphere: started 2 mm too large, with the true normals (an offset
 //! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
 //! it converges onto the sphere where the views see it; a step that folds a triangle is
-//! shortened until it does not; a vertex is held on a silhouette only where as many views as
+//! shortened until it does not (down to not moving its corners at all); a vertex is held on a silhouette only where as many views as
 //! the hull has votes are tangent to it; its hold gives way inward, never outward.
 
 use ellipso_model::geometry::TriangleMesh;
@@ -10,7 +10,7 @@ use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::super::hull::{GridGeometry, HullField};
 use super::super::tests::fit;
-use super::{SurfaceConfig, SurfaceState, on_silhouette, turned_over, unfolded_step};
+use super::{SurfaceConfig, SurfaceState, left_hull_by, on_silhouette, turned_over, unfolded_step};
 
 const RADIUS: f64 = 0.02;
 
@@ -208,14 +208,54 @@ fn a_step_that_folds_a_triangle_is_shortened_until_it_does_not() {
     let mut after = before;
     after[2] = Point3::new(0.0, -1.5, 0.0);
     assert_eq!(turned_over(&triangles, &before, &after), 1);
-    let u = unfolded_step(&triangles, &before, &after, None).unwrap();
+    let u = unfolded_step(&triangles, &before, &after, None);
     assert_eq!(u.fraction, 0.25);
     assert_eq!(u.shortened, 3);
     assert!((u.positions[2].y - 0.375).abs() < 1e-12);
     assert_eq!(turned_over(&triangles, &before, &u.positions), 0);
-    // So far across that every fraction folds it: refused.
+    // So far across that every fraction but the last folds it: its corners stay where they
+    // were, and the step goes on without folding it.
     after[2] = Point3::new(0.0, -100.0, 0.0);
-    assert!(unfolded_step(&triangles, &before, &after, None).is_none());
+    let u = unfolded_step(&triangles, &before, &after, None);
+    assert_eq!(u.fraction, 0.0);
+    assert_eq!(u.positions, before);
+    assert_eq!(turned_over(&triangles, &before, &u.positions), 0);
+}
+
+#[test]
+fn a_corner_that_cannot_move_without_folding_stays_exactly_where_it_was_even_outside_the_hull() {
+    // A sliver whose corners lie 0.2 mm outside a sphere's hull: projecting them onto the hull
+    // would be a move, and the step asks vertex 2 to cross the opposite edge. The corners held
+    // by the last fraction are not projected (they are the last good mesh's), and the other
+    // triangle still moves the whole step, projected.
+    let hull = crate::shape::hull::tests::sphere_hull(Vector3::zeros(), 0.01, 5e-4);
+    let r = 0.0102;
+    let before = [
+        Point3::new(r, 0.0, 0.0),
+        Point3::new(r, 1e-3, 0.0),
+        Point3::new(r, 0.0, 1e-3),
+        Point3::new(-r, 0.0, 0.0),
+        Point3::new(-r, 0.0, 1e-3),
+        Point3::new(-r, 1e-3, 0.0),
+    ];
+    let triangles = [[0u32, 1, 2], [3, 4, 5]];
+    let mut after = before;
+    after[2] = Point3::new(r, 0.0, -1.0);
+    for p in &mut after[3..] {
+        p.x += 1e-4;
+    }
+    let u = unfolded_step(&triangles, &before, &after, Some(&hull));
+    assert_eq!(u.fraction, 0.0);
+    assert_eq!(u.positions[..3], before[..3], "held exactly, not projected");
+    for p in &u.positions[3..] {
+        assert!(hull.value_world(p).0 <= 0.0, "the rest projected inside");
+    }
+    assert_eq!(turned_over(&triangles, &before, &u.positions), 0);
+    // What was outside before and stays there is not the step leaving the hull.
+    assert!(left_hull_by(&hull, &before, &u.positions) <= 0.0);
+    let mut out = u.positions.clone();
+    out[0].x += 1e-3;
+    assert!((left_hull_by(&hull, &before, &out) - 1e-3).abs() < 5e-5);
 }
 
 #[test]
@@ -236,7 +276,7 @@ fn only_the_corners_of_a_folding_triangle_are_cut_back() {
     for p in &mut after[3..] {
         p.x += 1.0;
     }
-    let u = unfolded_step(&triangles, &before, &after, None).unwrap();
+    let u = unfolded_step(&triangles, &before, &after, None);
     assert_eq!(u.fraction, 0.25);
     assert_eq!(u.shortened, 3);
     assert!((u.positions[2].y - 0.375).abs() < 1e-12);
@@ -336,4 +376,73 @@ fn a_silhouette_hold_gives_way_inward_to_consistent_normals_but_never_outward() 
         out.max_outside_m
     );
     assert!(outward < 0.05e-3, "moved out {outward} m");
+}
+
+#[test]
+fn a_step_that_diverges_is_refused_and_the_last_good_mesh_stays() {
+    // A sphere 0.1 mm outside its hull with its true normals: the first step brings it onto the
+    // hull. Then normals tilted by a seeded ±25° field ask for a crumpled surface far larger
+    // than that step: refused as diverging, with the reason in words, and no mesh comes back.
+    let (dirs, triangles) = icosphere(3);
+    let start: Vec<Point3<f64>> = dirs
+        .iter()
+        .map(|d| Point3::from(centre() + d.into_inner() * (RADIUS + 1e-4)))
+        .collect();
+    let mesh = TriangleMesh::new(start, None, None, triangles).unwrap();
+    let observed = vec![true; dirs.len()];
+    let fits_with = |normal: &dyn Fn(usize, Vector3<f64>) -> Vector3<f64>| -> Vec<_> {
+        dirs.iter()
+            .enumerate()
+            .map(|(v, d)| fit(v as u32, normal(v, d.into_inner()).into(), 0.5, vec![]))
+            .collect()
+    };
+    let hull = hull();
+    let cameras: Vec<Point3<f64>> = cameras().into_iter().map(Point3::from).collect();
+    let config = SurfaceConfig::default();
+    let mut state = SurfaceState::new(&mesh);
+    let first = state
+        .step(
+            &mesh,
+            &fits_with(&|_, n| n),
+            &observed,
+            &cameras,
+            Some(&hull),
+            &config,
+        )
+        .unwrap()
+        .expect("the first step applies");
+    assert!(!state.done());
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(7);
+    let tilts: Vec<Vector3<f64>> = (0..dirs.len())
+        .map(|_| {
+            use rand::Rng;
+            Vector3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            ) * 25f64.to_radians().tan()
+        })
+        .collect();
+    let crumpled = fits_with(&|v, n| (n + tilts[v] - n * n.dot(&tilts[v])).normalize());
+    let second = state
+        .step(&first, &crumpled, &observed, &cameras, Some(&hull), &config)
+        .unwrap();
+    assert!(second.is_none(), "a diverging step came back as a mesh");
+    assert!(state.done());
+    let why = state.stopped().unwrap();
+    assert!(why.starts_with("stopped: diverging"), "{why}");
+    assert!(why.ends_with("the last good mesh is kept"), "{why}");
+    for s in &state.iterations {
+        eprintln!("{}", s.describe());
+    }
+    let report = state.iterations.last().unwrap();
+    assert!(!report.applied);
+    // no later step runs
+    assert!(
+        state
+            .step(&first, &crumpled, &observed, &cameras, Some(&hull), &config)
+            .unwrap()
+            .is_none()
+    );
+    assert_eq!(state.iterations.len(), 2);
 }
