@@ -12,7 +12,9 @@
 //! report ([`markdown`]).
 //!
 //! Contract: the report and its JSON are claimed before any capture; the processes run are the
-//! request's executable; nothing here prints (lines to the caller's [`Say`], the fit's mesh
+//! request's executable; a capture that cannot be made, meshed or fitted is a row of the
+//! report's failures (with its error) and the others still run — the report and its JSON are
+//! written, and then the run ends in an error naming the failed captures; nothing here prints (lines to the caller's [`Say`], the fit's mesh
 //! step to its [`Steps`], the captures recorded by its [`Recorder`]).
 
 pub mod markdown;
@@ -120,6 +122,21 @@ pub struct MeshScores {
     pub true_mesh_normal_median_deg: f64,
 }
 
+/// A capture the bench could not make, mesh or fit.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct FailedCapture {
+    /// Row label (as [`SceneResult::scene`]).
+    pub scene: String,
+    /// The error, in words.
+    pub error: String,
+}
+
+/// The scenes `ellipso bench mesh` runs when none are named.
+pub const DEFAULT_SCENES: [&str; 3] = ["sphere", "multi_material", "demo"];
+
+/// The report `ellipso bench mesh` writes when none is named.
+pub const DEFAULT_REPORT: &str = "docs/mesh-bench.md";
+
 /// One `ellipso fit --vertices N` run.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ScaleResult {
@@ -158,6 +175,7 @@ pub fn run(
     )?;
     let report = OutputFile::claim(&args.report, "bench-mesh", FileFormat::MARKDOWN, &[], None)?;
     let mut results = Vec::new();
+    let mut failed = Vec::new();
     for name in &args.scenes {
         let scene_path = shipped_scene(&format!("{name}.toml"));
         ensure!(
@@ -167,16 +185,9 @@ pub fn run(
         );
         let scene = Scene::load(&scene_path)?;
         let session_dir = args.work.join(name);
-        ensure_captured(name, &scene_path, &session_dir, args, recorder, say)?;
-        results.push(bench_scene(
-            name,
-            name,
-            &scene,
-            &session_dir,
-            args,
-            steps,
-            say,
-        )?);
+        let result = ensure_captured(name, &scene_path, &session_dir, args, recorder, say)
+            .and_then(|()| bench_scene(name, name, &scene, &session_dir, args, steps, say));
+        keep(result, name.clone(), &mut results, &mut failed, say);
         for &seed in &args.seeds {
             let label = format!("{name}-seed{seed}");
             let variant = args.work.join(format!("{label}.toml"));
@@ -186,10 +197,19 @@ pub fn run(
             };
             let scene = crate::variant::write_variant(&scene_path, &edit, &variant)?;
             let session_dir = args.work.join(&label);
-            ensure_captured(&label, &variant, &session_dir, args, recorder, say)?;
-            let mut result = bench_scene(&label, name, &scene, &session_dir, args, steps, say)?;
-            result.scene = format!("{name} seed {seed}");
-            results.push(result);
+            let result = ensure_captured(&label, &variant, &session_dir, args, recorder, say)
+                .and_then(|()| bench_scene(&label, name, &scene, &session_dir, args, steps, say))
+                .map(|mut r| {
+                    r.scene = format!("{name} seed {seed}");
+                    r
+                });
+            keep(
+                result,
+                format!("{name} seed {seed}"),
+                &mut results,
+                &mut failed,
+                say,
+            );
         }
     }
     let mut scale = Vec::new();
@@ -203,18 +223,51 @@ pub fn run(
         scale.push(scale_run(&scene, &session_dir, n, args, say)?);
     }
     json.write(serde_json::to_vec_pretty(
-        &serde_json::json!({"scenes": results, "scale": scale}),
+        &serde_json::json!({"scenes": results, "failed": failed, "scale": scale}),
     )?)?;
     report.write(markdown::markdown(
         &results,
+        &failed,
         &scale,
         args,
         started.elapsed().as_secs_f64(),
     ))?;
+    ensure!(
+        failed.is_empty(),
+        "{} of {} captures failed ({}); {} lists them with their errors",
+        failed.len(),
+        failed.len() + results.len(),
+        failed
+            .iter()
+            .map(|f| f.scene.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        report.shown().display()
+    );
     Ok(MeshBenchFiles {
         report: report.shown().to_path_buf(),
         json: json.shown().to_path_buf(),
     })
+}
+
+/// A capture's row, or its failure (said at once, and kept for the report).
+fn keep(
+    result: Result<SceneResult, RunError>,
+    scene: String,
+    results: &mut Vec<SceneResult>,
+    failed: &mut Vec<FailedCapture>,
+    say: &dyn Say,
+) {
+    match result {
+        Ok(r) => results.push(r),
+        Err(e) => {
+            say!(say, "[{scene}] failed: {e}");
+            failed.push(FailedCapture {
+                scene,
+                error: e.to_string(),
+            });
+        }
+    }
 }
 
 /// Captures `scene_path` into `session_dir` unless a session is there already (then reused).

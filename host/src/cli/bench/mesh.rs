@@ -12,6 +12,7 @@ use crate::cli::out;
 #[derive(Debug, clap::Args)]
 pub struct MeshArgs {
     /// Shipped scenes (`sim/scenes/NAME.toml`).
+    // the bench's DEFAULT_SCENES, written with commas for the help (test below)
     #[arg(
         long,
         value_delimiter = ',',
@@ -44,7 +45,7 @@ pub struct MeshArgs {
     #[arg(long, value_delimiter = ',')]
     pub seeds: Vec<u64>,
     /// The Markdown report.
-    #[arg(long, default_value = "docs/mesh-bench.md")]
+    #[arg(long, default_value = ellipso_bench::mesh_bench::DEFAULT_REPORT)]
     pub report: PathBuf,
 }
 
@@ -75,4 +76,25 @@ pub fn run(args: MeshArgs) -> anyhow::Result<()> {
         files.json.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Wrapper {
+        #[command(flatten)]
+        args: super::MeshArgs,
+    }
+
+    #[test]
+    fn the_flags_defaults_are_the_ones_the_report_leaves_out_of_its_command() {
+        let w = Wrapper::parse_from(["bench-mesh"]);
+        assert_eq!(w.args.scenes, ellipso_bench::mesh_bench::DEFAULT_SCENES);
+        assert_eq!(
+            w.args.report,
+            std::path::Path::new(ellipso_bench::mesh_bench::DEFAULT_REPORT)
+        );
+    }
 }
