@@ -160,12 +160,15 @@ impl SurfaceIteration {
             s += &format!(", {} projected onto it", self.projected);
         }
         if self.turned_over_full_step > 0 && self.applied {
+            let down_to = if self.step_fraction > 0.0 {
+                format!("down to {:.1} %", self.step_fraction * 100.0)
+            } else {
+                "some not at all".into()
+            };
             s += &format!(
-                ", {} vertices moved only part of the way, down to {:.1} % (the whole step would \
-                 turn {} triangles over)",
-                self.shortened_vertices,
-                self.step_fraction * 100.0,
-                self.turned_over_full_step
+                ", {} vertices moved only part of the way, {down_to} (the whole step would turn \
+                 {} triangles over)",
+                self.shortened_vertices, self.turned_over_full_step
             );
         }
         if let Some(why) = &self.stopped {
