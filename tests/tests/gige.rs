@@ -159,11 +159,11 @@ fn gige_frames_pair_with_their_own_pulses() {
     // Simulated: the trigger board. Its pulse k fires at t0 + k·P, P being the fake camera's
     // frame period (the fake camera free-runs on that period, as a triggered camera follows its
     // pulses); the clock fit is exact (device clock ≡ host clock) and t0 puts the most common
-    // arrival phase 1 ms after its pulse, as a clock sync would. Real: the frames, their ids and arrival times,
-    // from GVSP on loopback, with the host's scheduling jitter. Truth: the block id in the
-    // pixels. The fake camera's first frame leaves at start, off its period grid: it stands for
-    // a frame from before the pulse train and is not fed. Frames 12, 25, … are withheld (lost on
-    // the wire). A quarter period after pulse K−1 an extra pulse fires that the camera ignores
+    // arrival phase 1 ms after its pulse, as a clock sync would. Real: the frames, their ids
+    // and arrival times, from GVSP on loopback, with the host's scheduling jitter. Truth: the
+    // block id in the pixels. The fake camera's first frame leaves at start, off its period
+    // grid: it stands for a frame from before the pulse train and is not fed. Frames 12, 25, …
+    // are withheld (lost on the wire). A quarter period after pulse K−1 an extra pulse fires that the camera ignores
     // (it came during readout: a missed trigger), and every later pulse's sequence number is one
     // higher, so ids and pulses disagree from then on. The period (50 ms) is chosen so the timing
     // evidence (extra pulse ≥ 37 ms before frame K) beats this host's arrival jitter (~1–10 ms

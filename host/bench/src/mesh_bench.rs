@@ -14,8 +14,9 @@
 //! Contract: the report and its JSON are claimed before any capture; the processes run are the
 //! request's executable; a capture that cannot be made, meshed or fitted is a row of the
 //! report's failures (with its error) and the others still run — the report and its JSON are
-//! written, and then the run ends in an error naming the failed captures; nothing here prints (lines to the caller's [`Say`], the fit's mesh
-//! step to its [`Steps`], the captures recorded by its [`Recorder`]).
+//! written, and then the run ends in an error naming the failed captures; nothing here prints
+//! (lines to the caller's [`Say`], the fit's mesh step to its [`Steps`], the captures recorded
+//! by its [`Recorder`]).
 
 pub mod markdown;
 
@@ -197,19 +198,14 @@ pub fn run(
             };
             let scene = crate::variant::write_variant(&scene_path, &edit, &variant)?;
             let session_dir = args.work.join(&label);
+            let row = format!("{name} seed {seed}");
             let result = ensure_captured(&label, &variant, &session_dir, args, recorder, say)
                 .and_then(|()| bench_scene(&label, name, &scene, &session_dir, args, steps, say))
-                .map(|mut r| {
-                    r.scene = format!("{name} seed {seed}");
-                    r
+                .map(|r| SceneResult {
+                    scene: row.clone(),
+                    ..r
                 });
-            keep(
-                result,
-                format!("{name} seed {seed}"),
-                &mut results,
-                &mut failed,
-                say,
-            );
+            keep(result, row, &mut results, &mut failed, say);
         }
     }
     let mut scale = Vec::new();

@@ -223,7 +223,6 @@ fn eta_verdict(difference: f64, noise: f64) -> &'static str {
     }
 }
 
-/// ` FLAG a,b,c` as the command line had it, or nothing for an empty list.
 /// The command line that makes this report (the flags that differ from their defaults).
 fn command(args: &MeshBenchRequest) -> String {
     let mut c = String::from("ellipso bench mesh");
@@ -265,6 +264,7 @@ fn failures(s: &mut String, failed: &[FailedCapture]) {
     }
 }
 
+/// ` FLAG a,b,c` as the command line had it, or nothing for an empty list.
 fn list_flag<T: ToString>(flag: &str, values: &[T]) -> String {
     if values.is_empty() {
         return String::new();

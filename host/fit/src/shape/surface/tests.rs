@@ -1,8 +1,9 @@
 //! The surface update on a sphere: started 2 mm too large, with the true normals (an offset
 //! sphere has the same ones, so they cannot shrink it) and the visual hull of a ring of views,
 //! it converges onto the sphere where the views see it; a step that folds a triangle is
-//! shortened until it does not (down to not moving its corners at all); a vertex is held on a silhouette only where as many views as
-//! the hull has votes are tangent to it; its hold gives way inward, never outward.
+//! shortened until it does not (down to not moving its corners at all); a step that diverges
+//! is refused; a vertex is held on a silhouette only where as many views as the hull has votes
+//! are tangent to it; its hold gives way inward, never outward.
 
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::procedural::icosphere;
