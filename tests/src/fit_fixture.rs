@@ -62,6 +62,7 @@ pub fn write_fit_dir(dir: &Path) -> PathBuf {
                 iterations: 6,
                 flags: vec![],
                 eta_unpooled: None,
+                gates: Default::default(),
             };
             if d.z < -0.8 {
                 fit.flags = vec![FitFlag::TooFewViews];

@@ -81,6 +81,7 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
                 iterations: 6,
                 flags: vec![],
                 eta_unpooled: None,
+                gates: Default::default(),
             }
         })
         .collect();

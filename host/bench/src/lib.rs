@@ -14,6 +14,7 @@
 //! | [`capture`] | a scene rendered straight into a session; true poses of a recorded session |
 //! | [`ideal`] | a session's frames as an ideal polarisation sensor sees them (no mosaic) |
 //! | [`truth_map`] | the truth at the vertices of any mesh (closest point of the true surface) |
+//! | [`coverage`] | what a fit covers of the surface its views see (decided from the true geometry), per material, with its accuracy and σ calibration (`ellipso bench score`) |
 //! | [`score`] | per-material and per-vertex errors, held-out re-render beside the truth's own, residuals at the truth |
 //! | [`surface`] | a carved and a refined mesh against the truth, observed and unobserved surface apart; η beside the true mesh's |
 //! | [`chain`] | the error budget: the full chain and one stage replaced at a time |
@@ -35,6 +36,7 @@ pub mod budget;
 pub mod calibration;
 pub mod capture;
 pub mod chain;
+pub mod coverage;
 pub mod demo;
 pub mod ideal;
 pub mod mesh_bench;

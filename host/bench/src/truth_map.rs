@@ -28,6 +28,8 @@ pub struct VertexTruth {
     pub distance_m: f64,
     /// The same, positive outside the true surface and negative inside, metres.
     pub signed_distance_m: f64,
+    /// The closest point of the true surface, world, metres.
+    pub closest_world: [f64; 3],
 }
 
 /// The truth at every position (module doc).
@@ -69,6 +71,7 @@ pub fn truth_at(truth: &TruthObject, positions: &[Point3<f64>]) -> Vec<Option<Ve
                 normal_world: n.into(),
                 distance_m: c.distance_m,
                 signed_distance_m: side * c.distance_m,
+                closest_world: c.point.into(),
             })
         })
         .collect()

@@ -342,6 +342,12 @@ pub enum FitFlag {
     /// whose every sample a gate removed (mixed materials, grazing, dark, saturated) is only
     /// [`FitFlag::TooFewViews`].
     Unobserved,
+    /// The views see the vertex, but its own samples do not identify every parameter: those
+    /// they do not identify are its material's (the pooled η and its cluster's lobe; ρd its own
+    /// where it has samples), with the material's spread as their standard error
+    /// (`crate::complete`). Reported as values, never withheld: a vertex the views see always
+    /// has a full parameter set.
+    FromMaterial,
 }
 
 /// The largest angular standard error an output reports, degrees: an angle's uncertainty cannot
@@ -353,7 +359,7 @@ impl FitFlag {
     /// `flags`, `maps.exr`'s `flags` channel, the view): bit k = `ALL[k]`. A new flag is one
     /// entry at the end (and one line in [`FitFlag::withholds_vertex`] or
     /// [`FitFlag::withholds_eta`] when it withholds values).
-    pub const ALL: [FitFlag; 12] = [
+    pub const ALL: [FitFlag; 13] = [
         FitFlag::TooFewViews,
         FitFlag::UnderDetermined,
         FitFlag::Dark,
@@ -366,6 +372,7 @@ impl FitFlag {
         FitFlag::NormalUnconstrained,
         FitFlag::EtaPooled,
         FitFlag::Unobserved,
+        FitFlag::FromMaterial,
     ];
 
     /// This flag's bit in the bitmask ([`FitFlag::ALL`] order).
@@ -416,9 +423,18 @@ pub struct Identifiable {
 }
 
 impl Identifiable {
-    /// The rule over a flags bitmask ([`FitFlag::ALL`] bit order).
+    /// The rule over a flags bitmask ([`FitFlag::ALL`] bit order). [`FitFlag::FromMaterial`]
+    /// lifts every withholding but [`FitFlag::Unobserved`]'s: what the vertex's data left open
+    /// is its material's value, reported as such.
     pub fn of_mask(mask: u32) -> Self {
         let flags = FitFlag::from_mask(mask);
+        if flags.contains(&FitFlag::FromMaterial) {
+            let seen = !flags.contains(&FitFlag::Unobserved);
+            return Self {
+                vertex: seen,
+                eta: seen,
+            };
+        }
         Self {
             vertex: !flags.iter().any(|f| f.withholds_vertex()),
             eta: !flags.iter().any(|f| f.withholds_eta()),
@@ -466,6 +482,10 @@ pub struct VertexFit {
     /// ([`FitFlag::EtaPooled`]: step A's estimate); `None` where no pool did.
     #[serde(default)]
     pub eta_unpooled: Option<[f64; 2]>,
+    /// What the gates removed of the vertex's (vertex, view) pairs, per reason, and what they
+    /// kept (the extraction's counts for this vertex).
+    #[serde(default)]
+    pub gates: GateCounts,
 }
 
 /// Whether any albedo of `params` sits at the solver's cap `albedo_cap` (within 0.1 %): the

@@ -290,6 +290,7 @@ mod tests {
             iterations: 0,
             flags: Vec::new(),
             eta_unpooled: None,
+            gates: Default::default(),
         };
         let cap = 5.0;
         let runaway = PbrdfParams {

@@ -20,6 +20,8 @@
 //! - [`solve`]: per-vertex Levenberg–Marquardt with variable projection, uncertainty and flags.
 //! - [`augment`]: clusters, per-cluster two-lobe models and virtual specular samples.
 //! - [`shape`]: vertex positions updated towards the refined normals.
+//! - [`complete`]: every vertex the views see gets a full parameter set — its material's values
+//!   where its own samples leave a parameter open, flagged `FromMaterial`.
 //! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
 //! - [`holdout`]: the held-out views no step sees, and the re-render error on them.
 //! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
@@ -35,6 +37,7 @@
 #![forbid(unsafe_code)]
 
 pub mod augment;
+pub mod complete;
 pub mod data;
 pub mod export;
 pub mod gate;

@@ -504,6 +504,10 @@ pub fn extract_from(
             .vertex_labels
             .as_deref()
             .filter(|l| l.len() == mesh.positions().len()),
+        min_tap_weight: sampler::min_tap_weight(
+            radiometry.full_scale_dn,
+            &sensor_noise_of(session).unwrap_or_default(),
+        ),
     };
     let run_frame = |job: &Job<'_>| -> FrameResult {
         // Every pixel the sampler can read: the projections inside the image

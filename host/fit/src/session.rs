@@ -27,6 +27,7 @@ use std::time::Instant;
 use ellipso_model::geometry::TriangleMesh;
 use nalgebra::Isometry3;
 
+use super::complete::{Completion, complete};
 use super::data::{GateCounts, SampleSet, VertexFit};
 use super::holdout::{HoldoutReport, score, split};
 use super::observe::sampler::UNLABELLED;
@@ -176,6 +177,9 @@ pub struct SessionFit {
     /// How the reported normals were combined with the refined surface's (`None`: no surface
     /// step was applied, or `combine_normals` is off; the normals are the solve's).
     pub normal_combination: Option<NormalCombination>,
+    /// What the completion gave the vertices the views see but their samples do not identify
+    /// (`None` without step B: no materials to take values from).
+    pub completion: Option<Completion>,
     /// Per vertex of `mesh`: observed by at least one fitted frame (a kept sample).
     pub observed: Vec<bool>,
     /// Gate counts of the last extraction, summed over vertices.
@@ -305,6 +309,16 @@ pub fn fit_session_with(
         }
         _ => None,
     };
+    let completion = complete_fits(
+        &set,
+        &mut outcome,
+        &mesh,
+        surface_normal_std_deg(&surface.iterations),
+        config,
+    );
+    if let Some(c) = &completion {
+        progress(&c.describe());
+    }
     outcome.times.observe_s = observe_s;
     outcome.times.joint_s += joint_s;
     outcome.times.shape_s = shape_s;
@@ -330,6 +344,7 @@ pub fn fit_session_with(
         outcome,
         surface: surface.iterations,
         normal_combination,
+        completion,
         observed,
         gates,
         observe: extraction.report,
@@ -338,6 +353,29 @@ pub fn fit_session_with(
         holdout,
         held_out_set,
     })
+}
+
+/// Completes the fits of `outcome` from its materials ([`super::complete`]) on the final
+/// `mesh`: a completed vertex's normal is the surface's, with the surface update's normal σ
+/// (`surface_std_deg`) — or, without an applied surface step, the solver's normal prior: how
+/// far the input mesh's normals are trusted. `None` without step B.
+fn complete_fits(
+    set: &SampleSet,
+    outcome: &mut FitOutcome,
+    mesh: &TriangleMesh,
+    surface_std_deg: Option<f64>,
+    config: &SessionFitConfig,
+) -> Option<Completion> {
+    let a = outcome.augmentation.as_ref()?;
+    let normal_std_deg = surface_std_deg.unwrap_or(config.fit.solver.normal_prior_deg);
+    Some(complete(
+        set,
+        &mut outcome.fits,
+        a,
+        mesh,
+        normal_std_deg,
+        config.fit.solver.albedo_cap,
+    ))
 }
 
 /// The material label of every vertex from step A's `fits` ([`super::augment::material_labels`]
@@ -527,7 +565,11 @@ pub fn finish_from_joint(
     }
     let (fitted, poses_held_out) = split_poses(poses, config.holdout_fraction);
     let set = extraction.samples;
-    let outcome = fit_shared_steps(&set, fits, &config.fit, progress);
+    let mut outcome = fit_shared_steps(&set, fits, &config.fit, progress);
+    let completion = complete_fits(&set, &mut outcome, mesh, None, config);
+    if let Some(c) = &completion {
+        progress(&c.describe());
+    }
     let mut gates = GateCounts::default();
     for v in &set.vertices {
         gates.add(&v.gates);
@@ -540,6 +582,7 @@ pub fn finish_from_joint(
         outcome,
         surface: Vec::new(),
         normal_combination: None,
+        completion,
         observed,
         gates,
         observe: extraction.report,

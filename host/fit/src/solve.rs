@@ -677,6 +677,7 @@ fn finish(
         iterations: state.iterations,
         flags,
         eta_unpooled: None,
+        gates: vertex.gates.clone(),
     }
 }
 
@@ -759,6 +760,7 @@ fn prior_fit(
         iterations: 0,
         flags,
         eta_unpooled: None,
+        gates: vertex.gates.clone(),
     }
 }
 

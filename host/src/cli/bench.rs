@@ -34,6 +34,10 @@ pub enum Args {
     Mesh(mesh::MeshArgs),
     /// What the live view costs a simulated capture: the same capture without and with `--view`.
     View(ViewArgs),
+    /// A fit of a simulated session scored against the scene's truth: per material, the share
+    /// of the visible surface (decided from the true geometry) with a full parameter set, η and
+    /// normal errors over it, and how many true errors fall within the reported 1σ.
+    Score(ScoreArgs),
 }
 
 /// Runs `ellipso bench`.
@@ -79,6 +83,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
         .map_err(out::failed),
         Args::Chain(a) => chain::run(a),
+        Args::Score(a) => score(a),
         Args::Mesh(a) => mesh::run(a),
         Args::View(a) => ellipso_bench::view_cost::run(
             ViewOptions {
@@ -223,4 +228,58 @@ fn children_cpu_s() -> f64 {
     {
         f64::NAN
     }
+}
+
+/// Arguments of `ellipso bench score`.
+#[derive(Debug, clap::Args)]
+pub struct ScoreArgs {
+    /// The scene the session was captured from.
+    #[arg(long)]
+    pub scene: PathBuf,
+    /// The scene seed the capture used (default the scene's).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// The session.
+    #[arg(long)]
+    pub session: PathBuf,
+    /// The fit's folder (`fit.ply`, `fit-summary.json`).
+    #[arg(long)]
+    pub fit: PathBuf,
+    /// Print one JSON object instead of the text.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the truth beside every fitted vertex (material, visible frames, true η and
+    /// normal, signed distance) to this file, one JSON object per line.
+    #[arg(long)]
+    pub vertices: Option<PathBuf>,
+}
+
+/// Runs `ellipso bench score`.
+fn score(a: ScoreArgs) -> anyhow::Result<()> {
+    let scene = ellipso_bench::pose::load_scene(&a.scene, a.seed).map_err(out::failed)?;
+    let (scores, rows) =
+        ellipso_bench::coverage::score_fit_dir(&scene, &a.session, &a.fit).map_err(out::failed)?;
+    if let Some(path) = &a.vertices {
+        let mut text = String::new();
+        for r in &rows {
+            text.push_str(&serde_json::to_string(r)?);
+            text.push('\n');
+        }
+        std::fs::write(path, text)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&scores)?);
+    } else {
+        println!(
+            "{}: {} vertices, {} visible",
+            a.fit.display(),
+            scores.vertices,
+            scores.visible
+        );
+        for line in ellipso_bench::coverage::describe(&scores) {
+            println!("{line}");
+        }
+    }
+    Ok(())
 }

@@ -157,6 +157,7 @@ fn fit_of(vertex: usize, params: PbrdfParams<f64>, normal: [f64; 3]) -> VertexFi
         iterations: 0,
         flags: Vec::new(),
         eta_unpooled: None,
+        gates: Default::default(),
     }
 }
 

@@ -217,6 +217,7 @@ fn fits_of(vertices: &[super::ply::FitVertex]) -> Vec<VertexFit> {
                 iterations: 0,
                 flags: crate::data::FitFlag::from_mask(v.flags),
                 eta_unpooled: None,
+                gates: Default::default(),
             }
         })
         .collect()
@@ -516,6 +517,7 @@ mod tests {
                 iterations: 3,
                 flags: vec![],
                 eta_unpooled: None,
+                gates: Default::default(),
             })
             .collect();
         super::super::ply::write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();

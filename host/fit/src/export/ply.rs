@@ -10,7 +10,9 @@
 //! material's pooled η entered — flag `EtaPooled` — and its final ones where none did),
 //! `float normal_std_deg` (≤ 180°, [`crate::data::MAX_REPORTED_ANGLE_STD_DEG`]), `int samples`,
 //! `int flags` (bit k set = [`FitFlag::ALL`]`[k]`, the output flags of
-//! [`VertexFit::output_flags`]) and `uchar red green blue` (the diffuse albedo π·ρ_d, sRGB, grey
+//! [`VertexFit::output_flags`]), `int seen_lit gated_mixed gated_grazing gated_saturated
+//! gated_dark gated_colour_outlier gated_non_finite` (the frames that saw the vertex lit and
+//! what each pixel gate removed of them, [`GATE_COLUMNS`]) and `uchar red green blue` (the diffuse albedo π·ρ_d, sRGB, grey
 //! where the rule withholds the vertex), so Open3D, plyfile, trimesh and MeshLab read every
 //! property and show the object in its colours. Faces: `uchar`-counted `int` lists, so
 //! `fit.ply` also loads as a plain mesh. [`read_fit_ply`] reads back what [`write_fit_ply`]
@@ -26,7 +28,7 @@ use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyColumn, PlyFormat, read_vertex_table, write_table};
 use nalgebra::Point3;
 
-use crate::data::{FitFlag, Identifiable, VertexFit};
+use crate::data::{FitFlag, GateCounts, Identifiable, VertexFit};
 
 /// Flag bit order of the `flags` property (every output's bitmask).
 pub const FLAG_BITS: [FitFlag; FitFlag::ALL.len()] = FitFlag::ALL;
@@ -35,6 +37,21 @@ pub const FLAG_BITS: [FitFlag; FitFlag::ALL.len()] = FitFlag::ALL;
 pub const PARAMS: [&str; 10] = [
     "eta", "sigma_s", "sigma_ss", "rho_s", "rho_ss_r", "rho_ss_g", "rho_ss_b", "rho_d_r",
     "rho_d_g", "rho_d_b",
+];
+
+/// One count of a vertex's [`GateCounts`].
+pub type GateCount = fn(&GateCounts) -> u64;
+
+/// The per-vertex gate counts `fit.ply` carries: frames that saw the vertex lit
+/// ([`GateCounts::seen_lit`]) and, of those, what each pixel gate removed.
+pub const GATE_COLUMNS: [(&str, GateCount); 7] = [
+    ("seen_lit", GateCounts::seen_lit),
+    ("gated_mixed", |g| g.mixed),
+    ("gated_grazing", |g| g.grazing),
+    ("gated_saturated", |g| g.saturated),
+    ("gated_dark", |g| g.dark),
+    ("gated_colour_outlier", |g| g.colour_outlier),
+    ("gated_non_finite", |g| g.non_finite),
 ];
 
 /// Grey of the vertex colour where the rule withholds the vertex (the pictures' no-data grey).
@@ -159,6 +176,10 @@ pub fn schema() -> Vec<Property> {
     }));
     s.push(property("samples", Int, |r| f64::from(r.fit.samples_used)));
     s.push(property("flags", Int, |r| f64::from(r.mask)));
+    // What the gates removed of the frames that saw the vertex lit, per reason (module doc).
+    for (name, count) in GATE_COLUMNS {
+        s.push(property(name, Int, move |r| count(&r.fit.gates) as f64));
+    }
     for (k, name) in ["red", "green", "blue"].into_iter().enumerate() {
         s.push(property(name, Uchar, move |r| {
             if r.identifiable.vertex {
@@ -321,6 +342,7 @@ mod tests {
                     _ => vec![],
                 },
                 eta_unpooled: (v == 6).then_some([1.52, 0.04]),
+                gates: Default::default(),
             })
             .collect();
         fits[5].normal_std_error_deg = 500.0;
@@ -328,7 +350,8 @@ mod tests {
     }
 
     /// The bytes of a small `fit.ply` as the fit's own writer wrote them before `fit.ply`
-    /// became a schema over the model's PLY writer (captured at commit f22c554).
+    /// became a schema over the model's PLY writer (captured at commit f22c554; re-captured
+    /// when the per-vertex gate counts, [`GATE_COLUMNS`], were added before the colours).
     #[test]
     fn fit_ply_bytes_are_those_the_previous_writer_wrote() {
         let (mesh, fits) = fixture(0);

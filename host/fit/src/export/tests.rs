@@ -42,6 +42,7 @@ fn fits(mesh: &TriangleMesh) -> Vec<VertexFit> {
                 vec![]
             },
             eta_unpooled: None,
+            gates: Default::default(),
         })
         .collect()
 }

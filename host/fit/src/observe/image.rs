@@ -82,6 +82,9 @@ struct DnBand {
     offset_px: [[f64; 2]; 4],
     /// Largest dark-subtracted raw DN of the band's samples per superpixel.
     max_dn: Vec<f32>,
+    /// How far (x, y) the band's blocks sit from their mean position (`offset_px`), raw px:
+    /// a colour band's sample averages blocks up to this far apart.
+    spread_px: [f64; 2],
 }
 
 impl DnImage {
@@ -152,10 +155,20 @@ impl DnImage {
                         *m = f32::from(v) - dark;
                     }
                 }
+                let spread_px = std::array::from_fn(|axis| {
+                    let n = blocks.len() as f64;
+                    let pos = |b: &(usize, usize)| 2.0 * if axis == 0 { b.0 } else { b.1 } as f64;
+                    let mean = blocks.iter().map(pos).sum::<f64>() / n;
+                    blocks
+                        .iter()
+                        .map(|b| (pos(b) - mean).abs())
+                        .fold(0.0, f64::max)
+                });
                 DnBand {
                     dn,
                     offset_px,
                     max_dn,
+                    spread_px,
                 }
             })
             .collect();
@@ -243,6 +256,41 @@ impl DnImage {
         (values, peaks)
     }
 
+    /// The raw pixels the value at `pixel` draws on through taps of weight at least
+    /// `min_weight` along each axis (every band and analyser; a tap covers its band's blocks,
+    /// each ±½ px): the sample's real footprint, which the kernel's phase at that pixel
+    /// decides — one tile where a lattice sample sits on the point, four for a Catmull–Rom
+    /// value halfway between samples.
+    pub fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+        let mut min = [f64::INFINITY; 2];
+        let mut max = [f64::NEG_INFINITY; 2];
+        for band in self.bands.iter().take(3) {
+            for offset in &band.offset_px {
+                for axis in 0..2 {
+                    let s = (pixel[axis] - offset[axis]) / self.tile_px;
+                    for (i, w) in self.kernel.taps(s, self.frame_size[axis]) {
+                        if w.abs() < min_weight || w == 0.0 {
+                            continue;
+                        }
+                        let centre = i as f64 * self.tile_px + offset[axis];
+                        let half = band.spread_px[axis] + 0.5;
+                        min[axis] = min[axis].min(centre - half);
+                        max[axis] = max[axis].max(centre + half);
+                    }
+                }
+            }
+        }
+        if min.iter().chain(&max).any(|v| !v.is_finite()) {
+            // No tap (cannot happen: the weights sum to 1): the kernel's whole reach.
+            let r = self.footprint_radius_px;
+            return PixelRect {
+                min: pixel.map(|v| v - r),
+                max: pixel.map(|v| v + r),
+            };
+        }
+        PixelRect { min, max }
+    }
+
     /// The superpixel range `[lo, hi)` per axis whose planes hold every tap of a sample inside
     /// `rect`, clamped to the frame.
     fn tap_range(&self, rect: &PixelRect) -> [[usize; 2]; 2] {
@@ -313,6 +361,7 @@ impl DnImage {
                     dn: std::array::from_fn(|k| copy(&b.dn[k])),
                     offset_px: b.offset_px,
                     max_dn: copy(&b.max_dn),
+                    spread_px: b.spread_px,
                 })
                 .collect(),
         }
@@ -378,6 +427,16 @@ pub trait AnalyserPixels: Sync {
     /// Half-side of the square of raw pixels about the sampled point that a value draws on
     /// (its footprint), px; 0 for a point sample.
     fn footprint_radius_px(&self) -> f64;
+    /// The raw pixels the value at `pixel` draws on through taps weighing at least
+    /// `min_weight` (per axis); by default the square of [`Self::footprint_radius_px`].
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+        let _ = min_weight;
+        let r = self.footprint_radius_px();
+        PixelRect {
+            min: pixel.map(|v| v - r),
+            max: pixel.map(|v| v + r),
+        }
+    }
 }
 
 /// A shared image (a frame cache's crop) reads as the image itself.
@@ -393,6 +452,10 @@ impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
     fn footprint_radius_px(&self) -> f64 {
         (**self).footprint_radius_px()
     }
+
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+        (**self).footprint(pixel, min_weight)
+    }
 }
 
 impl AnalyserPixels for DnImage {
@@ -406,6 +469,10 @@ impl AnalyserPixels for DnImage {
 
     fn footprint_radius_px(&self) -> f64 {
         self.footprint_radius_px
+    }
+
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+        DnImage::footprint(self, pixel, min_weight)
     }
 }
 

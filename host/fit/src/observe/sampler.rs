@@ -19,7 +19,7 @@ use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::image::AnalyserPixels;
+use super::image::{AnalyserPixels, PixelRect};
 use super::radiometry::{PointNormaliser, SessionRadiometry};
 use crate::data::{OBSERVATION_CHANNELS, Sample, ViewGeometry};
 use crate::gate::{GateConfig, SampleGate};
@@ -46,8 +46,9 @@ pub enum Outcome {
     Occluded,
     /// Not lit by the flash (blocked, facing away from it, or outside its emission profile).
     Shadowed,
-    /// The image footprint of the sample's value reaches off the vertex's visible surface
-    /// ([`AnalyserPixels::footprint_radius_px`], `FrameSampler::footprint_on_surface`).
+    /// The image footprint of the sample's value reaches off the vertex's visible surface or
+    /// onto another material ([`AnalyserPixels::footprint`],
+    /// `FrameSampler::footprint_on_surface`).
     Mixed,
     /// A shared sample gate (non-finite, grazing, saturated, dark).
     Gate(SampleGate),
@@ -115,9 +116,26 @@ pub struct SessionContext<'a> {
     pub gate: &'a GateConfig,
     /// Full scale minus the dark level, DN (what the gates compare against).
     pub full_scale_dn: f64,
-    /// A material label per vertex (`None`: unknown): a footprint that meets a triangle with
-    /// a corner of another label ([`UNLABELLED`] matches every label) mixes materials.
+    /// A material label per vertex (`None`: unknown): a footprint that meets a point whose
+    /// nearest vertex has another label ([`UNLABELLED`] matches every label) mixes materials.
     pub labels: Option<&'a [u32]>,
+    /// Taps of the sampling kernel lighter than this do not count to a sample's footprint
+    /// ([`min_tap_weight`]).
+    pub min_tap_weight: f64,
+}
+
+/// The lightest kernel tap that counts to a sample's footprint: the relative shot noise of a
+/// pixel at half the sensor's full well, 1/√(full well / 2) (1.4 % for the IMX250's 10 500 e⁻
+/// at 0 dB; `sensor.dn_per_electron` already carries the gain). A lighter tap on a
+/// contaminant no brighter than the sample's own level moves the value by less than one noise
+/// σ of a mid-scale pixel, so it cannot make the sample mixed.
+pub fn min_tap_weight(full_scale_dn: f64, sensor: &crate::solve::SensorNoiseModel) -> f64 {
+    let full_well_e = full_scale_dn / sensor.dn_per_electron.max(f64::MIN_POSITIVE);
+    if full_well_e.is_finite() && full_well_e > 2.0 {
+        (0.5 * full_well_e).sqrt().recip()
+    } else {
+        0.0
+    }
 }
 
 /// Everything needed to observe every vertex in one frame.
@@ -200,49 +218,60 @@ impl<'a> FrameSampler<'a> {
         false
     }
 
-    /// Whether the sample's footprint — the square of half-side `r` px about its pixel
-    /// ([`AnalyserPixels::footprint_radius_px`]) — lies on the vertex's visible
-    /// surface: the rays through its four corners and four edge midpoints each meet the mesh
-    /// within the distance a footprint of that size can cover on the vertex's tangent plane
-    /// (the corners' image distance at depth `depth_m`, stretched by 1/cos of the view angle,
-    /// capped at 85°, plus the unstretched distance again as room for curvature). A ray that
-    /// misses the mesh has left the object past a silhouette (or onto the board below a
-    /// contact); one that meets it farther away crossed an occlusion boundary. Either way the
-    /// value mixes in light the vertex's model cannot explain. A point sample (radius 0)
-    /// always passes.
+    /// Whether the sample's footprint — the raw pixels its value draws on at this pixel
+    /// ([`AnalyserPixels::footprint`], taps of weight ≥ [`SessionContext::min_tap_weight`]) —
+    /// lies on the vertex's visible surface and material: the rays through the rectangle's four
+    /// corners and four edge midpoints each meet the mesh within the distance a footprint of
+    /// that size can cover on the vertex's tangent plane (the farthest corner's image distance
+    /// at depth `depth_m`, stretched by 1/cos of the view angle, capped at 85°, plus the
+    /// unstretched distance again as room for curvature), at a point of the vertex's own
+    /// material. A ray that misses the mesh has left the object past a silhouette (or onto the
+    /// board below a contact); one that meets it farther away crossed an occlusion boundary;
+    /// one that meets another material (the label of the hit triangle's nearest corner: a
+    /// material's region is its vertices' Voronoi cells on the surface, as the renderer's
+    /// `region_blend = "nearest"` draws it) mixes materials. Either way the value holds light
+    /// the vertex's model cannot explain. A point sample (an empty footprint) always passes.
     fn footprint_on_surface(
         &self,
         v: usize,
         position: &Point3<f64>,
         pixel: [f64; 2],
-        r: f64,
+        rect: &PixelRect,
         depth_m: f64,
         cos_view: f64,
     ) -> bool {
-        if r <= 0.0 {
+        let corners = [
+            [rect.min[0], rect.min[1]],
+            [rect.max[0], rect.min[1]],
+            [rect.min[0], rect.max[1]],
+            [rect.max[0], rect.max[1]],
+        ];
+        let far_px = corners
+            .iter()
+            .map(|c| (c[0] - pixel[0]).hypot(c[1] - pixel[1]))
+            .fold(0.0, f64::max);
+        if far_px <= 0.0 {
             return true;
         }
         let px_m = depth_m / self.session.camera.intrinsics.fx.abs().max(1e-9);
-        // A corner is r·√2 px off; on the tangent plane that stretches by at most 1/cos θ.
-        let reach_m = r * std::f64::consts::SQRT_2 * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
+        // On the tangent plane an image distance stretches by at most 1/cos θ.
+        let reach_m = far_px * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
         let origin = Point3::from(self.view.camera_position_world);
+        let mid = |a: f64, b: f64| 0.5 * (a + b);
         // Corners first: they reach farthest, so a mixed footprint fails in fewer rays (every
         // ray must pass, so the order does not change the verdict).
-        for (dx, dy) in [
-            (-1.0, -1.0),
-            (1.0, -1.0),
-            (-1.0, 1.0),
-            (1.0, 1.0),
-            (0.0, -1.0),
-            (-1.0, 0.0),
-            (1.0, 0.0),
-            (0.0, 1.0),
-        ] {
-            let Ok(dir) = self
-                .session
-                .camera
-                .unproject_to_ray([pixel[0] + dx * r, pixel[1] + dy * r])
-            else {
+        let points = [
+            corners[0],
+            corners[1],
+            corners[2],
+            corners[3],
+            [mid(rect.min[0], rect.max[0]), rect.min[1]],
+            [rect.min[0], mid(rect.min[1], rect.max[1])],
+            [rect.max[0], mid(rect.min[1], rect.max[1])],
+            [mid(rect.min[0], rect.max[0]), rect.max[1]],
+        ];
+        for p in points {
+            let Ok(dir) = self.session.camera.unproject_to_ray(p) else {
                 return false;
             };
             let ray = Ray::new(origin, self.world_from_camera.rotation * dir.into_inner());
@@ -251,11 +280,11 @@ impl<'a> FrameSampler<'a> {
                     if let Some(labels) = self.session.labels {
                         let own = labels[v];
                         let tri = self.session.mesh.triangles()[hit.primitive as usize];
-                        let other = |c: &u32| {
-                            let l = labels[*c as usize];
-                            l != own && l != UNLABELLED && own != UNLABELLED
-                        };
-                        if tri.iter().any(other) {
+                        let nearest = (0..3)
+                            .max_by(|&i, &j| hit.barycentric[i].total_cmp(&hit.barycentric[j]))
+                            .unwrap_or(0);
+                        let there = labels[tri[nearest] as usize];
+                        if own != UNLABELLED && there != UNLABELLED && there != own {
                             return false;
                         }
                     }
@@ -298,8 +327,8 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        let r = self.image.footprint_radius_px();
-        if !self.footprint_on_surface(v, &position, pixel, r, p_cam.z, cos_view) {
+        let rect = self.image.footprint(pixel, self.session.min_tap_weight);
+        if !self.footprint_on_surface(v, &position, pixel, &rect, p_cam.z, cos_view) {
             return Outcome::Mixed;
         }
 
@@ -324,14 +353,30 @@ impl<'a> FrameSampler<'a> {
             return Outcome::Gate(g);
         }
 
-        // Normaliser geometry exactly as the renderer's (`PointNormaliser`).
-        let n = self.normaliser.at(&position);
+        match self.in_model_units(&position, &values, bands) {
+            Some(Ok(sample)) => Outcome::Kept(sample),
+            Some(Err(gate)) => Outcome::Gate(gate),
+            // Outside the flash's emission profile: not lit.
+            None => Outcome::Shadowed,
+        }
+    }
+
+    /// The sample of analyser values `values` (DN, `bands` bands) at `position` in model units:
+    /// the observation channels divided by the normaliser N (its geometry exactly as the
+    /// renderer's, `PointNormaliser`). `None` outside the flash's emission profile (N ≤ 0), the
+    /// non-finite gate where N or a channel is not finite.
+    fn in_model_units(
+        &self,
+        position: &Point3<f64>,
+        values: &[[f32; 4]; 3],
+        bands: usize,
+    ) -> Option<Result<Sample, SampleGate>> {
+        let n = self.normaliser.at(position);
         if !n.is_finite() {
-            return Outcome::Gate(SampleGate::NonFinite);
+            return Some(Err(SampleGate::NonFinite));
         }
         if n <= 0.0 {
-            // Outside the flash's emission profile: not lit.
-            return Outcome::Shadowed;
+            return None;
         }
         let mut channels = [[0f32; OBSERVATION_CHANNELS]; 3];
         for (c, out) in channels.iter_mut().enumerate() {
@@ -339,12 +384,12 @@ impl<'a> FrameSampler<'a> {
             *out = self.session.radiometry.channels(a).map(|v| (v / n) as f32);
         }
         if channels.iter().flatten().any(|v| !v.is_finite()) || !(n as f32).is_finite() {
-            return Outcome::Gate(SampleGate::NonFinite);
+            return Some(Err(SampleGate::NonFinite));
         }
-        Outcome::Kept(Sample {
+        Some(Ok(Sample {
             view: 0,
             channels,
             normaliser: n as f32,
-        })
+        }))
     }
 }

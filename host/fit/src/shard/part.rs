@@ -295,6 +295,7 @@ pub(crate) mod tests {
                 iterations: 3,
                 flags: vec![crate::data::FitFlag::TooFewViews],
                 eta_unpooled: None,
+                gates: Default::default(),
             })
             .collect();
         PartFile {

@@ -1,0 +1,468 @@
+//! A full parameter set for every vertex the views see: where a vertex's own samples do not
+//! identify a parameter, it takes its material's value, flagged [`FitFlag::FromMaterial`], with
+//! the material's spread as its standard error (docs/fit-augment.md "Every observed vertex").
+//!
+//! Why. The per-vertex solve needs `min_views` usable samples; a vertex the views see only
+//! near a silhouette, behind a highlight or at a material boundary has fewer, and η needs
+//! oblique views besides. Left withheld, those vertices are holes in every map and picture — a
+//! quarter to a half of what the camera saw. Their material, though, is known from what the
+//! rest of the object says about it, and their colour from their own samples.
+//!
+//! Contract:
+//! - **Which vertices.** Every vertex the views see lit (not [`FitFlag::Unobserved`]) whose
+//!   flags withhold its parameters ([`FitFlag::TooFewViews`], [`FitFlag::AlbedoAtCap`]) is
+//!   *completed*; one whose flags withhold only η ([`FitFlag::EtaUnidentifiable`]) gets its
+//!   material's η and keeps the rest. Vertices the fit identified are never touched. An
+//!   unobserved vertex stays withheld.
+//! - **Its material** ([`assign`]): the clusters whose colour lies within the virtual-sample
+//!   kernel's reach ([`crate::augment::POOL_COLOUR_DISTANCE`]) of the vertex's own colour (its
+//!   samples' ρd at the prior lobe) are its candidates (every cluster when it has no sample,
+//!   the nearest by colour when none is that close); of them, the one whose own-fit members are
+//!   nearest along the mesh's edges (multi-source Dijkstra per cluster). So a vertex takes the
+//!   material of its surroundings that its colour allows: two materials of one colour and
+//!   different η stay where they lie, and a small patch of another colour keeps it.
+//! - **The material's values** ([`MaterialValues`], from the cluster's own-fit members): η the
+//!   pooled one (`Pooled::mean`) with the predictive spread of a member √(se² + τ²), or, where
+//!   no pool formed, the members' median η and robust spread; σs, σss, ρs, ρss the cluster's
+//!   two-lobe model with the members' robust spread (1.4826·MAD) of their own values; ρd the
+//!   members' median and robust spread, used only where the vertex has no sample.
+//! - **Its own ρd** ([`own_rho_d`]): per colour channel the weighted least-squares albedo of its
+//!   samples' observation channels with every other parameter the material's, at the surface's
+//!   normal (weights N: the samples' inverse variance at a given model intensity); its standard
+//!   error from the residuals (at least one sample gives three channels per colour). Clamped
+//!   to [0, cap].
+//! - **Its normal** is the surface's (the refined mesh's), with `normal_std_deg` as its σ.
+//! - A material without a value (no cluster: step B did not run or found none) completes
+//!   nothing; the vertex stays withheld and [`Completion::unassigned`] counts it.
+//! - Deterministic: a function of its inputs, no randomness, serial over vertices.
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+
+use ellipso_model::geometry::TriangleMesh;
+
+use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
+use crate::data::{FitFlag, SampleSet, VertexFit};
+use crate::model::{SampleFrames, unit_sample_at};
+
+/// What [`complete`] did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Completion {
+    /// Vertices given their material's parameters (all but ρd where they had samples).
+    pub completed: usize,
+    /// Of those, with their own ρd from their samples.
+    pub own_rho_d: usize,
+    /// Vertices given only their material's η.
+    pub eta_from_material: usize,
+    /// Vertices that needed completing but had no material to take it from.
+    pub unassigned: usize,
+    /// Completed vertices per cluster (index into the augmentation's clusters).
+    pub per_cluster: Vec<usize>,
+}
+
+impl Completion {
+    /// One line for progress output.
+    pub fn describe(&self) -> String {
+        format!(
+            "completion: {} vertices the views see but their samples do not identify took their \
+             material's values ({} with their own ρd), {} their material's η{}",
+            self.completed,
+            self.own_rho_d,
+            self.eta_from_material,
+            if self.unassigned > 0 {
+                format!("; {} had no material to take it from", self.unassigned)
+            } else {
+                String::new()
+            }
+        )
+    }
+}
+
+/// One material's values and spreads, from its cluster's own-fit members.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaterialValues {
+    /// η and its spread (`None`: no η for this material).
+    pub eta: Option<[f64; 2]>,
+    /// σs, σss, ρs, ρss RGB (the cluster's lobe model).
+    pub lobe: [f64; 6],
+    /// Their spreads.
+    pub lobe_spread: [f64; 6],
+    /// Median ρd RGB of the members.
+    pub rho_d: [f64; 3],
+    /// Its spread.
+    pub rho_d_spread: [f64; 3],
+}
+
+/// 1.4826·MAD: the robust standard deviation (NaN below two values).
+fn robust_sd(values: &mut [f64]) -> f64 {
+    if values.len() < 2 {
+        return f64::NAN;
+    }
+    ellipso_model::stats::robust_sigma(values)
+}
+
+fn median(values: &mut [f64]) -> f64 {
+    ellipso_model::stats::median(values)
+}
+
+impl MaterialValues {
+    /// The values of cluster `j` of `a` from its own-fit members' `fits`.
+    fn of_cluster(a: &Augmentation, j: usize, members: &[&VertexFit]) -> Self {
+        let c = &a.clusters[j];
+        let column = |f: &dyn Fn(&VertexFit) -> f64| -> Vec<f64> {
+            members
+                .iter()
+                .map(|m| f(m))
+                .filter(|v| v.is_finite())
+                .collect()
+        };
+        let spread = |f: &dyn Fn(&VertexFit) -> f64| robust_sd(&mut column(f));
+        let eta = if c.eta_pooled.usable {
+            let p = c.eta_pooled;
+            Some([p.mean, (p.se * p.se + p.tau * p.tau).sqrt()])
+        } else {
+            let mut etas = column(&|m| {
+                if m.eta_identified() {
+                    m.params.eta
+                } else {
+                    f64::NAN
+                }
+            });
+            let centre = median(&mut etas);
+            let sd = robust_sd(&mut etas);
+            (centre.is_finite() && sd.is_finite()).then_some([centre, sd])
+        };
+        let rho_d: [f64; 3] = std::array::from_fn(|k| median(&mut column(&|m| m.params.rho_d[k])));
+        Self {
+            eta,
+            lobe: [
+                c.sigma_s,
+                c.sigma_ss,
+                c.rho_s,
+                c.rho_ss[0],
+                c.rho_ss[1],
+                c.rho_ss[2],
+            ],
+            lobe_spread: [
+                spread(&|m| m.params.sigma_s),
+                spread(&|m| m.params.sigma_ss),
+                spread(&|m| m.params.rho_s),
+                spread(&|m| m.params.rho_ss[0]),
+                spread(&|m| m.params.rho_ss[1]),
+                spread(&|m| m.params.rho_ss[2]),
+            ],
+            rho_d,
+            rho_d_spread: std::array::from_fn(|k| spread(&|m| m.params.rho_d[k])),
+        }
+    }
+}
+
+/// Whether the fit reports `f`'s parameters as its own (the identifiability rule before any
+/// completion).
+fn own_vertex(f: &VertexFit) -> bool {
+    f.identifiable().vertex && !f.flags.contains(&FitFlag::FromMaterial)
+}
+
+/// Edge-length graph distances from every vertex to the nearest vertex of `sources`
+/// (multi-source Dijkstra); `f64::INFINITY` where none is reachable.
+fn graph_distance(adjacency: &[Vec<(u32, f64)>], sources: &[usize]) -> Vec<f64> {
+    let mut dist = vec![f64::INFINITY; adjacency.len()];
+    let mut heap = BinaryHeap::new();
+    for &s in sources {
+        dist[s] = 0.0;
+        heap.push(Reverse((ordered(0.0), s)));
+    }
+    while let Some(Reverse((d, v))) = heap.pop() {
+        let d = f64::from_bits(d);
+        if d > dist[v] {
+            continue;
+        }
+        for &(w, len) in &adjacency[v] {
+            let w = w as usize;
+            let nd = d + len;
+            if nd < dist[w] {
+                dist[w] = nd;
+                heap.push(Reverse((ordered(nd), w)));
+            }
+        }
+    }
+    dist
+}
+
+/// A non-negative finite f64 as an integer key with the same order.
+fn ordered(d: f64) -> u64 {
+    d.to_bits()
+}
+
+/// The mesh's edges as an adjacency list with lengths, metres.
+fn adjacency(mesh: &TriangleMesh) -> Vec<Vec<(u32, f64)>> {
+    let p = mesh.positions();
+    let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); p.len()];
+    for t in mesh.triangles() {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let len = (p[a as usize] - p[b as usize]).norm();
+            for (x, y) in [(a, b), (b, a)] {
+                let list = &mut adj[x as usize];
+                if !list.iter().any(|(z, _)| *z == y) {
+                    list.push((y, len));
+                }
+            }
+        }
+    }
+    adj
+}
+
+/// The material of every vertex that needs one (module doc, "Its material"): cluster index,
+/// or `None` (no cluster, or the vertex is not to be completed).
+pub fn assign(
+    set: &SampleSet,
+    fits: &[VertexFit],
+    a: &Augmentation,
+    mesh: &TriangleMesh,
+    needs: &[bool],
+) -> Vec<Option<usize>> {
+    let k = a.clusters.len();
+    if k == 0 {
+        return vec![None; fits.len()];
+    }
+    let adj = adjacency(mesh);
+    let distances: Vec<Vec<f64>> = (0..k)
+        .map(|j| {
+            let sources: Vec<usize> = (0..fits.len())
+                .filter(|&v| a.assignment.get(v) == Some(&Some(j)) && own_vertex(&fits[v]))
+                .collect();
+            graph_distance(&adj, &sources)
+        })
+        .collect();
+    let scaling = a.partition.scaling;
+    // A vertex's colour: its fit's ρd where it has samples (fitted, or at the prior lobe for a
+    // vertex with too few). A vertex whose every sample was mixed has none: what its mixed
+    // samples show is dominated, on the underside and at silhouettes, by the board and the
+    // neighbours its footprint reached.
+    let colours: Vec<Option<[f64; 3]>> = (0..fits.len())
+        .map(|v| {
+            let vertex = set.vertices.get(v)?;
+            (needs[v] && !vertex.samples.is_empty()).then_some(fits[v].params.rho_d)
+        })
+        .collect();
+    let colour_distance = |v: usize, j: usize| {
+        let Some(rho_d) = colours[v] else {
+            return f64::INFINITY;
+        };
+        let f = scaling.feature(rho_d, 1.5);
+        let c = &a.clusters[j].centroid;
+        (0..3).map(|i| (f[i] - c[i]).powi(2)).sum::<f64>().sqrt()
+    };
+    (0..fits.len())
+        .map(|v| {
+            if !needs[v] {
+                return None;
+            }
+            let mut candidates: Vec<usize> = if colours[v].is_some() {
+                (0..k)
+                    .filter(|&j| colour_distance(v, j) < POOL_COLOUR_DISTANCE)
+                    .collect()
+            } else {
+                (0..k).collect()
+            };
+            if candidates.is_empty() {
+                candidates = vec![
+                    (0..k)
+                        .min_by(|&i, &j| colour_distance(v, i).total_cmp(&colour_distance(v, j)))
+                        .unwrap_or(0),
+                ];
+            }
+            let nearest = candidates
+                .iter()
+                .copied()
+                .min_by(|&i, &j| distances[i][v].total_cmp(&distances[j][v]))
+                .unwrap_or(candidates[0]);
+            Some(nearest)
+        })
+        .collect()
+}
+
+/// The vertex's own ρd per colour channel and its standard error, with every other parameter
+/// `params`'s at `normal` (module doc); `None` without a usable sample.
+pub fn own_rho_d(
+    set: &SampleSet,
+    v: usize,
+    params: &ellipso_model::optics::pbrdf::PbrdfParams<f64>,
+    normal: [f64; 3],
+    albedo_cap: f64,
+) -> Option<([f64; 3], [f64; 3])> {
+    let vertex = set.vertices.get(v)?;
+    rho_d_of(set, vertex, &vertex.samples, params, normal, albedo_cap)
+}
+
+/// [`own_rho_d`] from `samples` of `vertex`.
+fn rho_d_of(
+    set: &SampleSet,
+    vertex: &crate::data::VertexSamples,
+    samples: &[crate::data::Sample],
+    params: &ellipso_model::optics::pbrdf::PbrdfParams<f64>,
+    normal: [f64; 3],
+    albedo_cap: f64,
+) -> Option<([f64; 3], [f64; 3])> {
+    let channels = if set.colour { 3 } else { 1 };
+    let mut units = Vec::with_capacity(samples.len());
+    for s in samples {
+        let Some(view) = set.views.get(s.view as usize) else {
+            continue;
+        };
+        let Some(frames) = SampleFrames::new(view, vertex.position_world) else {
+            continue;
+        };
+        let Some(u) = unit_sample_at(&frames, normal, params.eta, params.sigma_s, params.sigma_ss)
+        else {
+            continue;
+        };
+        units.push((s, u));
+    }
+    if units.is_empty() {
+        return None;
+    }
+    let mut rho = [0.0; 3];
+    let mut se = [f64::INFINITY; 3];
+    for c in 0..channels {
+        let rest =
+            |u: &crate::model::UnitSample<f64>| u.predict(0.0, params.rho_ss[c], params.rho_s);
+        let (mut num, mut den) = (0.0, 0.0);
+        for (s, u) in &units {
+            let w = f64::from(s.normaliser);
+            let r = rest(u);
+            for ((a, obs), r) in u.diffuse.iter().zip(&s.channels[c]).zip(r) {
+                num += w * a * (f64::from(*obs) - r);
+                den += w * a * a;
+            }
+        }
+        if !(den > 0.0 && num.is_finite()) {
+            return None;
+        }
+        let estimate = num / den;
+        let (mut rss, mut m) = (0.0, 0usize);
+        for (s, u) in &units {
+            let w = f64::from(s.normaliser);
+            let r = rest(u);
+            for ((a, obs), r) in u.diffuse.iter().zip(&s.channels[c]).zip(r) {
+                let res = f64::from(*obs) - r - estimate * a;
+                rss += w * res * res;
+                m += 1;
+            }
+        }
+        // m ≥ 3 (one sample's three channels) against one unknown.
+        let s2 = rss / (m.saturating_sub(1)).max(1) as f64;
+        rho[c] = estimate.clamp(0.0, albedo_cap);
+        se[c] = (s2 / den).sqrt();
+    }
+    if channels == 1 {
+        rho = [rho[0]; 3];
+        se = [se[0]; 3];
+    }
+    Some((rho, se))
+}
+
+/// Completes `fits` (one per vertex of `set`, in order) from the materials of `a` (module doc).
+/// `mesh` is the surface the fit ends on (its normals are the completed vertices' normals);
+/// `normal_std_deg` is that surface's normal σ; `albedo_cap` the solver's.
+pub fn complete(
+    set: &SampleSet,
+    fits: &mut [VertexFit],
+    a: &Augmentation,
+    mesh: &TriangleMesh,
+    normal_std_deg: f64,
+    albedo_cap: f64,
+) -> Completion {
+    let k = a.clusters.len();
+    let mut report = Completion {
+        per_cluster: vec![0; k],
+        ..Default::default()
+    };
+    let needs_all: Vec<bool> = fits
+        .iter()
+        .map(|f| !f.flags.contains(&FitFlag::Unobserved) && !own_vertex(f))
+        .collect();
+    let needs_eta: Vec<bool> = fits
+        .iter()
+        .map(|f| own_vertex(f) && !f.identifiable().eta)
+        .collect();
+    let needs: Vec<bool> = needs_all
+        .iter()
+        .zip(&needs_eta)
+        .map(|(a, b)| *a || *b)
+        .collect();
+    let materials: Vec<MaterialValues> = (0..k)
+        .map(|j| {
+            let members: Vec<&VertexFit> = fits
+                .iter()
+                .enumerate()
+                .filter(|(v, f)| a.assignment.get(*v) == Some(&Some(j)) && own_vertex(f))
+                .map(|(_, f)| f)
+                .collect();
+            MaterialValues::of_cluster(a, j, &members)
+        })
+        .collect();
+    let labels = assign(set, fits, a, mesh, &needs);
+    for v in 0..fits.len() {
+        if !needs[v] {
+            continue;
+        }
+        let Some(j) = labels[v] else {
+            report.unassigned += 1;
+            continue;
+        };
+        let m = &materials[j];
+        let Some([eta, eta_sd]) = m.eta else {
+            report.unassigned += 1;
+            continue;
+        };
+        let f = &mut fits[v];
+        if needs_eta[v] {
+            f.params.eta = eta;
+            f.std_error[0] = eta_sd;
+            f.flags.push(FitFlag::FromMaterial);
+            report.eta_from_material += 1;
+            continue;
+        }
+        let normal: [f64; 3] = mesh
+            .normals()
+            .get(v)
+            .map_or(f.normal_world, |n| n.into_inner().into());
+        let mut params = f.params;
+        params.eta = eta;
+        params.sigma_s = m.lobe[0];
+        params.sigma_ss = m.lobe[1].max(m.lobe[0]);
+        params.rho_s = m.lobe[2];
+        params.rho_ss = [m.lobe[3], m.lobe[4], m.lobe[5]];
+        let (rho_d, rho_d_se) = match own_rho_d(set, v, &params, normal, albedo_cap) {
+            Some(own) => {
+                report.own_rho_d += 1;
+                own
+            }
+            None => (m.rho_d, m.rho_d_spread),
+        };
+        params.rho_d = rho_d;
+        f.params = params;
+        f.normal_world = normal;
+        f.normal_std_error_deg = normal_std_deg;
+        f.std_error = [
+            eta_sd,
+            m.lobe_spread[0],
+            m.lobe_spread[1],
+            m.lobe_spread[2],
+            m.lobe_spread[3],
+            m.lobe_spread[4],
+            m.lobe_spread[5],
+            rho_d_se[0],
+            rho_d_se[1],
+            rho_d_se[2],
+        ];
+        f.flags.push(FitFlag::FromMaterial);
+        f.flags.sort();
+        f.flags.dedup();
+        report.completed += 1;
+        report.per_cluster[j] += 1;
+    }
+    report
+}
