@@ -140,6 +140,11 @@ pub struct Scores {
     pub vertices: usize,
     /// Vertices scored (not `TooFewViews`).
     pub scored: usize,
+    /// Vertices some view sees lit (not `Unobserved`): what the coverage is of.
+    pub observed: usize,
+    /// `scored / observed`: the share of the seen surface the figures stand for (this
+    /// fit-only bench runs steps A–C without the completion from materials).
+    pub coverage: f64,
     /// Kept observations.
     pub samples: usize,
     /// Mean η error over scored vertices, %.
@@ -557,10 +562,20 @@ pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
             .map(|m| 100.0 * (m.eta_median - m.eta_true).abs() / m.eta_true)
             .collect::<Vec<_>>(),
     );
+    let observed = fits
+        .iter()
+        .filter(|f| !f.flags.contains(&FitFlag::Unobserved))
+        .count();
     Scores {
         eta_material_pct,
         vertices: fits.len(),
         scored: scored.len(),
+        observed,
+        coverage: if observed == 0 {
+            f64::NAN
+        } else {
+            scored.len() as f64 / observed as f64
+        },
         samples: set.vertices.iter().map(|v| v.samples.len()).sum(),
         eta_mean_pct: mean(&scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
         eta_median_pct: ellipso_report::percentile(

@@ -429,12 +429,13 @@ fn one_run(
     };
     say!(
         say,
-        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
+        "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices ({:.3} of the observed scored) {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
         r.scene,
         r.sweep,
         r.solver,
         r.photos,
         r.scores.vertices,
+        r.scores.coverage,
         r.scores.samples,
         r.fit_s,
         r.fit_over_forward,

@@ -112,6 +112,8 @@ pub struct RunResult {
     pub vertices: usize,
     /// Scores.
     pub scores: FitScores,
+    /// What share of the visible surface they stand for (`crate::coverage`).
+    pub coverage: crate::coverage::CoverageScores,
     /// Held-out re-render, fit and truth.
     pub holdout: Option<HoldoutBeside>,
     /// Residuals of the fitted observations at the truth.
@@ -233,6 +235,8 @@ impl Bench {
         let at = truth_at(&truth, fit.mesh.positions());
         let colour = fit.set.colour;
         let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
+        let (coverage, _) = crate::coverage::score_session_fit(&scene, &session, &fit)
+            .map_err(|e| BenchError::stage("coverage", e))?;
         let full_scale = crate::accuracy::full_scale_dn(&scene);
         let holdout = fit
             .held_out_set
@@ -246,6 +250,7 @@ impl Bench {
             frames: session.frames.len(),
             vertices: mesh.positions().len(),
             scores,
+            coverage,
             holdout,
             residuals,
             times,

@@ -361,10 +361,8 @@ pub fn describe(s: &CoverageScores) -> Vec<String> {
 }
 
 /// Scores the fit in `fit_dir` (its `fit.ply` and `fit-summary.json`) of `session_dir`, a
-/// session captured from `scene`: the truth at every fitted vertex, the visible frame counts over
-/// the frames the fit used (the session's posed frames less the held-out ones, at their true
-/// poses, with the session's camera and flash and the fit's default grazing cut-off), then
-/// [`score`].
+/// session captured from `scene` ([`score_fit_vertices`] over the posed frames less the
+/// held-out ones the summary lists).
 pub fn score_fit_dir(
     scene: &ellipso_sim::scene::Scene,
     session_dir: &std::path::Path,
@@ -384,17 +382,61 @@ pub fn score_fit_dir(
         .as_array()
         .map(|a| a.iter().filter_map(serde_json::Value::as_u64).collect())
         .unwrap_or_default();
-    let posed: std::collections::BTreeSet<u64> = ellipso_fit::observe::poses_from_session(&session)
+    let fitted: Vec<u64> = ellipso_fit::observe::poses_from_session(&session)
         .into_iter()
         .map(|(id, _)| id)
+        .filter(|id| !held_out.contains(id))
         .collect();
-    let poses: Vec<Isometry3<f64>> = crate::capture::true_poses(&session, scene)
+    score_fit_vertices(scene, &session, &fitted, &fit)
+}
+
+/// [`score_fit_vertices`] of a fit made in this process: its vertices as `fit.ply` writes them
+/// and its fitted frames.
+pub fn score_session_fit(
+    scene: &ellipso_sim::scene::Scene,
+    session: &ellipso_session::reader::Session,
+    fit: &ellipso_fit::session::SessionFit,
+) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_model::run_error::RunError> {
+    let vertices: Vec<FitVertex> = fit
+        .outcome
+        .fits
+        .iter()
+        .zip(fit.mesh.positions())
+        .map(|(f, p)| {
+            let params = ellipso_fit::export::ply::params_of(f);
+            let std = f.reported_std_error();
+            FitVertex {
+                position: [p.x as f32, p.y as f32, p.z as f32],
+                normal: f.normal_world.map(|v| v as f32),
+                params: params.map(|v| v as f32),
+                std_error: std.map(|v| v as f32),
+                normal_std_deg: f.reported_normal_std_deg() as f32,
+                samples: f.samples_used,
+                flags: f.output_mask(),
+            }
+        })
+        .collect();
+    let fitted: Vec<u64> = fit.poses_fitted.iter().map(|p| p.0).collect();
+    score_fit_vertices(scene, session, &fitted, &vertices)
+}
+
+/// Scores `fit` (vertices as `fit.ply` holds them) of `session`, captured from `scene`, fitted
+/// from the frames `fitted` (ids): the truth at every vertex, the visible frame counts over
+/// those frames at their true poses (the session's camera and flash, the fit's default grazing
+/// cut-off), then [`score`]; with the truth beside every vertex.
+pub fn score_fit_vertices(
+    scene: &ellipso_sim::scene::Scene,
+    session: &ellipso_session::reader::Session,
+    fitted: &[u64],
+    fit: &[FitVertex],
+) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_model::run_error::RunError> {
+    let poses: Vec<Isometry3<f64>> = crate::capture::true_poses(session, scene)
         .into_iter()
-        .filter(|(id, _)| posed.contains(id) && !held_out.contains(id))
+        .filter(|(id, _)| fitted.contains(id))
         .map(|(_, p)| p)
         .collect();
-    let camera = ellipso_fit::observe::camera_of(&session)?;
-    let flash = ellipso_fit::observe::flash_of(&session)?;
+    let camera = ellipso_fit::observe::camera_of(session)?;
+    let flash = ellipso_fit::observe::flash_of(session)?;
     let truth = crate::chain::truth_for_scoring(scene)?;
     let positions: Vec<Point3<f64>> = fit
         .iter()
@@ -412,12 +454,11 @@ pub fn score_fit_dir(
     let grazing = ellipso_fit::gate::GateConfig::default().grazing_cutoff_deg;
     let visible = visible_frames(&truth.mesh, &points, &camera, &flash, &poses, grazing);
     let colour = session.manifest.sensor.layout == ellipso_model::mosaic::SensorLayout::ColourPolar;
-    let scores = score(&fit, &at, &visible, &truth.material_names, colour);
-    let vertices = fit
+    let scores = score(fit, &at, &visible, &truth.material_names, colour);
+    let vertices = at
         .iter()
-        .zip(&at)
         .zip(&visible)
-        .map(|((_, t), &seen)| VertexRow {
+        .map(|(t, &seen)| VertexRow {
             material: t.map(|t| t.material),
             visible_frames: seen,
             eta_true: t.map_or(f64::NAN, |t| t.params.eta),

@@ -114,6 +114,9 @@ pub struct MeshScores {
     pub surface_update: Vec<ellipso_fit::shape::surface::SurfaceIteration>,
     /// Per-material η on the carved-and-refined mesh beside the true mesh's fit.
     pub eta: Vec<EtaBeside>,
+    /// What share of the visible surface the carved mesh's fit covers, per material, and how
+    /// honest its σ are (`crate::coverage`).
+    pub coverage: crate::coverage::CoverageScores,
     /// Wall time of the fit on the carved mesh, s.
     pub fit_s: f64,
     /// Wall time of the fit on the true mesh, s.
@@ -427,7 +430,9 @@ pub fn mesh_scores(
         let at = crate::truth_map::truth_at(&truth, f.mesh.positions());
         crate::score::score_fit(&f.outcome.fits, &at, &truth.material_names, f.set.colour)
     };
+    let (coverage, _) = crate::coverage::score_session_fit(scene, session, fit)?;
     Ok(MeshScores {
+        coverage,
         before: surface_score(&truth, carved, None, &fit.observed),
         after: surface_score(&truth, &fit.mesh, Some(&fit.outcome.fits), &fit.observed),
         distance_before: mesh_distance(carved, &truth.mesh, 50_000, 1),

@@ -130,7 +130,9 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
 
     // Table 1: every run.
     let _ = writeln!(s, "## Every run\n");
-    let mut head = String::from("| run | posed | vertices scored |");
+    let mut head = String::from(
+        "| run | posed | vertices scored (coverage of the visible surface, lowest material) |",
+    );
     let mut rule = String::from("|---|---:|---:|");
     for m in &materials {
         head += &format!(" η {m} (%) |");
@@ -142,11 +144,13 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
     for r in runs {
         let sc = &r.scores;
         let mut row = format!(
-            "| {} | {}/{} | {} |",
+            "| {} | {}/{} | {} ({:.3}, {:.3}) |",
             cell(&r.spec.name),
             r.frames_posed,
             r.frames,
-            sc.scored
+            sc.scored,
+            r.coverage.coverage_visible,
+            r.coverage.coverage_material_min
         );
         for m in &materials {
             let cell = sc

@@ -2,7 +2,9 @@
 //! floor.
 //!
 //! Contract:
-//! - Vertices scored: every fitted vertex (not `TooFewViews`) with a truth ([`VertexTruth`]).
+//! - Vertices scored: every vertex whose parameters the outputs report (the identifiability
+//!   rule, `VertexFit::is_reliable`: own fits and those completed from their material) with a
+//!   truth ([`VertexTruth`]); what share of the visible surface that is, `crate::coverage`.
 //! - **Per material** (the paper's measure): the median fitted η over the material's scored
 //!   vertices whose η the identifiability rule reports (`VertexFit::eta_identified`; NaN
 //!   when none does) and its signed error against the truth, %; the same for the vertices' unpooled η
@@ -21,7 +23,7 @@
 //!   sensor noise the solver assumes; a chain stage that biases the observations shows here as
 //!   a mean far from 0, before any fit.
 
-use ellipso_fit::data::{FitFlag, SampleSet, VertexFit};
+use ellipso_fit::data::{SampleSet, VertexFit};
 use ellipso_fit::holdout::{FrameScore, score};
 use ellipso_fit::model::{SampleFrames, observed_pixels, predicted_pixels, unit_sample_at};
 use ellipso_fit::solve::SensorNoiseModel;
@@ -134,7 +136,7 @@ pub fn score_fit(
         .iter()
         .zip(truth)
         .enumerate()
-        .filter(|(_, (f, _))| !f.flags.contains(&FitFlag::TooFewViews))
+        .filter(|(_, (f, _))| f.is_reliable())
         .filter_map(|(v, (_, t))| t.as_ref().map(|t| (v, t)))
         .collect();
     let eta_err = |eta: f64, t: &VertexTruth| 100.0 * (eta - t.params.eta) / t.params.eta;

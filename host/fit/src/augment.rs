@@ -355,7 +355,13 @@ fn fit_cluster(
 ///   split selected — but two materials of one colour and different η stay apart, and a
 ///   vertex whose own η agrees with both (its data cannot tell which it is of) borrows from
 ///   neither.
-pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
+pub fn pool_eta(
+    a: &mut Augmentation,
+    set: &SampleSet,
+    fits: &[VertexFit],
+    eta_prior: [f64; 2],
+    max_eta_std_error: f64,
+) {
     let k = a.clusters.len();
     let mut members: Vec<Vec<usize>> = vec![Vec::new(); k];
     for (v, (j, g)) in a.assignment.iter().zip(&a.guides).enumerate() {
@@ -387,7 +393,20 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
     }
     let pools: Vec<Option<pool::Pooled>> = pooled_members
         .iter()
-        .map(|list| (!list.is_empty()).then(|| pool::random_effects(&points_of(list))))
+        .map(|list| {
+            if list.is_empty() {
+                return None;
+            }
+            let points = points_of(list);
+            let mut p = pool::random_effects(&points);
+            p.se_blocks = pool::block_jackknife_se(&points, &spatial_blocks(set, list));
+            if p.weak(max_eta_std_error) {
+                // A pool of vertices that each leave η open is no measurement (`Pooled::weak`):
+                // no prior, and no value for the vertices that would take the material's.
+                p.usable = false;
+            }
+            Some(p)
+        })
         .collect();
     for c in 0..k {
         if let Some(p) = pools[roots[c]] {
@@ -443,6 +462,34 @@ pub fn pool_eta(a: &mut Augmentation, fits: &[VertexFit], eta_prior: [f64; 2]) {
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
 }
+
+/// The jackknife blocks of `members` (vertex indices into `set`): k-means on their positions
+/// into ⌊n / [`pool::BLOCK_MIN_VERTICES`]⌋ blocks, at most [`pool::BLOCK_MAX`] (seeded, so
+/// deterministic); one block (no jackknife) for fewer members.
+fn spatial_blocks(set: &SampleSet, members: &[usize]) -> Vec<usize> {
+    let k = (members.len() / pool::BLOCK_MIN_VERTICES).min(pool::BLOCK_MAX);
+    if k < 2 {
+        return vec![0; members.len()];
+    }
+    let points: Vec<Feature> = members
+        .iter()
+        .map(|&v| {
+            let p = set.vertices[v].position_world;
+            [p[0], p[1], p[2], 0.0]
+        })
+        .collect();
+    cluster::kmeans(
+        &points,
+        k,
+        1,
+        50,
+        stream_seed(BLOCK_SEED, 20, members.len() as u64),
+    )
+    .labels
+}
+
+/// Seed of the jackknife blocks' k-means.
+const BLOCK_SEED: u64 = 0xb10c_5eed;
 
 /// Step A's fits grouped into materials: the members (finite fits without an excluded flag),
 /// every finite fit's feature, and the chosen partition of the members.

@@ -45,7 +45,7 @@ use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
 use crate::data::{FitFlag, SampleSet, VertexFit};
 use crate::model::{SampleFrames, unit_sample_at};
 
-/// What [`complete`] did.
+/// What [`complete`] did, and what the fit covers of the surface the views see.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Completion {
     /// Vertices given their material's parameters (all but ρd where they had samples).
@@ -56,11 +56,76 @@ pub struct Completion {
     pub eta_from_material: usize,
     /// Vertices that needed completing but had no material to take it from.
     pub unassigned: usize,
-    /// Completed vertices per cluster (index into the augmentation's clusters).
-    pub per_cluster: Vec<usize>,
+    /// Vertices the views see (not [`FitFlag::Unobserved`]: in view, unoccluded and lit in at
+    /// least one fitted frame, decided from the poses and the mesh, never from the gates).
+    pub observed: usize,
+    /// Of those, with a full parameter set (every parameter and η reported).
+    pub full_set: usize,
+    /// `full_set / observed` (NaN without an observed vertex).
+    pub coverage: f64,
+    /// Per material (cluster of step B, in the augmentation's order).
+    pub materials: Vec<MaterialCoverage>,
+    /// Each vertex's material (cluster index): its own cluster where the fit identified it,
+    /// the one it was completed from otherwise (`None`: no material).
+    #[serde(skip)]
+    pub labels: Vec<Option<usize>>,
+}
+
+/// One material's share of the surface the views see (`Completion::materials`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct MaterialCoverage {
+    /// Cluster index.
+    pub cluster: usize,
+    /// The material's η (pooled), `null` where it has none (no pool, or a weak one).
+    pub eta: Option<f64>,
+    /// Its standard error (`Pooled::se_reported`).
+    pub eta_se: Option<f64>,
+    /// Observed vertices of this material.
+    pub observed: usize,
+    /// Of those, fitted from their own samples.
+    pub own: usize,
+    /// Of those, with their material's values ([`FitFlag::FromMaterial`]).
+    pub from_material: usize,
+    /// Of those, without a full parameter set.
+    pub withheld: usize,
+    /// `(own + from_material) / observed`.
+    pub coverage: f64,
 }
 
 impl Completion {
+    /// The per-material coverage as report lines (material η, observed vertices and how they
+    /// were answered), then the whole.
+    pub fn report_lines(&self) -> Vec<String> {
+        let mut lines =
+            vec!["materials (step B's clusters) over the surface the views see:".to_string()];
+        for m in &self.materials {
+            let eta = match (m.eta, m.eta_se) {
+                (Some(e), Some(se)) => format!("η {e:.4} ± {se:.4}"),
+                _ => "η not identified".to_string(),
+            };
+            lines.push(format!(
+                "  material {:<2} {eta} · {} vertices observed: {} from their own samples, {} \
+                 from the material, {} withheld (coverage {:.3})",
+                m.cluster, m.observed, m.own, m.from_material, m.withheld, m.coverage
+            ));
+        }
+        lines.push(format!(
+            "  all         {} of {} observed vertices with a full parameter set (coverage {:.3}){}",
+            self.full_set,
+            self.observed,
+            self.coverage,
+            if self.unassigned > 0 {
+                format!(
+                    "; {} without a material to take values from",
+                    self.unassigned
+                )
+            } else {
+                String::new()
+            }
+        ));
+        lines
+    }
+
     /// One line for progress output.
     pub fn describe(&self) -> String {
         format!(
@@ -118,8 +183,13 @@ impl MaterialValues {
         };
         let spread = |f: &dyn Fn(&VertexFit) -> f64| robust_sd(&mut column(f));
         let eta = if c.eta_pooled.usable {
+            // η is one bulk value of the material: its pooled value's own uncertainty is a
+            // from-material vertex's (the pipeline's pooled standard errors say why).
             let p = c.eta_pooled;
-            Some([p.mean, (p.se * p.se + p.tau * p.tau).sqrt()])
+            Some([p.mean, p.se_reported()])
+        } else if c.eta_pooled.member_se_median.is_finite() && c.eta_pooled.vertices > 0 {
+            // A pool that formed but is no measurement (weak, `Pooled::weak`): no η.
+            None
         } else {
             let mut etas = column(&|m| {
                 if m.eta_identified() {
@@ -375,10 +445,7 @@ pub fn complete(
     albedo_cap: f64,
 ) -> Completion {
     let k = a.clusters.len();
-    let mut report = Completion {
-        per_cluster: vec![0; k],
-        ..Default::default()
-    };
+    let mut report = Completion::default();
     let needs_all: Vec<bool> = fits
         .iter()
         .map(|f| !f.flags.contains(&FitFlag::Unobserved) && !own_vertex(f))
@@ -462,7 +529,66 @@ pub fn complete(
         f.flags.sort();
         f.flags.dedup();
         report.completed += 1;
-        report.per_cluster[j] += 1;
     }
+    tally(&mut report, fits, a, labels, &materials);
     report
+}
+
+/// The coverage figures of `report` (module doc of [`Completion`]) after completion.
+fn tally(
+    report: &mut Completion,
+    fits: &[VertexFit],
+    a: &Augmentation,
+    completed_from: Vec<Option<usize>>,
+    materials: &[MaterialValues],
+) {
+    let k = a.clusters.len();
+    report.materials = (0..k)
+        .map(|j| MaterialCoverage {
+            cluster: j,
+            eta: materials[j].eta.map(|e| e[0]),
+            eta_se: materials[j].eta.map(|e| e[1]),
+            ..Default::default()
+        })
+        .collect();
+    report.labels = fits
+        .iter()
+        .enumerate()
+        .map(|(v, f)| {
+            if f.flags.contains(&FitFlag::FromMaterial) {
+                completed_from[v]
+            } else {
+                a.assignment.get(v).copied().flatten()
+            }
+        })
+        .collect();
+    for (f, label) in fits.iter().zip(&report.labels) {
+        if f.flags.contains(&FitFlag::Unobserved) {
+            continue;
+        }
+        report.observed += 1;
+        let full = f.identifiable().vertex && f.identifiable().eta;
+        report.full_set += usize::from(full);
+        if let Some(m) = label.and_then(|j| report.materials.get_mut(j)) {
+            m.observed += 1;
+            if !full {
+                m.withheld += 1;
+            } else if f.flags.contains(&FitFlag::FromMaterial) {
+                m.from_material += 1;
+            } else {
+                m.own += 1;
+            }
+        }
+    }
+    let ratio = |a: usize, b: usize| {
+        if b == 0 {
+            f64::NAN
+        } else {
+            a as f64 / b as f64
+        }
+    };
+    report.coverage = ratio(report.full_set, report.observed);
+    for m in &mut report.materials {
+        m.coverage = ratio(m.own + m.from_material, m.observed);
+    }
 }

@@ -133,6 +133,7 @@ pub fn export_fit(
             .augmentation
             .as_ref()
             .map(|a| a.clusters.clone()),
+        coverage: fit.completion.clone(),
         export: report,
         frames_fitted: fit.poses_fitted.len(),
         frames_held_out: fit.poses_held_out.iter().map(|p| p.0).collect(),

@@ -20,6 +20,7 @@
 use std::time::Instant;
 
 use super::augment::{AugmentConfig, Augmentation, augment, pool_eta};
+use super::data::FitFlag;
 use super::data::{SampleSet, VertexFit};
 use super::solve::{SolverConfig, fit_all};
 
@@ -175,7 +176,13 @@ pub fn fit_shared_steps(
         let started = Instant::now();
         let mut a = augment(set, &fits, augment_config);
         if config.pool_eta {
-            pool_eta(&mut a, &fits, config.solver.eta_prior);
+            pool_eta(
+                &mut a,
+                set,
+                &fits,
+                config.solver.eta_prior,
+                config.solver.max_eta_std_error,
+            );
         }
         times.augment_s = started.elapsed().as_secs_f64();
         let pooled: Vec<usize> = (0..fits.len())
@@ -195,6 +202,9 @@ pub fn fit_shared_steps(
         }
         times.final_s = started.elapsed().as_secs_f64();
         if config.pool_eta {
+            pooled_standard_errors(&mut fits, &a);
+        }
+        if config.pool_eta {
             pooling = Some(PoolingSummary {
                 vertices_pooled: pooled.len(),
                 median_eta_se_before: before,
@@ -208,6 +218,51 @@ pub fn fit_shared_steps(
         augmentation,
         pooling,
         times,
+    }
+}
+
+/// The η standard error of every vertex the pool entered ([`FitFlag::EtaPooled`]), as the
+/// error of the shrinkage estimate around a material whose η is one bulk value: with the
+/// vertex's own standard error s (step A's), the pool's between-vertex spread τ and the
+/// material's standard error se (`Pooled::se_reported`, spatial blocks included),
+/// w = τ²/(τ² + s²) is the weight the vertex's own estimate keeps and
+/// σ² = w²(s² + τ²) + (1 − w)²se². η is a property of the material, not of the vertex: τ is
+/// scatter of the vertices' estimates that their own s does not account for, not a difference
+/// of the truth between them. The solver's posterior, which takes τ as a real difference and
+/// leaves out the material's own uncertainty, is replaced (docs/fit-augment.md "Pooled η").
+fn pooled_standard_errors(fits: &mut [VertexFit], a: &Augmentation) {
+    for (v, fit) in fits.iter_mut().enumerate() {
+        if !fit.flags.contains(&FitFlag::EtaPooled) {
+            continue;
+        }
+        let Some(pool) = a
+            .assignment
+            .get(v)
+            .copied()
+            .flatten()
+            .and_then(|j| a.clusters.get(j))
+            .map(|c| c.eta_pooled)
+            .filter(|p| p.usable)
+        else {
+            continue;
+        };
+        let own = fit.eta_unpooled.map_or(f64::INFINITY, |u| u[1]);
+        let tau2 = pool.tau * pool.tau;
+        let w = if own.is_finite() && tau2 + own * own > 0.0 {
+            tau2 / (tau2 + own * own)
+        } else {
+            0.0
+        };
+        let se = pool.se_reported();
+        let own_part = if w > 0.0 {
+            w * w * (own * own + tau2)
+        } else {
+            0.0
+        };
+        let sigma = (own_part + (1.0 - w).powi(2) * se * se).sqrt();
+        if sigma.is_finite() && sigma > 0.0 {
+            fit.std_error[0] = sigma;
+        }
     }
 }
 

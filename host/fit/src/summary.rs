@@ -15,6 +15,7 @@ use ellipso_model::run_error::{Context, RunError};
 use ellipso_report::paths::{paths_relative_to, relative_if_path};
 
 use crate::augment::{ClusterModel, PartitionSummary};
+use crate::complete::Completion;
 use crate::data::GateCounts;
 use crate::export::ExportReport;
 use crate::holdout::HoldoutReport;
@@ -30,6 +31,12 @@ pub struct FitSummary {
     /// The clusters of step B with their two-lobe models and pooled η; `null` when step B did
     /// not run (`--joint-only`).
     pub clusters: Option<Vec<ClusterModel>>,
+    /// What the fit covers of the surface the views see (decided from the poses and the mesh,
+    /// not from the gates), overall and per material: observed vertices, how many the fit
+    /// identified from their own samples, how many took their material's values
+    /// (`FromMaterial`), how many stay withheld (`crate::complete::Completion`); `null` when
+    /// step B did not run (no materials).
+    pub coverage: Option<Completion>,
     /// The pictures and maps written: `files` (every file, in writing order), `rerender_rmse`
     /// (the comparison picture's relative RMSE) and `comparison_frame` (`{frame_id,
     /// held_out}`: the frame `rerender-vs-captured.png` shows).

@@ -121,6 +121,12 @@ pub fn print_results(out: &Path, result: &FitRun, json: bool) {
         crate::outln!("{json}");
         return;
     }
+    if let Some(coverage) = &result.summary.coverage {
+        crate::outln!();
+        for line in coverage.report_lines() {
+            crate::outln!("{line}");
+        }
+    }
     crate::outln!("\nresults in {}:", out.display());
     for f in &result.files {
         crate::outln!("  {}", f.display());

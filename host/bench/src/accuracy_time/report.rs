@@ -76,7 +76,7 @@ pub fn markdown(
         let _ = writeln!(s, "## {title}\n");
         let _ = writeln!(
             s,
-            "| scene | solver | photos | vertices | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex mean / median (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | held-out s0 RMSE / PSNR | peak memory (GB) | flagged |"
+            "| scene | solver | photos | vertices (scored of observed: coverage) | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex mean / median (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | held-out s0 RMSE / PSNR | peak memory (GB) | flagged |"
         );
         let _ = writeln!(
             s,
@@ -92,11 +92,13 @@ pub fn markdown(
                 .join(", ");
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} / {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} | {} | {} | {} |",
+                "| {} | {} | {} | {} of {} ({:.3}) | {} | {:.2} | {:.2} / {:.2} / {:.2} | {:.0} | {:.3} / {:.3} | {:.3} | {:.2} / {:.2} | {:.2} | {:.2} / {:.2} | {:.3} / {:.3} | {:.4} | {} | {} | {} |",
                 r.scene,
                 r.solver,
                 r.photos,
-                r.scores.vertices,
+                r.scores.scored,
+                r.scores.observed,
+                r.scores.coverage,
                 r.scores.samples,
                 r.fit_s,
                 r.times.joint_s,

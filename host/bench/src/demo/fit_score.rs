@@ -77,6 +77,7 @@ pub fn fit_and_score(
     let at = crate::truth_map::truth_at(&truth, run.fit.mesh.positions());
     let fits = &run.fit.outcome.fits;
     let score = crate::score::score_fit(fits, &at, &truth.material_names, run.fit.set.colour);
+    let (coverage, _) = crate::coverage::score_session_fit(scene, session, &run.fit)?;
     let held_out = run.fit.held_out_set.as_ref().map(|held| {
         crate::score::holdout_beside_truth(held, fits, &at, crate::accuracy::full_scale_dn(scene))
     });
@@ -97,6 +98,7 @@ pub fn fit_and_score(
         "mesh_before_fit": before,
         "mesh_after_fit": after,
         "materials": score.materials,
+        "coverage": coverage,
         "eta_material_mean_abs_error_pct": score.eta_material_mean_pct,
         "eta_material_max_abs_error_pct": score.eta_material_max_pct,
         "eta_vertex_median_error_pct": score.eta_vertex_median_pct,
@@ -163,6 +165,18 @@ pub fn fit_and_score(
         say,
         "η per material (median over the vertices that report η, against the truth):"
     );
+    let visible = |name: &str| {
+        coverage
+            .materials
+            .iter()
+            .find(|c| c.name == name)
+            .map_or(String::new(), |c| {
+                format!(
+                    " · coverage {:.3} of {} visible vertices ({} from the material)",
+                    c.coverage, c.visible, c.from_material
+                )
+            })
+    };
     for m in &score.materials {
         let verdict = if m.vertices == 0 {
             "unidentified: no vertex's data fix η".to_string()
@@ -174,12 +188,30 @@ pub fn fit_and_score(
         };
         say!(
             say,
-            "  {:16} {verdict} · {} vertices report η, {} withheld",
+            "  {:16} {verdict} · {} vertices report η, {} withheld{}",
             m.name,
             m.vertices,
-            m.unidentified_vertices
+            m.unidentified_vertices,
+            visible(&m.name)
         );
     }
+    say!(
+        say,
+        "coverage     {} of {} vertices the true geometry makes visible have a full parameter set \
+         ({:.3}; lowest material {:.3}; {} from their material) · within 1σ: η {:.2} own / {:.2} \
+         from material, normals {:.2} / {:.2}, ρd {:.2} / {:.2}",
+        coverage.full_set,
+        coverage.visible,
+        coverage.coverage_visible,
+        coverage.coverage_material_min,
+        coverage.from_material,
+        coverage.sigma_eta.own,
+        coverage.sigma_eta.from_material,
+        coverage.sigma_normal.own,
+        coverage.sigma_normal.from_material,
+        coverage.sigma_rho_d.own,
+        coverage.sigma_rho_d.from_material,
+    );
     say!(
         say,
         "η per vertex  median error {:.2} % (before pooling {:.2} %)",

@@ -123,16 +123,16 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) | noise, 1σ (points) | target | vertices reporting η (carved / true) |"
+            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) | noise, 1σ (points) | target | vertices reporting η (carved / true) | coverage of the visible surface (carved) |"
         );
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---|---|");
+        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---|---|---:|");
         for r in results {
             let Some(f) = &r.fit else { continue };
             for m in &f.eta {
                 let difference = m.difference_points();
                 let _ = writeln!(
                     s,
-                    "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {:.2} | {} | {} / {} |",
+                    "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {:.2} | {} | {} / {} | {} |",
                     r.scene,
                     m.name,
                     m.eta_true,
@@ -142,7 +142,15 @@ pub fn markdown(
                     m.noise_points,
                     eta_verdict(difference, m.noise_points),
                     m.vertices[0],
-                    m.vertices[1]
+                    m.vertices[1],
+                    f.coverage
+                        .materials
+                        .iter()
+                        .find(|c| c.name == m.name)
+                        .map_or("—".to_string(), |c| format!(
+                            "{:.3} ({} of {})",
+                            c.coverage, c.full_set, c.visible
+                        ))
                 );
             }
         }

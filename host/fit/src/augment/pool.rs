@@ -57,9 +57,42 @@ pub struct Pooled {
     pub trimmed: usize,
     /// Median η of all usable vertices (before trimming).
     pub median: f64,
+    /// The standard error of `mean` from the members' spatial blocks (a delete-a-block
+    /// jackknife, [`block_jackknife_se`]; NaN where too few blocks): neighbouring vertices
+    /// share pixels and the mesh's local errors, so their estimates are not independent and
+    /// `se` (which assumes they are) understates the material's uncertainty.
+    #[serde(default = "nan")]
+    pub se_blocks: f64,
+    /// The members' median own standard error of η: what one vertex's data say. Above the
+    /// solver's `max_eta_std_error` the material is weakly identified ([`Pooled::weak`]).
+    #[serde(default = "nan")]
+    pub member_se_median: f64,
+}
+
+fn nan() -> f64 {
+    f64::NAN
 }
 
 impl Pooled {
+    /// The material's η standard error as the outputs report it: the larger of the
+    /// independent-vertex `se` and the spatial-block jackknife `se_blocks`.
+    pub fn se_reported(&self) -> f64 {
+        if self.se_blocks.is_finite() {
+            self.se.max(self.se_blocks)
+        } else {
+            self.se
+        }
+    }
+
+    /// Whether the members' own data leave η open (their median own standard error above
+    /// `max_eta_std_error`, the per-vertex identifiability limit): averaging many such vertices
+    /// shrinks their noise but not what they share — at high η the diffuse DoP flattens and a
+    /// bounded estimate is pulled low by its upper bound, the same way at every vertex — so a
+    /// pool of them is no measurement and its η is withheld.
+    pub fn weak(&self, max_eta_std_error: f64) -> bool {
+        self.member_se_median > max_eta_std_error
+    }
+
     /// Whether two pools may be one material's: both identified and their η within
     /// [`AGREE_SIGMAS`] of their combined spread (standard errors and between-vertex spreads).
     pub fn agrees_with(&self, other: &Pooled) -> bool {
@@ -182,7 +215,46 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
         vertices: kept.len(),
         trimmed: usable.len() - kept.len(),
         median: centre,
+        se_blocks: f64::NAN,
+        member_se_median: median(kept.iter().map(|p| p.1).collect()),
     }
+}
+
+/// Fewest vertices a jackknife block holds: a block's median must itself be an estimate.
+pub const BLOCK_MIN_VERTICES: usize = 2 * MIN_VERTICES;
+
+/// Most jackknife blocks: more blocks only make each smaller, and spatially correlated errors
+/// need blocks larger than the correlation's reach (a few mesh rings).
+pub const BLOCK_MAX: usize = 8;
+
+/// The delete-a-block jackknife standard error of [`random_effects`]' η over `members`
+/// (`(η, s)` pairs) grouped by `blocks` (one block index per member): the pool recomputed
+/// without each block in turn, se² = (B − 1)/B·Σ(η₋ᵦ − η̄)² (Shao & Wu, "A general theory for
+/// jackknife variance estimation", Ann. Statist. 17, 1989: deleting large groups makes the
+/// jackknife consistent for the median, which deleting one point is not). NaN with fewer than
+/// two blocks or when a reduced pool is not usable.
+pub fn block_jackknife_se(members: &[(f64, f64)], blocks: &[usize]) -> f64 {
+    let count = blocks.iter().copied().max().map_or(0, |b| b + 1);
+    if count < 2 || blocks.len() != members.len() {
+        return f64::NAN;
+    }
+    let mut estimates = Vec::with_capacity(count);
+    for b in 0..count {
+        let rest: Vec<(f64, f64)> = members
+            .iter()
+            .zip(blocks)
+            .filter(|(_, k)| **k != b)
+            .map(|(m, _)| *m)
+            .collect();
+        let p = random_effects(&rest);
+        if !p.usable {
+            return f64::NAN;
+        }
+        estimates.push(p.mean);
+    }
+    let n = estimates.len() as f64;
+    let mean = estimates.iter().sum::<f64>() / n;
+    ((n - 1.0) / n * estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>()).sqrt()
 }
 
 /// The reliability shrinkage of the η feature (module doc).
