@@ -444,7 +444,7 @@ impl Board {
     /// Ray (in board frame) against the sheet rectangle; both sides are solid.
     pub fn intersect(
         &self,
-        ray: &ellipso_model::geometry::Ray,
+        ray: &crate::geometry::Ray,
         t_min: f64,
         t_max: f64,
     ) -> Option<BoardHit> {

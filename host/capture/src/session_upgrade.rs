@@ -2,10 +2,11 @@
 //! their whole rig record (radiometry, sensor noise, analyser extinction) that record, so it can
 //! be fitted without its scene file.
 //!
-//! It lives here, not in `ellipso-session`, because a simulator session's record is made from
-//! its scene file: reading one needs the simulator (which the session crate, read by the fit,
-//! must not depend on), and the record is written by [`crate::process::rig_record_of_scene`],
-//! the one `ellipso capture --sim` writes.
+//! It lives here, beside the capture on the simulated rig ([`crate::sim`]), not in
+//! `ellipso-session`, because a simulator session's record is made from its scene file: reading
+//! one needs the simulator (which the session crate, read by the fit, must not depend on), and
+//! the record is written by [`ellipso_sim::record::rig_record_of_scene`], the one `ellipso
+//! capture --sim` writes.
 //!
 //! Contract:
 //! - A simulator session: the scene file its manifest names is read (as recorded, else
@@ -21,8 +22,8 @@
 
 use std::path::{Path, PathBuf};
 
-use ellipso_model::ensure;
-use ellipso_model::run_error::{Context, RunError};
+use ellipso_run_error::ensure;
+use ellipso_run_error::{Context, RunError};
 use ellipso_session::manifest::{Manifest, SessionSource};
 use ellipso_session::reader;
 use ellipso_session::rig::RadiometryRecord;
@@ -65,7 +66,7 @@ fn upgraded(manifest: &Manifest, dir: &Path) -> Result<Manifest, RunError> {
                  edited after the capture",
                 path.display()
             );
-            *rig = crate::process::rig_record_of_scene(&loaded, rig.camera);
+            *rig = ellipso_sim::record::rig_record_of_scene(&loaded, rig.camera);
         }
         SessionSource::Hardware { .. } | SessionSource::Replay { .. } => {
             rig.radiometry = Some(RadiometryRecord::Relative);
@@ -114,8 +115,8 @@ mod tests {
             },
             1,
         );
-        m.rig = Some(crate::process::rig_record_of_scene(&scene, camera));
-        m.boards = crate::process::boards_of_scene(&scene);
+        m.rig = Some(ellipso_sim::record::rig_record_of_scene(&scene, camera));
+        m.boards = ellipso_sim::record::boards_of_scene(&scene);
         let dir = root.join("s");
         drop(SessionWriter::create(&dir, m.clone()).unwrap());
         let mut old = serde_json::to_value(&m).unwrap();

@@ -1,5 +1,5 @@
 //! Distances between two triangle meshes: Chamfer and Hausdorff, for scoring a mesh against the
-//! simulator's truth.
+//! simulator's truth (the mesh bench, the truth at a mesh's vertices) and in the carving's tests.
 //!
 //! Contract: each mesh is sampled at its vertices plus `samples` area-weighted points (seeded,
 //! ChaCha8), and every sample's distance to the other mesh is the exact point–triangle distance
@@ -12,7 +12,7 @@ use nalgebra::Point3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use ellipso_model::geometry::{Aabb, Bvh, TriangleMesh};
+use crate::geometry::{Aabb, Bvh, TriangleMesh};
 
 /// Distances between two meshes.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -231,14 +231,14 @@ pub fn mesh_distance(
         hausdorff_m: max(&ab).max(max(&ba)),
         a_to_b_mean_m: mean(&ab),
         b_to_a_mean_m: mean(&ba),
-        p90_m: ellipso_report::percentile(&mut all, 0.9),
+        p90_m: crate::stats::percentile(&mut all, 0.9),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ellipso_model::geometry::procedural::icosphere;
+    use crate::geometry::procedural::icosphere;
 
     fn sphere(radius: f64, subdivisions: u32) -> TriangleMesh {
         let (dirs, tris) = icosphere(subdivisions);

@@ -40,12 +40,12 @@ use std::path::{Path, PathBuf};
 
 use ellipso_model::camera::CameraModel;
 use ellipso_model::mosaic::SensorLayout;
+use ellipso_model::tags::PlacedBoard;
 use ellipso_protocol::{CaptureConfig, PulseCount, TriggerSource};
-use ellipso_sim::tags::PlacedBoard;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
-use crate::track::TrackedBoard;
+use ellipso_session::rig::TrackedBoard;
 
 /// The trigger board.
 #[derive(Debug, Clone, Deserialize)]
@@ -307,12 +307,10 @@ impl RigFile {
                     Translation3::new(tx, ty, tz),
                     UnitQuaternion::from_euler_angles(rx, ry, rz),
                 );
-                Ok(
-                    <TrackedBoard as crate::track::TrackedBoardExt>::from_placed(&PlacedBoard {
-                        board,
-                        world_from_board,
-                    }),
-                )
+                Ok(TrackedBoard::from_placed(&PlacedBoard {
+                    board,
+                    world_from_board,
+                }))
             })
             .collect()
     }
@@ -380,7 +378,7 @@ file = "{}"
 
     #[test]
     fn the_flash_section_calibrate_writes_loads_back() {
-        let estimate = crate::calibrate::flash::FlashEstimate {
+        let estimate = ellipso_vision::calibrate::flash::FlashEstimate {
             flash_camera_m: nalgebra::Point3::new(0.000_1, -0.030_2, 0.001_7),
             covariance_m2: nalgebra::Matrix3::identity() * 1e-8,
             std_m: [1e-4; 3],

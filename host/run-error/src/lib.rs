@@ -1,6 +1,11 @@
-//! The error of the library functions the `ellipso` subcommands call ([`RunError`]), and the
-//! anyhow-like helpers their bodies use to say what failed: [`Context`] on results and options,
-//! [`bail!`](crate::bail) and [`ensure!`](crate::ensure); and [`Say`], where their lines go.
+//! `ellipso-run-error`: the error of the library functions the `ellipso` subcommands call
+//! ([`RunError`]), and the anyhow-like helpers their bodies use to say what failed: [`Context`]
+//! on results and options, [`bail!`](crate::bail) and [`ensure!`](crate::ensure); and [`Say`],
+//! where their lines go.
+//!
+//! A crate of its own, not part of the numeric core (`ellipso-model`): it is the command line's
+//! error machinery, which the optics, the camera model and the geometry never need; every crate
+//! with a subcommand's body depends on it, and it depends on none of ours.
 //!
 //! Contract: an error's text and its causes are exactly those the command line printed when
 //! these bodies lived in the binary with `anyhow`: a context is its own link of the chain, the
@@ -122,7 +127,7 @@ impl<T> Context<T> for Option<T> {
 #[macro_export]
 macro_rules! bail {
     ($($arg:tt)*) => {
-        return Err($crate::run_error::RunError::msg(format!($($arg)*)))
+        return Err($crate::RunError::msg(format!($($arg)*)))
     };
 }
 

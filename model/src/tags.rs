@@ -1,7 +1,10 @@
-//! AprilTag boards for the simulator and the host's pose tracker.
+//! AprilTag boards: what the simulator renders, a rig file or a scene places, and the pose
+//! tracker detects (as a session records it: `ellipso_session::rig::TrackedBoard`). Here, in the
+//! shared core, so the tracker reaches them without the simulator.
 //!
-//! - [`family`]: tag families and their code tables, read from the AprilTag C library so printed
-//!   tags carry exactly the bits the detector decodes.
+//! - [`family`]: tag families and their code tables, as data taken from the AprilTag C library
+//!   (checked against it in `ellipso-sim`'s tests), so printed tags carry exactly the bits the
+//!   detector decodes.
 //! - [`spec`]: board descriptions as written in TOML (board files and inline tables).
 //! - [`board`]: validation and the built board: albedo lookup, tag corners, ray hits.
 //! - [`placed`]: a board posed in the world (`world_from_board`) for world-space rays.
@@ -14,8 +17,6 @@ pub mod family;
 pub mod placed;
 pub mod spec;
 
-#[cfg(test)]
-pub(crate) mod detect_for_tests;
 #[cfg(test)]
 mod tests;
 

@@ -12,12 +12,30 @@
 //! orthogonalised against z, x = y × z; when the up vector is parallel to z the world axis least
 //! aligned with z is used instead.
 
-use crate::bail;
-use crate::run_error::{Context, RunError};
+use super::OpticsError;
 
 use super::measure::dop_diffuse_with_d_eta;
 use super::pbrdf::{Geometry, PbrdfParams, evaluate};
 use super::{Frame, FresnelTerms, Vec3};
+
+/// Why the model's numbers cannot be given for these inputs.
+#[derive(Debug, thiserror::Error)]
+pub enum InspectError {
+    /// An input out of its range (the message names the flag and the range), or a result that
+    /// is not finite.
+    #[error("{0}")]
+    Input(String),
+    /// The optics refused the geometry or the parameters.
+    #[error(transparent)]
+    Optics(#[from] OpticsError),
+}
+
+/// Returns an [`InspectError::Input`] made like `format!`.
+macro_rules! bail {
+    ($($arg:tt)*) => {
+        return Err(InspectError::Input(format!($($arg)*)))
+    };
+}
 
 /// Largest refractive index (the scene files' limit: no dielectric exceeds it).
 pub const MAX_ETA: f64 = 5.0;
@@ -119,7 +137,7 @@ pub struct MuellerTables {
     pub front_facing: bool,
 }
 
-fn check_eta(eta: f64) -> Result<(), RunError> {
+fn check_eta(eta: f64) -> Result<(), InspectError> {
     if !(1.0..=MAX_ETA).contains(&eta) {
         bail!(
             "--eta must be in [1, {MAX_ETA}] (a dielectric in air; none exceeds {MAX_ETA}), got {eta}"
@@ -128,7 +146,7 @@ fn check_eta(eta: f64) -> Result<(), RunError> {
     Ok(())
 }
 
-fn check_theta(theta_deg: f64) -> Result<(), RunError> {
+fn check_theta(theta_deg: f64) -> Result<(), InspectError> {
     if !theta_deg.is_finite() || !(0.0..=90.0).contains(&theta_deg) {
         bail!("--theta-deg must be in [0, 90], got {theta_deg}");
     }
@@ -136,7 +154,7 @@ fn check_theta(theta_deg: f64) -> Result<(), RunError> {
 }
 
 /// Every number is finite.
-fn check_finite<'a>(values: impl IntoIterator<Item = &'a f64>) -> Result<(), RunError> {
+fn check_finite<'a>(values: impl IntoIterator<Item = &'a f64>) -> Result<(), InspectError> {
     if values.into_iter().any(|v| !v.is_finite()) {
         bail!("the model has no finite value for these inputs");
     }
@@ -145,7 +163,7 @@ fn check_finite<'a>(values: impl IntoIterator<Item = &'a f64>) -> Result<(), Run
 
 /// A direction flag: finite, non-zero, any length; normalised after scaling by the largest
 /// component so neither 1e300 nor 1e-300 overflows.
-fn direction(flag: &str, v: [f64; 3]) -> Result<Vec3<f64>, RunError> {
+fn direction(flag: &str, v: [f64; 3]) -> Result<Vec3<f64>, InspectError> {
     let largest = v.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
     if !largest.is_finite() {
         bail!("{flag} must be finite, got {v:?}");
@@ -155,11 +173,11 @@ fn direction(flag: &str, v: [f64; 3]) -> Result<Vec3<f64>, RunError> {
     }
     Vec3::from_f64(v.map(|x| x / largest))
         .normalized_or_none(1e-24)
-        .with_context(|| format!("{flag} must be a non-zero vector, got {v:?}"))
+        .ok_or_else(|| InspectError::Input(format!("{flag} must be a non-zero vector, got {v:?}")))
 }
 
 /// The Fresnel terms of a dielectric of index `eta` at `theta_deg` from the normal.
-pub fn fresnel(eta: f64, theta_deg: f64) -> Result<FresnelTable, RunError> {
+pub fn fresnel(eta: f64, theta_deg: f64) -> Result<FresnelTable, InspectError> {
     check_eta(eta)?;
     check_theta(theta_deg)?;
     let f = FresnelTerms::dielectric(theta_deg.to_radians().cos(), eta);
@@ -179,7 +197,7 @@ pub fn fresnel(eta: f64, theta_deg: f64) -> Result<FresnelTable, RunError> {
 }
 
 /// The diffuse DoP at exit angle `theta_deg` and index `eta`, with its η-derivative.
-pub fn dop(eta: f64, theta_deg: f64) -> Result<DopTable, RunError> {
+pub fn dop(eta: f64, theta_deg: f64) -> Result<DopTable, InspectError> {
     check_eta(eta)?;
     check_theta(theta_deg)?;
     let (dop, d_dop_d_eta) = dop_diffuse_with_d_eta(theta_deg.to_radians().cos(), eta);
@@ -188,7 +206,7 @@ pub fn dop(eta: f64, theta_deg: f64) -> Result<DopTable, RunError> {
 }
 
 /// The Mueller matrices of the three lobes at one geometry (module doc: ranges, frames).
-pub fn mueller(inputs: &MuellerInputs) -> Result<MuellerTables, RunError> {
+pub fn mueller(inputs: &MuellerInputs) -> Result<MuellerTables, InspectError> {
     let a = &inputs.params;
     check_eta(a.eta)?;
     for (flag, v) in [("--sigma-s", a.sigma_s), ("--sigma-ss", a.sigma_ss)] {

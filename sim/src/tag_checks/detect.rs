@@ -5,20 +5,20 @@
 
 /// Detects tag36h11 tags in a row-major `w × h` grey image.
 pub(crate) fn detect_tag36h11(gray: &[u8], w: usize, h: usize) -> Vec<(u32, [[f64; 2]; 4])> {
-    detect(super::TagFamily::Tag36h11, gray, w, h)
+    detect(ellipso_model::tags::TagFamily::Tag36h11, gray, w, h)
 }
 
 /// Detects tags of `family` in a row-major `w × h` grey image.
 pub(crate) fn detect(
-    family: super::TagFamily,
+    family: ellipso_model::tags::TagFamily,
     gray: &[u8],
     w: usize,
     h: usize,
 ) -> Vec<(u32, [[f64; 2]; 4])> {
     let fam = match family {
-        super::TagFamily::Tag36h11 => apriltag::Family::tag_36h11(),
-        super::TagFamily::Tag25h9 => apriltag::Family::tag_25h9(),
-        super::TagFamily::Tag16h5 => apriltag::Family::tag_16h5(),
+        ellipso_model::tags::TagFamily::Tag36h11 => apriltag::Family::tag_36h11(),
+        ellipso_model::tags::TagFamily::Tag25h9 => apriltag::Family::tag_25h9(),
+        ellipso_model::tags::TagFamily::Tag16h5 => apriltag::Family::tag_16h5(),
     };
     let mut det = apriltag::DetectorBuilder::new()
         .add_family_bits(fam, 1)

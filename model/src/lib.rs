@@ -13,8 +13,8 @@
 //! - [`stats`]: the one median and percentile (nearest rank) every crate reports with.
 //! - [`colour`]: the one sRGB encoder (linear → 8-bit code) for every picture.
 //! - [`file_io`]: reading an input file whole with a size bound, refusing special files.
-//! - [`run_error`]: the error of the library functions a subcommand calls (anyhow's chain of
-//!   contexts, as a typed error), and [`run_error::Say`], where their lines go.
+//! - [`tags`]: AprilTag families (code tables as data) and boards: albedo, corners, ray hits;
+//!   what the simulator renders and the tracker detects.
 //! - [`rig`]: the camera settings and the flash of a rig, as scene files and session
 //!   manifests spell them.
 //! - [`radiometry`]: the camera equation from model intensity to electrons and DN (the
@@ -29,5 +29,5 @@ pub mod mosaic;
 pub mod optics;
 pub mod radiometry;
 pub mod rig;
-pub mod run_error;
 pub mod stats;
+pub mod tags;

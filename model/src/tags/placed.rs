@@ -5,7 +5,7 @@
 //! the print albedo and the world normal of the side that was hit's printed face.
 
 use super::{Board, BoardHit};
-use ellipso_model::geometry::Ray;
+use crate::geometry::Ray;
 use nalgebra::{Isometry3, Point3, Unit, Vector3};
 
 /// A board with its pose in the world.

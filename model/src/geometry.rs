@@ -1,6 +1,7 @@
 //! Geometry for the simulator: rays, hits, bounding boxes, a binned-SAH BVH, triangle meshes
 //! (PLY / OBJ loading, procedural assets), analytic shapes, per-object affine transforms and the
-//! similarity between two reconstructions of the same cameras, and the error between two poses.
+//! similarity between two reconstructions of the same cameras, the error between two poses, and
+//! the distances between two meshes (Chamfer, Hausdorff: [`distance`], for scoring a mesh).
 //!
 //! Contract:
 //! - All geometry is `f64`. Lengths are metres wherever a scene supplies them.
@@ -15,6 +16,7 @@
 
 pub mod aabb;
 pub mod bvh;
+pub mod distance;
 pub mod mesh;
 pub mod obj;
 pub mod ply;
