@@ -13,22 +13,21 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use ellipso_fit::observe::poses_from_session;
 use ellipso_fit::output::{FitRun, OutputTo, export_fit};
 use ellipso_fit::session::{SessionFitConfig, finish_from_joint, solve_shard, with_session_sensor};
 use ellipso_fit::shard::Shard;
 use ellipso_fit::shard::merge::merge_parts;
 use ellipso_fit::shard::part::{PartFile, config_hash, file_hash, session_hash};
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::run_error::{Context, RunError, Say};
 use ellipso_report::output::{FileFormat, OutputDir, OutputFile};
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
 /// The recorded poses, refusing to track: shards run at once and must not append to the log.
 pub fn recorded_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, RunError> {
     let untracked = ellipso_vision::process::untracked_frames(session);
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         untracked.is_empty(),
         "{}: {} complete frames have no pose yet; a sharded fit does not track (its shards run \
          at once): run `ellipso mesh {}` once first (it tracks and records the poses, and \
@@ -37,8 +36,8 @@ pub fn recorded_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, R
         untracked.len(),
         session.dir.display()
     );
-    let poses = poses_from_session(session);
-    ellipso_model::ensure!(
+    let poses = session.poses().tracked();
+    ellipso_run_error::ensure!(
         !poses.is_empty(),
         "{}: no frame has a pose",
         session.dir.display()
@@ -170,7 +169,7 @@ pub fn run_merge(request: &MergeRequest<'_>, say: &dyn Say) -> Result<(PathBuf, 
         .map_or(head.session_dir.clone(), Path::to_path_buf);
     let session = ellipso_session::reader::open(&session_dir)?;
     let hash = session_hash(&session)?;
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         hash == head.session_hash,
         "{}: the session's hash is {hash:016x} but the shards fitted {:016x}: it changed since, or \
          is another session",
@@ -181,7 +180,7 @@ pub fn run_merge(request: &MergeRequest<'_>, say: &dyn Say) -> Result<(PathBuf, 
         .mesh
         .map_or(head.mesh_path.clone(), Path::to_path_buf);
     let mesh_hash = file_hash(&mesh_path)?;
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         mesh_hash == head.mesh_hash,
         "{}: the mesh file's hash is {mesh_hash:016x} but the shards fitted {:016x}",
         mesh_path.display(),

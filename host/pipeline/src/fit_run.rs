@@ -21,25 +21,14 @@ use ellipso_fit::output::{FitRun, OutputTo, export_fit};
 use ellipso_fit::session::{SessionFitConfig, fit_session, with_session_sensor};
 use ellipso_fit::shard::Shard;
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::run_error::{Context, RunError, Say};
 use ellipso_report::output::OutputDir;
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 
 use crate::fit_import::{ImportFlags, Imported};
 use crate::fit_shard::{ShardInputs, ShardRun};
-use crate::output::{mesh_of_session, write_mesh};
-
-/// Where a run's long steps are shown: the binary draws a spinner per step. A step begun and
-/// not ended (an error, a step that gave up) is dropped silently when the next one begins or the
-/// run ends.
-pub trait Steps: Send {
-    /// A step (`mesh`, `fit`) begins.
-    fn begin(&mut self, label: &str);
-    /// The running step's current stage.
-    fn stage(&mut self, name: &str);
-    /// The running step ends, with its one summary line.
-    fn end(&mut self, summary: &str);
-}
+use crate::mesh::{mesh_of_session, write_mesh};
+use crate::steps::Steps;
 
 /// What `ellipso fit` is given (its flags, parsed).
 pub struct FitRequest<'a> {
@@ -109,14 +98,14 @@ pub fn run(
         .transpose()?;
     let models = crate::fit_import::read(&import, mesh_path.is_some(), shard.is_some())?;
     let session = ellipso_session::reader::open(session_dir)?;
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         (0.0..=0.5).contains(&config.holdout_fraction),
         "--holdout {}: must be a fraction in [0, 0.5]",
         config.holdout_fraction
     );
     // --view names a frame of the session: checked now, not after the fit
     if let Some(id) = view {
-        ellipso_model::ensure!(
+        ellipso_run_error::ensure!(
             session
                 .frames
                 .iter()
@@ -154,7 +143,7 @@ pub fn run(
             match mesh_of_session(
                 &session,
                 imported_poses,
-                &crate::MeshConfig::default(),
+                &ellipso_mesh::MeshConfig::default(),
                 say,
                 steps,
             ) {
@@ -174,7 +163,7 @@ pub fn run(
             say.err(format_args!(
                 "no --mesh: carving the object's mesh from the frames first…"
             ));
-            let mut mesh_config = crate::MeshConfig::default();
+            let mut mesh_config = ellipso_mesh::MeshConfig::default();
             mesh_config.remesh.target_vertices = vertices;
             let (mesh, report, hull) =
                 mesh_of_session(&session, imported_poses, &mesh_config, say, steps)?;
@@ -243,7 +232,7 @@ pub fn fit_and_export(
     };
     // the pictures' frame is checked before the long work, not after it
     if let Some(id) = view {
-        ellipso_model::ensure!(
+        ellipso_run_error::ensure!(
             poses.iter().any(|p| p.0 == id),
             "--view {id}: frame {id} has no pose in {} ({} posed frames, ids {}…{})",
             session.dir.display(),

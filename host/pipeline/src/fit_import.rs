@@ -2,7 +2,7 @@
 //! `--mesh-model COLMAP_MODEL` import: camera poses and a mesh from COLMAP, or any
 //! photogrammetry tool that writes COLMAP models, brought into the board frame by the
 //! similarity that aligns the model's cameras with the session's own AprilTag poses
-//! ([`crate::colmap_import`]; docs/mesh.md, "The way in").
+//! ([`ellipso_colmap::import`]; docs/mesh.md, "The way in").
 //!
 //! Contract:
 //! - [`read`] checks the flags and reads the models before the session is opened: a
@@ -21,14 +21,14 @@ use std::path::{Path, PathBuf};
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::similarity::AlignConfig;
-use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
-use crate::colmap_import::{
+use ellipso_colmap::import::{
     ImportReport, ModelImport, SimilarityReport, import_model, transform_mesh,
 };
-use crate::colmap_model::{ColmapModel, read_model};
+use ellipso_colmap::model::{ColmapModel, read_model};
 
 /// The frame a `--mesh` is in.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,7 +100,7 @@ pub fn read(
     sharded: bool,
 ) -> Result<Option<Models>, RunError> {
     let mesh_in_model = match (flags.mesh_frame, &flags.mesh_model) {
-        (Some(MeshFrame::Board), Some(_)) => ellipso_model::bail!(
+        (Some(MeshFrame::Board), Some(_)) => ellipso_run_error::bail!(
             "--mesh-model puts the mesh in that model's frame, --mesh-frame board says it is in \
              the board frame: give one of them"
         ),
@@ -110,17 +110,17 @@ pub fn read(
     if !mesh_in_model && flags.poses.is_none() {
         return Ok(None);
     }
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         !sharded,
         "--poses, --mesh-frame colmap and --mesh-model are not taken with --shard: run the fit \
          once without --shard (it writes the aligned mesh to OUT/mesh.ply, which shards take as \
          --mesh); sharded fits use the session's tracked poses"
     );
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         has_mesh || !mesh_in_model,
         "--mesh-frame colmap and --mesh-model say which frame --mesh is in: give --mesh MESH"
     );
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         !mesh_in_model || flags.mesh_model.is_some() || flags.poses.is_some(),
         "--mesh-frame colmap needs the COLMAP model the mesh belongs to: --poses MODEL (its \
          poses are used too) or --mesh-model MODEL (the tracked poses are kept)"

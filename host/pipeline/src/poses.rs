@@ -8,8 +8,7 @@
 //! that takes poses needs (a possible camera, possible poses). Its lines (the wait, the count
 //! of frames to track) go through the caller's [`Say`]; it prints nothing itself.
 
-use ellipso_fit::observe::poses_from_session;
-use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
@@ -17,7 +16,7 @@ use nalgebra::Isometry3;
 /// neither a pose nor a rejection (none tracked yet, or a tracking run cut short).
 pub fn poses_of(session: &Session, say: &dyn Say) -> Result<Vec<(u64, Isometry3<f64>)>, RunError> {
     let mut untracked = ellipso_vision::process::untracked_frames(session);
-    let mut poses = poses_from_session(session);
+    let mut poses = session.poses().tracked();
     // one run tracks a session at a time; a second waits and takes the first one's poses
     let _lock = if untracked.is_empty() {
         None
@@ -30,7 +29,7 @@ pub fn poses_of(session: &Session, say: &dyn Say) -> Result<Vec<(u64, Isometry3<
         })?;
         let now = ellipso_session::reader::open(&session.dir)?;
         untracked = ellipso_vision::process::untracked_frames(&now);
-        poses = poses_from_session(&now);
+        poses = now.poses().tracked();
         lock
     };
     if !untracked.is_empty() {
@@ -53,9 +52,11 @@ pub fn poses_of(session: &Session, say: &dyn Say) -> Result<Vec<(u64, Isometry3<
             "recording the new poses failed part-way (every line written is whole; the next \
              fit tracks the frames still without one)",
         )?;
-        poses = poses_from_session(&ellipso_session::reader::open(&session.dir)?);
+        poses = ellipso_session::reader::open(&session.dir)?
+            .poses()
+            .tracked();
     }
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         !poses.is_empty(),
         "{}: no frame could be posed from the AprilTags",
         session.dir.display()

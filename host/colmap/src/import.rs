@@ -33,7 +33,7 @@ use ellipso_model::geometry::similarity::{
 use ellipso_model::geometry::{MeshError, TriangleMesh};
 use nalgebra::{Isometry3, Similarity3};
 
-use crate::colmap_model::{ColmapModel, ModelFormat};
+use crate::model::{ColmapModel, ModelFormat};
 
 /// Why a model could not be brought in.
 #[derive(Debug, thiserror::Error)]

@@ -13,7 +13,7 @@ use ellipso_model::geometry::similarity::{AlignConfig, apply_to_pose};
 use nalgebra::{Isometry3, Point3, Similarity3, Translation3, Unit, UnitQuaternion, Vector3};
 
 use super::*;
-use crate::colmap_model::{ModelCamera, ModelImage, ModelPoint, read_model};
+use crate::model::{ModelCamera, ModelImage, ModelPoint, read_model};
 
 /// `n` board-frame cameras on an orbit around the object (0.32 m, 30° and 55° elevation).
 fn orbit(n: usize) -> Vec<Isometry3<f64>> {

@@ -15,13 +15,13 @@ use std::path::{Path, PathBuf};
 use ellipso_fit::shape::hull::HullField;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
-use ellipso_model::run_error::{Context, RunError, Say};
 use ellipso_report::output::FileFormat;
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
-use crate::fit_run::Steps;
-use crate::{MeshConfig, MeshReport, build_mesh};
+use crate::steps::Steps;
+use ellipso_mesh::{MeshConfig, MeshReport, build_mesh};
 
 /// Carves the session's mesh from `poses`, or from its tracked poses (tracking it first if it
 /// has none); also returns the carved hull (the fit's surface update stays inside it). The

@@ -32,8 +32,8 @@ use std::path::{Path, PathBuf};
 use ellipso_model::camera::CameraModel;
 use nalgebra::{Isometry3, UnitQuaternion};
 
-use super::frames::posed_frames;
 use ellipso_fit::observe::{SkippedFrame, camera_of};
+use ellipso_mesh::frames::posed_frames;
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::reader::Session;
 
@@ -261,26 +261,6 @@ fn full_resolution_s0(raw: &RawFrame) -> Result<(Vec<f32>, usize, usize), String
     Ok((plane, w, h))
 }
 
-/// `ellipso export colmap SESSION --out DIR`: claims `out` (new, empty, or an earlier `export
-/// colmap`'s; written beside and swapped in whole), opens the session, takes its poses
-/// ([`crate::poses::poses_of`], lines to `say`), writes the model and commits it. Returns the
-/// report and the published folder.
-pub fn export_session(
-    session_dir: &Path,
-    out: &Path,
-    options: ColmapOptions,
-    say: &dyn ellipso_model::run_error::Say,
-) -> Result<(ColmapReport, PathBuf), ellipso_model::run_error::RunError> {
-    use ellipso_model::run_error::Context;
-    let out = ellipso_report::output::OutputDir::claim(out, "export-colmap", &[session_dir])?;
-    let session = ellipso_session::reader::open(session_dir)?;
-    let poses = crate::poses::poses_of(&session, say)?;
-    let report = export_colmap(&session, &poses, out.path(), options)
-        .with_context(|| format!("exporting {} for COLMAP", session_dir.display()))?;
-    let published = out.commit()?;
-    Ok((report, published))
-}
-
 /// Writes the COLMAP model of `session` seen from `poses` into `out` (module contract).
 pub fn export_colmap(
     session: &Session,
@@ -353,7 +333,7 @@ pub fn export_colmap(
         names.push((id, name));
     }
     if lines.is_empty() {
-        return Err(ColmapError::NoImages(super::error::skipped_list(
+        return Err(ColmapError::NoImages(ellipso_mesh::error::skipped_list(
             &skipped, 6,
         )));
     }
