@@ -3,7 +3,8 @@
 //! The physics it renders with (optics, camera, geometry, mosaic) lives in `ellipso-model`,
 //! which the fit shares.
 //!
-//! - [`tags`]: AprilTag families (real code tables) and boards: albedo, corners, ray hits.
+//! AprilTag boards (families, code tables, albedo, corners, ray hits) are in
+//! `ellipso_model::tags`, shared with the tracker.
 //! - [`scene`]: scene files (TOML): objects, materials, AprilTag boards, rig, capture path.
 //!
 //! - [`effects`]: effects on demand — the plan of stages a scene needs, with reasons, and the
@@ -11,11 +12,17 @@
 //! - [`render`]: the polarimetric renderer (raw mosaic frames + ground truth) and the
 //!   radiometry shared with the fit.
 //!
+//! - [`record`]: what a session records of a scene (rig record, boards), so its fit and tracking
+//!   need no scene file.
+//!
 //! - [`rig`]: the virtual rig — trigger board, camera, wire, clocks, faults.
 #![cfg_attr(not(test), forbid(unsafe_code))] // the tests compare with the C apriltag library
 
 pub mod effects;
+pub mod record;
 pub mod render;
 pub mod rig;
 pub mod scene;
-pub mod tags;
+
+#[cfg(test)]
+mod tag_checks;

@@ -9,7 +9,7 @@
 //!   surface point, tag ids are unique across boards, the camera poses are computed
 //!   deterministically from `seed`.
 //! - World frame: right-handed, `capture.up` (default `+z`) up. Camera frame: OpenCV (x right,
-//!   y down, z forward). Board and tag frames: see [`crate::tags::board`].
+//!   y down, z forward). Board and tag frames: see [`ellipso_model::tags::board`].
 //! - Ray queries ([`Scene::intersect`], [`Scene::occluded`]) are in world space with the
 //!   conventions of [`ellipso_model::geometry`].
 
@@ -37,8 +37,8 @@ pub use spec::{
     BoardRefSpec, MaterialSpec, ObjectSpec, PoseSpec, RegionBlend, ScaleSpec, SceneFile, ShapeKind,
 };
 
-use crate::tags::PlacedBoard;
 use ellipso_model::geometry::{Ray, SurfaceHit};
+use ellipso_model::tags::PlacedBoard;
 use error::Located;
 use nalgebra::Unit;
 use std::path::{Path, PathBuf};

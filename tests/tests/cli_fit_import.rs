@@ -16,7 +16,7 @@ use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use ellipso_mesh::colmap_model::{ColmapModel, read_model};
+use ellipso_colmap::model::{ColmapModel, read_model};
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::similarity::{apply_to_pose, umeyama};

@@ -44,7 +44,7 @@ fn session(dir: &Path, resolution: [u32; 2]) -> Vec<(u64, Isometry3<f64>)> {
         },
         0,
     );
-    manifest.rig = Some(ellipso_vision::process::rig_record_of_scene(&scene, camera));
+    manifest.rig = Some(ellipso_sim::record::rig_record_of_scene(&scene, camera));
     let mut writer = SessionWriter::create(dir, manifest).expect("session");
     let mut poses = Vec::new();
     // Every 19th pose of the two-turn orbit: views spread around the sphere.

@@ -19,8 +19,8 @@ use ellipso_report::output::{FileFormat, OutputFile};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::{ensure, say};
+use ellipso_run_error::{Context, RunError, Say};
+use ellipso_run_error::{ensure, say};
 
 pub mod report;
 

@@ -10,8 +10,8 @@
 
 use std::path::{Path, PathBuf};
 
-use ellipso_model::ensure;
-use ellipso_model::run_error::{Context, RunError};
+use ellipso_run_error::ensure;
+use ellipso_run_error::{Context, RunError};
 use ellipso_sim::scene::Scene;
 
 use crate::chain::{Bench, RunResult, budget_specs};

@@ -16,8 +16,8 @@ use ellipso_vision::calibrate::{CalibConfig, Calibration, calibrate};
 use ellipso_vision::pose::DetectorConfig;
 use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
-use ellipso_model::run_error::{RunError, Say};
-use ellipso_model::say;
+use ellipso_run_error::say;
+use ellipso_run_error::{RunError, Say};
 
 /// Relative-error targets of issue 6: fx, fy, cx, cy.
 pub const INTRINSIC_TARGET: f64 = 1e-3;

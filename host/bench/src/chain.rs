@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use crate::truth::TruthObject;
-use ellipso_fit::observe::{MosaicFrames, poses_from_session};
+use ellipso_fit::observe::MosaicFrames;
 use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session_with};
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_session::reader::Session;
@@ -297,7 +297,7 @@ impl Bench {
 /// The poses of `session`: its `pose` events when it has any, else tracked now (in memory;
 /// the session is not written).
 pub fn tracked_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, BenchError> {
-    let recorded = poses_from_session(session);
+    let recorded = session.poses().tracked();
     if !recorded.is_empty() {
         return Ok(recorded);
     }

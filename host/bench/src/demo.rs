@@ -23,13 +23,13 @@ pub mod fit_score;
 
 use std::path::{Path, PathBuf};
 
-use ellipso_mesh::fit_run::Steps;
 use ellipso_model::geometry::pose_error;
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::{ensure, say};
+use ellipso_pipeline::steps::Steps;
 use ellipso_report::plot::{LegendPosition, LinePlot};
 use ellipso_rig::acquire::capture::CaptureReport;
 use ellipso_rig::acquire::ready::{Recorder, report_lines};
+use ellipso_run_error::{Context, RunError, Say};
+use ellipso_run_error::{ensure, say};
 use ellipso_sim::scene::{Scene, shipped_scene};
 use ellipso_vision::process::TrackedFrame;
 

@@ -26,13 +26,13 @@ use std::time::Instant;
 
 use ellipso_fit::session::{SessionFit, SessionFitConfig};
 use ellipso_mesh::MeshReport;
-use ellipso_mesh::distance::{MeshDistance, mesh_distance};
-use ellipso_mesh::fit_run::Steps;
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::{ensure, say};
+use ellipso_model::geometry::distance::{MeshDistance, mesh_distance};
+use ellipso_pipeline::steps::Steps;
 use ellipso_report::output::{FileFormat, OutputFile};
 use ellipso_rig::acquire::ready::Recorder;
+use ellipso_run_error::{Context, RunError, Say};
+use ellipso_run_error::{ensure, say};
 use ellipso_sim::scene::{Scene, shipped_scene};
 
 use crate::surface::{EtaBeside, SurfaceScore, eta_beside, surface_score};
@@ -340,7 +340,7 @@ fn bench_scene(
         "ellipso mesh failed on {name}: {}",
         String::from_utf8_lossy(&o.stderr).trim()
     );
-    let report_path = ellipso_mesh::output::report_path(&out);
+    let report_path = ellipso_pipeline::mesh::report_path(&out);
     let report: MeshReport = serde_json::from_slice(&std::fs::read(&report_path)?)
         .with_context(|| format!("reading {}", report_path.display()))?;
     let peak_rss_bytes = report.peak_rss_bytes;
@@ -358,7 +358,7 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
-        let (_, _, hull) = ellipso_mesh::output::mesh_of_session(
+        let (_, _, hull) = ellipso_pipeline::mesh::mesh_of_session(
             &session,
             None,
             &ellipso_mesh::MeshConfig::default(),
@@ -370,7 +370,7 @@ fn bench_scene(
             ..SessionFitConfig::default()
         };
         let config = ellipso_fit::session::with_session_sensor(&session, &config);
-        let poses = ellipso_mesh::poses::poses_of(&session, say)?;
+        let poses = ellipso_pipeline::poses::poses_of(&session, say)?;
         let t0 = Instant::now();
         let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
         let fit_s = t0.elapsed().as_secs_f64();
@@ -416,7 +416,7 @@ pub fn mesh_scores(
     say: &dyn Say,
 ) -> Result<MeshScores, RunError> {
     let truth = crate::chain::truth_for_scoring(scene)?;
-    let poses = ellipso_mesh::poses::poses_of(session, say)?;
+    let poses = ellipso_pipeline::poses::poses_of(session, say)?;
     let true_config = SessionFitConfig {
         hull: None,
         ..config.clone()

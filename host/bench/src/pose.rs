@@ -21,9 +21,9 @@ use ellipso_sim::scene::error::Located;
 
 use ellipso_polar::frame::RawFrame;
 
-use ellipso_model::run_error::{RunError, Say};
-use ellipso_model::{ensure, say};
-use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, TrackedBoardExt, Tracker};
+use ellipso_run_error::{RunError, Say};
+use ellipso_run_error::{ensure, say};
+use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
 
 /// What `ellipso bench pose` runs (its flags, parsed by the binary).
 #[derive(Debug, Clone)]

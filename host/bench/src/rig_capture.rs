@@ -9,9 +9,9 @@
 
 use std::path::Path;
 
-use ellipso_model::run_error::RunError;
 use ellipso_rig::acquire::ready::{Recorded, Recorder};
 use ellipso_rig::acquire::sim_rig::SimCaptureOptions;
+use ellipso_run_error::RunError;
 
 /// Captures `scene` into the new session `out` (`photos`: at most the scene's path; at
 /// `resolution` instead of the scene's).

@@ -9,8 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
-use ellipso_model::bail;
-use ellipso_model::run_error::{Context, RunError};
+use ellipso_run_error::bail;
+use ellipso_run_error::{Context, RunError};
 
 /// The command's result.
 type Result<T> = std::result::Result<T, RunError>;

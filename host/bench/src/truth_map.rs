@@ -2,7 +2,7 @@
 //! when the fit ran on a mesh other than the truth's (carved, refined, perturbed).
 //!
 //! Contract: [`truth_at`] gives each position the closest point of the true surface
-//! ([`ellipso_mesh::distance::ClosestPoints`]): the material and parameters of that triangle's
+//! ([`ellipso_model::geometry::distance::ClosestPoints`]): the material and parameters of that triangle's
 //! nearest corner (materials are regions, and the renderer's `region_blend = "nearest"` picks
 //! the nearest corner too), the true normal interpolated over the triangle and normalised, and
 //! the distance, unsigned and signed (positive outside: along the true triangle's outward face
@@ -10,7 +10,7 @@
 //! (empty truth) gets `None`.
 
 use crate::truth::TruthObject;
-use ellipso_mesh::distance::ClosestPoints;
+use ellipso_model::geometry::distance::ClosestPoints;
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use nalgebra::{Point3, Vector3};
 use rayon::prelude::*;

@@ -19,8 +19,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::{ensure, say};
+use ellipso_run_error::{Context, RunError, Say};
+use ellipso_run_error::{ensure, say};
 
 /// The command's result.
 type Result<T> = std::result::Result<T, RunError>;

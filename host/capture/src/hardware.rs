@@ -9,12 +9,12 @@
 
 use std::path::Path;
 
-use ellipso_model::run_error::{RunError, Say};
+use crate::rig_file::{Backend, RigFile};
 use ellipso_protocol::Bracket;
 use ellipso_rig::acquire::hardware::{self, HardwareRig};
 use ellipso_rig::acquire::ready::Recorder;
 use ellipso_rig::camera::CameraSettings;
-use ellipso_vision::rig_file::{Backend, RigFile};
+use ellipso_run_error::{RunError, Say};
 
 use crate::Captured;
 

@@ -3,9 +3,13 @@
 //! bar and signal handlers, or a quiet one), then its poses tracked and appended to the session
 //! ([`record_and_track`]).
 //!
+//! Also here: [`rig_file`], the rig file's format (trigger port, sensor backend, camera model,
+//! capture, boards), and [`session_upgrade`], the rig record an older session lacks, from its
+//! scene file (`ellipso session upgrade`).
+//!
 //! Why a crate of its own: `ellipso-rig` drives the link and the cameras and must not link the
-//! AprilTag C library; `ellipso-vision` tracks poses and owns the rig file's format and the
-//! boards, and must not drive hardware. A capture needs both; this crate is where they meet, so
+//! AprilTag C library; `ellipso-vision` tracks poses and must not drive hardware, nor depend on
+//! the simulator or the wire protocol (a fit tracks recorded frames through it). A capture needs both; this crate is where they meet, so
 //! `ellipso capture`, the demo and `ellipso bench mesh` all capture through the same code.
 //!
 //! Contract: nothing here prints except through the caller's [`Say`] (the tracker's lines); a
@@ -16,13 +20,15 @@
 
 use std::path::PathBuf;
 
-use ellipso_model::run_error::{RunError, Say};
 use ellipso_rig::acquire::capture::CaptureReport;
 use ellipso_rig::acquire::ready::{ReadyCapture, Recorded, Recorder};
+use ellipso_run_error::{RunError, Say};
 use ellipso_vision::process::{self, TrackedFrame};
 
 pub mod bracket;
 pub mod hardware;
+pub mod rig_file;
+pub mod session_upgrade;
 pub mod sim;
 
 /// A finished capture.

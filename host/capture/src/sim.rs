@@ -3,13 +3,13 @@
 //! session code, and the simulator's camera ([`ellipso_rig::acquire::sim_rig`]).
 //!
 //! Contract: the session records the scene's rig record and boards as the tracker reads them
-//! ([`process::rig_record_of_scene`], [`process::boards_of_scene`]), so a simulated session is
+//! ([`record::rig_record_of_scene`], [`record::boards_of_scene`]), so a simulated session is
 //! self-contained: the fit never opens the scene file.
 
-use ellipso_model::run_error::{RunError, Say};
 use ellipso_rig::acquire::ready::{ReadyCapture, Recorded, Recorder};
 use ellipso_rig::acquire::sim_rig::{self, SimCaptureOptions};
-use ellipso_vision::process;
+use ellipso_run_error::{RunError, Say};
+use ellipso_sim::record;
 
 use crate::Captured;
 
@@ -17,8 +17,8 @@ use crate::Captured;
 pub fn prepare(options: &SimCaptureOptions) -> Result<ReadyCapture, RunError> {
     sim_rig::prepare(options, |scene, camera| {
         (
-            process::rig_record_of_scene(scene, camera),
-            process::boards_of_scene(scene),
+            record::rig_record_of_scene(scene, camera),
+            record::boards_of_scene(scene),
         )
     })
 }

@@ -5,7 +5,7 @@
 //!
 //! Contract:
 //! - **Inputs.** The session (`ellipso_session::reader::open`), poses `(frame id,
-//!   world_from_camera)` (from [`poses_from_session`], tracking, or ground truth), a mesh in the
+//!   world_from_camera)` (from `Session::poses`, tracking, or ground truth), a mesh in the
 //!   world (= board) frame in metres with unit vertex normals. The camera model is the
 //!   manifest's `rig.camera`, the flash `rig.flash` ([`radiometry::flash_of`]); exposure and gain
 //!   are each frame's recorded values.
@@ -255,36 +255,6 @@ pub fn views_of(
         .iter()
         .map(|(id, p)| view_of(&flash, *id, p))
         .collect())
-}
-
-/// The poses recorded in the session log (`pose` events, as appended by
-/// `ellipso_vision::process::append_poses`), sorted by frame id. When a frame has several pose or
-/// `pose_rejected` events the last one counts (a later tracking run supersedes an earlier one);
-/// non-finite poses are dropped.
-pub fn poses_from_session(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
-    let mut latest = std::collections::BTreeMap::new();
-    for e in &session.events {
-        match e {
-            SessionEvent::Pose {
-                frame_id,
-                rotation_camera_from_world: r,
-                translation_camera_from_world_m: t,
-                ..
-            } => {
-                let camera_from_world = ellipso_session::events::camera_from_world(r, t);
-                let finite = r.iter().chain(t).all(|v| v.is_finite());
-                latest.insert(*frame_id, finite.then(|| camera_from_world.inverse()));
-            }
-            SessionEvent::PoseRejected { frame_id, .. } => {
-                latest.insert(*frame_id, None);
-            }
-            _ => {}
-        }
-    }
-    latest
-        .into_iter()
-        .filter_map(|(id, p)| p.map(|p| (id, p)))
-        .collect()
 }
 
 /// The normaliser of recorded frame `frame_id` seen from `world_from_camera` at any world point

@@ -10,7 +10,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 

@@ -11,8 +11,8 @@
 
 use std::path::Path;
 
-use ellipso_model::run_error::{Context, RunError};
 use ellipso_report::paths::{paths_relative_to, relative_if_path};
+use ellipso_run_error::{Context, RunError};
 
 use crate::augment::{ClusterModel, PartitionSummary};
 use crate::complete::Completion;
@@ -58,7 +58,7 @@ pub struct FitSummary {
     /// were held out or none gave samples.
     pub held_out: Option<HoldoutReport>,
     /// With `--poses`, `--mesh-frame colmap` or `--mesh-model`: the COLMAP alignment
-    /// (`import.poses`, `import.mesh`; `ellipso_mesh::fit_import::ImportSummary`, whose crate
+    /// (`import.poses`, `import.mesh`; `ellipso_pipeline::fit_import::ImportSummary`, whose crate
     /// comes after this one); absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub import: Option<serde_json::Value>,

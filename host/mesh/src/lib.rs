@@ -14,15 +14,9 @@
 //! 6. [`extract`], [`remesh`]: marching tetrahedra, isotropic remeshing onto the carved surface
 //!    to the target vertex count, Taubin smoothing; the bottom is the board plane.
 //!
-//! Also here: [`poses`] (the session's poses, tracked first where the log has none; it appends
-//! them to the event log), [`output`] (the mesh as the subcommands take and write it),
-//! [`distance`] (Chamfer / Hausdorff between meshes, for the bench), [`colmap`]
-//! (the session as a COLMAP sparse model with undistorted images, for photogrammetry users) and
-//! the way back: [`colmap_model`] reads a COLMAP model (text or binary), [`colmap_import`]
-//! aligns its poses, and a mesh in its frame, to the board frame. The fit of a session as the
-//! subcommands run it lives here too, since it takes these poses and the hull: [`fit_run`]
-//! (`ellipso fit`, the demo's fit), [`fit_import`] (its `--poses`/`--mesh-frame` flags),
-//! [`fit_shard`] (`fit --shard`, `fit-merge`).
+//! What takes the mesh further lives elsewhere: the session's poses, the mesh as the subcommands
+//! write it and the fit of a session as `ellipso fit` runs it in `ellipso-pipeline`; the COLMAP
+//! formats in `ellipso-colmap`; distances between meshes in `ellipso_model::geometry::distance`.
 //!
 //! Contract: [`build_mesh`] reads the session (frames twice, streamed, at most
 //! `frames_in_flight` at once) and never writes to it; the mesh is in world (board)
@@ -33,24 +27,15 @@
 
 pub mod appearance;
 pub mod carve;
-pub mod colmap;
-pub mod colmap_import;
-pub mod colmap_model;
 pub mod components;
 pub mod debug;
-pub mod distance;
 pub mod edge;
 pub mod error;
 pub mod extract;
-pub mod fit_import;
-pub mod fit_run;
-pub mod fit_shard;
 pub mod frames;
 pub mod halfedge;
 pub mod implicit;
-pub mod output;
 pub mod pipeline;
-pub mod poses;
 pub mod remesh;
 pub mod silhouette;
 pub mod volume;

@@ -23,7 +23,6 @@ use super::{MeshConfig, MeshError, MeshReport};
 use ellipso_fit::observe::radiometry::radiometry_of;
 use ellipso_fit::observe::{SkippedFrame, camera_of};
 use ellipso_fit::shape::hull::HullField;
-use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::Session;
 
 /// A mesh and how it was made.
@@ -195,16 +194,11 @@ fn too_few(
     votes: usize,
 ) -> MeshError {
     let rejected: Vec<SkippedFrame> = session
-        .events
-        .iter()
-        .filter_map(|e| match e {
-            SessionEvent::PoseRejected {
-                frame_id, reason, ..
-            } => Some(SkippedFrame {
-                frame_id: *frame_id,
-                reason: reason.clone(),
-            }),
-            _ => None,
+        .poses()
+        .rejected()
+        .map(|(frame_id, reason)| SkippedFrame {
+            frame_id,
+            reason: reason.to_string(),
         })
         .collect();
     let ids: Vec<u64> = frames.iter().map(|f| f.frame_id).collect();

@@ -26,7 +26,7 @@ mod summary;
 
 use std::path::{Path, PathBuf};
 
-use ellipso_model::run_error::{Context, RunError, Say};
+use ellipso_run_error::{Context, RunError, Say};
 
 /// The conversion's result.
 type Result<T> = std::result::Result<T, RunError>;

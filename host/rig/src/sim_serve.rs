@@ -21,8 +21,8 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use ellipso_model::bail;
-use ellipso_model::run_error::{Context, RunError};
+use ellipso_run_error::bail;
+use ellipso_run_error::{Context, RunError};
 use ellipso_sim::rig::{BoardTruth, VirtualBoard, VirtualBoardConfig, WireServer, wire};
 use ellipso_sim::scene::Scene;
 use serialport::{SerialPort, TTYPort};

@@ -23,6 +23,7 @@ pub mod events;
 pub mod frame_png;
 pub mod link_counters;
 pub mod manifest;
+pub mod poses;
 pub mod reader;
 pub mod rig;
 pub mod time;
@@ -30,6 +31,7 @@ pub mod writer;
 
 pub use events::SessionEvent;
 pub use manifest::Manifest;
+pub use poses::SessionPoses;
 pub use reader::{FrameEntry, ReadReport, Session};
 pub use writer::SessionWriter;
 

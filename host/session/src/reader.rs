@@ -252,15 +252,9 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     // per frame: its first pose value (rotation and translation; empty for a rejection)
     let mut poses: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
     for e in &events {
-        let pose = match e {
-            SessionEvent::Pose {
-                frame_id,
-                rotation_camera_from_world: r,
-                translation_camera_from_world_m: t,
-                ..
-            } => Some((*frame_id, r.iter().chain(t).copied().collect::<Vec<f64>>())),
-            SessionEvent::PoseRejected { frame_id, .. } => Some((*frame_id, Vec::new())),
-            _ => None,
+        let pose = match e.pose_event() {
+            Some((_, crate::poses::PoseEvent::Interpolated { .. })) | None => None,
+            Some((id, p)) => Some((id, p.logged_values())),
         };
         if let Some((id, value)) = pose {
             match poses.get(&id) {

@@ -178,6 +178,25 @@ fn default_family() -> String {
 }
 
 impl TrackedBoard {
+    /// The record of a board placed in the world (a scene's or a rig file's).
+    pub fn from_placed(placed: &ellipso_model::tags::PlacedBoard) -> Self {
+        let corners_board_m = placed
+            .board
+            .tags
+            .iter()
+            .map(|t| (t.id, t.corners_board_m.map(|p| [p.x, p.y, p.z])))
+            .collect();
+        let t = placed.world_from_board.translation.vector;
+        let r = placed.world_from_board.rotation.scaled_axis();
+        Self {
+            name: placed.board.name.clone(),
+            family: placed.board.family.name().to_string(),
+            corners_board_m,
+            world_from_board_translation_m: [t.x, t.y, t.z],
+            world_from_board_rotation: [r.x, r.y, r.z],
+        }
+    }
+
     /// Board frame → world frame.
     pub fn world_from_board(&self) -> nalgebra::Isometry3<f64> {
         let [tx, ty, tz] = self.world_from_board_translation_m;

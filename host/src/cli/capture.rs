@@ -32,7 +32,7 @@ pub struct Args {
     #[arg(long, value_name = "SCENE")]
     pub sim: Option<PathBuf>,
     /// Rig file of the physical rig (trigger port, camera backend and address, camera model,
-    /// capture, boards; see `host/vision/src/rig_file.rs`).
+    /// capture, boards; see `host/capture/src/rig_file.rs`).
     #[arg(long, value_name = "RIG")]
     pub rig: Option<PathBuf>,
     /// Session directory to create.

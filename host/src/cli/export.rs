@@ -1,5 +1,5 @@
 //! `ellipso export colmap SESSION --out DIR`: the session as a COLMAP sparse model with known
-//! poses and undistorted s0 images (`ellipso_mesh::colmap::export_session`), for users who prefer
+//! poses and undistorted s0 images (`ellipso_pipeline::colmap_export::export_session`), for users who prefer
 //! photogrammetry: COLMAP's `point_triangulator`, dense and meshing steps then give a mesh in
 //! board coordinates that `ellipso fit --mesh` takes unchanged (docs/mesh.md).
 //!
@@ -11,7 +11,8 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 
-use ellipso_mesh::colmap::{ColmapOptions, export_session};
+use ellipso_colmap::export::ColmapOptions;
+use ellipso_pipeline::colmap_export::export_session;
 use ellipso_report::output::OutputDir;
 
 /// `ellipso export` subcommands.

@@ -2,17 +2,17 @@
 //! recorded session, per mesh vertex, with its pictures (`fit.ply`, the pictures from one
 //! captured view, `fit-summary.json`; docs/fit-outputs.md).
 //!
-//! The flags only: `ellipso_mesh::fit_run::run` claims the output, reads the mesh (board frame,
+//! The flags only: `ellipso_pipeline::fit_run::run` claims the output, reads the mesh (board frame,
 //! or a COLMAP model's with `--mesh-frame colmap`; carved from the session's frames without
 //! `--mesh`), takes the poses (the session's, tracked first where needed, or `--poses`), fits
-//! and writes; with `--shard`, one shard's part file (`ellipso_mesh::fit_shard`).
+//! and writes; with `--shard`, one shard's part file (`ellipso_pipeline::fit_shard`).
 
 use std::path::{Path, PathBuf};
 
 use ellipso_fit::output::FitRun;
 use ellipso_fit::session::SessionFitConfig;
 use ellipso_fit::shard::Shard;
-use ellipso_mesh::fit_run::{FitDone, FitRequest};
+use ellipso_pipeline::fit_run::{FitDone, FitRequest};
 
 /// Arguments of `ellipso fit`.
 #[derive(Debug, clap::Args)]
@@ -88,7 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard,
         import: args.import.flags(),
     };
-    let done = ellipso_mesh::fit_run::run(
+    let done = ellipso_pipeline::fit_run::run(
         request,
         &mut super::progress::Spinners::default(),
         &super::out::Printed,

@@ -2,7 +2,7 @@
 //! `--mesh-model COLMAP_MODEL`: camera poses and a mesh from COLMAP, or any photogrammetry tool
 //! that writes COLMAP models, brought into the board frame by the similarity that aligns the
 //! model's cameras with the session's own AprilTag poses (docs/mesh.md, "The way in"). The
-//! flags only: `ellipso_mesh::fit_import` checks them, reads and aligns the models, says the
+//! flags only: `ellipso_pipeline::fit_import` checks them, reads and aligns the models, says the
 //! alignment and writes the board-frame mesh.
 
 use std::path::PathBuf;
@@ -38,13 +38,13 @@ pub struct ImportArgs {
 }
 
 impl ImportArgs {
-    /// The flags as the library takes them (`ellipso_mesh::fit_import` checks them).
-    pub fn flags(&self) -> ellipso_mesh::fit_import::ImportFlags {
-        ellipso_mesh::fit_import::ImportFlags {
+    /// The flags as the library takes them (`ellipso_pipeline::fit_import` checks them).
+    pub fn flags(&self) -> ellipso_pipeline::fit_import::ImportFlags {
+        ellipso_pipeline::fit_import::ImportFlags {
             poses: self.poses.clone(),
             mesh_frame: self.mesh_frame.map(|f| match f {
-                MeshFrame::Board => ellipso_mesh::fit_import::MeshFrame::Board,
-                MeshFrame::Colmap => ellipso_mesh::fit_import::MeshFrame::Colmap,
+                MeshFrame::Board => ellipso_pipeline::fit_import::MeshFrame::Board,
+                MeshFrame::Colmap => ellipso_pipeline::fit_import::MeshFrame::Colmap,
             }),
             mesh_model: self.mesh_model.clone(),
         }

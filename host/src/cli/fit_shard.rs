@@ -1,6 +1,6 @@
 //! `ellipso fit-merge PARTS… --out DIR`: the part files of a sharded fit (`ellipso fit --shard
 //! I/N --out PART`) merged into what `ellipso fit` writes — bit-identical to an unsharded
-//! `ellipso fit --outer 1` (docs/scale.md; the body is `ellipso_mesh::fit_shard`).
+//! `ellipso fit --outer 1` (docs/scale.md; the body is `ellipso_pipeline::fit_shard`).
 
 use std::path::PathBuf;
 
@@ -26,14 +26,14 @@ pub struct MergeArgs {
 
 /// Runs `ellipso fit-merge`.
 pub fn run_merge(args: MergeArgs) -> anyhow::Result<()> {
-    let request = ellipso_mesh::fit_shard::MergeRequest {
+    let request = ellipso_pipeline::fit_shard::MergeRequest {
         parts: &args.parts,
         out: &args.out,
         view: args.view,
         session: args.session.as_deref(),
         mesh: args.mesh.as_deref(),
     };
-    let (out, run) = ellipso_mesh::fit_shard::run_merge(&request, &super::out::Printed)
+    let (out, run) = ellipso_pipeline::fit_shard::run_merge(&request, &super::out::Printed)
         .map_err(super::out::failed)?;
     super::fit::print_results(&out, &run, false);
     Ok(())

@@ -1,5 +1,5 @@
 //! `ellipso mesh SESSION --out mesh.ply [--vertices N]`: the object's watertight mesh carved
-//! from the session's posed frames (`ellipso_mesh::output::mesh_command`), written as a binary PLY (or, for an `.obj`
+//! from the session's posed frames (`ellipso_pipeline::mesh::mesh_command`), written as a binary PLY (or, for an `.obj`
 //! name, Wavefront OBJ) in board coordinates (metres), with `<out stem>-report.json` beside it.
 //! Both files are claimed before the work starts (never inside the session, never over a file of
 //! another format) and written whole.
@@ -69,7 +69,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("--debug {}: {e}", dir.display()))?;
         config.debug_dir = Some(dir.clone());
     }
-    let done = ellipso_mesh::output::mesh_command(
+    let done = ellipso_pipeline::mesh::mesh_command(
         &args.session,
         &args.out,
         &config,

@@ -122,7 +122,7 @@ fn parse_triple(text: &str) -> Result<[f64; 3], String> {
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         ModelCommand::Fresnel(a) => {
-            let t = inspect::fresnel(a.eta, a.theta_deg).map_err(super::out::failed)?;
+            let t = inspect::fresnel(a.eta, a.theta_deg).map_err(anyhow::Error::new)?;
             if a.json {
                 crate::outln!("{}", serde_json::to_value(t)?);
             } else {
@@ -146,7 +146,7 @@ pub fn run(args: Args) -> Result<()> {
             }
         }
         ModelCommand::Dop(a) => {
-            let t = inspect::dop(a.eta, a.theta_deg).map_err(super::out::failed)?;
+            let t = inspect::dop(a.eta, a.theta_deg).map_err(anyhow::Error::new)?;
             if a.json {
                 crate::outln!("{}", serde_json::to_value(t)?);
             } else {
@@ -157,7 +157,7 @@ pub fn run(args: Args) -> Result<()> {
         }
         ModelCommand::Mueller(a) => {
             let v =
-                serde_json::to_value(inspect::mueller(&a.inputs()).map_err(super::out::failed)?)?;
+                serde_json::to_value(inspect::mueller(&a.inputs()).map_err(anyhow::Error::new)?)?;
             if a.json {
                 crate::outln!("{v}");
             } else {

@@ -66,15 +66,15 @@ macro_rules! out {
 }
 
 /// A library function's error as the binary's: its text and causes unchanged.
-pub fn failed(e: ellipso_model::run_error::RunError) -> anyhow::Error {
+pub fn failed(e: ellipso_run_error::RunError) -> anyhow::Error {
     anyhow::anyhow!(e.into_boxed())
 }
 
-/// The library bodies' lines ([`ellipso_model::run_error::Say`]) printed as [`outln!`] and
+/// The library bodies' lines ([`ellipso_run_error::Say`]) printed as [`outln!`] and
 /// [`errln!`] print them.
 pub struct Printed;
 
-impl ellipso_model::run_error::Say for Printed {
+impl ellipso_run_error::Say for Printed {
     fn out(&self, line: std::fmt::Arguments<'_>) {
         crate::outln!("{line}");
     }

@@ -100,12 +100,12 @@ impl Drop for Progress {
     }
 }
 
-/// A library run's long steps ([`ellipso_mesh::fit_run::Steps`]) shown as one
+/// A library run's long steps ([`ellipso_pipeline::steps::Steps`]) shown as one
 /// [`Progress::spinner`] each; a step not ended is cleared when the next begins.
 #[derive(Default)]
 pub struct Spinners(Option<Progress>);
 
-impl ellipso_mesh::fit_run::Steps for Spinners {
+impl ellipso_pipeline::steps::Steps for Spinners {
     fn begin(&mut self, label: &str) {
         self.0 = Some(Progress::spinner(label));
     }

@@ -9,8 +9,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use anyhow::Context;
-use ellipso_model::run_error::RunError;
 use ellipso_rig::acquire::ready::{ReadyCapture, Recorded, Recorder};
+use ellipso_run_error::RunError;
 
 use super::progress::Progress;
 

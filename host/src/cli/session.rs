@@ -1,5 +1,5 @@
 //! `ellipso session upgrade DIR`: gives a session recorded before sessions carried their whole
-//! rig record that record ([`ellipso_vision::session_upgrade::upgrade`], whose doc states the
+//! rig record that record ([`ellipso_capture::session_upgrade::upgrade`], whose doc states the
 //! contract); the binary keeps the flags and says what was done.
 
 use std::path::PathBuf;
@@ -23,7 +23,7 @@ pub struct UpgradeArgs {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Upgrade(a) => {
-            match ellipso_vision::session_upgrade::upgrade(&a.session)
+            match ellipso_capture::session_upgrade::upgrade(&a.session)
                 .map_err(super::out::failed)?
             {
                 Some(backup) => crate::outln!(

@@ -248,6 +248,8 @@ struct FollowState {
     partial: Vec<u8>,
     bad_lines: u64,
     frames: BTreeMap<u64, FrameInfo>,
+    /// The poses the log holds so far (the session's one fold of its pose events).
+    log_poses: ellipso_session::SessionPoses,
     counters: Counters,
     tracker: Option<Result<Tracker, String>>,
     camera: Option<CameraModel>,
@@ -275,6 +277,7 @@ impl FollowState {
             partial: Vec::new(),
             bad_lines: 0,
             frames: BTreeMap::new(),
+            log_poses: Default::default(),
             counters: Counters::default(),
             tracker: None,
             camera: None,

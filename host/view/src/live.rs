@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use ellipso_model::run_error::RunError;
+use ellipso_run_error::RunError;
 
 use crate::follow::{self, FollowConfig, Follower};
 use crate::server::{self, Content, ServerConfig, ViewServer};

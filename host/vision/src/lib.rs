@@ -1,6 +1,7 @@
 //! `ellipso-vision`: what the host sees in a session's frames — AprilTag detection and board
-//! poses, pose tracking of recorded frames, camera and flash calibration, and the rig files that
-//! carry a calibration. It is the one crate (with the binary) that links the AprilTag C library.
+//! poses, pose tracking of recorded frames, camera and flash calibration. It is the one crate
+//! (with the binary) that links the AprilTag C library, and it depends on neither the simulator
+//! nor the wire protocol: a recorded session's frames are tracked from its own record.
 //!
 //! - [`pose`]: AprilTag detection and joint board pose (IPPE + LM with distortion, flip checks).
 //! - [`track`]: pose tracking of recorded frames (detection image, tags, joint PnP, world pose).
@@ -11,9 +12,6 @@
 //!   highlights.
 //! - `lm`: the one Levenberg–Marquardt loop of pose refinement and the calibration bundle.
 //! - [`replay`]: the replay report of a recorded session (`ellipso replay`).
-//! - [`rig_file`]: rig files (trigger port, sensor backend, camera model, capture, boards).
-//! - [`session_upgrade`]: the rig record an older session lacks, from its scene file
-//!   (`ellipso session upgrade`).
 #![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
 pub mod calibrate;
@@ -21,7 +19,5 @@ mod lm;
 pub mod pose;
 pub mod process;
 pub mod replay;
-pub mod rig_file;
-pub mod session_upgrade;
 pub mod short_pulse_poses;
 pub mod track;

@@ -9,7 +9,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use ellipso_model::camera::CameraModel;
-use ellipso_model::run_error::{RunError, Say};
+use ellipso_run_error::{RunError, Say};
 use rayon::prelude::*;
 
 use crate::track::{FramePose, TrackConfig, TrackRejection, TrackedBoard, Tracker};
@@ -21,29 +21,6 @@ use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::SessionAppender;
 
 pub use ellipso_session::rig::RigRecord;
-
-/// The rig record a simulated capture of `scene` writes, with `camera` the model of the frames
-/// it renders (the scene's camera, or the resolution override's): the flash, and the
-/// radiometry, sensor noise and analyser extinction the renderer simulates, so the session's
-/// fit needs no scene file.
-pub fn rig_record_of_scene(scene: &ellipso_sim::scene::Scene, camera: CameraModel) -> RigRecord {
-    let sensor = ellipso_sim::render::radiometry::recorded_sensor(scene);
-    RigRecord {
-        camera,
-        flash: Some(scene.rig.flash.clone()),
-        radiometry: Some(ellipso_session::rig::RadiometryRecord::Absolute(
-            sensor.radiometry,
-        )),
-        noise: Some(sensor.noise),
-        analyser_extinction_ratio: sensor.analyser_extinction_ratio,
-    }
-}
-
-/// The boards a simulated capture of `scene` records, as tracking needs them.
-pub fn boards_of_scene(scene: &ellipso_sim::scene::Scene) -> Vec<TrackedBoard> {
-    use crate::track::TrackedBoardExt;
-    scene.boards.iter().map(TrackedBoard::from_placed).collect()
-}
 
 /// Errors of the processing stages.
 #[derive(Debug, thiserror::Error)]
@@ -111,17 +88,11 @@ pub fn track_session(
 /// Complete frames of `session` with neither a `pose` nor a `pose_rejected` event: frames a
 /// tracking run never reached (it was stopped, or its appends failed on a full disk).
 pub fn untracked_frames(session: &Session) -> std::collections::BTreeSet<u64> {
-    let mut done = std::collections::BTreeSet::new();
-    for e in &session.events {
-        if let SessionEvent::Pose { frame_id, .. } | SessionEvent::PoseRejected { frame_id, .. } = e
-        {
-            done.insert(*frame_id);
-        }
-    }
+    let poses = session.poses();
     session
         .frames
         .iter()
-        .filter(|f| f.complete && !done.contains(&f.frame_id))
+        .filter(|f| f.complete && !poses.has_outcome(f.frame_id))
         .map(|f| f.frame_id)
         .collect()
 }

@@ -6,7 +6,7 @@
 
 use std::collections::BTreeMap;
 
-use ellipso_model::run_error::RunError;
+use ellipso_run_error::RunError;
 
 use crate::process::{self, TrackedFrame};
 use crate::track::TrackConfig;

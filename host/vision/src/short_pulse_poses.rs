@@ -24,7 +24,7 @@
 //! frames without them fall back to frame ids as time (a free run spaces frames evenly).
 //! Borrowed poses are logged as `pose_interpolated` events after the frame's `pose_rejected`,
 //! naming the frames they came from, so a reader can always tell a measured pose from a
-//! borrowed one; [`interpolated_poses`] reads them back.
+//! borrowed one; `Session::poses` (`ellipso_session::poses`) reads them back.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -210,33 +210,6 @@ pub fn append_borrowed_poses(
         })?;
     }
     Ok(())
-}
-
-/// The borrowed poses logged in a session (`pose_interpolated` events), world from camera, by
-/// frame id; the last event per frame counts, a later `pose` of the same frame supersedes it.
-pub fn interpolated_poses(session: &Session) -> Vec<(u64, Isometry3<f64>)> {
-    let mut latest = BTreeMap::new();
-    for e in &session.events {
-        match e {
-            SessionEvent::PoseInterpolated {
-                frame_id,
-                rotation_camera_from_world: r,
-                translation_camera_from_world_m: t,
-                ..
-            } if r.iter().chain(t).all(|v| v.is_finite()) => {
-                let camera_from_world = ellipso_session::events::camera_from_world(r, t);
-                latest.insert(*frame_id, Some(camera_from_world.inverse()));
-            }
-            SessionEvent::Pose { frame_id, .. } => {
-                latest.insert(*frame_id, None);
-            }
-            _ => {}
-        }
-    }
-    latest
-        .into_iter()
-        .filter_map(|(id, p)| p.map(|p| (id, p)))
-        .collect()
 }
 
 #[cfg(test)]

@@ -18,7 +18,6 @@
 //!    board's `world_from_board`.
 
 use ellipso_model::camera::CameraModel;
-use ellipso_sim::tags::PlacedBoard;
 use nalgebra::{Isometry3, Point3};
 
 use crate::pose::{
@@ -80,13 +79,10 @@ pub enum TrackRejection {
 
 pub use ellipso_session::rig::TrackedBoard;
 
-/// What tracking adds to a recorded board: its detector family, and the record of a scene's
-/// placed board.
+/// What tracking adds to a recorded board: its detector family.
 pub trait TrackedBoardExt: Sized {
     /// The detector family of this board's tags.
     fn tag_family(&self) -> Result<TagFamily, DetectError>;
-    /// From a scene's placed board.
-    fn from_placed(placed: &PlacedBoard) -> Self;
 }
 
 impl TrackedBoardExt for TrackedBoard {
@@ -99,24 +95,6 @@ impl TrackedBoardExt for TrackedBoard {
                 name: "board tag family",
                 value: format!("'{other}' (tracked families: tag36h11, tag25h9, tag16h5)"),
             }),
-        }
-    }
-
-    fn from_placed(placed: &PlacedBoard) -> Self {
-        let corners_board_m = placed
-            .board
-            .tags
-            .iter()
-            .map(|t| (t.id, t.corners_board_m.map(|p| [p.x, p.y, p.z])))
-            .collect();
-        let t = placed.world_from_board.translation.vector;
-        let r = placed.world_from_board.rotation.scaled_axis();
-        Self {
-            name: placed.board.name.clone(),
-            family: placed.board.family.name().to_string(),
-            corners_board_m,
-            world_from_board_translation_m: [t.x, t.y, t.z],
-            world_from_board_rotation: [r.x, r.y, r.z],
         }
     }
 }

@@ -290,7 +290,7 @@ fn rendered_calibration_board_is_detected_with_accurate_corners() {
             ((at(0, 0) + at(1, 1)) / (2.0 * full) * 255.0 * 2.0).clamp(0.0, 255.0) as u8
         })
         .collect();
-    let found = crate::tags::detect_for_tests::detect_tag36h11(&grey, sw, sh);
+    let found = crate::tag_checks::detect::detect_tag36h11(&grey, sw, sh);
     assert!(found.len() >= 20, "only {} tags detected", found.len());
     let pose = scene.camera_poses[0].world_from_camera;
     let board = &scene.boards[0];

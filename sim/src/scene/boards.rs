@@ -7,7 +7,7 @@
 
 use super::error::{Located, SceneError};
 use super::spec::BoardRefSpec;
-use crate::tags::{Board, BoardSpec, PlacedBoard};
+use ellipso_model::tags::{Board, BoardSpec, PlacedBoard};
 use std::collections::HashMap;
 use std::path::Path;
 

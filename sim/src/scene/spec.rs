@@ -9,7 +9,7 @@ use super::capture::CaptureSpec;
 use super::effects::EffectsSpec;
 use super::error::{Located, SceneError};
 use super::rig::RigSpec;
-use crate::tags::BoardSpec;
+use ellipso_model::tags::BoardSpec;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;

@@ -369,7 +369,7 @@ fn documented_minimal_example_loads() {
 /// every detected corner against the world corner projected through `world_from_camera`.
 #[test]
 fn scene_poses_and_board_poses_agree_with_detections() {
-    use crate::tags::detect_for_tests::detect_tag36h11;
+    use crate::tag_checks::detect::detect_tag36h11;
     let s = Scene::load(&sim_dir().join("scenes/sphere.toml")).expect("sphere");
     let cam = &s.rig.camera;
     let scale = 4.0;

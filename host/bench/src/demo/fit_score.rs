@@ -9,9 +9,9 @@
 
 use std::path::PathBuf;
 
-use ellipso_mesh::fit_run::Steps;
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::say;
+use ellipso_pipeline::steps::Steps;
+use ellipso_run_error::say;
+use ellipso_run_error::{Context, RunError, Say};
 use ellipso_sim::scene::Scene;
 
 /// The demo's fit: where it went and its scores.
@@ -39,7 +39,7 @@ pub fn fit_and_score(
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
-    let (mesh, mesh_report, hull) = ellipso_mesh::output::mesh_of_session(
+    let (mesh, mesh_report, hull) = ellipso_pipeline::mesh::mesh_of_session(
         session,
         None,
         &ellipso_mesh::MeshConfig::default(),
@@ -48,7 +48,7 @@ pub fn fit_and_score(
     )?;
     let mesh_s = started.elapsed().as_secs_f64();
     let mesh_path = dir.join("mesh.ply");
-    ellipso_mesh::output::write_mesh(&mesh, &mesh_report, &mesh_path)?;
+    ellipso_pipeline::mesh::write_mesh(&mesh, &mesh_report, &mesh_path)?;
     say!(
         say,
         "mesh         {} vertices carved from {} frames in {mesh_s:.1} s",
@@ -68,8 +68,9 @@ pub fn fit_and_score(
         dir: &dir,
         publish: &|p| out.published(p),
     };
-    let run =
-        ellipso_mesh::fit_run::fit_and_export(session, &mesh, None, to, None, &config, steps, say)?;
+    let run = ellipso_pipeline::fit_run::fit_and_export(
+        session, &mesh, None, to, None, &config, steps, say,
+    )?;
     let config = ellipso_fit::session::with_session_sensor(session, &config);
 
     // Only now the truth.

@@ -19,7 +19,7 @@ use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::reader::{self, Session};
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::{FrameRecord, SessionWriter};
-use ellipso_vision::process::rig_record_of_scene;
+use ellipso_sim::record::rig_record_of_scene;
 
 /// Sphere centre and radius of every test scene, world metres.
 pub const CENTRE: [f64; 3] = [0.0, 0.0, 0.04];

@@ -12,8 +12,8 @@ use nalgebra::Vector3;
 use super::{SceneSpec, make_session, open, sphere_and_board};
 use ellipso_fit::observe::radiometry::{FrameRadiometry, SessionRadiometry};
 use ellipso_fit::observe::{
-    FrameImages, MosaicFrames, ObserveConfig, ObserveError, extract, extract_from,
-    poses_from_session, radiometry_of, views_of,
+    FrameImages, MosaicFrames, ObserveConfig, ObserveError, extract, extract_from, radiometry_of,
+    views_of,
 };
 use ellipso_fit::shard::Shard;
 use ellipso_session::events::SessionEvent;
@@ -201,7 +201,7 @@ fn poses_round_trip_through_the_session_log() {
     })
     .unwrap();
     drop(log);
-    let read = poses_from_session(&open(&session_dir));
+    let read = open(&session_dir).poses().tracked();
     let expected: Vec<_> = poses.iter().filter(|p| p.0 != 102).collect();
     assert_eq!(read.len(), expected.len());
     for ((id, got), (want_id, want)) in read.iter().zip(expected) {

@@ -24,7 +24,7 @@ pub(super) fn picture(w: usize, h: usize, pixels: Vec<Rgb>) -> Picture {
 pub(super) fn with_key(
     picture: Picture,
     key: Key,
-) -> Result<image::RgbImage, ellipso_model::run_error::RunError> {
+) -> Result<image::RgbImage, ellipso_run_error::RunError> {
     Ok(Figure::bare().image("", picture).key(key).render()?)
 }
 

@@ -14,8 +14,8 @@
 use std::path::Path;
 
 use crate::{PolarImage, StokesBand};
-use ellipso_model::run_error::{Context, RunError};
 use ellipso_report::exr_image::FloatImage;
+use ellipso_run_error::{Context, RunError};
 
 /// The channel name of `plane` for `band` (module doc).
 fn name(plane: &str, band: &StokesBand) -> String {

@@ -28,7 +28,7 @@ fn args(frame: &Path, out: &Path) -> Args {
 /// Warnings are not what these tests look at.
 struct Quiet;
 
-impl ellipso_model::run_error::Say for Quiet {
+impl ellipso_run_error::Say for Quiet {
     fn out(&self, _: std::fmt::Arguments<'_>) {}
     fn err(&self, _: std::fmt::Arguments<'_>) {}
 }

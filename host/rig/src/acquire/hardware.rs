@@ -1,7 +1,7 @@
 //! The physical rig of `ellipso capture --rig RIG.toml` ([`prepare`]): the trigger board on its
 //! serial port and the camera through its backend, as the rig file describes them.
 //!
-//! Contract: the rig file is read by the caller (`ellipso_vision::rig_file`, which owns its
+//! Contract: the rig file is read by the caller (`ellipso_capture::rig_file`, which owns its
 //! format and its boards) and handed over as a [`HardwareRig`]; the camera must deliver the
 //! frame size of the rig's camera model; a backend not compiled in is refused by name with the
 //! cargo feature that adds it. The session records the trigger port, the camera's backend and
@@ -12,8 +12,8 @@ use std::path::PathBuf;
 
 use ellipso_model::camera::CameraModel;
 use ellipso_model::mosaic::SensorLayout;
-use ellipso_model::run_error::RunError;
 use ellipso_protocol::CaptureConfig;
+use ellipso_run_error::RunError;
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
 use ellipso_session::rig::{RigRecord, TrackedBoard};
 use ellipso_session::time::HostClock;
@@ -65,7 +65,7 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
     let clock = HostClock::new();
     let camera = open_camera(rig, clock)?;
     let info = camera.info();
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         (info.width, info.height) == (rig.camera.width, rig.camera.height),
         "{}: the camera delivers {}×{} but the rig's camera model is {}×{}; recalibrate or fix [camera]",
         rig.rig_file.display(),
@@ -144,7 +144,7 @@ fn missing_backend(
     feature: &str,
     _clock: HostClock,
 ) -> Result<Box<dyn Camera>, RunError> {
-    ellipso_model::bail!(
+    ellipso_run_error::bail!(
         "{}: camera backend `{feature}` is not in this build; rebuild with `--features {feature}`",
         rig.rig_file.display()
     )

@@ -13,8 +13,8 @@ use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use ellipso_model::run_error::RunError;
 use ellipso_protocol::CaptureConfig;
+use ellipso_run_error::RunError;
 use ellipso_session::writer::SessionWriter;
 use ellipso_sim::rig::VirtualBoard;
 

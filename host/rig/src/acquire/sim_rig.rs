@@ -9,7 +9,7 @@
 //! Contract: the scene's capture path gives the photos (at most its poses); its `capture.bracket`
 //! the flash-energy bracket unless one is given; the camera renders every frame at the energy it
 //! really received. The session records the resolved scene path and seed, and the rig record and
-//! boards the caller makes from the scene (`ellipso_vision::process::rig_record_of_scene` and
+//! boards the caller makes from the scene (`ellipso_sim::record::rig_record_of_scene` and
 //! `boards_of_scene`: this crate does not link the tracker). Errors read as the command line
 //! printed them when this lived in the binary; nothing here prints.
 
@@ -18,8 +18,8 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ellipso_model::camera::CameraModel;
-use ellipso_model::run_error::{Context, RunError};
 use ellipso_protocol::{Bracket, CaptureConfig, PulseCount, TriggerSource};
+use ellipso_run_error::{Context, RunError};
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource, layout_name};
 use ellipso_session::rig::{RigRecord, TrackedBoard};
 use ellipso_session::time::HostClock;
@@ -91,7 +91,7 @@ pub fn prepare(
         .photos
         .unwrap_or(scene.camera_poses.len() as u32)
         .min(scene.camera_poses.len() as u32);
-    ellipso_model::ensure!(
+    ellipso_run_error::ensure!(
         photos > 0,
         "{}: the capture path has no poses",
         scene_path.display()

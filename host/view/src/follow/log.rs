@@ -1,6 +1,8 @@
 //! Reading the session's log as it grows: complete lines of `events.jsonl` from where the last
 //! poll stopped (a half-written last line waits for its end), each event folded into the
-//! follower's frames and counters. A pose the log records replaces one the view tracked.
+//! follower's frames and counters. Poses are taken through the session's one fold of its pose
+//! events (`ellipso_session::poses`, step by step); a pose the log records replaces one the view
+//! tracked.
 
 use std::io::{Read, Seek, SeekFrom};
 use std::time::Instant;
@@ -8,6 +10,7 @@ use std::time::Instant;
 use super::{FollowState, FrameInfo, PoseStatus};
 use ellipso_session::events::{FrameStatus, SessionEvent};
 use ellipso_session::paths;
+use ellipso_session::poses::TrackedPose;
 
 impl FollowState {
     pub(super) fn read_log(&mut self) -> bool {
@@ -42,6 +45,20 @@ impl FollowState {
     }
 
     fn on_event(&mut self, e: SessionEvent) {
+        if let Some(frame_id) = self.log_poses.apply(&e) {
+            let status = match self.log_poses.outcome(frame_id) {
+                Some(TrackedPose::Posed(Some(world_from_camera))) => PoseStatus::Posed {
+                    world_from_camera: *world_from_camera,
+                    live: false,
+                },
+                Some(TrackedPose::Posed(None)) => {
+                    PoseStatus::Rejected("the logged pose is not finite".into())
+                }
+                Some(TrackedPose::Rejected(reason)) => PoseStatus::Rejected(reason.clone()),
+                None => PoseStatus::Pending,
+            };
+            self.set_pose(frame_id, status);
+        }
         let c = &mut self.counters;
         match e {
             SessionEvent::Pulse { .. } => c.pulses += 1,
@@ -85,24 +102,6 @@ impl FollowState {
             SessionEvent::Fault { what, .. } => c.faults.push(what),
             SessionEvent::Disconnected { reason, .. } => c.disconnected = Some(reason),
             SessionEvent::End { reason, .. } => c.ended = Some(reason),
-            SessionEvent::Pose {
-                frame_id,
-                rotation_camera_from_world: r,
-                translation_camera_from_world_m: t,
-                ..
-            } => {
-                let camera_from_world = ellipso_session::events::camera_from_world(&r, &t);
-                self.set_pose(
-                    frame_id,
-                    PoseStatus::Posed {
-                        world_from_camera: camera_from_world.inverse(),
-                        live: false,
-                    },
-                );
-            }
-            SessionEvent::PoseRejected {
-                frame_id, reason, ..
-            } => self.set_pose(frame_id, PoseStatus::Rejected(reason)),
             _ => {}
         }
     }

@@ -16,8 +16,8 @@
 use std::path::PathBuf;
 
 use ellipso_model::camera::CAMERA_PARAM_NAMES;
-use ellipso_model::run_error::{Context, RunError, Say};
-use ellipso_model::{ensure, say};
+use ellipso_run_error::{Context, RunError, Say};
+use ellipso_run_error::{ensure, say};
 use rayon::prelude::*;
 
 use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};

@@ -1,0 +1,511 @@
+//! AprilTag boards: the TOML description ([`BoardSpec`]), its validation, and the built [`Board`]
+//! that answers albedo lookups, tag corner coordinates and ray–board intersections.
+//!
+//! Frames (all metres):
+//! - *Sheet* frame: the printed sheet laid out like a page: origin at its top-left corner, x right,
+//!   y down, z into the sheet (away from the viewer). Layout positions are given in this frame.
+//! - *Board* frame: the frame poses refer to. Origin at the sheet's top-left corner or centre
+//!   (`origin`); axes either the sheet's (`x_right_y_down`, z into the board — AprilTag's and
+//!   OpenCV's convention) or `x_right_y_up` (z out of the board towards the viewer). The sheet
+//!   lies in the board's `z = 0` plane.
+//! - *Tag* frame: AprilTag's: centre of the tag, x right, y down, z into the tag, as seen on the
+//!   upright printed tag. `board_from_tag` is what pose estimation recovers per tag.
+//!
+//! Corner order: [`BoardTag::corners_board_m`] lists corners in AprilTag's detection order, the
+//! tag-frame points `(-s/2, +s/2)`, `(+s/2, +s/2)`, `(+s/2, -s/2)`, `(-s/2, -s/2)` (`s` = tag
+//! size, the black border's outer edge): bottom-left, bottom-right, top-right, top-left of the
+//! upright tag, counter-clockwise on screen, matching `apriltag_detection_t::p[0..4]`.
+
+use super::family::{TagCells, TagFamily};
+pub use super::spec::{BoardAxes, BoardOrigin, BoardSpec, GridSpec, TagPlacementSpec};
+use nalgebra::{Isometry3, Point2, Point3, Translation3, Unit, UnitQuaternion, Vector2, Vector3};
+use std::collections::HashMap;
+
+/// A validation error: the offending key (dotted path inside the board table) and what is wrong.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("`{key}`: {message}")]
+pub struct BoardError {
+    /// Dotted key path relative to the board table, e.g. `grid.spacing_m` or `tags[2].id`.
+    pub key: String,
+    /// What is wrong.
+    pub message: String,
+}
+
+fn bad(key: impl Into<String>, message: impl Into<String>) -> BoardError {
+    BoardError {
+        key: key.into(),
+        message: message.into(),
+    }
+}
+
+/// One tag on a built board.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoardTag {
+    /// Tag id.
+    pub id: u32,
+    /// Tag frame to board frame.
+    pub board_from_tag: Isometry3<f64>,
+    /// Corners in board frame, AprilTag detection order (see the module doc).
+    pub corners_board_m: [Point3<f64>; 4],
+    /// Centre in sheet coordinates.
+    centre_sheet_m: Vector2<f64>,
+    /// In-plane rotation (clockwise seen from the front), radians.
+    rotation_rad: f64,
+    /// Key path of the spec entry that placed this tag (for error messages).
+    key: String,
+}
+
+/// A ray–board hit, in the frame the ray was given in.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoardHit {
+    /// Ray parameter.
+    pub t: f64,
+    /// Hit point in board coordinates (z = 0).
+    pub point_board_m: Point2<f64>,
+    /// Albedo of the print at the hit (back side: the white albedo).
+    pub albedo: f32,
+    /// Whether the printed side was hit.
+    pub front: bool,
+}
+
+/// A validated, ready-to-render board in its own board frame.
+#[derive(Clone, Debug)]
+pub struct Board {
+    /// Name from the spec.
+    pub name: Option<String>,
+    /// Tag family.
+    pub family: TagFamily,
+    /// Tag size (black border outer edge), metres.
+    pub tag_size_m: f64,
+    /// Sheet `[width, height]`, metres.
+    pub sheet_size_m: [f64; 2],
+    /// Albedo of white print.
+    pub white_albedo: f32,
+    /// Albedo of black print.
+    pub black_albedo: f32,
+    /// Tags in spec order (grid first, then explicit placements).
+    pub tags: Vec<BoardTag>,
+    /// Board frame from sheet frame.
+    pub board_from_sheet: Isometry3<f64>,
+    cells: HashMap<u32, TagCells>,
+    /// Uniform lookup grid over the sheet: bucket → tag indices.
+    buckets: Vec<Vec<u32>>,
+    bucket_size_m: f64,
+    bucket_dims: [usize; 2],
+}
+
+impl Board {
+    /// Validates a spec and builds the board. Errors name the offending key.
+    pub fn from_spec(spec: &BoardSpec) -> Result<Self, BoardError> {
+        let table = spec.family.code_table();
+        let s = spec.tag_size_m;
+        if !(s.is_finite() && s > 0.0) {
+            return Err(bad(
+                "tag_size_m",
+                format!("must be a positive length, got {s}"),
+            ));
+        }
+        if !(spec.margin_m.is_finite() && spec.margin_m >= 0.0) {
+            return Err(bad("margin_m", "must be a non-negative length"));
+        }
+        for (key, v) in [
+            ("white_albedo", spec.white_albedo),
+            ("black_albedo", spec.black_albedo),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(bad(key, format!("albedo must be in [0, 1], got {v}")));
+            }
+        }
+        if spec.black_albedo >= spec.white_albedo {
+            return Err(bad("black_albedo", "must be darker than white_albedo"));
+        }
+        let cell = s / table.width_at_border as f64;
+        let quiet = table.quiet_zone_cells() as f64 * cell;
+        // (key, id, centre in sheet, rotation rad)
+        let mut placed: Vec<(String, u32, Vector2<f64>, f64)> = Vec::new();
+        if let Some(g) = &spec.grid {
+            if g.cols == 0 || g.rows == 0 {
+                let key = if g.cols == 0 {
+                    "grid.cols"
+                } else {
+                    "grid.rows"
+                };
+                return Err(bad(key, "a grid needs at least one column and one row"));
+            }
+            if !(g.spacing_m.is_finite() && g.spacing_m >= s + quiet) {
+                return Err(bad(
+                    "grid.spacing_m",
+                    format!(
+                        "{} m leaves less than the {quiet:.4} m quiet zone between {s} m tags \
+                         (need ≥ {:.4} m)",
+                        g.spacing_m,
+                        s + quiet
+                    ),
+                ));
+            }
+            let n = g.cols as usize * g.rows as usize;
+            if n > table.len() {
+                return Err(bad(
+                    "grid.cols",
+                    format!(
+                        "{}×{} tags exceed the {} codes of {}",
+                        g.cols,
+                        g.rows,
+                        table.len(),
+                        spec.family.name()
+                    ),
+                ));
+            }
+            let ids: Vec<(String, u32)> = match &g.ids {
+                Some(ids) if ids.len() != n => {
+                    return Err(bad(
+                        "grid.ids",
+                        format!(
+                            "{} ids for a {}×{} grid (need {n})",
+                            ids.len(),
+                            g.cols,
+                            g.rows
+                        ),
+                    ));
+                }
+                Some(ids) => ids
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &i)| (format!("grid.ids[{k}]"), i))
+                    .collect(),
+                None => (0..n as u32)
+                    .map(|k| ("grid.first_id".to_string(), g.first_id.saturating_add(k)))
+                    .collect(),
+            };
+            let first = match g.first_centre_m {
+                Some(c) => Vector2::from(c),
+                None => Vector2::repeat(spec.margin_m + quiet + 0.5 * s),
+            };
+            if !first.iter().all(|v| v.is_finite()) {
+                return Err(bad("grid.first_centre_m", "must be finite"));
+            }
+            for (k, (key, id)) in ids.into_iter().enumerate() {
+                let (c, r) = ((k as u32 % g.cols) as f64, (k as u32 / g.cols) as f64);
+                placed.push((key, id, first + Vector2::new(c, r) * g.spacing_m, 0.0));
+            }
+        }
+        for (k, t) in spec.tags.iter().enumerate() {
+            if !(t.centre_m.iter().all(|v| v.is_finite()) && t.rotation_deg.is_finite()) {
+                return Err(bad(
+                    format!("tags[{k}]"),
+                    "centre_m and rotation_deg must be finite",
+                ));
+            }
+            placed.push((
+                format!("tags[{k}].id"),
+                t.id,
+                Vector2::from(t.centre_m),
+                t.rotation_deg.to_radians(),
+            ));
+        }
+        if placed.is_empty() {
+            return Err(bad("grid", "a board needs tags: give `grid` or `[[tags]]`"));
+        }
+        let mut seen: HashMap<u32, String> = HashMap::new();
+        for (key, id, _, _) in &placed {
+            if *id as usize >= table.len() {
+                return Err(bad(
+                    key.clone(),
+                    format!(
+                        "id {id} is not in {} (ids 0..{})",
+                        spec.family.name(),
+                        table.len() - 1
+                    ),
+                ));
+            }
+            if let Some(prev) = seen.insert(*id, key.clone()) {
+                return Err(bad(
+                    key.clone(),
+                    format!("id {id} appears twice (also at `{prev}`)"),
+                ));
+            }
+        }
+        // Tags (with one quiet zone between them) must not overlap: separating-axis test on the
+        // squares of side s + quiet.
+        let half = 0.5 * (s + quiet) - 1e-12;
+        for i in 0..placed.len() {
+            for j in 0..i {
+                if squares_overlap(placed[i].2, placed[i].3, placed[j].2, placed[j].3, half) {
+                    return Err(bad(
+                        placed[i].0.clone(),
+                        format!(
+                            "tag {} overlaps tag {} (or leaves no {quiet:.4} m quiet zone)",
+                            placed[i].1, placed[j].1
+                        ),
+                    ));
+                }
+            }
+        }
+        // Sheet: given, or the tags' extent including quiet zone plus margin.
+        let outer_half = 0.5 * s + quiet;
+        let extent = |(_, _, c, rot): &(String, u32, Vector2<f64>, f64)| {
+            let r = outer_half * (rot.cos().abs() + rot.sin().abs());
+            (c - Vector2::repeat(r), c + Vector2::repeat(r))
+        };
+        let sheet_size_m = match spec.sheet_size_m {
+            Some([w, h]) => {
+                if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
+                    return Err(bad(
+                        "sheet_size_m",
+                        format!("must be positive, got [{w}, {h}]"),
+                    ));
+                }
+                [w, h]
+            }
+            None => {
+                let max = placed
+                    .iter()
+                    .map(extent)
+                    .fold(Vector2::zeros(), |m, (_, hi)| m.sup(&hi));
+                [max.x + spec.margin_m, max.y + spec.margin_m]
+            }
+        };
+        for p in &placed {
+            let (lo, hi) = extent(p);
+            let tol = 1e-9;
+            if lo.x < -tol
+                || lo.y < -tol
+                || hi.x > sheet_size_m[0] + tol
+                || hi.y > sheet_size_m[1] + tol
+            {
+                return Err(bad(
+                    p.0.clone(),
+                    format!(
+                        "tag {} with its quiet zone reaches outside the {} × {} m sheet",
+                        p.1, sheet_size_m[0], sheet_size_m[1]
+                    ),
+                ));
+            }
+        }
+        let origin = match spec.origin {
+            BoardOrigin::SheetTopLeft => Vector3::zeros(),
+            BoardOrigin::SheetCentre => {
+                Vector3::new(0.5 * sheet_size_m[0], 0.5 * sheet_size_m[1], 0.0)
+            }
+        };
+        let flip = match spec.axes {
+            BoardAxes::XRightYDown => UnitQuaternion::identity(),
+            BoardAxes::XRightYUp => {
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+            }
+        };
+        let board_from_sheet = Isometry3::from_parts(Translation3::identity(), flip)
+            * Isometry3::from_parts(Translation3::from(-origin), UnitQuaternion::identity());
+        let hs = 0.5 * s;
+        let corners_tag = [
+            Point3::new(-hs, hs, 0.0),
+            Point3::new(hs, hs, 0.0),
+            Point3::new(hs, -hs, 0.0),
+            Point3::new(-hs, -hs, 0.0),
+        ];
+        let mut cells = HashMap::new();
+        let tags: Vec<BoardTag> = placed
+            .into_iter()
+            .map(|(key, id, c, rot)| {
+                let sheet_from_tag = Isometry3::from_parts(
+                    Translation3::new(c.x, c.y, 0.0),
+                    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rot),
+                );
+                let board_from_tag = board_from_sheet * sheet_from_tag;
+                cells.entry(id).or_insert_with(|| {
+                    table
+                        .cells(id)
+                        .unwrap_or_else(|| unreachable!("id {id} checked above"))
+                });
+                BoardTag {
+                    id,
+                    board_from_tag,
+                    corners_board_m: corners_tag.map(|p| board_from_tag * p),
+                    centre_sheet_m: c,
+                    rotation_rad: rot,
+                    key,
+                }
+            })
+            .collect();
+        let mut board = Self {
+            name: spec.name.clone(),
+            family: spec.family,
+            tag_size_m: s,
+            sheet_size_m,
+            white_albedo: spec.white_albedo as f32,
+            black_albedo: spec.black_albedo as f32,
+            tags,
+            board_from_sheet,
+            cells,
+            buckets: Vec::new(),
+            bucket_size_m: 2.0 * outer_half,
+            bucket_dims: [0, 0],
+        };
+        board.build_buckets(outer_half);
+        Ok(board)
+    }
+
+    fn build_buckets(&mut self, outer_half: f64) {
+        let size = self.bucket_size_m;
+        // Guard: at most a few hundred thousand buckets even for tiny tags on a big sheet.
+        let nx = ((self.sheet_size_m[0] / size).ceil() as usize).clamp(1, 512);
+        let ny = ((self.sheet_size_m[1] / size).ceil() as usize).clamp(1, 512);
+        let (bx, by) = (
+            self.sheet_size_m[0] / nx as f64,
+            self.sheet_size_m[1] / ny as f64,
+        );
+        self.bucket_dims = [nx, ny];
+        self.buckets = vec![Vec::new(); nx * ny];
+        for (k, t) in self.tags.iter().enumerate() {
+            let r = outer_half * (t.rotation_rad.cos().abs() + t.rotation_rad.sin().abs());
+            let lo = t.centre_sheet_m - Vector2::repeat(r);
+            let hi = t.centre_sheet_m + Vector2::repeat(r);
+            let x0 = ((lo.x / bx).floor().max(0.0) as usize).min(nx - 1);
+            let x1 = ((hi.x / bx).floor().max(0.0) as usize).min(nx - 1);
+            let y0 = ((lo.y / by).floor().max(0.0) as usize).min(ny - 1);
+            let y1 = ((hi.y / by).floor().max(0.0) as usize).min(ny - 1);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    self.buckets[y * nx + x].push(k as u32);
+                }
+            }
+        }
+    }
+
+    /// The tag with this id, if the board has it.
+    pub fn tag(&self, id: u32) -> Option<&BoardTag> {
+        self.tags.iter().find(|t| t.id == id)
+    }
+
+    /// Corners of tag `id` in board frame, AprilTag detection order (see the module doc).
+    pub fn tag_corners_board_m(&self, id: u32) -> Option<[Point3<f64>; 4]> {
+        self.tag(id).map(|t| t.corners_board_m)
+    }
+
+    /// Key path of the spec entry that placed tag index `k` (for scene-level error messages).
+    pub fn tag_key(&self, k: usize) -> Option<&str> {
+        self.tags.get(k).map(|t| t.key.as_str())
+    }
+
+    /// Whether a board-plane point lies on the sheet.
+    pub fn contains(&self, point_board_m: &Point2<f64>) -> bool {
+        let p = self.sheet_point(point_board_m);
+        (0.0..=self.sheet_size_m[0]).contains(&p.x) && (0.0..=self.sheet_size_m[1]).contains(&p.y)
+    }
+
+    fn sheet_point(&self, point_board_m: &Point2<f64>) -> Point2<f64> {
+        let p = self.board_from_sheet.inverse_transform_point(&Point3::new(
+            point_board_m.x,
+            point_board_m.y,
+            0.0,
+        ));
+        Point2::new(p.x, p.y)
+    }
+
+    /// Printed albedo at a board-plane point: black or white print; the quiet zone and the rest of
+    /// the sheet (and anything off the sheet) are white.
+    pub fn albedo_at(&self, point_board_m: &Point2<f64>) -> f32 {
+        let p = self.sheet_point(point_board_m);
+        let [nx, ny] = self.bucket_dims;
+        if !(p.x >= 0.0 && p.y >= 0.0 && p.x < self.sheet_size_m[0] && p.y < self.sheet_size_m[1]) {
+            return self.white_albedo;
+        }
+        let bx = ((p.x / self.sheet_size_m[0] * nx as f64) as usize).min(nx - 1);
+        let by = ((p.y / self.sheet_size_m[1] * ny as f64) as usize).min(ny - 1);
+        let table = self.family.code_table();
+        let cell = self.tag_size_m / table.width_at_border as f64;
+        let total = table.total_width as f64 * cell;
+        for &k in &self.buckets[by * nx + bx] {
+            let t = &self.tags[k as usize];
+            let d = p.coords - t.centre_sheet_m;
+            // Rotate into the tag frame (inverse of the clockwise-seen-from-front rotation).
+            let (sin, cos) = t.rotation_rad.sin_cos();
+            let local = Vector2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y);
+            let u = (local.x + 0.5 * total) / cell;
+            let v = (local.y + 0.5 * total) / cell;
+            if u >= 0.0 && v >= 0.0 && u < table.total_width as f64 && v < table.total_width as f64
+            {
+                let white = self.cells[&t.id].is_white(u as usize, v as usize);
+                return if white {
+                    self.white_albedo
+                } else {
+                    self.black_albedo
+                };
+            }
+        }
+        self.white_albedo
+    }
+
+    /// Unit normal of the printed side in board frame (`-z` for y-down axes, `+z` for y-up).
+    pub fn front_normal_board(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(self.board_from_sheet.transform_vector(&-Vector3::z()))
+    }
+
+    /// Ray (in board frame) against the sheet rectangle; both sides are solid.
+    pub fn intersect(
+        &self,
+        ray: &crate::geometry::Ray,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<BoardHit> {
+        // Guard: a ray parallel to the sheet never hits it.
+        if ray.dir.z == 0.0 {
+            return None;
+        }
+        let t = -ray.origin.z / ray.dir.z;
+        if !(t > t_min && t < t_max) {
+            return None;
+        }
+        let p = ray.at(t);
+        let point = Point2::new(p.x, p.y);
+        if !self.contains(&point) {
+            return None;
+        }
+        let front = ray.dir.dot(&self.front_normal_board()) < 0.0;
+        let albedo = if front {
+            self.albedo_at(&point)
+        } else {
+            self.white_albedo
+        };
+        Some(BoardHit {
+            t,
+            point_board_m: point,
+            albedo,
+            front,
+        })
+    }
+}
+
+/// Separating-axis test for two squares of half-side `half` (centres, rotations in radians).
+fn squares_overlap(ca: Vector2<f64>, ra: f64, cb: Vector2<f64>, rb: f64, half: f64) -> bool {
+    let axes = |r: f64| {
+        [
+            Vector2::new(r.cos(), r.sin()),
+            Vector2::new(-r.sin(), r.cos()),
+        ]
+    };
+    let corners = |c: Vector2<f64>, r: f64| {
+        let [u, v] = axes(r);
+        [
+            c + (u + v) * half,
+            c + (u - v) * half,
+            c - (u + v) * half,
+            c - (u - v) * half,
+        ]
+    };
+    let (pa, pb) = (corners(ca, ra), corners(cb, rb));
+    for axis in axes(ra).into_iter().chain(axes(rb)) {
+        let proj = |pts: &[Vector2<f64>; 4]| {
+            pts.iter()
+                .map(|p| p.dot(&axis))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
+        let ((a0, a1), (b0, b1)) = (proj(&pa), proj(&pb));
+        if a1 <= b0 || b1 <= a0 {
+            return false;
+        }
+    }
+    true
+}
