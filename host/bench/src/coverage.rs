@@ -367,8 +367,8 @@ pub fn score_fit_dir(
     scene: &ellipso_sim::scene::Scene,
     session_dir: &std::path::Path,
     fit_dir: &std::path::Path,
-) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_model::run_error::RunError> {
-    use ellipso_model::run_error::Context;
+) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_run_error::RunError> {
+    use ellipso_run_error::Context;
     let session = ellipso_session::reader::open(session_dir)
         .with_context(|| format!("reading the session {}", session_dir.display()))?;
     let fit = ellipso_fit::export::ply::read_fit_ply(&fit_dir.join("fit.ply"))?;
@@ -382,7 +382,9 @@ pub fn score_fit_dir(
         .as_array()
         .map(|a| a.iter().filter_map(serde_json::Value::as_u64).collect())
         .unwrap_or_default();
-    let fitted: Vec<u64> = ellipso_fit::observe::poses_from_session(&session)
+    let fitted: Vec<u64> = session
+        .poses()
+        .tracked()
         .into_iter()
         .map(|(id, _)| id)
         .filter(|id| !held_out.contains(id))
@@ -396,7 +398,7 @@ pub fn score_session_fit(
     scene: &ellipso_sim::scene::Scene,
     session: &ellipso_session::reader::Session,
     fit: &ellipso_fit::session::SessionFit,
-) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_model::run_error::RunError> {
+) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_run_error::RunError> {
     let vertices: Vec<FitVertex> = fit
         .outcome
         .fits
@@ -429,7 +431,7 @@ pub fn score_fit_vertices(
     session: &ellipso_session::reader::Session,
     fitted: &[u64],
     fit: &[FitVertex],
-) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_model::run_error::RunError> {
+) -> Result<(CoverageScores, Vec<VertexRow>), ellipso_run_error::RunError> {
     let poses: Vec<Isometry3<f64>> = crate::capture::true_poses(session, scene)
         .into_iter()
         .filter(|(id, _)| fitted.contains(id))
