@@ -321,12 +321,18 @@ pub fn simulate_with_truth(
         })
         .collect();
     let (vertices, near_mirror): (Vec<VertexSamples>, Vec<Vec<u64>>) = vertices.into_iter().unzip();
+    let rings = if vertices.len() == truth.mesh.positions().len() {
+        ellipso_fit::neighbours::rings(&truth.mesh)
+    } else {
+        Vec::new()
+    };
     Ok(SimulatedCapture {
         truth,
         set: SampleSet {
             views,
             colour,
             vertices,
+            rings,
         },
         flash_energy_rel,
         near_mirror,

@@ -428,6 +428,19 @@ pub fn pool_eta(
         r
     };
     let neighbours: Vec<Vec<usize>> = (0..k).map(same_colour).collect();
+    // Every member's own estimate (the default prior removed) and its pool.
+    let mut own: Vec<Option<(usize, f64, f64)>> = vec![None; fits.len()];
+    for (j, list) in members.iter().enumerate() {
+        for &v in list {
+            let f = &fits[v];
+            let (eta, se) = if eta_trusted(f) {
+                pool::without_prior(f.params.eta, f.std_error[0], eta_prior)
+            } else {
+                (f.params.eta, f64::INFINITY)
+            };
+            own[v] = Some((roots[j], eta, se));
+        }
+    }
     let mut priors = Vec::new();
     for (j, list) in members.iter().enumerate() {
         let Some(pooled) = pools[roots[j]] else {
@@ -442,6 +455,15 @@ pub fn pool_eta(
             } else {
                 (f.params.eta, f64::INFINITY)
             };
+            // Nor may a vertex borrow where its surroundings disagree with the pool: a patch
+            // of another η too small to be a cluster of its own (a vertex of it may say too
+            // little alone, its patch does not).
+            if local_eta(&set.rings, &own, v, roots[j])
+                .is_some_and(|(e, s)| pooled.prior_for(e, s).is_none())
+            {
+                priors.push((v, None));
+                continue;
+            }
             // A vertex whose own η would agree with another pool of its colour as well cannot
             // say which material it is of: it borrows from neither.
             let ambiguous = neighbours[j]
@@ -461,6 +483,39 @@ pub fn pool_eta(
         a.guides[v].eta_prior = prior;
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
+}
+
+/// Rings of a vertex's surroundings the local η reads ([`local_eta`]): two rings hold about
+/// 19 vertices on a regular mesh — a patch of the 2 % of the surface the smallest cluster may
+/// be, and few enough that a patch's own vertices outnumber its border's.
+pub const LOCAL_RINGS: usize = 2;
+
+/// The inverse-variance weighted η of the members of pool `root` within [`LOCAL_RINGS`] of
+/// `v` (their own estimates `own`: pool, η, s) and its standard error; `None` with fewer
+/// than [`pool::MIN_VERTICES`] of them or without rings.
+fn local_eta(
+    rings: &[Vec<u32>],
+    own: &[Option<(usize, f64, f64)>],
+    v: usize,
+    root: usize,
+) -> Option<(f64, f64)> {
+    if rings.len() != own.len() {
+        return None;
+    }
+    let (mut sw, mut swe, mut n) = (0.0, 0.0, 0usize);
+    for u in crate::neighbours::within(rings, v, LOCAL_RINGS) {
+        if let Some((r, eta, se)) = own[u]
+            && r == root
+            && se.is_finite()
+            && se > 0.0
+        {
+            let w = 1.0 / (se * se);
+            sw += w;
+            swe += w * eta;
+            n += 1;
+        }
+    }
+    (n >= pool::MIN_VERTICES && sw > 0.0).then(|| (swe / sw, sw.sqrt().recip()))
 }
 
 /// The jackknife blocks of `members` (vertex indices into `set`): k-means on their positions

@@ -36,9 +36,6 @@
 //!   nothing; the vertex stays withheld and [`Completion::unassigned`] counts it.
 //! - Deterministic: a function of its inputs, no randomness, serial over vertices.
 
-use std::cmp::Reverse;
-use std::collections::BinaryHeap;
-
 use ellipso_model::geometry::TriangleMesh;
 
 use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
@@ -233,56 +230,6 @@ fn own_vertex(f: &VertexFit) -> bool {
     f.identifiable().vertex && !f.flags.contains(&FitFlag::FromMaterial)
 }
 
-/// Edge-length graph distances from every vertex to the nearest vertex of `sources`
-/// (multi-source Dijkstra); `f64::INFINITY` where none is reachable.
-fn graph_distance(adjacency: &[Vec<(u32, f64)>], sources: &[usize]) -> Vec<f64> {
-    let mut dist = vec![f64::INFINITY; adjacency.len()];
-    let mut heap = BinaryHeap::new();
-    for &s in sources {
-        dist[s] = 0.0;
-        heap.push(Reverse((ordered(0.0), s)));
-    }
-    while let Some(Reverse((d, v))) = heap.pop() {
-        let d = f64::from_bits(d);
-        if d > dist[v] {
-            continue;
-        }
-        for &(w, len) in &adjacency[v] {
-            let w = w as usize;
-            let nd = d + len;
-            if nd < dist[w] {
-                dist[w] = nd;
-                heap.push(Reverse((ordered(nd), w)));
-            }
-        }
-    }
-    dist
-}
-
-/// A non-negative finite f64 as an integer key with the same order.
-fn ordered(d: f64) -> u64 {
-    d.to_bits()
-}
-
-/// The mesh's edges as an adjacency list with lengths, metres.
-fn adjacency(mesh: &TriangleMesh) -> Vec<Vec<(u32, f64)>> {
-    let p = mesh.positions();
-    let mut adj: Vec<Vec<(u32, f64)>> = vec![Vec::new(); p.len()];
-    for t in mesh.triangles() {
-        for k in 0..3 {
-            let (a, b) = (t[k], t[(k + 1) % 3]);
-            let len = (p[a as usize] - p[b as usize]).norm();
-            for (x, y) in [(a, b), (b, a)] {
-                let list = &mut adj[x as usize];
-                if !list.iter().any(|(z, _)| *z == y) {
-                    list.push((y, len));
-                }
-            }
-        }
-    }
-    adj
-}
-
 /// The material of every vertex that needs one (module doc, "Its material"): cluster index,
 /// or `None` (no cluster, or the vertex is not to be completed).
 pub fn assign(
@@ -296,13 +243,13 @@ pub fn assign(
     if k == 0 {
         return vec![None; fits.len()];
     }
-    let adj = adjacency(mesh);
+    let adj = crate::neighbours::adjacency(mesh);
     let distances: Vec<Vec<f64>> = (0..k)
         .map(|j| {
             let sources: Vec<usize> = (0..fits.len())
                 .filter(|&v| a.assignment.get(v) == Some(&Some(j)) && own_vertex(&fits[v]))
                 .collect();
-            graph_distance(&adj, &sources)
+            crate::neighbours::graph_distance(&adj, &sources)
         })
         .collect();
     let scaling = a.partition.scaling;
@@ -351,6 +298,43 @@ pub fn assign(
             Some(nearest)
         })
         .collect()
+}
+
+/// The η a completed vertex `v` of material `j` takes: the material's `[η, σ]`, unless the
+/// material's own identified vertices within two rings of it (`identified`: material, η, σ)
+/// say otherwise — their inverse-variance weighted η disagrees with the material's beyond
+/// [`crate::augment::pool::AGREE_SIGMAS`] combined standard deviations — as they do in a patch
+/// of another η too small to be a cluster of its own: then theirs. Fewer than
+/// [`crate::augment::pool::MIN_VERTICES`] such neighbours say nothing.
+fn local_or(
+    material: [f64; 2],
+    rings: &[Vec<u32>],
+    identified: &[Option<(usize, f64, f64)>],
+    v: usize,
+    j: usize,
+) -> [f64; 2] {
+    let (mut sw, mut swe, mut n) = (0.0, 0.0, 0usize);
+    for u in crate::neighbours::within(rings, v, crate::augment::LOCAL_RINGS) {
+        if let Some((k, eta, se)) = identified.get(u).copied().flatten()
+            && k == j
+            && se > 0.0
+        {
+            let w = 1.0 / (se * se);
+            sw += w;
+            swe += w * eta;
+            n += 1;
+        }
+    }
+    if n < crate::augment::pool::MIN_VERTICES || sw <= 0.0 {
+        return material;
+    }
+    let (local, local_se) = (swe / sw, sw.sqrt().recip());
+    let spread = (local_se * local_se + material[1] * material[1]).sqrt();
+    if (local - material[0]).abs() > crate::augment::pool::AGREE_SIGMAS * spread {
+        [local, local_se]
+    } else {
+        material
+    }
 }
 
 /// The vertex's own ρd per colour channel and its standard error, with every other parameter
@@ -471,6 +455,20 @@ pub fn complete(
         })
         .collect();
     let labels = assign(set, fits, a, mesh, &needs);
+    // What the fit identified of η, and its material, before any completion.
+    let identified: Vec<Option<(usize, f64, f64)>> = fits
+        .iter()
+        .enumerate()
+        .map(|(v, f)| {
+            let j = a.assignment.get(v).copied().flatten()?;
+            (own_vertex(f) && f.identifiable().eta && f.std_error[0].is_finite()).then_some((
+                j,
+                f.params.eta,
+                f.std_error[0],
+            ))
+        })
+        .collect();
+    let rings = crate::neighbours::rings(mesh);
     for v in 0..fits.len() {
         if !needs[v] {
             continue;
@@ -480,7 +478,10 @@ pub fn complete(
             continue;
         };
         let m = &materials[j];
-        let Some([eta, eta_sd]) = m.eta else {
+        let Some([eta, eta_sd]) = m
+            .eta
+            .map(|material| local_or(material, &rings, &identified, v, j))
+        else {
             report.unassigned += 1;
             continue;
         };

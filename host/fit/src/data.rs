@@ -301,6 +301,11 @@ pub struct SampleSet {
     pub colour: bool,
     /// One entry per mesh vertex, in mesh order.
     pub vertices: Vec<VertexSamples>,
+    /// The mesh's edge neighbours of every vertex (`crate::neighbours::rings`), where the set
+    /// holds every vertex of a mesh (empty otherwise, e.g. a shard's part): the shared steps
+    /// judge a vertex's η beside its surroundings' with them.
+    #[serde(skip)]
+    pub rings: Vec<Vec<u32>>,
 }
 
 /// Why a vertex's result should not be trusted as is. A flagged vertex still carries finite

@@ -211,11 +211,13 @@ pub fn split_set(set: &SampleSet, fraction: f64) -> (SampleSet, SampleSet) {
         views: train_views,
         colour: set.colour,
         vertices: Vec::with_capacity(set.vertices.len()),
+        rings: set.rings.clone(),
     };
     let mut held = SampleSet {
         views: held_views,
         colour: set.colour,
         vertices: Vec::with_capacity(set.vertices.len()),
+        rings: set.rings.clone(),
     };
     for v in &set.vertices {
         let mut t = v.clone();

@@ -20,6 +20,8 @@
 //! - [`solve`]: per-vertex Levenberg–Marquardt with variable projection, uncertainty and flags.
 //! - [`augment`]: clusters, per-cluster two-lobe models and virtual specular samples.
 //! - [`shape`]: vertex positions updated towards the refined normals.
+//! - [`neighbours`]: mesh rings and graph distances for the steps that look at a vertex's
+//!   surroundings.
 //! - [`complete`]: every vertex the views see gets a full parameter set — its material's values
 //!   where its own samples leave a parameter open, flagged `FromMaterial`.
 //! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
@@ -44,6 +46,7 @@ pub mod gate;
 pub mod holdout;
 pub mod inputs;
 pub mod model;
+pub mod neighbours;
 pub mod observe;
 pub mod output;
 pub mod pipeline;

@@ -593,11 +593,18 @@ pub fn extract_from(
     report.samples = report.gates.kept;
     report.sample_bytes = report.samples * sample_size;
     report.peak_bytes = report.peak_bytes.max(base_bytes + kept * sample_size);
+    // A set of every vertex carries the mesh's rings (a shard's part does not).
+    let rings = if vertices.len() == mesh.positions().len() {
+        crate::neighbours::rings(mesh)
+    } else {
+        Vec::new()
+    };
     Ok(Extraction {
         samples: SampleSet {
             views,
             colour,
             vertices,
+            rings,
         },
         report,
     })

@@ -564,7 +564,10 @@ pub fn finish_from_joint(
         return Err(SessionFitError::NoSamples(Box::new(extraction.report)));
     }
     let (fitted, poses_held_out) = split_poses(poses, config.holdout_fraction);
-    let set = extraction.samples;
+    let mut set = extraction.samples;
+    if set.vertices.len() == mesh.positions().len() {
+        set.rings = super::neighbours::rings(mesh);
+    }
     let mut outcome = fit_shared_steps(&set, fits, &config.fit, progress);
     let completion = complete_fits(&set, &mut outcome, mesh, None, config);
     if let Some(c) = &completion {

@@ -141,6 +141,7 @@ fn synthesize(
         views,
         colour: true,
         vertices,
+        rings: Vec::new(),
     }
 }
 
@@ -461,6 +462,7 @@ fn degenerate_inputs() {
         views: Vec::new(),
         colour: true,
         vertices: Vec::new(),
+        rings: Vec::new(),
     };
     let a = augment(&empty, &[], &config);
     assert!(a.clusters.is_empty() && a.assignment.is_empty());

@@ -215,11 +215,13 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
         views: ordered[0].set.views.clone(),
         colour: ordered[0].set.colour,
         vertices: Vec::with_capacity(vertices),
+        rings: Vec::new(),
     };
     let mut held = ordered[0].held_out.as_ref().map(|h| SampleSet {
         views: h.views.clone(),
         colour: h.colour,
         vertices: Vec::with_capacity(vertices),
+        rings: Vec::new(),
     });
     let mut fits = Vec::with_capacity(vertices);
     let mut samples: Vec<_> = ordered

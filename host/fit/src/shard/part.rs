@@ -319,6 +319,7 @@ pub(crate) mod tests {
                 }],
                 colour: true,
                 vertices,
+                rings: Vec::new(),
             },
             report: ObserveReport::default(),
             fits,

@@ -273,6 +273,7 @@ fn small_set(colour: bool) -> SampleSet {
         views,
         colour,
         vertices,
+        rings: Vec::new(),
     }
 }
 
