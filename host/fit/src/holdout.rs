@@ -280,6 +280,7 @@ mod tests {
             ],
             views,
             colour: true,
+            rings: Vec::new(),
         };
         let fit = |vertex: u32, params| VertexFit {
             vertex,
