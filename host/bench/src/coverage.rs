@@ -525,17 +525,22 @@ mod tests {
         let points: Vec<([f64; 3], [f64; 3])> = [
             ([0.0, 0.0, 0.05], [0.0, 0.0, 1.0]),
             ([0.0, 0.0, -0.05], [0.0, 0.0, -1.0]),
-            // 85° from the view: beyond an 80° cut-off, inside a 89° one.
+            // 79.5° from the pole is ≈ 85.2° from the ray to the camera 0.5 m up (perspective):
+            // beyond an 80° cut-off, inside an 89° one (asserted below).
             (
                 [
-                    0.05 * 85f64.to_radians().sin(),
+                    0.05 * 79.5f64.to_radians().sin(),
                     0.0,
-                    0.05 * 85f64.to_radians().cos(),
+                    0.05 * 79.5f64.to_radians().cos(),
                 ],
-                [85f64.to_radians().sin(), 0.0, 85f64.to_radians().cos()],
+                [79.5f64.to_radians().sin(), 0.0, 79.5f64.to_radians().cos()],
             ),
         ]
         .to_vec();
+        let (p, n) = (Vector3::from(points[2].0), Vector3::from(points[2].1));
+        let to_camera = Vector3::new(0.0, 0.0, 0.5) - p;
+        let view_deg = n.angle(&to_camera).to_degrees();
+        assert!((84.0..86.0).contains(&view_deg), "{view_deg}");
         let poses = [looking_down()];
         let v = visible_frames(&mesh, &points, &camera, &flash, &poses, 80.0);
         assert_eq!(v, vec![1, 0, 0]);
