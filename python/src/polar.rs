@@ -1,0 +1,282 @@
+//! `ellipso.polar(mosaic, …)`: a raw mosaic (numpy `uint8`/`uint16`, 2-D, C-contiguous) to
+//! Stokes planes through `ellipso_polar::process`, the code `ellipso polar` runs.
+//!
+//! Contract:
+//! - The same defaults and checks as `ellipso polar`: bit depth 8 for `uint8`, 12 for `uint16`
+//!   unless given; the layout detected from the pixels when not given ([`ellipso_polar::layout`],
+//!   refused when unclear); every value above the bit depth refused with the frame's message.
+//! - Bad input raises, never crashes: not an array or a dtype other than `uint8`/`uint16` →
+//!   `TypeError`; not 2-D, not C-contiguous, a size that is not whole mosaic tiles, values
+//!   above the bit depth, bad levels → `ValueError`.
+//! - Memory: the samples are read from the array's buffer (one copy into the frame the crate
+//!   owns, as any caller of `RawFrame::new` makes); every output plane is the vector the crate
+//!   filled, handed to numpy without a copy. The GIL is released while the frame is copied,
+//!   checked and processed.
+
+use ellipso_model::mosaic::SensorLayout;
+use ellipso_polar::layout::{Detection, detect};
+use ellipso_polar::{DemosaicMethod, PolarConfig, PolarImage, RawFrame, process};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// The layout names of `ellipso polar --layout`.
+pub fn layout_of(name: &str) -> PyResult<SensorLayout> {
+    match name {
+        "mono" => Ok(SensorLayout::MonoPolar),
+        "colour" | "color" => Ok(SensorLayout::ColourPolar),
+        other => Err(PyValueError::new_err(format!(
+            "layout {other:?}: expected 'mono' (IMX250MZR) or 'colour' (IMX250MYR)"
+        ))),
+    }
+}
+
+/// The name `layout_of` reads.
+pub fn layout_name(layout: SensorLayout) -> &'static str {
+    match layout {
+        SensorLayout::MonoPolar => "mono",
+        SensorLayout::ColourPolar => "colour",
+    }
+}
+
+fn demosaic_of(name: &str) -> PyResult<DemosaicMethod> {
+    match name {
+        "superpixel" => Ok(DemosaicMethod::Superpixel),
+        "bilinear" => Ok(DemosaicMethod::Bilinear),
+        other => Err(PyValueError::new_err(format!(
+            "demosaic {other:?}: expected 'superpixel' or 'bilinear'"
+        ))),
+    }
+}
+
+/// A mosaic array's samples borrowed from numpy, with its container depth.
+pub enum Samples<'py> {
+    /// `uint8`.
+    U8(PyReadonlyArray2<'py, u8>),
+    /// `uint16`.
+    U16(PyReadonlyArray2<'py, u16>),
+}
+
+impl Samples<'_> {
+    /// Bits of the container (8 or 16).
+    pub fn container_bits(&self) -> u8 {
+        match self {
+            Samples::U8(_) => 8,
+            Samples::U16(_) => 16,
+        }
+    }
+}
+
+/// Checks `mosaic` is a 2-D C-contiguous `uint8`/`uint16` array (module contract).
+pub fn samples<'py>(mosaic: &Bound<'py, PyAny>) -> PyResult<(Samples<'py>, usize, usize)> {
+    let array = mosaic.cast::<PyUntypedArray>().map_err(|_| {
+        let kind = mosaic
+            .get_type()
+            .name()
+            .map_or_else(|_| "?".to_string(), |n| n.to_string());
+        PyTypeError::new_err(format!(
+            "mosaic must be a numpy array of uint8 or uint16 raw samples, got {kind}"
+        ))
+    })?;
+    if array.ndim() != 2 {
+        return Err(PyValueError::new_err(format!(
+            "mosaic must be 2-D (height, width) raw samples, got shape {:?}",
+            array.shape()
+        )));
+    }
+    let (h, w) = (array.shape()[0], array.shape()[1]);
+    let dtype = array.dtype().to_string();
+    let samples = if let Ok(a) = mosaic.extract::<PyReadonlyArray2<'py, u16>>() {
+        Samples::U16(a)
+    } else if let Ok(a) = mosaic.extract::<PyReadonlyArray2<'py, u8>>() {
+        Samples::U8(a)
+    } else {
+        return Err(PyTypeError::new_err(format!(
+            "mosaic has dtype {dtype}: expected uint8 or uint16 (raw DN exactly as the camera \
+             delivered them, native byte order)"
+        )));
+    };
+    if !array.is_c_contiguous() {
+        return Err(PyValueError::new_err(format!(
+            "mosaic ({h}×{w} {dtype}) is not C-contiguous (a slice, a transpose or a flipped \
+             view of an image?): the mosaic's 2×2 pattern would be read wrongly; pass \
+             numpy.ascontiguousarray(mosaic) if that is what you mean"
+        )));
+    }
+    Ok((samples, w, h))
+}
+
+/// The samples as the frame's `u16` vector (the GIL released by the caller).
+fn to_vec(samples: &Samples<'_>) -> Vec<u16> {
+    match samples {
+        // contiguity was checked in `samples`
+        Samples::U16(a) => a.as_slice().map(<[u16]>::to_vec).unwrap_or_default(),
+        Samples::U8(a) => a
+            .as_slice()
+            .map(|s| s.iter().map(|&v| u16::from(v)).collect())
+            .unwrap_or_default(),
+    }
+}
+
+/// The layout given, or detected from the pixels as `ellipso polar` does without `--layout`.
+fn settle_layout(given: Option<SensorLayout>, w: usize, h: usize, data: &[u16]) -> Result<SensorLayout, String> {
+    if let Some(layout) = given {
+        return Ok(layout);
+    }
+    let e = detect(w, h, data);
+    let numbers = format!(
+        "colour contrast {:.3}, green-green {:.3} over {} tiles",
+        e.rg, e.gg, e.tiles
+    );
+    match e.detection {
+        Detection::Mono => Ok(SensorLayout::MonoPolar),
+        Detection::Colour => Ok(SensorLayout::ColourPolar),
+        Detection::Unsure => Err(format!(
+            "cannot tell a mono (IMX250MZR) from a colour (IMX250MYR) mosaic ({numbers}); pass \
+             layout='mono' or layout='colour'"
+        )),
+    }
+}
+
+/// The processing settings of one call (the flags of `ellipso polar`).
+pub struct Request {
+    /// `None`: detected.
+    pub layout: Option<SensorLayout>,
+    /// `None`: the container's default.
+    pub bit_depth: Option<u8>,
+    /// Everything else.
+    pub config: PolarConfig,
+}
+
+/// Copies, validates and processes (no GIL needed).
+pub fn run(samples: &Samples<'_>, w: usize, h: usize, request: &Request) -> Result<(PolarImage, u8), String> {
+    let data = to_vec(samples);
+    let layout = settle_layout(request.layout, w, h, &data)?;
+    let bit_depth = request.bit_depth.unwrap_or(match samples.container_bits() {
+        8 => 8,
+        // the IMX250's ADC depth (Mono12/Polarized12), as `ellipso polar` assumes
+        _ => 12,
+    });
+    let too_big = |n: usize| format!("mosaic side {n} exceeds 4294967295");
+    let frame = RawFrame::new(
+        u32::try_from(w).map_err(|_| too_big(w))?,
+        u32::try_from(h).map_err(|_| too_big(h))?,
+        bit_depth,
+        layout,
+        data,
+    )
+    .map_err(|e| format!("mosaic: {e}"))?;
+    let image = process(&frame, &request.config).map_err(|e| format!("mosaic: {e}"))?;
+    Ok((image, bit_depth))
+}
+
+/// `ellipso.polar`'s native body: the bands as dicts of arrays (module contract).
+#[pyfunction]
+#[pyo3(signature = (mosaic, *, layout=None, bit_depth=None, demosaic="superpixel", dark_level=0.0, saturation=None, dark_intensity=ellipso_polar::DEFAULT_DARK_INTENSITY, max_residual=None))]
+#[expect(clippy::too_many_arguments, reason = "the flags of `ellipso polar`, one keyword each")]
+pub fn polar<'py>(
+    py: Python<'py>,
+    mosaic: &Bound<'py, PyAny>,
+    layout: Option<&str>,
+    bit_depth: Option<u8>,
+    demosaic: &str,
+    dark_level: f32,
+    saturation: Option<u16>,
+    dark_intensity: f32,
+    max_residual: Option<f32>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (samples, w, h) = samples(mosaic)?;
+    if let Some(b) = bit_depth
+        && !(1..=16).contains(&b)
+    {
+        return Err(PyValueError::new_err(format!(
+            "bit_depth {b} is not supported (1..=16 bits per sample)"
+        )));
+    }
+    let request = Request {
+        layout: layout.map(layout_of).transpose()?,
+        bit_depth,
+        config: PolarConfig {
+            demosaic: demosaic_of(demosaic)?,
+            dark_level_dn: dark_level,
+            saturation_dn: saturation,
+            dark_intensity,
+            max_residual,
+            calibration: None,
+        },
+    };
+    let (image, bit_depth) = py
+        .detach(|| run(&samples, w, h, &request))
+        .map_err(PyValueError::new_err)?;
+    image_dict(py, image, bit_depth)
+}
+
+/// The processed image as `{layout, demosaic, bit_depth, levels…, bands: [{colour, s0, …}]}`,
+/// every plane a numpy array that owns the crate's vector.
+fn image_dict(py: Python<'_>, image: PolarImage, bit_depth: u8) -> PyResult<Bound<'_, PyDict>> {
+    let out = PyDict::new(py);
+    out.set_item("layout", layout_name(image.layout))?;
+    out.set_item("demosaic", image.method.name())?;
+    out.set_item("bit_depth", bit_depth)?;
+    out.set_item("dark_level_dn", image.levels.dark_dn())?;
+    out.set_item("saturation_dn", image.levels.saturation_dn())?;
+    let bands = PyList::empty(py);
+    for band in image.bands {
+        let (w, h) = (band.width(), band.height());
+        let d = PyDict::new(py);
+        d.set_item(
+            "colour",
+            band.colour.map(|c| c.letter().to_string()),
+        )?;
+        let plane = |v: Vec<f32>| PyArray1::from_vec(py, v).reshape([h, w]);
+        d.set_item("s0", plane(band.s0.into_vec())?)?;
+        d.set_item("s1", plane(band.s1.into_vec())?)?;
+        d.set_item("s2", plane(band.s2.into_vec())?)?;
+        d.set_item("dolp", plane(band.dolp.into_vec())?)?;
+        d.set_item("aolp", plane(band.aolp_rad.into_vec())?)?;
+        d.set_item("residual", plane(band.residual.into_vec())?)?;
+        d.set_item("i_d", plane(band.i_d.into_vec())?)?;
+        let mask: Vec<u8> = band.mask.into_vec().into_iter().map(|m| m.0).collect();
+        d.set_item("mask", PyArray1::from_vec(py, mask).reshape([h, w])?)?;
+        bands.append(d)?;
+    }
+    out.set_item("bands", bands)?;
+    Ok(out)
+}
+
+/// Seconds per call of the same work from Rust (frame checked, processed; the input vector
+/// already owned, as a Rust caller's is), `repeats` times, for the bench report; the GIL is
+/// released throughout.
+#[pyfunction]
+#[pyo3(signature = (mosaic, repeats, *, layout, demosaic="superpixel"))]
+pub fn _bench_polar_rust(
+    py: Python<'_>,
+    mosaic: &Bound<'_, PyAny>,
+    repeats: usize,
+    layout: &str,
+    demosaic: &str,
+) -> PyResult<Vec<f64>> {
+    let (samples, w, h) = samples(mosaic)?;
+    let layout = layout_of(layout)?;
+    let config = PolarConfig {
+        demosaic: demosaic_of(demosaic)?,
+        ..PolarConfig::default()
+    };
+    let bits = if samples.container_bits() == 8 { 8 } else { 12 };
+    let data = to_vec(&samples);
+    py.detach(|| {
+        let mut times = Vec::with_capacity(repeats);
+        for _ in 0..repeats {
+            let owned = data.clone();
+            let t = std::time::Instant::now();
+            let frame = RawFrame::new(w as u32, h as u32, bits, layout, owned)
+                .map_err(|e| e.to_string())?;
+            let image = process(&frame, &config).map_err(|e| e.to_string())?;
+            times.push(t.elapsed().as_secs_f64());
+            drop(std::hint::black_box(image));
+        }
+        Ok(times)
+    })
+    .map_err(PyValueError::new_err)
+}
