@@ -11,7 +11,7 @@ use ellipso_model::optics::coaxial::{CoaxialGeometry, terms};
 use ellipso_model::optics::inspect::{MuellerInputs, fresnel as fresnel_one, mueller as mueller_one};
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_model::optics::Vec3;
-use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -23,7 +23,7 @@ fn flat<'a>(name: &str, a: &'a PyReadonlyArray1<'_, f64>) -> PyResult<&'a [f64]>
 }
 
 /// An `(n, 3)` array's rows.
-fn rows3<'a>(name: &str, a: &'a PyReadonlyArray2<'_, f64>, n: usize) -> PyResult<&'a [[f64; 3]]> {
+fn rows3(name: &str, a: &PyReadonlyArray2<'_, f64>, n: usize) -> PyResult<Vec<[f64; 3]>> {
     let shape = a.shape();
     if shape != [n, 3] {
         return Err(PyValueError::new_err(format!(
@@ -33,9 +33,7 @@ fn rows3<'a>(name: &str, a: &'a PyReadonlyArray2<'_, f64>, n: usize) -> PyResult
     let s = a
         .as_slice()
         .map_err(|_| PyValueError::new_err(format!("{name} is not C-contiguous")))?;
-    let (rows, rest) = s.as_chunks::<3>();
-    debug_assert!(rest.is_empty());
-    Ok(rows)
+    Ok(s.chunks_exact(3).map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// The material parameters of every element.
@@ -44,8 +42,8 @@ struct Params<'a> {
     sigma_s: &'a [f64],
     sigma_ss: &'a [f64],
     rho_s: &'a [f64],
-    rho_ss: &'a [[f64; 3]],
-    rho_d: &'a [[f64; 3]],
+    rho_ss: Vec<[f64; 3]>,
+    rho_d: Vec<[f64; 3]>,
 }
 
 impl Params<'_> {
@@ -103,7 +101,7 @@ pub fn mueller<'py>(
     light_up: PyReadonlyArray2<'py, f64>,
     camera_up: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let n = eta.len()?;
+    let n = eta.len();
     let p = Params {
         eta: flat("eta", &eta)?,
         sigma_s: flat("sigma_s", &sigma_s)?,
@@ -166,7 +164,7 @@ pub fn coaxial<'py>(
     rho_d: PyReadonlyArray2<'py, f64>,
     normal_camera: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let n = eta.len()?;
+    let n = eta.len();
     let p = Params {
         eta: flat("eta", &eta)?,
         sigma_s: flat("sigma_s", &sigma_s)?,

@@ -66,6 +66,23 @@ impl Samples<'_> {
             Samples::U16(_) => 16,
         }
     }
+
+    /// The samples in place (contiguity was checked by [`samples`]).
+    pub fn slice(&self) -> Slice<'_> {
+        match self {
+            Samples::U8(a) => Slice::U8(a.as_slice().unwrap_or_default()),
+            Samples::U16(a) => Slice::U16(a.as_slice().unwrap_or_default()),
+        }
+    }
+}
+
+/// A mosaic's samples in numpy's buffer, shareable with the work done without the GIL.
+#[derive(Clone, Copy)]
+pub enum Slice<'a> {
+    /// `uint8`.
+    U8(&'a [u8]),
+    /// `uint16`.
+    U16(&'a [u16]),
 }
 
 /// Checks `mosaic` is a 2-D C-contiguous `uint8`/`uint16` array (module contract).
@@ -108,14 +125,10 @@ pub fn samples<'py>(mosaic: &Bound<'py, PyAny>) -> PyResult<(Samples<'py>, usize
 }
 
 /// The samples as the frame's `u16` vector (the GIL released by the caller).
-fn to_vec(samples: &Samples<'_>) -> Vec<u16> {
+fn to_vec(samples: Slice<'_>) -> Vec<u16> {
     match samples {
-        // contiguity was checked in `samples`
-        Samples::U16(a) => a.as_slice().map(<[u16]>::to_vec).unwrap_or_default(),
-        Samples::U8(a) => a
-            .as_slice()
-            .map(|s| s.iter().map(|&v| u16::from(v)).collect())
-            .unwrap_or_default(),
+        Slice::U16(s) => s.to_vec(),
+        Slice::U8(s) => s.iter().map(|&v| u16::from(v)).collect(),
     }
 }
 
@@ -150,11 +163,11 @@ pub struct Request {
 }
 
 /// Copies, validates and processes (no GIL needed).
-pub fn run(samples: &Samples<'_>, w: usize, h: usize, request: &Request) -> Result<(PolarImage, u8), String> {
+pub fn run(samples: Slice<'_>, w: usize, h: usize, request: &Request) -> Result<(PolarImage, u8), String> {
     let data = to_vec(samples);
     let layout = settle_layout(request.layout, w, h, &data)?;
-    let bit_depth = request.bit_depth.unwrap_or(match samples.container_bits() {
-        8 => 8,
+    let bit_depth = request.bit_depth.unwrap_or(match samples {
+        Slice::U8(_) => 8,
         // the IMX250's ADC depth (Mono12/Polarized12), as `ellipso polar` assumes
         _ => 12,
     });
@@ -206,8 +219,9 @@ pub fn polar<'py>(
             calibration: None,
         },
     };
+    let slice = samples.slice();
     let (image, bit_depth) = py
-        .detach(|| run(&samples, w, h, &request))
+        .detach(|| run(slice, w, h, &request))
         .map_err(PyValueError::new_err)?;
     image_dict(py, image, bit_depth)
 }
@@ -245,9 +259,10 @@ fn image_dict(py: Python<'_>, image: PolarImage, bit_depth: u8) -> PyResult<Boun
     Ok(out)
 }
 
-/// Seconds per call of the same work from Rust (frame checked, processed; the input vector
-/// already owned, as a Rust caller's is), `repeats` times, for the bench report; the GIL is
-/// released throughout.
+/// Seconds per call of the same work from Rust, `repeats` times each way, for the bench
+/// report (the GIL released throughout): `from_slice` starts, as `ellipso.polar` does, from a
+/// buffer the caller does not own (the samples copied into the frame, checked, processed);
+/// `owned` from a vector the caller already owns (checked, processed; no copy).
 #[pyfunction]
 #[pyo3(signature = (mosaic, repeats, *, layout, demosaic="superpixel"))]
 pub fn _bench_polar_rust(
@@ -256,7 +271,7 @@ pub fn _bench_polar_rust(
     repeats: usize,
     layout: &str,
     demosaic: &str,
-) -> PyResult<Vec<f64>> {
+) -> PyResult<(Vec<f64>, Vec<f64>)> {
     let (samples, w, h) = samples(mosaic)?;
     let layout = layout_of(layout)?;
     let config = PolarConfig {
@@ -264,19 +279,26 @@ pub fn _bench_polar_rust(
         ..PolarConfig::default()
     };
     let bits = if samples.container_bits() == 8 { 8 } else { 12 };
-    let data = to_vec(&samples);
+    let slice = samples.slice();
     py.detach(|| {
-        let mut times = Vec::with_capacity(repeats);
+        let once = |data: Vec<u16>| -> Result<PolarImage, String> {
+            let frame =
+                RawFrame::new(w as u32, h as u32, bits, layout, data).map_err(|e| e.to_string())?;
+            process(&frame, &config).map_err(|e| e.to_string())
+        };
+        let (mut from_slice, mut owned) = (Vec::new(), Vec::new());
         for _ in 0..repeats {
-            let owned = data.clone();
             let t = std::time::Instant::now();
-            let frame = RawFrame::new(w as u32, h as u32, bits, layout, owned)
-                .map_err(|e| e.to_string())?;
-            let image = process(&frame, &config).map_err(|e| e.to_string())?;
-            times.push(t.elapsed().as_secs_f64());
+            let image = once(to_vec(slice))?;
+            from_slice.push(t.elapsed().as_secs_f64());
+            drop(std::hint::black_box(image));
+            let data = to_vec(slice);
+            let t = std::time::Instant::now();
+            let image = once(data)?;
+            owned.push(t.elapsed().as_secs_f64());
             drop(std::hint::black_box(image));
         }
-        Ok(times)
+        Ok((from_slice, owned))
     })
     .map_err(PyValueError::new_err)
 }

@@ -19,7 +19,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, unbounded};
 use std::time::Duration;
 
 use ellipso_fit::session::SessionFitConfig;
@@ -102,7 +102,7 @@ fn drive<T: Send + 'static>(
     work: impl FnOnce(&mut Forward) -> Result<T, RunError> + Send + 'static,
 ) -> PyResult<T> {
     quiet_cancel_hook();
-    let (tx, rx): (Sender<Message>, Receiver<Message>) = channel();
+    let (tx, rx): (Sender<Message>, Receiver<Message>) = unbounded();
     let cancel = Arc::new(AtomicBool::new(false));
     let mut forward = Forward {
         tx,
