@@ -234,6 +234,17 @@ class Fit(Mapping[str, np.ndarray]):
         """``True`` for every vertex with ``flag`` (any of the bits, for a combination)."""
         return (self["flags"] & int(flag)) != 0
 
+    def identifiable(self) -> Tuple[np.ndarray, np.ndarray]:
+        """The identifiability rule over the flags (``ellipso_fit::data::Identifiable``):
+        ``(vertex, eta)`` booleans, ``True`` where the vertex's parameters (its η) are
+        measurements. ``FromMaterial`` lifts every withholding but ``Unobserved``'s."""
+        flags = self["flags"].astype(np.int64)
+        from_material = (flags & int(FitFlag.FromMaterial)) != 0
+        seen = (flags & int(FitFlag.Unobserved)) == 0
+        vertex = np.where(from_material, seen, (flags & int(WITHHOLDS_VERTEX)) == 0)
+        eta = np.where(from_material, seen, (flags & int(WITHHOLDS_ETA)) == 0)
+        return vertex, eta
+
     @property
     def eta_reported(self) -> np.ndarray:
         """``True`` where η is a measurement (its standard error is finite)."""

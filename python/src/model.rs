@@ -163,7 +163,7 @@ pub fn coaxial<'py>(
     rho_ss: PyReadonlyArray2<'py, f64>,
     rho_d: PyReadonlyArray2<'py, f64>,
     normal_camera: PyReadonlyArray2<'py, f64>,
-) -> PyResult<Bound<'py, PyArray1<f64>>> {
+) -> PyResult<Bound<'py, numpy::PyArray4<f64>>> {
     let n = eta.len();
     let p = Params {
         eta: flat("eta", &eta)?,

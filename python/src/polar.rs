@@ -298,7 +298,7 @@ pub fn _bench_polar_rust(
             owned.push(t.elapsed().as_secs_f64());
             drop(std::hint::black_box(image));
         }
-        Ok((from_slice, owned))
+        Ok::<_, String>((from_slice, owned))
     })
     .map_err(PyValueError::new_err)
 }

@@ -1,8 +1,9 @@
-"""Shared fixtures: the `ellipso` binary and a tiny simulated session with its fit.
+"""Shared fixtures: the `ellipso` binary and the demo's session and fit.
 
-The session and the fit are made by the command line the package mirrors: `ellipso capture`
-on the shipped sphere scene (16 photos at 640×480, enough for every frame to be posed) and
-`ellipso fit` on it (300 vertices, one outer iteration). The binary is `$ELLIPSO_BIN`, else
+The session and the fit are the quick demo's, made by the command line the package mirrors:
+`ellipso demo --quick` (the glass sphere scene at quarter resolution, 612×512, 24 photos:
+capture, tracking, carving, fit; about a minute with a debug binary). The binary is
+`$ELLIPSO_BIN`, else
 `target/release/ellipso` or `target/debug/ellipso` of this checkout, else `ellipso` on PATH;
 tests that need it are skipped without one unless `$ELLIPSO_BIN` is set (CI sets it, so there
 they run or fail).
@@ -48,17 +49,17 @@ def run_cli(binary, *args):
 
 
 @pytest.fixture(scope="session")
-def session_dir(ellipso_bin, tmp_path_factory):
-    d = tmp_path_factory.mktemp("capture") / "session"
-    run_cli(
-        ellipso_bin, "capture", "--sim", ROOT / "sim/scenes/sphere.toml", "--out", d,
-        "--photos", 16, "--resolution", "640x480",
-    )
+def demo_dir(ellipso_bin, tmp_path_factory):
+    d = tmp_path_factory.mktemp("demo") / "demo"
+    run_cli(ellipso_bin, "demo", "--quick", "--out", d, "--scene", ROOT / "sim/scenes/sphere.toml")
     return d
 
 
 @pytest.fixture(scope="session")
-def fit_dir(ellipso_bin, session_dir, tmp_path_factory):
-    d = tmp_path_factory.mktemp("fit") / "fit"
-    run_cli(ellipso_bin, "fit", session_dir, "--out", d, "--vertices", 300, "--outer", 1)
-    return d
+def session_dir(demo_dir):
+    return demo_dir / "session"
+
+
+@pytest.fixture(scope="session")
+def fit_dir(demo_dir):
+    return demo_dir / "fit"

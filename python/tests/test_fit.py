@@ -36,14 +36,15 @@ def test_flags_are_the_fits_bits(fit_dir):
     assert [f.name for f in FitFlag] == ellipso._native.fit_flag_names()
     fit = ellipso.read_fit(fit_dir)
     for v in range(fit.vertex_count):
-        flags = fit.flags_of(v)
-        assert int(flags) == int(fit.flags[v])
-        # the identifiability rule as the file writes it: η withheld ⇔ std_eta = +inf
-        withheld = bool(flags & ellipso.WITHHOLDS_ETA) and not (
-            flags & FitFlag.FromMaterial and not flags & FitFlag.Unobserved
-        )
-        assert withheld == (not np.isfinite(fit["std_eta"][v])), (v, flags)
+        assert int(fit.flags_of(v)) == int(fit.flags[v])
+    # the identifiability rule as the file applies it: what it withholds has σ = +inf
+    vertex, eta = fit.identifiable()
+    assert np.isinf(fit["std_eta"][~eta]).all()
+    for p in ellipso.PARAMS:
+        assert np.isinf(fit["std_" + p][~vertex]).all(), p
+    assert (~vertex).any() and vertex.any()
     assert fit.has(FitFlag.Unobserved).any()  # the underside of the sphere
+    assert not vertex[fit.has(FitFlag.Unobserved)].any()
 
 
 def test_read_fit_refuses_what_is_not_a_fit(tmp_path):
@@ -57,12 +58,14 @@ def test_read_fit_refuses_what_is_not_a_fit(tmp_path):
 def test_fit_from_python_with_progress(session_dir, fit_dir, tmp_path):
     seen = []
     out = tmp_path / "fit"
-    fit = ellipso.fit(session_dir, out, mesh=fit_dir / "mesh.ply", outer=1, no_hull=True,
-                      progress=lambda kind, text: seen.append((kind, text)))
+    fit = ellipso.fit(ellipso.Session(session_dir), out, mesh=fit_dir / "mesh.ply", outer=1,
+                      no_hull=True, progress=lambda kind, text: seen.append((kind, text)))
     assert ("begin", "fit") in seen and any(k == "stage" for k, _ in seen)
     assert any(k == "end" for k, _ in seen)
     assert (out / "fit.ply").exists() and fit.material.shape == (fit.vertex_count,)
     assert fit.run_files
+    # the same settings from the command line give the same file
+    assert fit.vertex_count == ellipso.read_fit(fit_dir).vertex_count
 
 
 def _leftovers(parent, keep):
