@@ -57,21 +57,24 @@ pub fn session_error(e: ellipso_session::SessionError) -> PyErr {
     }
 }
 
+/// Whether a missing file is what failed (the error, or any error it wraps).
 fn is_not_found(e: &(dyn std::error::Error + 'static)) -> bool {
-    let mut cur = Some(e);
-    while let Some(c) = cur {
-        if let Some(io) = c.downcast_ref::<std::io::Error>()
-            && io.kind() == std::io::ErrorKind::NotFound
-        {
-            return true;
-        }
-        if let Some(ellipso_session::SessionError::Io { error, .. }) =
-            c.downcast_ref::<ellipso_session::SessionError>()
-            && error.kind() == std::io::ErrorKind::NotFound
-        {
-            return true;
-        }
-        cur = c.source();
+    // a `RunError` passed on by `?` is transparent: its `source` skips the error it wraps
+    if let Some(ellipso_run_error::RunErrorKind::Other(inner)) =
+        e.downcast_ref::<ellipso_run_error::RunErrorKind>()
+    {
+        return is_not_found(inner.as_ref());
     }
-    false
+    if let Some(io) = e.downcast_ref::<std::io::Error>()
+        && io.kind() == std::io::ErrorKind::NotFound
+    {
+        return true;
+    }
+    if let Some(ellipso_session::SessionError::Io { error, .. }) =
+        e.downcast_ref::<ellipso_session::SessionError>()
+        && error.kind() == std::io::ErrorKind::NotFound
+    {
+        return true;
+    }
+    e.source().is_some_and(is_not_found)
 }

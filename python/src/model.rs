@@ -7,10 +7,12 @@
 //! command line does for one, and the first bad element raises `ValueError` naming its index
 //! and the command's message. The GIL is released over the loop.
 
-use ellipso_model::optics::coaxial::{CoaxialGeometry, terms};
-use ellipso_model::optics::inspect::{MuellerInputs, fresnel as fresnel_one, mueller as mueller_one};
-use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_model::optics::Vec3;
+use ellipso_model::optics::coaxial::{CoaxialGeometry, terms};
+use ellipso_model::optics::inspect::{
+    MuellerInputs, fresnel as fresnel_one, mueller as mueller_one,
+};
+use ellipso_model::optics::pbrdf::PbrdfParams;
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -86,7 +88,10 @@ fn push4(out: &mut Vec<f64>, m: &[[f64; 4]; 4]) {
 
 /// `ellipso model mueller` for `n` geometries and materials.
 #[pyfunction]
-#[expect(clippy::too_many_arguments, reason = "the model's inputs, one array each")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the model's inputs, one array each"
+)]
 pub fn mueller<'py>(
     py: Python<'py>,
     eta: PyReadonlyArray1<'py, f64>,
@@ -116,36 +121,51 @@ pub fn mueller<'py>(
     let to_camera = rows3("to_camera", &to_camera, n)?;
     let light_up = rows3("light_up", &light_up, n)?;
     let camera_up = rows3("camera_up", &camera_up, n)?;
-    let (total, diffuse, specular, single, front) = py.detach(|| {
-        let mut total = Vec::with_capacity(n * 48);
-        let mut diffuse = Vec::with_capacity(n * 48);
-        let mut specular = Vec::with_capacity(n * 16);
-        let mut single = Vec::with_capacity(n * 48);
-        let mut front = Vec::with_capacity(n);
-        for i in 0..n {
-            let t = mueller_one(&MuellerInputs {
-                params: p.at(i),
-                normal: normal[i],
-                to_light: to_light[i],
-                to_camera: to_camera[i],
-                light_up: Some(light_up[i]),
-                camera_up: Some(camera_up[i]),
-            })
-            .map_err(|e| (i, e.to_string()))?;
-            t.total.iter().for_each(|m| push4(&mut total, m));
-            t.diffuse.iter().for_each(|m| push4(&mut diffuse, m));
-            push4(&mut specular, &t.specular);
-            t.single_scattering.iter().for_each(|m| push4(&mut single, m));
-            front.push(t.front_facing);
-        }
-        Ok((total, diffuse, specular, single, front))
-    })
-    .map_err(|(i, e): (usize, String)| element_error(i, e))?;
+    let (total, diffuse, specular, single, front) = py
+        .detach(|| {
+            let mut total = Vec::with_capacity(n * 48);
+            let mut diffuse = Vec::with_capacity(n * 48);
+            let mut specular = Vec::with_capacity(n * 16);
+            let mut single = Vec::with_capacity(n * 48);
+            let mut front = Vec::with_capacity(n);
+            for i in 0..n {
+                let t = mueller_one(&MuellerInputs {
+                    params: p.at(i),
+                    normal: normal[i],
+                    to_light: to_light[i],
+                    to_camera: to_camera[i],
+                    light_up: Some(light_up[i]),
+                    camera_up: Some(camera_up[i]),
+                })
+                .map_err(|e| (i, e.to_string()))?;
+                t.total.iter().for_each(|m| push4(&mut total, m));
+                t.diffuse.iter().for_each(|m| push4(&mut diffuse, m));
+                push4(&mut specular, &t.specular);
+                t.single_scattering
+                    .iter()
+                    .for_each(|m| push4(&mut single, m));
+                front.push(t.front_facing);
+            }
+            Ok((total, diffuse, specular, single, front))
+        })
+        .map_err(|(i, e): (usize, String)| element_error(i, e))?;
     let d = PyDict::new(py);
-    d.set_item("total", PyArray1::from_vec(py, total).reshape([n, 3, 4, 4])?)?;
-    d.set_item("diffuse", PyArray1::from_vec(py, diffuse).reshape([n, 3, 4, 4])?)?;
-    d.set_item("specular", PyArray1::from_vec(py, specular).reshape([n, 4, 4])?)?;
-    d.set_item("single_scattering", PyArray1::from_vec(py, single).reshape([n, 3, 4, 4])?)?;
+    d.set_item(
+        "total",
+        PyArray1::from_vec(py, total).reshape([n, 3, 4, 4])?,
+    )?;
+    d.set_item(
+        "diffuse",
+        PyArray1::from_vec(py, diffuse).reshape([n, 3, 4, 4])?,
+    )?;
+    d.set_item(
+        "specular",
+        PyArray1::from_vec(py, specular).reshape([n, 4, 4])?,
+    )?;
+    d.set_item(
+        "single_scattering",
+        PyArray1::from_vec(py, single).reshape([n, 3, 4, 4])?,
+    )?;
     d.set_item("front_facing", PyArray1::from_vec(py, front))?;
     Ok(d)
 }
@@ -153,7 +173,10 @@ pub fn mueller<'py>(
 /// The coaxial 3×3 block per channel (talk form, docs/model.md §5) for `n` normals in the
 /// camera frame (x right, y up, z toward the camera) and materials: `(n, 3, 3, 3)`.
 #[pyfunction]
-#[expect(clippy::too_many_arguments, reason = "the model's inputs, one array each")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the model's inputs, one array each"
+)]
 pub fn coaxial<'py>(
     py: Python<'py>,
     eta: PyReadonlyArray1<'py, f64>,
@@ -183,7 +206,10 @@ pub fn coaxial<'py>(
                 params.validate().map_err(|e| (i, e.to_string()))?;
                 let nc = normals[i];
                 if !nc.iter().all(|v| v.is_finite()) || nc.iter().all(|v| *v == 0.0) {
-                    return Err((i, format!("normal_camera must be a finite non-zero vector, got {nc:?}")));
+                    return Err((
+                        i,
+                        format!("normal_camera must be a finite non-zero vector, got {nc:?}"),
+                    ));
                 }
                 let g = CoaxialGeometry::from_normal_in_camera(Vec3::from_f64(nc));
                 for channel in terms(&g, &params) {
@@ -218,10 +244,9 @@ pub fn fresnel<'py>(
             let mut c: [Vec<f64>; 7] = Default::default();
             for (i, (&e, &t)) in eta.iter().zip(theta).enumerate() {
                 let f = fresnel_one(e, t).map_err(|err| (i, err.to_string()))?;
-                for (col, v) in c
-                    .iter_mut()
-                    .zip([f.rs, f.rp, f.r_plus, f.r_minus, f.r_cross, f.t_plus, f.t_minus])
-                {
+                for (col, v) in c.iter_mut().zip([
+                    f.rs, f.rp, f.r_plus, f.r_minus, f.r_cross, f.t_plus, f.t_minus,
+                ]) {
                     col.push(v);
                 }
             }
@@ -229,7 +254,9 @@ pub fn fresnel<'py>(
         })
         .map_err(|(i, e): (usize, String)| element_error(i, e))?;
     let d = PyDict::new(py);
-    let names = ["rs", "rp", "r_plus", "r_minus", "r_cross", "t_plus", "t_minus"];
+    let names = [
+        "rs", "rp", "r_plus", "r_minus", "r_cross", "t_plus", "t_minus",
+    ];
     for (name, col) in names.into_iter().zip(columns) {
         d.set_item(name, PyArray1::from_vec(py, col))?;
     }

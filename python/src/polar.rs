@@ -27,7 +27,7 @@ pub fn layout_of(name: &str) -> PyResult<SensorLayout> {
         "mono" => Ok(SensorLayout::MonoPolar),
         "colour" | "color" => Ok(SensorLayout::ColourPolar),
         other => Err(PyValueError::new_err(format!(
-            "layout {other:?}: expected 'mono' (IMX250MZR) or 'colour' (IMX250MYR)"
+            "layout '{other}': expected 'mono' (IMX250MZR) or 'colour' (IMX250MYR)"
         ))),
     }
 }
@@ -45,7 +45,7 @@ fn demosaic_of(name: &str) -> PyResult<DemosaicMethod> {
         "superpixel" => Ok(DemosaicMethod::Superpixel),
         "bilinear" => Ok(DemosaicMethod::Bilinear),
         other => Err(PyValueError::new_err(format!(
-            "demosaic {other:?}: expected 'superpixel' or 'bilinear'"
+            "demosaic '{other}': expected 'superpixel' or 'bilinear'"
         ))),
     }
 }
@@ -133,7 +133,12 @@ fn to_vec(samples: Slice<'_>) -> Vec<u16> {
 }
 
 /// The layout given, or detected from the pixels as `ellipso polar` does without `--layout`.
-fn settle_layout(given: Option<SensorLayout>, w: usize, h: usize, data: &[u16]) -> Result<SensorLayout, String> {
+fn settle_layout(
+    given: Option<SensorLayout>,
+    w: usize,
+    h: usize,
+    data: &[u16],
+) -> Result<SensorLayout, String> {
     if let Some(layout) = given {
         return Ok(layout);
     }
@@ -163,7 +168,12 @@ pub struct Request {
 }
 
 /// Copies, validates and processes (no GIL needed).
-pub fn run(samples: Slice<'_>, w: usize, h: usize, request: &Request) -> Result<(PolarImage, u8), String> {
+pub fn run(
+    samples: Slice<'_>,
+    w: usize,
+    h: usize,
+    request: &Request,
+) -> Result<(PolarImage, u8), String> {
     let data = to_vec(samples);
     let layout = settle_layout(request.layout, w, h, &data)?;
     let bit_depth = request.bit_depth.unwrap_or(match samples {
@@ -187,7 +197,10 @@ pub fn run(samples: Slice<'_>, w: usize, h: usize, request: &Request) -> Result<
 /// `ellipso.polar`'s native body: the bands as dicts of arrays (module contract).
 #[pyfunction]
 #[pyo3(signature = (mosaic, *, layout=None, bit_depth=None, demosaic="superpixel", dark_level=0.0, saturation=None, dark_intensity=ellipso_polar::DEFAULT_DARK_INTENSITY, max_residual=None))]
-#[expect(clippy::too_many_arguments, reason = "the flags of `ellipso polar`, one keyword each")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the flags of `ellipso polar`, one keyword each"
+)]
 pub fn polar<'py>(
     py: Python<'py>,
     mosaic: &Bound<'py, PyAny>,
@@ -239,10 +252,7 @@ fn image_dict(py: Python<'_>, image: PolarImage, bit_depth: u8) -> PyResult<Boun
     for band in image.bands {
         let (w, h) = (band.width(), band.height());
         let d = PyDict::new(py);
-        d.set_item(
-            "colour",
-            band.colour.map(|c| c.letter().to_string()),
-        )?;
+        d.set_item("colour", band.colour.map(|c| c.letter().to_string()))?;
         let plane = |v: Vec<f32>| PyArray1::from_vec(py, v).reshape([h, w]);
         d.set_item("s0", plane(band.s0.into_vec())?)?;
         d.set_item("s1", plane(band.s1.into_vec())?)?;

@@ -15,11 +15,11 @@
 //!   whole lines, as with the CLI.
 //! - Errors raise with the CLI's messages ([`crate::errors`]).
 
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, unbounded};
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, unbounded};
 use std::time::Duration;
 
 use ellipso_fit::session::SessionFitConfig;
@@ -203,10 +203,14 @@ fn fit_config(
         return bad(format!("outer {o} is outside 1..=20"));
     }
     if !(normal_prior_deg.is_finite() && (0.0..=90.0).contains(&normal_prior_deg)) {
-        return bad(format!("normal_prior_deg {normal_prior_deg}: must be in [0, 90]"));
+        return bad(format!(
+            "normal_prior_deg {normal_prior_deg}: must be in [0, 90]"
+        ));
     }
     if !(grazing_cutoff_deg.is_finite() && (10.0..=89.0).contains(&grazing_cutoff_deg)) {
-        return bad(format!("grazing_cutoff_deg {grazing_cutoff_deg}: must be in [10, 89]"));
+        return bad(format!(
+            "grazing_cutoff_deg {grazing_cutoff_deg}: must be in [10, 89]"
+        ));
     }
     let mut config = SessionFitConfig {
         outer_iterations: outer.unwrap_or(SessionFitConfig::default().outer_iterations),
@@ -233,7 +237,10 @@ struct Fitted {
 /// `ellipso fit SESSION --out OUT …`: returns `{out, files, summary, material}`.
 #[pyfunction]
 #[pyo3(signature = (session, out, *, mesh=None, vertices=2500, outer=None, holdout=0.1, joint_only=false, normal_prior_deg=10.0, grazing_cutoff_deg=ellipso_fit::gate::GateConfig::default().grazing_cutoff_deg, view=None, no_hull=false, progress=None))]
-#[expect(clippy::too_many_arguments, reason = "the flags of `ellipso fit`, one keyword each")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the flags of `ellipso fit`, one keyword each"
+)]
 pub fn fit<'py>(
     py: Python<'py>,
     session: PathBuf,
@@ -250,7 +257,13 @@ pub fn fit<'py>(
     progress: Option<Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     check_vertices(vertices)?;
-    let config = fit_config(outer, holdout, joint_only, normal_prior_deg, grazing_cutoff_deg)?;
+    let config = fit_config(
+        outer,
+        holdout,
+        joint_only,
+        normal_prior_deg,
+        grazing_cutoff_deg,
+    )?;
     let fitted = drive(py, progress.as_ref(), move |fw| {
         let request = FitRequest {
             session: &session,

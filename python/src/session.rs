@@ -19,7 +19,10 @@ use pyo3::types::{PyDict, PyList};
 use crate::errors::{EllipsoError, session_error};
 
 /// A JSON-serialisable value as the Python object `json.loads` makes of it.
-pub fn to_python<'py>(py: Python<'py>, value: &impl serde::Serialize) -> PyResult<Bound<'py, PyAny>> {
+pub fn to_python<'py>(
+    py: Python<'py>,
+    value: &impl serde::Serialize,
+) -> PyResult<Bound<'py, PyAny>> {
     let text = serde_json::to_string(value).map_err(|e| EllipsoError::new_err(e.to_string()))?;
     py.import("json")?.call_method1("loads", (text,))
 }
@@ -154,7 +157,11 @@ impl Session {
     }
 
     /// The raw mosaic of frame `frame_id` as recorded: `uint16`, `(height, width)`.
-    fn frame<'py>(&self, py: Python<'py>, frame_id: u64) -> PyResult<Bound<'py, numpy::PyArray2<u16>>> {
+    fn frame<'py>(
+        &self,
+        py: Python<'py>,
+        frame_id: u64,
+    ) -> PyResult<Bound<'py, numpy::PyArray2<u16>>> {
         let entry = self.entry(frame_id)?;
         let (w, h, pixels) = py
             .detach(|| self.session.load_frame(entry))
@@ -209,7 +216,13 @@ impl Session {
             d.set_item(name, v)?;
         }
         let t = &c.distortion;
-        for (name, v) in [("k1", t.k1), ("k2", t.k2), ("k3", t.k3), ("p1", t.p1), ("p2", t.p2)] {
+        for (name, v) in [
+            ("k1", t.k1),
+            ("k2", t.k2),
+            ("k3", t.k3),
+            ("p1", t.p1),
+            ("p2", t.p2),
+        ] {
             d.set_item(name, v)?;
         }
         Ok(Some(d))
