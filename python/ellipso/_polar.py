@@ -2,8 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Iterator, Mapping, Optional
+from typing import Any, Dict, Iterator, Mapping, Optional
 
 import numpy as np
 
@@ -21,7 +20,6 @@ MASK_BITS = {
 _PLANES = ("s0", "s1", "s2", "dolp", "aolp", "residual", "i_d", "i_s", "i_alpha", "mask")
 
 
-@dataclass(frozen=True)
 class Polar(Mapping[str, np.ndarray]):
     """Stokes images of one mosaic, as ``ellipso polar`` computes them.
 
@@ -34,42 +32,66 @@ class Polar(Mapping[str, np.ndarray]):
     - ``dolp = sqrt(s1² + s2²) / s0``; ``aolp = atan2(s2, s1) / 2`` in ``[0, π)`` radians,
       counter-clockwise from image-right as the image is displayed
     - ``i_d = 2·I90``, ``i_s = I0 - I90`` (the same array as ``s1``), ``i_alpha = I135 - I45``
-      (``-s2``), ``residual = I0 + I90 - I45 - I135``
+      (``-s2``, computed when first asked for), ``residual = I0 + I90 - I45 - I135``
 
     It is a mapping (``result["dolp"]``) and has the planes as attributes (``result.dolp``).
+    A mono plane is the array the crate filled (no copy); colour planes are stacked into one
+    array when first asked for.
     """
 
-    s0: np.ndarray
-    s1: np.ndarray
-    s2: np.ndarray
-    dolp: np.ndarray
-    aolp: np.ndarray
-    residual: np.ndarray
-    i_d: np.ndarray
-    i_s: np.ndarray
-    i_alpha: np.ndarray
-    mask: np.ndarray
-    #: ``'mono'`` or ``'colour'``.
-    layout: str
-    #: ``'superpixel'`` or ``'bilinear'``.
-    demosaic: str
-    #: Bits per sample the frame was read with.
-    bit_depth: int
-    #: Black level subtracted, DN.
-    dark_level_dn: float
-    #: Samples at or above this DN were saturated.
-    saturation_dn: int
+    def __init__(self, raw: Dict[str, Any]) -> None:
+        self._bands = raw["bands"]
+        self._planes: Dict[str, np.ndarray] = {}
+        #: ``'mono'`` or ``'colour'``.
+        self.layout: str = raw["layout"]
+        #: ``'superpixel'`` or ``'bilinear'``.
+        self.demosaic: str = raw["demosaic"]
+        #: Bits per sample the frame was read with.
+        self.bit_depth: int = raw["bit_depth"]
+        #: Black level subtracted, DN.
+        self.dark_level_dn: float = raw["dark_level_dn"]
+        #: Samples at or above this DN were saturated.
+        self.saturation_dn: int = raw["saturation_dn"]
+
+    def _plane(self, name: str) -> np.ndarray:
+        p = self._planes.get(name)
+        if p is None:
+            if name == "i_s":
+                p = self._plane("s1")
+            elif name == "i_alpha":
+                p = np.negative(self._plane("s2"))
+            elif len(self._bands) == 1:
+                p = self._bands[0][name]
+            else:
+                p = np.stack([b[name] for b in self._bands])
+            self._planes[name] = p
+        return p
 
     def __getitem__(self, key: str) -> np.ndarray:
         if key not in _PLANES:
             raise KeyError(key)
-        return getattr(self, key)
+        return self._plane(key)
 
     def __iter__(self) -> Iterator[str]:
         return iter(_PLANES)
 
     def __len__(self) -> int:
         return len(_PLANES)
+
+    def __repr__(self) -> str:
+        return (f"ellipso.Polar({self.layout}, {self.demosaic}, {self.bit_depth}-bit: "
+                f"planes {tuple(self._plane('s0').shape)})")
+
+    s0 = property(lambda self: self._plane("s0"), doc="Total intensity s0.")
+    s1 = property(lambda self: self._plane("s1"), doc="s1 = I0 − I90.")
+    s2 = property(lambda self: self._plane("s2"), doc="s2 = I45 − I135.")
+    dolp = property(lambda self: self._plane("dolp"), doc="Degree of linear polarisation.")
+    aolp = property(lambda self: self._plane("aolp"), doc="Angle of linear polarisation, rad, [0, π).")
+    residual = property(lambda self: self._plane("residual"), doc="I0 + I90 − I45 − I135.")
+    i_d = property(lambda self: self._plane("i_d"), doc="I^d = 2·I90.")
+    i_s = property(lambda self: self._plane("i_s"), doc="I^s = I0 − I90 (the s1 array).")
+    i_alpha = property(lambda self: self._plane("i_alpha"), doc="I^α = I135 − I45 = −s2.")
+    mask = property(lambda self: self._plane("mask"), doc="Reason bits (MASK_BITS); 0 = valid.")
 
     @property
     def valid(self) -> np.ndarray:
@@ -117,29 +139,4 @@ def polar(
         dark_intensity=float(dark_intensity),
         max_residual=None if max_residual is None else float(max_residual),
     )
-    bands = raw["bands"]
-
-    def plane(name: str) -> np.ndarray:
-        if len(bands) == 1:
-            return bands[0][name]
-        return np.stack([b[name] for b in bands])
-
-    s1 = plane("s1")
-    s2 = plane("s2")
-    return Polar(
-        s0=plane("s0"),
-        s1=s1,
-        s2=s2,
-        dolp=plane("dolp"),
-        aolp=plane("aolp"),
-        residual=plane("residual"),
-        i_d=plane("i_d"),
-        i_s=s1,
-        i_alpha=np.negative(s2),
-        mask=plane("mask"),
-        layout=raw["layout"],
-        demosaic=raw["demosaic"],
-        bit_depth=raw["bit_depth"],
-        dark_level_dn=raw["dark_level_dn"],
-        saturation_dn=raw["saturation_dn"],
-    )
+    return Polar(raw)
