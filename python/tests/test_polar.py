@@ -128,4 +128,6 @@ def test_outputs_are_arrays_the_caller_owns():
     r = ellipso.polar(mosaic(), layout="mono")
     assert r.s0.dtype == np.float32 and r.mask.dtype == np.uint8
     assert r.s0.flags.c_contiguous and r.s0.flags.writeable
+    # handed over, not copied: numpy holds the crate's vector through a base object
+    assert not r.s0.flags.owndata and r.s0.base is not None
     assert set(r) == {"s0", "s1", "s2", "dolp", "aolp", "residual", "i_d", "i_s", "i_alpha", "mask"}
