@@ -201,10 +201,9 @@ pub fn coaxial<'py>(
     let out = py
         .detach(|| {
             let mut out = Vec::with_capacity(n * 27);
-            for i in 0..n {
+            for (i, &nc) in normals.iter().enumerate() {
                 let params = p.at(i);
                 params.validate().map_err(|e| (i, e.to_string()))?;
-                let nc = normals[i];
                 if !nc.iter().all(|v| v.is_finite()) || nc.iter().all(|v| *v == 0.0) {
                     return Err((
                         i,
