@@ -34,13 +34,14 @@ class FitFlag(enum.IntFlag):
     EtaPooled = 1 << 10
     Unobserved = 1 << 11
     FromMaterial = 1 << 12
+    MaterialEtaUnidentified = 1 << 13
 
 
 #: Flags that withhold every parameter of a vertex (the identifiability rule,
 #: docs/fit-outputs.md), unless ``FromMaterial`` lifts them (``Unobserved`` it never lifts).
 WITHHOLDS_VERTEX = FitFlag.TooFewViews | FitFlag.AlbedoAtCap | FitFlag.Unobserved
 #: Flags that withhold η.
-WITHHOLDS_ETA = WITHHOLDS_VERTEX | FitFlag.EtaUnidentifiable
+WITHHOLDS_ETA = WITHHOLDS_VERTEX | FitFlag.EtaUnidentifiable | FitFlag.MaterialEtaUnidentified
 
 #: The fitted parameters, in the order of their standard errors ``std_<name>``.
 PARAMS = (
@@ -237,12 +238,14 @@ class Fit(Mapping[str, np.ndarray]):
     def identifiable(self) -> Tuple[np.ndarray, np.ndarray]:
         """The identifiability rule over the flags (``ellipso_fit::data::Identifiable``):
         ``(vertex, eta)`` booleans, ``True`` where the vertex's parameters (its η) are
-        measurements. ``FromMaterial`` lifts every withholding but ``Unobserved``'s."""
+        measurements. ``FromMaterial`` lifts every withholding but ``Unobserved``'s (and η's
+        where ``MaterialEtaUnidentified`` says the material has none)."""
         flags = self["flags"].astype(np.int64)
         from_material = (flags & int(FitFlag.FromMaterial)) != 0
         seen = (flags & int(FitFlag.Unobserved)) == 0
         vertex = np.where(from_material, seen, (flags & int(WITHHOLDS_VERTEX)) == 0)
-        eta = np.where(from_material, seen, (flags & int(WITHHOLDS_ETA)) == 0)
+        material_eta = (flags & int(FitFlag.MaterialEtaUnidentified)) == 0
+        eta = np.where(from_material, seen & material_eta, (flags & int(WITHHOLDS_ETA)) == 0)
         return vertex, eta
 
     @property

@@ -82,6 +82,15 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("fit-summary.json")).unwrap()).unwrap();
     assert_eq!(summary["vertices"].as_u64(), Some(162));
+    // No hole on the observed surface: in the maps' and the novel view, every mesh pixel whose
+    // vertices the views saw is drawn with parameters and with η.
+    let holes = summary["export"]["holes"].as_array().expect("export.holes");
+    assert_eq!(holes.len(), 2, "{holes:?}");
+    for h in holes {
+        assert!(h["observed_px"].as_u64().unwrap() > 1000, "{h}");
+        assert_eq!(h["without_parameters_px"].as_u64(), Some(0), "{h}");
+        assert_eq!(h["without_eta_px"].as_u64(), Some(0), "{h}");
+    }
     assert_eq!(frames_snapshot(&session), before, "recorded frames changed");
 }
 

@@ -400,9 +400,11 @@ pub fn pool_eta(
             let points = points_of(list);
             let mut p = pool::random_effects(&points);
             p.se_blocks = pool::block_jackknife_se(&points, &spatial_blocks(set, list));
-            if p.weak(max_eta_std_error) {
-                // A pool of vertices that each leave η open is no measurement (`Pooled::weak`):
-                // no prior, and no value for the vertices that would take the material's.
+            p.prior_pull = pool::prior_pull(&points, p.mean, eta_prior);
+            if p.usable && p.weak(max_eta_std_error) {
+                // A pool whose σ, the prior's possible pull included, exceeds what a vertex
+                // may report is no measurement (`Pooled::weak`): no prior, and no value for
+                // the vertices that would take the material's.
                 p.usable = false;
             }
             Some(p)

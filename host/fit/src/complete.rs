@@ -32,8 +32,11 @@
 //!   error from the residuals (at least one sample gives three channels per colour). Clamped
 //!   to [0, cap].
 //! - **Its normal** is the surface's (the refined mesh's), with `normal_std_deg` as its σ.
-//! - A material without a value (no cluster: step B did not run or found none) completes
-//!   nothing; the vertex stays withheld and [`Completion::unassigned`] counts it.
+//! - A vertex without a material (no cluster: step B did not run or found none) completes
+//!   nothing; it stays withheld and [`Completion::unassigned`] counts it. A material without an
+//!   identified η (its pool weak or absent, `Pooled::weak`) completes everything but η, which
+//!   stays withheld ([`FitFlag::MaterialEtaUnidentified`], counted in
+//!   [`Completion::eta_withheld`]): the reason is the material's, named in the report.
 //! - Deterministic: a function of its inputs, no randomness, serial over vertices.
 
 use ellipso_model::geometry::TriangleMesh;
@@ -53,6 +56,11 @@ pub struct Completion {
     pub eta_from_material: usize,
     /// Vertices that needed completing but had no material to take it from.
     pub unassigned: usize,
+    /// Vertices that needed their material's η where the material has none identified
+    /// ([`FitFlag::MaterialEtaUnidentified`]: the pool is weak or absent): η withheld, the
+    /// rest completed.
+    #[serde(default)]
+    pub eta_withheld: usize,
     /// Vertices the views see (not [`FitFlag::Unobserved`]: in view, unoccluded and lit in at
     /// least one fitted frame, decided from the poses and the mesh, never from the gates).
     pub observed: usize,
@@ -75,8 +83,13 @@ pub struct MaterialCoverage {
     pub cluster: usize,
     /// The material's η (pooled), `null` where it has none (no pool, or a weak one).
     pub eta: Option<f64>,
-    /// Its standard error (`Pooled::se_reported`).
+    /// A from-material vertex's η standard error: `Pooled::se_reported` ⊕ the between-vertex τ.
     pub eta_se: Option<f64>,
+    /// Where the material's η is withheld although its vertices pooled (`Pooled::weak`): the
+    /// pool's standard error and, within it, the default prior's possible pull
+    /// (`Pooled::prior_pull`) — the reason it is withheld.
+    #[serde(default)]
+    pub eta_withheld_se: Option<[f64; 2]>,
     /// Observed vertices of this material.
     pub observed: usize,
     /// Of those, fitted from their own samples.
@@ -96,8 +109,12 @@ impl Completion {
         let mut lines =
             vec!["materials (step B's clusters) over the surface the views see:".to_string()];
         for m in &self.materials {
-            let eta = match (m.eta, m.eta_se) {
-                (Some(e), Some(se)) => format!("η {e:.4} ± {se:.4}"),
+            let eta = match (m.eta, m.eta_se, m.eta_withheld_se) {
+                (Some(e), Some(se), _) => format!("η {e:.4} ± {se:.4}"),
+                (_, _, Some([se, pull])) => format!(
+                    "η withheld (its pool's σ {se:.3}, of which the default prior's possible \
+                     pull {pull:.3}, is above what a vertex may report)"
+                ),
                 _ => "η not identified".to_string(),
             };
             lines.push(format!(
@@ -127,10 +144,18 @@ impl Completion {
     pub fn describe(&self) -> String {
         format!(
             "completion: {} vertices the views see but their samples do not identify took their \
-             material's values ({} with their own ρd), {} their material's η{}",
+             material's values ({} with their own ρd), {} their material's η{}{}",
             self.completed,
             self.own_rho_d,
             self.eta_from_material,
+            if self.eta_withheld > 0 {
+                format!(
+                    "; {} without η, their material having none identified",
+                    self.eta_withheld
+                )
+            } else {
+                String::new()
+            },
             if self.unassigned > 0 {
                 format!("; {} had no material to take it from", self.unassigned)
             } else {
@@ -145,6 +170,8 @@ impl Completion {
 pub struct MaterialValues {
     /// η and its spread (`None`: no η for this material).
     pub eta: Option<[f64; 2]>,
+    /// A weak pool's standard error and the prior's possible pull in it (η withheld).
+    pub eta_withheld_se: Option<[f64; 2]>,
     /// σs, σss, ρs, ρss RGB (the cluster's lobe model).
     pub lobe: [f64; 6],
     /// Their spreads.
@@ -180,10 +207,12 @@ impl MaterialValues {
         };
         let spread = |f: &dyn Fn(&VertexFit) -> f64| robust_sd(&mut column(f));
         let eta = if c.eta_pooled.usable {
-            // η is one bulk value of the material: its pooled value's own uncertainty is a
-            // from-material vertex's (the pipeline's pooled standard errors say why).
+            // A vertex that takes its material's η is a new member of the pool: its η is the
+            // material's, uncertain by the pooled value's own standard error and the
+            // members' between-vertex spread τ (0 on one homogeneous material; the spread of
+            // what the pool mixed where it is not).
             let p = c.eta_pooled;
-            Some([p.mean, p.se_reported()])
+            Some([p.mean, p.tau.hypot(p.se_reported())])
         } else if c.eta_pooled.member_se_median.is_finite() && c.eta_pooled.vertices > 0 {
             // A pool that formed but is no measurement (weak, `Pooled::weak`): no η.
             None
@@ -200,8 +229,12 @@ impl MaterialValues {
             (centre.is_finite() && sd.is_finite()).then_some([centre, sd])
         };
         let rho_d: [f64; 3] = std::array::from_fn(|k| median(&mut column(&|m| m.params.rho_d[k])));
+        let p = c.eta_pooled;
+        let eta_withheld_se = (eta.is_none() && p.vertices > 0 && p.se.is_finite() && p.se > 0.0)
+            .then(|| [p.se_reported(), p.prior_pull]);
         Self {
             eta,
+            eta_withheld_se,
             lobe: [
                 c.sigma_s,
                 c.sigma_ss,
@@ -478,14 +511,20 @@ pub fn complete(
             continue;
         };
         let m = &materials[j];
-        let Some([eta, eta_sd]) = m
+        let material_eta = m
             .eta
-            .map(|material| local_or(material, &rings, &identified, v, j))
-        else {
-            report.unassigned += 1;
-            continue;
-        };
+            .map(|material| local_or(material, &rings, &identified, v, j));
         let f = &mut fits[v];
+        // A material without an identified η completes the rest; η stays withheld, flagged.
+        let [eta, eta_sd] = material_eta.unwrap_or([f.params.eta, f64::INFINITY]);
+        if material_eta.is_none() {
+            report.eta_withheld += 1;
+            if needs_eta[v] {
+                // Its own data identified everything else: only η is missing, and stays so.
+                continue;
+            }
+            f.flags.push(FitFlag::MaterialEtaUnidentified);
+        }
         if needs_eta[v] {
             f.params.eta = eta;
             f.std_error[0] = eta_sd;
@@ -549,6 +588,7 @@ fn tally(
             cluster: j,
             eta: materials[j].eta.map(|e| e[0]),
             eta_se: materials[j].eta.map(|e| e[1]),
+            eta_withheld_se: materials[j].eta_withheld_se,
             ..Default::default()
         })
         .collect();

@@ -353,6 +353,10 @@ pub enum FitFlag {
     /// (`crate::complete`). Reported as values, never withheld: a vertex the views see always
     /// has a full parameter set.
     FromMaterial,
+    /// The vertex's material has no identified η (its pool was weak — its standard error, the
+    /// default prior's possible pull included, above the solver's limit — or it formed none):
+    /// η is withheld, whatever [`FitFlag::FromMaterial`] completed of the rest is reported.
+    MaterialEtaUnidentified,
 }
 
 /// The largest angular standard error an output reports, degrees: an angle's uncertainty cannot
@@ -364,7 +368,7 @@ impl FitFlag {
     /// `flags`, `maps.exr`'s `flags` channel, the view): bit k = `ALL[k]`. A new flag is one
     /// entry at the end (and one line in [`FitFlag::withholds_vertex`] or
     /// [`FitFlag::withholds_eta`] when it withholds values).
-    pub const ALL: [FitFlag; 13] = [
+    pub const ALL: [FitFlag; 14] = [
         FitFlag::TooFewViews,
         FitFlag::UnderDetermined,
         FitFlag::Dark,
@@ -378,6 +382,7 @@ impl FitFlag {
         FitFlag::EtaPooled,
         FitFlag::Unobserved,
         FitFlag::FromMaterial,
+        FitFlag::MaterialEtaUnidentified,
     ];
 
     /// This flag's bit in the bitmask ([`FitFlag::ALL`] order).
@@ -412,7 +417,11 @@ impl FitFlag {
     /// Whether this flag withholds η (standard error +inf, grey η maps), beyond
     /// [`FitFlag::withholds_vertex`].
     pub fn withholds_eta(self) -> bool {
-        self.withholds_vertex() || matches!(self, FitFlag::EtaUnidentifiable)
+        self.withholds_vertex()
+            || matches!(
+                self,
+                FitFlag::EtaUnidentifiable | FitFlag::MaterialEtaUnidentified
+            )
     }
 }
 
@@ -429,15 +438,16 @@ pub struct Identifiable {
 
 impl Identifiable {
     /// The rule over a flags bitmask ([`FitFlag::ALL`] bit order). [`FitFlag::FromMaterial`]
-    /// lifts every withholding but [`FitFlag::Unobserved`]'s: what the vertex's data left open
-    /// is its material's value, reported as such.
+    /// lifts every withholding but [`FitFlag::Unobserved`]'s (and η's where the material has
+    /// none, [`FitFlag::MaterialEtaUnidentified`]): what the vertex's data left open is its
+    /// material's value, reported as such.
     pub fn of_mask(mask: u32) -> Self {
         let flags = FitFlag::from_mask(mask);
         if flags.contains(&FitFlag::FromMaterial) {
             let seen = !flags.contains(&FitFlag::Unobserved);
             return Self {
                 vertex: seen,
-                eta: seen,
+                eta: seen && !flags.contains(&FitFlag::MaterialEtaUnidentified),
             };
         }
         Self {

@@ -73,6 +73,9 @@ pub struct ExportReport {
     pub rerender_rmse: Option<f64>,
     /// The frame of the comparison picture (`rerender-vs-captured.png`).
     pub comparison_frame: Option<ComparisonFrame>,
+    /// Per picture view, the observed surface it shows and the grey pixels on it
+    /// ([`images::Holes`]; zero where every observed vertex has a full parameter set).
+    pub holes: Vec<images::Holes>,
 }
 
 /// Which captured frame `rerender-vs-captured.png` shows.
@@ -256,6 +259,7 @@ pub fn export_all(
     })?;
     report.files.push(view_path);
     let mut pictures = images::pictures(mesh, fits, &view, flash, &light);
+    report.holes.push(images::holes(mesh, fits, &view, "map-eta"));
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(
         &Vector3::z_axis(),
@@ -265,6 +269,7 @@ pub fn export_all(
         Translation3::from(centre.coords) * turn * Translation3::from(-centre.coords);
     let novel = ViewCamera::framing(about_centre * world_from_camera, px, px, &centre, radius);
     let models = images::pixel_models(mesh, fits, &novel);
+    report.holes.push(images::holes(mesh, fits, &novel, "novel-view"));
     pictures.push(images::relit(
         &models,
         px,

@@ -39,7 +39,8 @@ pub struct FitSummary {
     pub coverage: Option<Completion>,
     /// The pictures and maps written: `files` (every file, in writing order), `rerender_rmse`
     /// (the comparison picture's relative RMSE) and `comparison_frame` (`{frame_id,
-    /// held_out}`: the frame `rerender-vs-captured.png` shows).
+    /// held_out}`: the frame `rerender-vs-captured.png` shows) and `holes` (per picture view,
+    /// the observed surface it shows and how many of those pixels are grey).
     pub export: ExportReport,
     /// Number of posed frames the fit used (the held-out ones excluded).
     pub frames_fitted: usize,

@@ -63,10 +63,14 @@ pub struct Pooled {
     /// `se` (which assumes they are) understates the material's uncertainty.
     #[serde(default = "nan")]
     pub se_blocks: f64,
-    /// The members' median own standard error of η: what one vertex's data say. Above the
-    /// solver's `max_eta_std_error` the material is weakly identified ([`Pooled::weak`]).
+    /// The members' median own standard error of η: what one vertex's data say.
     #[serde(default = "nan")]
     pub member_se_median: f64,
+    /// How far the default η prior that every member's step-A solve carried could still pull
+    /// the pooled value ([`prior_pull`]): 0 where the members' data dominate that prior or the
+    /// material sits at the prior's mean. Part of [`Pooled::se_reported`].
+    #[serde(default)]
+    pub prior_pull: f64,
 }
 
 fn nan() -> f64 {
@@ -75,22 +79,32 @@ fn nan() -> f64 {
 
 impl Pooled {
     /// The material's η standard error as the outputs report it: the larger of the
-    /// independent-vertex `se` and the spatial-block jackknife `se_blocks`.
+    /// independent-vertex `se` and the spatial-block jackknife `se_blocks`, combined in
+    /// quadrature with the bias the members' default prior could leave (`prior_pull`).
     pub fn se_reported(&self) -> f64 {
-        if self.se_blocks.is_finite() {
+        let sampling = if self.se_blocks.is_finite() {
             self.se.max(self.se_blocks)
         } else {
             self.se
-        }
+        };
+        let pull = if self.prior_pull.is_finite() {
+            self.prior_pull
+        } else {
+            0.0
+        };
+        sampling.hypot(pull)
     }
 
-    /// Whether the members' own data leave η open (their median own standard error above
-    /// `max_eta_std_error`, the per-vertex identifiability limit): averaging many such vertices
-    /// shrinks their noise but not what they share — at high η the diffuse DoP flattens and a
-    /// bounded estimate is pulled low by its upper bound, the same way at every vertex — so a
-    /// pool of them is no measurement and its η is withheld.
+    /// Whether the pool is no measurement of the material's η: the standard error of a vertex
+    /// that takes it — [`Pooled::se_reported`] (the prior's possible pull included) with the
+    /// members' between-vertex spread τ — exceeds `max_eta_std_error`, the limit above which a
+    /// single vertex's η is withheld too. A large τ is a pool that mixed materials (a
+    /// clustering that joined them) as often as texture: its one value is no material's. At high
+    /// η the members' data say little each (the diffuse DoP flattens), the default prior pulls
+    /// every one of them the same way, and averaging many of them shrinks their noise but not
+    /// that shared pull: such a pool is withheld, not reported with a σ it does not have.
     pub fn weak(&self, max_eta_std_error: f64) -> bool {
-        self.member_se_median > max_eta_std_error
+        !(self.tau.hypot(self.se_reported()) <= max_eta_std_error)
     }
 
     /// Whether two pools may be one material's: both identified and their η within
@@ -110,7 +124,7 @@ impl Pooled {
         if !self.usable {
             return None;
         }
-        let sd = (self.tau * self.tau + self.se * self.se).sqrt();
+        let sd = self.tau.hypot(self.se_reported());
         let own = if se.is_finite() { se } else { f64::INFINITY };
         let spread = (own * own + sd * sd).sqrt();
         let agrees = !eta.is_finite()
@@ -217,7 +231,34 @@ pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
         median: centre,
         se_blocks: f64::NAN,
         member_se_median: median(kept.iter().map(|p| p.1).collect()),
+        prior_pull: 0.0,
     }
+}
+
+/// The bias the default η prior `prior` = (mean, sd) could leave in a pool at `pooled_eta`
+/// whose members' own (prior-removed) estimates are `members` (`(η, s)` pairs): the median
+/// over members of the share of a posterior the prior holds, r = s²/(s² + sd²), times the
+/// distance |η − mean|. Each member's estimate has the prior removed
+/// ([`without_prior`]), exactly only where its likelihood is Gaussian; where the diffuse DoP
+/// flattens (high η) the curvature at the posterior's mode overstates the data's precision and
+/// the removal falls short. Its shortfall is at most the prior's whole pull on that member,
+/// r·|η − mean|, and it is the same sign for every member, so the pool cannot average it away:
+/// this bound is carried in the pool's standard error, never divided by √n. 0 without
+/// members or with a prior of infinite width.
+pub fn prior_pull(members: &[(f64, f64)], pooled_eta: f64, prior: [f64; 2]) -> f64 {
+    let [mean, sd] = prior;
+    if !(sd.is_finite() && sd > 0.0 && pooled_eta.is_finite()) {
+        return 0.0;
+    }
+    let mut shares: Vec<f64> = members
+        .iter()
+        .filter(|(eta, s)| eta.is_finite() && s.is_finite() && *s > 0.0)
+        .map(|(_, s)| s * s / (s * s + sd * sd))
+        .collect();
+    if shares.is_empty() {
+        return 0.0;
+    }
+    ellipso_model::stats::median(&mut shares) * (pooled_eta - mean).abs()
 }
 
 /// Fewest vertices a jackknife block holds: a block's median must itself be an estimate.
@@ -373,5 +414,41 @@ mod tests {
             (one.apply(1.7, 0.1) - one.median_eta).abs() < 0.02,
             "{one:?}"
         );
+    }
+
+    #[test]
+    fn the_prior_can_pull_only_a_material_away_from_its_mean_and_only_through_weak_members() {
+        let prior = [1.5, 0.5];
+        // Members as precise as the prior (r = ½), material 1.0 above the prior's mean.
+        let weak: Vec<(f64, f64)> = (0..20).map(|i| (2.5 + 0.001 * i as f64, 0.5)).collect();
+        assert!((prior_pull(&weak, 2.5, prior) - 0.5).abs() < 1e-12);
+        // The same members at the prior's mean: nothing to pull.
+        assert_eq!(prior_pull(&weak, 1.5, prior), 0.0);
+        // Precise members (s = 0.01): r = 4e-4.
+        let precise: Vec<(f64, f64)> = (0..20).map(|i| (2.5 + 0.001 * i as f64, 0.01)).collect();
+        assert!(prior_pull(&precise, 2.5, prior) < 1e-3);
+        // An infinitely wide prior pulls nothing.
+        assert_eq!(prior_pull(&weak, 2.5, [1.5, f64::INFINITY]), 0.0);
+    }
+
+    #[test]
+    fn a_pool_whose_possible_pull_exceeds_the_vertex_limit_is_weak_and_its_sigma_says_so() {
+        let members: Vec<(f64, f64)> = (0..40)
+            .map(|i| (2.4 + 0.002 * (i % 7) as f64, 0.2))
+            .collect();
+        let mut p = random_effects(&members);
+        assert!(p.usable);
+        // 40 members of s = 0.2 give a pooled se near 0.04: alone it would pass 0.05.
+        assert!(p.se < 0.05, "{p:?}");
+        p.prior_pull = prior_pull(&members, p.mean, [1.5, 0.5]);
+        // r = 0.04/0.29 ≈ 0.14 of a 0.9 distance: 0.12.
+        assert!((p.prior_pull - 0.124).abs() < 0.01, "{p:?}");
+        assert!(p.se_reported() >= p.prior_pull);
+        assert!(p.weak(0.05));
+        // The same members at the prior's mean are a measurement.
+        let centred: Vec<(f64, f64)> = members.iter().map(|(e, s)| (e - 0.9, *s)).collect();
+        let mut q = random_effects(&centred);
+        q.prior_pull = prior_pull(&centred, q.mean, [1.5, 0.5]);
+        assert!(!q.weak(0.05), "{q:?}");
     }
 }

@@ -487,6 +487,55 @@ pub fn tone_map(rgb: &[Option<[f64; 3]>]) -> Vec<Option<[f64; 3]>> {
         .collect()
 }
 
+/// What one picture's view shows of the surface the capture observed, and how much of it the
+/// pictures leave grey. A pixel is *observed* when the mesh is hit there and none of its
+/// triangle's vertices is [`crate::data::FitFlag::Unobserved`] (the geometry decides: no
+/// fitted frame saw it lit); every other mesh pixel may be grey by the contract. Completion
+/// (`crate::complete`) gives every observed vertex a full parameter set, so both hole counts
+/// are zero unless a vertex the views see was left without one.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Holes {
+    /// The picture (`map-eta`'s view is the maps' and `relit`'s; `novel-view` its own).
+    pub view: &'static str,
+    /// Mesh pixels whose triangle every view-seen vertex spans.
+    pub observed_px: usize,
+    /// Observed pixels drawn without parameters (grey in the maps, relit and novel view).
+    pub without_parameters_px: usize,
+    /// Observed pixels drawn without η (grey in `map-eta`).
+    pub without_eta_px: usize,
+}
+
+/// The [`Holes`] of `camera`'s picture of `mesh` with `fits`.
+pub fn holes(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+    view: &'static str,
+) -> Holes {
+    let field = Field::new(fits);
+    let observed: Vec<bool> = fits
+        .iter()
+        .map(|f| !f.flags.contains(&crate::data::FitFlag::Unobserved))
+        .collect();
+    let mut h = Holes {
+        view,
+        ..Holes::default()
+    };
+    for hit in rasterise(mesh, camera).into_iter().flatten() {
+        if !hit.vertices.iter().all(|&v| observed[v as usize]) {
+            continue;
+        }
+        h.observed_px += 1;
+        if field.at(&hit).is_none() {
+            h.without_parameters_px += 1;
+            h.without_eta_px += 1;
+        } else if !field.eta_at(&hit) {
+            h.without_eta_px += 1;
+        }
+    }
+    h
+}
+
 /// The per-pixel model of a view (for the novel view and tests).
 pub fn pixel_models(
     mesh: &TriangleMesh,
