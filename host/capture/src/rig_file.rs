@@ -179,11 +179,12 @@ pub const GAIN_MAX_DB: f32 = 60.0;
 pub const BOARD_MAX_M: f64 = 100.0;
 use ellipso_model::rig::MAX_SIDE_PX;
 
-
 /// Whether `ip` can be one camera's address.
 fn unicast(ip: std::net::IpAddr) -> bool {
     match ip {
-        std::net::IpAddr::V4(v4) => !(v4.is_unspecified() || v4.is_broadcast() || v4.is_multicast()),
+        std::net::IpAddr::V4(v4) => {
+            !(v4.is_unspecified() || v4.is_broadcast() || v4.is_multicast())
+        }
         std::net::IpAddr::V6(v6) => !(v6.is_unspecified() || v6.is_multicast()),
     }
 }
@@ -416,7 +417,11 @@ impl RigFile {
             }
         }
         for (i, b) in self.boards.iter().enumerate() {
-            if !b.translation_m.iter().all(|v| v.is_finite() && v.abs() <= BOARD_MAX_M) {
+            if !b
+                .translation_m
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= BOARD_MAX_M)
+            {
                 return Err(bad(
                     &format!("boards[{i}].translation_m"),
                     format!(
@@ -425,7 +430,11 @@ impl RigFile {
                     ),
                 ));
             }
-            if !b.rotation_deg.iter().all(|v| v.is_finite() && v.abs() <= 360.0) {
+            if !b
+                .rotation_deg
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= 360.0)
+            {
                 return Err(bad(
                     &format!("boards[{i}].rotation_deg"),
                     format!(

@@ -353,10 +353,7 @@ impl OutputDir {
                 "{}.ellipso-old-{}",
                 self.target
                     .file_name()
-                    .map(|n| format!(
-                        ".{}",
-                        crate::atomic_file::short_name(&n.to_string_lossy())
-                    ))
+                    .map(|n| format!(".{}", crate::atomic_file::short_name(&n.to_string_lossy())))
                     .unwrap_or_default(),
                 std::process::id()
             ));

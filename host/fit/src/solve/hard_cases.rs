@@ -456,5 +456,8 @@ fn eta_pinned_at_its_bound_is_withheld() {
     assert!(fit.flags.contains(&FitFlag::AtBound), "{fit:?}");
     assert!(fit.flags.contains(&FitFlag::EtaUnidentifiable), "{fit:?}");
     let shown = crate::data::Identifiable::of_mask(FitFlag::mask(&fit.flags));
-    assert!(!shown.eta, "η at its bound is reported as a measurement: {fit:?}");
+    assert!(
+        !shown.eta,
+        "η at its bound is reported as a measurement: {fit:?}"
+    );
 }

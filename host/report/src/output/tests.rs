@@ -188,7 +188,8 @@ fn a_result_file_is_claimed_by_one_run_at_a_time() {
     // a second claim in this process stands for a second run: flock is per open file
     let e = OutputFile::claim(&out, "mesh", FileFormat::PLY, &[], None).unwrap_err();
     assert!(
-        e.to_string().contains("another ellipso run is writing this output now"),
+        e.to_string()
+            .contains("another ellipso run is writing this output now"),
         "{e}"
     );
     first.write(b"ply\nformat ascii 1.0\nend_header\n").unwrap();

@@ -189,7 +189,13 @@ fn tiny_images_are_refused_not_crashed_on() {
             match d.detect(&gray, w, h) {
                 Ok(tags) => assert!(tags.is_empty()),
                 Err(e) => {
-                    assert_eq!(e, DetectError::TooSmall { width: w, height: h });
+                    assert_eq!(
+                        e,
+                        DetectError::TooSmall {
+                            width: w,
+                            height: h
+                        }
+                    );
                     assert!(w.min(h) < MIN_TAG_SIDE_PX || decimation >= 2.0, "{w}×{h}");
                     assert!(e.to_string().contains(&format!("{w}×{h} px")));
                 }
