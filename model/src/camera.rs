@@ -23,8 +23,10 @@
 //! non-finite numbers, non-positive focal lengths or image sizes are errors naming the field.
 
 mod jacobian;
+mod plausible;
 
 pub use jacobian::ProjectionJacobians;
+pub use plausible::{FOCAL_MAX_SIDES, FOCAL_MIN_SIDES, RADIAL_MAX, TANGENTIAL_MAX};
 
 use nalgebra::{Isometry3, Matrix2, Point3, Unit, Vector2, Vector3};
 use serde::{Deserialize, Serialize};

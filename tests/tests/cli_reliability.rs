@@ -172,7 +172,12 @@ fn capture_refuses_an_out_that_holds_an_older_recording() {
 #[test]
 fn sigint_and_sigterm_end_a_capture_cleanly() {
     let tmp = tempfile::tempdir().unwrap();
-    for (signal, name) in [(libc::SIGINT, "SIGINT"), (libc::SIGTERM, "SIGTERM")] {
+    // SIGHUP: the terminal closed (issue 46; main died without its end record)
+    for (signal, name) in [
+        (libc::SIGINT, "SIGINT"),
+        (libc::SIGTERM, "SIGTERM"),
+        (libc::SIGHUP, "SIGHUP"),
+    ] {
         let out = tmp.path().join(name);
         let mut child = capture_cmd(&out, 200, 100)
             .stdout(std::process::Stdio::null())
@@ -592,4 +597,30 @@ fn every_flag_the_docs_show_exists() {
         missing.is_empty(),
         "documented flags the CLI rejects: {missing:#?}"
     );
+}
+
+/// Issue 46 item 1: frames 8 px tall or less crashed pose tracking (a segfault in the AprilTag
+/// library) in `capture` and `replay`. Now each such frame is a pose rejection naming its size,
+/// and the session ends with its record.
+#[test]
+fn tiny_frames_are_rejected_by_the_tracker_not_crashed_on() {
+    let tmp = tempfile::tempdir().unwrap();
+    for res in ["2x2", "64x8"] {
+        let out = tmp.path().join(res);
+        let o = Command::new(ellipso_bin())
+            .args(["capture", "--sim"])
+            .arg(scene("sphere.toml"))
+            .arg("--out")
+            .arg(&out)
+            .args(["--photos", "2", "--resolution", res, "--supersampling", "1"])
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{res}: {}", stderr(&o));
+        let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), stderr(&o));
+        assert!(text.contains("too small to hold a tag"), "{res}: {text}");
+        let s = reader::open(&out).expect("session opens");
+        assert!(s.report.ended_cleanly, "{res}: no end record");
+        let o = ellipso(&["replay", out.to_str().unwrap()]);
+        assert_ne!(o.status.code(), None, "{res}: replay died by a signal");
+    }
 }

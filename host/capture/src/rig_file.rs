@@ -35,6 +35,15 @@
 //! ```
 //!
 //! Unknown keys are refused; every error names the file, the key and, for syntax errors, the line.
+//! The file is checked whole before anything looks for the camera backend or opens a port:
+//! `sensor.gain_db` in [`GAIN_MIN_DB`, `GAIN_MAX_DB`]; the camera's sides even in
+//! 2..=`MAX_SIDE_PX` and its parameters plausible (`CameraModel::check_plausible`);
+//! `capture.interval_ms` within the board's u32 µs frame period; the flash delay plus duration
+//! inside the exposure (summed without wrapping); the flash within 1 m of the lens; each board's
+//! translation finite and within ±`BOARD_MAX_M`, its angles finite and within ±360°; an aravis
+//! address one camera's (not unspecified, broadcast or multicast); the trigger port a serial
+//! device, a pty or `unix:PATH` (a device the kernel does not class as a tty, such as
+//! `/dev/zero`, is refused).
 
 use std::path::{Path, PathBuf};
 
@@ -162,6 +171,66 @@ pub struct RigFile {
     pub path: PathBuf,
 }
 
+/// Lowest sensor gain, dB (the bound the fit puts on a frame's gain).
+pub const GAIN_MIN_DB: f32 = -20.0;
+/// Highest sensor gain, dB (the IMX250's analogue and digital gain together reach 48 dB).
+pub const GAIN_MAX_DB: f32 = 60.0;
+/// Farthest a board may be placed from the world origin, m (the bound the fit puts on cameras).
+pub const BOARD_MAX_M: f64 = 100.0;
+use ellipso_model::rig::MAX_SIDE_PX;
+
+/// Whether `ip` can be one camera's address.
+fn unicast(ip: std::net::IpAddr) -> bool {
+    match ip {
+        std::net::IpAddr::V4(v4) => {
+            !(v4.is_unspecified() || v4.is_broadcast() || v4.is_multicast())
+        }
+        std::net::IpAddr::V6(v6) => !(v6.is_unspecified() || v6.is_multicast()),
+    }
+}
+
+/// Refuses a trigger port that cannot be the trigger board: an existing path that is not a
+/// character device, or a character device the kernel does not class as a tty (`/dev/zero`,
+/// `/dev/null`: `/sys/dev/char/MAJOR:MINOR/subsystem` names another class). A path that does not
+/// exist yet (a board not plugged in) is left to the open, which names it.
+fn check_trigger_port(port: &str) -> Result<(), String> {
+    use std::os::unix::fs::FileTypeExt;
+    if port.starts_with("unix:") {
+        return Ok(());
+    }
+    let Ok(meta) = std::fs::metadata(port) else {
+        return Ok(());
+    };
+    if !meta.file_type().is_char_device() {
+        return Err(format!(
+            "'{port}' is not a serial device (a tty, a pty, or unix:PATH for a socket)"
+        ));
+    }
+    use std::os::unix::fs::MetadataExt;
+    let rdev = meta.rdev();
+    let (major, minor) = (libc_major(rdev), libc_minor(rdev));
+    let class = std::fs::read_link(format!("/sys/dev/char/{major}:{minor}/subsystem"))
+        .ok()
+        .and_then(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()));
+    match class {
+        Some(c) if c != "tty" => Err(format!(
+            "'{port}' is a `{c}` device, not a serial port: give the trigger board's tty \
+             (e.g. /dev/ttyACM0)"
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The major number of a Linux device id (glibc's `gnu_dev_major`).
+fn libc_major(dev: u64) -> u64 {
+    ((dev >> 32) & 0xffff_f000) | ((dev >> 8) & 0x0000_0fff)
+}
+
+/// The minor number of a Linux device id (glibc's `gnu_dev_minor`).
+fn libc_minor(dev: u64) -> u64 {
+    ((dev >> 12) & 0xffff_ff00) | (dev & 0x0000_00ff)
+}
+
 /// Errors reading a rig file.
 #[derive(Debug, thiserror::Error)]
 pub enum RigFileError {
@@ -243,7 +312,10 @@ impl RigFile {
                 format!("{:?} has a non-finite value", f.offset_m),
             ));
         }
-        if self.capture.flash_delay_us + self.capture.flash_duration_us > self.sensor.exposure_us {
+        // in u64: a delay near u32::MAX plus a short duration must not wrap past the check
+        if u64::from(self.capture.flash_delay_us) + u64::from(self.capture.flash_duration_us)
+            > u64::from(self.sensor.exposure_us)
+        {
             return Err(bad(
                 "capture.flash_duration_us",
                 format!(
@@ -254,16 +326,123 @@ impl RigFile {
                 ),
             ));
         }
-        if self.sensor.backend == Backend::Aravis
-            && self.sensor.address.parse::<std::net::IpAddr>().is_err()
-        {
+        if self.sensor.backend == Backend::Aravis {
+            match self.sensor.address.parse::<std::net::IpAddr>() {
+                Err(_) => {
+                    return Err(bad(
+                        "sensor.address",
+                        format!(
+                            "'{}' is not a numeric IP address (names would trigger network \
+                             discovery)",
+                            self.sensor.address
+                        ),
+                    ));
+                }
+                Ok(ip) if !unicast(ip) => {
+                    return Err(bad(
+                        "sensor.address",
+                        format!(
+                            "{ip} is not one camera's address (unspecified, broadcast or \
+                             multicast): give the camera's own IP address"
+                        ),
+                    ));
+                }
+                Ok(_) => {}
+            }
+        }
+        self.check_ranges()?;
+        check_trigger_port(&self.trigger.port).map_err(|m| bad("trigger.port", m))
+    }
+
+    /// The values of physical quantities against their ranges (module doc).
+    fn check_ranges(&self) -> Result<(), RigFileError> {
+        let bad = |key: &str, message: String| RigFileError::Invalid {
+            path: self.path.clone(),
+            key: key.into(),
+            message,
+        };
+        let g = self.sensor.gain_db;
+        if !(g.is_finite() && (GAIN_MIN_DB..=GAIN_MAX_DB).contains(&g)) {
             return Err(bad(
-                "sensor.address",
+                "sensor.gain_db",
+                format!("is {g}; must be within [{GAIN_MIN_DB}, {GAIN_MAX_DB}] dB"),
+            ));
+        }
+        let c = &self.camera;
+        for (key, side) in [("camera.width", c.width), ("camera.height", c.height)] {
+            if side < 2 || side % 2 != 0 || side > MAX_SIDE_PX {
+                return Err(bad(
+                    key,
+                    format!(
+                        "is {side}; must be even (the 2×2 polariser mosaic) and in \
+                         2..={MAX_SIDE_PX} px"
+                    ),
+                ));
+            }
+        }
+        if let Err(m) = c.check_plausible() {
+            let key = ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2"]
+                .into_iter()
+                .find(|k| m.starts_with(&format!("{k} ")) || m.contains(&format!("`{k}`")))
+                .unwrap_or("camera");
+            let key = if key == "camera" {
+                key.to_string()
+            } else {
+                format!("camera.{key}")
+            };
+            return Err(bad(&key, m));
+        }
+        let max_interval_ms = f64::from(u32::MAX) / 1e3;
+        if self.capture.interval_ms > max_interval_ms {
+            return Err(bad(
+                "capture.interval_ms",
                 format!(
-                    "'{}' is not a numeric IP address (names would trigger network discovery)",
-                    self.sensor.address
+                    "is {}; the board's frame period is at most {max_interval_ms} ms (u32 µs)",
+                    self.capture.interval_ms
                 ),
             ));
+        }
+        if let Some(f) = &self.flash {
+            let d = nalgebra::Vector3::from(f.offset_m).norm();
+            if d > ellipso_session::rig_ranges::MAX_FLASH_OFFSET_M {
+                return Err(bad(
+                    "flash.offset_m",
+                    format!(
+                        "{:?} is {d:e} m from the lens; a flash mounted on the camera is within \
+                         {} m",
+                        f.offset_m,
+                        ellipso_session::rig_ranges::MAX_FLASH_OFFSET_M
+                    ),
+                ));
+            }
+        }
+        for (i, b) in self.boards.iter().enumerate() {
+            if !b
+                .translation_m
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= BOARD_MAX_M)
+            {
+                return Err(bad(
+                    &format!("boards[{i}].translation_m"),
+                    format!(
+                        "{:?}: each component must be finite and within ±{BOARD_MAX_M} m",
+                        b.translation_m
+                    ),
+                ));
+            }
+            if !b
+                .rotation_deg
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= 360.0)
+            {
+                return Err(bad(
+                    &format!("boards[{i}].rotation_deg"),
+                    format!(
+                        "{:?}: each angle must be finite and within ±360°",
+                        b.rotation_deg
+                    ),
+                ));
+            }
         }
         Ok(())
     }
@@ -317,123 +496,4 @@ impl RigFile {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn write(dir: &Path, text: &str) -> PathBuf {
-        let p = dir.join("rig.toml");
-        std::fs::write(&p, text).unwrap();
-        p
-    }
-
-    fn good() -> String {
-        let board = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../sim/boards/base_a4.toml");
-        format!(
-            r#"
-[trigger]
-port = "/dev/ttyACM0"
-
-[sensor]
-backend = "aravis"
-address = "192.168.10.2"
-layout = "monopolar"
-bit_depth = 12
-exposure_us = 8000
-
-[camera]
-width = 2448
-height = 2048
-fx = 3500.0
-fy = 3500.0
-cx = 1223.5
-cy = 1023.5
-k1 = 0.0
-k2 = 0.0
-k3 = 0.0
-p1 = 0.0
-p2 = 0.0
-
-[capture]
-photos = 150
-interval_ms = 500.0
-flash_duration_us = 2000
-
-[[boards]]
-file = "{}"
-"#,
-            board.display()
-        )
-    }
-
-    #[test]
-    fn a_good_rig_file_loads_with_its_board() {
-        let tmp = tempfile::tempdir().unwrap();
-        let rig = RigFile::load(&write(tmp.path(), &good())).unwrap();
-        assert_eq!(rig.board_config().frame_period_us, 500_000);
-        assert_eq!(rig.board_config().pulses, PulseCount::Count(150));
-        let boards = rig.boards().unwrap();
-        assert_eq!(boards.len(), 1);
-        assert!(!boards[0].corners_board_m.is_empty());
-    }
-
-    #[test]
-    fn the_flash_section_calibrate_writes_loads_back() {
-        let estimate = ellipso_vision::calibrate::flash::FlashEstimate {
-            flash_camera_m: nalgebra::Point3::new(0.000_1, -0.030_2, 0.001_7),
-            covariance_m2: nalgebra::Matrix3::identity() * 1e-8,
-            std_m: [1e-4; 3],
-            ray_angle_residuals_rad: vec![1e-3; 12],
-            rms_angle_rad: 1e-3,
-        };
-        let tmp = tempfile::tempdir().unwrap();
-        let text = format!("{}\n{}", good(), estimate.to_toml_flash_section());
-        let rig = RigFile::load(&write(tmp.path(), &text)).unwrap();
-        assert_eq!(
-            rig.flash.map(|f| f.offset_m),
-            Some([0.000_1, -0.030_2, 0.001_7])
-        );
-        assert!(
-            RigFile::load(&write(tmp.path(), &good()))
-                .unwrap()
-                .flash
-                .is_none()
-        );
-    }
-
-    #[test]
-    fn errors_name_the_file_and_the_key() {
-        let tmp = tempfile::tempdir().unwrap();
-        let cases = [
-            (
-                good().replace("bit_depth = 12", "bit_depth = 11"),
-                "sensor.bit_depth",
-            ),
-            (
-                good().replace("192.168.10.2", "camera.local"),
-                "sensor.address",
-            ),
-            (
-                good().replace("flash_duration_us = 2000", "flash_duration_us = 9000"),
-                "flash outside the exposure",
-            ),
-            (
-                good().replace("photos = 150", "photos = 0"),
-                "capture.photos",
-            ),
-            (good().replace("port = ", "prot = "), "unknown field `prot`"),
-            (
-                format!("{}\n[flash]\noffset_m = [0.0, nan, 0.0]\n", good()),
-                "flash.offset_m",
-            ),
-            (good().replace("[capture]", "[capture\n"), "rig.toml"),
-        ];
-        for (text, expected) in cases {
-            let p = write(tmp.path(), &text);
-            let e = RigFile::load(&p).unwrap_err().to_string();
-            assert!(
-                e.contains(expected) && e.contains("rig.toml"),
-                "{expected}: {e}"
-            );
-        }
-    }
-}
+mod tests;

@@ -27,14 +27,7 @@ use ellipso_session::SessionEvent;
 use ellipso_session::reader::Session;
 use nalgebra::{Isometry3, Point3, Vector3};
 
-/// Smallest focal length, in longer image sides (a 180° fisheye is ≈ 0.3).
-pub const FOCAL_MIN_SIDES: f64 = 0.1;
-/// Largest focal length, in longer image sides (a 600 mm lens on a 2/3" sensor is ≈ 70).
-pub const FOCAL_MAX_SIDES: f64 = 100.0;
-/// Largest |k1|, |k2|, |k3|.
-pub const RADIAL_MAX: f64 = 100.0;
-/// Largest |p1|, |p2|.
-pub const TANGENTIAL_MAX: f64 = 1.0;
+pub use ellipso_model::camera::{FOCAL_MAX_SIDES, FOCAL_MIN_SIDES, RADIAL_MAX, TANGENTIAL_MAX};
 /// Farthest camera from the board origin, m.
 pub const POSE_MAX_M: f64 = 100.0;
 /// Longest exposure, µs (one minute).
@@ -74,47 +67,7 @@ pub enum InputError {
 
 /// Checks the camera model (module doc).
 pub fn check_camera(camera: &CameraModel) -> Result<(), InputError> {
-    let bad = |what: String| Err(InputError::Camera(what));
-    if let Err(e) = camera.validate() {
-        return bad(e.to_string());
-    }
-    let side = f64::from(camera.width.max(camera.height));
-    let i = camera.intrinsics;
-    for (name, f) in [("fx", i.fx), ("fy", i.fy)] {
-        if !(FOCAL_MIN_SIDES * side..=FOCAL_MAX_SIDES * side).contains(&f) {
-            return bad(format!(
-                "{name} = {f:e} px is outside [{}, {}] px ({FOCAL_MIN_SIDES}–{FOCAL_MAX_SIDES} \
-                 image widths): no lens has it — recalibrate (`ellipso calibrate`)",
-                FOCAL_MIN_SIDES * side,
-                FOCAL_MAX_SIDES * side
-            ));
-        }
-    }
-    for (name, c, len) in [
-        ("cx", i.cx, f64::from(camera.width)),
-        ("cy", i.cy, f64::from(camera.height)),
-    ] {
-        if !(-0.5 * len..=1.5 * len).contains(&c) {
-            return bad(format!(
-                "{name} = {c:e} px is more than half an image outside the {len}-px image"
-            ));
-        }
-    }
-    let d = camera.distortion;
-    for (name, k, max) in [
-        ("k1", d.k1, RADIAL_MAX),
-        ("k2", d.k2, RADIAL_MAX),
-        ("k3", d.k3, RADIAL_MAX),
-        ("p1", d.p1, TANGENTIAL_MAX),
-        ("p2", d.p2, TANGENTIAL_MAX),
-    ] {
-        if k.abs() > max {
-            return bad(format!(
-                "{name} = {k:e} is beyond ±{max}: no lens distorts so"
-            ));
-        }
-    }
-    Ok(())
+    camera.check_plausible().map_err(InputError::Camera)
 }
 
 /// Checks the poses (`world_from_camera` per frame; module doc).

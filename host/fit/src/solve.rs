@@ -45,10 +45,14 @@
 //! - `Dark`: more samples gated dark than kept, or the kept samples' mean diffuse signal
 //!   (I^d·N) below `dark_signal_dn`.
 //! - `Saturated`: saturated samples exceed `saturated_fraction` of (kept + saturated).
-//! - `EtaUnidentifiable`: std error of η above `max_eta_std_error` (incl. ∞); without a pooled
-//!   prior also when max over samples of |∂DoP_d/∂η| at the solution is below
-//!   `min_eta_sensitivity` or the polarisation SNR (mean model DoP_d / RMS of the DoP
-//!   residuals) is below 1 (with a pooled prior η comes from the material, and its std error —
+//! - `EtaUnidentifiable`: std error of η above `max_eta_std_error` (incl. ∞); η within
+//!   `bound_margin_eta` of either end of its range (with `AtBound`: a value pinned at a bound
+//!   is no measurement); without a pooled prior also when max over samples of |∂DoP_d/∂η| at
+//!   the solution is below `min_eta_sensitivity`, or the polarisation SNR (mean model DoP_d /
+//!   RMS of the DoP residuals) is below 1, or — measurement loss — the data carry less
+//!   information on η than its prior ((JᵀJ)⁻¹_ηη of the whitened rows, prior row included,
+//!   above half the prior's variance: the data did not move η from its start, whatever the
+//!   recorded noise claims; with a pooled prior η comes from the material, and its std error —
 //!   the posterior's — says how well).
 //! - `GrazingOnly`: every sample views more than `grazing_only_deg` from the fitted normal, or
 //!   more samples were gated grazing than kept.
@@ -649,7 +653,22 @@ fn finish(
         .partial_cmp(&config.max_eta_std_error)
         .is_none_or(|o| o == Ordering::Greater);
     let own_data_weak = max_sensitivity < config.min_eta_sensitivity || dop_snr < 1.0;
-    if eta_std_too_large || (guide.eta_prior.is_none() && own_data_weak) {
+    let data_did_not_move_eta = guide.eta_prior.is_none()
+        && problem.loss == LossMode::Measurement
+        && problem.priors.eta.is_some_and(|prior| {
+            // posterior information = data + prior; below twice the prior's, the data carry
+            // less than the prior on its own: the "estimate" is the start value
+            u.eta_variance_unscaled.is_nan() || u.eta_variance_unscaled > 0.5 * prior.sd * prior.sd
+        });
+    // η pinned within the margin of a bound is not a measurement either (it is withheld, with
+    // `AtBound` saying why), never reported as a value with a small σ
+    let eta_at_bound = params.eta < bounds.eta_min + config.bound_margin_eta
+        || params.eta > bounds.eta_max - config.bound_margin_eta;
+    if eta_std_too_large
+        || (guide.eta_prior.is_none() && own_data_weak)
+        || data_did_not_move_eta
+        || eta_at_bound
+    {
         flags.push(FitFlag::EtaUnidentifiable);
     }
     if max_cos_o < config.grazing_only_deg.to_radians().cos() {

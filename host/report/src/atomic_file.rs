@@ -10,13 +10,40 @@ use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+/// Longest file name, in bytes, kept whole inside a temporary sibling's name: a temporary name
+/// adds at most 30 bytes (`.` + `.ellipso-claim` or `.ellipso-new-PID` or `.PID.partial`, a
+/// PID ≤ 10 digits) and a name may have 255 bytes (`NAME_MAX`), so 200 leaves room.
+const SHORT_NAME_MAX: usize = 200;
+
+/// `name` as it appears inside the names of its temporary siblings: whole up to
+/// [`SHORT_NAME_MAX`] bytes; longer, its first 100 bytes (at a character boundary), `~` and a
+/// 64-bit FNV-1a hash of the whole name in hex — so a 250-byte output name gets temporary names
+/// the file system accepts, and two long names still get different ones.
+pub fn short_name(name: &str) -> std::borrow::Cow<'_, str> {
+    if name.len() <= SHORT_NAME_MAX {
+        return name.into();
+    }
+    let mut cut = 100;
+    while !name.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    let hash = name.bytes().fold(0xcbf2_9ce4_8422_2325_u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    format!("{}~{hash:016x}", &name[..cut]).into()
+}
+
 /// The temporary name `path` is written under before the rename.
 fn temporary(path: &Path) -> PathBuf {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.partial", std::process::id()))
+    path.with_file_name(format!(
+        ".{}.{}.partial",
+        short_name(&name),
+        std::process::id()
+    ))
 }
 
 /// Writes `bytes` to `path` atomically (see the module doc).

@@ -21,6 +21,7 @@
 //! session, a name whose extension is the format written, an existing file replaced only when
 //! it is a regular file of that format) and written whole through [`crate::atomic_file`].
 
+mod claim;
 mod file;
 mod fsops;
 pub mod place;
@@ -261,7 +262,8 @@ impl OutputDir {
             }
         };
         std::fs::create_dir_all(&parent).map_err(|e| OutputError::io(&parent, e))?;
-        let staging = parent.join(format!(".{name}.ellipso-new-{}", std::process::id()));
+        let short = crate::atomic_file::short_name(&name);
+        let staging = parent.join(format!(".{short}.ellipso-new-{}", std::process::id()));
         // a stale staging directory of this very pid (a recycled pid) is a dead run's
         let _ = std::fs::remove_dir_all(&staging);
         std::fs::create_dir(&staging).map_err(|e| OutputError::io(&staging, e))?;
@@ -283,7 +285,7 @@ impl OutputDir {
     /// Removes the staging and set-aside directories of dead runs into the same output; a live
     /// run's is [`OutputError::Busy`].
     fn clear_leftovers(&self, parent: &Path, name: &str) -> Result<(), OutputError> {
-        let prefix = format!(".{name}.ellipso-");
+        let prefix = format!(".{}.ellipso-", crate::atomic_file::short_name(name));
         let entries = std::fs::read_dir(parent).map_err(|e| OutputError::io(parent, e))?;
         for e in entries.filter_map(Result::ok) {
             let path = e.path();
@@ -351,7 +353,7 @@ impl OutputDir {
                 "{}.ellipso-old-{}",
                 self.target
                     .file_name()
-                    .map(|n| format!(".{}", n.to_string_lossy()))
+                    .map(|n| format!(".{}", crate::atomic_file::short_name(&n.to_string_lossy())))
                     .unwrap_or_default(),
                 std::process::id()
             ));

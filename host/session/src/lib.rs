@@ -26,6 +26,7 @@ pub mod manifest;
 pub mod poses;
 pub mod reader;
 pub mod rig;
+pub mod rig_ranges;
 pub mod time;
 pub mod writer;
 

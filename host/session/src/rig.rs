@@ -124,15 +124,20 @@ pub enum RigError {
         /// The session directory, as the command needs it.
         dir: String,
     },
+    /// A value outside its physical range ([`crate::rig_ranges`]).
+    #[error("{manifest}: {0}", manifest = crate::paths::MANIFEST)]
+    OutOfRange(#[from] crate::rig_ranges::RangeError),
 }
 
 impl Manifest {
     /// What the fit needs of this session's rig: the flash, the radiometry (relative for
-    /// hardware and replayed sessions whose record predates it), noise and extinction.
+    /// hardware and replayed sessions whose record predates it), noise and extinction, each
+    /// value checked against its physical range ([`crate::rig_ranges`]).
     /// `dir` is the session directory (named in [`RigError::NeedsUpgrade`]).
     pub fn fit_inputs(&self, dir: &std::path::Path) -> Result<FitInputs, RigError> {
         let rig = self.rig.as_ref().ok_or(RigError::Missing)?;
         let flash = rig.flash.clone().ok_or(RigError::MissingFlash)?;
+        crate::rig_ranges::check(rig)?;
         let radiometry = match (&rig.radiometry, &self.source) {
             (Some(r), _) => r.clone(),
             (None, SessionSource::Simulator { .. }) => {
@@ -248,7 +253,7 @@ pub(crate) mod tests {
         }
     }
 
-    fn complete() -> RigRecord {
+    pub(crate) fn complete() -> RigRecord {
         RigRecord {
             camera: camera(),
             flash: Some(FlashSpec::default()),

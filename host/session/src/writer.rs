@@ -185,7 +185,7 @@ impl SessionWriter {
 }
 
 /// Refuses a `dir` that is not new or an empty directory: it must never be another session
-/// (even one whose manifest is gone), nor a file.
+/// (even one whose manifest is gone), nor a file, nor lie inside a recorded session.
 pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
     if dir.join(paths::MANIFEST).exists() {
         return Err(SessionError::AlreadyExists {
@@ -196,6 +196,13 @@ pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
         path: dir.to_path_buf(),
         what,
     };
+    if let Some(session) = session_above(dir) {
+        return Err(not_fresh(format!(
+            "lies inside the recorded session {}: a session is never written into another \
+             (choose an --out outside it)",
+            session.display()
+        )));
+    }
     match fs::symlink_metadata(dir) {
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(()),
         Err(e) => Err(SessionError::io(dir)(e)),
@@ -219,6 +226,22 @@ pub fn check_fresh(dir: &Path) -> Result<(), SessionError> {
             )))
         }
     }
+}
+
+/// The recorded session strictly above `dir`, if any, its path resolved (symbolic links, `..`)
+/// as far as it exists.
+fn session_above(dir: &Path) -> Option<PathBuf> {
+    let abs = std::path::absolute(dir).ok()?;
+    // the nearest existing ancestor, canonical, then the rest as given
+    let mut existing = abs.as_path();
+    let mut rest = Vec::new();
+    while !existing.exists() {
+        rest.push(existing.file_name()?.to_owned());
+        existing = existing.parent()?;
+    }
+    let mut resolved = existing.canonicalize().ok()?;
+    resolved.extend(rest.iter().rev());
+    paths::enclosing_session(resolved.parent()?)
 }
 
 /// Replaces the manifest of the recorded session in `dir` with `manifest` (`ellipso session

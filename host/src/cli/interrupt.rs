@@ -1,4 +1,4 @@
-//! Ctrl-C (SIGINT) and SIGTERM in every stage of every command.
+//! Ctrl-C (SIGINT), SIGTERM and SIGHUP (the terminal closed) in every stage of every command.
 //!
 //! Contract: [`install`] (called once by `main`) watches both signals for the whole run. Where a
 //! stage stops cleanly on its own — a capture ends its session, `sim serve` closes its link —
@@ -17,10 +17,14 @@ use anyhow::Context;
 /// Stages that handle the signals themselves, alive now.
 static DEFERRED: AtomicUsize = AtomicUsize::new(0);
 
-/// Starts watching SIGINT and SIGTERM (see the module doc).
+/// Starts watching SIGINT, SIGTERM and SIGHUP (see the module doc).
 pub fn install() -> anyhow::Result<()> {
     let pending = Arc::new(AtomicUsize::new(0));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+    for sig in [
+        signal_hook::consts::SIGINT,
+        signal_hook::consts::SIGTERM,
+        signal_hook::consts::SIGHUP,
+    ] {
         signal_hook::flag::register_usize(sig, pending.clone(), sig as usize)
             .with_context(|| format!("cannot install the handler for signal {sig}"))?;
     }
@@ -43,10 +47,10 @@ pub fn install() -> anyhow::Result<()> {
 /// Ends the process on signal `sig` after removing uncommitted outputs.
 fn stop(sig: usize) -> ! {
     ellipso_report::output::abandon_active();
-    let name = if sig == signal_hook::consts::SIGINT as usize {
-        "SIGINT"
-    } else {
-        "SIGTERM"
+    let name = match i32::try_from(sig).unwrap_or(0) {
+        signal_hook::consts::SIGINT => "SIGINT",
+        signal_hook::consts::SIGHUP => "SIGHUP",
+        _ => "SIGTERM",
     };
     // stderr may be gone too (a closed terminal): nothing to do about it then
     let _ = std::io::Write::write_all(

@@ -2,8 +2,9 @@
 //! not on a terminal) and the signal handlers of [`StopOnSignal`] — the binary's
 //! [`Recorder`], for `ellipso capture`, the demo and `ellipso bench mesh`.
 //!
-//! Contract: SIGINT and SIGTERM stop the capture cleanly (the session is complete up to the
-//! stop, [`Recorded::signal`] says which); a second SIGINT while it winds down ends the process.
+//! Contract: SIGINT, SIGTERM and SIGHUP (the terminal closed) stop the capture cleanly (the
+//! session is complete up to the stop, with its end record; [`Recorded::signal`] says which); a
+//! second signal while it winds down ends the process.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -50,7 +51,7 @@ impl Recorder for Recording {
     }
 }
 
-/// SIGINT and SIGTERM stop a running capture cleanly: the stop flag is set, the board is told
+/// SIGINT, SIGTERM and SIGHUP stop a running capture cleanly: the stop flag is set, the board is told
 /// to stop, frames in flight are drained and the end record written. A second SIGINT while it
 /// winds down ends the process at once. Dropping this restores the default handling.
 struct StopOnSignal {
@@ -63,12 +64,12 @@ struct StopOnSignal {
 
 impl StopOnSignal {
     fn install() -> anyhow::Result<Self> {
-        use signal_hook::consts::{SIGINT, SIGTERM};
+        use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
         let deferred = super::interrupt::Deferred::take();
         let stop = Arc::new(AtomicBool::new(false));
         let signal = Arc::new(AtomicUsize::new(0));
         let mut ids = Vec::new();
-        for sig in [SIGINT, SIGTERM] {
+        for sig in [SIGINT, SIGTERM, SIGHUP] {
             let context = || format!("cannot install the handler for signal {sig}");
             // registered first, so it sees the flag as it was before this signal
             ids.push(

@@ -432,3 +432,32 @@ fn adversarial_inputs_never_produce_nan() {
     assert_sane(&fit);
     assert!(fit.flags.contains(&FitFlag::TooFewViews));
 }
+
+/// Issue 46 item 3: a material of η 1.0 (below the range) came back as η = 1.100 ± 0.0045,
+/// flagged only `AtBound` and drawn as measured. A value pinned at a bound is withheld.
+#[test]
+fn eta_pinned_at_its_bound_is_withheld() {
+    let views = views();
+    let truth = PbrdfParams {
+        eta: 1.0,
+        ..material("ceramic")
+    };
+    let v = synth(&views, UP, &truth, Some(&sensor()), 1.0, 46);
+    let fit = fit_vertex(
+        &views,
+        &v,
+        true,
+        None,
+        &VertexGuide::default(),
+        &SolverConfig::default(),
+    );
+    assert_sane(&fit);
+    assert!((fit.params.eta - 1.1).abs() < 0.01, "{fit:?}");
+    assert!(fit.flags.contains(&FitFlag::AtBound), "{fit:?}");
+    assert!(fit.flags.contains(&FitFlag::EtaUnidentifiable), "{fit:?}");
+    let shown = crate::data::Identifiable::of_mask(FitFlag::mask(&fit.flags));
+    assert!(
+        !shown.eta,
+        "η at its bound is reported as a measurement: {fit:?}"
+    );
+}

@@ -27,6 +27,11 @@ pub(super) const NULL_RELATIVE: f64 = 1e-12;
 pub(super) struct Uncertainty {
     pub std_error: [f64; 10],
     pub normal_std_error_deg: f64,
+    /// (JᵀJ)⁻¹ of η without the s² scale: in the measurement loss, whose rows are whitened by
+    /// the claimed noise and include the prior's row, the variance the data and the prior
+    /// together leave η. Compared with the prior's own variance it says whether the data moved
+    /// η at all (`solve.rs`, `EtaUnidentifiable`); +inf where η is null.
+    pub eta_variance_unscaled: f64,
 }
 
 /// Standard errors at (`x`, `albedos`) on `chart` (p = q = 0 at the solution).
@@ -48,7 +53,7 @@ pub(super) fn standard_errors(
         vec![0, 1, 2, 3, 4, 7, 10, 11]
     };
     let p = active.len();
-    let variance = covariance_diagonal(&jtj, &active, cost, m, p);
+    let (variance, unscaled) = covariance_diagonal(&jtj, &active, cost, m, p);
     let at = |k: usize| variance[k].sqrt();
     let mut std_error = [f64::INFINITY; 10];
     for (k, e) in std_error.iter_mut().enumerate() {
@@ -67,6 +72,7 @@ pub(super) fn standard_errors(
     Uncertainty {
         std_error,
         normal_std_error_deg: normal_var.sqrt().to_degrees(),
+        eta_variance_unscaled: unscaled[0],
     }
 }
 
@@ -94,7 +100,7 @@ pub(super) fn all_duals(
 }
 
 /// Diagonal of s²·(JᵀJ)⁻¹ restricted to `active` (others INFINITY), with the null-direction rule
-/// of the module doc.
+/// of the module doc; second, the same diagonal without the factor s².
 #[expect(
     clippy::needless_range_loop,
     reason = "eigenvector rows, live and active indices are parallel arrays"
@@ -105,10 +111,11 @@ fn covariance_diagonal(
     cost: f64,
     m: usize,
     p: usize,
-) -> [f64; N_ALL] {
+) -> ([f64; N_ALL], [f64; N_ALL]) {
     let mut out = [f64::INFINITY; N_ALL];
+    let mut unscaled = [f64::INFINITY; N_ALL];
     if m <= p || !cost.is_finite() {
-        return out;
+        return (out, unscaled);
     }
     let s2 = cost / (m - p) as f64;
     let scale: Vec<f64> = active.iter().map(|&i| jtj[(i, i)].sqrt()).collect();
@@ -116,7 +123,7 @@ fn covariance_diagonal(
         .filter(|&a| scale[a] > 0.0 && scale[a].is_finite())
         .collect();
     if live.is_empty() {
-        return out;
+        return (out, unscaled);
     }
     let n = live.len();
     let h = DMatrix::from_fn(n, n, |r, c| {
@@ -124,12 +131,12 @@ fn covariance_diagonal(
         jtj[(i, j)] / (scale[live[r]] * scale[live[c]])
     });
     if !h.iter().all(|v| v.is_finite()) {
-        return out;
+        return (out, unscaled);
     }
     let eig = h.symmetric_eigen();
     let lambda_max = eig.eigenvalues.iter().copied().fold(0.0, f64::max);
     if lambda_max <= 0.0 {
-        return out;
+        return (out, unscaled);
     }
     for r in 0..n {
         let mut var = 0.0;
@@ -144,11 +151,10 @@ fn covariance_diagonal(
             }
         }
         let a = live[r];
-        out[active[a]] = if null_loading > 1e-6 {
-            f64::INFINITY
-        } else {
-            s2 * var / (scale[a] * scale[a])
-        };
+        if null_loading <= 1e-6 {
+            unscaled[active[a]] = var / (scale[a] * scale[a]);
+            out[active[a]] = s2 * unscaled[active[a]];
+        }
     }
-    out
+    (out, unscaled)
 }

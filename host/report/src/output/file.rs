@@ -4,8 +4,9 @@
 //! Contract of [`OutputFile::claim`]: the name is not a directory's (`out/`), its place passes
 //! [`super::place::check`], its extension is the format's, and an existing file there is
 //! replaced only when it is a regular file whose first bytes are the format's (a user's
-//! document saved under the same name is refused, never overwritten). The temporary files a
-//! killed run left beside it are removed.
+//! document saved under the same name is refused, never overwritten); it is claimed
+//! ([`super::claim`]): a second live run writing the same file is refused. The temporary files
+//! a killed run left beside it are removed.
 
 use std::io::Read;
 use std::path::{Path, PathBuf};
@@ -69,7 +70,7 @@ fn remove_dead_partials(parent: &Path, path: &Path) {
     let Some(name) = path.file_name().map(|n| n.to_string_lossy().into_owned()) else {
         return;
     };
-    let prefix = format!(".{name}.");
+    let prefix = format!(".{}.", crate::atomic_file::short_name(&name));
     for e in std::fs::read_dir(parent).into_iter().flatten().flatten() {
         let file = e.file_name().to_string_lossy().into_owned();
         let Some(pid) = file
@@ -88,12 +89,14 @@ fn remove_dead_partials(parent: &Path, path: &Path) {
     }
 }
 
-/// A result file claimed by a command.
+/// A result file claimed by a command; the claim ([`super::claim`]) is held while any clone
+/// lives.
 #[derive(Debug, Clone)]
 pub struct OutputFile {
     path: PathBuf,
     shown: PathBuf,
     format: FileFormat,
+    _claim: std::sync::Arc<super::claim::FileClaim>,
 }
 
 impl OutputFile {
@@ -119,6 +122,13 @@ impl OutputFile {
                 text.trim_end_matches('/'),
                 format.extensions[0]
             )));
+        }
+        if out.file_name().is_some_and(|n| n.len() > 255) {
+            return Err(wrong(
+                "its name is longer than 255 bytes, more than a file system stores; choose a \
+                 shorter name"
+                    .into(),
+            ));
         }
         let path = place::resolve(out)?;
         place::check(&path, command, inputs, derived)?;
@@ -160,12 +170,16 @@ impl OutputFile {
         }
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(|e| OutputError::io(parent, e))?;
+        }
+        let claim = super::claim::FileClaim::take(&path, out)?;
+        if let Some(parent) = path.parent() {
             remove_dead_partials(parent, &path);
         }
         Ok(OutputFile {
             path,
             shown: out.to_path_buf(),
             format,
+            _claim: std::sync::Arc::new(claim),
         })
     }
 

@@ -18,6 +18,13 @@ pub struct DirLock {
     _file: File,
 }
 
+impl DirLock {
+    /// The metadata of the locked file itself (not of whatever its path names now).
+    pub fn metadata(&self) -> io::Result<std::fs::Metadata> {
+        self._file.metadata()
+    }
+}
+
 /// Locks `dir` without waiting: `Ok(None)` when another process holds it.
 pub fn try_lock(dir: &Path) -> io::Result<Option<DirLock>> {
     let file = File::open(dir)?;

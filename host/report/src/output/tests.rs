@@ -149,6 +149,8 @@ fn files_are_claimed_by_format_and_place() {
     let f = claim(&d.join("m.ply"), FileFormat::PLY).unwrap();
     f.write(b"ply\nnew").unwrap();
     assert_eq!(std::fs::read(d.join("m.ply")).unwrap(), b"ply\nnew");
+    // the run ends: its claim goes with it
+    drop(f);
     // a FIFO is nobody's output
     let fifo = d.join("p.ply");
     let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
@@ -174,4 +176,47 @@ fn files_are_claimed_by_format_and_place() {
     )
     .unwrap_err();
     assert!(matches!(e, OutputError::OverlapsInput { .. }), "{e}");
+}
+
+/// Issue 46 item 7: two runs writing one result file at once — the second is refused at its
+/// claim, and once the first ends the file is free again.
+#[test]
+fn a_result_file_is_claimed_by_one_run_at_a_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("same.ply");
+    let first = OutputFile::claim(&out, "mesh", FileFormat::PLY, &[], None).unwrap();
+    // a second claim in this process stands for a second run: flock is per open file
+    let e = OutputFile::claim(&out, "mesh", FileFormat::PLY, &[], None).unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("another ellipso run is writing this output now"),
+        "{e}"
+    );
+    first.write(b"ply\nformat ascii 1.0\nend_header\n").unwrap();
+    drop(first);
+    let again = OutputFile::claim(&out, "mesh", FileFormat::PLY, &[], None).unwrap();
+    drop(again);
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(left, ["same.ply"], "no claim or temporary file is left");
+}
+
+/// Issue 46 (minor): a 250-byte output name failed on the tool's own temporary names.
+#[test]
+fn long_output_names_get_temporary_names_the_file_system_takes() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = format!("{}.ply", "n".repeat(246));
+    let out = dir.path().join(&long);
+    let f = OutputFile::claim(&out, "mesh", FileFormat::PLY, &[], None).unwrap();
+    f.write(b"ply\n").unwrap();
+    drop(f);
+    assert_eq!(std::fs::read(&out).unwrap(), b"ply\n");
+    let d = OutputDir::claim(&dir.path().join("d".repeat(250)), "fit", &[]).unwrap();
+    std::fs::write(d.path().join("x.json"), b"{}").unwrap();
+    d.commit().unwrap();
+    let too_long = dir.path().join(format!("{}.ply", "n".repeat(253)));
+    let e = OutputFile::claim(&too_long, "mesh", FileFormat::PLY, &[], None).unwrap_err();
+    assert!(e.to_string().contains("longer than 255 bytes"), "{e}");
 }

@@ -473,3 +473,26 @@ fn pose_events_that_disagree_are_reported() {
         s.report.summary()
     );
 }
+
+/// Issue 46 item 6: `capture --out S/frames/new` wrote a whole session inside another one.
+#[test]
+fn a_new_session_is_never_written_inside_another() {
+    let tmp = tempfile::tempdir().unwrap();
+    let outer = tmp.path().join("s");
+    drop(SessionWriter::create(&outer, manifest()).unwrap());
+    for inner in [
+        outer.join(paths::FRAMES).join("new"),
+        outer.join("deeper/still/new"),
+        outer.join(paths::FRAMES).join("../x"),
+    ] {
+        let e = SessionWriter::create(&inner, manifest()).unwrap_err();
+        assert!(
+            e.to_string().contains("inside the recorded session"),
+            "{}: {e}",
+            inner.display()
+        );
+        assert!(!inner.exists(), "{}", inner.display());
+    }
+    // beside it is fine
+    drop(SessionWriter::create(&tmp.path().join("t"), manifest()).unwrap());
+}

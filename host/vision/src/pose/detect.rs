@@ -100,6 +100,31 @@ impl Default for DetectorConfig {
     }
 }
 
+/// The fewest pixels a side of an image must have for any tag to fit in it: the smallest family
+/// (tag16h5) is 8 cells across with its white border, and the decoder samples each cell at
+/// least once, so a tag under 8 px across cannot be decoded. An image narrower than that holds
+/// no tag; it is refused before the library sees it (the library's quad search itself crashes
+/// on images under 3 px a side after decimation, see [`quad_image_side`]).
+pub const MIN_TAG_SIDE_PX: usize = 8;
+
+/// The smallest side of the decimated image the library's quad search handles: its gradient
+/// clustering splits rows `1 .. side − 1` into tasks and reads the first task's result, so it
+/// needs at least one such row (side ≥ 3); below that it reads unallocated memory.
+const MIN_QUAD_IMAGE_SIDE_PX: usize = 3;
+
+/// A side of the image the library's quad search works on, as `image_u8_decimate` computes it:
+/// `side / 3 · 2` at decimation 1.5, `1 + (side − 1) / ⌊decimation⌋` above 1, the side itself
+/// otherwise.
+fn quad_image_side(side: usize, decimation: f32) -> usize {
+    if decimation == 1.5 {
+        side / 3 * 2
+    } else if decimation > 1.0 {
+        1 + (side - 1) / (decimation as usize).max(1)
+    } else {
+        side
+    }
+}
+
 /// Why detection could not run.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DetectError {
@@ -120,6 +145,13 @@ pub enum DetectError {
     /// The image is empty or too large for the library (dimensions must fit in i32).
     #[error("image size {width}×{height} is not supported")]
     ImageSize { width: usize, height: usize },
+    /// The image is too small to hold a tag (and too small for the library's quad search,
+    /// which reads past its buffers on images under 3 px a side after decimation).
+    #[error(
+        "the image is {width}×{height} px: too small to hold a tag (a tag needs at least \
+         {MIN_TAG_SIDE_PX} px a side); capture at a higher --resolution"
+    )]
+    TooSmall { width: usize, height: usize },
     /// The library could not allocate the image.
     #[error("AprilTag image allocation failed: {0}")]
     Allocate(String),
@@ -226,6 +258,13 @@ impl TagDetector {
                 height,
                 expected,
             });
+        }
+        let decimation = self.config.decimation;
+        if width.min(height) < MIN_TAG_SIDE_PX
+            || quad_image_side(width, decimation).min(quad_image_side(height, decimation))
+                < MIN_QUAD_IMAGE_SIDE_PX
+        {
+            return Err(DetectError::TooSmall { width, height });
         }
         let mut image =
             Image::zeros_with_alignment(width, height, apriltag::image_buf::DEFAULT_ALIGNMENT_U8)

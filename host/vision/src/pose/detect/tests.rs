@@ -160,3 +160,46 @@ fn rejects_bad_settings_and_buffers() {
             .is_empty()
     );
 }
+
+/// Issue 46 item 1: the library's quad search read unallocated memory (a segfault) on images
+/// under 3 px tall after decimation. Every size is now either searched or refused by name.
+#[test]
+fn tiny_images_are_refused_not_crashed_on() {
+    for decimation in [1.0_f32, 1.5, 2.0, 3.0] {
+        let mut d = TagDetector::new(DetectorConfig {
+            decimation,
+            ..Default::default()
+        })
+        .unwrap();
+        for (w, h) in [
+            (1, 1),
+            (2, 2),
+            (4, 4),
+            (8, 4),
+            (32, 2),
+            (2, 32),
+            (8192, 1),
+            (1, 8192),
+            (8, 8),
+            (9, 9),
+            (16, 5),
+            (64, 16),
+        ] {
+            let gray: Vec<u8> = (0..w * h).map(|i| (i * 37 % 251) as u8).collect();
+            match d.detect(&gray, w, h) {
+                Ok(tags) => assert!(tags.is_empty()),
+                Err(e) => {
+                    assert_eq!(
+                        e,
+                        DetectError::TooSmall {
+                            width: w,
+                            height: h
+                        }
+                    );
+                    assert!(w.min(h) < MIN_TAG_SIDE_PX || decimation >= 2.0, "{w}×{h}");
+                    assert!(e.to_string().contains(&format!("{w}×{h} px")));
+                }
+            }
+        }
+    }
+}
