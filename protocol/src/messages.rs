@@ -94,8 +94,8 @@ pub enum HostMessage {
     /// Reboot into the USB DFU bootloader for a firmware update (`ellipso board flash`): the
     /// board stops any capture, writes both outputs low, sends the `Ack` and then resets into
     /// its bootloader; the serial port goes away. Refused with `Busy` while a capture runs.
-    /// Appended after the first release's variants, so every older message keeps its
-    /// encoding; a board older than this command answers `Fault(BadFrame(UnknownMessage))`.
+    /// Appended (protocol version 3), so every older message keeps its encoding; a board
+    /// older than this command answers `Fault(BadFrame(UnknownMessage))`.
     EnterBootloader,
 }
 

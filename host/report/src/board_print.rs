@@ -198,7 +198,11 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
             .as_deref()
             .unwrap_or("(unnamed)")
             .chars()
-            .map(|c| if c.is_ascii_graphic() || c == ' ' { c } else { '?' })
+            .map(|c| if c.is_ascii_graphic() || c == ' ' {
+                c
+            } else {
+                '?'
+            })
             .collect::<String>(),
         board.family.name()
     );
@@ -281,7 +285,12 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
         }
     }
     // end ticks mark the exact 0 and 100 mm positions
-    quads.push(rect(x + SCALE_BAR_MM - line_mm, bar_top, x + SCALE_BAR_MM, bar_bottom));
+    quads.push(rect(
+        x + SCALE_BAR_MM - line_mm,
+        bar_top,
+        x + SCALE_BAR_MM,
+        bar_bottom,
+    ));
     texts.push(Text {
         x_mm: x + SCALE_BAR_MM + gap,
         baseline_mm: bar_bottom,

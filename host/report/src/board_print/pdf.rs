@@ -13,7 +13,12 @@ const PT_PER_MM: f64 = 72.0 / 25.4;
 pub fn to_pdf(drawing: &Drawing) -> Vec<u8> {
     let [w_mm, h_mm] = drawing.paper_mm;
     // sheet mm (y down) to PDF points (y up)
-    let pt = |p: [f64; 2]| ((p[0] * PT_PER_MM) as f32, ((h_mm - p[1]) * PT_PER_MM) as f32);
+    let pt = |p: [f64; 2]| {
+        (
+            (p[0] * PT_PER_MM) as f32,
+            ((h_mm - p[1]) * PT_PER_MM) as f32,
+        )
+    };
     let (catalog_id, tree_id, page_id, font_id, content_id) = (
         Ref::new(1),
         Ref::new(2),

@@ -62,8 +62,7 @@ pub fn rasterise(drawing: &Drawing, dpi: f64) -> Result<GrayImage, RasterError> 
     let px_per_mm = dpi / 25.4;
     let width = (drawing.paper_mm[0] * px_per_mm).round().max(0.0) as usize;
     let height = (drawing.paper_mm[1] * px_per_mm).round().max(0.0) as usize;
-    if !(dpi.is_finite() && dpi > 0.0) || width == 0 || height == 0 || width * height > MAX_PIXELS
-    {
+    if !(dpi.is_finite() && dpi > 0.0) || width == 0 || height == 0 || width * height > MAX_PIXELS {
         return Err(RasterError::Resolution { dpi, width, height });
     }
     let mut black = vec![0u16; width * height];
@@ -101,8 +100,7 @@ pub fn rasterise(drawing: &Drawing, dpi: f64) -> Result<GrayImage, RasterError> 
     let mut rgb: Vec<u8> = gray.iter().flat_map(|&g| [g, g, g]).collect();
     crate::font::ensure_registered();
     {
-        let mut backend =
-            BitMapBackend::with_buffer(&mut rgb, (width as u32, height as u32));
+        let mut backend = BitMapBackend::with_buffer(&mut rgb, (width as u32, height as u32));
         for t in &drawing.texts {
             let font = FontDesc::new(
                 FontFamily::Name(crate::font::FAMILY),

@@ -66,7 +66,10 @@ fn a_tag_in_the_printer_margin_or_a_full_sheet_is_refused() {
     // tag 0's white ring (10 cells of 3.75 mm = 37.5 mm) reaches 1.25 mm from the left edge
     let b = board(&[[20.0, 60.0]], [210.0, 148.0]);
     let err = layout(&b, 5.0).expect_err("in margin");
-    assert!(matches!(err, PrintError::TagInMargin { id: 0, .. }), "{err}");
+    assert!(
+        matches!(err, PrintError::TagInMargin { id: 0, .. }),
+        "{err}"
+    );
     assert!(layout(&b, 1.0).is_ok());
     // a sheet filled with tags leaves no room for the scale bar
     let full: Vec<[f64; 2]> = (0..4)
@@ -85,7 +88,11 @@ fn pdf_and_svg_are_at_physical_scale() {
     assert!(pdf.starts_with(b"%PDF-"));
     let text = String::from_utf8_lossy(&pdf);
     // A4 in points: 595.28 × 841.89
-    assert!(text.contains("/MediaBox [0 0 595.27"), "{}", &text[..400.min(text.len())]);
+    assert!(
+        text.contains("/MediaBox [0 0 595.27"),
+        "{}",
+        &text[..400.min(text.len())]
+    );
     assert!(text.contains("ellipso board test"));
     let svg = svg::to_svg(&d);
     assert!(svg.contains(r#"width="210mm" height="297mm" viewBox="0 0 210 297""#));
