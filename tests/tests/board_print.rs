@@ -77,7 +77,10 @@ fn view(
     let y = z.cross(&x);
     let board_from_camera = Isometry3::from_parts(
         Translation3::from(eye.coords),
-        UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[x, y, z])),
+        // exact: `from_matrix` iterates from the identity and stalls on a 180° turn
+        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(
+            nalgebra::Matrix3::from_columns(&[x, y, z]),
+        )),
     );
     board_from_camera.inverse()
 }
@@ -151,6 +154,15 @@ fn track(board: &Board, gray: &[u8], cam: &CameraModel) -> Isometry3<f64> {
     let detections = detector
         .detect(gray, cam.width as usize, cam.height as usize)
         .expect("detect");
+    if detections.is_empty() {
+        let _ = image::save_buffer(
+            std::env::temp_dir().join("ellipso-board-print-view.png"),
+            gray,
+            cam.width,
+            cam.height,
+            image::ExtendedColorType::L8,
+        );
+    }
     let assembly = assemble_correspondences(&detections, &Corners(board));
     estimate_board_pose(cam, &assembly.correspondences, &PoseConfig::default())
         .expect("pose")
