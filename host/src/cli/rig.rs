@@ -188,7 +188,8 @@ fn init(args: InitArgs) -> anyhow::Result<()> {
     let folder_abs = std::path::absolute(folder)?;
     let mut boards = Vec::new();
     for b in &args.boards {
-        ellipso_sim::scene::load_board_file(b).with_context(|| format!("--board {}", b.display()))?;
+        ellipso_sim::scene::load_board_file(b)
+            .with_context(|| format!("--board {}", b.display()))?;
         let rel = relative(&std::path::absolute(b)?, &folder_abs);
         boards.push(rel.display().to_string());
     }

@@ -5,7 +5,7 @@
 
 use std::time::Duration;
 
-use rusb::{Direction, Recipient, RequestType};
+use rusb::{Direction, Recipient, RequestType, UsbContext as _};
 
 use super::{DeviceIdentity, DfuTransport, STM32_DFU_VID_PID, TransportError};
 
@@ -36,7 +36,7 @@ pub enum UsbError {
 
 /// An STM32 bootloader opened over USB.
 pub struct UsbDfu {
-    handle: rusb::DeviceHandle<rusb::GlobalContext>,
+    handle: rusb::DeviceHandle<rusb::Context>,
     interface: u8,
     identity: DeviceIdentity,
 }
@@ -53,7 +53,8 @@ impl std::fmt::Debug for UsbDfu {
 /// "bus B address A")`.
 pub fn list_dfu_devices() -> Result<Vec<(u16, u16, String)>, UsbError> {
     let mut out = Vec::new();
-    for device in rusb::devices()?.iter() {
+    // an own context: libusb's global one panics where USB is absent (a container)
+    for device in rusb::Context::new()?.devices()?.iter() {
         let Ok(desc) = device.device_descriptor() else {
             continue;
         };
@@ -82,7 +83,7 @@ pub fn list_dfu_devices() -> Result<Vec<(u16, u16, String)>, UsbError> {
 impl UsbDfu {
     /// Opens the first STM32 bootloader on USB.
     pub fn open_stm32() -> Result<Self, UsbError> {
-        let devices = rusb::devices()?;
+        let devices = rusb::Context::new()?.devices()?;
         let mut seen = 0;
         for device in devices.iter() {
             seen += 1;
