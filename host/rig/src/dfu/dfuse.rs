@@ -273,7 +273,7 @@ impl<T: DfuTransport> DfuSe<T> {
     }
 
     /// Brings the device to dfuIDLE from wherever a previous session left it.
-    fn to_idle(&mut self) -> Result<(), DfuError> {
+    fn back_to_idle(&mut self) -> Result<(), DfuError> {
         let during = "asking the bootloader's state";
         let st = self.status(during)?;
         if st.state == DfuState::Error as u8 {
@@ -307,7 +307,7 @@ impl<T: DfuTransport> DfuSe<T> {
         progress: &mut dyn FnMut(Phase, usize, usize),
     ) -> Result<FlashReport, DfuError> {
         self.check_image(image)?;
-        self.to_idle()?;
+        self.back_to_idle()?;
         let sectors = self.layout.sectors_for(FLASH_BASE, image.len() as u32);
         if let Some(s) = sectors.iter().find(|s| !s.writable) {
             return Err(DfuError::WrongDevice {

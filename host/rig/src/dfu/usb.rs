@@ -115,9 +115,11 @@ impl UsbDfu {
                     // DFU functional descriptor: bLength 9, type 0x21, attributes,
                     // wDetachTimeOut, wTransferSize, bcdDFUVersion
                     let extra = d.extra();
-                    let transfer_size = (extra.len() >= 7 && extra[1] == 0x21)
-                        .then(|| u16::from_le_bytes([extra[5], extra[6]]))
-                        .unwrap_or(2048);
+                    let transfer_size = if extra.len() >= 7 && extra[1] == 0x21 {
+                        u16::from_le_bytes([extra[5], extra[6]])
+                    } else {
+                        2048
+                    };
                     let interface = d.interface_number();
                     // the kernel has no driver on a DFU interface; detach is best effort
                     let _ = handle.set_auto_detach_kernel_driver(true);
