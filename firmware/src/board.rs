@@ -32,6 +32,7 @@
 //! | `Stop` | Ack | Ack | Ack → Configured | flash off, trigger low, Ack → Configured |
 //! | `Ping { nonce }` | `Pong { nonce, t_device_us: now }` | same | same | same |
 //! | `StatusRequest` | `Status` | same | same | same |
+//! | `EnterBootloader` | outputs low, Ack, bootloader requested | same | same | `Busy` |
 //!
 //! - `FireOne` needs [`TriggerSource::HostCommand`] (checked before the armed state); it starts
 //!   the capture when armed, fires one pulse at `now + lead_us`, and is refused with
@@ -47,6 +48,9 @@
 //!   panic button. Its `Ack` is sent after the flash is off.
 //! - Each `Rejected` counts in `rejected_commands`; a bad frame counts in `bad_frames` and is
 //!   answered with `Fault(BadFrame(kind))`; neither changes the state.
+//! - `EnterBootloader` only records the request ([`Board::take_bootloader_request`]): the port
+//!   resets into the chip's DFU bootloader once the `Ack` has left (a reset from here would cut
+//!   the reply). A running capture refuses it (`Busy`): a firmware update never cuts a scan.
 //! - When a counted capture completes, `poll` sends a `Status` (state `Configured`).
 //! - Grip-button presses are accepted while `Running` with [`TriggerSource::GripButton`]; a press
 //!   within one frame period of the previous trigger is debounced (ignored).
@@ -104,6 +108,7 @@ pub struct Board {
     bad_frames: u32,
     tx_overflows: u32,
     rejected_commands: u32,
+    bootloader_requested: bool,
 }
 
 impl Board {
@@ -119,7 +124,15 @@ impl Board {
             bad_frames: 0,
             tx_overflows: 0,
             rejected_commands: 0,
+            bootloader_requested: false,
         })
+    }
+
+    /// Whether the host asked for the DFU bootloader ([`HostMessage::EnterBootloader`]), and
+    /// clears the request. The port calls it after sending its replies and, when `true`, resets
+    /// into the bootloader.
+    pub fn take_bootloader_request(&mut self) -> bool {
+        core::mem::take(&mut self.bootloader_requested)
     }
 
     /// The `HelloReply` payload.
@@ -299,6 +312,16 @@ impl Board {
                 t_device_us: now_us,
             }),
             HostMessage::StatusRequest => Ok(BoardMessage::Status(self.status(now_us))),
+            HostMessage::EnterBootloader => {
+                if self.state() == BoardState::Running {
+                    Err(RejectReason::Busy)
+                } else {
+                    self.sequencer.stop(now_us, outputs, &mut sink);
+                    self.armed = false;
+                    self.bootloader_requested = true;
+                    Ok(BoardMessage::Ack(CommandKind::EnterBootloader))
+                }
+            }
         };
         let reply = reply.unwrap_or_else(|reason| {
             self.rejected_commands = self.rejected_commands.saturating_add(1);

@@ -2,6 +2,7 @@
 
 pub mod allocator;
 pub mod bench;
+pub mod board;
 pub mod calibrate;
 pub mod capture;
 pub mod demo;
@@ -19,6 +20,7 @@ pub mod polar;
 pub mod progress;
 pub mod record;
 pub mod replay;
+pub mod rig;
 pub mod session;
 pub mod sim;
 pub mod sim_serve;

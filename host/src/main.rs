@@ -38,8 +38,17 @@ enum Command {
     /// Benchmarks that write reports (pose accuracy and speed; the fit's accuracy vs time).
     #[command(subcommand)]
     Bench(cli::bench::Args),
-    /// List trigger boards (serial ports), video devices and, with --gige, GigE cameras.
+    /// AprilTag boards to print (`board print`, `board new`); the trigger board's firmware
+    /// (`board flash`).
+    #[command(subcommand)]
+    Board(cli::board::Args),
+    /// What is attached and answers: trigger boards (asked over the protocol), boards in DFU
+    /// mode, video devices and, with --gige, GigE cameras; `--json` too.
     Devices(cli::devices::Args),
+    /// Rig files: write one to start from (`rig init`), check one and its trigger board
+    /// (`rig check`).
+    #[command(subcommand)]
+    Rig(cli::rig::Args),
     /// Replay a recorded session through the stages after capture (pose tracking).
     Replay(cli::replay::Args),
     /// Recorded sessions: upgrade one written by an older ellipso.
@@ -132,6 +141,8 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Polar(args) => cli::polar::run(args),
         Command::Replay(args) => cli::replay::run(args),
         Command::Session(args) => cli::session::run(args),
+        Command::Board(args) => cli::board::run(args),
+        Command::Rig(args) => cli::rig::run(args),
         Command::Devices(args) => cli::devices::run(args),
         Command::Bench(args) => cli::bench::run(args),
         Command::Calibrate(args) => cli::calibrate::run(args),

@@ -8,6 +8,7 @@
 //! - [`spec`]: board descriptions as written in TOML (board files and inline tables).
 //! - [`board`]: validation and the built board: albedo lookup, tag corners, ray hits.
 //! - [`placed`]: a board posed in the world (`world_from_board`) for world-space rays.
+//! - [`texture`]: a printed sheet's raster laid over a board (the simulator renders prints).
 //!
 //! Frame conventions and the corner order are documented in [`board`].
 
@@ -16,6 +17,7 @@ mod codes;
 pub mod family;
 pub mod placed;
 pub mod spec;
+pub mod texture;
 
 #[cfg(test)]
 mod tests;
@@ -26,3 +28,4 @@ pub use board::{
 };
 pub use family::{TagCells, TagCodeTable, TagFamily};
 pub use placed::PlacedBoard;
+pub use texture::{SheetTexture, TextureError};

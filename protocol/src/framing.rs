@@ -51,7 +51,7 @@ pub trait Message: Serialize + DeserializeOwned + sealed::Sealed {
 }
 
 impl Message for HostMessage {
-    const VARIANT_COUNT: u32 = 8;
+    const VARIANT_COUNT: u32 = 9;
 }
 
 impl Message for BoardMessage {

@@ -32,5 +32,6 @@ pub use messages::*;
 /// Version of this protocol; both sides exchange it in `Hello` / `HelloReply`.
 ///
 /// History: 1 — the first release; 2 — flash-energy brackets (`CaptureConfig::bracket`,
-/// `PulseEvent::{bracket_step, flash_on_us}`, two bracket `RejectReason`s).
-pub const PROTOCOL_VERSION: u16 = 2;
+/// `PulseEvent::{bracket_step, flash_on_us}`, two bracket `RejectReason`s); 3 — reboot into the
+/// DFU bootloader for a firmware update (`HostMessage::EnterBootloader`, appended).
+pub const PROTOCOL_VERSION: u16 = 3;

@@ -91,6 +91,12 @@ pub enum HostMessage {
     },
     /// Asks for a [`BoardMessage::Status`].
     StatusRequest,
+    /// Reboot into the USB DFU bootloader for a firmware update (`ellipso board flash`): the
+    /// board stops any capture, writes both outputs low, sends the `Ack` and then resets into
+    /// its bootloader; the serial port goes away. Refused with `Busy` while a capture runs.
+    /// Appended (protocol version 3), so every older message keeps its encoding; a board
+    /// older than this command answers `Fault(BadFrame(UnknownMessage))`.
+    EnterBootloader,
 }
 
 /// Which command an `Ack` or `Rejected` answers.
@@ -112,6 +118,8 @@ pub enum CommandKind {
     Ping,
     /// [`HostMessage::StatusRequest`].
     StatusRequest,
+    /// [`HostMessage::EnterBootloader`].
+    EnterBootloader,
 }
 
 impl HostMessage {
@@ -126,6 +134,7 @@ impl HostMessage {
             Self::Stop => CommandKind::Stop,
             Self::Ping { .. } => CommandKind::Ping,
             Self::StatusRequest => CommandKind::StatusRequest,
+            Self::EnterBootloader => CommandKind::EnterBootloader,
         }
     }
 }

@@ -41,8 +41,8 @@ fn flipped_crc_byte_is_bad_crc() {
 
 #[test]
 fn unknown_discriminant_is_unknown_message() {
-    let f = raw_frame(&[8]); // HostMessage has 8 variants: 0..=7
-    assert_eq!(error_of(&f), FrameError::UnknownMessage { discriminant: 8 });
+    let f = raw_frame(&[9]); // HostMessage has 9 variants: 0..=8
+    assert_eq!(error_of(&f), FrameError::UnknownMessage { discriminant: 9 });
     let f = raw_frame(&[0xff, 0x01]); // varint 255
     assert_eq!(
         error_of(&f),

@@ -526,7 +526,9 @@ fn documented_commands() -> Vec<(String, String)> {
 #[test]
 fn every_flag_the_docs_show_exists() {
     // docs/fit.md showed `--no-augment`, which the CLI rejects
-    const SUBCOMMANDS: [&str; 12] = [
+    const SUBCOMMANDS: [&str; 14] = [
+        "board",
+        "rig",
         "demo",
         "capture",
         "model",
@@ -562,7 +564,7 @@ fn every_flag_the_docs_show_exists() {
             if let Some(next) = tokens
                 .get(i + 2)
                 .and_then(|s| s.trim_end_matches('`').split("\\|").next())
-                && ["model", "sim", "bench", "export"].contains(&sub)
+                && ["model", "sim", "bench", "export", "board", "rig"].contains(&sub)
                 && next.chars().all(|c| c.is_ascii_lowercase())
             {
                 path.push(next);

@@ -641,3 +641,36 @@ fn contradictory_board_configs_are_refused_at_construction() {
 mod bracket;
 
 mod proptests;
+
+#[test]
+fn enter_bootloader_is_refused_while_running_and_otherwise_requested_once_with_outputs_low() {
+    use CommandKind as K;
+    let free = config(TriggerSource::FreeRun, PulseCount::Continuous);
+    let mut rig = Rig::armed(free);
+    assert_eq!(rig.send(HostMessage::Start, 10), [ack(K::Start)]);
+    assert_eq!(
+        rig.send(HostMessage::EnterBootloader, 20),
+        [rejected(K::EnterBootloader, RejectReason::Busy)],
+        "a firmware update never cuts a scan"
+    );
+    assert!(!rig.board.take_bootloader_request());
+    assert_eq!(rig.board.state(), BoardState::Running);
+    assert_eq!(rig.send(HostMessage::Stop, 30), [ack(K::Stop)]);
+    // armed, not running: accepted, disarmed, requested exactly once
+    assert_eq!(rig.send(HostMessage::Arm, 40), [ack(K::Arm)]);
+    assert_eq!(
+        rig.send(HostMessage::EnterBootloader, 50),
+        [ack(K::EnterBootloader)]
+    );
+    assert_eq!(rig.board.state(), BoardState::Configured);
+    assert!(rig.board.take_bootloader_request());
+    assert!(!rig.board.take_bootloader_request());
+    // the byte path carries the new command too
+    let mut got = Vec::new();
+    for b in frame(&HostMessage::EnterBootloader) {
+        rig.board
+            .feed_rx_byte(b, 60, &mut rig.out, &mut |m| got.push(m));
+    }
+    assert_eq!(got, [ack(K::EnterBootloader)]);
+    assert!(rig.board.take_bootloader_request());
+}

@@ -12,7 +12,7 @@
 //! exposure_us = 8000
 //! gain_db = 0.0
 //!
-//! [camera]                       # the camera model, exactly as `ellipso calibrate` writes it
+//! [camera]                       # optional until `ellipso calibrate` writes it; exactly its output
 //! width = 2448
 //! height = 2048
 //! fx = 3500.0
@@ -156,8 +156,10 @@ pub struct RigFile {
     pub trigger: TriggerSection,
     /// Sensor.
     pub sensor: SensorSection,
-    /// Camera model.
-    pub camera: CameraModel,
+    /// Camera model; optional until `ellipso calibrate` has written it (a capture before
+    /// calibration records a provisional model).
+    #[serde(default)]
+    pub camera: Option<CameraModel>,
     /// Capture.
     pub capture: CaptureSection,
     /// Flash position (from `ellipso calibrate --sphere`), if known.

@@ -3,7 +3,8 @@
 //! inside a summary relative to its folder ([`paths`]), `.npy` arrays ([`npy`]), multi-channel OpenEXR float images
 //! ([`exr_image`]) — and its pictures: line plots ([`plot::LinePlot`]) and framed images with
 //! colour bars and keys ([`figure::Figure`]), in the colour maps of [`colour`]; the docs' DoP plot
-//! of `ellipso model plot` ([`dop_plot`]).
+//! of `ellipso model plot` ([`dop_plot`]); printable AprilTag boards as PDF, SVG or PNG
+//! ([`board_print`]).
 //!
 //! Contract: all drawing goes through `plotters` (pure-Rust bitmap backend) with the font
 //! bundled in [`font`], so pictures look the same on every machine and need no system font;
@@ -11,6 +12,7 @@
 //! through the `exr` crate.
 
 pub mod atomic_file;
+pub mod board_print;
 pub mod colour;
 pub mod dop_plot;
 pub mod exr_image;

@@ -415,6 +415,13 @@ impl TriggerLink {
         self.command(&HostMessage::Stop)
     }
 
+    /// Asks the board to reboot into its USB DFU bootloader (`ellipso board flash`); after the
+    /// `Ack` the board resets and this link ends. A board whose firmware predates the command
+    /// answers with a bad-frame fault instead, so this times out.
+    pub fn enter_bootloader(&self) -> Result<(), LinkError> {
+        self.command(&HostMessage::EnterBootloader)
+    }
+
     /// Fires one pulse (host-command trigger source).
     pub fn fire_one(&self) -> Result<(), LinkError> {
         self.command(&HostMessage::FireOne)

@@ -55,6 +55,18 @@ pub struct BoardTag {
     key: String,
 }
 
+impl BoardTag {
+    /// Centre in sheet coordinates (x right, y down from the sheet's top-left corner), metres.
+    pub fn centre_sheet_m(&self) -> Vector2<f64> {
+        self.centre_sheet_m
+    }
+
+    /// In-plane rotation of the printed tag, radians, clockwise as seen from the front.
+    pub fn rotation_rad(&self) -> f64 {
+        self.rotation_rad
+    }
+}
+
 /// A ray–board hit, in the frame the ray was given in.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BoardHit {
@@ -92,6 +104,9 @@ pub struct Board {
     buckets: Vec<Vec<u32>>,
     bucket_size_m: f64,
     bucket_dims: [usize; 2],
+    /// The printed sheet's raster, when the board is rendered as printed
+    /// ([`Board::with_texture`]); `None`: the procedural tag cells.
+    texture: Option<super::SheetTexture>,
 }
 
 impl Board {
@@ -340,6 +355,7 @@ impl Board {
             buckets: Vec::new(),
             bucket_size_m: 2.0 * outer_half,
             bucket_dims: [0, 0],
+            texture: None,
         };
         board.build_buckets(outer_half);
         Ok(board)
@@ -372,9 +388,26 @@ impl Board {
         }
     }
 
+    /// The same board with its print taken from `texture` (a rasterised print of this sheet,
+    /// see [`super::texture`]) instead of the procedural tag cells; tag geometry is unchanged.
+    pub fn with_texture(mut self, texture: super::SheetTexture) -> Self {
+        self.texture = Some(texture);
+        self
+    }
+
+    /// Whether the board is rendered from a print's raster.
+    pub fn is_textured(&self) -> bool {
+        self.texture.is_some()
+    }
+
     /// The tag with this id, if the board has it.
     pub fn tag(&self, id: u32) -> Option<&BoardTag> {
         self.tags.iter().find(|t| t.id == id)
+    }
+
+    /// The printed cells of tag `id` (its code, black border and white outer ring).
+    pub fn tag_cells(&self, id: u32) -> Option<&TagCells> {
+        self.cells.get(&id)
     }
 
     /// Corners of tag `id` in board frame, AprilTag detection order (see the module doc).
@@ -409,6 +442,10 @@ impl Board {
         let [nx, ny] = self.bucket_dims;
         if !(p.x >= 0.0 && p.y >= 0.0 && p.x < self.sheet_size_m[0] && p.y < self.sheet_size_m[1]) {
             return self.white_albedo;
+        }
+        if let Some(t) = &self.texture {
+            let g = t.gray_at(p.x / self.sheet_size_m[0], p.y / self.sheet_size_m[1]) as f32;
+            return self.black_albedo + (self.white_albedo - self.black_albedo) * g;
         }
         let bx = ((p.x / self.sheet_size_m[0] * nx as f64) as usize).min(nx - 1);
         let by = ((p.y / self.sheet_size_m[1] * ny as f64) as usize).min(ny - 1);

@@ -49,7 +49,8 @@ pub fn bracket(rng: &mut impl Rng) -> Bracket {
 }
 
 pub fn host_message(rng: &mut impl Rng) -> HostMessage {
-    match rng.random_range(0..8) {
+    match rng.random_range(0..9) {
+        8 => HostMessage::EnterBootloader,
         0 => HostMessage::Hello {
             protocol_version: edgy_u32(rng) as u16,
         },
@@ -66,7 +67,8 @@ pub fn host_message(rng: &mut impl Rng) -> HostMessage {
 }
 
 fn command(rng: &mut impl Rng) -> CommandKind {
-    match rng.random_range(0..8) {
+    match rng.random_range(0..9) {
+        8 => CommandKind::EnterBootloader,
         0 => CommandKind::Hello,
         1 => CommandKind::Configure,
         2 => CommandKind::Arm,

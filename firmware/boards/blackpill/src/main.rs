@@ -19,6 +19,10 @@
 //! - **Exposure-active input:** PA15 (TIM2 CH1) is wired for input capture (`docs/rig.md`) but not
 //!   yet used by this firmware.
 //! - **Limits:** the LED rig defaults of `ellipso_firmware::LED_RIG_LIMITS`.
+//! - **Firmware update:** `EnterBootloader` (after its `Ack` has gone out) writes a magic word to
+//!   RAM that survives a reset and resets; the next boot sees it before any clock or peripheral
+//!   is set up and jumps to the STM32's ROM DFU bootloader (0x1FFF0000, AN2606), which
+//!   `ellipso board flash` then talks to over USB.
 //!
 //! # Clock tree (`clock_config`)
 //!
@@ -195,8 +199,45 @@ fn clock_config() -> Config {
     config
 }
 
+/// Written before the reset that asks for the DFU bootloader ("DFU!" in ASCII).
+const DFU_MAGIC: u32 = 0x2155_4644;
+
+/// A RAM word cortex-m-rt neither zeroes nor initialises, so it survives a software reset.
+#[unsafe(link_section = ".uninit.ELLIPSO_DFU")]
+static mut DFU_REQUEST: core::mem::MaybeUninit<u32> = core::mem::MaybeUninit::uninit();
+
+/// Resets into the ROM bootloader (see the module doc).
+fn reboot_into_bootloader() -> ! {
+    // SAFETY: a plain volatile write of a word this firmware owns; nothing else touches it.
+    unsafe { core::ptr::write_volatile((&raw mut DFU_REQUEST).cast::<u32>(), DFU_MAGIC) };
+    cortex_m::peripheral::SCB::sys_reset()
+}
+
+/// At boot, before any clock or peripheral set-up: jumps to the ROM bootloader when the last
+/// reset asked for it.
+fn enter_bootloader_if_requested() {
+    let word = (&raw mut DFU_REQUEST).cast::<u32>();
+    // SAFETY: volatile accesses to a word this firmware owns; an uninitialised value after a
+    // power-on is just a number that is not the magic.
+    let requested = unsafe { core::ptr::read_volatile(word) } == DFU_MAGIC;
+    if !requested {
+        return;
+    }
+    // SAFETY: as above; then, with the chip as reset left it, enable SYSCFG (RCC_APB2ENR bit
+    // 14), map system memory at 0 (SYSCFG_MEMRMP = 0b01) and jump through the bootloader's
+    // vector table (stack pointer, reset handler), as AN2606 describes for the STM32F4.
+    unsafe {
+        core::ptr::write_volatile(word, 0);
+        let apb2enr = 0x4002_3844 as *mut u32;
+        core::ptr::write_volatile(apb2enr, core::ptr::read_volatile(apb2enr) | (1 << 14));
+        core::ptr::write_volatile(0x4001_3800 as *mut u32, 0b01);
+        cortex_m::asm::bootload(0x1fff_0000 as *const u32)
+    }
+}
+
 #[embassy_executor::main]
 async fn main(spawner: Spawner) {
+    enter_bootloader_if_requested();
     let p = embassy_stm32::init(clock_config());
 
     // TIM2 owns PA2/PA3 (AF1); the pins stay configured as long as these live (forever).
@@ -329,6 +370,17 @@ async fn tx_task(mut tx: cdc_acm::Sender<'static, UsbDriver>) -> ! {
                 n
             });
             if n == 0 {
+                let reboot = critical_section::with(|cs| {
+                    SHARED
+                        .borrow_ref_mut(cs)
+                        .as_mut()
+                        .is_some_and(|s| s.board.take_bootloader_request())
+                });
+                if reboot {
+                    // the Ack has been handed to USB: give the host time to read it
+                    Timer::after_millis(50).await;
+                    reboot_into_bootloader();
+                }
                 TX_READY.wait().await;
                 continue;
             }

@@ -47,8 +47,10 @@ pub struct HardwareRig {
     pub layout: SensorLayout,
     /// Exposure, gain and bit depth applied to the camera.
     pub settings: CameraSettings,
-    /// The calibrated camera model.
-    pub camera: CameraModel,
+    /// The calibrated camera model; `None` before `ellipso calibrate` has written the rig file's
+    /// `[camera]` (the capture then records [`provisional_camera`], enough to detect tags for
+    /// the calibration itself).
+    pub camera: Option<CameraModel>,
     /// The flash position in the camera frame, as `ellipso calibrate --sphere` measured it.
     pub flash_offset_m: Option<[f64; 3]>,
     /// The board timing.
@@ -59,21 +61,53 @@ pub struct HardwareRig {
     pub boards: Vec<TrackedBoard>,
 }
 
+/// The camera model a capture records before calibration: a pinhole with the focal length
+/// equal to the image's larger side (a 53° field of view across it, between the rig's 12 mm
+/// and 8 mm lenses on the 2/3" sensor) centred, no distortion. Tag detection does not use it;
+/// `ellipso calibrate` replaces it.
+pub fn provisional_camera(width: u32, height: u32) -> CameraModel {
+    let f = f64::from(width.max(height));
+    CameraModel {
+        width,
+        height,
+        intrinsics: ellipso_model::camera::Intrinsics {
+            fx: f,
+            fy: f,
+            cx: (f64::from(width) - 1.0) / 2.0,
+            cy: (f64::from(height) - 1.0) / 2.0,
+        },
+        distortion: Default::default(),
+    }
+}
+
 /// Opens the camera and the trigger link and creates the session in `out`: a capture ready to
 /// run.
 pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture, RunError> {
     let clock = HostClock::new();
     let camera = open_camera(rig, clock)?;
     let info = camera.info();
-    ellipso_run_error::ensure!(
-        (info.width, info.height) == (rig.camera.width, rig.camera.height),
-        "{}: the camera delivers {}×{} but the rig's camera model is {}×{}; recalibrate or fix [camera]",
-        rig.rig_file.display(),
-        info.width,
-        info.height,
-        rig.camera.width,
-        rig.camera.height
-    );
+    let model = match rig.camera {
+        Some(model) => {
+            ellipso_run_error::ensure!(
+                (info.width, info.height) == (model.width, model.height),
+                "{}: the camera delivers {}×{} but the rig's camera model is {}×{}; recalibrate or fix [camera]",
+                rig.rig_file.display(),
+                info.width,
+                info.height,
+                model.width,
+                model.height
+            );
+            model
+        }
+        None => {
+            tracing::warn!(
+                "{}: no [camera] yet: recording a provisional camera model; run `ellipso \
+                 calibrate` on this session and add the [camera] it writes",
+                rig.rig_file.display()
+            );
+            provisional_camera(info.width, info.height)
+        }
+    };
     let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
     let mut manifest = Manifest::new(
         SessionSource::Hardware {
@@ -89,7 +123,7 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
         clock.wall_at_epoch_unix_us(),
     );
     manifest.rig = Some(RigRecord::relative(
-        rig.camera,
+        model,
         // The flash as `ellipso calibrate --sphere` measured it (the fit needs it); the rest of
         // the flash description takes the rig's defaults (polarised parallel to the 0° analyser).
         rig.flash_offset_m
