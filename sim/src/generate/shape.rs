@@ -22,6 +22,9 @@ use std::collections::VecDeque;
 
 use ellipso_model::geometry::procedural::icosphere;
 
+/// A unit shape's radius along a unit direction.
+pub type RadiusFn = Box<dyn Fn(&Vector3<f64>) -> f64>;
+
 /// Which kind of shape a generated object has.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ShapeKind {
@@ -48,7 +51,7 @@ impl ShapeKind {
     }
 
     /// A radius function of this kind with parameters drawn from `rng` (module doc).
-    pub fn radius(self, rng: &mut ChaCha8Rng) -> Box<dyn Fn(&Vector3<f64>) -> f64> {
+    pub fn radius(self, rng: &mut ChaCha8Rng) -> RadiusFn {
         match self {
             ShapeKind::BumpyBlob => {
                 // Eight bumps of relative height ≤ 0.09: the radius stays within 1 ± 0.72.
