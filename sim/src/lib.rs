@@ -16,9 +16,13 @@
 //!   need no scene file.
 //!
 //! - [`rig`]: the virtual rig — trigger board, camera, wire, clocks, faults.
+//!
+//! - [`generate`]: scenes drawn from a seed (shape, measured materials, patches, capture path)
+//!   for the generalisation bench.
 #![cfg_attr(not(test), forbid(unsafe_code))] // the tests compare with the C apriltag library
 
 pub mod effects;
+pub mod generate;
 pub mod record;
 pub mod render;
 pub mod rig;

@@ -114,6 +114,8 @@ pub struct RunResult {
     pub scores: FitScores,
     /// What share of the visible surface they stand for (`crate::coverage`).
     pub coverage: crate::coverage::CoverageScores,
+    /// How far the visible fitted vertices lie from the true surface.
+    pub visible_distance: crate::surface::VisibleDistance,
     /// Held-out re-render, fit and truth.
     pub holdout: Option<HoldoutBeside>,
     /// Residuals of the fitted observations at the truth.
@@ -235,8 +237,9 @@ impl Bench {
         let at = truth_at(&truth, fit.mesh.positions());
         let colour = fit.set.colour;
         let scores = score_fit(&fit.outcome.fits, &at, &truth.material_names, colour);
-        let (coverage, _) = crate::coverage::score_session_fit(&scene, &session, &fit)
+        let (coverage, rows) = crate::coverage::score_session_fit(&scene, &session, &fit)
             .map_err(|e| BenchError::stage("coverage", e))?;
+        let visible_distance = crate::surface::visible_distance(&rows);
         let full_scale = crate::accuracy::full_scale_dn(&scene);
         let holdout = fit
             .held_out_set
@@ -251,6 +254,7 @@ impl Bench {
             vertices: mesh.positions().len(),
             scores,
             coverage,
+            visible_distance,
             holdout,
             residuals,
             times,

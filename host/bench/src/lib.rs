@@ -27,6 +27,8 @@
 //! | [`view_cost`] | `ellipso bench view`: what the live view costs a simulated capture |
 //! | [`rig_capture`] | a scene captured on the simulated rig (pty link, pairing), recorded by the caller |
 //! | [`demo`] | `ellipso demo`: capture, tracking, carving and fit, scored against the truth; pictures and `summary.json` |
+//! | [`generalize`] | `ellipso bench generalize`: the whole chain on procedurally generated scenes (held-out seeds ≥ 1000), `docs/generalize.md` |
+//! | [`generalize_report`] | its figures over a set of scenes and its Markdown report |
 //! | [`mesh_bench`] | `ellipso bench mesh`: the built-in mesh (and with `--fit` the refined one) against the truth, its cost, `docs/mesh-bench.md` |
 #![forbid(unsafe_code)]
 
@@ -38,6 +40,8 @@ pub mod capture;
 pub mod chain;
 pub mod coverage;
 pub mod demo;
+pub mod generalize;
+pub mod generalize_report;
 pub mod ideal;
 pub mod mesh_bench;
 pub mod pose;

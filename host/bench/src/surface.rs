@@ -145,3 +145,42 @@ pub fn eta_beside(
         })
         .collect()
 }
+
+/// How far the fitted vertices that a fitted view sees lie from the true surface (the rows of
+/// [`crate::coverage::score_fit_vertices`], visible ones only), metres; NaN when none is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct VisibleDistance {
+    /// Visible vertices with a truth.
+    pub vertices: usize,
+    /// Mean |distance|.
+    pub mean_m: f64,
+    /// 90th percentile of |distance|.
+    pub p90_m: f64,
+    /// Median signed distance (negative: inside the true surface).
+    pub signed_median_m: f64,
+}
+
+/// [`VisibleDistance`] of `rows`.
+pub fn visible_distance(rows: &[crate::coverage::VertexRow]) -> VisibleDistance {
+    let mut signed: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.visible_frames >= crate::coverage::VISIBLE_MIN_FRAMES)
+        .map(|r| r.distance_m)
+        .filter(|d| d.is_finite())
+        .collect();
+    if signed.is_empty() {
+        return VisibleDistance {
+            vertices: 0,
+            mean_m: f64::NAN,
+            p90_m: f64::NAN,
+            signed_median_m: f64::NAN,
+        };
+    }
+    let mut abs: Vec<f64> = signed.iter().map(|d| d.abs()).collect();
+    VisibleDistance {
+        vertices: signed.len(),
+        mean_m: mean(&abs),
+        p90_m: percentile(&mut abs, 0.9),
+        signed_median_m: percentile(&mut signed, 0.5),
+    }
+}

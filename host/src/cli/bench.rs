@@ -14,6 +14,7 @@ use ellipso_vision::track::DetectImage;
 use super::{limits, out};
 
 pub mod chain;
+pub mod generalize;
 pub mod mesh;
 
 /// `ellipso bench` subcommands.
@@ -29,6 +30,10 @@ pub enum Args {
     Chain(chain::ChainArgs),
     /// Camera calibration accuracy on a rendered calibration capture.
     Calibration(CalibrationArgs),
+    /// The whole chain on procedurally generated scenes (seeds ≥ 1000 are the held-out ones
+    /// whose figures count): coverage, per-material η error, normals, σ calibration; writes
+    /// docs/generalize.md and docs/generalize.json.
+    Generalize(generalize::GeneralizeArgs),
     /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
     /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
     Mesh(mesh::MeshArgs),
@@ -83,6 +88,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         )
         .map_err(out::failed),
         Args::Chain(a) => chain::run(a),
+        Args::Generalize(a) => generalize::run(a),
         Args::Score(a) => score(a),
         Args::Mesh(a) => mesh::run(a),
         Args::View(a) => ellipso_bench::view_cost::run(
