@@ -370,29 +370,31 @@ impl RigFile {
                 format!("is {g}; must be within [{GAIN_MIN_DB}, {GAIN_MAX_DB}] dB"),
             ));
         }
-        let c = &self.camera;
-        for (key, side) in [("camera.width", c.width), ("camera.height", c.height)] {
-            if side < 2 || side % 2 != 0 || side > MAX_SIDE_PX {
-                return Err(bad(
-                    key,
-                    format!(
-                        "is {side}; must be even (the 2×2 polariser mosaic) and in \
-                         2..={MAX_SIDE_PX} px"
-                    ),
-                ));
+        // The camera section is optional until `calibrate` fills it (docs/rig-file.md).
+        if let Some(c) = &self.camera {
+            for (key, side) in [("camera.width", c.width), ("camera.height", c.height)] {
+                if side < 2 || side % 2 != 0 || side > MAX_SIDE_PX {
+                    return Err(bad(
+                        key,
+                        format!(
+                            "is {side}; must be even (the 2×2 polariser mosaic) and in \
+                             2..={MAX_SIDE_PX} px"
+                        ),
+                    ));
+                }
             }
-        }
-        if let Err(m) = c.check_plausible() {
-            let key = ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2"]
-                .into_iter()
-                .find(|k| m.starts_with(&format!("{k} ")) || m.contains(&format!("`{k}`")))
-                .unwrap_or("camera");
-            let key = if key == "camera" {
-                key.to_string()
-            } else {
-                format!("camera.{key}")
-            };
-            return Err(bad(&key, m));
+            if let Err(m) = c.check_plausible() {
+                let key = ["fx", "fy", "cx", "cy", "k1", "k2", "k3", "p1", "p2"]
+                    .into_iter()
+                    .find(|k| m.starts_with(&format!("{k} ")) || m.contains(&format!("`{k}`")))
+                    .unwrap_or("camera");
+                let key = if key == "camera" {
+                    key.to_string()
+                } else {
+                    format!("camera.{key}")
+                };
+                return Err(bad(&key, m));
+            }
         }
         let max_interval_ms = f64::from(u32::MAX) / 1e3;
         if self.capture.interval_ms > max_interval_ms {

@@ -104,7 +104,9 @@ impl Pooled {
     /// every one of them the same way, and averaging many of them shrinks their noise but not
     /// that shared pull: such a pool is withheld, not reported with a σ it does not have.
     pub fn weak(&self, max_eta_std_error: f64) -> bool {
-        !(self.tau.hypot(self.se_reported()) <= max_eta_std_error)
+        // NaN (no spread known) is weak too.
+        let sd = self.tau.hypot(self.se_reported());
+        sd.is_nan() || sd > max_eta_std_error
     }
 
     /// Whether two pools may be one material's: both identified and their η within
