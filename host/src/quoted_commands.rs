@@ -84,7 +84,7 @@ fn ellipso_words(line: &str) -> Option<Vec<String>> {
     Some(rest.to_vec())
 }
 
-/// The commands of the shell blocks (`sh`, `bash`, `console` or untagged fences) of `text`:
+/// The commands of the shell blocks (`sh`, `bash`, `console`, `shell` fences) of `text`:
 /// `\` continuations joined, `&&` chains split.
 fn fenced_commands(file: &str, text: &str) -> Vec<Quoted> {
     let mut out = Vec::new();
@@ -94,10 +94,7 @@ fn fenced_commands(file: &str, text: &str) -> Vec<Quoted> {
         if let Some(tag) = line.trim_start().strip_prefix("```") {
             shell = match shell {
                 Some(_) => None,
-                None => Some(matches!(
-                    tag.trim(),
-                    "" | "sh" | "bash" | "console" | "shell"
-                )),
+                None => Some(matches!(tag.trim(), "sh" | "bash" | "console" | "shell")),
             };
             continue;
         }
