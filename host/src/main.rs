@@ -2,6 +2,8 @@
 
 use clap::{Parser, Subcommand};
 mod cli;
+#[cfg(test)]
+mod quoted_commands;
 
 /// ellipso: Sparse Ellipsometry on a hand-held polarisation camera and flash.
 #[derive(Debug, Parser)]
@@ -32,7 +34,8 @@ enum Command {
     FitMerge(cli::fit_shard::MergeArgs),
     /// Carve the object's watertight mesh from a session's posed frames.
     Mesh(cli::mesh::Args),
-    /// Write a session for other tools (a COLMAP sparse model with undistorted images).
+    /// Write for other tools: a session as a COLMAP sparse model with undistorted images, or a
+    /// fit as a Mitsuba 3 scene.
     #[command(subcommand)]
     Export(cli::export::Args),
     /// Benchmarks that write reports (pose accuracy and speed; the fit's accuracy vs time).

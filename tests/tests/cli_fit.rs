@@ -52,13 +52,13 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
     let before = frames_snapshot(&session);
     let mesh = sphere_mesh(tmp.path());
     let out = tmp.path().join("fit");
+    // run from the folder above, with relative paths, as a user types them: the summary's paths
+    // are still relative to its own folder (docs/fit-outputs.md)
     let o = Command::new(ellipso_bin())
-        .arg("fit")
-        .arg(&session)
-        .arg("--mesh")
+        .current_dir(tmp.path())
+        .args(["fit", "session", "--mesh"])
         .arg(&mesh)
-        .args(["--outer", "1", "--out"])
-        .arg(&out)
+        .args(["--outer", "1", "--out", "fit"])
         .output()
         .expect("spawn fit");
     let text = String::from_utf8_lossy(&o.stdout);
@@ -68,6 +68,11 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
         String::from_utf8_lossy(&o.stderr)
     );
     assert!(text.contains("results in"), "{text}");
+    // the per-material summary a user's own fit prints, as the demo does
+    assert!(
+        text.contains("η per material") && text.contains("material 0"),
+        "{text}"
+    );
     for f in [
         "fit.ply",
         "fit-summary.json",
@@ -90,6 +95,16 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
         assert!(h["observed_px"].as_u64().unwrap() > 1000, "{h}");
         assert_eq!(h["without_parameters_px"].as_u64(), Some(0), "{h}");
         assert_eq!(h["without_eta_px"].as_u64(), Some(0), "{h}");
+    }
+    assert_eq!(summary["session"], "../session", "{summary}");
+    let files = summary["export"]["files"].as_array().expect("export.files");
+    assert!(!files.is_empty());
+    for f in files {
+        let f = f.as_str().expect("a path");
+        assert!(
+            out.join(f).is_file(),
+            "{f} is not relative to the summary's folder"
+        );
     }
     assert_eq!(frames_snapshot(&session), before, "recorded frames changed");
 }

@@ -17,6 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use ellipso_colmap::model::{ColmapModel, read_model};
+use ellipso_colmap::recipe;
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_model::geometry::ply::{PlyFormat, write_ply};
 use ellipso_model::geometry::similarity::{apply_to_pose, umeyama};
@@ -371,39 +372,36 @@ fn poses_and_a_mesh_from_another_frame_come_into_the_fit() {
     if !colmap_installed() {
         return;
     }
-    let p = |x: &Path| x.display().to_string();
-    let db = p(&c.join("database.db"));
-    colmap(&[
-        "feature_extractor",
-        "--database_path",
-        &db,
-        "--image_path",
-        &p(&c.join("images")),
-        "--SiftExtraction.use_gpu",
-        "0",
-    ]);
-    colmap(&[
-        "exhaustive_matcher",
-        "--database_path",
-        &db,
-        "--SiftMatching.use_gpu",
-        "0",
-    ]);
-    let mapped = c.join("mapped");
-    std::fs::create_dir_all(&mapped).unwrap();
-    colmap(&[
-        "mapper",
-        "--database_path",
-        &db,
-        "--image_path",
-        &p(&c.join("images")),
-        "--output_path",
-        &p(&mapped),
-        "--Mapper.ba_refine_focal_length",
-        "0",
-        "--Mapper.ba_refine_extra_params",
-        "0",
-    ]);
+    // docs/mesh.md's way in, word for word: features, matches, mapper with the intrinsics kept;
+    // COLMAP's results beside the export (`R`)
+    let results = t.join("colmap-results");
+    let steps = recipe::recipe(recipe::MESH_DOC, recipe::WAY_IN);
+    assert!(!steps.is_empty(), "docs/mesh.md has no way-in recipe");
+    for step in steps {
+        match step.substituted(&c, &results) {
+            recipe::Step::Env(k, v) => assert_eq!(
+                (k.as_str(), v.as_str()),
+                ("QT_QPA_PLATFORM", "offscreen"),
+                "colmap() sets this variable for every call"
+            ),
+            recipe::Step::Mkdir(dirs) => {
+                dirs.iter()
+                    .for_each(|d| std::fs::create_dir_all(d).unwrap());
+            }
+            recipe::Step::Colmap(args) => {
+                colmap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+            }
+        }
+    }
+    // the recipe leaves the export folder to the export: exporting there again still works
+    ok(ellipso(&[
+        "export".as_ref(),
+        "colmap".as_ref(),
+        session.as_os_str(),
+        "--out".as_ref(),
+        c.as_os_str(),
+    ]));
+    let mapped = results.join("sparse-own");
     let model_dir = mapped.join("0");
     // a mesh in COLMAP's frame: the true sphere placed there by the similarity between the
     // mapper's camera centres and the exported (tracked) ones

@@ -71,7 +71,9 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
                     sigma_ss: 0.5,
                     rho_s: 0.9 + 1.2 * (1.0 - x),
                     rho_ss: [0.05, 0.04, 0.03],
-                    rho_d: [0.1 * x + 0.008, 0.048, 0.1 * (1.0 - x) + 0.008],
+                    // π·ρd up to 1.7 in red, as a bright fit has (the demo's ceramic: 2.13): the
+                    // export must hand a renderer reflectances ≤ 1 (spectral variants clamp)
+                    rho_d: [0.5 * x + 0.05, 0.048, 0.1 * (1.0 - x) + 0.008],
                 },
                 normal_world: d.into_inner().into(),
                 std_error: [0.02; 10],
@@ -144,6 +146,13 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
         "export: {}",
         String::from_utf8_lossy(&o.stderr)
     );
+    // the scale went from the albedos to the flash (every reflectance ≤ 1)
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(said.contains("albedos ÷"), "{said}");
+    let diffuse = FloatImage::read(&out.join("diffuse.exr")).expect("diffuse.exr");
+    let red = diffuse.f32_channel("R").expect("R");
+    let top = red.iter().copied().fold(0.0f32, f32::max);
+    assert!(top <= 1.0 + 1e-6 && top > 0.5, "largest π·ρd written {top}");
     for f in [
         "scene.xml",
         "mesh.ply",
@@ -253,18 +262,20 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
     ] {
         assert_eq!(types[name], ty, "plyfile reads {name} of fit.ply: {ply}");
     }
+    // every variant within the export README's 1 % on S0 (measured 0.3–0.6 %); the polarised
+    // part, a smaller signal, within 5 %
     let result = compare("scalar_rgb", "64", &figure);
     let rmse = result["relative_rmse"].as_f64().expect("rmse");
     assert!(
-        rmse <= 0.05,
-        "scalar_rgb: relative RMSE {rmse} > 5 %: {result}"
+        rmse <= 0.01,
+        "scalar_rgb: relative RMSE {rmse} > 1 %: {result}"
     );
     // the polarised variants: the rig's polarised flash, S0 and the polarised part (S1, S2)
     for variant in ["llvm_ad_mono_polarized", "scalar_spectral_polarized"] {
         let r = compare(variant, "64", &tmp.path().join(format!("{variant}.png")));
-        for key in ["relative_rmse", "relative_rmse_polarised"] {
+        for (key, limit) in [("relative_rmse", 0.01), ("relative_rmse_polarised", 0.05)] {
             let v = r[key].as_f64().expect(key);
-            assert!(v <= 0.05, "{variant}: {key} {v} > 5 %: {r}");
+            assert!(v <= limit, "{variant}: {key} {v} > {limit}: {r}");
         }
         // the light is polarised where ellipso says so: a test that a depolarised render fails
         let dolp = r["mean_dolp_ellipso"].as_f64().unwrap_or(0.0);

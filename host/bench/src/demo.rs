@@ -43,6 +43,9 @@ pub struct DemoRequest {
     /// Smaller and shorter, for a smoke test: quarter resolution, 24 photos, one outer
     /// iteration of the fit.
     pub quick: bool,
+    /// Pace the photos at the scene's interval (a hand-held walk round the object) instead of
+    /// the fastest the rig allows ([`ellipso_rig::acquire::sim_rig::fastest_interval_ms`]).
+    pub real_time: bool,
 }
 
 /// How the demo ended.
@@ -175,11 +178,32 @@ pub fn run(
         say,
         "[1/4] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
     );
+    // the photos as fast as the rig honestly takes them (the flash's duty limit, the sensor's
+    // readout, the camera link), unless asked for the scene's hand-held pace
+    let interval_ms = if request.real_time {
+        scene.capture.interval_ms
+    } else {
+        ellipso_rig::acquire::sim_rig::fastest_interval_ms(&scene, resolution)
+    };
+    say!(
+        say,
+        "pacing       {interval_ms:.0} ms between photos ({})",
+        if request.real_time {
+            "the scene's hand-held pace, --real-time".to_string()
+        } else {
+            format!(
+                "the fastest the rig allows: flash duty, sensor readout, camera link; \
+                 --real-time for the scene's {:.0} ms",
+                scene.capture.interval_ms
+            )
+        }
+    );
     let captured = crate::rig_capture::capture_on_sim_rig(
         &scene_path,
         &session_dir,
         photos,
         resolution,
+        Some(interval_ms),
         recorder,
     )?;
     let (report, dir) = (captured.report, captured.dir);

@@ -299,7 +299,14 @@ fn capture_session(
     recorder: &mut dyn Recorder,
     say: &dyn Say,
 ) -> Result<(), RunError> {
-    crate::rig_capture::capture_on_sim_rig(scene, dir, args.photos, args.resolution, recorder)?;
+    crate::rig_capture::capture_on_sim_rig(
+        scene,
+        dir,
+        args.photos,
+        args.resolution,
+        None,
+        recorder,
+    )?;
     ellipso_vision::process::track_and_append(dir, say)?;
     Ok(())
 }

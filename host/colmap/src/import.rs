@@ -70,7 +70,7 @@ pub enum ImportError {
     /// The alignment refused.
     #[error(
         "{}: cannot be aligned to the board frame ({matched} of its images name session frames, \
-         {tracked} frames tracked, {common} posed by both): {error}",
+         {tracked} frames tracked, {common} posed by both): {error}{hint}",
         model.display()
     )]
     Align {
@@ -84,7 +84,43 @@ pub enum ImportError {
         common: usize,
         /// Why.
         error: AlignError,
+        /// The likely cause where the model says it ([`intrinsics_hint`]), else empty.
+        hint: String,
     },
+}
+
+/// How far a model camera's focal length may stray from the session's calibration before a
+/// refused alignment names it as the likely cause: 0.5 %. A camera placed for a focal length
+/// off by ε sits ε·d off along its axis; at the rig's 0.3–0.7 m working distance 0.5 % is
+/// 1.5–3.5 mm, the order of the alignment's inlier threshold (`AlignConfig`, 5 mm), so beyond
+/// it the poses of a model that refined its intrinsics cannot all agree with the tracked ones.
+pub const FOCAL_RATIO_TOLERANCE: f64 = 0.005;
+
+/// The likely cause of a refused alignment in the model's own cameras: a focal length that
+/// strays from the calibration by more than [`FOCAL_RATIO_TOLERANCE`] (COLMAP's `mapper`
+/// refines the intrinsics by default) — `"; likely cause: …"`, or empty.
+pub fn intrinsics_hint(cameras: &[CameraReport]) -> String {
+    let off: Vec<String> = cameras
+        .iter()
+        .filter(|c| !((c.focal_ratio - 1.0).abs() <= FOCAL_RATIO_TOLERANCE))
+        .map(|c| {
+            format!(
+                "camera {} {:+.1} %",
+                c.camera_id,
+                100.0 * (c.focal_ratio - 1.0)
+            )
+        })
+        .collect();
+    if off.is_empty() {
+        return String::new();
+    }
+    format!(
+        "; likely cause: the model's focal length is not the session's calibration ({}), so its \
+         cameras are placed for another lens — COLMAP's mapper refines the intrinsics unless \
+         told not to: run it with --Mapper.ba_refine_focal_length 0 \
+         --Mapper.ba_refine_extra_params 0 (docs/mesh.md, \"The way in\")",
+        off.join(", ")
+    )
 }
 
 /// One frame in the alignment.
@@ -276,24 +312,7 @@ pub fn import_model(
             target_from_camera: tracked_map[id],
         })
         .collect();
-    let alignment = align_poses(&pairs, config).map_err(|error| ImportError::Align {
-        model: model.dir.clone(),
-        matched: matched.len(),
-        tracked: tracked_map.len(),
-        common: common.len(),
-        error,
-    })?;
-    let board_from_model = alignment.target_from_source;
-    let per_frame: Vec<FrameResidual> = common
-        .iter()
-        .zip(&alignment.residuals)
-        .map(|(id, r)| FrameResidual {
-            frame_id: *id,
-            image: matched[id].0.to_string(),
-            residual: *r,
-        })
-        .collect();
-    let cameras = model
+    let cameras: Vec<CameraReport> = model
         .cameras
         .iter()
         .map(|c| CameraReport {
@@ -305,6 +324,29 @@ pub fn import_model(
             // width or fx gives NaN, reported as such
             focal_ratio: c.params[0] * f64::from(camera.width)
                 / (c.width as f64 * camera.intrinsics.fx),
+        })
+        .collect();
+    let alignment = align_poses(&pairs, config).map_err(|error| ImportError::Align {
+        model: model.dir.clone(),
+        matched: matched.len(),
+        tracked: tracked_map.len(),
+        common: common.len(),
+        hint: match error {
+            AlignError::TooFewInliers { .. } | AlignError::ResidualTooLarge { .. } => {
+                intrinsics_hint(&cameras)
+            }
+            _ => String::new(),
+        },
+        error,
+    })?;
+    let board_from_model = alignment.target_from_source;
+    let per_frame: Vec<FrameResidual> = common
+        .iter()
+        .zip(&alignment.residuals)
+        .map(|(id, r)| FrameResidual {
+            frame_id: *id,
+            image: matched[id].0.to_string(),
+            residual: *r,
         })
         .collect();
     let report = ImportReport {

@@ -7,6 +7,7 @@
 //! - [`model`]: a COLMAP model read (text or binary).
 //! - [`import`]: its poses, and a mesh in its frame, aligned to the board frame through the
 //!   session's own AprilTag poses (`ellipso fit --poses`, `--mesh-frame colmap`).
+//! - [`recipe`]: docs/mesh.md's COLMAP recipes as steps, which the tests run verbatim.
 //!
 //! Contract: the export reads the session (frames streamed) and writes only into the folder it
 //! is given; reading and aligning never touch the session.
@@ -15,6 +16,7 @@
 pub mod export;
 pub mod import;
 pub mod model;
+pub mod recipe;
 
 #[cfg(test)]
 mod tests;

@@ -259,10 +259,10 @@ fn colmap_pipeline_both_ways() {
         );
     };
     let p = |x: &Path| x.display().to_string();
-    let db = p(&c.join("database.db"));
-    let tri = c.join("triangulated");
-    let txt = c.join("txt");
-    std::fs::create_dir_all(&tri).unwrap();
+    // COLMAP's results beside the export, as docs/mesh.md's recipe has them
+    let results = tmp.path().join("results");
+    let tri = results.join("triangulated");
+    let txt = results.join("txt");
     std::fs::create_dir_all(&txt).unwrap();
     // features and matches of an export in `dir`, the matcher's RANSAC seeded with `seed`
     let features = |dir: &Path, seed: u32| {
@@ -286,18 +286,25 @@ fn colmap_pipeline_both_ways() {
             &seed.to_string(),
         ]);
     };
-    features(&c, 1);
-    colmap(&[
-        "point_triangulator",
-        "--database_path",
-        &db,
-        "--image_path",
-        &p(&c.join("images")),
-        "--input_path",
-        &p(&c.join("sparse")),
-        "--output_path",
-        &p(&tri),
-    ]);
+    // docs/mesh.md's route, word for word: features, matches, point_triangulator
+    let steps = crate::recipe::recipe(crate::recipe::MESH_DOC, crate::recipe::ROUTE);
+    assert!(!steps.is_empty(), "docs/mesh.md has no COLMAP route recipe");
+    for step in steps {
+        match step.substituted(&c, &results) {
+            crate::recipe::Step::Env(k, v) => assert_eq!(
+                (k.as_str(), v.as_str()),
+                ("QT_QPA_PLATFORM", "offscreen"),
+                "the runner sets this variable for every colmap call"
+            ),
+            crate::recipe::Step::Mkdir(dirs) => {
+                dirs.iter()
+                    .for_each(|d| std::fs::create_dir_all(d).unwrap());
+            }
+            crate::recipe::Step::Colmap(args) => {
+                colmap(&args.iter().map(String::as_str).collect::<Vec<_>>());
+            }
+        }
+    }
     colmap(&[
         "model_converter",
         "--input_path",

@@ -40,7 +40,8 @@ use raster::ViewCamera;
 /// Settings of the pictures.
 #[derive(Clone, Debug)]
 pub struct ExportConfig {
-    /// Picture size, px (square).
+    /// Picture size, px (square): 512 by default, a size a screen shows whole and an eye reads
+    /// without zooming (the figures are a little wider: margins, title and keys around it).
     pub picture_px: u32,
     /// The new point light of each relit picture, relative to the mesh's bounding-sphere
     /// centre, in units of its radius, in the picture camera's axes (image right, image up,
@@ -55,7 +56,7 @@ pub struct ExportConfig {
 impl Default for ExportConfig {
     fn default() -> Self {
         Self {
-            picture_px: 320,
+            picture_px: 512,
             light_offset_radii: [2.0, 2.5, 4.0],
             novel_view_turn_deg: 70.0,
         }
@@ -131,6 +132,10 @@ pub struct CapturedS0 {
     pub s0: Vec<f32>,
     /// Camera → world of the frame.
     pub world_from_camera: Isometry3<f64>,
+    /// The fit's held-out score, s0 relative RMSE over the samples of every held-out frame
+    /// (`fit-summary.json`'s `held_out.overall`), named in the picture's title beside its own
+    /// per-pixel figure; `None` without held-out frames.
+    pub held_out_samples_rmse: Option<f64>,
 }
 
 impl CapturedS0 {
@@ -195,6 +200,7 @@ pub fn captured_s0(
         tile_px: raw.layout().tile_px() as usize,
         s0,
         world_from_camera,
+        held_out_samples_rmse: None,
     })
 }
 
@@ -369,11 +375,19 @@ fn comparison(
         .iter()
         .map(|p| p.map(|p| (p.0 - rendered(p.1)) / hi))
         .collect();
+    // This picture's RMSE is over its pixels (the model interpolated between vertices, edges
+    // and one frame only); the fit's headline score is over the held-out frames' samples at
+    // the vertices. Both are named, so the two numbers are not taken for one.
     let title = format!(
-        "frame {}{}: captured and re-rendered s0, relative RMSE {}",
+        "frame {}{}: captured and re-rendered s0 · relative RMSE {} over this picture's pixels{}",
         captured.frame_id,
         if captured.held_out { " (held out)" } else { "" },
-        rmse.map_or("n/a".into(), |r| format!("{r:.3}"))
+        rmse.map_or("n/a".into(), |r| format!("{r:.3}")),
+        captured
+            .held_out_samples_rmse
+            .map_or(String::new(), |r| format!(
+                ", {r:.3} over all held-out samples (the fit's score)"
+            ))
     );
     let figure = Figure::new(title)
         .columns(3)

@@ -24,6 +24,8 @@
 //!   surroundings.
 //! - [`complete`]: every vertex the views see gets a full parameter set — its material's values
 //!   where its own samples leave a parameter open, flagged `FromMaterial`.
+//! - [`materials`]: per material, the η a fit reports (the text report's lines and
+//!   `fit-summary.json`'s `materials`).
 //! - [`pipeline`]: steps A (joint solve), B (augmentation), C (final passes), timed.
 //! - [`holdout`]: the held-out views no step sees, and the re-render error on them.
 //! - [`session`]: the outer loop on a recorded session (observe → solve → shape).
@@ -45,6 +47,7 @@ pub mod export;
 pub mod gate;
 pub mod holdout;
 pub mod inputs;
+pub mod materials;
 pub mod model;
 pub mod neighbours;
 pub mod observe;

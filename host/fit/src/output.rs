@@ -102,7 +102,10 @@ pub fn export_fit(
     say.err(format_args!("pictures from frame {frame_id}…"));
     let captured_s0 =
         match crate::export::captured_s0(session, comparison.0, comparison.1, comparison.2) {
-            Ok(c) => Some(c),
+            Ok(c) => Some(crate::export::CapturedS0 {
+                held_out_samples_rmse: fit.holdout.as_ref().map(|h| h.overall.s0.relative_rmse),
+                ..c
+            }),
             Err(e) => {
                 say.err(format_args!(
                     "note: no comparison picture: frame {}: {e}",
@@ -111,7 +114,7 @@ pub fn export_fit(
                 None
             }
         };
-    let mut report = crate::export::export_all(
+    let report = crate::export::export_all(
         out,
         &fit.mesh,
         &fit.outcome.fits,
@@ -122,11 +125,9 @@ pub fn export_fit(
         captured_s0.as_ref(),
     )?;
     let wall_s = started.elapsed().as_secs_f64();
-    // recorded and printed paths are where the files will be, not the staging directory
-    for f in &mut report.files {
-        *f = publish(f);
-    }
-    let mut files = report.files.clone();
+    // printed paths are where the files will be, not the staging directory; the summary's are
+    // made relative to its folder from where they are now (below)
+    let mut files: Vec<PathBuf> = report.files.iter().map(|f| publish(f)).collect();
     let mut summary = FitSummary {
         clusters: fit
             .outcome
@@ -143,6 +144,7 @@ pub fn export_fit(
         gates: fit.gates.clone(),
         held_out: fit.holdout.clone(),
         import,
+        materials: crate::materials::material_eta(&fit.outcome.fits, fit.completion.as_ref()),
         normal_combination: fit.normal_combination.clone(),
         partition: fit
             .outcome

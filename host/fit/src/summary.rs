@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use ellipso_report::paths::{paths_relative_to, relative_if_path};
+use ellipso_report::paths::{paths_relative_to, relative_path};
 use ellipso_run_error::{Context, RunError};
 
 use crate::augment::{ClusterModel, PartitionSummary};
@@ -63,6 +63,10 @@ pub struct FitSummary {
     /// comes after this one); absent otherwise.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub import: Option<serde_json::Value>,
+    /// Per material (step B's clusters): the pooled η, the median and spread of the η the
+    /// vertices report from their own samples, and how many report it (`crate::materials`);
+    /// empty when step B did not run.
+    pub materials: Vec<crate::materials::MaterialEta>,
     /// How the reported normals were combined with the refined surface's
     /// (`shape::combine`); `null` when no surface step was applied.
     pub normal_combination: Option<NormalCombination>,
@@ -102,13 +106,18 @@ impl FitSummary {
     /// Rewrites the paths in the summary (the session folder, the files written, the import's
     /// model folders and mesh) relative to `base`, the summary's folder, where they name an
     /// existing file or directory (`ellipso_report::paths`).
+    ///
+    /// The session and the files are known to be paths, so they are rewritten whatever they
+    /// look like (a bare `s1` is a folder too); `export.files` must name the files where they
+    /// are now (the staging folder `base`, before the output is committed), not where they
+    /// will be published.
     pub fn make_paths_relative(&mut self, base: &Path) {
-        if let Some(r) = relative_if_path(&self.session, base) {
-            self.session = r;
+        if let Some(r) = relative_path(Path::new(&self.session), base) {
+            self.session = r.display().to_string();
         }
         for f in &mut self.export.files {
-            if let Some(r) = f.to_str().and_then(|s| relative_if_path(s, base)) {
-                *f = r.into();
+            if let Some(r) = relative_path(f, base) {
+                *f = r;
             }
         }
         if let Some(import) = &mut self.import {

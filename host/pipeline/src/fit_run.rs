@@ -137,25 +137,50 @@ pub fn run(
     let (mesh, hull) = match given_mesh {
         Some(mesh) if no_hull => (mesh, None),
         Some(mesh) => {
-            say.err(format_args!(
-                "carving the visual hull from the frames (the surface update stays inside it)…"
-            ));
-            match mesh_of_session(
-                &session,
-                imported_poses,
-                &ellipso_mesh::MeshConfig::default(),
-                say,
-                steps,
-            ) {
-                Ok((_, _, hull)) => (mesh, Some(hull)),
-                Err(e) => {
-                    let e = e.into_boxed();
-                    say.err(format_args!(
-                        "warning: no visual hull ({}); the surface update runs without the \
+            // the hull `ellipso mesh` saved beside this mesh, when it is this session's, carved
+            // from the poses this fit takes, for this very file (crate::mesh_hull)
+            let saved = match (imported_poses, mesh_path) {
+                (None, Some(path)) => {
+                    let poses = crate::poses::poses_of(&session, say)?;
+                    let identity = crate::mesh_hull::SessionIdentity::of(&session);
+                    match crate::mesh_hull::reusable_hull(path, &identity, &poses) {
+                        Ok(hull) => hull.map(|h| (h, path)),
+                        Err(why) => {
+                            say.err(format_args!("not reusing the saved hull: {why}"));
+                            None
+                        }
+                    }
+                }
+                _ => None,
+            };
+            if let Some((hull, path)) = saved {
+                say.err(format_args!(
+                    "reusing the visual hull `ellipso mesh` saved beside {} (same session, \
+                     poses and mesh file; the surface update stays inside it)",
+                    path.display()
+                ));
+                (mesh, Some(hull))
+            } else {
+                say.err(format_args!(
+                    "carving the visual hull from the frames (the surface update stays inside it)…"
+                ));
+                match mesh_of_session(
+                    &session,
+                    imported_poses,
+                    &ellipso_mesh::MeshConfig::default(),
+                    say,
+                    steps,
+                ) {
+                    Ok((_, _, hull)) => (mesh, Some(hull)),
+                    Err(e) => {
+                        let e = e.into_boxed();
+                        say.err(format_args!(
+                            "warning: no visual hull ({}); the surface update runs without the \
                          silhouettes' constraint",
-                        chain(e.as_ref())
-                    ));
-                    (mesh, None)
+                            chain(e.as_ref())
+                        ));
+                        (mesh, None)
+                    }
                 }
             }
         }

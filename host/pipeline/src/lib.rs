@@ -7,7 +7,8 @@
 //! - [`poses`]: the poses every later stage takes: the session's recorded poses, the frames
 //!   without one tracked first ([`poses::poses_of`], through `ellipso-vision`).
 //! - [`mesh`]: the session's mesh as the subcommands take it and write it (carved by
-//!   `ellipso-mesh`; `ellipso mesh` whole: [`mesh::mesh_command`]).
+//!   `ellipso-mesh`; `ellipso mesh` whole: [`mesh::mesh_command`]); [`mesh_hull`]: the visual
+//!   hull saved beside it, reused by `ellipso fit --mesh` on the same session.
 //! - [`fit_run`]: `ellipso fit` whole (inputs checked, poses, hull or carved mesh, the fit of
 //!   `ellipso-fit`, its files); [`fit_import`]: its COLMAP flags (`--poses`, `--mesh-frame`,
 //!   `--mesh-model`: models read by `ellipso-colmap` and aligned); [`fit_shard`]: sharded fits
@@ -26,5 +27,6 @@ pub mod fit_import;
 pub mod fit_run;
 pub mod fit_shard;
 pub mod mesh;
+pub mod mesh_hull;
 pub mod poses;
 pub mod steps;

@@ -8,7 +8,8 @@
 //! owns; [`mesh_bytes`] is the one encoding of a mesh file (binary little-endian PLY with
 //! double coordinates, or OBJ). [`mesh_command`] is `ellipso mesh` whole: both files claimed
 //! before the work (never inside the session, never over a file of another format), the mesh
-//! carved (its step on the caller's [`Steps`]) and both written whole.
+//! carved (its step on the caller's [`Steps`]) and both written whole, with the carved hull
+//! beside them ([`crate::mesh_hull`]).
 
 use std::path::{Path, PathBuf};
 
@@ -91,6 +92,8 @@ pub struct MeshWritten {
     pub mesh_file: PathBuf,
     /// The report file, as shown.
     pub report_file: PathBuf,
+    /// The hull's sidecar (`<stem>-hull.json`, with `<stem>-hull.npy`), as shown.
+    pub hull_file: PathBuf,
     /// Seconds from the session's opening to both files written.
     pub wall_s: f64,
 }
@@ -121,16 +124,24 @@ pub fn mesh_command(
         &[session_dir],
         None,
     )?;
+    let hull_files = crate::mesh_hull::HullFiles::claim(out, session_dir)?;
     let session = ellipso_session::reader::open(session_dir)?;
     let started = std::time::Instant::now();
-    let (mesh, mut report, _) = mesh_of_session(&session, None, config, say, steps)?;
+    let poses = crate::poses::poses_of(&session, say)?;
+    let (mesh, mut report, hull) = mesh_of_session(&session, Some(&poses[..]), config, say, steps)?;
     report.peak_rss_bytes = ellipso_report::memory::peak_rss_bytes();
-    mesh_file.write(mesh_bytes(&mesh, mesh_file.format()))?;
+    let bytes = mesh_bytes(&mesh, mesh_file.format());
+    mesh_file.write(&bytes)?;
     report_file.write(serde_json::to_vec_pretty(&report)?)?;
+    // the hull beside the mesh: `ellipso fit --mesh` on this session takes it instead of
+    // carving again (crate::mesh_hull)
+    let identity = crate::mesh_hull::SessionIdentity::of(&session);
+    hull_files.write(&identity, &poses, &bytes, &hull)?;
     Ok(MeshWritten {
         report,
         mesh_file: mesh_file.shown().to_path_buf(),
         report_file: report_file.shown().to_path_buf(),
+        hull_file: hull_files.shown().to_path_buf(),
         wall_s: started.elapsed().as_secs_f64(),
     })
 }

@@ -6,10 +6,10 @@
 //!
 //! | file | content | encoding |
 //! |---|---|---|
-//! | `s0.png` | total intensity | 16-bit grey, `clamp(s0/2, 0, 1)·65535` (mean analyser intensity) |
+//! | `s0.png` | total intensity | RGB: s0/2 (mean analyser intensity, fraction of full scale) in grey, linear from 0 to its 99.5th percentile, colour bar below saying so |
 //! | `dolp.png` | DoLP | RGB, viridis over [0, 1] (`ellipso_report::colour::dolp_colour`), colour bar below the image |
 //! | `aolp.png` | AoLP and DoLP | RGB, HSV composite: hue = AoLP (once round the wheel over [0, π), 0 and π meet), saturation = DoLP, value 1 (`ellipso_report::colour::aolp_colour`: every AoLP picture's convention); AoLP × DoLP key below |
-//! | `i_d.png` | I^d = 2·I90 | 16-bit grey, `clamp(I^d/2, 0, 1)·65535` |
+//! | `i_d.png` | I^d = 2·I90 | RGB: I^d/2 in grey as `s0.png`, colour bar below |
 //! | `i_s.png`, `i_alpha.png` | I^s, I^α (signed) | RGB diverging map, symmetric range, legend |
 //! | `mask.png`, `mask_bits.png` | validity | RGB by reason with legend; raw reason bits (8-bit) |
 //! | `stokes.exr` | every band's S0, S1, S2, DoLP, AoLP, I^d, I^s, I^α, residual, mask | OpenEXR f32 channels named as Mitsuba's (`S0.R` …; [`stokes_exr`]) |
@@ -209,36 +209,28 @@ fn write_band(
         write_npy(out, band, suffix, files)?;
     }
 
-    let s0: Vec<u16> = band
-        .s0
-        .data()
-        .iter()
-        .map(|v| render::unit_to_u16(v / 2.0))
-        .collect();
-    save_gray16(
+    // s0 and I^d as pictures a screen shows: grey linear in the value from 0 to its 99.5th
+    // percentile, the key saying so (the floats are in stokes.exr and the .npy planes)
+    let s0_half: Vec<f32> = band.s0.data().iter().map(|v| v / 2.0).collect();
+    intensity_picture(
         out,
         &format!("s0{suffix}.png"),
-        w,
-        h,
-        s0,
+        (w, h),
+        &s0_half,
+        masks,
+        "s0/2, mean analyser intensity",
         files,
-        "s0/2 as 16-bit grey",
     )?;
     let channels = band.observation_channels();
-    let i_d: Vec<u16> = channels
-        .i_d
-        .data()
-        .iter()
-        .map(|v| render::unit_to_u16(v / 2.0))
-        .collect();
-    save_gray16(
+    let i_d_half: Vec<f32> = channels.i_d.data().iter().map(|v| v / 2.0).collect();
+    intensity_picture(
         out,
         &format!("i_d{suffix}.png"),
-        w,
-        h,
-        i_d,
+        (w, h),
+        &i_d_half,
+        masks,
+        "I^d/2 = I90, the cross-polarised (diffuse) intensity",
         files,
-        "I^d/2 = I90 as 16-bit grey",
     )?;
 
     // DoLP and AoLP in the one convention of every picture; masked pixels grey
@@ -422,21 +414,84 @@ fn symmetric_range(values: &[f32], masks: &[PixelMask]) -> f32 {
     nth.max(1e-6)
 }
 
+/// An intensity plane (fractions of full scale) as a picture readable on its own: grey linear
+/// in the value from 0 to its 99.5th percentile over the valid pixels (white at and above it),
+/// with a colour bar whose label names the quantity, the transform and where the numbers are.
+fn intensity_picture(
+    out: &Path,
+    name: &str,
+    (w, h): (usize, usize),
+    values: &[f32],
+    masks: &[PixelMask],
+    quantity: &str,
+    files: &mut Vec<FileEntry>,
+) -> Result<()> {
+    let hi = symmetric_range(values, masks);
+    let pixels = values
+        .iter()
+        .map(|v| ColourMap::Grey.at(f64::from(v / hi)))
+        .collect();
+    let picture = render::with_key(
+        render::picture(w, h, pixels),
+        Key::Bar {
+            map: ColourMap::Grey,
+            lo: 0.0,
+            hi: f64::from(hi),
+            label: format!(
+                "{quantity}, fraction of full scale (grey linear, white ≥ 99.5th percentile; \
+                 floats in stokes.exr)"
+            ),
+        },
+    )?;
+    save_png(
+        out,
+        name,
+        Some(picture),
+        files,
+        &format!("{quantity}: grey linear from 0 to its 99.5th percentile, colour bar below"),
+    )
+}
+
 fn write_s0_rgb(out: &Path, image: &PolarImage, files: &mut Vec<FileEntry>) -> Result<()> {
     let (w, h) = (image.width(), image.height());
-    let mut rgb = Vec::with_capacity(3 * w * h);
-    for i in 0..w * h {
-        for band in &image.bands {
-            rgb.push(render::unit_to_u16(band.s0.data()[i] / 2.0));
-        }
-    }
-    let buf = image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w as u32, h as u32, rgb);
+    // one range for the three bands, so the picture keeps the colour balance
+    let all: Vec<f32> = image
+        .bands
+        .iter()
+        .flat_map(|b| b.s0.data().iter().map(|v| v / 2.0))
+        .collect();
+    let masks: Vec<PixelMask> = image
+        .bands
+        .iter()
+        .flat_map(|b| b.mask.data().iter().copied())
+        .collect();
+    let hi = symmetric_range(&all, &masks);
+    let pixels = (0..w * h)
+        .map(|i| {
+            let mut c = [0u8; 3];
+            for (slot, band) in c.iter_mut().zip(&image.bands) {
+                *slot = ColourMap::Grey.at(f64::from(band.s0.data()[i] / 2.0 / hi))[0];
+            }
+            c
+        })
+        .collect();
+    let picture = render::with_key(
+        render::picture(w, h, pixels),
+        Key::Bar {
+            map: ColourMap::Grey,
+            lo: 0.0,
+            hi: f64::from(hi),
+            label: "s0/2 of R, G, B, fraction of full scale (each channel linear, white ≥ \
+                    99.5th percentile; floats in stokes.exr)"
+                .into(),
+        },
+    )?;
     save_png(
         out,
         "s0_rgb.png",
-        buf,
+        Some(picture),
         files,
-        "s0/2 of R, G, B as 16-bit RGB",
+        "s0/2 of R, G, B: each channel linear from 0 to their 99.5th percentile, colour bar below",
     )
 }
 
@@ -459,19 +514,6 @@ where
         .with_context(|| format!("cannot write {}", path.display()))?;
     files.push((name.into(), what.into()));
     Ok(())
-}
-
-fn save_gray16(
-    out: &Path,
-    name: &str,
-    w: usize,
-    h: usize,
-    data: Vec<u16>,
-    files: &mut Vec<FileEntry>,
-    what: &str,
-) -> Result<()> {
-    let buf = image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, data);
-    save_png(out, name, buf, files, what)
 }
 
 #[cfg(test)]

@@ -22,6 +22,10 @@ pub struct Args {
     /// resolution, 24 photos).
     #[arg(long)]
     pub quick: bool,
+    /// Take the photos at the scene's interval (a hand-held walk, 500 ms for the demo scene)
+    /// instead of the fastest the rig allows (the flash's duty limit: 50 ms).
+    #[arg(long)]
+    pub real_time: bool,
 }
 
 /// Runs `ellipso demo`.
@@ -30,6 +34,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         out: args.out,
         scene: args.scene,
         quick: args.quick,
+        real_time: args.real_time,
     };
     let done = ellipso_bench::demo::run(
         &request,

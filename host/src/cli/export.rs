@@ -79,6 +79,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                     String::new()
                 }
             );
+            if report.albedo_scale > 1.0 {
+                crate::outln!(
+                    "             albedos ÷ {:.3} (every reflectance ≤ 1), the flash's intensity × {:.3}: the same render",
+                    report.albedo_scale,
+                    report.albedo_scale
+                );
+            }
             let files: Vec<_> = report.files.iter().map(|f| out.published(f)).collect();
             out.commit()?;
             for f in &files {

@@ -123,7 +123,7 @@ pub fn print_results(out: &Path, result: &FitRun, json: bool) {
     }
     if let Some(coverage) = &result.summary.coverage {
         crate::outln!();
-        for line in coverage.report_lines() {
+        for line in ellipso_fit::materials::report_lines(&result.summary.materials, coverage) {
             crate::outln!("{line}");
         }
     }

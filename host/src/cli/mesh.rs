@@ -1,7 +1,9 @@
 //! `ellipso mesh SESSION --out mesh.ply [--vertices N]`: the object's watertight mesh carved
 //! from the session's posed frames (`ellipso_pipeline::mesh::mesh_command`), written as a binary PLY (or, for an `.obj`
 //! name, Wavefront OBJ) in board coordinates (metres), with `<out stem>-report.json` beside it.
-//! Both files are claimed before the work starts (never inside the session, never over a file of
+//! `<out stem>-hull.json`/`.npy` hold the carved visual hull, which `ellipso fit --mesh` on the
+//! same session reuses instead of carving again (`ellipso_pipeline::mesh_hull`).
+//! The files are claimed before the work starts (never inside the session, never over a file of
 //! another format) and written whole.
 //!
 //! Poses come from the session's `pose` events (tracked now and appended when the log has none,
@@ -82,6 +84,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let object = serde_json::json!({
             "mesh": done.mesh_file.display().to_string(),
             "report_file": done.report_file.display().to_string(),
+            "hull_file": done.hull_file.display().to_string(),
             "wall_s": done.wall_s,
             "report": report,
         });
@@ -103,6 +106,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ellipso_mesh::error::skipped_list(&report.skipped, 4)
         );
     }
-    crate::outln!("  {}\n  {}", args.out.display(), done.report_file.display());
+    crate::outln!(
+        "  {}\n  {}\n  {} (the visual hull: `ellipso fit --mesh {}` on this session reuses it)",
+        args.out.display(),
+        done.report_file.display(),
+        done.hull_file.display(),
+        args.out.display()
+    );
     Ok(())
 }

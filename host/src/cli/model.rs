@@ -14,8 +14,18 @@ use ellipso_model::optics::inspect::{self, MuellerInputs};
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use serde_json::Value;
 
+/// Working examples of every subcommand, shown by `ellipso model --help` (README's, kept true
+/// by `host/src/quoted_commands.rs`).
+pub const EXAMPLES: &str = "Examples:
+  ellipso model fresnel --eta 1.5 --theta-deg 56.3
+  ellipso model dop --eta 1.5 --theta-deg 60
+  ellipso model mueller --eta 1.5 --sigma-s 0.1 --sigma-ss 0.2 --rho-s 1 --rho-ss 0.1,0.1,0.1 \\
+      --rho-d 0.5,0.4,0.3 --normal 0,0,1 --to-light 0.3,0,1 --to-camera -0.3,0,1
+  ellipso model plot --out dop.png";
+
 /// Arguments of `ellipso model`.
 #[derive(Debug, clap::Args)]
+#[command(after_help = EXAMPLES)]
 pub struct Args {
     #[command(subcommand)]
     command: ModelCommand,

@@ -127,7 +127,7 @@ pub fn fit_and_score(
     );
     say!(
         say,
-        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm, signed median {:+.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {:.2}° median (mesh before {:.2}°)",
+        "surface      observed {} vertices: {:.3} mm mean from the truth before the fit, {:.3} mm after (p90 {:.3} mm, signed median {:+.3} mm); unobserved {}: {:.3} → {:.3} mm; normals {} median (mesh before {:.2}°)",
         scores.after.observed_vertices,
         scores.before.observed_mean_m * 1e3,
         scores.after.observed_mean_m * 1e3,
@@ -136,31 +136,44 @@ pub fn fit_and_score(
         scores.after.unobserved_vertices,
         scores.before.unobserved_mean_m * 1e3,
         scores.after.unobserved_mean_m * 1e3,
-        scores.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+        scores
+            .after
+            .fit_normal_median_deg
+            .filter(|d| d.is_finite())
+            .map_or("— (no refined normal)".to_string(), |d| format!(
+                "{d:.2}°"
+            )),
         scores.before.mesh_normal_median_deg,
     );
     for m in &scores.eta {
+        let difference = if m.difference_points().is_finite() {
+            format!(
+                " (difference {:.2} ± {:.2} points, 1σ noise)",
+                m.difference_points(),
+                m.noise_points
+            )
+        } else {
+            String::new()
+        };
         say!(
             say,
-            "η            {:<15} carved mesh {:+.2} %, true mesh {:+.2} % (difference {:.2} ± {:.2} points, 1σ noise; from {} / {} vertices)",
+            "η            {:<15} carved mesh {}, true mesh {}{difference}; from {} / {} vertices",
             m.name,
-            m.carved_pct,
-            m.true_mesh_pct,
-            m.difference_points(),
-            m.noise_points,
+            signed_pct(m.carved_pct),
+            signed_pct(m.true_mesh_pct),
             m.vertices[0],
             m.vertices[1]
         );
     }
     say!(
         say,
-        "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {:.1} %",
+        "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {}",
         score.scored,
         fits.len(),
         run.wall_s,
         score.normal_median_deg,
         score.normal_p90_deg,
-        score.rho_d_median_pct,
+        unsigned_pct(score.rho_d_median_pct),
     );
     say!(
         say,
@@ -215,9 +228,9 @@ pub fn fit_and_score(
     );
     say!(
         say,
-        "η per vertex  median error {:.2} % (before pooling {:.2} %)",
-        score.eta_vertex_median_pct,
-        score.eta_vertex_unpooled_median_pct
+        "η per vertex  median error {} (before pooling {})",
+        unsigned_pct(score.eta_vertex_median_pct),
+        unsigned_pct(score.eta_vertex_unpooled_median_pct)
     );
     if let Some(h) = &held_out {
         say!(
@@ -236,4 +249,36 @@ pub fn fit_and_score(
         dir,
         summary,
     })
+}
+
+/// A signed percentage, or what its absence means: a median over no vertex is NaN, which the
+/// demo says in words (`summary.json` keeps `null`).
+fn signed_pct(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:+.2} %")
+    } else {
+        "not identified (no vertex reports η)".into()
+    }
+}
+
+/// An unsigned percentage, or "none reported" where no vertex gave one ([`signed_pct`]).
+fn unsigned_pct(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.2} %")
+    } else {
+        "— (no vertex reports it)".into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_median_over_no_vertex_is_said_in_words() {
+        assert_eq!(signed_pct(0.25), "+0.25 %");
+        assert!(!signed_pct(f64::NAN).contains("NaN"));
+        assert_eq!(unsigned_pct(1.5), "1.50 %");
+        assert!(!unsigned_pct(f64::NAN).contains("NaN"));
+    }
 }

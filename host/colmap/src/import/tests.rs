@@ -687,3 +687,23 @@ pub(crate) fn mapper_model_comes_back_onto_the_board(
     println!("mesh from COLMAP's frame: worst vertex {worst_mm:.3} mm off the true sphere");
     assert!(worst_mm < 0.5, "{worst_mm} mm");
 }
+
+#[test]
+fn a_refused_alignment_names_refined_intrinsics_as_the_likely_cause() {
+    let camera = |ratio: f64| CameraReport {
+        camera_id: 1,
+        model: "PINHOLE".into(),
+        width: 612,
+        height: 512,
+        focal_ratio: ratio,
+    };
+    // the calibration kept: nothing to say
+    assert_eq!(intrinsics_hint(&[camera(1.0), camera(1.004)]), "");
+    // the mapper run: fx −2.2 %
+    let hint = intrinsics_hint(&[camera(0.978)]);
+    assert!(
+        hint.contains("camera 1 -2.2 %") && hint.contains("--Mapper.ba_refine_focal_length 0"),
+        "{hint}"
+    );
+    assert!(intrinsics_hint(&[camera(f64::NAN)]).contains("likely cause"));
+}

@@ -558,7 +558,8 @@ fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<Pix
 }
 
 /// A scalar map (viridis over the fit's shared range, [`super::colour::MapRanges`], with its
-/// colour bar).
+/// colour bar); a map with no value to show says so in its title and key instead of drawing a
+/// colour bar over a range no pixel has.
 fn scalar_picture(
     name: &'static str,
     title: &str,
@@ -568,6 +569,17 @@ fn scalar_picture(
     values: &[Option<f64>],
     (lo, hi): (f64, f64),
 ) -> Picture {
+    if !values.iter().flatten().any(|v| v.is_finite()) {
+        return Picture {
+            name,
+            figure: Figure::new(format!("{title}: no vertex in view reports it"))
+                .image("", Pixels::scalar(w, h, values, ColourMap::Viridis, lo, hi))
+                .key(Key::Swatches(vec![(
+                    NO_DATA,
+                    format!("{label} not reported anywhere in this view (see fit-summary.json)"),
+                )])),
+        };
+    }
     Picture {
         name,
         figure: Figure::new(title)

@@ -30,10 +30,17 @@
 //! - `README.md` — the parameter mapping and what the hand-over loses.
 //!
 //! The mapping (`docs/model.md` §3–§4): Mitsuba's `eta` = η; `alpha` = σ_s (the model's GGX α
-//! is σ); `diffuse_reflectance` = π·ρ_d (ellipso's ρ_d has 1/π absorbed; `pplastic`
+//! is σ); `diffuse_reflectance` = π·ρ_d / k (ellipso's ρ_d has 1/π absorbed; `pplastic`
 //! divides by π; both attenuate by the Fresnel transmissions in and out, as Mueller matrices in
-//! the polarised variants); `specular_reflectance` = ρ_s. ρ_ss and σ_ss have no `pplastic`
+//! the polarised variants); `specular_reflectance` = ρ_s / k. ρ_ss and σ_ss have no `pplastic`
 //! counterpart and are dropped.
+//!
+//! Radiometric scale: the fit's albedos are relative to the rig's radiometric normaliser, and
+//! can exceed 1 (the demo's ceramic: π·ρ_d 2.13, ρ_s up to 1.88); a renderer's reflectances
+//! cannot (spectral variants clamp the RGB they upsample to [0, 1]). So every reflectance is
+//! divided by k = [`albedo_scale`] (the largest π·ρ_d channel or ρ_s, at least 1) and the
+//! emitter's intensity multiplied by k: both lobes are linear in their albedo and the render in
+//! the light, so the radiance is the fit's, in every variant.
 
 pub mod atlas;
 
@@ -72,6 +79,9 @@ pub struct MitsubaReport {
     pub faces: usize,
     /// Vertices whose parameters were clamped into Mitsuba's domain (η > 1, α > 0).
     pub clamped: usize,
+    /// The factor the albedos were divided by and the emitter's intensity multiplied by
+    /// ([`albedo_scale`]; 1 where every reflectance was already at most 1).
+    pub albedo_scale: f64,
 }
 
 /// Errors of the export; each names the file.
@@ -153,22 +163,28 @@ pub fn export(
         .map(|v| [v.params[7] * pi, v.params[8] * pi, v.params[9] * pi])
         .collect();
     let specular: Vec<[f32; 3]> = vertices.iter().map(|v| [v.params[3]; 3]).collect();
-    for (name, values, channels) in [
-        ("diffuse.exr", &diffuse, &["R", "G", "B"][..]),
+    let baked = [atlas::bake(faces, &diffuse), atlas::bake(faces, &specular)];
+    // Reflectances a renderer accepts (≤ 1, every texel the bilinear lookup reads); the fit's
+    // scale goes on the emitter instead (module doc, "Radiometric scale").
+    let scale = albedo_scale(baked.iter().flat_map(|b| b.rgb.iter()).flatten().copied());
+    for ((name, channels), baked) in [
+        ("diffuse.exr", &["R", "G", "B"][..]),
         // ρ_s is grey: one channel, which no variant colour-converts
-        ("specular.exr", &specular, &["Y"][..]),
-    ] {
-        let baked = atlas::bake(faces, values);
+        ("specular.exr", &["Y"][..]),
+    ]
+    .into_iter()
+    .zip(baked)
+    {
         let mut image = FloatImage::new(baked.width, baked.height)?;
         for (channel, plane) in channels.iter().zip(baked.rgb) {
-            image.push_f32(channel, plane)?;
+            image.push_f32(channel, plane.into_iter().map(|v| v / scale).collect())?;
         }
         put(name, image.encode(&out.join(name))?)?;
     }
     let axis = polariser_axis(&view)?;
     put(
         "objects.xml",
-        objects_xml(&view, &axis, options).into_bytes(),
+        objects_xml(&view, &axis, options, scale).into_bytes(),
     )?;
     put("scene.xml", scene_xml(true).into_bytes())?;
     put("scene-rgb.xml", scene_xml(false).into_bytes())?;
@@ -189,7 +205,20 @@ pub fn export(
         vertices: vertices.len(),
         faces: faces.len(),
         clamped,
+        albedo_scale: f64::from(scale),
     })
+}
+
+/// The factor that brings every exported reflectance to at most 1: the largest π·ρ_d channel
+/// or ρ_s texel of the baked atlases (vertex values and each cell's affine fourth texel, which
+/// the bilinear lookup reads too), 1 where none exceeds 1 (non-finite values are left out; the
+/// export writes them as the fit has them). Both lobes are linear in their albedo and the
+/// render linear in the light, so albedos ÷ k under an emitter × k render the same radiance.
+pub fn albedo_scale(texels: impl IntoIterator<Item = f32>) -> f32 {
+    texels
+        .into_iter()
+        .filter(|v| v.is_finite())
+        .fold(1.0, f32::max)
 }
 
 /// The exported vertices as fits with the single-scattering lobe off (what `pplastic` renders).
@@ -342,7 +371,7 @@ fn triple(v: &Vector3<f64>) -> String {
 fn scene_xml(polarised: bool) -> String {
     let (variants, integrator) = if polarised {
         (
-            "a *_polarized variant: mitsuba -m scalar_spectral_polarized scene.xml (or llvm_ad_mono_polarized)",
+            "a *_polarized variant: mitsuba -m scalar_spectral_polarized scene.xml -o ../renders/stokes.exr (or llvm_ad_mono_polarized; renders beside this folder, not in it)",
             r#"<integrator type="stokes">
         <integrator type="volpath">
             <integer name="max_depth" value="2"/>
@@ -351,7 +380,7 @@ fn scene_xml(polarised: bool) -> String {
         )
     } else {
         (
-            "an RGB variant: mitsuba -m scalar_rgb scene-rgb.xml (the polarised scene is scene.xml)",
+            "an RGB variant: mitsuba -m scalar_rgb scene-rgb.xml -o ../renders/rgb.exr (the polarised scene is scene.xml)",
             r#"<integrator type="volpath">
         <integer name="max_depth" value="2"/>
     </integrator>"#,
@@ -375,7 +404,9 @@ fn objects_xml(
     view: &view_file::PictureView,
     polariser_axis: &Vector3<f64>,
     options: &MitsubaOptions,
+    albedo_scale: f32,
 ) -> String {
+    let intensity = 2.0 * f64::from(albedo_scale);
     let camera = view.camera();
     let pose = camera.world_from_camera;
     let origin = pose.translation.vector;
@@ -432,11 +463,13 @@ fn objects_xml(
             <string name="pixel_format" value="rgba"/>
         </film>
     </sensor>
-    <!-- the rig's flash at that pose: an isotropic point light of intensity 2 behind an ideal
-         linear polariser, whose transmission axis is the flash polariser's: unit intensity, polarised -->
+    <!-- the rig's flash at that pose: an isotropic point light of intensity 2 × {albedo_scale} behind an
+         ideal linear polariser, whose transmission axis is the flash polariser's: {albedo_scale} × unit
+         intensity, polarised; the albedos in diffuse.exr and specular.exr are the fit's ÷ {albedo_scale}, so
+         every reflectance is at most 1 and the render is the fit's -->
     <emitter type="point">
         <point name="position" x="{fx:e}" y="{fy:e}" z="{fz:e}"/>
-        <rgb name="intensity" value="2, 2, 2"/>
+        <rgb name="intensity" value="{intensity:e}, {intensity:e}, {intensity:e}"/>
     </emitter>
     <shape type="rectangle">
         <transform name="to_world">
@@ -482,122 +515,4 @@ fn objects_xml(
 const README: &str = include_str!("mitsuba/README.md");
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::export::raster::ViewCamera;
-    use ellipso_model::geometry::procedural::icosphere;
-    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-
-    /// A fit directory of a uniform sphere seen from above, written by the fit's own writers.
-    fn fit_dir(dir: &Path) {
-        let (dirs, faces) = icosphere(2);
-        let pos = dirs
-            .iter()
-            .map(|d| Point3::from(d.into_inner() * 0.04))
-            .collect();
-        let mesh = TriangleMesh::new(pos, None, None, faces).unwrap();
-        let fits: Vec<VertexFit> = dirs
-            .iter()
-            .enumerate()
-            .map(|(v, d)| VertexFit {
-                vertex: v as u32,
-                params: PbrdfParams {
-                    eta: if v == 0 { 1.0 } else { 1.5 },
-                    sigma_s: 0.2,
-                    sigma_ss: 0.4,
-                    rho_s: 0.8,
-                    rho_ss: [0.3; 3],
-                    rho_d: [0.2, 0.1, 0.05],
-                },
-                normal_world: d.into_inner().into(),
-                std_error: [0.01; 10],
-                normal_std_error_deg: 0.5,
-                samples_used: 30,
-                cost: 1.0,
-                iterations: 3,
-                flags: vec![],
-                eta_unpooled: None,
-                gates: Default::default(),
-            })
-            .collect();
-        super::super::ply::write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();
-        let pose = Isometry3::from_parts(
-            Translation3::new(0.0, 0.0, 0.5),
-            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-        );
-        let camera = ViewCamera::framing(pose, 40, 32, &Point3::origin(), 0.04);
-        let flash = pose.transform_point(&Point3::new(0.0, -0.03, 0.0));
-        let view = view_file::PictureView::new(&camera, &flash, &Point3::new(0.1, 0.1, 0.3))
-            .with_polariser(Some((pose.rotation * Vector3::x()).into()));
-        view_file::write(dir, &view).unwrap();
-    }
-
-    #[test]
-    fn a_fit_directory_becomes_a_scene_with_its_reference_render() {
-        let tmp = tempfile::tempdir().unwrap();
-        fit_dir(tmp.path());
-        let out = tmp.path().join("mitsuba");
-        let report = export(tmp.path(), &out, &MitsubaOptions { spp: 8 }).unwrap();
-        assert_eq!(report.files.len(), 9);
-        assert_eq!(report.clamped, 1, "vertex 0 has eta = 1");
-        let scene = std::fs::read_to_string(out.join("scene.xml")).unwrap();
-        assert!(scene.contains(r#"<integrator type="stokes">"#) && scene.contains("volpath"));
-        assert!(scene.contains(r#"<include filename="objects.xml"/>"#));
-        let xml = std::fs::read_to_string(out.join("objects.xml")).unwrap();
-        assert!(xml.contains(r#"<bsdf type="polarizer"/>"#));
-        for want in [
-            r#"<bsdf type="pplastic">"#,
-            r#"value="ggx""#,
-            r#"value="vertex_eta""#,
-            r#"value="vertex_alpha""#,
-            r#"value="diffuse.exr""#,
-            r#"<default name="spp" value="8"/>"#,
-            r#"<integer name="width" value="40"/>"#,
-        ] {
-            assert!(xml.contains(want), "{want} not in scene.xml");
-        }
-        // Looking straight down from z = 0.5: the look-at target is below the origin.
-        assert!(xml.contains(r#"origin="0e0, 0e0, 5e-1""#), "{xml}");
-        let reference = FloatImage::read(&out.join("ellipso-s0.exr")).unwrap();
-        let centre = 16 * 40 + 20;
-        let a = reference.f32_channel("A").unwrap();
-        assert_eq!((a[centre], a[0]), (1.0, 0.0));
-        // Single scattering off: the reference equals ellipso's radiance with ρss = 0 (the
-        // fitted 0.3 would brighten the head-on highlight).
-        let r = f64::from(reference.f32_channel("R").unwrap()[centre]);
-        let g = f64::from(reference.f32_channel("G").unwrap()[centre]);
-        assert!(r > g && g > 0.0, "{r} {g}");
-        let diffuse = FloatImage::read(&out.join("diffuse.exr")).unwrap();
-        let d = diffuse.f32_channel("R").unwrap();
-        // a uniform ρd: every texel of a used cell (extension texels too) is π·0.2
-        let used: Vec<&f32> = d.iter().filter(|v| **v != 0.0).collect();
-        assert_eq!(used.len(), 4 * report.faces);
-        assert!(
-            used.iter()
-                .all(|v| (*v - 0.2 * std::f32::consts::PI).abs() < 1e-5)
-        );
-    }
-
-    #[test]
-    fn missing_inputs_are_named() {
-        let tmp = tempfile::tempdir().unwrap();
-        let e = export(
-            tmp.path(),
-            &tmp.path().join("o"),
-            &MitsubaOptions::default(),
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("fit.ply"), "{e}");
-        fit_dir(tmp.path());
-        std::fs::remove_file(tmp.path().join(view_file::FILE_NAME)).unwrap();
-        let e = export(
-            tmp.path(),
-            &tmp.path().join("o"),
-            &MitsubaOptions::default(),
-        )
-        .unwrap_err()
-        .to_string();
-        assert!(e.contains("fit-view.json") && e.contains("re-run"), "{e}");
-    }
-}
+mod tests;

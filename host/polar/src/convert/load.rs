@@ -344,8 +344,9 @@ fn settle_layout(
     }
     let e = detect(width as usize, height as usize, data);
     let numbers = format!(
-        "red/blue vs green block difference {:.3}, green vs green {:.3}, over {} tiles",
-        e.rg, e.gg, e.tiles
+        "red/blue vs green block difference {:.3}, green vs green {:.3} (90th percentile {:.3} \
+         vs {:.3}), over {} flat tiles",
+        e.rg, e.gg, e.rg_upper, e.gg_upper, e.tiles
     );
     match e.detection {
         Detection::Mono => Ok((

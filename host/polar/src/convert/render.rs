@@ -33,15 +33,6 @@ pub(super) fn diverging(t: f32) -> Rgb {
     ColourMap::Diverging.at((f64::from(t) + 1.0) / 2.0)
 }
 
-/// `round(65535·t)` for `t` clamped to [0, 1]; NaN gives 0.
-pub(super) fn unit_to_u16(t: f32) -> u16 {
-    if t.is_finite() {
-        (t.clamp(0.0, 1.0) * 65535.0).round() as u16
-    } else {
-        0
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -69,8 +60,6 @@ mod tests {
 
     #[test]
     fn scaling_clamps() {
-        assert_eq!(unit_to_u16(2.0), 65535);
-        assert_eq!(unit_to_u16(-1.0), 0);
         let mid = diverging(0.0);
         assert!(mid.iter().all(|&c| c > 230), "{mid:?}");
     }

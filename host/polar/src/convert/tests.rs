@@ -84,11 +84,16 @@ fn mono_frame_produces_every_file_and_a_truthful_summary() {
     ] {
         assert!(out.join(f).is_file(), "{f} missing");
     }
-    let s0 = image::open(out.join("s0.png")).expect("s0").into_luma16();
-    assert_eq!(s0.dimensions(), (32, 16));
-    // s0/2 = 1000 DN of 4095 → 16-bit
-    let expect = (1000.0 / 4095.0 * 65535.0f64).round() as u16;
-    assert!(s0.get_pixel(0, 0)[0].abs_diff(expect) <= 1);
+    let s0 = image::open(out.join("s0.png")).expect("s0").into_rgb8();
+    // the frame's pixels on top (32 × 16), a colour bar below: a picture readable on its own
+    assert!(
+        s0.width() >= 32 && s0.height() > 16,
+        "{:?}",
+        s0.dimensions()
+    );
+    // a uniform s0/2 = 1000 DN is its own 99.5th percentile: white (the one saturated
+    // superpixel is masked and left out of the range)
+    assert_eq!(s0.get_pixel(0, 0).0, [255, 255, 255]);
     let dolp = image::open(out.join("dolp.png")).expect("dolp").into_rgb8();
     assert_eq!(dolp.width(), 240, "narrow frames get a legend-wide canvas");
     let want = ellipso_report::colour::dolp_colour(Some(0.5));
@@ -187,8 +192,12 @@ fn colour_bilinear_writes_per_band_files() {
     }
     let rgb = image::open(out.join("s0_rgb.png"))
         .expect("rgb")
-        .into_rgb16();
-    assert_eq!(rgb.dimensions(), (16, 8));
+        .into_rgb8();
+    assert!(
+        rgb.width() >= 16 && rgb.height() > 8,
+        "{:?}",
+        rgb.dimensions()
+    );
     let px = rgb.get_pixel(5, 5);
     assert!(px[0] > px[1] && px[1] == px[2], "{px:?}");
     let summary = fs::read_to_string(out.join("summary.json")).expect("summary");

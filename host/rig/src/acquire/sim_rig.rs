@@ -235,6 +235,39 @@ pub fn board_config(
     }
 }
 
+/// Sustained payload of a GigE Vision link, bytes per second: 1 Gb/s less Ethernet, IP, UDP and
+/// GVSP headers (≈ 8 % at jumbo frames), the rate `ellipso_firmware::config` quotes (≈ 23 fps
+/// for 8-bit 5 MP).
+pub const GIGE_PAYLOAD_BYTES_PER_S: f64 = 115e6;
+
+/// The shortest photo interval, ms, the rig allows for `scene`'s timing at `resolution` (the
+/// frame size the camera sends): the longest of the board's own rules for
+/// [`board_config`]'s exposure and flash (`ellipso_firmware::plan` rule 9, the exposure plus the
+/// sensor's readout; rule 8, the flash LED's duty limit; the board's shortest period) and the
+/// time the camera link takes to carry one frame ([`GIGE_PAYLOAD_BYTES_PER_S`], 1 byte per
+/// sample up to 8 bits, 2 above). The board accepts it exactly: it is the honest free-run
+/// pace of the rig, what a real capture at full speed would take.
+pub fn fastest_interval_ms(scene: &Scene, resolution: [u32; 2]) -> f64 {
+    let limits = ellipso_firmware::config::LED_RIG_LIMITS;
+    let board = board_config(scene, 1, None, None);
+    let flash_us = u64::from(board.flash_duration_us);
+    let duty_us = (1000 * flash_us).div_ceil(u64::from(limits.max_flash_duty_permille));
+    let readout_us = u64::from(board.exposure_us) + u64::from(limits.readout_us);
+    let bytes = f64::from(resolution[0])
+        * f64::from(resolution[1])
+        * if scene.rig.camera.bit_depth > 8 {
+            2.0
+        } else {
+            1.0
+        };
+    let link_us = (bytes / GIGE_PAYLOAD_BYTES_PER_S * 1e6).ceil() as u64;
+    let period_us = duty_us
+        .max(readout_us)
+        .max(link_us)
+        .max(u64::from(limits.min_frame_period_us));
+    period_us as f64 / 1e3
+}
+
 /// Renders capture poses for the simulated camera.
 struct RenderSource {
     renderer: Renderer<'static>,
@@ -257,5 +290,25 @@ impl FrameSource for RenderSource {
                 vec![0; self.size.0 as usize * self.size.1 as usize]
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_fastest_pace_is_the_flash_duty_limit_for_the_demo() {
+        let scene = Scene::load(&ellipso_sim::scene::shipped_scene("demo.toml")).unwrap();
+        // 6 ms exposure, 5 ms flash: the LED's 10 % duty needs 50 ms; the readout 26 ms; the
+        // link 22 ms for a 1224 × 1024 12-bit frame
+        assert_eq!(fastest_interval_ms(&scene, [1224, 1024]), 50.0);
+        // the board accepts it
+        let config = board_config(&scene, 150, Some(50.0), None);
+        ellipso_firmware::plan::CapturePlan::new(config, &ellipso_firmware::config::LED_RIG_LIMITS)
+            .expect("the board accepts the fastest pace");
+        // a full-size 12-bit frame takes the link longer than the flash needs
+        let full = fastest_interval_ms(&scene, [2448, 2048]);
+        assert!(full > 80.0 && full < 90.0, "{full}");
     }
 }
