@@ -102,7 +102,10 @@ pub const FOCAL_RATIO_TOLERANCE: f64 = 0.005;
 pub fn intrinsics_hint(cameras: &[CameraReport]) -> String {
     let off: Vec<String> = cameras
         .iter()
-        .filter(|c| !((c.focal_ratio - 1.0).abs() <= FOCAL_RATIO_TOLERANCE))
+        .filter(|c| {
+            let off = (c.focal_ratio - 1.0).abs();
+            off.is_nan() || off > FOCAL_RATIO_TOLERANCE
+        })
         .map(|c| {
             format!(
                 "camera {} {:+.1} %",

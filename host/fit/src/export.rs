@@ -265,7 +265,9 @@ pub fn export_all(
     })?;
     report.files.push(view_path);
     let mut pictures = images::pictures(mesh, fits, &view, flash, &light);
-    report.holes.push(images::holes(mesh, fits, &view, "map-eta"));
+    report
+        .holes
+        .push(images::holes(mesh, fits, &view, "map-eta"));
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(
         &Vector3::z_axis(),
@@ -275,7 +277,9 @@ pub fn export_all(
         Translation3::from(centre.coords) * turn * Translation3::from(-centre.coords);
     let novel = ViewCamera::framing(about_centre * world_from_camera, px, px, &centre, radius);
     let models = images::pixel_models(mesh, fits, &novel);
-    report.holes.push(images::holes(mesh, fits, &novel, "novel-view"));
+    report
+        .holes
+        .push(images::holes(mesh, fits, &novel, "novel-view"));
     pictures.push(images::relit(
         &models,
         px,

@@ -168,6 +168,7 @@ mod tests {
                     from_material: 1,
                     withheld: 0,
                     coverage: 1.0,
+                    ..Default::default()
                 },
                 MaterialCoverage {
                     cluster: 1,
