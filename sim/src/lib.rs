@@ -18,6 +18,7 @@
 //! - [`rig`]: the virtual rig — trigger board, camera, wire, clocks, faults.
 #![cfg_attr(not(test), forbid(unsafe_code))] // the tests compare with the C apriltag library
 
+pub mod calibration_captures;
 pub mod effects;
 pub mod record;
 pub mod render;
