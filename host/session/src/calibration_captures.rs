@@ -1,4 +1,4 @@
-//! A folder of sensor-calibration captures: what `ellipso sim calibration-captures` writes (or a
+//! A folder of sensor-calibration captures: what `ellipso sim captures` writes (or a
 //! user assembles from the rig) and `ellipso calibrate sensor` reads.
 //!
 //! Contract: the folder holds `captures.json` ([`CaptureSet`]) and the raw frames it names,
