@@ -116,7 +116,8 @@ fn calibration_captures(args: CapturesArgs) -> anyhow::Result<()> {
         resolution_px: args.width.zip(args.height).map(|(w, h)| [w, h]),
         pixel_truth: false,
     };
-    let captures = cc::render(&scene, &cc::CapturePlan::default(), options)
+    let plan = ellipso_bench::sensor_calibration::capture_plan(&scene).map_err(out::failed)?;
+    let captures = cc::render(&scene, &plan, options)
         .map_err(|e| anyhow!("{}: {e}", args.scene.display()))?;
     cc::write(&captures, &args.out).map_err(|e| anyhow!("{e}"))?;
     crate::outln!(
