@@ -113,7 +113,9 @@ pub fn render(
         for i in 0..plan.polariser_frames {
             jobs.push((
                 format!("polariser_{a:02}_{i:03}.png"),
-                CaptureKind::Polariser { polariser_deg: *deg },
+                CaptureKind::Polariser {
+                    polariser_deg: *deg,
+                },
                 UniformTarget {
                     electrons: plan.polariser_level_rel * full_well_e,
                     stokes: [1.0, c, s],
@@ -152,7 +154,10 @@ pub fn render(
         frames: Vec::new(),
     };
     let set = CaptureSet {
-        frames: frames.iter().map(|f: &RenderedCapture| f.frame.clone()).collect(),
+        frames: frames
+            .iter()
+            .map(|f: &RenderedCapture| f.frame.clone())
+            .collect(),
         ..set
     };
     Ok(RenderedCaptures { set, frames })

@@ -495,9 +495,9 @@ impl EffectPlan {
                 Stage::Prnu => e.prnu.map(StageParams::Prnu),
                 Stage::BlackLevel => e.black_level.map(StageParams::BlackLevel),
                 Stage::HotPixels => e.hot_pixels.map(StageParams::HotPixels),
-                Stage::FlashPolariserError => {
-                    e.flash_polariser_error.map(StageParams::FlashPolariserError)
-                }
+                Stage::FlashPolariserError => e
+                    .flash_polariser_error
+                    .map(StageParams::FlashPolariserError),
                 Stage::FlashProfileError => {
                     e.flash_profile_error.map(StageParams::FlashProfileError)
                 }

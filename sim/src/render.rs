@@ -35,17 +35,17 @@ mod fixed_pattern;
 mod footprint;
 pub mod radiometry;
 mod sensor;
-mod uniform;
 mod shade;
 pub mod truth;
+mod uniform;
 
 #[cfg(test)]
 mod tests;
 
 pub use fixed_pattern::{FixedPattern, PixelPattern};
 pub use footprint::{Footprint, IdealPixel, PointFrame};
-pub use uniform::UniformTarget;
 pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
+pub use uniform::UniformTarget;
 
 use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams, StageSet};
 use crate::scene::{Scene, SensorKind};

@@ -106,7 +106,9 @@ fn options(resolution: [u32; 2]) -> RenderOptions {
 pub fn capture_plan(scene: &Scene) -> Result<CapturePlan, RunError> {
     let r = Renderer::new(scene, options([4, 4])).map_err(|e| RunError::msg(e.to_string()))?;
     let rad = r.radiometry();
-    let clip_e = rad.full_well_e().min(rad.full_scale_dn() / rad.dn_per_electron());
+    let clip_e = rad
+        .full_well_e()
+        .min(rad.full_scale_dn() / rad.dn_per_electron());
     let fraction = clip_e / rad.full_well_e();
     let plan = CapturePlan::default();
     Ok(CapturePlan {
@@ -125,7 +127,8 @@ pub fn calibrate(
     let captures = calibration_captures::render(scene, &capture_plan(scene)?, options(resolution))
         .map_err(|e| RunError::msg(e.to_string()))?;
     calibration_captures::write(&captures, work).map_err(|e| RunError::msg(e.to_string()))?;
-    measure(work, &captures.set, MeasureOptions::default()).map_err(|e| RunError::msg(e.to_string()))
+    measure(work, &captures.set, MeasureOptions::default())
+        .map_err(|e| RunError::msg(e.to_string()))
 }
 
 /// Stokes errors of frame 0 of `effects` (calibrated with `cal`, and through the ideal formulas
@@ -142,15 +145,24 @@ pub fn stokes_check(
     resolution: [u32; 2],
 ) -> Result<(f64, f64, f64), RunError> {
     let frame = |scene: &Scene| -> Result<RawFrame, RunError> {
-        let r = Renderer::new(scene, options(resolution)).map_err(|e| RunError::msg(e.to_string()))?;
-        let f = r.render_frame(0).map_err(|e| RunError::msg(e.to_string()))?;
-        RawFrame::new(f.width, f.height, scene.rig.camera.bit_depth, r.layout(), f.raw())
-            .map_err(|e| RunError::msg(e.to_string()))
+        let r =
+            Renderer::new(scene, options(resolution)).map_err(|e| RunError::msg(e.to_string()))?;
+        let f = r
+            .render_frame(0)
+            .map_err(|e| RunError::msg(e.to_string()))?;
+        RawFrame::new(
+            f.width,
+            f.height,
+            scene.rig.camera.bit_depth,
+            r.layout(),
+            f.raw(),
+        )
+        .map_err(|e| RunError::msg(e.to_string()))
     };
     let (fe, fi) = (frame(effects)?, frame(ideal)?);
     let truth = process(&fi, &PolarConfig::default()).map_err(|e| RunError::msg(e.to_string()))?;
-    let calibrated =
-        process_with_sensor(&fe, &PolarConfig::default(), cal).map_err(|e| RunError::msg(e.to_string()))?;
+    let calibrated = process_with_sensor(&fe, &PolarConfig::default(), cal)
+        .map_err(|e| RunError::msg(e.to_string()))?;
     let plain = PolarConfig {
         dark_level_dn: cal.header.figures.black_level_dn as f32,
         ..PolarConfig::default()
@@ -161,7 +173,12 @@ pub fn stokes_check(
     };
     let (kc, ku) = (to_ideal(&calibrated), to_ideal(&uncalibrated));
     let (mut max, mut sum2, mut sum2u, mut n) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-    for ((t, c), u) in truth.bands.iter().zip(&calibrated.bands).zip(&uncalibrated.bands) {
+    for ((t, c), u) in truth
+        .bands
+        .iter()
+        .zip(&calibrated.bands)
+        .zip(&uncalibrated.bands)
+    {
         for i in 0..t.s0.data().len() {
             // a superpixel whose four raw pixels did not see one Stokes vector (an edge or a
             // steep gradient inside the 2×2 block: ideal-sensor residual above 8 quantisation
@@ -174,7 +191,11 @@ pub fn stokes_check(
             {
                 continue;
             }
-            for (pt, pc, pu) in [(&t.s0, &c.s0, &u.s0), (&t.s1, &c.s1, &u.s1), (&t.s2, &c.s2, &u.s2)] {
+            for (pt, pc, pu) in [
+                (&t.s0, &c.s0, &u.s0),
+                (&t.s1, &c.s1, &u.s1),
+                (&t.s2, &c.s2, &u.s2),
+            ] {
                 let e = kc * f64::from(pc.data()[i]) - f64::from(pt.data()[i]);
                 let eu = ku * f64::from(pu.data()[i]) - f64::from(pt.data()[i]);
                 max = max.max(e.abs());
@@ -192,10 +213,16 @@ pub fn stokes_check(
 pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
     let scene = demo_with(REAL_SENSOR_EFFECTS, true)?;
     let resolution = RESOLUTION;
-    say!(say, "rendering and measuring the calibration captures at {}×{}", resolution[0], resolution[1]);
+    say!(
+        say,
+        "rendering and measuring the calibration captures at {}×{}",
+        resolution[0],
+        resolution[1]
+    );
     let cal = calibrate(&scene, resolution, &work.join("captures"))?;
     let f = &cal.header.figures;
-    let renderer = Renderer::new(&scene, options(resolution)).map_err(|e| RunError::msg(e.to_string()))?;
+    let renderer =
+        Renderer::new(&scene, options(resolution)).map_err(|e| RunError::msg(e.to_string()))?;
     let pattern = renderer.fixed_pattern();
     let layout = renderer.layout();
     let camera = *renderer.camera();
@@ -209,7 +236,9 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
     for y in 0..h {
         for x in 0..w {
             let p = pattern.pixel(x, y);
-            let d = camera.unproject_to_ray([f64::from(x), f64::from(y)]).map_or(1.0, |r| r.z);
+            let d = camera
+                .unproject_to_ray([f64::from(x), f64::from(y)])
+                .map_or(1.0, |r| r.z);
             let v_true = renderer.radiometry().vignetting(d.clamp(-1.0, 1.0).acos());
             vig_err = vig_err.max((d.powf(f.vignetting_exponent) / v_true - 1.0).abs());
             if p.hot {
@@ -243,7 +272,10 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
         .zip(&f.extinction_ratio)
         .map(|(t, e)| (e / t - 1.0).abs())
         .fold(0.0, f64::max);
-    say!(say, "rendering an object frame with and without the effects");
+    say!(
+        say,
+        "rendering an object frame with and without the effects"
+    );
     let effects_clean = demo_with(REAL_SENSOR_EFFECTS, false)?;
     let ideal = demo_with("vignetting = { exponent = 4.0 }\n", false)?;
     let (smax, srms, srms_u) = stokes_check(&effects_clean, &ideal, &cal, resolution)?;
@@ -268,7 +300,11 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
         ("dsnu_dn".into(), 1.5, f.dsnu_dn),
         ("prnu_rel".into(), 0.008, f.prnu_rel),
         ("vignetting_exponent".into(), 4.0, f.vignetting_exponent),
-        ("hot_pixels_fraction".into(), 1e-4, f.hot_pixels as f64 / f64::from(w * h)),
+        (
+            "hot_pixels_fraction".into(),
+            1e-4,
+            f.hot_pixels as f64 / f64::from(w * h),
+        ),
     ];
     for (b, (t, e)) in er_true.iter().zip(&f.extinction_ratio).enumerate() {
         figures.push((format!("extinction_ratio_{}", ["R", "G", "B"][b]), *t, *e));
@@ -288,10 +324,17 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
 
 fn write_report(out: &Path, report: &Report) -> Result<(), RunError> {
     let json_path = out.join("sensor-calibration.json");
-    let mut json = serde_json::to_value(&report.recovered).map_err(|e| RunError::msg(e.to_string()))?;
+    let mut json =
+        serde_json::to_value(&report.recovered).map_err(|e| RunError::msg(e.to_string()))?;
     if let Some(o) = json.as_object_mut() {
-        o.insert("figures".into(), serde_json::to_value(&report.figures).unwrap_or_default());
-        o.insert("not_measured".into(), serde_json::to_value(&report.not_measured).unwrap_or_default());
+        o.insert(
+            "figures".into(),
+            serde_json::to_value(&report.figures).unwrap_or_default(),
+        );
+        o.insert(
+            "not_measured".into(),
+            serde_json::to_value(&report.not_measured).unwrap_or_default(),
+        );
         o.insert("command".into(), report.command.clone().into());
     }
     let text = serde_json::to_string_pretty(&json).map_err(|e| RunError::msg(e.to_string()))?;
@@ -305,7 +348,8 @@ fn write_report(out: &Path, report: &Report) -> Result<(), RunError> {
         (Some(a), Some(b)) if a < b => format!("{}{begin}\n{table}{}", &md[..a], &md[b..]),
         _ => format!("{md}\n## Measured\n\n{begin}\n{table}{end}\n"),
     };
-    ellipso_report::atomic_file::write(&md_path, md).with_context(|| md_path.display().to_string())?;
+    ellipso_report::atomic_file::write(&md_path, md)
+        .with_context(|| md_path.display().to_string())?;
     Ok(())
 }
 
@@ -313,22 +357,66 @@ fn markdown_table(report: &Report) -> String {
     use std::fmt::Write;
     let r = &report.recovered;
     let mut s = String::new();
-    let _ = writeln!(s, "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`).\n", report.command, RESOLUTION[0], RESOLUTION[1]);
+    let _ = writeln!(
+        s,
+        "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`).\n",
+        report.command, RESOLUTION[0], RESOLUTION[1]
+    );
     let _ = writeln!(s, "| key | recovered | target |\n|---|---|---|");
     let opt = |v: Option<f64>| v.map_or("not measured".to_string(), |v| format!("{v:.4}"));
     for (k, v, t) in [
         ("gain_rel_err", format!("{:.4}", r.gain_rel_err), "≤ 0.02"),
-        ("read_noise_rel_err", format!("{:.4}", r.read_noise_rel_err), "≤ 0.02"),
-        ("black_level_err_dn", format!("{:.4}", r.black_level_err_dn), "≤ 0.5"),
-        ("analyser_angle_rms_deg", format!("{:.4}", r.analyser_angle_rms_deg), "≤ 0.2"),
-        ("extinction_rel_err", format!("{:.4}", r.extinction_rel_err), "≤ 0.10"),
-        ("vignetting_err", format!("{:.4}", r.vignetting_err), "≤ 0.01"),
+        (
+            "read_noise_rel_err",
+            format!("{:.4}", r.read_noise_rel_err),
+            "≤ 0.02",
+        ),
+        (
+            "black_level_err_dn",
+            format!("{:.4}", r.black_level_err_dn),
+            "≤ 0.5",
+        ),
+        (
+            "analyser_angle_rms_deg",
+            format!("{:.4}", r.analyser_angle_rms_deg),
+            "≤ 0.2",
+        ),
+        (
+            "extinction_rel_err",
+            format!("{:.4}", r.extinction_rel_err),
+            "≤ 0.10",
+        ),
+        (
+            "vignetting_err",
+            format!("{:.4}", r.vignetting_err),
+            "≤ 0.01",
+        ),
         ("flash_position_err_mm", opt(r.flash_position_err_mm), "≤ 1"),
-        ("flash_polariser_angle_err_deg", opt(r.flash_polariser_angle_err_deg), "≤ 0.5"),
-        ("eta_shift_calibrated_points_max", opt(r.eta_shift_calibrated_points_max), "≤ 0.1"),
-        ("stokes_max_err_calibrated", format!("{:.2e}", r.stokes_max_err_calibrated), "≤ 1e-3"),
-        ("stokes_rms_err_calibrated", format!("{:.2e}", r.stokes_rms_err_calibrated), ""),
-        ("stokes_rms_err_uncalibrated", format!("{:.2e}", r.stokes_rms_err_uncalibrated), ""),
+        (
+            "flash_polariser_angle_err_deg",
+            opt(r.flash_polariser_angle_err_deg),
+            "≤ 0.5",
+        ),
+        (
+            "eta_shift_calibrated_points_max",
+            opt(r.eta_shift_calibrated_points_max),
+            "≤ 0.1",
+        ),
+        (
+            "stokes_max_err_calibrated",
+            format!("{:.2e}", r.stokes_max_err_calibrated),
+            "≤ 1e-3",
+        ),
+        (
+            "stokes_rms_err_calibrated",
+            format!("{:.2e}", r.stokes_rms_err_calibrated),
+            "",
+        ),
+        (
+            "stokes_rms_err_uncalibrated",
+            format!("{:.2e}", r.stokes_rms_err_uncalibrated),
+            "",
+        ),
     ] {
         let _ = writeln!(s, "| `{k}` | {v} | {t} |");
     }

@@ -16,8 +16,16 @@ fn calibrated_polar_reads_the_ideal_sensor_and_uncalibrated_does_not() {
     let work = tempfile::tempdir().unwrap();
     let cal = calibrate(&noisy, RESOLUTION, &work.path().join("captures")).unwrap();
     let f = &cal.header.figures;
-    assert!((f.black_level_dn - 64.0).abs() < 0.5, "black level {}", f.black_level_dn);
-    assert!(f.analyser_angle_sd_deg > 0.8 && f.analyser_angle_sd_deg < 1.2, "{}", f.analyser_angle_sd_deg);
+    assert!(
+        (f.black_level_dn - 64.0).abs() < 0.5,
+        "black level {}",
+        f.black_level_dn
+    );
+    assert!(
+        f.analyser_angle_sd_deg > 0.8 && f.analyser_angle_sd_deg < 1.2,
+        "{}",
+        f.analyser_angle_sd_deg
+    );
     let clean = demo_with(effects, false).unwrap();
     let ideal = demo_with("", false).unwrap();
     let (max, rms, rms_uncalibrated) = stokes_check(&clean, &ideal, &cal, RESOLUTION).unwrap();
@@ -26,12 +34,18 @@ fn calibrated_polar_reads_the_ideal_sensor_and_uncalibrated_does_not() {
     // analyser angles (docs/sensor-calibration.md, measured), i.e. 2·0.1° ≈ 3.5e-3 rad of a
     // superpixel's |s12| (≤ 0.5 on the lit object) → ~1e-3 RMS; 2e-3 leaves room for the
     // smaller frame. The 1e-3 on every pixel needs more sheet frames (not met yet).
-    assert!(rms < 2e-3, "calibrated Stokes off the ideal sensor's by {rms} RMS (max {max})");
+    assert!(
+        rms < 2e-3,
+        "calibrated Stokes off the ideal sensor's by {rms} RMS (max {max})"
+    );
     // Without the calibration: a 1° RMS analyser angle error turns a polarised pixel's
     // (s1, s2) by ~2·1° = 0.035 rad of |s12|, PRNU of 0.8 % moves s0 by ~0.4 % (¼ of four
     // pixels' gains) and the extinction of 1/80…1/250 scales s0 up and s12 down by as much:
     // at the frame's lit pixels (s0 ~ 0.1–0.6) that is 1e-3 or more RMS, ten times the
     // calibrated error at least.
-    assert!(rms_uncalibrated > 1e-3, "uncalibrated rms {rms_uncalibrated}");
+    assert!(
+        rms_uncalibrated > 1e-3,
+        "uncalibrated rms {rms_uncalibrated}"
+    );
     assert!(rms_uncalibrated > 2.5 * rms, "{rms_uncalibrated} vs {rms}");
 }

@@ -133,7 +133,6 @@ impl StokesMatrix {
     /// order): one global calibration's, or one superpixel's of a per-pixel sensor
     /// calibration ([`crate::sensor_calibration`]).
     pub fn of_measurement(a: [[f64; 3]; 4]) -> Result<StokesMatrix, CalibrationError> {
-
         // AᵀA (3×3, symmetric)
         let mut ata = [[0.0f64; 3]; 3];
         for row in &a {

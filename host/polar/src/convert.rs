@@ -125,8 +125,7 @@ pub fn write(args: &Args, say: &dyn Say) -> Result<Written> {
     // per-analyser JSON
     let sensor = match &args.calibration {
         Some(path) if sensor_calibration::file::is_sensor_calibration(path) => Some(
-            sensor_calibration::file::read(path, None)
-                .map_err(|e| RunError::msg(e.to_string()))?,
+            sensor_calibration::file::read(path, None).map_err(|e| RunError::msg(e.to_string()))?,
         ),
         _ => None,
     };
@@ -152,8 +151,14 @@ pub fn write(args: &Args, say: &dyn Say) -> Result<Written> {
                     cal.header.figures.black_level_dn
                 ));
             }
-            let config = sensor_calibration::apply::calibrated_config(&PolarConfig { dark_level_dn: 0.0, ..config }, cal)
-                .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
+            let config = sensor_calibration::apply::calibrated_config(
+                &PolarConfig {
+                    dark_level_dn: 0.0,
+                    ..config
+                },
+                cal,
+            )
+            .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
             let image = process_with_sensor(&loaded.frame, &config, cal)
                 .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
             (image, config)

@@ -158,7 +158,10 @@ impl CaptureSet {
         for (i, f) in self.frames.iter().enumerate() {
             let field = format!("frames[{i}]");
             if f.file.is_empty() || Path::new(&f.file).is_absolute() || f.file.contains("..") {
-                return Err((field, format!("file '{}' must be inside the folder", f.file)));
+                return Err((
+                    field,
+                    format!("file '{}' must be inside the folder", f.file),
+                ));
             }
             match f.kind {
                 CaptureKind::Flat { level_rel } if !(level_rel.is_finite() && level_rel > 0.0) => {
@@ -215,7 +218,9 @@ mod tests {
                 },
                 CaptureFrame {
                     file: "pol_000.png".into(),
-                    kind: CaptureKind::Polariser { polariser_deg: 45.0 },
+                    kind: CaptureKind::Polariser {
+                        polariser_deg: 45.0,
+                    },
                 },
             ],
         }
@@ -233,7 +238,10 @@ mod tests {
         bad.frames[0].file = "../x.png".into();
         bad.write(dir.path()).unwrap();
         let e = CaptureSet::read(dir.path()).unwrap_err().to_string();
-        assert!(e.contains("frames[0]") && e.contains("inside the folder"), "{e}");
+        assert!(
+            e.contains("frames[0]") && e.contains("inside the folder"),
+            "{e}"
+        );
         let mut bad = set();
         bad.version = 9;
         bad.write(dir.path()).unwrap();

@@ -138,8 +138,12 @@ fn sensor(args: SensorArgs) -> anyhow::Result<()> {
     );
     crate::outln!(
         "  extinction ratio {:?}, analyser angle errors (mean per analyser) {:?} deg, sd {:.3} deg",
-        f.extinction_ratio.iter().map(|v| (v * 10.0).round() / 10.0).collect::<Vec<_>>(),
-        f.analyser_angle_mean_error_deg.map(|v| (v * 1000.0).round() / 1000.0),
+        f.extinction_ratio
+            .iter()
+            .map(|v| (v * 10.0).round() / 10.0)
+            .collect::<Vec<_>>(),
+        f.analyser_angle_mean_error_deg
+            .map(|v| (v * 1000.0).round() / 1000.0),
         f.analyser_angle_sd_deg
     );
     crate::outln!("  report: {}", report.display());

@@ -117,8 +117,8 @@ fn calibration_captures(args: CapturesArgs) -> anyhow::Result<()> {
         pixel_truth: false,
     };
     let plan = ellipso_bench::sensor_calibration::capture_plan(&scene).map_err(out::failed)?;
-    let captures = cc::render(&scene, &plan, options)
-        .map_err(|e| anyhow!("{}: {e}", args.scene.display()))?;
+    let captures =
+        cc::render(&scene, &plan, options).map_err(|e| anyhow!("{}: {e}", args.scene.display()))?;
     cc::write(&captures, &args.out).map_err(|e| anyhow!("{e}"))?;
     crate::outln!(
         "wrote {} calibration frames ({}×{}) and captures.json into {}",

@@ -171,7 +171,12 @@ fn a_static_rig_has_no_motion_blur_and_a_lone_sphere_no_shadows() {
 fn real_sensor_effects_cost_one_draw_per_raw_pixel_only_when_listed() {
     let base = scene_edited("sphere.toml", |t| t);
     let c0 = counts(&base);
-    for s in [Stage::AnalyserErrors, Stage::Prnu, Stage::BlackLevel, Stage::HotPixels] {
+    for s in [
+        Stage::AnalyserErrors,
+        Stage::Prnu,
+        Stage::BlackLevel,
+        Stage::HotPixels,
+    ] {
         assert_eq!(c0.get(s), 0, "{}", s.name());
     }
     let scene = scene_edited("sphere.toml", |t| {
@@ -185,15 +190,25 @@ fn real_sensor_effects_cost_one_draw_per_raw_pixel_only_when_listed() {
     });
     let plan = EffectPlan::from_scene(&scene);
     let c = counts(&scene);
-    for s in [Stage::AnalyserErrors, Stage::Prnu, Stage::BlackLevel, Stage::HotPixels] {
+    for s in [
+        Stage::AnalyserErrors,
+        Stage::Prnu,
+        Stage::BlackLevel,
+        Stage::HotPixels,
+    ] {
         assert!(plan.contains(s));
         assert_eq!(c.get(s), 48 * 40, "{}: one draw per raw pixel", s.name());
     }
     assert!(plan.contains(Stage::FlashPolariserError) && plan.contains(Stage::FlashProfileError));
     // everything else runs exactly as often as without the new effects
     for s in Stage::ALL {
-        if ![Stage::AnalyserErrors, Stage::Prnu, Stage::BlackLevel, Stage::HotPixels]
-            .contains(&s)
+        if ![
+            Stage::AnalyserErrors,
+            Stage::Prnu,
+            Stage::BlackLevel,
+            Stage::HotPixels,
+        ]
+        .contains(&s)
         {
             assert_eq!(c.get(s), c0.get(s), "{}", s.name());
         }

@@ -190,7 +190,11 @@ mod tests {
         );
         let p = FixedPattern::new(&plan, SensorLayout::MonoPolar, 7);
         assert!(p.is_active());
-        assert_eq!(p.pixel(10, 20), p.pixel(10, 20), "a pure function of the pixel");
+        assert_eq!(
+            p.pixel(10, 20),
+            p.pixel(10, 20),
+            "a pure function of the pixel"
+        );
         let other = FixedPattern::new(&plan, SensorLayout::MonoPolar, 8);
         assert_ne!(p.pixel(10, 20), other.pixel(10, 20), "another sensor");
         let n = 200 * 200;

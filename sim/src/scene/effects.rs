@@ -412,10 +412,22 @@ impl EffectsSpec {
         }
         if let Some(b) = self.black_level {
             in_range(k("black_level.dn"), b.dn, 0.0, 4096.0, "need 0..=4096 DN")?;
-            in_range(k("black_level.dsnu_dn"), b.dsnu_dn, 0.0, 100.0, "need 0..=100 DN")?;
+            in_range(
+                k("black_level.dsnu_dn"),
+                b.dsnu_dn,
+                0.0,
+                100.0,
+                "need 0..=100 DN",
+            )?;
         }
         if let Some(h) = self.hot_pixels {
-            in_range(k("hot_pixels.fraction"), h.fraction, 0.0, 0.01, "need 0..=0.01")?;
+            in_range(
+                k("hot_pixels.fraction"),
+                h.fraction,
+                0.0,
+                0.01,
+                "need 0..=0.01",
+            )?;
             in_range(k("hot_pixels.dn"), h.dn, 0.0, 65535.0, "need 0..=65535 DN")?;
         }
         if let Some(f) = self.flash_polariser_error {

@@ -16,8 +16,7 @@ use super::SensorCalibration;
 use crate::demosaic::{RowBuf, band_colours, superpixel_row};
 use crate::stokes::{AnalyserRow, per_pixel_row};
 use crate::{
-    DemosaicMethod, Levels, PolarConfig, PolarError, PolarImage, RawFrame, StokesBand,
-    StokesMatrix,
+    DemosaicMethod, Levels, PolarConfig, PolarError, PolarImage, RawFrame, StokesBand, StokesMatrix,
 };
 
 /// Every output pixel's estimator and offsets, per band, for one calibration and one set of
@@ -33,7 +32,12 @@ pub struct PixelEstimators {
 }
 
 /// The raw pixels of output pixel `(i, j)` of `colour`, grouped by analyser index.
-fn block_pixels(layout: SensorLayout, colour: Option<Channel>, i: usize, j: usize) -> [Vec<(u32, u32)>; 4] {
+fn block_pixels(
+    layout: SensorLayout,
+    colour: Option<Channel>,
+    i: usize,
+    j: usize,
+) -> [Vec<(u32, u32)>; 4] {
     let tile = if colour.is_some() { 4 } else { 2 };
     let mut groups: [Vec<(u32, u32)>; 4] = Default::default();
     for dy in 0..tile {

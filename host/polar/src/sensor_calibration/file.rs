@@ -181,8 +181,8 @@ pub fn from_bytes(
         return Err(corrupt(path, "truncated inside the header"));
     };
     // the version first, so a newer file's other fields are not reported as corrupt
-    let value: serde_json::Value = serde_json::from_slice(header_bytes)
-        .map_err(|e| corrupt(path, format!("header: {e}")))?;
+    let value: serde_json::Value =
+        serde_json::from_slice(header_bytes).map_err(|e| corrupt(path, format!("header: {e}")))?;
     if value.get("format").and_then(|v| v.as_str()) != Some(FORMAT) {
         return Err(corrupt(path, format!("header: format is not '{FORMAT}'")));
     }

@@ -95,7 +95,10 @@ impl Frames<'_> {
         if (w, h) != (s.width, s.height) {
             return Err(MeasureError::Frame {
                 file: file.into(),
-                what: format!("{w}×{h} px, the manifest's sensor is {}×{}", s.width, s.height),
+                what: format!(
+                    "{w}×{h} px, the manifest's sensor is {}×{}",
+                    s.width, s.height
+                ),
             });
         }
         Ok(px)
@@ -129,7 +132,9 @@ pub fn measure(
                 .or_insert((level_rel, Vec::new()))
                 .1
                 .push(f.file.as_str()),
-            CaptureKind::Polariser { polariser_deg } => sheets.push((polariser_deg, f.file.as_str())),
+            CaptureKind::Polariser { polariser_deg } => {
+                sheets.push((polariser_deg, f.file.as_str()))
+            }
         }
     }
     if darks.len() < 2 {
@@ -238,7 +243,9 @@ pub fn measure(
     let usable: Vec<&PhotonTransferPoint> = points
         .iter()
         .zip(&level_frames)
-        .filter(|(p, (_, _, c))| *c == 0 && p.mean_dn <= options.photon_transfer_max_fraction * range)
+        .filter(|(p, (_, _, c))| {
+            *c == 0 && p.mean_dn <= options.photon_transfer_max_fraction * range
+        })
         .map(|(p, _)| p)
         .collect();
     if usable.len() < 2 {
@@ -248,10 +255,14 @@ pub fn measure(
                 usable.len(),
                 100.0 * options.photon_transfer_max_fraction
             ),
-            photos: "more flat levels between 5 % and 70 % of saturation (shorter exposures)".into(),
+            photos: "more flat levels between 5 % and 70 % of saturation (shorter exposures)"
+                .into(),
         });
     }
-    let k_num: f64 = usable.iter().map(|p| p.mean_dn * (p.variance_dn2 - var_dark_t)).sum();
+    let k_num: f64 = usable
+        .iter()
+        .map(|p| p.mean_dn * (p.variance_dn2 - var_dark_t))
+        .sum();
     let k_den: f64 = usable.iter().map(|p| p.mean_dn * p.mean_dn).sum();
     let gain = k_num / k_den;
     if !(gain.is_finite() && gain > 0.0) {
@@ -356,7 +367,11 @@ pub fn measure(
     let inv = invert3(design).ok_or_else(|| {
         MeasureError::Degenerate("the polariser-sheet angles do not separate s1 from s2".into())
     })?;
-    let bands = if layout.colour_at(0, 0).is_some() { 3 } else { 1 };
+    let bands = if layout.colour_at(0, 0).is_some() {
+        3
+    } else {
+        1
+    };
     let mut analysis = vec![[0.0f64; 3]; n];
     let mut norm = vec![(0.0f64, 0.0f64); bands];
     for i in 0..n {
@@ -416,7 +431,11 @@ pub fn measure(
         .iter()
         .map(|(s, c)| {
             let d = s / c.max(1.0);
-            if d < 1.0 { (1.0 + d) / (1.0 - d) } else { f64::INFINITY }
+            if d < 1.0 {
+                (1.0 + d) / (1.0 - d)
+            } else {
+                f64::INFINITY
+            }
         })
         .collect();
     let figures = SensorFigures {
@@ -462,15 +481,22 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
-    let scale = m.iter().flatten().fold(0.0f64, |a, v| a.max(v.abs())).powi(3);
+    let scale = m
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, v| a.max(v.abs()))
+        .powi(3);
     if !(det.abs() > 1e-9 * scale) {
         return None;
     }
-    let c = |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
+    let c =
+        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
     let cof = [
         [c(1, 2, 1, 2), -c(1, 2, 0, 2), c(1, 2, 0, 1)],
         [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
         [c(0, 1, 1, 2), -c(0, 1, 0, 2), c(0, 1, 0, 1)],
     ];
-    Some(std::array::from_fn(|i| std::array::from_fn(|j| cof[j][i] / det)))
+    Some(std::array::from_fn(|i| {
+        std::array::from_fn(|j| cof[j][i] / det)
+    }))
 }

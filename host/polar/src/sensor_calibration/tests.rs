@@ -96,7 +96,10 @@ fn per_pixel_estimator_recovers_the_stokes_vector_the_sensor_saw() {
             }
         }
         assert!(worst < 1e-4, "{layout:?}: calibrated error {worst}");
-        assert!(worst_ideal > 3e-3, "{layout:?}: ideal formulas' error {worst_ideal}");
+        assert!(
+            worst_ideal > 3e-3,
+            "{layout:?}: ideal formulas' error {worst_ideal}"
+        );
     }
 }
 
@@ -121,22 +124,37 @@ fn file_round_trips_and_every_bad_file_is_named() {
     let n = flipped.len();
     flipped[n - 20] ^= 1;
     let e = at(&p, &flipped);
-    assert!(matches!(e, SensorCalibrationError::Corrupt { .. }) && e.to_string().contains("checksum"), "{e}");
+    assert!(
+        matches!(e, SensorCalibrationError::Corrupt { .. }) && e.to_string().contains("checksum"),
+        "{e}"
+    );
     // truncated
     let e = at(&p, &bytes[..n - 100]);
-    assert!(e.to_string().contains("bytes, a 8×8 calibration has"), "{e}");
+    assert!(
+        e.to_string().contains("bytes, a 8×8 calibration has"),
+        "{e}"
+    );
     // not a calibration
     let e = at(&p, b"{\"angle_deg\": [0, 45, 90, 135]}");
-    assert!(matches!(e, SensorCalibrationError::NotACalibration { .. }), "{e}");
+    assert!(
+        matches!(e, SensorCalibrationError::NotACalibration { .. }),
+        "{e}"
+    );
     // another version
     let mut newer = cal.clone();
     newer.header.version = 2;
     let (b, _) = file::to_bytes(&newer);
     let e = at(&p, &b);
-    assert!(matches!(e, SensorCalibrationError::Version { found: 2, .. }), "{e}");
+    assert!(
+        matches!(e, SensorCalibrationError::Version { found: 2, .. }),
+        "{e}"
+    );
     // stale: not the identity the rig file names
     let e = file::read(&path, Some("0123456789abcdef")).unwrap_err();
-    assert!(matches!(e, SensorCalibrationError::Stale { .. }) && e.to_string().contains(&id), "{e}");
+    assert!(
+        matches!(e, SensorCalibrationError::Stale { .. }) && e.to_string().contains(&id),
+        "{e}"
+    );
     // a frame of another size or layout
     let frame = RawFrame::new(16, 8, 16, SensorLayout::MonoPolar, vec![0; 128]).unwrap();
     let e = cal.check_frame(&frame).unwrap_err().to_string();
@@ -144,6 +162,9 @@ fn file_round_trips_and_every_bad_file_is_named() {
     let frame = RawFrame::new(8, 8, 16, SensorLayout::ColourPolar, vec![0; 64]);
     if let Ok(frame) = frame {
         let e = cal.check_frame(&frame).unwrap_err().to_string();
-        assert!(e.contains("mono_polar") && e.contains("colour_polar"), "{e}");
+        assert!(
+            e.contains("mono_polar") && e.contains("colour_polar"),
+            "{e}"
+        );
     }
 }
