@@ -486,7 +486,7 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
         .flatten()
         .fold(0.0f64, |a, v| a.max(v.abs()))
         .powi(3);
-    if !(det.abs() > 1e-9 * scale) {
+    if det.is_nan() || det.abs() <= 1e-9 * scale {
         return None;
     }
     let c =
