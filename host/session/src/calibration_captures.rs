@@ -49,9 +49,9 @@ pub enum CaptureKind {
     },
 }
 
-/// One frame of the set.
+/// One frame of the set (unknown fields are not refused here: serde cannot refuse them
+/// through the flattened `kind`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct CaptureFrame {
     /// PNG file, relative to the folder.
     pub file: String,
