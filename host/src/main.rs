@@ -26,7 +26,8 @@ enum Command {
     Model(cli::model::Args),
     /// Turn one raw polarisation-mosaic frame into s0, DoLP, AoLP and observation-channel images.
     Polar(cli::polar::Args),
-    /// Calibrate the camera (intrinsics, distortion) from a session of AprilTag board frames.
+    /// Calibrate the camera (intrinsics, distortion) from a session of AprilTag board frames;
+    /// `calibrate sensor`: the sensor (EMVA 1288 figures, per-pixel analysers) from captures.
     Calibrate(cli::calibrate::Args),
     /// Fit the per-vertex polarimetric SVBRDF and refined shape of a session to a mesh.
     Fit(cli::fit::Args),

@@ -21,6 +21,12 @@
 //!     analytic surface cannot shadow itself (its back-facing points get no light anyway);
 //!   - flash falloff: always (the flash is a point source: 1/d² and its angular profile);
 //!   - motion blur: listed *and* a non-zero linear or angular speed (a static rig has none).
+//!   - the sensor's fixed pattern (`analyser_errors`, `prnu`, `black_level`, `hot_pixels`) and
+//!     the flash's true polariser angle and profile (`flash_polariser_error`,
+//!     `flash_profile_error`): listed. Each fixed-pattern stage costs one evaluation of its
+//!     per-pixel draw per raw pixel (a hash, no stored map: [`crate::render::FixedPattern`]);
+//!     the flash stages cost nothing per pixel (the renderer lights the scene with the true
+//!     flash, the session records the stated one).
 //!
 //! Only materials actually bound to an object count, so an unused material costs nothing.
 
@@ -31,7 +37,8 @@ mod tests;
 pub use counts::{StageCounts, StageSet};
 
 use crate::scene::effects::{
-    FrameDrops, LinkCorruption, LinkDisconnect, MotionBlur, PolariserExtinction, ReadNoise,
+    AnalyserErrors, BlackLevel, FlashPolariserError, FlashProfileError, FrameDrops, HotPixels,
+    LinkCorruption, LinkDisconnect, MotionBlur, PolariserExtinction, Prnu, ReadNoise,
     TriggerJitter, Vignetting,
 };
 use crate::scene::{EffectKind, MaterialBinding, ObjectGeometry, Scene};
@@ -61,14 +68,26 @@ pub enum Stage {
     LensDistortion,
     /// Finite extinction ratio of the on-chip polarisers.
     PolariserExtinction,
+    /// Per-pixel analyser angle and extinction errors (fixed pattern).
+    AnalyserErrors,
+    /// Photo-response non-uniformity (fixed pattern).
+    Prnu,
     /// Poisson photon noise.
     ShotNoise,
     /// Gaussian read noise.
     ReadNoise,
+    /// Black level and dark-signal non-uniformity (fixed pattern).
+    BlackLevel,
+    /// Hot pixels (fixed pattern).
+    HotPixels,
     /// Rounding to whole digital numbers.
     Quantisation,
     /// Full-well and ADC clipping.
     Saturation,
+    /// The flash polariser off its recorded angle.
+    FlashPolariserError,
+    /// The flash's true angular profile differs from the recorded one.
+    FlashProfileError,
     /// Camera motion during the exposure.
     MotionBlur,
     /// Trigger timing jitter (virtual rig).
@@ -93,7 +112,7 @@ pub enum Executor {
 
 impl Stage {
     /// Number of stages.
-    pub const COUNT: usize = 19;
+    pub const COUNT: usize = 25;
     /// Every stage, in pipeline order.
     pub const ALL: [Stage; Stage::COUNT] = [
         Stage::Diffuse,
@@ -106,10 +125,16 @@ impl Stage {
         Stage::Vignetting,
         Stage::LensDistortion,
         Stage::PolariserExtinction,
+        Stage::AnalyserErrors,
+        Stage::Prnu,
         Stage::ShotNoise,
         Stage::ReadNoise,
+        Stage::BlackLevel,
+        Stage::HotPixels,
         Stage::Quantisation,
         Stage::Saturation,
+        Stage::FlashPolariserError,
+        Stage::FlashProfileError,
         Stage::MotionBlur,
         Stage::TriggerJitter,
         Stage::FrameDrops,
@@ -135,6 +160,12 @@ impl Stage {
             Stage::Vignetting => "vignetting",
             Stage::LensDistortion => "lens_distortion",
             Stage::PolariserExtinction => "polariser_extinction",
+            Stage::AnalyserErrors => "analyser_errors",
+            Stage::Prnu => "prnu",
+            Stage::BlackLevel => "black_level",
+            Stage::HotPixels => "hot_pixels",
+            Stage::FlashPolariserError => "flash_polariser_error",
+            Stage::FlashProfileError => "flash_profile_error",
             Stage::ShotNoise => "shot_noise",
             Stage::ReadNoise => "read_noise",
             Stage::Quantisation => "quantisation",
@@ -168,6 +199,12 @@ impl Stage {
             EffectKind::Vignetting => Stage::Vignetting,
             EffectKind::LensDistortion => Stage::LensDistortion,
             EffectKind::PolariserExtinction => Stage::PolariserExtinction,
+            EffectKind::AnalyserErrors => Stage::AnalyserErrors,
+            EffectKind::Prnu => Stage::Prnu,
+            EffectKind::BlackLevel => Stage::BlackLevel,
+            EffectKind::HotPixels => Stage::HotPixels,
+            EffectKind::FlashPolariserError => Stage::FlashPolariserError,
+            EffectKind::FlashProfileError => Stage::FlashProfileError,
             EffectKind::MotionBlur => Stage::MotionBlur,
             EffectKind::TriggerJitter => Stage::TriggerJitter,
             EffectKind::FrameDrops => Stage::FrameDrops,
@@ -202,6 +239,18 @@ pub enum StageParams {
     Vignetting(Vignetting),
     /// Polariser extinction.
     PolariserExtinction(PolariserExtinction),
+    /// Per-pixel analyser errors.
+    AnalyserErrors(AnalyserErrors),
+    /// PRNU.
+    Prnu(Prnu),
+    /// Black level and DSNU.
+    BlackLevel(BlackLevel),
+    /// Hot pixels.
+    HotPixels(HotPixels),
+    /// Flash polariser angle error.
+    FlashPolariserError(FlashPolariserError),
+    /// Flash profile error.
+    FlashProfileError(FlashProfileError),
     /// Motion blur.
     MotionBlur(MotionBlur),
     /// Trigger jitter.
@@ -442,6 +491,16 @@ impl EffectPlan {
                 Stage::PolariserExtinction => {
                     e.polariser_extinction.map(StageParams::PolariserExtinction)
                 }
+                Stage::AnalyserErrors => e.analyser_errors.map(StageParams::AnalyserErrors),
+                Stage::Prnu => e.prnu.map(StageParams::Prnu),
+                Stage::BlackLevel => e.black_level.map(StageParams::BlackLevel),
+                Stage::HotPixels => e.hot_pixels.map(StageParams::HotPixels),
+                Stage::FlashPolariserError => e
+                    .flash_polariser_error
+                    .map(StageParams::FlashPolariserError),
+                Stage::FlashProfileError => {
+                    e.flash_profile_error.map(StageParams::FlashProfileError)
+                }
                 Stage::MotionBlur => e.motion_blur.map(StageParams::MotionBlur),
                 Stage::TriggerJitter => e.trigger_jitter.map(StageParams::TriggerJitter),
                 Stage::FrameDrops => e.frame_drops.map(StageParams::FrameDrops),
@@ -555,6 +614,15 @@ fn params_text(p: &StageParams) -> String {
         StageParams::ReadNoise(r) => format!(" [sigma_e = {}]", r.sigma_e),
         StageParams::Vignetting(v) => format!(" [exponent = {}]", v.exponent),
         StageParams::PolariserExtinction(x) => format!(" [ratio = {}]", x.ratio),
+        StageParams::AnalyserErrors(a) => format!(
+            " [angle_sigma_deg = {}, extinction_ratio_rgb = {:?}, extinction_sigma_rel = {}]",
+            a.angle_sigma_deg, a.extinction_ratio_rgb, a.extinction_sigma_rel
+        ),
+        StageParams::Prnu(p) => format!(" [sigma_rel = {}]", p.sigma_rel),
+        StageParams::BlackLevel(b) => format!(" [dn = {}, dsnu_dn = {}]", b.dn, b.dsnu_dn),
+        StageParams::HotPixels(h) => format!(" [fraction = {}, dn = {}]", h.fraction, h.dn),
+        StageParams::FlashPolariserError(f) => format!(" [angle_deg = {}]", f.angle_deg),
+        StageParams::FlashProfileError(f) => format!(" [exponent = {}]", f.exponent),
         StageParams::MotionBlur(m) => format!(
             " [samples = {}, {} m/s, {} deg/s]",
             m.samples, m.linear_speed_m_per_s, m.angular_speed_deg_per_s

@@ -21,6 +21,7 @@
 //!   for the generalisation bench.
 #![cfg_attr(not(test), forbid(unsafe_code))] // the tests compare with the C apriltag library
 
+pub mod calibration_captures;
 pub mod effects;
 pub mod generate;
 pub mod record;

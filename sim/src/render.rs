@@ -31,17 +31,21 @@
 //!   pose) and turns (about the axis of the path's rotation there) symmetrically about the listed
 //!   pose during the exposure; `samples` instants are averaged. The truth pose is mid-exposure.
 
+mod fixed_pattern;
 mod footprint;
 pub mod radiometry;
 mod sensor;
 mod shade;
 pub mod truth;
+mod uniform;
 
 #[cfg(test)]
 mod tests;
 
+pub use fixed_pattern::{FixedPattern, PixelPattern};
 pub use footprint::{Footprint, IdealPixel, PointFrame};
 pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
+pub use uniform::UniformTarget;
 
 use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams, StageSet};
 use crate::scene::{Scene, SensorKind};
@@ -50,6 +54,7 @@ use ellipso_model::geometry::Ray;
 use ellipso_model::mosaic::{MosaicError, SensorLayout};
 use ellipso_model::optics::OpticsError;
 use ellipso_model::optics::pbrdf::PbrdfParams;
+use ellipso_model::rig::FlashSpec;
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use radiometry::Radiometry;
 use rayon::prelude::*;
@@ -200,6 +205,26 @@ pub struct Renderer<'s> {
     materials: Vec<PbrdfParams<f64>>,
     options: RenderOptions,
     seed: u64,
+    pattern: FixedPattern,
+    flash: FlashSpec,
+}
+
+/// The flash a render lights the scene with: the scene's (what a session records), turned by
+/// `flash_polariser_error` and with the profile of `flash_profile_error` when those are planned.
+pub fn true_flash(recorded: &FlashSpec, plan: &EffectPlan) -> FlashSpec {
+    let mut flash = recorded.clone();
+    if let Some(StageParams::FlashPolariserError(e)) = plan.params(Stage::FlashPolariserError) {
+        flash.polariser_deg += e.angle_deg;
+    }
+    if let Some(StageParams::FlashProfileError(e)) = plan.params(Stage::FlashProfileError) {
+        flash.profile = ellipso_model::rig::FlashProfileSpec {
+            kind: ellipso_model::rig::FlashProfileKind::CosPower,
+            exponent: Some(e.exponent),
+            angle_deg: None,
+            relative: None,
+        };
+    }
+    flash
 }
 
 impl<'s> Renderer<'s> {
@@ -260,8 +285,12 @@ impl<'s> Renderer<'s> {
             Some(StageParams::Vignetting(v)) => Some(v.exponent),
             _ => None,
         };
-        let radiometry = Radiometry::new(&scene.rig.camera, &scene.rig.flash, vignetting);
+        let flash = true_flash(&scene.rig.flash, &plan);
+        let radiometry = Radiometry::new(&scene.rig.camera, &flash, vignetting);
+        let pattern = FixedPattern::new(&plan, layout, scene.effects.sensor_seed);
         Ok(Self {
+            flash,
+            pattern,
             scene,
             set: plan.stage_set(),
             plan,
@@ -369,8 +398,31 @@ impl<'s> Renderer<'s> {
         Vector3::new((u - i.cx) / i.fx, (v - i.cy) / i.fy, 1.0).normalize()
     }
 
-    /// What raw pixel `(x, y)` measures.
-    fn pixel_sensor(&self, x: u32, y: u32) -> PixelSensor {
+    /// The sensor's fixed pattern (truth for calibration benches).
+    pub fn fixed_pattern(&self) -> &FixedPattern {
+        &self.pattern
+    }
+
+    /// The fixed-pattern values of raw pixel `(x, y)`, counting each planned stage once.
+    fn pixel_pattern(&self, x: u32, y: u32, counts: &mut StageCounts) -> PixelPattern {
+        if !self.pattern.is_active() {
+            return PixelPattern::IDEAL;
+        }
+        for stage in [
+            Stage::AnalyserErrors,
+            Stage::Prnu,
+            Stage::BlackLevel,
+            Stage::HotPixels,
+        ] {
+            if self.set.has(stage) {
+                counts.add(stage, 1);
+            }
+        }
+        self.pattern.pixel(x, y)
+    }
+
+    /// What raw pixel `(x, y)` with fixed pattern `pattern` measures.
+    fn pixel_sensor(&self, x: u32, y: u32, pattern: &PixelPattern) -> PixelSensor {
         let weights = match self.layout.colour_at(x, y) {
             Some(c) => {
                 let mut w = [0.0; 3];
@@ -379,7 +431,11 @@ impl<'s> Renderer<'s> {
             }
             None => [1.0 / 3.0; 3],
         };
-        PixelSensor::new(self.layout.analyser_at(x, y).angle_rad(), weights)
+        let angle = self.layout.analyser_at(x, y).angle_rad() + pattern.angle_error_rad;
+        PixelSensor {
+            extinction: pattern.inverse_extinction,
+            ..PixelSensor::new(angle, weights)
+        }
     }
 
     /// Renders frame `index` on the current rayon pool, lit by the scene's full flash pulse.

@@ -48,6 +48,7 @@ pub mod pose;
 pub mod report;
 pub mod rig_capture;
 pub mod score;
+pub mod sensor_calibration;
 pub mod sim_render;
 pub mod surface;
 pub mod truth;

@@ -17,7 +17,8 @@
 //! Contract: [`AnalyserCalibration::stokes_matrix`] either returns a finite estimator or an error
 //! naming why the calibration cannot be inverted; for [`AnalyserCalibration::IDEAL`] it returns
 //! exactly the textbook rows and `n = [1, −1, 1, −1]`. This module covers one global calibration
-//! per sensor; per-pixel calibration (Stockmans et al., arXiv 2405.07864) is not implemented.
+//! per sensor; the per-pixel calibration of [`crate::sensor_calibration`] builds one
+//! [`StokesMatrix`] per superpixel with [`StokesMatrix::of_measurement`].
 
 use serde::{Deserialize, Serialize};
 
@@ -123,7 +124,15 @@ impl AnalyserCalibration {
     /// The least-squares estimator `A⁺` and the residual direction (see the module doc).
     pub fn stokes_matrix(&self) -> Result<StokesMatrix, CalibrationError> {
         self.validate()?;
-        let a = self.measurement_matrix();
+        StokesMatrix::of_measurement(self.measurement_matrix())
+    }
+}
+
+impl StokesMatrix {
+    /// The estimator of any 4×3 measurement matrix `a` (`I = A s`, rows in 0°, 45°, 90°, 135°
+    /// order): one global calibration's, or one superpixel's of a per-pixel sensor
+    /// calibration ([`crate::sensor_calibration`]).
+    pub fn of_measurement(a: [[f64; 3]; 4]) -> Result<StokesMatrix, CalibrationError> {
         // AᵀA (3×3, symmetric)
         let mut ata = [[0.0f64; 3]; 3];
         for row in &a {

@@ -34,7 +34,7 @@ use ellipso_model::mosaic::SensorLayout;
 
 use crate::{
     AnalyserCalibration, DemosaicMethod, MaskReason, PixelMask, PolarConfig, PolarImage,
-    StokesBand, process,
+    StokesBand, process, process_with_sensor, sensor_calibration,
 };
 use ellipso_report::{ColourMap, Key, Rgb};
 use render::MASKED;
@@ -69,8 +69,10 @@ pub struct Args {
     /// Also write every plane at full f32 precision as NumPy `.npy` files (s0, s1, s2, dolp,
     /// aolp_rad, residual, i_d; mask as u8 bits).
     pub npy: bool,
-    /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
-    /// 0°, 45°, 90°, 135° order); default: ideal analysers.
+    /// Analyser calibration: a sensor calibration file of `ellipso calibrate sensor` (every
+    /// pixel's dark level and analysis vector; superpixel demosaic), or a global per-analyser
+    /// JSON (`angle_deg`, `extinction_ratio`, `gain`, four values each in 0°, 45°, 90°, 135°
+    /// order); default: ideal analysers.
     pub calibration: Option<PathBuf>,
 }
 
@@ -119,9 +121,17 @@ pub fn write(args: &Args, say: &dyn Say) -> Result<Written> {
     for w in &loaded.warnings {
         say.err(format_args!("warning: {name}: {w}"));
     }
+    // one flag, two kinds of file: a per-pixel sensor calibration (its magic) or the global
+    // per-analyser JSON
+    let sensor = match &args.calibration {
+        Some(path) if sensor_calibration::file::is_sensor_calibration(path) => Some(
+            sensor_calibration::file::read(path, None).map_err(|e| RunError::msg(e.to_string()))?,
+        ),
+        _ => None,
+    };
     let calibration = match &args.calibration {
-        None => None,
-        Some(path) => Some(read_calibration(path)?),
+        Some(path) if sensor.is_none() => Some(read_calibration(path)?),
+        _ => None,
     };
     let config = PolarConfig {
         demosaic: args.demosaic,
@@ -131,8 +141,33 @@ pub fn write(args: &Args, say: &dyn Say) -> Result<Written> {
         max_residual: args.max_residual,
         calibration,
     };
-    let image =
-        process(&loaded.frame, &config).map_err(|e| RunError::msg(format!("{name}: {e}")))?;
+    let (image, config) = match &sensor {
+        Some(cal) => {
+            if args.dark_level != 0.0 {
+                say.err(format_args!(
+                    "warning: --dark-level {} ignored: sensor calibration {} brings the black level {:.2} DN and every pixel's dark level",
+                    args.dark_level,
+                    cal.id(),
+                    cal.header.figures.black_level_dn
+                ));
+            }
+            let config = sensor_calibration::apply::calibrated_config(
+                &PolarConfig {
+                    dark_level_dn: 0.0,
+                    ..config
+                },
+                cal,
+            )
+            .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
+            let image = process_with_sensor(&loaded.frame, &config, cal)
+                .map_err(|e| RunError::msg(format!("{name}: {e}")))?;
+            (image, config)
+        }
+        None => (
+            process(&loaded.frame, &config).map_err(|e| RunError::msg(format!("{name}: {e}")))?,
+            config,
+        ),
+    };
 
     let mut files = Vec::new();
     let mut band_stats = Vec::new();

@@ -103,6 +103,11 @@ impl Levels {
         self.dark_dn
     }
 
+    /// Normalised intensity per DN (`1 / (full scale − dark)`).
+    pub fn scale_per_dn(&self) -> f32 {
+        self.scale
+    }
+
     /// Samples at or above this DN are saturated.
     pub fn saturation_dn(&self) -> u16 {
         self.saturation_dn

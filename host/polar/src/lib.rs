@@ -43,7 +43,9 @@
 //! - Observation channels (docs/model.md §6): `I^d = 2·I90`, `I^s = I0 − I90`, `I^α = I135 − I45`;
 //!   `s1 = I^s` and `s2 = −I^α` bit for bit; `s0 − s1 = I^d` when the residual is 0.
 //! - Non-ideal analysers: an optional [`AnalyserCalibration`] (angles, extinction ratios, gains)
-//!   replaces the formulas by the least-squares estimator ([`calibration`]).
+//!   replaces the formulas by the least-squares estimator ([`calibration`]); a per-pixel
+//!   [`SensorCalibration`] (dark level and analysis vector of every raw pixel, measured by
+//!   `ellipso calibrate sensor`) gives every superpixel its own ([`sensor_calibration`]).
 //! - Units: normalised, `I = (DN − dark) / (full scale − dark)`; s0 ∈ [0, 2] for unclipped data.
 //! - Handedness check: a linear polariser in front of the lens at +30° counter-clockwise from
 //!   image-right must read AoLP = 30°, not 150°. If it reads 150°, the camera's 45°/135° labels
@@ -65,6 +67,7 @@ pub mod intensity;
 pub mod layout;
 pub mod mask;
 pub mod plane;
+pub mod sensor_calibration;
 pub mod stokes;
 pub mod synthetic;
 
@@ -76,6 +79,7 @@ pub use demosaic::{AnalyserBand, AnalyserImage, DemosaicMethod, Levels, demosaic
 pub use frame::{FrameError, RawFrame};
 pub use mask::{MaskReason, MaskSummary, PixelMask};
 pub use plane::Plane;
+pub use sensor_calibration::{SensorCalibration, process_with_sensor};
 pub use stokes::{StokesBand, aolp_rad, dolp, intensity_behind_analyser, stokes_from_intensities};
 
 use demosaic::{RowBuf, band_colours, superpixel_row};
@@ -144,6 +148,9 @@ pub enum PolarError {
     /// The analyser calibration cannot be used.
     #[error("analyser calibration: {0}")]
     Calibration(#[from] CalibrationError),
+    /// A per-pixel sensor calibration cannot be applied.
+    #[error("sensor calibration: {0}")]
+    SensorCalibration(String),
     /// A threshold is not a finite non-negative number.
     #[error("{name} = {value} must be finite and ≥ 0")]
     Threshold {
@@ -176,7 +183,7 @@ impl PolarConfig {
         Ok(Levels::new(full_scale_dn, dark, saturation_dn))
     }
 
-    fn thresholds(&self) -> Result<Thresholds, PolarError> {
+    pub(crate) fn thresholds(&self) -> Result<Thresholds, PolarError> {
         let check = |name: &'static str, value: f32| {
             if value.is_finite() && value >= 0.0 {
                 Ok(value)

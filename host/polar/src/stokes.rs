@@ -324,6 +324,44 @@ fn calibrated_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds, m: 
     }
 }
 
+/// [`calibrated_row`] with each output pixel's own estimator and intensity offsets (a per-pixel
+/// sensor calibration: `s = A⁺ (I − δ)`, residual `nᵀ(I − δ)`).
+pub(crate) fn per_pixel_row(
+    input: AnalyserRow<'_>,
+    out: StokesRow<'_>,
+    t: Thresholds,
+    estimators: &[StokesMatrix],
+    offsets: &[[f32; 4]],
+) {
+    let n = out.s0.len();
+    let [i0, i45, i90, i135] = input.intensity;
+    let (i0, i45, i90, i135, m_in) = (&i0[..n], &i45[..n], &i90[..n], &i135[..n], &input.mask[..n]);
+    let (estimators, offsets) = (&estimators[..n], &offsets[..n]);
+    for k in 0..n {
+        let d = offsets[k];
+        let i = [i0[k] - d[0], i45[k] - d[1], i90[k] - d[2], i135[k] - d[3]];
+        let m = &estimators[k];
+        let dot = |r: &[f32; 4]| r[0] * i[0] + r[1] * i[1] + r[2] * i[2] + r[3] * i[3];
+        let (v0, v1, v2) = (dot(&m.rows[0]), dot(&m.rows[1]), dot(&m.rows[2]));
+        let residual = dot(&m.null);
+        let raw_dolp = (v1 * v1 + v2 * v2).sqrt() / v0.max(S0_FLOOR);
+        let lit = v0 > S0_FLOOR;
+        out.s0[k] = v0;
+        out.s1[k] = v1;
+        out.s2[k] = v2;
+        out.dolp[k] = if lit { raw_dolp.min(1.0) } else { 0.0 };
+        out.aolp_rad[k] = aolp_rad(v1, v2);
+        out.residual[k] = residual;
+        out.i_d[k] = v0 - v1;
+        let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
+        let unphysical = u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE))
+            * MaskReason::Unphysical.bit();
+        let inconsistent =
+            u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
+        out.mask[k] = PixelMask(m_in[k].0 | dark | unphysical | inconsistent);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -19,6 +19,7 @@
 //! - Versioning: [`SCHEMA_VERSION`] changes only on incompatible change; additive fields are
 //!   `#[serde(default)]` and unknown event types are kept as [`events::SessionEvent::Unknown`].
 
+pub mod calibration_captures;
 pub mod events;
 pub mod frame_png;
 pub mod link_counters;

@@ -34,6 +34,10 @@ pub enum Args {
     /// whose figures count): coverage, per-material η error, normals, σ calibration; writes
     /// docs/generalize.md and docs/generalize.json.
     Generalize(generalize::GeneralizeArgs),
+    /// Sensor calibration on simulated captures (dark, flat, polariser-sheet) of a real
+    /// sensor: what `ellipso calibrate sensor` recovers against the simulator's truth, and
+    /// `ellipso polar` with it against the ideal sensor; writes docs/sensor-calibration.{md,json}.
+    Sensor(SensorCalibrationArgs),
     /// Built-in mesh (`ellipso mesh`) against the simulator's truth on the shipped scenes:
     /// Chamfer / Hausdorff distance, time and peak memory; writes docs/mesh-bench.md.
     Mesh(mesh::MeshArgs),
@@ -45,9 +49,31 @@ pub enum Args {
     Score(ScoreArgs),
 }
 
+/// Arguments of `ellipso bench sensor`.
+#[derive(Debug, clap::Args)]
+pub struct SensorCalibrationArgs {
+    /// Folder of the report (`sensor-calibration.json`; the table of `sensor-calibration.md`
+    /// is replaced between its markers).
+    #[arg(long, default_value = "docs")]
+    pub out: PathBuf,
+    /// Scratch folder for the rendered captures (created; must be empty or absent).
+    #[arg(long)]
+    pub work: PathBuf,
+}
+
 /// Runs `ellipso bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
+        Args::Sensor(a) => {
+            let r = ellipso_bench::sensor_calibration::run(&a.out, &a.work, &out::Printed)
+                .map_err(out::failed)?;
+            crate::outln!(
+                "{}",
+                serde_json::to_string_pretty(&r.recovered).unwrap_or_default()
+            );
+            crate::outln!("wrote {}", a.out.join("sensor-calibration.json").display());
+            Ok(())
+        }
         Args::Pose(a) => ellipso_bench::pose::run(
             &PoseOptions {
                 scene: a.scene,

@@ -2,6 +2,11 @@
 //! flash position) from a recorded session's board frames. The flags become
 //! [`ellipso_vision::calibrate::session::Args`]; [`ellipso_vision::calibrate::session::run`]
 //! does the work and says its report, printed here.
+//!
+//! `ellipso calibrate sensor CAPTURES --out FILE`: the per-pixel sensor calibration (EMVA 1288
+//! figures, dark levels, analysis vectors) from a captures folder
+//! ([`ellipso_polar::sensor_calibration::measure`]), written as a calibration file and its
+//! `.json` report beside it (docs/sensor-calibration.md).
 
 use std::path::PathBuf;
 
@@ -11,9 +16,14 @@ use ellipso_vision::track::DetectImage;
 
 /// Arguments of `ellipso calibrate`.
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
+    /// `sensor`: the sensor calibration from calibration captures.
+    #[command(subcommand)]
+    pub what: Option<What>,
     /// Session directory (frames of AprilTag boards).
-    pub session: PathBuf,
+    #[arg(required = true)]
+    pub session: Option<PathBuf>,
     /// Where to write the `[camera]` section.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -27,6 +37,24 @@ pub struct Args {
     /// the centre in the world frame of the session's boards.
     #[arg(long, value_parser = parse_sphere, value_name = "R,X,Y,Z")]
     pub sphere: Option<Sphere>,
+}
+
+/// What else `ellipso calibrate` calibrates.
+#[derive(Debug, clap::Subcommand)]
+pub enum What {
+    /// The sensor (gain, read noise, black level, DSNU, PRNU, vignetting, per-pixel analysers)
+    /// from a folder of dark, flat and polariser-sheet captures (`captures.json`).
+    Sensor(SensorArgs),
+}
+
+/// Arguments of `ellipso calibrate sensor`.
+#[derive(Debug, clap::Args)]
+pub struct SensorArgs {
+    /// Captures folder (`captures.json` and its frames).
+    pub captures: PathBuf,
+    /// The calibration file to write (a `.json` report is written beside it).
+    #[arg(long)]
+    pub out: PathBuf,
 }
 
 /// Parses `R,X,Y,Z` (metres) into a sphere.
@@ -51,12 +79,73 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
 
 /// Runs `ellipso calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(What::Sensor(a)) = args.what {
+        return sensor(a);
+    }
+    let Some(session) = args.session else {
+        anyhow::bail!("calibrate: give a session directory, or `sensor CAPTURES --out FILE`");
+    };
     let options = session::Args {
-        session: args.session,
+        session,
         out: args.out,
         image: args.image,
         free_k3: args.free_k3,
         sphere: args.sphere,
     };
     session::run(&options, &super::out::Printed).map_err(super::out::failed)
+}
+
+fn sensor(args: SensorArgs) -> anyhow::Result<()> {
+    use anyhow::Context;
+    use ellipso_polar::sensor_calibration::{MeasureOptions, file, measure};
+    use ellipso_session::calibration_captures::CaptureSet;
+    if args.out.exists() {
+        anyhow::bail!(
+            "{}: exists; a calibration is never written over (choose a new name)",
+            args.out.display()
+        );
+    }
+    let set = CaptureSet::read(&args.captures)?;
+    let mut cal = measure(&args.captures, &set, MeasureOptions::default())
+        .with_context(|| format!("{}", args.captures.display()))?;
+    let id = file::write(&mut cal, &args.out)?;
+    let report = args.out.with_extension("json");
+    let json = serde_json::json!({
+        "id": id,
+        "file": args.out.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "header": &cal.header,
+    });
+    ellipso_report::atomic_file::write(&report, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| report.display().to_string())?;
+    let f = &cal.header.figures;
+    crate::outln!("sensor calibration {id} written to {}", args.out.display());
+    crate::outln!(
+        "  gain {:.4} DN/e- ({:.3} e-/DN), read noise {:.3} e- ({:.3} DN), black level {:.2} DN, DSNU {:.3} DN",
+        f.gain_dn_per_e,
+        f.gain_e_per_dn,
+        f.read_noise_e,
+        f.read_noise_dn,
+        f.black_level_dn,
+        f.dsnu_dn
+    );
+    crate::outln!(
+        "  PRNU {:.3} %, saturation {:.0} DN ({:.0} e-), vignetting cos^{:.3}, {} hot pixel(s)",
+        100.0 * f.prnu_rel,
+        f.saturation_dn,
+        f.saturation_e,
+        f.vignetting_exponent,
+        f.hot_pixels
+    );
+    crate::outln!(
+        "  extinction ratio {:?}, analyser angle errors (mean per analyser) {:?} deg, sd {:.3} deg",
+        f.extinction_ratio
+            .iter()
+            .map(|v| (v * 10.0).round() / 10.0)
+            .collect::<Vec<_>>(),
+        f.analyser_angle_mean_error_deg
+            .map(|v| (v * 1000.0).round() / 1000.0),
+        f.analyser_angle_sd_deg
+    );
+    crate::outln!("  report: {}", report.display());
+    Ok(())
 }

@@ -68,7 +68,8 @@ pub struct Args {
     /// aolp_rad, residual, i_d; mask as u8 bits).
     #[arg(long)]
     pub npy: bool,
-    /// Analyser calibration (JSON: `angle_deg`, `extinction_ratio`, `gain`, four values each in
+    /// Analyser calibration: a sensor calibration file (`ellipso calibrate sensor`; per pixel,
+    /// superpixel demosaic) or a per-analyser JSON (`angle_deg`, `extinction_ratio`, `gain`, four values each in
     /// 0°, 45°, 90°, 135° order); default: ideal analysers.
     #[arg(long)]
     pub calibration: Option<PathBuf>,

@@ -7,6 +7,11 @@
 //! - `ellipso sim plan SCENE [--json]` prints the effect plan: each stage, who runs it and why,
 //!   and each stage left out with why.
 //!
+//! - `ellipso sim captures SCENE --out DIR` renders the sensor-calibration captures
+//!   of the scene's camera and sensor effects (dark frames, flat fields at 8 levels, flats
+//!   through a polariser sheet at 8 angles): [`ellipso_sim::calibration_captures`], the folder
+//!   `ellipso calibrate sensor` reads.
+//!
 //! `serve` (the virtual trigger board on a pty) lives in [`super::sim_serve`].
 
 use std::path::PathBuf;
@@ -27,6 +32,28 @@ pub enum Args {
     Plan(PlanArgs),
     /// Serve the virtual trigger board (the real firmware core) on a pseudo-terminal.
     Serve(super::sim_serve::ServeArgs),
+    /// Render the sensor-calibration captures (dark, flat, polariser-sheet frames) of a scene's
+    /// camera, for `ellipso calibrate sensor`.
+    Captures(CapturesArgs),
+}
+
+/// Arguments of `ellipso sim captures`.
+#[derive(Debug, clap::Args)]
+pub struct CapturesArgs {
+    /// Scene file (TOML): its camera and sensor effects.
+    pub scene: PathBuf,
+    /// Output directory (created; must be empty or absent).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Render width in pixels, even (intrinsics scaled; needs --height too).
+    #[arg(long, requires = "height", value_parser = limits::side_px)]
+    pub width: Option<u32>,
+    /// Render height in pixels, even (intrinsics scaled; needs --width too).
+    #[arg(long, requires = "width", value_parser = limits::side_px)]
+    pub height: Option<u32>,
+    /// Noise seed (default: the scene's seed).
+    #[arg(long)]
+    pub seed: Option<u64>,
 }
 
 /// Arguments of `ellipso sim render`.
@@ -76,7 +103,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Args::Render(a) => render(a),
         Args::Plan(a) => plan(a),
         Args::Serve(a) => super::sim_serve::run(a),
+        Args::Captures(a) => calibration_captures(a),
     }
+}
+
+fn calibration_captures(args: CapturesArgs) -> anyhow::Result<()> {
+    use ellipso_sim::calibration_captures as cc;
+    let scene = Scene::load(&args.scene).map_err(|e| anyhow!("{e}"))?;
+    let options = ellipso_sim::render::RenderOptions {
+        supersampling: 1,
+        seed: args.seed,
+        resolution_px: args.width.zip(args.height).map(|(w, h)| [w, h]),
+        pixel_truth: false,
+    };
+    let plan = ellipso_bench::sensor_calibration::capture_plan(&scene).map_err(out::failed)?;
+    let captures =
+        cc::render(&scene, &plan, options).map_err(|e| anyhow!("{}: {e}", args.scene.display()))?;
+    cc::write(&captures, &args.out).map_err(|e| anyhow!("{e}"))?;
+    crate::outln!(
+        "wrote {} calibration frames ({}×{}) and captures.json into {}",
+        captures.frames.len(),
+        captures.set.sensor.width,
+        captures.set.sensor.height,
+        args.out.display()
+    );
+    Ok(())
 }
 
 fn plan(args: PlanArgs) -> anyhow::Result<()> {

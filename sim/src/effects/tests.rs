@@ -96,11 +96,21 @@ fn analysers_bring_in_the_stokes_path_and_diffuse_polarisation() {
 fn full_scene_plans_every_listed_effect_and_hands_faults_to_the_rig() {
     let scene = scene_edited("multi_material.toml", |t| t);
     let plan = EffectPlan::from_scene(&scene);
-    // Everything but lens distortion (the scene's lens has no distortion coefficients).
+    // Everything but lens distortion (the scene's lens has no distortion coefficients) and the
+    // real sensor's and flash's effects (the scene describes the rig the fit assumes).
+    let unlisted = [
+        Stage::LensDistortion,
+        Stage::AnalyserErrors,
+        Stage::Prnu,
+        Stage::BlackLevel,
+        Stage::HotPixels,
+        Stage::FlashPolariserError,
+        Stage::FlashProfileError,
+    ];
     for s in Stage::ALL {
-        assert_eq!(plan.contains(s), s != Stage::LensDistortion, "{}", s.name());
+        assert_eq!(plan.contains(s), !unlisted.contains(&s), "{}", s.name());
     }
-    assert_eq!(plan.omitted.len(), 1);
+    assert_eq!(plan.omitted.len(), unlisted.len());
     let f = plan.rig_faults();
     assert_eq!(f.trigger_jitter.unwrap().sigma_us, 20.0);
     assert_eq!(f.frame_drops.unwrap().probability, 0.01);
@@ -155,4 +165,52 @@ fn a_static_rig_has_no_motion_blur_and_a_lone_sphere_no_shadows() {
     let plan = EffectPlan::from_scene(&lone);
     assert!(!plan.contains(Stage::Shadows));
     assert_eq!(counts(&lone).get(Stage::Shadows), 0);
+}
+
+#[test]
+fn real_sensor_effects_cost_one_draw_per_raw_pixel_only_when_listed() {
+    let base = scene_edited("sphere.toml", |t| t);
+    let c0 = counts(&base);
+    for s in [
+        Stage::AnalyserErrors,
+        Stage::Prnu,
+        Stage::BlackLevel,
+        Stage::HotPixels,
+    ] {
+        assert_eq!(c0.get(s), 0, "{}", s.name());
+    }
+    let scene = scene_edited("sphere.toml", |t| {
+        t.replace(
+            "[effects]",
+            "[effects]\nblack_level = { dn = 64.0, dsnu_dn = 1.0 }\nprnu = { sigma_rel = 0.01 }\n\
+             analyser_errors = { angle_sigma_deg = 1.0, extinction_ratio_rgb = [150.0, 250.0, 80.0] }\n\
+             hot_pixels = { fraction = 0.0001, dn = 200.0 }\nflash_polariser_error = { angle_deg = 1.0 }\n\
+             flash_profile_error = { exponent = 2.0 }",
+        )
+    });
+    let plan = EffectPlan::from_scene(&scene);
+    let c = counts(&scene);
+    for s in [
+        Stage::AnalyserErrors,
+        Stage::Prnu,
+        Stage::BlackLevel,
+        Stage::HotPixels,
+    ] {
+        assert!(plan.contains(s));
+        assert_eq!(c.get(s), 48 * 40, "{}: one draw per raw pixel", s.name());
+    }
+    assert!(plan.contains(Stage::FlashPolariserError) && plan.contains(Stage::FlashProfileError));
+    // everything else runs exactly as often as without the new effects
+    for s in Stage::ALL {
+        if ![
+            Stage::AnalyserErrors,
+            Stage::Prnu,
+            Stage::BlackLevel,
+            Stage::HotPixels,
+        ]
+        .contains(&s)
+        {
+            assert_eq!(c.get(s), c0.get(s), "{}", s.name());
+        }
+    }
 }

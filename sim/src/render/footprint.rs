@@ -81,7 +81,7 @@ impl<'s> Renderer<'s> {
         let contexts: Vec<PoseContext> = self
             .sub_poses(index)
             .into_iter()
-            .map(|w| PoseContext::new(self.scene, w))
+            .map(|w| PoseContext::with_flash(&self.flash, w))
             .collect();
         let read_noise_e = match self.plan.params(Stage::ReadNoise) {
             Some(StageParams::ReadNoise(r)) => r.sigma_e,
@@ -109,10 +109,14 @@ impl<'s> Renderer<'s> {
         let n = self.options.supersampling;
         for (x, out) in row.iter_mut().enumerate() {
             let x = x as u32;
-            let pixel = self.pixel_sensor(x, y);
+            let pattern = self.pixel_pattern(x, y, &mut counts);
+            let pixel = self.pixel_sensor(x, y, &pattern);
             let centre = [f64::from(x), f64::from(y)];
-            let electrons = self.expected_electrons(centre, n, &pixel, frame, &mut counts);
-            *out = frame.chain.digitise(electrons, &mut rng, &mut counts);
+            let electrons =
+                pattern.gain * self.expected_electrons(centre, n, &pixel, frame, &mut counts);
+            *out = frame
+                .chain
+                .digitise(electrons, pattern.offset_dn, &mut rng, &mut counts);
         }
         counts
     }
@@ -211,7 +215,7 @@ impl PointFrame<'_, '_> {
             for (k, analyser) in Analyser::ALL.iter().enumerate() {
                 let pixel = PixelSensor::new(analyser.angle_rad(), weights);
                 let e = r.expected_electrons(point_px, n, &pixel, &self.frame, &mut counts);
-                dn[b][k] = self.frame.chain.digitise(e, &mut rng, &mut counts);
+                dn[b][k] = self.frame.chain.digitise(e, 0.0, &mut rng, &mut counts);
             }
         }
         IdealPixel {

@@ -5,8 +5,9 @@
 //! 1. shot noise: electrons ~ Poisson(expected) (rand_distr's exact sampler);
 //! 2. read noise: + N(0, σ_e²);
 //! 3. saturation: clip to [0, full_well_e];
-//! 4. DN = electrons × DN/e⁻ (never negative: a real ADC's black level keeps codes ≥ 0, and we
-//!    clip at 0 in every case so the u16 container is well defined);
+//! 4. DN = electrons × DN/e⁻ + the pixel's fixed offset (black level, DSNU, hot-pixel signal;
+//!    0 unless those stages are planned), never negative: a real ADC's black level keeps codes
+//!    ≥ 0, and we clip at 0 in every case so the u16 container is well defined;
 //! 5. saturation: clip to the ADC's full scale 2^bits − 1;
 //! 6. quantisation: round half away from zero to a whole DN.
 //!
@@ -40,8 +41,15 @@ impl SensorChain {
         }
     }
 
-    /// The DN of one pixel whose expected signal is `electrons`.
-    pub fn digitise<R: Rng>(&self, electrons: f64, rng: &mut R, counts: &mut StageCounts) -> f32 {
+    /// The DN of one pixel whose expected signal is `electrons` and whose fixed offset is
+    /// `offset_dn`.
+    pub fn digitise<R: Rng>(
+        &self,
+        electrons: f64,
+        offset_dn: f64,
+        rng: &mut R,
+        counts: &mut StageCounts,
+    ) -> f32 {
         let mut e = electrons.max(0.0);
         if self.set.has(Stage::ShotNoise) {
             counts.add(Stage::ShotNoise, 1);
@@ -64,7 +72,7 @@ impl SensorChain {
             counts.add(Stage::Saturation, 1);
             e = e.min(self.full_well_e);
         }
-        let mut dn = (e * self.dn_per_electron).max(0.0);
+        let mut dn = (e * self.dn_per_electron + offset_dn).max(0.0);
         if saturate {
             dn = dn.min(self.full_scale_dn);
         }

@@ -20,7 +20,9 @@
 //!   [1, 0, 0, 0].
 //! - Boards are matte paper: a Lambertian depolariser with the print albedo (no specular), so
 //!   they never need Mueller work.
-//! - Analyser at nominal θ with extinction ratio ER (when planned; e = 1/ER, else 0):
+//! - Analyser at θ (nominal, plus the pixel's angle error when `analyser_errors` is planned) with
+//!   extinction ratio ER (the pixel's own under `analyser_errors`, else the global one when
+//!   `polariser_extinction` is planned; e = 1/ER, else 0):
 //!   I = ½[(1 + e) s0 + (1 − e)(s1 cos2ψ + s2 sin2ψ)], ψ the wire grid's effective axis for the
 //!   ray in the ray's camera frame (`PixelSensor::for_ray`; ψ = θ on the optical axis); a
 //!   camera without analysers measures s0.
@@ -55,9 +57,17 @@ pub(crate) struct PoseContext {
 }
 
 impl PoseContext {
-    /// The context of `world_from_camera` for a scene's flash.
+    /// The context of `world_from_camera` for a scene's flash as recorded.
+    #[cfg(test)]
     pub fn new(scene: &Scene, world_from_camera: Isometry3<f64>) -> Self {
-        let flash = &scene.rig.flash;
+        Self::with_flash(&scene.rig.flash, world_from_camera)
+    }
+
+    /// The context of `world_from_camera` for `flash` (the true flash of a render).
+    pub fn with_flash(
+        flash: &ellipso_model::rig::FlashSpec,
+        world_from_camera: Isometry3<f64>,
+    ) -> Self {
         Self {
             camera_up_world: -(world_from_camera.rotation * Vector3::y()),
             flash_world: flash.position_world(&world_from_camera),
@@ -80,6 +90,9 @@ pub(crate) struct PixelSensor {
     pub sin2: f64,
     /// Colour weights over (R, G, B): one-hot under a colour filter, ⅓ each on a mono sensor.
     pub weights: [f64; 3],
+    /// This pixel's own 1/ER when the sensor's fixed pattern gives it one (`analyser_errors`);
+    /// `None`: the render's global extinction.
+    pub extinction: Option<f64>,
 }
 
 impl PixelSensor {
@@ -91,6 +104,7 @@ impl PixelSensor {
             cos2,
             sin2,
             weights,
+            extinction: None,
         }
     }
 
@@ -140,19 +154,19 @@ impl Shader<'_> {
         if self.set.has(Stage::PolariserExtinction) {
             counts.add(Stage::PolariserExtinction, 1);
         }
-        let e = self.extinction;
+        let e = pixel.extinction.unwrap_or(self.extinction);
         0.5 * ((1.0 + e) * s.s0 + (1.0 - e) * (s.s1 * pixel.cos2 + s.s2 * pixel.sin2))
     }
 
     /// Analysed response to unpolarised light of intensity `s0` (a depolarising surface).
-    fn analyse_unpolarised(&self, s0: f64, counts: &mut StageCounts) -> f64 {
+    fn analyse_unpolarised(&self, s0: f64, pixel: &PixelSensor, counts: &mut StageCounts) -> f64 {
         if self.transport != LightTransport::Stokes {
             return s0;
         }
         if self.set.has(Stage::PolariserExtinction) {
             counts.add(Stage::PolariserExtinction, 1);
         }
-        0.5 * (1.0 + self.extinction) * s0
+        0.5 * (1.0 + pixel.extinction.unwrap_or(self.extinction)) * s0
     }
 
     /// Flash irradiance (W/m²) × analysed model intensity for a primary `ray` (unit direction)
@@ -202,7 +216,7 @@ impl Shader<'_> {
                 }
                 counts.add(Stage::Diffuse, 1);
                 let s0 = f64::from(albedo) * normal.dot(&to_light);
-                self.analyse_unpolarised(s0, counts)
+                self.analyse_unpolarised(s0, pixel, counts)
             }
             SurfaceKind::Object { material, .. } => {
                 let params = match material {

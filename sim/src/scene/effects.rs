@@ -40,6 +40,67 @@ pub struct PolariserExtinction {
     pub ratio: f64,
 }
 
+/// The sensor's black level (a constant offset in DN) and its dark-signal non-uniformity.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlackLevel {
+    /// Mean offset added to every pixel, DN.
+    pub dn: f64,
+    /// Pixel-to-pixel standard deviation of the offset (DSNU), DN.
+    #[serde(default)]
+    pub dsnu_dn: f64,
+}
+
+/// Photo-response non-uniformity: each pixel's response scaled by `1 + N(0, sigma_rel²)`.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Prnu {
+    /// Relative standard deviation of the pixel gains.
+    pub sigma_rel: f64,
+}
+
+/// Per-pixel analyser errors: the wire grid's angle off nominal and a finite extinction ratio
+/// that differs per colour and per pixel (see `docs/sensor-calibration.md` for the sources of
+/// the magnitudes).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct AnalyserErrors {
+    /// Standard deviation of each pixel's analyser angle about its nominal angle, degrees.
+    pub angle_sigma_deg: f64,
+    /// Mean extinction ratio under the R, G, B filters (a mono sensor takes the G value).
+    pub extinction_ratio_rgb: [f64; 3],
+    /// Relative pixel-to-pixel standard deviation of the extinction ratio.
+    #[serde(default)]
+    pub extinction_sigma_rel: f64,
+}
+
+/// Hot pixels: a fraction of the pixels with a large extra dark signal.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct HotPixels {
+    /// Fraction of the pixels that are hot, in [0, 0.01].
+    pub fraction: f64,
+    /// Extra dark signal of a hot pixel, DN.
+    pub dn: f64,
+}
+
+/// The flash's polariser turned off the angle the rig record states.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlashPolariserError {
+    /// Rotation of the polariser's transmission axis about the flash axis, degrees.
+    pub angle_deg: f64,
+}
+
+/// The flash's angular profile is not the one the rig record states: the renderer lights the
+/// scene with `cos^exponent` of the angle from the flash axis instead.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlashProfileError {
+    /// The true profile's cosine exponent.
+    pub exponent: f64,
+}
+
 /// Camera motion during the exposure.
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -88,7 +149,7 @@ pub struct LinkDisconnect {
 }
 
 /// The `[effects]` table.
-#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
+#[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct EffectsSpec {
     /// Poisson photon noise.
@@ -112,6 +173,28 @@ pub struct EffectsSpec {
     /// Imperfect polarisers.
     #[serde(default)]
     pub polariser_extinction: Option<PolariserExtinction>,
+    /// Per-pixel analyser angle and extinction errors.
+    #[serde(default)]
+    pub analyser_errors: Option<AnalyserErrors>,
+    /// Photo-response non-uniformity.
+    #[serde(default)]
+    pub prnu: Option<Prnu>,
+    /// Black level and DSNU.
+    #[serde(default)]
+    pub black_level: Option<BlackLevel>,
+    /// Hot pixels.
+    #[serde(default)]
+    pub hot_pixels: Option<HotPixels>,
+    /// The flash polariser's angle error.
+    #[serde(default)]
+    pub flash_polariser_error: Option<FlashPolariserError>,
+    /// The flash's true angular profile.
+    #[serde(default)]
+    pub flash_profile_error: Option<FlashProfileError>,
+    /// Seed of the sensor's fixed pattern (DSNU, PRNU, analyser errors, hot pixels): one
+    /// physical sensor, the same in every scene that names the same seed (default 1).
+    #[serde(default = "default_sensor_seed")]
+    pub sensor_seed: u64,
     /// Exposure-time motion.
     #[serde(default)]
     pub motion_blur: Option<MotionBlur>,
@@ -127,6 +210,36 @@ pub struct EffectsSpec {
     /// Link disconnect.
     #[serde(default)]
     pub link_disconnect: Option<LinkDisconnect>,
+}
+
+fn default_sensor_seed() -> u64 {
+    1
+}
+
+impl Default for EffectsSpec {
+    fn default() -> Self {
+        EffectsSpec {
+            shot_noise: None,
+            read_noise: None,
+            quantisation: None,
+            saturation: None,
+            vignetting: None,
+            lens_distortion: None,
+            polariser_extinction: None,
+            analyser_errors: None,
+            prnu: None,
+            black_level: None,
+            hot_pixels: None,
+            flash_polariser_error: None,
+            flash_profile_error: None,
+            sensor_seed: default_sensor_seed(),
+            motion_blur: None,
+            trigger_jitter: None,
+            frame_drops: None,
+            link_corruption: None,
+            link_disconnect: None,
+        }
+    }
 }
 
 /// Names of listable effects, for plans and reports.
@@ -146,6 +259,18 @@ pub enum EffectKind {
     LensDistortion,
     /// `polariser_extinction`
     PolariserExtinction,
+    /// `analyser_errors`
+    AnalyserErrors,
+    /// `prnu`
+    Prnu,
+    /// `black_level`
+    BlackLevel,
+    /// `hot_pixels`
+    HotPixels,
+    /// `flash_polariser_error`
+    FlashPolariserError,
+    /// `flash_profile_error`
+    FlashProfileError,
     /// `motion_blur`
     MotionBlur,
     /// `trigger_jitter`
@@ -170,6 +295,12 @@ impl EffectsSpec {
             (self.vignetting.is_some(), K::Vignetting),
             (self.lens_distortion.is_some(), K::LensDistortion),
             (self.polariser_extinction.is_some(), K::PolariserExtinction),
+            (self.analyser_errors.is_some(), K::AnalyserErrors),
+            (self.prnu.is_some(), K::Prnu),
+            (self.black_level.is_some(), K::BlackLevel),
+            (self.hot_pixels.is_some(), K::HotPixels),
+            (self.flash_polariser_error.is_some(), K::FlashPolariserError),
+            (self.flash_profile_error.is_some(), K::FlashProfileError),
             (self.motion_blur.is_some(), K::MotionBlur),
             (self.trigger_jitter.is_some(), K::TriggerJitter),
             (self.frame_drops.is_some(), K::FrameDrops),
@@ -243,6 +374,84 @@ impl EffectsSpec {
                 1.0,
                 1e9,
                 "need a ratio ≥ 1",
+            )?;
+        }
+        if let Some(a) = self.analyser_errors {
+            if !rig.camera.analysers {
+                return Err(loc.invalid(
+                    k("analyser_errors"),
+                    "rig.camera.analysers is false: no analysers",
+                ));
+            }
+            in_range(
+                k("analyser_errors.angle_sigma_deg"),
+                a.angle_sigma_deg,
+                0.0,
+                10.0,
+                "need 0..=10°",
+            )?;
+            for (c, er) in ["R", "G", "B"].iter().zip(a.extinction_ratio_rgb) {
+                in_range(
+                    k(&format!("analyser_errors.extinction_ratio_rgb ({c})")),
+                    er,
+                    2.0,
+                    1e6,
+                    "need a ratio ≥ 2",
+                )?;
+            }
+            in_range(
+                k("analyser_errors.extinction_sigma_rel"),
+                a.extinction_sigma_rel,
+                0.0,
+                0.3,
+                "need 0..=0.3",
+            )?;
+        }
+        if let Some(p) = self.prnu {
+            in_range(k("prnu.sigma_rel"), p.sigma_rel, 0.0, 0.2, "need 0..=0.2")?;
+        }
+        if let Some(b) = self.black_level {
+            in_range(k("black_level.dn"), b.dn, 0.0, 4096.0, "need 0..=4096 DN")?;
+            in_range(
+                k("black_level.dsnu_dn"),
+                b.dsnu_dn,
+                0.0,
+                100.0,
+                "need 0..=100 DN",
+            )?;
+        }
+        if let Some(h) = self.hot_pixels {
+            in_range(
+                k("hot_pixels.fraction"),
+                h.fraction,
+                0.0,
+                0.01,
+                "need 0..=0.01",
+            )?;
+            in_range(k("hot_pixels.dn"), h.dn, 0.0, 65535.0, "need 0..=65535 DN")?;
+        }
+        if let Some(f) = self.flash_polariser_error {
+            if !rig.flash.polarised {
+                return Err(loc.invalid(
+                    k("flash_polariser_error"),
+                    "rig.flash.polarised is false: no flash polariser",
+                ));
+            }
+            in_range(
+                k("flash_polariser_error.angle_deg"),
+                f.angle_deg,
+                -45.0,
+                45.0,
+                "need -45..=45°",
+            )?;
+        }
+        if let Some(f) = self.flash_profile_error {
+            in_range(
+                k("flash_profile_error.exponent"),
+                f.exponent,
+                0.0,
+                50.0,
+                "need 0..=50",
             )?;
         }
         if let Some(m) = self.motion_blur {

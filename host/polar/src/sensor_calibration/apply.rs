@@ -1,0 +1,189 @@
+//! Applying a sensor calibration: each superpixel's own Stokes estimator.
+//!
+//! Contract: for every output pixel of the superpixel demosaic, the measurement matrix `A`
+//! (row k: the mean analysis vector of the raw pixels behind analyser k in that block; two G
+//! blocks of a colour tile averaged, as the demosaic averages their intensities) and the
+//! intensity offsets `δ_k` (their mean dark level minus the black level, normalised like the
+//! intensities) give `s = A⁺ (I − δ)` ([`crate::StokesMatrix::of_measurement`]) and the
+//! residual `nᵀ(I − δ)`. The black level of the calibration replaces the configuration's dark
+//! level. Only the superpixel demosaic is calibrated per pixel (the bilinear demosaic mixes
+//! pixels of different analysis vectors into one value); asking for bilinear is an error.
+//! A block whose measurement matrix cannot be inverted (a dead pixel) is an error naming it.
+
+use ellipso_model::mosaic::{Channel, SensorLayout};
+
+use super::SensorCalibration;
+use crate::demosaic::{RowBuf, band_colours, superpixel_row};
+use crate::stokes::{AnalyserRow, per_pixel_row};
+use crate::{
+    DemosaicMethod, Levels, PolarConfig, PolarError, PolarImage, RawFrame, StokesBand, StokesMatrix,
+};
+
+/// Every output pixel's estimator and offsets, per band, for one calibration and one set of
+/// levels (build once, apply to every frame of a session).
+#[derive(Debug, Clone)]
+pub struct PixelEstimators {
+    /// Output size.
+    width: usize,
+    height: usize,
+    /// Per band: estimators and offsets, row-major over the output.
+    bands: Vec<(Vec<StokesMatrix>, Vec<[f32; 4]>)>,
+    levels: Levels,
+}
+
+/// The raw pixels of output pixel `(i, j)` of `colour`, grouped by analyser index.
+fn block_pixels(
+    layout: SensorLayout,
+    colour: Option<Channel>,
+    i: usize,
+    j: usize,
+) -> [Vec<(u32, u32)>; 4] {
+    let tile = if colour.is_some() { 4 } else { 2 };
+    let mut groups: [Vec<(u32, u32)>; 4] = Default::default();
+    for dy in 0..tile {
+        for dx in 0..tile {
+            let (x, y) = ((tile * i + dx) as u32, (tile * j + dy) as u32);
+            if layout.colour_at(x, y) == colour {
+                groups[layout.analyser_at(x, y).index()].push((x, y));
+            }
+        }
+    }
+    groups
+}
+
+impl PixelEstimators {
+    /// The estimators of `cal` for frames normalised with `levels` (module doc).
+    pub fn new(cal: &SensorCalibration, levels: Levels) -> Result<PixelEstimators, PolarError> {
+        let s = &cal.header.sensor;
+        let layout = s.layout;
+        let (w, h) = DemosaicMethod::Superpixel.output_size(layout, s.width, s.height);
+        let per_dn = f64::from(levels.scale_per_dn());
+        let black = f64::from(levels.dark_dn());
+        let mut bands = Vec::new();
+        for colour in band_colours(layout) {
+            let mut est = Vec::with_capacity(w * h);
+            let mut off = Vec::with_capacity(w * h);
+            for j in 0..h {
+                for i in 0..w {
+                    let groups = block_pixels(layout, colour, i, j);
+                    let mut a = [[0.0f64; 3]; 4];
+                    let mut d = [0.0f32; 4];
+                    for (k, g) in groups.iter().enumerate() {
+                        let n = g.len().max(1) as f64;
+                        let mut dark = 0.0;
+                        for &(x, y) in g {
+                            let p = cal.pixel(x, y);
+                            for (c, v) in a[k].iter_mut().zip(p.analysis) {
+                                *c += f64::from(v) / n;
+                            }
+                            dark += f64::from(p.dark_dn) / n;
+                        }
+                        d[k] = ((dark - black) * per_dn) as f32;
+                    }
+                    let m = StokesMatrix::of_measurement(a).map_err(|e| {
+                        PolarError::SensorCalibration(format!(
+                            "superpixel ({i}, {j}) of band {}: {e}",
+                            colour.map_or("mono".to_string(), |c| format!("{c:?}"))
+                        ))
+                    })?;
+                    est.push(m);
+                    off.push(d);
+                }
+            }
+            bands.push((est, off));
+        }
+        Ok(PixelEstimators {
+            width: w,
+            height: h,
+            bands,
+            levels,
+        })
+    }
+}
+
+/// [`crate::process`] with a sensor calibration (module doc); `config.calibration` must be
+/// `None` (one calibration at a time) and the demosaic superpixel.
+pub fn process_with_sensor(
+    frame: &RawFrame,
+    config: &PolarConfig,
+    cal: &SensorCalibration,
+) -> Result<PolarImage, PolarError> {
+    cal.check_frame(frame)
+        .map_err(|e| PolarError::SensorCalibration(e.to_string()))?;
+    let config = calibrated_config(config, cal)?;
+    let levels = config.levels(frame)?;
+    let estimators = PixelEstimators::new(cal, levels)?;
+    process_with_estimators(frame, &config, &estimators)
+}
+
+/// The configuration a sensor calibration runs with: its black level, no global calibration,
+/// superpixel demosaic.
+pub fn calibrated_config(
+    config: &PolarConfig,
+    cal: &SensorCalibration,
+) -> Result<PolarConfig, PolarError> {
+    if config.calibration.is_some() {
+        return Err(PolarError::SensorCalibration(
+            "a per-analyser calibration and a sensor calibration were both given".into(),
+        ));
+    }
+    if config.demosaic != DemosaicMethod::Superpixel {
+        return Err(PolarError::SensorCalibration(
+            "a sensor calibration is applied per superpixel; use the superpixel demosaic".into(),
+        ));
+    }
+    Ok(PolarConfig {
+        dark_level_dn: cal.header.figures.black_level_dn as f32,
+        ..*config
+    })
+}
+
+/// [`process_with_sensor`] with estimators built already (a session's frames share them).
+pub fn process_with_estimators(
+    frame: &RawFrame,
+    config: &PolarConfig,
+    estimators: &PixelEstimators,
+) -> Result<PolarImage, PolarError> {
+    let levels = config.levels(frame)?;
+    if levels != estimators.levels {
+        return Err(PolarError::SensorCalibration(
+            "the frame's levels differ from those the estimators were built for".into(),
+        ));
+    }
+    let thresholds = config.thresholds()?;
+    let layout = frame.layout();
+    let (w, h) = DemosaicMethod::Superpixel.output_size(layout, frame.width(), frame.height());
+    if (w, h) != (estimators.width, estimators.height) {
+        return Err(PolarError::SensorCalibration(format!(
+            "the frame gives {w}×{h} superpixels, the calibration {}×{}",
+            estimators.width, estimators.height
+        )));
+    }
+    let colours = band_colours(layout);
+    let mut out = PolarImage::empty();
+    out.method = DemosaicMethod::Superpixel;
+    out.layout = layout;
+    out.levels = levels;
+    out.bands.resize_with(colours.len(), StokesBand::default);
+    let mut buf = RowBuf::default();
+    for ((band, colour), (est, off)) in out.bands.iter_mut().zip(&colours).zip(&estimators.bands) {
+        band.reshape(*colour, w, h);
+        for y in 0..h {
+            superpixel_row(frame, &levels, band.colour, y, &mut buf);
+            let [i0, i45, i90, i135] = &buf.intensity;
+            let input = AnalyserRow {
+                intensity: [i0, i45, i90, i135],
+                mask: &buf.mask,
+            };
+            let row = y * w..(y + 1) * w;
+            per_pixel_row(
+                input,
+                band.row_mut(y),
+                thresholds,
+                &est[row.clone()],
+                &off[row],
+            );
+        }
+    }
+    Ok(out)
+}
