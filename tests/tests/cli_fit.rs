@@ -88,13 +88,14 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
         serde_json::from_slice(&std::fs::read(out.join("fit-summary.json")).unwrap()).unwrap();
     assert_eq!(summary["vertices"].as_u64(), Some(162));
     // No hole on the observed surface: in the maps' and the novel view, every mesh pixel whose
-    // vertices the views saw is drawn with parameters and with η.
+    // vertices the views saw is drawn with parameters. (η may be withheld, with its reason in
+    // the report: 16 photos at 612×512 do not identify this glass's η — its pool is no
+    // measurement — so `without_eta_px` is not asserted here; the demo's is 0.)
     let holes = summary["export"]["holes"].as_array().expect("export.holes");
     assert_eq!(holes.len(), 2, "{holes:?}");
     for h in holes {
         assert!(h["observed_px"].as_u64().unwrap() > 1000, "{h}");
         assert_eq!(h["without_parameters_px"].as_u64(), Some(0), "{h}");
-        assert_eq!(h["without_eta_px"].as_u64(), Some(0), "{h}");
     }
     assert_eq!(summary["session"], "../session", "{summary}");
     let files = summary["export"]["files"].as_array().expect("export.files");
