@@ -110,7 +110,7 @@ fn polar_json_prints_one_object_on_stdout() {
             .is_some_and(|f| f.len() >= 8)
     );
     // without --json the same run prints the text report
-    let o = ellipso(&["polar", frame, "--out", out]);
+    let o = ellipso(&["polar", frame, "--out", out, "--layout", "mono"]);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("wrote") && serde_json::from_str::<serde_json::Value>(&text).is_err());
 }
