@@ -280,7 +280,10 @@ fn the_mitsuba_scene_renders_what_ellipso_renders() {
         ("scalar_spectral_polarized", 0.02),
     ] {
         let r = compare(variant, "64", &tmp.path().join(format!("{variant}.png")));
-        for (key, limit) in [("relative_rmse", s0_limit), ("relative_rmse_polarised", 0.05)] {
+        for (key, limit) in [
+            ("relative_rmse", s0_limit),
+            ("relative_rmse_polarised", 0.05),
+        ] {
             let v = r[key].as_f64().expect(key);
             assert!(v <= limit, "{variant}: {key} {v} > {limit}: {r}");
         }
