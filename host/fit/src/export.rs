@@ -264,10 +264,8 @@ pub fn export_all(
         source,
     })?;
     report.files.push(view_path);
-    let mut pictures = images::pictures(mesh, fits, &view, flash, &light);
-    report
-        .holes
-        .push(images::holes(mesh, fits, &view, "map-eta"));
+    let (mut pictures, holes) = images::pictures(mesh, fits, &view, flash, &light);
+    report.holes.push(holes);
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(
         &Vector3::z_axis(),
@@ -276,10 +274,8 @@ pub fn export_all(
     let about_centre =
         Translation3::from(centre.coords) * turn * Translation3::from(-centre.coords);
     let novel = ViewCamera::framing(about_centre * world_from_camera, px, px, &centre, radius);
-    let models = images::pixel_models(mesh, fits, &novel);
-    report
-        .holes
-        .push(images::holes(mesh, fits, &novel, "novel-view"));
+    let (models, holes) = images::pixel_models_and_holes(mesh, fits, &novel, "novel-view");
+    report.holes.push(holes);
     pictures.push(images::relit(
         &models,
         px,

@@ -43,6 +43,8 @@ struct Field {
     eta_std: Vec<[f64; 1]>,
     reliable: Vec<bool>,
     eta_identifiable: Vec<bool>,
+    /// Not [`crate::data::FitFlag::Unobserved`]: some fitted frame saw the vertex lit.
+    observed: Vec<bool>,
 }
 
 impl Field {
@@ -53,6 +55,10 @@ impl Field {
             eta_std: fits.iter().map(|f| [f.reported_std_error()[0]]).collect(),
             reliable: fits.iter().map(VertexFit::is_reliable).collect(),
             eta_identifiable: fits.iter().map(|f| f.identifiable().eta).collect(),
+            observed: fits
+                .iter()
+                .map(|f| !f.flags.contains(&crate::data::FitFlag::Unobserved))
+                .collect(),
         }
     }
 
@@ -135,10 +141,10 @@ pub fn pictures(
     camera: &ViewCamera,
     flash: &FlashSpec,
     light_world: &Point3<f64>,
-) -> Vec<Picture> {
+) -> (Vec<Picture>, Holes) {
     let field = Field::new(fits);
     let (w, h) = (camera.width, camera.height);
-    let at = models_of(mesh, &field, camera);
+    let (at, holes) = models_and_holes(mesh, &field, camera, "map-eta");
     let mut out = Vec::new();
     let ranges = super::colour::MapRanges::of_fits(fits);
     let scalar = |name: &'static str,
@@ -266,7 +272,7 @@ pub fn pictures(
         "relit",
         "relit under a key light (unpolarised)",
     ));
-    out
+    (out, holes)
 }
 
 /// What one pixel sees of the fitted model: parameters, unit normal, world point and the hit.
@@ -505,37 +511,6 @@ pub struct Holes {
     pub without_eta_px: usize,
 }
 
-/// The [`Holes`] of `camera`'s picture of `mesh` with `fits`.
-pub fn holes(
-    mesh: &TriangleMesh,
-    fits: &[VertexFit],
-    camera: &ViewCamera,
-    view: &'static str,
-) -> Holes {
-    let field = Field::new(fits);
-    let observed: Vec<bool> = fits
-        .iter()
-        .map(|f| !f.flags.contains(&crate::data::FitFlag::Unobserved))
-        .collect();
-    let mut h = Holes {
-        view,
-        ..Holes::default()
-    };
-    for hit in rasterise(mesh, camera).into_iter().flatten() {
-        if !hit.vertices.iter().all(|&v| observed[v as usize]) {
-            continue;
-        }
-        h.observed_px += 1;
-        if field.at(&hit).is_none() {
-            h.without_parameters_px += 1;
-            h.without_eta_px += 1;
-        } else if !field.eta_at(&hit) {
-            h.without_eta_px += 1;
-        }
-    }
-    h
-}
-
 /// The per-pixel model of a view (for the novel view and tests).
 pub fn pixel_models(
     mesh: &TriangleMesh,
@@ -545,16 +520,52 @@ pub fn pixel_models(
     models_of(mesh, &Field::new(fits), camera)
 }
 
+/// [`pixel_models`] with the view's [`Holes`] counted from the same rasterisation.
+pub fn pixel_models_and_holes(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    camera: &ViewCamera,
+    view: &'static str,
+) -> (Vec<PixelModel>, Holes) {
+    models_and_holes(mesh, &Field::new(fits), camera, view)
+}
+
 /// Rasterises `mesh` and interpolates `field` at every hit.
 fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<PixelModel> {
-    rasterise(mesh, camera)
+    models_and_holes(mesh, field, camera, "").0
+}
+
+/// Rasterises `mesh` once: `field` interpolated at every hit, and the [`Holes`] of the
+/// observed surface among those hits.
+fn models_and_holes(
+    mesh: &TriangleMesh,
+    field: &Field,
+    camera: &ViewCamera,
+    view: &'static str,
+) -> (Vec<PixelModel>, Holes) {
+    let mut holes = Holes {
+        view,
+        ..Holes::default()
+    };
+    let models = rasterise(mesh, camera)
         .into_iter()
         .map(|hit| {
             let hit = hit?;
-            let (p, n) = field.at(&hit)?;
+            let at = field.at(&hit);
+            if hit.vertices.iter().all(|&v| field.observed[v as usize]) {
+                holes.observed_px += 1;
+                if at.is_none() {
+                    holes.without_parameters_px += 1;
+                }
+                if at.is_none() || !field.eta_at(&hit) {
+                    holes.without_eta_px += 1;
+                }
+            }
+            let (p, n) = at?;
             Some((p, n, hit.point_world, hit))
         })
-        .collect()
+        .collect();
+    (models, holes)
 }
 
 /// A scalar map (viridis over the fit's shared range, [`super::colour::MapRanges`], with its
