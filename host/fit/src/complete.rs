@@ -39,6 +39,10 @@
 //!   [`Completion::eta_withheld`]): the reason is the material's, named in the report.
 //! - Deterministic: a function of its inputs, no randomness, serial over vertices.
 
+mod sigma;
+
+pub use sigma::{MESH_NORMAL_MIN_VERTICES, mesh_normal_std_deg};
+
 use ellipso_model::geometry::TriangleMesh;
 
 use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
@@ -259,7 +263,7 @@ impl MaterialValues {
 
 /// Whether the fit reports `f`'s parameters as its own (the identifiability rule before any
 /// completion).
-fn own_vertex(f: &VertexFit) -> bool {
+pub(crate) fn own_vertex(f: &VertexFit) -> bool {
     f.identifiable().vertex && !f.flags.contains(&FitFlag::FromMaterial)
 }
 
@@ -377,14 +381,18 @@ pub fn own_rho_d(
     v: usize,
     params: &ellipso_model::optics::pbrdf::PbrdfParams<f64>,
     normal: [f64; 3],
+    normal_std_deg: f64,
     albedo_cap: f64,
 ) -> Option<([f64; 3], [f64; 3])> {
     let vertex = set.vertices.get(v)?;
-    rho_d_of(set, vertex, &vertex.samples, params, normal, albedo_cap)
+    let (rho, se) = rho_d_of(set, vertex, &vertex.samples, params, normal, albedo_cap)?;
+    let tilt =
+        sigma::normal_tilt_rho_d_se(set, vertex, params, normal, normal_std_deg, albedo_cap, rho);
+    Some((rho, std::array::from_fn(|c| se[c].hypot(tilt[c]))))
 }
 
 /// [`own_rho_d`] from `samples` of `vertex`.
-fn rho_d_of(
+pub(crate) fn rho_d_of(
     set: &SampleSet,
     vertex: &crate::data::VertexSamples,
     samples: &[crate::data::Sample],
@@ -542,7 +550,8 @@ pub fn complete(
         params.sigma_ss = m.lobe[1].max(m.lobe[0]);
         params.rho_s = m.lobe[2];
         params.rho_ss = [m.lobe[3], m.lobe[4], m.lobe[5]];
-        let (rho_d, rho_d_se) = match own_rho_d(set, v, &params, normal, albedo_cap) {
+        let (rho_d, rho_d_se) = match own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
+        {
             Some(own) => {
                 report.own_rho_d += 1;
                 own

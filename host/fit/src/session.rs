@@ -266,6 +266,9 @@ pub fn fit_session_with(
             mesh.positions().len()
         )
     };
+    // The input mesh's normals: where a vertex's own data do not pin its normal, how far
+    // these stray from the fitted ones elsewhere is its σ (`complete::mesh_normal_std_deg`).
+    let input_normals: Vec<[f64; 3]> = mesh.normals().iter().map(|n| (**n).into()).collect();
     let mut surface = SurfaceState::new(&mesh);
     for k in 1..iterations {
         progress(&announce(k, &mesh));
@@ -314,6 +317,7 @@ pub fn fit_session_with(
         &mut outcome,
         &mesh,
         surface_normal_std_deg(&surface.iterations),
+        &input_normals,
         config,
     );
     if let Some(c) = &completion {
@@ -364,10 +368,15 @@ fn complete_fits(
     outcome: &mut FitOutcome,
     mesh: &TriangleMesh,
     surface_std_deg: Option<f64>,
+    input_normals: &[[f64; 3]],
     config: &SessionFitConfig,
 ) -> Option<Completion> {
     let a = outcome.augmentation.as_ref()?;
-    let normal_std_deg = surface_std_deg.unwrap_or(config.fit.solver.normal_prior_deg);
+    // A completed vertex's normal is the surface's: its σ is the larger of the refined
+    // surface's (at the fitted vertices) and the input mesh's measured stray.
+    let surface = surface_std_deg.unwrap_or(config.fit.solver.normal_prior_deg);
+    let normal_std_deg = crate::complete::mesh_normal_std_deg(&outcome.fits, input_normals)
+        .map_or(surface, |m| m.max(surface));
     Some(complete(
         set,
         &mut outcome.fits,
@@ -569,7 +578,9 @@ pub fn finish_from_joint(
         set.rings = super::neighbours::rings(mesh);
     }
     let mut outcome = fit_shared_steps(&set, fits, &config.fit, progress);
-    let completion = complete_fits(&set, &mut outcome, mesh, None, config);
+    // One pass on the input mesh: its normals are the input ones.
+    let input_normals: Vec<[f64; 3]> = mesh.normals().iter().map(|n| (**n).into()).collect();
+    let completion = complete_fits(&set, &mut outcome, mesh, None, &input_normals, config);
     if let Some(c) = &completion {
         progress(&c.describe());
     }
