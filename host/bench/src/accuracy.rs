@@ -401,10 +401,9 @@ pub fn with_photo_count(scene: &Scene, photos: usize) -> Result<Scene, BenchErro
     Scene::from_toml_str(&text, &scene.source).map_err(|e| bad(e.to_string()))
 }
 
-/// Angle between two vectors, degrees (the cosine clamped into acos's domain).
+/// Angle between two vectors, degrees: the model's one [`ellipso_model::geometry::angle_between_deg`].
 fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    let c = a.dot(b) / (a.norm() * b.norm()).max(1e-300);
-    c.clamp(-1.0, 1.0).acos().to_degrees()
+    ellipso_model::geometry::angle_between_deg(a, b)
 }
 
 /// Model prediction at every kept observation of `vertex` with `params`/`normal`: one

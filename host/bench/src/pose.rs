@@ -161,13 +161,12 @@ pub fn run(args: &PoseOptions, say: &dyn Say) -> Result<(), RunError> {
             match tracker.track(raw) {
                 Ok(p) => {
                     let truth = scene.camera_poses[*k].world_from_camera;
-                    let delta = truth.inverse() * p.world_from_camera;
-                    let r = delta.rotation.angle().to_degrees();
-                    if r > 10.0 {
+                    let e = ellipso_model::geometry::pose_error(&p.world_from_camera, &truth);
+                    if e.rotation_deg > 10.0 {
                         flipped += 1;
                     }
-                    rot.push(r);
-                    trans.push(delta.translation.vector.norm() * 1e3);
+                    rot.push(e.rotation_deg);
+                    trans.push(e.translation_mm);
                 }
                 Err(e) => *rejected.entry(e.to_string()).or_insert(0) += 1,
             }

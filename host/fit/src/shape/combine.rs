@@ -140,7 +140,7 @@ mod tests {
     }
 
     fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
-        Vector3::from(a).angle(&Vector3::from(b)).to_degrees()
+        ellipso_model::geometry::angle_between_deg(&Vector3::from(a), &Vector3::from(b))
     }
 
     fn surface(n: usize) -> Vec<Unit<Vector3<f64>>> {

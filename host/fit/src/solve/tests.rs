@@ -103,8 +103,7 @@ pub(crate) fn synth(
 }
 
 pub(super) fn angle_deg(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-    d.clamp(-1.0, 1.0).acos().to_degrees()
+    ellipso_model::geometry::angle_between_deg(&a.into(), &b.into())
 }
 
 /// Always true of any result: finite, inside the bounds, std errors non-negative or ∞.
