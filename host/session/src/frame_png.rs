@@ -10,8 +10,9 @@ use image::{ImageBuffer, Luma};
 
 use super::SessionError;
 
-/// Writes `pixels` (row-major, `width × height`) to `path` as a 16-bit grayscale PNG.
-pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<(), SessionError> {
+/// Writes `pixels` (row-major, `width × height`) to `path` as a 16-bit grayscale PNG. Returns
+/// the CRC-64/XZ of the bytes written (`crate::provenance`).
+pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<u64, SessionError> {
     let bad = |reason: String| SessionError::BadFrame {
         path: path.to_path_buf(),
         reason,
@@ -24,8 +25,11 @@ pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<(),
     }
     let img: ImageBuffer<Luma<u16>, &[u16]> =
         ImageBuffer::from_raw(width, height, pixels).ok_or_else(|| bad("buffer size".into()))?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| bad(e.to_string()))
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| bad(e.to_string()))?;
+    std::fs::write(path, &png).map_err(SessionError::io(path))?;
+    Ok(crate::provenance::crc64(&png))
 }
 
 /// Reads a 16-bit grayscale PNG: `(width, height, pixels)`.

@@ -137,6 +137,15 @@ impl ReadReport {
     }
 }
 
+/// Up to 10 ids, comma-separated, then `…` and the count.
+pub fn id_list(ids: &[u64]) -> String {
+    let mut s = list(ids);
+    if ids.len() > 10 {
+        s.push_str(&format!(" ({} frames)", ids.len()));
+    }
+    s
+}
+
 /// Up to 10 ids, comma-separated.
 fn list(ids: &[u64]) -> String {
     let mut s: Vec<String> = ids.iter().take(10).map(u64::to_string).collect();
@@ -249,18 +258,22 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     let mut pulses = std::collections::BTreeSet::new();
-    // per frame: its first pose value (rotation and translation; empty for a rejection)
-    let mut poses: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    // per frame and what it was computed from: its first pose value (rotation and translation;
+    // empty for a rejection); a later outcome computed from other inputs is no conflict
+    let mut poses: BTreeMap<(u64, crate::events::TrackedFrom), Vec<f64>> = BTreeMap::new();
     for e in &events {
         let pose = match e.pose_event() {
             Some((_, crate::poses::PoseEvent::Interpolated { .. })) | None => None,
-            Some((id, p)) => Some((id, p.logged_values())),
+            Some((id, p)) => Some((
+                (id, e.tracked_from().unwrap_or_default()),
+                p.logged_values(),
+            )),
         };
         if let Some((id, value)) = pose {
             match poses.get(&id) {
                 Some(first) if *first != value => {
-                    if !report.conflicting_poses.contains(&id) {
-                        report.conflicting_poses.push(id);
+                    if !report.conflicting_poses.contains(&id.0) {
+                        report.conflicting_poses.push(id.0);
                     }
                 }
                 Some(_) => {}
