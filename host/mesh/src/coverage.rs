@@ -2,7 +2,9 @@
 //! the box, or falling apart, is blamed on what is actually missing: views of that region from
 //! its other side, not the object's placement.
 //!
-//! Contract: [`coverage`] takes the camera centres of the views that see a point and measures
+//! Contract: [`coverage`] takes the camera centres of the views that see a point (the centre of
+//! a carved part: a point at the box's edge is out of the nearest views' images whatever the
+//! capture) and measures
 //! their azimuths about the board normal (volume z) around that point; [`Coverage::one_sided`]
 //! holds when they leave a gap of more than half a turn, or when fewer than `votes` views see it.
 //!

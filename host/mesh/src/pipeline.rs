@@ -454,8 +454,8 @@ fn views_seeing<'s>(
         .map(|(i, _)| *i)
 }
 
-/// [`MeshError::UnderViewed`] for the hull's `what` at `p`, when the views that see `p` leave
-/// its far side unseen (`crate::coverage`): the capture is short of views there, whatever the
+/// [`MeshError::UnderViewed`] for the hull's `what`, when the views that see `p` (a part's
+/// centre) leave its far side unseen (`crate::coverage`): the capture is short of views there, whatever the
 /// object's placement.
 fn under_viewed(
     setup: &Setup<'_>,
@@ -555,13 +555,11 @@ fn coarse_pass(
             second.volume_m3(&grid) * 1e6,
             mm(second)
         );
-        if let Some(e) = under_viewed(
-            setup,
-            silhouettes,
-            components::centroid(second),
-            what,
-            config.votes,
-        ) {
+        // either part seen from one side only: the other can be its unseen far side's shadow
+        let one_sided = [components::centroid(second), components::centroid(&main)]
+            .into_iter()
+            .find_map(|p| under_viewed(setup, silhouettes, p, what.clone(), config.votes));
+        if let Some(e) = one_sided {
             return Err(e);
         }
         return Err(MeshError::HullDisconnected {
@@ -616,7 +614,15 @@ fn off_board(
         "reaches the {face_names} face(s) of the volume above board {}",
         setup.volume.board
     );
-    if let Some(e) = under_viewed(setup, silhouettes, grid.point(ijk), what, config.votes) {
+    // judged at the object's centre, not at the face: a point at the box's edge is out of the
+    // nearest views' images whatever the capture
+    if let Some(e) = under_viewed(
+        setup,
+        silhouettes,
+        components::centroid(main),
+        what,
+        config.votes,
+    ) {
         return e;
     }
     MeshError::ObjectOffBoard {
