@@ -20,13 +20,20 @@ use ellipso_session::provenance::{FrameCheck, Stale, stale_outcomes};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
-/// Checks that `session`'s frames are its own (module contract): refuses frames whose file is
-/// not the one recorded, naming them, and a mono `sensor.layout` on colour frames; says on
+/// Checks that `session`'s frames are its own (module contract): refuses a session whose files
+/// were renamed or are not the ones recorded, naming them, and a mono `sensor.layout` on colour
+/// frames; warns of single damaged or foreign files (every stage skips them); says on
 /// `say` when the frames carry no checksum (an older session) and are not checked.
 pub fn checked_frames(session: &Session, say: &dyn Say) -> Result<FrameCheck, RunError> {
     let check = session.check_frames();
     if let Some(refusal) = check.refusal(&session.dir) {
         ellipso_run_error::bail!("{refusal}");
+    }
+    if let Some(warning) = check.warning() {
+        say.err(format_args!(
+            "warning: {}: {warning}",
+            session.dir.display()
+        ));
     }
     if let Some(note) = check.note() {
         say.err(format_args!("note: {}: {note}", session.dir.display()));

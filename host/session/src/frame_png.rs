@@ -34,16 +34,26 @@ pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<u64
 
 /// Reads a 16-bit grayscale PNG: `(width, height, pixels)`.
 pub fn read(path: &Path) -> Result<(u32, u32, Vec<u16>), SessionError> {
+    decode(path, &read_bytes(path)?)
+}
+
+/// A frame file's bytes: a regular file of a frame's size at most (a FIFO or device never
+/// opened).
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, SessionError> {
+    ellipso_model::file_io::check_regular(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(SessionError::io(path))?;
+    ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(SessionError::io(path))
+}
+
+/// Decodes the bytes of the 16-bit grayscale PNG at `path` (named in errors), within the
+/// largest sensor the manifest allows: `(width, height, pixels)`.
+pub fn decode(path: &Path, bytes: &[u8]) -> Result<(u32, u32, Vec<u16>), SessionError> {
     let bad = |reason: String| SessionError::BadFrame {
         path: path.to_path_buf(),
         reason,
     };
-    // a regular file of a frame's size at most (a FIFO or device never opened), decoded within
-    // the largest sensor the manifest allows
-    ellipso_model::file_io::check_regular(path, ellipso_model::file_io::caps::FRAME)
-        .map_err(SessionError::io(path))?;
-    let mut reader = image::ImageReader::open(path)
-        .map_err(SessionError::io(path))?
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(SessionError::io(path))?;
     let mut limits = image::Limits::default();

@@ -5,7 +5,10 @@
 //!   bytes are not the ones its event recorded (frames from another capture, files renamed one id
 //!   off, an `events.jsonl` from another capture, a copy still in progress) is a
 //!   [`FrameMismatch`], named by frame, with the frame whose recorded checksum the file holds
-//!   when there is one (a rename).
+//!   when there is one (a rename). A session whose files were renamed, or none of whose files
+//!   is the one recorded, is inconsistent ([`FrameCheck::refusal`]); single damaged or foreign
+//!   files are skipped by every stage (`Session::load_frame` refuses them) and said
+//!   ([`FrameCheck::warning`]).
 //! - Each `pose` / `pose_rejected` records what it was computed from ([`TrackedFrom`]): the
 //!   checksum of the bytes tracking read and of the manifest's board definitions. An outcome
 //!   whose frame checksum is not the frame file's now, or whose boards are not the manifest's
@@ -71,9 +74,19 @@ pub struct FrameCheck {
 }
 
 impl FrameCheck {
-    /// The error naming every mismatched frame, if there is one.
+    /// Whether the mismatches say the session's parts do not belong together: a file holds
+    /// another frame's recorded bytes (files renamed), or no frame's file is the one recorded
+    /// (frames, or the log, from another capture). Otherwise the mismatched frames are single
+    /// damaged or foreign files, which every stage skips (`Session::load_frame` refuses them).
+    pub fn inconsistent(&self) -> bool {
+        !self.mismatched.is_empty()
+            && (self.mismatched.iter().any(|m| m.holds_frame.is_some())
+                || self.mismatched.len() == self.current.len())
+    }
+
+    /// The error naming every mismatched frame, when the session is [`Self::inconsistent`].
     pub fn refusal(&self, dir: &Path) -> Option<String> {
-        if self.mismatched.is_empty() {
+        if !self.inconsistent() {
             return None;
         }
         let named: Vec<String> = self
@@ -108,6 +121,22 @@ impl FrameCheck {
             self.mismatched.len(),
             self.current.len(),
             named.join(", ")
+        ))
+    }
+
+    /// The warning naming mismatched frames of a session that is not [`Self::inconsistent`]:
+    /// they are skipped.
+    pub fn warning(&self) -> Option<String> {
+        if self.mismatched.is_empty() || self.inconsistent() {
+            return None;
+        }
+        let ids: Vec<u64> = self.mismatched.iter().map(|m| m.frame_id).collect();
+        Some(format!(
+            "{} of {} frames are not the ones this session recorded (damaged, or another \
+             capture's: their checksums differ from their `frame` events'): {}; they are skipped",
+            ids.len(),
+            self.current.len(),
+            crate::reader::id_list(&ids)
         ))
     }
 

@@ -171,9 +171,25 @@ pub struct Session {
 }
 
 impl Session {
-    /// Loads a frame's raw samples: `(width, height, pixels)`, checked against the manifest.
+    /// Loads a frame's raw samples: `(width, height, pixels)`, checked against the manifest and
+    /// against the checksum its `frame` event recorded (`crate::provenance`): a file that is not
+    /// the one recorded is a bad frame, so every stage skips it rather than pairing another
+    /// capture's pixels with this frame's pose.
     pub fn load_frame(&self, entry: &FrameEntry) -> Result<(u32, u32, Vec<u16>), SessionError> {
-        let (w, h, px) = frame_png::read(&entry.path)?;
+        let bytes = frame_png::read_bytes(&entry.path)?;
+        if let Some(SessionEvent::Frame {
+            crc64: Some(want), ..
+        }) = &entry.event
+            && crate::provenance::crc64(&bytes) != *want
+        {
+            return Err(SessionError::BadFrame {
+                path: entry.path.clone(),
+                reason: "its bytes are not the ones this session recorded (their checksum \
+                         differs from the `frame` event's): damaged, or another capture's frame"
+                    .into(),
+            });
+        }
+        let (w, h, px) = frame_png::decode(&entry.path, &bytes)?;
         let s = &self.manifest.sensor;
         if (w, h) != (s.width, s.height) {
             return Err(SessionError::BadFrame {

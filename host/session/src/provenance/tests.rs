@@ -88,6 +88,28 @@ fn frames_are_proved_by_the_checksums_their_events_record() {
 }
 
 #[test]
+fn a_single_damaged_frame_is_skipped_and_said_not_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    session(&dir, 4);
+    // another capture's valid frame in place of frame 2
+    crate::frame_png::write(&frame(&dir, 2), 8, 6, &[7u16; 48]).unwrap();
+    let s = crate::reader::open(&dir).unwrap();
+    let check = s.check_frames();
+    assert!(!check.inconsistent());
+    assert_eq!(check.refusal(&dir), None);
+    let warning = check.warning().unwrap();
+    assert!(
+        warning.contains("1 of 4 frames") && warning.contains(": 2;"),
+        "{warning}"
+    );
+    // every stage's loader refuses its pixels, so none pairs them with frame 2's pose
+    let e = s.load_frame(&s.frames[2]).unwrap_err().to_string();
+    assert!(e.contains("not the ones this session recorded"), "{e}");
+    assert!(s.load_frame(&s.frames[1]).is_ok());
+}
+
+#[test]
 fn a_session_without_checksums_is_read_and_said_unchecked() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path().join("s");
