@@ -62,8 +62,9 @@ pub struct ReadReport {
     pub duplicate_frame_events: Vec<u64>,
     /// Pulse sequence numbers with more than one `pulse` event.
     pub duplicate_pulses: Vec<u64>,
-    /// Frame ids whose `pose` / `pose_rejected` events disagree (the last one is what readers
-    /// of poses take; identical repeats are not listed).
+    /// Frame ids whose `pose` / `pose_rejected` events computed from the same inputs
+    /// (`TrackedFrom`) disagree (the last one is what readers of poses take; identical repeats,
+    /// and outcomes recomputed from other bytes or boards, are not listed).
     pub conflicting_poses: Vec<u64>,
 }
 
