@@ -11,8 +11,8 @@
 //!   ([`FrameCheck::warning`]).
 //! - Each `pose` / `pose_rejected` records what it was computed from ([`TrackedFrom`]): the
 //!   checksum of the bytes tracking read and of the manifest's board definitions. An outcome
-//!   whose frame checksum is not the frame file's now, or whose boards are not the manifest's
-//!   now, is **stale** ([`stale_outcomes`]): the frame is tracked again (pose events shuffled
+//!   whose frame checksum is not the frame's (the recorded one, else the file's now), or whose
+//!   boards are not the manifest's now, is **stale** ([`stale_outcomes`]): the frame is tracked again (pose events shuffled
 //!   between frames, a frame restored after a failed read, a board definition fixed).
 //! - Sessions recorded before frames and outcomes carried checksums read as before: their frames
 //!   are listed as unchecked ([`FrameCheck::unrecorded`]), never refused, and an outcome without
@@ -66,6 +66,9 @@ pub struct FrameMismatch {
 pub struct FrameCheck {
     /// Each complete frame's file checksum now (`None`: it cannot be read).
     pub current: BTreeMap<u64, Option<u64>>,
+    /// Each complete frame's bytes as the session knows them: the checksum its `frame` event
+    /// recorded, else its file's now. What a tracking outcome must have been computed from.
+    pub expected: BTreeMap<u64, Option<u64>>,
     /// Complete frames whose `frame` event has no checksum (recorded before frames carried one,
     /// or a frame without an event): not checked.
     pub unrecorded: Vec<u64>,
@@ -176,6 +179,13 @@ impl Session {
         for f in self.frames.iter().filter(|f| f.complete) {
             let now = file_crc64(&f.path);
             check.current.insert(f.frame_id, now.as_ref().ok().copied());
+            check.expected.insert(
+                f.frame_id,
+                recorded
+                    .get(&f.frame_id)
+                    .copied()
+                    .or(now.as_ref().ok().copied()),
+            );
             let Some(&want) = recorded.get(&f.frame_id) else {
                 check.unrecorded.push(f.frame_id);
                 continue;
@@ -227,7 +237,8 @@ impl std::fmt::Display for Stale {
 }
 
 /// The complete frames whose tracking outcome is stale (module contract), by frame id, given
-/// the frames' checksums now (`check`) and the manifest's boards now.
+/// the frames' bytes as the session knows them (`check.expected`: recorded, else the file's now)
+/// and the manifest's boards now.
 pub fn stale_outcomes(
     poses: &SessionPoses,
     check: &FrameCheck,
@@ -235,12 +246,14 @@ pub fn stale_outcomes(
 ) -> Vec<(u64, Stale)> {
     let boards_now = boards_crc64(boards);
     let by_checksum: BTreeMap<u64, u64> = check
-        .current
+        .expected
         .iter()
         .filter_map(|(&id, c)| c.map(|c| (c, id)))
         .collect();
     let mut stale = Vec::new();
-    for (&id, now) in &check.current {
+    // against the recorded bytes: a frame whose file is damaged since keeps the outcome of its
+    // recorded bytes (its loader skips the file)
+    for (&id, now) in &check.expected {
         let Some(TrackedFrom {
             frame_crc64,
             boards_crc64,
