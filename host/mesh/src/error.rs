@@ -88,6 +88,22 @@ pub enum MeshError {
         /// Frames that see the second part.
         frames: String,
     },
+    /// The hull reaches out of the box or falls apart where the views that see it all look from
+    /// one side (`crate::coverage`): the capture lacks views there, not the object's placement.
+    #[error(
+        "the hull {what}, where too few views constrain it: {why}; frames {frames}. The object \
+         may well be on the board and alone: the space behind it was never seen from its other \
+         side, so it could not be carved. Take photos from all around the object (no gap of \
+         more than half a turn) and mesh again"
+    )]
+    UnderViewed {
+        /// What the hull does there.
+        what: String,
+        /// What the views lack (`Coverage::describe`).
+        why: String,
+        /// The frames that see it.
+        frames: String,
+    },
     /// The extracted surface is not a closed manifold or not a valid mesh (a bug, reported).
     #[error("surface extraction failed: {0}")]
     Surface(String),

@@ -10,7 +10,8 @@
 //!    distance to the boundary.
 //! 4. [`carve`]: a coarse then a fine voxel grid; every node takes the k-th largest signed
 //!    distance its views give (voting: k views must see the board through a voxel to carve it).
-//! 5. [`components`]: one connected part inside the footprint, or a clear error.
+//! 5. [`components`]: one connected part inside the footprint, or a clear error; [`coverage`]
+//!    tells a capture short of views of that region from a misplaced object.
 //! 6. [`extract`], [`remesh`]: marching tetrahedra, isotropic remeshing onto the carved surface
 //!    to the target vertex count, Taubin smoothing; the bottom is the board plane.
 //!
@@ -28,6 +29,7 @@
 pub mod appearance;
 pub mod carve;
 pub mod components;
+pub mod coverage;
 pub mod debug;
 pub mod edge;
 pub mod error;

@@ -11,6 +11,7 @@ use rayon::prelude::*;
 use super::appearance::{Agreement, Board, Reservoirs, TexelGrid, pixel_sample};
 use super::carve::{self, Grid, TopK, Voter};
 use super::components::{self, Part};
+use super::coverage::coverage;
 use super::error::{frame_list, skipped_list};
 use super::extract::marching_tetrahedra;
 use super::frames::{PosedFrame, RayTable, View, load_features, posed_frames};
@@ -430,17 +431,49 @@ fn frames_seeing(
     silhouettes: &[(usize, Silhouette)],
     p: Point3<f64>,
 ) -> Vec<u64> {
+    views_seeing(setup, silhouettes, p)
+        .map(|i| setup.views[i].frame_id)
+        .collect()
+}
+
+/// Indices into `setup.views` of the views in which `p` projects inside the image.
+fn views_seeing<'s>(
+    setup: &'s Setup<'_>,
+    silhouettes: &'s [(usize, Silhouette)],
+    p: Point3<f64>,
+) -> impl Iterator<Item = usize> + 's {
     silhouettes
         .iter()
-        .filter(|(i, _)| {
+        .filter(move |(i, _)| {
             let c = setup.views[*i].camera_from_volume * p;
             setup
                 .camera
                 .project(&c)
                 .is_some_and(|px| setup.camera.contains_pixel(px))
         })
-        .map(|(i, _)| setup.views[*i].frame_id)
-        .collect()
+        .map(|(i, _)| *i)
+}
+
+/// [`MeshError::UnderViewed`] for the hull's `what`, when the views that see `p` (a part's
+/// centre) leave its far side unseen (`crate::coverage`): the capture is short of views there, whatever the
+/// object's placement.
+fn under_viewed(
+    setup: &Setup<'_>,
+    silhouettes: &[(usize, Silhouette)],
+    p: Point3<f64>,
+    what: String,
+    votes: usize,
+) -> Option<MeshError> {
+    let seeing: Vec<usize> = views_seeing(setup, silhouettes, p).collect();
+    let cover = coverage(p, seeing.iter().map(|&i| setup.views[i].centre));
+    cover.one_sided(votes).then(|| {
+        let ids: Vec<u64> = seeing.iter().map(|&i| setup.views[i].frame_id).collect();
+        MeshError::UnderViewed {
+            what,
+            why: cover.describe(votes),
+            frames: frame_list(&ids, 10),
+        }
+    })
 }
 
 fn coarse_pass(
@@ -488,7 +521,7 @@ fn coarse_pass(
     // sides and top: the object must stand inside the footprint, below the box's lid
     let faces: Vec<usize> = (0..6).filter(|&f| f != 4 && main.touches[f]).collect();
     if !faces.is_empty() {
-        return Err(off_board(setup, silhouettes, &grid, &main, &faces));
+        return Err(off_board(setup, silhouettes, &grid, &main, &faces, config));
     }
     // An object that runs off the board ends where the learned board ends: beyond it no view can
     // judge the space (its background is unknown), so that part is neither carved nor solid.
@@ -506,7 +539,7 @@ fn coarse_pass(
     {
         let sides: Vec<usize> = (0..4).filter(|&f| region.touches[f]).collect();
         if !sides.is_empty() {
-            return Err(off_board(setup, silhouettes, &grid, &main, &sides));
+            return Err(off_board(setup, silhouettes, &grid, &main, &sides, config));
         }
     }
     if let Some(second) = parts.get(1)
@@ -516,6 +549,19 @@ fn coarse_pass(
             let c = p.centroid_m;
             format!("({:.0}, {:.0}, {:.0})", c[0] * 1e3, c[1] * 1e3, c[2] * 1e3)
         };
+        let what = format!(
+            "falls apart: besides the main part there is a separate part of {:.1} cm³ at {} \
+             (board frame, mm)",
+            second.volume_m3(&grid) * 1e6,
+            mm(second)
+        );
+        // either part seen from one side only: the other can be its unseen far side's shadow
+        let one_sided = [components::centroid(second), components::centroid(&main)]
+            .into_iter()
+            .find_map(|p| under_viewed(setup, silhouettes, p, what.clone(), config.votes));
+        if let Some(e) = one_sided {
+            return Err(e);
+        }
         return Err(MeshError::HullDisconnected {
             main_cm3: main.volume_m3(&grid) * 1e6,
             main_at: mm(&main),
@@ -541,13 +587,15 @@ fn coarse_pass(
 }
 
 /// [`MeshError::ObjectOffBoard`] for `main` reaching the box faces `faces` (indices into
-/// [`components::FACES`]), naming the frames that see the main part's edge on the first of them.
+/// [`components::FACES`]), naming the frames that see the main part's edge on the first of them;
+/// [`MeshError::UnderViewed`] instead when those frames leave that edge's far side unseen.
 fn off_board(
     setup: &Setup<'_>,
     silhouettes: &[(usize, Silhouette)],
     grid: &Grid,
     main: &Part,
     faces: &[usize],
+    config: &MeshConfig,
 ) -> MeshError {
     let face = faces[0];
     let axis = face / 2;
@@ -557,12 +605,28 @@ fn off_board(
         a => (main.min[a] + main.max[a]) / 2,
     });
     let (lo, hi) = (setup.volume.min_m, setup.volume.max_m);
+    let face_names = faces
+        .iter()
+        .map(|&f| components::FACES[f])
+        .collect::<Vec<_>>()
+        .join(", ");
+    let what = format!(
+        "reaches the {face_names} face(s) of the volume above board {}",
+        setup.volume.board
+    );
+    // judged at the object's centre, not at the face: a point at the box's edge is out of the
+    // nearest views' images whatever the capture
+    if let Some(e) = under_viewed(
+        setup,
+        silhouettes,
+        components::centroid(main),
+        what,
+        config.votes,
+    ) {
+        return e;
+    }
     MeshError::ObjectOffBoard {
-        faces: faces
-            .iter()
-            .map(|&f| components::FACES[f])
-            .collect::<Vec<_>>()
-            .join(", "),
+        faces: face_names,
         board: setup.volume.board,
         x0: lo.x,
         x1: hi.x,

@@ -25,7 +25,25 @@ use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
 /// The recorded poses, refusing to track: shards run at once and must not append to the log.
-pub fn recorded_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, RunError> {
+pub fn recorded_poses(
+    session: &Session,
+    say: &dyn Say,
+) -> Result<Vec<(u64, Isometry3<f64>)>, RunError> {
+    let check = crate::poses::checked_frames(session, say)?;
+    let stale = ellipso_session::provenance::stale_outcomes(
+        &session.poses(),
+        &check,
+        &session.manifest.boards,
+    );
+    ellipso_run_error::ensure!(
+        stale.is_empty(),
+        "{}: {} frames' recorded tracking is stale ({}); a sharded fit does not track (its \
+         shards run at once): run `ellipso mesh {}` once first (it tracks them again)",
+        session.dir.display(),
+        stale.len(),
+        crate::poses::stale_list(&stale),
+        session.dir.display()
+    );
     let untracked = ellipso_vision::process::untracked_frames(session);
     ellipso_run_error::ensure!(
         untracked.is_empty(),
@@ -100,7 +118,7 @@ pub fn run_shard(
         mesh,
     } = inputs;
     let started = Instant::now();
-    let poses = recorded_poses(session)?;
+    let poses = recorded_poses(session, say)?;
     let config = with_session_sensor(session, &config);
     let solve = solve_shard(session, mesh, &poses, &config, shard, &mut |stage| {
         say.out(format_args!("  {stage}…"))
@@ -188,7 +206,7 @@ pub fn run_merge(request: &MergeRequest<'_>, say: &dyn Say) -> Result<(PathBuf, 
     );
     let mesh = TriangleMesh::load(&mesh_path)
         .with_context(|| format!("loading mesh {}", mesh_path.display()))?;
-    let poses = recorded_poses(&session)?;
+    let poses = recorded_poses(&session, say)?;
     say.out(format_args!(
         "merging {} shards: {} vertices, {} samples",
         merged.shard_seconds.len(),

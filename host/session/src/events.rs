@@ -71,6 +71,20 @@ pub enum BoardTrigger {
     FreeRun,
 }
 
+/// What a tracking outcome (`pose`, `pose_rejected`) was computed from, so a later stage can
+/// tell a stale one (`crate::provenance`): both absent in logs written before outcomes carried
+/// them (such outcomes are taken as they are).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+pub struct TrackedFrom {
+    /// CRC-64/XZ of the frame file's bytes tracking read (absent: the file could not be read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame_crc64: Option<u64>,
+    /// CRC-64/XZ of the manifest's board definitions tracking used
+    /// (`crate::provenance::boards_crc64`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub boards_crc64: Option<u64>,
+}
+
 /// One line of the log.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
@@ -145,6 +159,10 @@ pub enum SessionEvent {
         /// Completion.
         #[serde(flatten)]
         status: FrameStatus,
+        /// CRC-64/XZ of the PNG's bytes as written (`crate::provenance`); absent in sessions
+        /// recorded before frames carried one (their frames are not checked).
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        crc64: Option<u64>,
     },
     /// A frame paired with the pulse that lit it.
     Pairing {
@@ -237,6 +255,9 @@ pub enum SessionEvent {
         rms_px: f64,
         /// Tags used.
         tags: u32,
+        /// What the pose was computed from (absent in older logs).
+        #[serde(flatten)]
+        from: TrackedFrom,
     },
     /// A frame without a usable pose, and why.
     PoseRejected {
@@ -246,6 +267,9 @@ pub enum SessionEvent {
         frame_id: u64,
         /// Why.
         reason: String,
+        /// What the rejection was computed from (absent in older logs).
+        #[serde(flatten)]
+        from: TrackedFrom,
     },
     /// A short-pulse frame of a bracketed capture that tracking refused, posed from its tracked
     /// neighbours (`ellipso_vision::short_pulse_poses`); follows the frame's `pose_rejected`.

@@ -10,8 +10,9 @@ use image::{ImageBuffer, Luma};
 
 use super::SessionError;
 
-/// Writes `pixels` (row-major, `width × height`) to `path` as a 16-bit grayscale PNG.
-pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<(), SessionError> {
+/// Writes `pixels` (row-major, `width × height`) to `path` as a 16-bit grayscale PNG. Returns
+/// the CRC-64/XZ of the bytes written (`crate::provenance`).
+pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<u64, SessionError> {
     let bad = |reason: String| SessionError::BadFrame {
         path: path.to_path_buf(),
         reason,
@@ -24,22 +25,35 @@ pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<(),
     }
     let img: ImageBuffer<Luma<u16>, &[u16]> =
         ImageBuffer::from_raw(width, height, pixels).ok_or_else(|| bad("buffer size".into()))?;
-    img.save_with_format(path, image::ImageFormat::Png)
-        .map_err(|e| bad(e.to_string()))
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| bad(e.to_string()))?;
+    std::fs::write(path, &png).map_err(SessionError::io(path))?;
+    Ok(crate::provenance::crc64(&png))
 }
 
 /// Reads a 16-bit grayscale PNG: `(width, height, pixels)`.
 pub fn read(path: &Path) -> Result<(u32, u32, Vec<u16>), SessionError> {
+    decode(path, &read_bytes(path)?)
+}
+
+/// A frame file's bytes: a regular file of a frame's size at most (a FIFO or device never
+/// opened).
+pub fn read_bytes(path: &Path) -> Result<Vec<u8>, SessionError> {
+    ellipso_model::file_io::check_regular(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(SessionError::io(path))?;
+    ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::FRAME)
+        .map_err(SessionError::io(path))
+}
+
+/// Decodes the bytes of the 16-bit grayscale PNG at `path` (named in errors), within the
+/// largest sensor the manifest allows: `(width, height, pixels)`.
+pub fn decode(path: &Path, bytes: &[u8]) -> Result<(u32, u32, Vec<u16>), SessionError> {
     let bad = |reason: String| SessionError::BadFrame {
         path: path.to_path_buf(),
         reason,
     };
-    // a regular file of a frame's size at most (a FIFO or device never opened), decoded within
-    // the largest sensor the manifest allows
-    ellipso_model::file_io::check_regular(path, ellipso_model::file_io::caps::FRAME)
-        .map_err(SessionError::io(path))?;
-    let mut reader = image::ImageReader::open(path)
-        .map_err(SessionError::io(path))?
+    let mut reader = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(SessionError::io(path))?;
     let mut limits = image::Limits::default();

@@ -25,6 +25,7 @@ pub mod frame_png;
 pub mod link_counters;
 pub mod manifest;
 pub mod poses;
+pub mod provenance;
 pub mod reader;
 pub mod rig;
 pub mod rig_ranges;

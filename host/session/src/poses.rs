@@ -14,12 +14,14 @@
 //!   `pose_interpolated` event with finite numbers; a later `pose` of the frame supersedes it
 //!   (a `pose_rejected` does not: the borrowed pose follows the rejection it stands in for).
 //! - Poses are `world_from_camera` (the log records `camera_from_world`), by frame id.
+//! - What a frame's tracking outcome was computed from is its last outcome's [`TrackedFrom`]
+//!   ([`SessionPoses::tracked_from`]; `crate::provenance` tells a stale one).
 
 use std::collections::BTreeMap;
 
 use nalgebra::Isometry3;
 
-use crate::events::{SessionEvent, camera_from_world};
+use crate::events::{SessionEvent, TrackedFrom, camera_from_world};
 use crate::reader::Session;
 
 /// One event's word on a frame's pose, as logged.
@@ -82,6 +84,16 @@ impl PoseEvent<'_> {
 }
 
 impl SessionEvent {
+    /// What a `pose` or `pose_rejected` event was computed from (`None` for other events).
+    pub fn tracked_from(&self) -> Option<TrackedFrom> {
+        match self {
+            SessionEvent::Pose { from, .. } | SessionEvent::PoseRejected { from, .. } => {
+                Some(*from)
+            }
+            _ => None,
+        }
+    }
+
     /// What this event says of a frame's pose: the frame and its [`PoseEvent`], if it is a
     /// `pose`, `pose_rejected` or `pose_interpolated` event.
     pub fn pose_event(&self) -> Option<(u64, PoseEvent<'_>)> {
@@ -131,6 +143,7 @@ pub enum TrackedPose {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SessionPoses {
     tracked: BTreeMap<u64, TrackedPose>,
+    from: BTreeMap<u64, TrackedFrom>,
     interpolated: BTreeMap<u64, Isometry3<f64>>,
 }
 
@@ -148,6 +161,9 @@ impl SessionPoses {
     /// tracking outcome ([`Self::outcome`]) it set, if it set one.
     pub fn apply(&mut self, event: &SessionEvent) -> Option<u64> {
         let (frame_id, e) = event.pose_event()?;
+        if let Some(from) = event.tracked_from() {
+            self.from.insert(frame_id, from);
+        }
         match e {
             PoseEvent::Tracked { .. } => {
                 self.interpolated.remove(&frame_id);
@@ -190,6 +206,11 @@ impl SessionPoses {
         self.tracked.get(&frame_id)
     }
 
+    /// What frame `frame_id`'s tracking outcome was computed from, if the log has an outcome.
+    pub fn tracked_from(&self, frame_id: u64) -> Option<TrackedFrom> {
+        self.from.get(&frame_id).copied()
+    }
+
     /// Whether the log has a tracking outcome (a `pose` or a `pose_rejected`) for `frame_id`.
     pub fn has_outcome(&self, frame_id: u64) -> bool {
         self.tracked.contains_key(&frame_id)
@@ -224,6 +245,7 @@ mod tests {
             translation_camera_from_world_m: [x, 0.0, 0.5],
             rms_px: 0.1,
             tags: 4,
+            from: TrackedFrom::default(),
         }
     }
 
@@ -232,6 +254,7 @@ mod tests {
             t_host_us: HostTimeUs(0),
             frame_id,
             reason: "no tag".into(),
+            from: TrackedFrom::default(),
         }
     }
 

@@ -62,8 +62,9 @@ pub struct ReadReport {
     pub duplicate_frame_events: Vec<u64>,
     /// Pulse sequence numbers with more than one `pulse` event.
     pub duplicate_pulses: Vec<u64>,
-    /// Frame ids whose `pose` / `pose_rejected` events disagree (the last one is what readers
-    /// of poses take; identical repeats are not listed).
+    /// Frame ids whose `pose` / `pose_rejected` events computed from the same inputs
+    /// (`TrackedFrom`) disagree (the last one is what readers of poses take; identical repeats,
+    /// and outcomes recomputed from other bytes or boards, are not listed).
     pub conflicting_poses: Vec<u64>,
 }
 
@@ -137,6 +138,15 @@ impl ReadReport {
     }
 }
 
+/// Up to 10 ids, comma-separated, then `…` and the count.
+pub fn id_list(ids: &[u64]) -> String {
+    let mut s = list(ids);
+    if ids.len() > 10 {
+        s.push_str(&format!(" ({} frames)", ids.len()));
+    }
+    s
+}
+
 /// Up to 10 ids, comma-separated.
 fn list(ids: &[u64]) -> String {
     let mut s: Vec<String> = ids.iter().take(10).map(u64::to_string).collect();
@@ -162,9 +172,25 @@ pub struct Session {
 }
 
 impl Session {
-    /// Loads a frame's raw samples: `(width, height, pixels)`, checked against the manifest.
+    /// Loads a frame's raw samples: `(width, height, pixels)`, checked against the manifest and
+    /// against the checksum its `frame` event recorded (`crate::provenance`): a file that is not
+    /// the one recorded is a bad frame, so every stage skips it rather than pairing another
+    /// capture's pixels with this frame's pose.
     pub fn load_frame(&self, entry: &FrameEntry) -> Result<(u32, u32, Vec<u16>), SessionError> {
-        let (w, h, px) = frame_png::read(&entry.path)?;
+        let bytes = frame_png::read_bytes(&entry.path)?;
+        if let Some(SessionEvent::Frame {
+            crc64: Some(want), ..
+        }) = &entry.event
+            && crate::provenance::crc64(&bytes) != *want
+        {
+            return Err(SessionError::BadFrame {
+                path: entry.path.clone(),
+                reason: "its bytes are not the ones this session recorded (their checksum \
+                         differs from the `frame` event's): damaged, or another capture's frame"
+                    .into(),
+            });
+        }
+        let (w, h, px) = frame_png::decode(&entry.path, &bytes)?;
         let s = &self.manifest.sensor;
         if (w, h) != (s.width, s.height) {
             return Err(SessionError::BadFrame {
@@ -249,18 +275,22 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     let mut pulses = std::collections::BTreeSet::new();
-    // per frame: its first pose value (rotation and translation; empty for a rejection)
-    let mut poses: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    // per frame and what it was computed from: its first pose value (rotation and translation;
+    // empty for a rejection); a later outcome computed from other inputs is no conflict
+    let mut poses: BTreeMap<(u64, crate::events::TrackedFrom), Vec<f64>> = BTreeMap::new();
     for e in &events {
         let pose = match e.pose_event() {
             Some((_, crate::poses::PoseEvent::Interpolated { .. })) | None => None,
-            Some((id, p)) => Some((id, p.logged_values())),
+            Some((id, p)) => Some((
+                (id, e.tracked_from().unwrap_or_default()),
+                p.logged_values(),
+            )),
         };
         if let Some((id, value)) = pose {
             match poses.get(&id) {
                 Some(first) if *first != value => {
-                    if !report.conflicting_poses.contains(&id) {
-                        report.conflicting_poses.push(id);
+                    if !report.conflicting_poses.contains(&id.0) {
+                        report.conflicting_poses.push(id.0);
                     }
                 }
                 Some(_) => {}

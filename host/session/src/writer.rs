@@ -127,11 +127,14 @@ impl SessionWriter {
     ) -> Result<PreparedFrame, SessionError> {
         let name = paths::frame_file(f.frame_id);
         let tmp = frames_dir.join(format!(".{name}.partial"));
-        if let Err(e) = frame_png::write(&tmp, f.width, f.height, f.pixels) {
-            // a full disk must not be left fuller by the half-written frame
-            let _ = fs::remove_file(&tmp);
-            return Err(e);
-        }
+        let crc64 = match frame_png::write(&tmp, f.width, f.height, f.pixels) {
+            Ok(c) => c,
+            Err(e) => {
+                // a full disk must not be left fuller by the half-written frame
+                let _ = fs::remove_file(&tmp);
+                return Err(e);
+            }
+        };
         let event = SessionEvent::Frame {
             t_host_us: f.t_host_us,
             frame_id: f.frame_id,
@@ -145,6 +148,7 @@ impl SessionWriter {
                     reason: r.to_string(),
                 },
             },
+            crc64: Some(crc64),
         };
         Ok(PreparedFrame {
             tmp,

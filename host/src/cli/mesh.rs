@@ -67,6 +67,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             dir.display(),
             args.session.display()
         );
+        // the debug pictures' folder is never one of the files `--out` names (created here, it
+        // would only then be found to be a directory)
+        let out_files = [
+            args.out.clone(),
+            ellipso_pipeline::mesh::report_path(&args.out),
+        ];
+        for f in &out_files {
+            anyhow::ensure!(
+                resolve(dir)? != resolve(f)?,
+                "--debug {}: the same path as the output file {} (from --out); the debug \
+                 pictures go into a folder of their own, e.g. --debug {}-debug",
+                dir.display(),
+                f.display(),
+                args.out.with_extension("").display()
+            );
+        }
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow::anyhow!("--debug {}: {e}", dir.display()))?;
         config.debug_dir = Some(dir.clone());

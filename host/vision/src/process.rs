@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use crate::track::{FramePose, TrackConfig, TrackRejection, TrackedBoard, Tracker};
 use ellipso_polar::frame::RawFrame;
 use ellipso_session::SessionError;
-use ellipso_session::events::SessionEvent;
+use ellipso_session::events::{SessionEvent, TrackedFrom};
 use ellipso_session::reader::Session;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::SessionAppender;
@@ -75,6 +75,9 @@ pub struct TrackedFrame {
     pub frame_id: u64,
     /// Pose or rejection.
     pub result: Result<FramePose, TrackRejection>,
+    /// What it was computed from: the checksum of the frame file's bytes read, and of the
+    /// boards (`ellipso_session::provenance`).
+    pub from: TrackedFrom,
 }
 
 /// Tracks every complete frame of `session`, in parallel, ordered by frame id.
@@ -105,6 +108,7 @@ pub fn track_frames(
     select: impl Fn(u64) -> bool,
 ) -> Result<Vec<TrackedFrame>, ProcessError> {
     let (camera, boards) = rig_of(session)?;
+    let boards_crc64 = Some(ellipso_session::provenance::boards_crc64(&boards));
     let layout = session.manifest.sensor.layout;
     let bit_depth = session.manifest.sensor.bit_depth;
     let frames: Vec<_> = session
@@ -117,6 +121,10 @@ pub fn track_frames(
         .map_init(
             || Tracker::new(camera, boards.clone(), config.clone()),
             |tracker, entry| {
+                let from = TrackedFrom {
+                    frame_crc64: ellipso_session::provenance::file_crc64(&entry.path).ok(),
+                    boards_crc64,
+                };
                 let result = match tracker {
                     Err(e) => Err(TrackRejection::Frame(e.to_string())),
                     Ok(tracker) => session
@@ -131,6 +139,7 @@ pub fn track_frames(
                 TrackedFrame {
                     frame_id: entry.frame_id,
                     result,
+                    from,
                 }
             },
         )
@@ -181,12 +190,14 @@ pub fn append_poses(
                     translation_camera_from_world_m: [tr.x, tr.y, tr.z],
                     rms_px: p.board_pose.rms_px,
                     tags: p.board_pose.tag_count as u32,
+                    from: t.from,
                 }
             }
             Err(reason) => SessionEvent::PoseRejected {
                 t_host_us,
                 frame_id: t.frame_id,
                 reason: reason.to_string(),
+                from: t.from,
             },
         };
         log.log(&event)?;
@@ -205,4 +216,46 @@ pub fn tally(tracked: &[TrackedFrame]) -> (usize, BTreeMap<String, usize>) {
         }
     }
     (posed, rejected)
+}
+
+/// How many complete frames [`layout_contradiction`] examines: the first, the middle and the
+/// last, so a colour object seen in part of an orbit is still found (each costs one decode).
+const LAYOUT_FRAMES: usize = 3;
+
+/// The error for a manifest whose `sensor.layout` is monochrome while its frames' pixels carry
+/// a colour filter pattern (`ellipso_polar::layout::detect`, the detection `ellipso polar`
+/// uses), naming the frame; `None` when no examined frame contradicts it. A colour layout on
+/// frames that read as mono is no contradiction (a grey scene under balanced colour filters
+/// reads as mono and is processed correctly either way, `ellipso_polar::layout`).
+pub fn layout_contradiction(session: &Session) -> Option<String> {
+    use ellipso_model::mosaic::SensorLayout;
+    use ellipso_polar::layout::{Detection, detect};
+    if session.manifest.sensor.layout != SensorLayout::MonoPolar {
+        return None;
+    }
+    let complete: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
+    let n = complete.len();
+    let m = LAYOUT_FRAMES.min(n);
+    let picks: std::collections::BTreeSet<usize> = (0..m)
+        .map(|k| k * n.saturating_sub(1) / (m - 1).max(1))
+        .collect();
+    for entry in picks.into_iter().map(|k| complete[k]) {
+        let Ok((w, h, px)) = session.load_frame(entry) else {
+            continue;
+        };
+        let e = detect(w as usize, h as usize, &px);
+        if e.detection == Detection::Colour {
+            return Some(format!(
+                "{}: `sensor.layout` is mono_polar, but frame {}'s pixels carry a colour filter \
+                 pattern (red/blue blocks differ from green by {:.2} of the mean, the two greens \
+                 by {:.3}, over {} flat tiles): set `sensor.layout` to colour_polar",
+                session.dir.join(ellipso_session::paths::MANIFEST).display(),
+                entry.frame_id,
+                e.rg.max(e.rg_upper),
+                e.gg,
+                e.tiles
+            ));
+        }
+    }
+    None
 }

@@ -190,6 +190,7 @@ fn poses_round_trip_through_the_session_log() {
             translation_camera_from_world_m: [t.x, t.y, t.z],
             rms_px: 0.1,
             tags: 8,
+            from: Default::default(),
         })
         .unwrap();
     }
@@ -198,6 +199,7 @@ fn poses_round_trip_through_the_session_log() {
         t_host_us: HostTimeUs(1),
         frame_id: 102,
         reason: "too few tags".into(),
+        from: Default::default(),
     })
     .unwrap();
     drop(log);

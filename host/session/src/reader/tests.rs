@@ -401,6 +401,7 @@ fn appends_start_on_a_fresh_line_after_a_cut_one() {
         t_host_us: HostTimeUs(1),
         frame_id: 0,
         reason: "test".into(),
+        from: Default::default(),
     })
     .unwrap();
     let s = open(&dir).unwrap();
@@ -452,6 +453,7 @@ fn pose_events_that_disagree_are_reported() {
         translation_camera_from_world_m: [x, 0.0, 0.5],
         rms_px: 0.3,
         tags: 4,
+        from: Default::default(),
     };
     for e in [
         pose(0, 0.0),
