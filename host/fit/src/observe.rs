@@ -105,6 +105,13 @@ pub struct ObserveConfig {
     /// extraction).
     #[serde(default = "default_frame_cache_bytes")]
     pub frame_cache_bytes: u64,
+    /// The sensor calibration the frames are read with (`None`: an ideal sensor with
+    /// `dark_level_dn`; [`MosaicFrames`]: with one, its black level replaces `dark_level_dn`
+    /// and each superpixel is read through its own analysis matrix,
+    /// `ellipso_polar::sensor_calibration::session`).
+    #[serde(skip)]
+    pub sensor_calibration:
+        Option<std::sync::Arc<ellipso_polar::sensor_calibration::SensorCalibration>>,
 }
 
 /// 2 GiB: the object's part of a few hundred full-resolution frames.
@@ -123,6 +130,7 @@ impl Default for ObserveConfig {
             sample_kernel: SampleKernel::default(),
             vertex_labels: None,
             frame_cache_bytes: default_frame_cache_bytes(),
+            sensor_calibration: None,
         }
     }
 }
