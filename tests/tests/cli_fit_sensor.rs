@@ -54,7 +54,8 @@ fn ideal_calibration(layout: SensorLayout, w: u32, h: u32, dark_dn: f32) -> Sens
                 saturation_dn: 4095.0,
                 saturation_e: 10_500.0,
                 vignetting_exponent: 0.0,
-                extinction_ratio: vec![f64::INFINITY],
+                // the file's JSON header holds finite numbers only
+                extinction_ratio: vec![1e9],
                 analyser_angle_mean_error_deg: [0.0; 4],
                 analyser_angle_sd_deg: 0.0,
                 hot_pixels: 0,
