@@ -14,8 +14,9 @@
 //! The effects session is fitted twice: with the calibration (`eta_shift_calibrated_points_max`)
 //! and without it (the frames read as an ideal sensor's: the uncalibrated cost). The η change of
 //! a material is the change of its median η's error, in percentage points of the true η; the
-//! normal change is the median over vertices reliable in both fits of the angle between their
-//! refined normals.
+//! normal change is the angle between the refined normals of each vertex reliable in both fits
+//! (median, 95th percentile, largest: most vertices' normals agree to rounding, so the median
+//! alone says nothing).
 
 use std::path::Path;
 use std::sync::Arc;
@@ -35,10 +36,10 @@ pub struct EtaShift {
     pub calibrated_points_max: f64,
     /// The same read as an ideal sensor (no calibration), percentage points.
     pub uncalibrated_points_max: f64,
-    /// Median normal change with the calibration, degrees.
-    pub calibrated_normal_median_deg: f64,
-    /// The same without it, degrees.
-    pub uncalibrated_normal_median_deg: f64,
+    /// Normal change with the calibration.
+    pub normals_calibrated: NormalShift,
+    /// The same without it.
+    pub normals_uncalibrated: NormalShift,
     /// Per material: name, η error of the ideal sensor, calibrated, uncalibrated (%).
     pub materials: Vec<(String, f64, f64, f64)>,
 }
@@ -120,12 +121,22 @@ pub fn run(
         crate::score::score_fit(&f.outcome.fits, &at, &truth.material_names, f.set.colour)
     };
     let (r, c, u) = (score(&reference), score(&calibrated), score(&uncalibrated));
-    for (name, f) in [("calibrated", &calibrated), ("uncalibrated", &uncalibrated)] {
-        let (n, p95, max) = normal_spread(&reference, f);
+    let (normals_calibrated, normals_uncalibrated) = (
+        normal_shift(&reference, &calibrated),
+        normal_shift(&reference, &uncalibrated),
+    );
+    for (name, n) in [
+        ("calibrated", &normals_calibrated),
+        ("uncalibrated", &normals_uncalibrated),
+    ] {
         say!(
             say,
-            "  normals, {name} vs ideal sensor: {n} vertices reliable in both, 95th percentile \
-             {p95:.4}°, largest {max:.4}°"
+            "  normals, {name} vs ideal sensor over {} vertices: median {:.4}°, 95th percentile \
+             {:.4}°, largest {:.4}°",
+            n.vertices,
+            n.median_deg,
+            n.p95_deg,
+            n.max_deg
         );
     }
     let mut materials = Vec::new();
@@ -146,34 +157,26 @@ pub fn run(
         photos: ideal.camera_poses.len(),
         calibrated_points_max: cal_max,
         uncalibrated_points_max: uncal_max,
-        calibrated_normal_median_deg: normal_change(&reference, &calibrated),
-        uncalibrated_normal_median_deg: normal_change(&reference, &uncalibrated),
+        normals_calibrated,
+        normals_uncalibrated,
         materials,
     })
 }
 
-/// Median angle between the refined normals of vertices reliable in both fits, degrees.
-fn normal_change(a: &SessionFit, b: &SessionFit) -> f64 {
-    let mut angles: Vec<f64> = a
-        .outcome
-        .fits
-        .iter()
-        .zip(&b.outcome.fits)
-        .filter(|(x, y)| x.is_reliable() && y.is_reliable())
-        .map(|(x, y)| {
-            let (p, q) = (
-                nalgebra::Vector3::from(x.normal_world),
-                nalgebra::Vector3::from(y.normal_world),
-            );
-            p.angle(&q).to_degrees()
-        })
-        .collect();
-    ellipso_model::stats::median(&mut angles)
+/// How far the refined normals of the vertices reliable in both fits moved, degrees.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct NormalShift {
+    /// Vertices compared.
+    pub vertices: usize,
+    /// Median angle.
+    pub median_deg: f64,
+    /// 95th percentile.
+    pub p95_deg: f64,
+    /// Largest.
+    pub max_deg: f64,
 }
 
-/// Vertices reliable in both fits, and the 95th percentile and largest angle between their
-/// refined normals, degrees.
-fn normal_spread(a: &SessionFit, b: &SessionFit) -> (usize, f64, f64) {
+fn normal_shift(a: &SessionFit, b: &SessionFit) -> NormalShift {
     let mut angles: Vec<f64> = a
         .outcome
         .fits
@@ -186,10 +189,10 @@ fn normal_spread(a: &SessionFit, b: &SessionFit) -> (usize, f64, f64) {
                 .to_degrees()
         })
         .collect();
-    let max = angles.iter().copied().fold(0.0, f64::max);
-    (
-        angles.len(),
-        ellipso_model::stats::percentile(&mut angles, 0.95),
-        max,
-    )
+    NormalShift {
+        vertices: angles.len(),
+        max_deg: angles.iter().copied().fold(0.0, f64::max),
+        p95_deg: ellipso_model::stats::percentile(&mut angles, 0.95),
+        median_deg: ellipso_model::stats::median(&mut angles),
+    }
 }
