@@ -4,7 +4,8 @@
 //!
 //! - fitted without a calibration it prints a warning naming what it assumes (ideal analysers,
 //!   the black level, the noise model's constants), never silently;
-//! - `--sensor-calibration FILE` reads the frames with the file and says which one;
+//! - `--sensor-calibration FILE` reads the frames with the file and says which one, and so does
+//!   a calibration the session recorded, without the flag;
 //! - a corrupt, truncated, foreign or newer file, one of another sensor size or layout, and a
 //!   file that is no longer the one the session recorded each fail with one error naming it.
 
@@ -214,13 +215,20 @@ fn a_hardware_session_says_what_it_assumes_and_bad_calibrations_are_named() {
         );
     }
 
-    // the session records the good file's identity; the file is then replaced by another
-    // calibration: stale, by name, with or without --sensor-calibration
+    // the session records the good file's identity (as `capture` writes it from the rig file);
+    // the file is then replaced by another calibration: stale, by name, with or without
+    // --sensor-calibration
     let manifest = session.join("manifest.json");
     let mut m: serde_json::Value =
         serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
     m["rig"]["sensor_calibration"] = serde_json::json!({"id": id, "file": good});
     std::fs::write(&manifest, serde_json::to_vec_pretty(&m).unwrap()).unwrap();
+    // recorded: used without the flag
+    let o = fit(&session, &mesh, &tmp.path().join("fit-recorded"), &[]);
+    let e = stderr(&o);
+    assert!(o.status.success(), "{e}");
+    assert!(e.contains(&format!("sensor calibration {id}")), "{e}");
+    assert!(!e.contains("without a sensor calibration"), "{e}");
     let replaced = tmp.path().join("replaced.senscal");
     write_calibration(ideal_calibration(layout, w, h, 1.0), &replaced);
     std::fs::copy(&replaced, &good).unwrap();

@@ -49,7 +49,7 @@ fn thinned(mut scene: Scene, photos: usize) -> Scene {
     let n = scene.camera_poses.len();
     if photos < n {
         let keep: Vec<_> = (0..photos)
-            .map(|k| scene.camera_poses[k * n / photos].clone())
+            .map(|k| scene.camera_poses[k * n / photos])
             .collect();
         scene.camera_poses = keep;
     }

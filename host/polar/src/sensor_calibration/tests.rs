@@ -209,14 +209,12 @@ fn calibrated_demosaic_writes_back_the_modelled_analysers() {
             );
             let (mut worst, mut worst_plain) = (0.0f64, 0.0f64);
             for (band, plain_band) in image.bands.iter().zip(&plain.bands) {
-                for k in 0..4 {
-                    for (v, p) in band.intensity[k]
-                        .data()
-                        .iter()
-                        .zip(plain_band.intensity[k].data())
-                    {
-                        worst = worst.max((f64::from(*v) - want[k]).abs());
-                        worst_plain = worst_plain.max((f64::from(*p) - want[k]).abs());
+                for ((got, plain), want) in
+                    band.intensity.iter().zip(&plain_band.intensity).zip(want)
+                {
+                    for (v, p) in got.data().iter().zip(plain.data()) {
+                        worst = worst.max((f64::from(*v) - want).abs());
+                        worst_plain = worst_plain.max((f64::from(*p) - want).abs());
                     }
                 }
             }
@@ -249,12 +247,8 @@ fn calibrated_demosaic_writes_back_the_modelled_analysers() {
         let plain =
             crate::demosaic::demosaic(&frame, &levels, crate::demosaic::DemosaicMethod::Superpixel);
         for (band, plain_band) in image.bands.iter().zip(&plain.bands) {
-            for k in 0..4 {
-                for (v, p) in band.intensity[k]
-                    .data()
-                    .iter()
-                    .zip(plain_band.intensity[k].data())
-                {
+            for (got, plain) in band.intensity.iter().zip(&plain_band.intensity) {
+                for (v, p) in got.data().iter().zip(plain.data()) {
                     assert!((v - p).abs() < 1e-6, "{layout:?}: {v} vs plain {p}");
                 }
             }

@@ -202,7 +202,7 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
     );
     let mut text = cal.to_toml_camera_section();
     if let Some(sphere) = args.sphere {
-        let flash = (|| -> Result<String, String> {
+        let flash: Result<String, String> = 'flash: {
             // per calibrated view: its frame, board and pose → the highlight
             let observations: Vec<HighlightObservation> = cal
                 .views
@@ -243,8 +243,10 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
                     }
                 })
                 .collect();
-            let flash =
-                estimate_flash_position(&cal.camera, &observations).map_err(|e| e.to_string())?;
+            let flash = match estimate_flash_position(&cal.camera, &observations) {
+                Ok(flash) => flash,
+                Err(e) => break 'flash Err(e.to_string()),
+            };
             let p = flash.flash_camera_m.coords * 1e3;
             let sd = flash.std_m.map(|v| v * 1e3);
             say!(
@@ -260,7 +262,7 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
                 flash.rms_angle_rad * 1e3
             );
             Ok(flash.to_toml_flash_section())
-        })();
+        };
         match flash {
             Ok(section) => {
                 text.push('\n');
