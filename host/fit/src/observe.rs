@@ -105,10 +105,8 @@ pub struct ObserveConfig {
     /// extraction).
     #[serde(default = "default_frame_cache_bytes")]
     pub frame_cache_bytes: u64,
-    /// The sensor calibration the frames are read with (`None`: an ideal sensor with
-    /// `dark_level_dn`; [`MosaicFrames`]: with one, its black level replaces `dark_level_dn`
-    /// and each superpixel is read through its own analysis matrix,
-    /// `ellipso_polar::sensor_calibration::session`).
+    /// The sensor calibration [`MosaicFrames`] reads the frames with (its black level, not
+    /// `dark_level_dn`); `None`: an ideal sensor.
     #[serde(skip)]
     pub sensor_calibration:
         Option<std::sync::Arc<ellipso_polar::sensor_calibration::SensorCalibration>>,
