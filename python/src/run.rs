@@ -275,6 +275,7 @@ pub fn fit<'py>(
             config,
             shard: None,
             import: Default::default(),
+            sensor_calibration: None,
         };
         let say = fw.clone();
         match ellipso_pipeline::fit_run::run(request, fw, &say)? {

@@ -113,6 +113,7 @@ pub fn rig_record_of_scene(scene: &Scene, camera: CameraModel) -> RigRecord {
         radiometry: Some(RadiometryRecord::Absolute(sensor.radiometry)),
         noise: Some(sensor.noise),
         analyser_extinction_ratio: sensor.analyser_extinction_ratio,
+        sensor_calibration: None,
     }
 }
 

@@ -10,6 +10,8 @@
 //! so the report is a pure function of the build. Keys the loop does not reach yet are written
 //! as `null` with the reason in `not_measured`.
 
+pub mod eta_shift;
+
 use std::path::{Path, PathBuf};
 
 use ellipso_polar::sensor_calibration::{MeasureOptions, SensorCalibration, measure};
@@ -31,6 +33,10 @@ vignetting = { exponent = 4.0 }\n";
 /// The resolution the bench renders at (a quarter of the demo camera's sides).
 pub const RESOLUTION: [u32; 2] = [612, 512];
 
+/// Views of the demo's path the end-to-end fits use by default ([`eta_shift`]): enough for
+/// every material to be seen from several sides, few enough for three fits on a laptop.
+pub const ETA_SHIFT_PHOTOS: usize = 48;
+
 /// What the bench recovered, under the issue's keys.
 #[derive(Debug, Clone, Serialize)]
 pub struct Recovered {
@@ -50,8 +56,20 @@ pub struct Recovered {
     pub flash_position_err_mm: Option<f64>,
     /// Not measured yet.
     pub flash_polariser_angle_err_deg: Option<f64>,
-    /// Not measured yet (the fit does not apply a sensor calibration yet).
+    /// Largest per-material η change (percentage points of the true η) between the effects
+    /// capture fitted with its calibration and the ideal sensor's capture ([`eta_shift`]).
     pub eta_shift_calibrated_points_max: Option<f64>,
+    /// The same, the effects capture read as an ideal sensor's (no calibration).
+    pub eta_shift_uncalibrated_points_max: Option<f64>,
+    /// 95th percentile over the vertices of the change of their refined normals with the
+    /// calibration, degrees.
+    pub normal_shift_calibrated_deg_p95: Option<f64>,
+    /// The largest such change, degrees.
+    pub normal_shift_calibrated_deg_max: Option<f64>,
+    /// The 95th percentile without the calibration, degrees.
+    pub normal_shift_uncalibrated_deg_p95: Option<f64>,
+    /// Views per session of those fits.
+    pub eta_shift_photos: Option<usize>,
     /// Largest |s − s_ideal| (s0, s1, s2, normalised) over the lit superpixels of an object frame,
     /// calibrated.
     pub stokes_max_err_calibrated: f64,
@@ -91,7 +109,7 @@ pub fn demo_with(extra: &str, noise: bool) -> Result<Scene, RunError> {
     Scene::from_toml_str(&text, &path).map_err(|e| RunError::msg(e.to_string()))
 }
 
-fn options(resolution: [u32; 2]) -> RenderOptions {
+pub(crate) fn options(resolution: [u32; 2]) -> RenderOptions {
     RenderOptions {
         supersampling: 1,
         resolution_px: Some(resolution),
@@ -210,7 +228,7 @@ pub fn stokes_check(
 }
 
 /// Runs the bench; writes `out/sensor-calibration.json` and updates `out/sensor-calibration.md`.
-pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
+pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Report, RunError> {
     let scene = demo_with(REAL_SENSOR_EFFECTS, true)?;
     let resolution = RESOLUTION;
     say!(
@@ -279,6 +297,24 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
     let effects_clean = demo_with(REAL_SENSOR_EFFECTS, false)?;
     let ideal = demo_with("vignetting = { exponent = 4.0 }\n", false)?;
     let (smax, srms, srms_u) = stokes_check(&effects_clean, &ideal, &cal, resolution)?;
+    let shift = if photos > 0 {
+        say!(
+            say,
+            "fitting the demo captured with and without the effects ({photos} views, {}×{})",
+            resolution[0],
+            resolution[1]
+        );
+        let s = eta_shift::run(&cal, resolution, photos, &work.join("fits"), say)?;
+        for (name, ideal, c, u) in &s.materials {
+            say!(
+                say,
+                "  {name}: η error {ideal:+.3} % ideal sensor, {c:+.3} % calibrated, {u:+.3} % uncalibrated"
+            );
+        }
+        Some(s)
+    } else {
+        None
+    };
     let recovered = Recovered {
         gain_rel_err: (f.gain_dn_per_e / k_true - 1.0).abs(),
         read_noise_rel_err: (f.read_noise_e / sigma_true - 1.0).abs(),
@@ -288,7 +324,12 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
         vignetting_err: vig_err,
         flash_position_err_mm: None,
         flash_polariser_angle_err_deg: None,
-        eta_shift_calibrated_points_max: None,
+        eta_shift_calibrated_points_max: shift.as_ref().map(|s| s.calibrated_points_max),
+        eta_shift_uncalibrated_points_max: shift.as_ref().map(|s| s.uncalibrated_points_max),
+        normal_shift_calibrated_deg_p95: shift.as_ref().map(|s| s.normals_calibrated.p95_deg),
+        normal_shift_calibrated_deg_max: shift.as_ref().map(|s| s.normals_calibrated.max_deg),
+        normal_shift_uncalibrated_deg_p95: shift.as_ref().map(|s| s.normals_uncalibrated.p95_deg),
+        eta_shift_photos: shift.as_ref().map(|s| s.photos),
         stokes_max_err_calibrated: smax,
         stokes_rms_err_calibrated: srms,
         stokes_rms_err_uncalibrated: srms_u,
@@ -312,10 +353,14 @@ pub fn run(out: &Path, work: &Path, say: &dyn Say) -> Result<Report, RunError> {
     let report = Report {
         recovered,
         figures,
-        not_measured: vec![
-            "flash_position_err_mm, flash_polariser_angle_err_deg: `ellipso calibrate flash` is not built yet".into(),
-            "eta_shift_calibrated_points_max: the fit does not apply a sensor calibration in its sampling yet".into(),
-        ],
+        not_measured: std::iter::once(
+            "flash_position_err_mm, flash_polariser_angle_err_deg: `ellipso calibrate flash` is not built yet".to_string(),
+        )
+        .chain(shift.is_none().then(|| {
+            "eta_shift_calibrated_points_max: the end-to-end fits were skipped (--photos 0)"
+                .to_string()
+        }))
+        .collect(),
         command: "ellipso bench sensor".into(),
     };
     write_report(out, &report)?;
@@ -359,8 +404,12 @@ fn markdown_table(report: &Report) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`).\n",
-        report.command, RESOLUTION[0], RESOLUTION[1]
+        "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`{}).\n",
+        report.command,
+        RESOLUTION[0],
+        RESOLUTION[1],
+        r.eta_shift_photos
+            .map_or(String::new(), |n| format!("; end-to-end fits on {n} views"))
     );
     let _ = writeln!(s, "| key | recovered | target |\n|---|---|---|");
     let opt = |v: Option<f64>| v.map_or("not measured".to_string(), |v| format!("{v:.4}"));
@@ -401,6 +450,26 @@ fn markdown_table(report: &Report) -> String {
             "eta_shift_calibrated_points_max",
             opt(r.eta_shift_calibrated_points_max),
             "≤ 0.1",
+        ),
+        (
+            "eta_shift_uncalibrated_points_max",
+            opt(r.eta_shift_uncalibrated_points_max),
+            "",
+        ),
+        (
+            "normal_shift_calibrated_deg_p95",
+            opt(r.normal_shift_calibrated_deg_p95),
+            "≤ 0.1",
+        ),
+        (
+            "normal_shift_calibrated_deg_max",
+            opt(r.normal_shift_calibrated_deg_max),
+            "",
+        ),
+        (
+            "normal_shift_uncalibrated_deg_p95",
+            opt(r.normal_shift_uncalibrated_deg_p95),
+            "",
         ),
         (
             "stokes_max_err_calibrated",

@@ -45,6 +45,7 @@ pub fn rig_of_file(rig: &RigFile, bracket: Option<Bracket>) -> Result<HardwareRi
         board,
         photos: rig.capture.photos,
         boards: rig.boards()?,
+        sensor_calibration: rig.sensor_calibration()?,
     })
 }
 

@@ -11,6 +11,7 @@
 //! bit_depth = 12
 //! exposure_us = 8000
 //! gain_db = 0.0
+//! calibration = "camera.senscal" # optional; `ellipso calibrate sensor` writes it
 //!
 //! [camera]                       # optional until `ellipso calibrate` writes it; exactly its output
 //! width = 2448
@@ -54,7 +55,7 @@ use ellipso_protocol::{CaptureConfig, PulseCount, TriggerSource};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde::Deserialize;
 
-use ellipso_session::rig::TrackedBoard;
+use ellipso_session::rig::{SensorCalibrationRef, TrackedBoard};
 
 /// The trigger board.
 #[derive(Debug, Clone, Deserialize)]
@@ -91,6 +92,10 @@ pub struct SensorSection {
     /// Gain, dB.
     #[serde(default)]
     pub gain_db: f32,
+    /// Sensor calibration file (`ellipso calibrate sensor`), relative to this rig file; its
+    /// identity is recorded in every session and the frames are read with it.
+    #[serde(default)]
+    pub calibration: Option<PathBuf>,
 }
 
 /// What fires each photo.
@@ -470,6 +475,48 @@ impl RigFile {
     }
 
     /// The boards, loaded from their files and placed in the world.
+    /// The sensor calibration `[sensor] calibration` names, read and checked against the
+    /// sensor's layout and the camera model's size: its identity and absolute path (`None`
+    /// when none is named).
+    pub fn sensor_calibration(&self) -> Result<Option<SensorCalibrationRef>, RigFileError> {
+        let Some(file) = &self.sensor.calibration else {
+            return Ok(None);
+        };
+        let base = self.path.parent().unwrap_or(Path::new("."));
+        let file = base.join(file);
+        let bad = |message: String| RigFileError::Invalid {
+            path: self.path.clone(),
+            key: "sensor.calibration".into(),
+            message,
+        };
+        let file =
+            std::path::absolute(&file).map_err(|e| bad(format!("{}: {e}", file.display())))?;
+        let cal = ellipso_polar::sensor_calibration::file::read(&file, None)
+            .map_err(|e| bad(e.to_string()))?;
+        let s = &cal.header.sensor;
+        if s.layout != self.sensor.layout {
+            return Err(bad(format!(
+                "sensor calibration {} is for a {} sensor, `sensor.layout` is {}",
+                cal.id(),
+                ellipso_session::manifest::layout_name(s.layout),
+                ellipso_session::manifest::layout_name(self.sensor.layout)
+            )));
+        }
+        if let Some(camera) = &self.camera
+            && (camera.width, camera.height) != (s.width, s.height)
+        {
+            return Err(bad(format!(
+                "sensor calibration {} is for a {}×{} sensor, [camera] is {}×{}",
+                cal.id(),
+                s.width,
+                s.height,
+                camera.width,
+                camera.height
+            )));
+        }
+        Ok(Some(SensorCalibrationRef { id: cal.id(), file }))
+    }
+
     pub fn boards(&self) -> Result<Vec<TrackedBoard>, RigFileError> {
         let base = self.path.parent().unwrap_or(Path::new("."));
         self.boards

@@ -105,6 +105,11 @@ pub struct ObserveConfig {
     /// extraction).
     #[serde(default = "default_frame_cache_bytes")]
     pub frame_cache_bytes: u64,
+    /// The sensor calibration [`MosaicFrames`] reads the frames with (its black level, not
+    /// `dark_level_dn`); `None`: an ideal sensor.
+    #[serde(skip)]
+    pub sensor_calibration:
+        Option<std::sync::Arc<ellipso_polar::sensor_calibration::SensorCalibration>>,
 }
 
 /// 2 GiB: the object's part of a few hundred full-resolution frames.
@@ -123,6 +128,7 @@ impl Default for ObserveConfig {
             sample_kernel: SampleKernel::default(),
             vertex_labels: None,
             frame_cache_bytes: default_frame_cache_bytes(),
+            sensor_calibration: None,
         }
     }
 }

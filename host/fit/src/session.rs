@@ -88,11 +88,18 @@ impl Default for SessionFitConfig {
 }
 
 /// `config` with the sensor model the solver weights samples by: the session's where it
-/// records one (simulator sessions), the documented default otherwise.
+/// records one (simulator sessions), else the sensor calibration's measured conversion gain and
+/// read noise where the frames are read with one, the documented default otherwise.
 pub fn with_session_sensor(session: &Session, config: &SessionFitConfig) -> SessionFitConfig {
     let mut config = config.clone();
     if let Some(sensor) = crate::observe::sensor_noise_of(session) {
         config.fit.solver.sensor = sensor;
+    } else if let Some(cal) = &config.observe.sensor_calibration {
+        let f = &cal.header.figures;
+        config.fit.solver.sensor = crate::solve::SensorNoiseModel {
+            dn_per_electron: f.gain_dn_per_e,
+            read_noise_dn: f.read_noise_dn,
+        };
     }
     config
 }

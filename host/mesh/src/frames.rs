@@ -12,6 +12,9 @@
 //!   `s0 = (I0 + I45 + I90 + I135)/2` per colour band in dark-subtracted DN, the co/cross
 //!   polarisation contrast `p = Σ(I0 − I90) / Σ(I0 + I90)` over bands, and whether any raw
 //!   sample of it is saturated.
+//! - With a sensor calibration the frames are read at its black level and each superpixel
+//!   through its own analysis matrix (`ellipso_polar::sensor_calibration::CalibratedDemosaic`,
+//!   as the fit reads them); without one, the plain superpixel demosaic at dark level 0.
 //! - Ray directions depend only on the camera model, so they are undistorted once per session
 //!   ([`RayTable`]); a pixel whose distortion cannot be inverted has no ray.
 
@@ -26,6 +29,7 @@ use ellipso_polar::PolarConfig;
 use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
 use ellipso_polar::frame::RawFrame;
 use ellipso_polar::mask::MaskReason;
+use ellipso_polar::sensor_calibration::CalibratedDemosaic;
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
 
@@ -222,14 +226,30 @@ pub fn load_features(
     session: &Session,
     layout: SensorLayout,
     frame: &PosedFrame<'_>,
+    calibrated: Option<&CalibratedDemosaic>,
 ) -> Result<FeatureImage, String> {
     let (w, h, px) = session.load_frame(frame.entry).map_err(|e| e.to_string())?;
     let raw = RawFrame::new(w, h, session.manifest.sensor.bit_depth, layout, px)
         .map_err(|e| format!("{}: {e}", frame.entry.path.display()))?;
-    let levels = PolarConfig::default()
-        .levels(&raw)
-        .map_err(|e| e.to_string())?;
-    let image = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+    let image = match calibrated {
+        Some(c) => {
+            let config = c
+                .config(&PolarConfig::default())
+                .map_err(|e| e.to_string())?;
+            let levels = config.levels(&raw).map_err(|e| e.to_string())?;
+            (
+                c.demosaic(&raw, &levels).map_err(|e| e.to_string())?,
+                levels,
+            )
+        }
+        None => {
+            let levels = PolarConfig::default()
+                .levels(&raw)
+                .map_err(|e| e.to_string())?;
+            (demosaic(&raw, &levels, DemosaicMethod::Superpixel), levels)
+        }
+    };
+    let (image, levels) = image;
     // DN per normalised unit, from the levels themselves (as the fit's sampler does).
     let dn_per_unit = 1.0 / (levels.normalise(1) - levels.normalise(0));
     let first = image.bands.first().ok_or("no colour band")?;

@@ -101,6 +101,11 @@ pub struct MeshConfig {
     /// fine fields), if anywhere.
     #[serde(skip)]
     pub debug_dir: Option<std::path::PathBuf>,
+    /// The sensor calibration the frames are read with (`None`: an ideal sensor, dark level 0;
+    /// [`frames::load_features`]).
+    #[serde(skip)]
+    pub sensor_calibration:
+        Option<std::sync::Arc<ellipso_polar::sensor_calibration::SensorCalibration>>,
 }
 
 impl Default for MeshConfig {
@@ -122,6 +127,7 @@ impl Default for MeshConfig {
             threads: None,
             max_second_part: 0.02,
             debug_dir: None,
+            sensor_calibration: None,
         }
     }
 }

@@ -49,6 +49,8 @@ struct Setup<'a> {
     views: Vec<View>,
     floor_dn: f64,
     full_scale_dn: f64,
+    /// The calibrated demosaic where the frames are read with a sensor calibration.
+    calibrated: Option<ellipso_polar::sensor_calibration::CalibratedDemosaic>,
 }
 
 fn session_error(e: impl std::fmt::Display) -> MeshError {
@@ -184,6 +186,17 @@ fn setup<'a>(
         views,
         floor_dn,
         full_scale_dn: radiometry.full_scale_dn,
+        calibrated: config.sensor_calibration.as_ref().map(|cal| {
+            let modelled = session
+                .manifest
+                .rig
+                .as_ref()
+                .and_then(|r| r.analyser_extinction_ratio);
+            ellipso_polar::sensor_calibration::CalibratedDemosaic::new(
+                std::sync::Arc::clone(cal),
+                modelled,
+            )
+        }),
     })
 }
 
@@ -249,7 +262,12 @@ fn stream<T: Send>(
         let results: Vec<Result<T, String>> = chunk
             .par_iter()
             .map(|&i| {
-                let image = load_features(setup.session, setup.layout, &setup.frames[i])?;
+                let image = load_features(
+                    setup.session,
+                    setup.layout,
+                    &setup.frames[i],
+                    setup.calibrated.as_ref(),
+                )?;
                 if (image.width, image.height) != (setup.rays.width, setup.rays.height) {
                     return Err(format!(
                         "{}×{} superpixels but the camera model gives {}×{}",

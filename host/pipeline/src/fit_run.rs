@@ -51,6 +51,9 @@ pub struct FitRequest<'a> {
     pub shard: Option<Shard>,
     /// `--poses`, `--mesh-frame`, `--mesh-model`.
     pub import: ImportFlags,
+    /// `--sensor-calibration`: the file to read the frames with where the session recorded
+    /// none (a session that recorded one accepts only that one; [`crate::sensor`]).
+    pub sensor_calibration: Option<&'a Path>,
 }
 
 /// What `ellipso fit` did.
@@ -82,6 +85,7 @@ pub fn run(
         mut config,
         shard,
         import,
+        sensor_calibration,
     } = request;
     // the output is claimed before any work: a bad --out is refused at once, not after the fit
     let mut inputs: Vec<&Path> = vec![session_dir];
@@ -114,6 +118,17 @@ pub fn run(
             session_dir.display()
         );
     }
+    let sensor = crate::sensor::session_calibration(
+        &session,
+        sensor_calibration,
+        config.observe.dark_level_dn,
+        say,
+    )?;
+    config.observe.sensor_calibration = sensor.clone();
+    let mesh_config = ellipso_mesh::MeshConfig {
+        sensor_calibration: sensor,
+        ..Default::default()
+    };
     let read = session.report.summary();
     if read != "intact" {
         say.err(format_args!("warning: {}: {read}", session_dir.display()));
@@ -164,13 +179,7 @@ pub fn run(
                 say.err(format_args!(
                     "carving the visual hull from the frames (the surface update stays inside it)…"
                 ));
-                match mesh_of_session(
-                    &session,
-                    imported_poses,
-                    &ellipso_mesh::MeshConfig::default(),
-                    say,
-                    steps,
-                ) {
+                match mesh_of_session(&session, imported_poses, &mesh_config, say, steps) {
                     Ok((_, _, hull)) => (mesh, Some(hull)),
                     Err(e) => {
                         let e = e.into_boxed();
@@ -188,7 +197,7 @@ pub fn run(
             say.err(format_args!(
                 "no --mesh: carving the object's mesh from the frames first…"
             ));
-            let mut mesh_config = ellipso_mesh::MeshConfig::default();
+            let mut mesh_config = mesh_config;
             mesh_config.remesh.target_vertices = vertices;
             let (mesh, report, hull) =
                 mesh_of_session(&session, imported_poses, &mesh_config, say, steps)?;

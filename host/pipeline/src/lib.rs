@@ -14,6 +14,8 @@
 //!   `--mesh-model`: models read by `ellipso-colmap` and aligned); [`fit_shard`]: sharded fits
 //!   (`fit --shard`, `fit-merge`).
 //! - [`colmap_export`]: `ellipso export colmap` whole.
+//! - [`sensor`]: the sensor calibration a session's frames are read with, or the warning
+//!   naming what a hardware session is fitted with instead.
 //! - [`steps`]: where a run's long steps are shown.
 //!
 //! Why a crate of its own: the carving (`ellipso-mesh`), the fit (`ellipso-fit`), the tracker
@@ -29,4 +31,5 @@ pub mod fit_shard;
 pub mod mesh;
 pub mod mesh_hull;
 pub mod poses;
+pub mod sensor;
 pub mod steps;

@@ -36,6 +36,21 @@ pub fn mesh_of_session(
     steps: &mut dyn Steps,
 ) -> Result<(TriangleMesh, MeshReport, HullField), RunError> {
     steps.begin("mesh");
+    // the session's recorded sensor calibration where the caller gave none (crate::sensor)
+    let recorded;
+    let config = if config.sensor_calibration.is_none() {
+        recorded = MeshConfig {
+            sensor_calibration: ellipso_polar::sensor_calibration::for_session(
+                &session.manifest,
+                None,
+            )?
+            .map(std::sync::Arc::new),
+            ..config.clone()
+        };
+        &recorded
+    } else {
+        config
+    };
     let poses = match poses {
         Some(p) => p.to_vec(),
         None => crate::poses::poses_of(session, say)?,

@@ -24,6 +24,7 @@
 pub mod apply;
 pub mod file;
 pub mod measure;
+pub mod session;
 #[cfg(test)]
 mod tests;
 
@@ -34,6 +35,7 @@ use serde::{Deserialize, Serialize};
 pub use apply::{PixelEstimators, process_with_sensor};
 pub use file::SensorCalibrationError;
 pub use measure::{MeasureError, MeasureOptions, measure};
+pub use session::{CalibratedDemosaic, for_session};
 
 /// The format name in every header.
 pub const FORMAT: &str = "ellipso-sensor-calibration";

@@ -53,6 +53,21 @@ pub struct RigRecord {
     /// Extinction ratio of the on-chip analysers where known (`None`: ideal analysers).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub analyser_extinction_ratio: Option<f64>,
+    /// The sensor calibration the rig file named when the frames were taken (`None`: none;
+    /// the fit then assumes an ideal sensor and says so for a hardware session).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor_calibration: Option<SensorCalibrationRef>,
+}
+
+/// Which sensor calibration file a session's frames were taken with: its identity (the CRC-64
+/// the file carries, 16 hex digits) and where it was when the capture read it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorCalibrationRef {
+    /// The file's identity (`ellipso calibrate sensor` prints it).
+    pub id: String,
+    /// The file, as the capture resolved it (absolute where the rig file's path was).
+    pub file: std::path::PathBuf,
 }
 
 /// Field readers whose errors name the manifest key (serde's own name only the type).
@@ -81,6 +96,7 @@ impl RigRecord {
             radiometry: Some(RadiometryRecord::Relative),
             noise: None,
             analyser_extinction_ratio: None,
+            sensor_calibration: None,
         }
     }
 }
@@ -274,6 +290,7 @@ pub(crate) mod tests {
                 bit_depth: 12,
             }),
             analyser_extinction_ratio: Some(200.0),
+            sensor_calibration: None,
         }
     }
 

@@ -59,14 +59,19 @@ pub struct SensorCalibrationArgs {
     /// Scratch folder for the rendered captures (created; must be empty or absent).
     #[arg(long)]
     pub work: PathBuf,
+    /// Views of the demo's path each end-to-end fit uses (the η and normal change with the
+    /// calibration; three fits); 0 skips them.
+    #[arg(long, default_value_t = ellipso_bench::sensor_calibration::ETA_SHIFT_PHOTOS)]
+    pub photos: usize,
 }
 
 /// Runs `ellipso bench`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args {
         Args::Sensor(a) => {
-            let r = ellipso_bench::sensor_calibration::run(&a.out, &a.work, &out::Printed)
-                .map_err(out::failed)?;
+            let r =
+                ellipso_bench::sensor_calibration::run(&a.out, &a.work, a.photos, &out::Printed)
+                    .map_err(out::failed)?;
             crate::outln!(
                 "{}",
                 serde_json::to_string_pretty(&r.recovered).unwrap_or_default()

@@ -65,6 +65,10 @@ pub struct Args {
     /// `spec.completions`, AWS Batch array size).
     #[arg(long)]
     pub shard_count: Option<u32>,
+    /// Sensor calibration file (`ellipso calibrate sensor`) to read the frames with, for a
+    /// session that did not record one (a session that did accepts only that file's identity).
+    #[arg(long)]
+    pub sensor_calibration: Option<PathBuf>,
     /// Print one JSON object (output folder, files, the fit summary) instead of the text report.
     #[arg(long)]
     pub json: bool,
@@ -87,6 +91,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config: config_of(&args)?,
         shard,
         import: args.import.flags(),
+        sensor_calibration: args.sensor_calibration.as_deref(),
     };
     let done = ellipso_pipeline::fit_run::run(
         request,

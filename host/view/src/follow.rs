@@ -15,6 +15,8 @@
 //!   capture has ended or paused (its log quiet for [`CAPTURE_QUIET`]: a crashed capture never
 //!   writes its end), newest first, within [`FollowConfig::track_budget`] per poll. Poses the
 //!   session's log records (`pose`, `pose_rejected`) win over its own.
+//! - The frame's pictures are read with the sensor calibration the session recorded, where it
+//!   records one (a file that cannot be used is shown as the frame's error, by name).
 //! - Each change yields a new [`Snapshot`] through a `tokio::sync::watch` channel; the server
 //!   pushes it to pages at most `server::LIVE_MAX_HZ` times a second.
 
@@ -260,6 +262,9 @@ struct FollowState {
     covered: std::collections::BTreeSet<u64>,
     latest_view: Option<frame_view::FrameView>,
     latest_error: Option<String>,
+    /// The sensor calibration the session names (read once with the manifest; `Err`: why it
+    /// cannot be used, shown instead of the frame).
+    sensor: Result<Option<Arc<ellipso_polar::sensor_calibration::SensorCalibration>>, String>,
     last_render: Option<Instant>,
     /// When the log last grew.
     log_grew: Option<Instant>,
@@ -288,6 +293,7 @@ impl FollowState {
             covered: Default::default(),
             latest_view: None,
             latest_error: None,
+            sensor: Ok(None),
             last_render: None,
             log_grew: None,
             pacer,
@@ -357,6 +363,9 @@ impl FollowState {
     fn setup_rig(&mut self, manifest: &Manifest) {
         let rig: Option<&RigRecord> = manifest.rig.as_ref();
         self.boards = manifest.boards.clone();
+        self.sensor = ellipso_polar::sensor_calibration::for_session(manifest, None)
+            .map(|c| c.map(Arc::new))
+            .map_err(|e| e.to_string());
         if let Some(rig) = rig {
             self.camera = Some(rig.camera);
             if let Some(flash) = &rig.flash {
@@ -399,10 +408,11 @@ impl FollowState {
             return false;
         }
         self.last_render = Some(Instant::now());
-        match self
-            .load_raw(id)
-            .and_then(|raw| frame_view::render(id, &raw))
-        {
+        let sensor = self.sensor.clone();
+        match sensor.and_then(|cal| {
+            self.load_raw(id)
+                .and_then(|raw| frame_view::render(id, &raw, cal.as_deref()))
+        }) {
             Ok(v) => {
                 self.latest_view = Some(v);
                 self.latest_error = None;

@@ -1,7 +1,8 @@
 //! The latest frame for the live page: s0, DoLP and AoLP pictures and the frame's statistics.
 //!
 //! Contract: [`render`] runs the polarisation processing of `ellipso_polar` (superpixel
-//! demosaic, ideal analysers, default levels) on one raw frame and returns small PNGs, at most
+//! demosaic, default levels; ideal analysers, or per superpixel the sensor calibration the
+//! session names) on one raw frame and returns small PNGs, at most
 //! [`MAX_WIDTH_PX`] wide (nearest superpixel, no smoothing so that masked pixels stay visible):
 //! - `s0`: grey, s0/2 (the mean analyser intensity) with an sRGB curve; saturated pixels red;
 //! - `dolp`: viridis over [0, 1] (`ellipso_report::colour::dolp_colour`);
@@ -18,6 +19,7 @@ use std::io::Cursor;
 
 use ellipso_polar::frame::RawFrame;
 use ellipso_polar::mask::MaskReason;
+use ellipso_polar::sensor_calibration::{SensorCalibration, process_with_sensor};
 use ellipso_polar::{PolarConfig, PolarImage, process};
 
 /// Widest picture sent to the page, px.
@@ -35,8 +37,16 @@ pub struct FrameView {
 }
 
 /// Processes one frame.
-pub fn render(frame_id: u64, frame: &RawFrame) -> Result<FrameView, String> {
-    let image = process(frame, &PolarConfig::default()).map_err(|e| e.to_string())?;
+pub fn render(
+    frame_id: u64,
+    frame: &RawFrame,
+    sensor: Option<&SensorCalibration>,
+) -> Result<FrameView, String> {
+    let image = match sensor {
+        Some(cal) => process_with_sensor(frame, &PolarConfig::default(), cal),
+        None => process(frame, &PolarConfig::default()),
+    }
+    .map_err(|e| e.to_string())?;
     let (w, h) = (image.width(), image.height());
     if w == 0 || h == 0 {
         return Err("empty frame".into());
@@ -168,7 +178,7 @@ mod tests {
         }
         px[0] = 4095;
         let frame = RawFrame::new(w, h, 12, layout, px).unwrap();
-        let v = render(7, &frame).unwrap();
+        let v = render(7, &frame, None).unwrap();
         for p in &v.pngs {
             assert_eq!(&p[1..4], b"PNG");
         }
@@ -200,7 +210,7 @@ mod tests {
             }
         }
         let frame = RawFrame::new(w, h, 12, layout, px).unwrap();
-        let v = render(1, &frame).unwrap();
+        let v = render(1, &frame, None).unwrap();
         assert!((v.stats["dark_fraction"].as_f64().unwrap() - 0.5).abs() < 1e-9);
         let [_, dolp, aolp] = v.pngs.each_ref().map(|p| decode(p));
         let (ow, oh) = dolp.dimensions();

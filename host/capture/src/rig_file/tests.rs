@@ -192,3 +192,104 @@ fn impossible_values_are_refused_by_their_key() {
         .to_string();
     assert!(e.contains("trigger.port"), "{e}");
 }
+
+/// A 16×8 calibration of ideal analysers for `layout`, written to `path`; its identity.
+fn write_calibration(path: &Path, layout: SensorLayout) -> String {
+    use ellipso_polar::sensor_calibration::{
+        FORMAT, PixelRecord, SensorCalibration, SensorFigures, SensorHeader, VERSION, file,
+    };
+    let (w, h) = (16u32, 8u32);
+    let pixels = (0..w * h)
+        .map(|i| {
+            let (s2, c2) = (2.0 * layout.analyser_at(i % w, i / w).angle_rad()).sin_cos();
+            PixelRecord {
+                dark_dn: 64.0,
+                analysis: [0.5, (0.5 * c2) as f32, (0.5 * s2) as f32],
+            }
+        })
+        .collect();
+    let mut cal = SensorCalibration {
+        header: SensorHeader {
+            format: FORMAT.into(),
+            version: VERSION,
+            sensor: ellipso_session::manifest::SensorInfo {
+                layout,
+                width: w,
+                height: h,
+                bit_depth: 12,
+            },
+            gain_db: 0.0,
+            figures: SensorFigures {
+                gain_dn_per_e: 0.39,
+                gain_e_per_dn: 1.0 / 0.39,
+                read_noise_dn: 0.9,
+                read_noise_e: 2.3,
+                black_level_dn: 64.0,
+                dsnu_dn: 0.0,
+                prnu_rel: 0.0,
+                saturation_dn: 4031.0,
+                saturation_e: 10_500.0,
+                vignetting_exponent: 0.0,
+                extinction_ratio: vec![1e9],
+                analyser_angle_mean_error_deg: [0.0; 4],
+                analyser_angle_sd_deg: 0.0,
+                hot_pixels: 0,
+                photon_transfer: Vec::new(),
+            },
+            source: "test".into(),
+        },
+        pixels,
+        checksum: 0,
+    };
+    file::write(&mut cal, path).unwrap()
+}
+
+/// `[sensor] calibration` names a file relative to the rig file: its identity and absolute path
+/// come back for the session; another layout, a missing file and a corrupt one are refused by
+/// the key (the camera's size is checked against `[camera]` where there is one).
+#[test]
+fn the_sensor_calibration_is_named_by_the_rig_file_and_checked() {
+    let tmp = tempfile::tempdir().unwrap();
+    let without_camera = |name: &str| {
+        let text = good();
+        let start = text.find("[camera]").unwrap();
+        let end = text.find("[capture]").unwrap();
+        format!("{}{}", &text[..start], &text[end..]).replace(
+            "exposure_us = 8000\n",
+            &format!("exposure_us = 8000\ncalibration = \"{name}\"\n"),
+        )
+    };
+    let id = write_calibration(&tmp.path().join("cam.senscal"), SensorLayout::MonoPolar);
+    let rig = RigFile::load(&write(tmp.path(), &without_camera("cam.senscal"))).unwrap();
+    let named = rig.sensor_calibration().unwrap().unwrap();
+    assert_eq!(named.id, id);
+    assert!(named.file.is_absolute() && named.file.ends_with("cam.senscal"));
+    // none named: none recorded
+    let rig = RigFile::load(&write(tmp.path(), &good())).unwrap();
+    assert!(rig.sensor_calibration().unwrap().is_none());
+    // another layout, a missing file, a corrupt file, [camera] of another size
+    write_calibration(
+        &tmp.path().join("colour.senscal"),
+        SensorLayout::ColourPolar,
+    );
+    std::fs::write(tmp.path().join("bad.senscal"), b"ELLIPSO-SENSCAL\ngarbage").unwrap();
+    for (name, want) in [
+        ("colour.senscal", "colour_polar sensor"),
+        ("absent.senscal", "absent.senscal"),
+        ("bad.senscal", "corrupt"),
+    ] {
+        let rig = RigFile::load(&write(tmp.path(), &without_camera(name))).unwrap();
+        let e = rig.sensor_calibration().unwrap_err().to_string();
+        assert!(
+            e.contains("sensor.calibration") && e.contains(want),
+            "{name}: {e}"
+        );
+    }
+    let with_camera = good().replace(
+        "exposure_us = 8000\n",
+        "exposure_us = 8000\ncalibration = \"cam.senscal\"\n",
+    );
+    let rig = RigFile::load(&write(tmp.path(), &with_camera)).unwrap();
+    let e = rig.sensor_calibration().unwrap_err().to_string();
+    assert!(e.contains("16×8 sensor, [camera] is 2448×2048"), "{e}");
+}

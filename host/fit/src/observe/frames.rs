@@ -18,6 +18,11 @@
 //!   four-iteration fit's CPU time and becomes one read per frame; the crops of its 135
 //!   frames hold 73 MB where the whole DN images would hold 635 MB.
 //! - An unreadable frame is never cached: each read reports it again.
+//! - **Sensor calibration.** With `ObserveConfig::sensor_calibration` the frames are read at the
+//!   calibration's black level and each superpixel through its own analysis matrix, written
+//!   back as the session's modelled analysers would record it
+//!   ([`ellipso_polar::sensor_calibration::CalibratedDemosaic`]); without one, exactly the
+//!   plain superpixel demosaic at `dark_level_dn`.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
@@ -26,6 +31,7 @@ use ellipso_model::mosaic::SensorLayout;
 use ellipso_polar::PolarConfig;
 use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
 use ellipso_polar::frame::RawFrame;
+use ellipso_polar::sensor_calibration::CalibratedDemosaic;
 use ellipso_session::reader::{FrameEntry, Session};
 
 use super::image::{AnalyserPixels, DnImage, PixelRect, SampleKernel};
@@ -63,6 +69,8 @@ pub struct MosaicFrames<'a> {
     sample_point: SamplePoint,
     sample_kernel: SampleKernel,
     cache: Option<Cache>,
+    /// The calibrated demosaic (`None`: the plain one).
+    calibrated: Option<CalibratedDemosaic>,
 }
 
 /// Cropped frames by frame id, and their bytes.
@@ -82,17 +90,33 @@ impl<'a> MosaicFrames<'a> {
     /// decoded at every read.
     pub fn new(session: &'a Session, config: &ObserveConfig) -> Result<Self, ObserveError> {
         let layout = session.manifest.sensor.layout;
+        let mut polar = PolarConfig {
+            demosaic: DemosaicMethod::Superpixel,
+            dark_level_dn: config.dark_level_dn,
+            ..PolarConfig::default()
+        };
+        let calibrated = config.sensor_calibration.as_ref().map(|cal| {
+            let modelled = session
+                .manifest
+                .rig
+                .as_ref()
+                .and_then(|r| r.analyser_extinction_ratio);
+            CalibratedDemosaic::new(std::sync::Arc::clone(cal), modelled)
+        });
+        if let Some(c) = &calibrated {
+            polar = c.config(&polar).map_err(|e| ObserveError::Manifest {
+                path: session.dir.join(ellipso_session::paths::MANIFEST),
+                what: format!("sensor calibration {}: {e}", c.calibration().id()),
+            })?;
+        }
         Ok(Self {
             session,
             layout,
-            polar: PolarConfig {
-                demosaic: DemosaicMethod::Superpixel,
-                dark_level_dn: config.dark_level_dn,
-                ..PolarConfig::default()
-            },
+            polar,
             sample_point: config.sample_point,
             sample_kernel: config.sample_kernel,
             cache: None,
+            calibrated,
         })
     }
 
@@ -116,7 +140,10 @@ impl<'a> MosaicFrames<'a> {
         let raw = RawFrame::new(w, h, bit_depth, self.layout, px)
             .map_err(|e| format!("{}: {e}", entry.path.display()))?;
         let levels = self.polar.levels(&raw).map_err(|e| e.to_string())?;
-        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
+        let analysers = match &self.calibrated {
+            Some(c) => c.demosaic(&raw, &levels).map_err(|e| e.to_string())?,
+            None => demosaic(&raw, &levels, DemosaicMethod::Superpixel),
+        };
         let image = DnImage::new(
             &raw,
             &analysers,

@@ -13,7 +13,7 @@
 use ellipso_model::mosaic::{Channel, SensorLayout};
 
 use super::SensorCalibration;
-use crate::demosaic::{RowBuf, band_colours, superpixel_row};
+use crate::demosaic::{AnalyserImage, RowBuf, band_colours, superpixel_row};
 use crate::stokes::{AnalyserRow, per_pixel_row};
 use crate::{
     DemosaicMethod, Levels, PolarConfig, PolarError, PolarImage, RawFrame, StokesBand, StokesMatrix,
@@ -98,6 +98,74 @@ impl PixelEstimators {
             bands,
             levels,
         })
+    }
+}
+
+impl PixelEstimators {
+    /// The levels these estimators were built for.
+    pub fn levels(&self) -> &Levels {
+        &self.levels
+    }
+
+    /// Replaces each superpixel's four intensities of `image` (a superpixel demosaic read with
+    /// these estimators' levels) by those analysers at exactly 0/45/90/135° with extinction
+    /// `e = 1/ER` would record for the superpixel's calibrated Stokes vector, plus the
+    /// calibrated residual along their null direction (`super::session`'s contract).
+    pub fn reproject(&self, image: &mut AnalyserImage, extinction: f64) -> Result<(), PolarError> {
+        if image.method != DemosaicMethod::Superpixel || image.bands.len() != self.bands.len() {
+            return Err(PolarError::SensorCalibration(
+                "a sensor calibration is applied to a superpixel demosaic of its own sensor".into(),
+            ));
+        }
+        let e = extinction as f32;
+        let model = [0.0f32, 45.0, 90.0, 135.0].map(|deg| {
+            let (sin2, cos2) = (2.0 * deg.to_radians()).sin_cos();
+            [
+                0.5 * (1.0 + e),
+                0.5 * (1.0 - e) * cos2,
+                0.5 * (1.0 - e) * sin2,
+            ]
+        });
+        // the model's unit null vector ½[1, −1, 1, −1]; the estimator's null has norm 2, so
+        // the residual's component along its unit vector is residual / 2
+        let unit_null = [0.5f32, -0.5, 0.5, -0.5];
+        for (band, (est, off)) in image.bands.iter_mut().zip(&self.bands) {
+            let n = band.mask.data().len();
+            if n != est.len() {
+                return Err(PolarError::SensorCalibration(format!(
+                    "the frame gives {} superpixels, the calibration {}",
+                    n,
+                    est.len()
+                )));
+            }
+            let [p0, p45, p90, p135] = &mut band.intensity;
+            let planes = [
+                p0.data_mut(),
+                p45.data_mut(),
+                p90.data_mut(),
+                p135.data_mut(),
+            ];
+            let [d0, d45, d90, d135] = planes;
+            for k in 0..n {
+                let d = off[k];
+                let i = [d0[k] - d[0], d45[k] - d[1], d90[k] - d[2], d135[k] - d[3]];
+                let m = &est[k];
+                let dot = |r: &[f32; 4]| r[0] * i[0] + r[1] * i[1] + r[2] * i[2] + r[3] * i[3];
+                let s = [dot(&m.rows[0]), dot(&m.rows[1]), dot(&m.rows[2])];
+                let along_null = 0.5 * dot(&m.null);
+                let out = std::array::from_fn::<f32, 4, _>(|a| {
+                    model[a][0] * s[0]
+                        + model[a][1] * s[1]
+                        + model[a][2] * s[2]
+                        + along_null * unit_null[a]
+                });
+                d0[k] = out[0];
+                d45[k] = out[1];
+                d90[k] = out[2];
+                d135[k] = out[3];
+            }
+        }
+        Ok(())
     }
 }
 

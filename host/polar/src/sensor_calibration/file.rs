@@ -60,8 +60,8 @@ pub enum SensorCalibrationError {
     },
     /// The file is not the one the rig file names.
     #[error(
-        "{path}: sensor calibration {found} is not the one the rig file names ({expected}); \
-         recalibrate or update the rig file"
+        "{path}: sensor calibration {found} is not the one the rig file or session names \
+         ({expected}); recalibrate or update the rig file"
     )]
     Stale {
         /// The file.

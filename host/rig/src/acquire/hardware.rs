@@ -15,7 +15,7 @@ use ellipso_model::mosaic::SensorLayout;
 use ellipso_protocol::CaptureConfig;
 use ellipso_run_error::RunError;
 use ellipso_session::manifest::{Manifest, SensorInfo, SessionSource};
-use ellipso_session::rig::{RigRecord, TrackedBoard};
+use ellipso_session::rig::{RigRecord, SensorCalibrationRef, TrackedBoard};
 use ellipso_session::time::HostClock;
 use ellipso_session::writer::SessionWriter;
 
@@ -59,6 +59,9 @@ pub struct HardwareRig {
     pub photos: u32,
     /// The AprilTag boards of the capture.
     pub boards: Vec<TrackedBoard>,
+    /// The sensor calibration the rig file names (its identity and file), recorded in the
+    /// session.
+    pub sensor_calibration: Option<SensorCalibrationRef>,
 }
 
 /// The camera model a capture records before calibration: a pinhole with the focal length
@@ -132,6 +135,16 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
                 ..Default::default()
             }),
     ));
+    if let Some(cal) = &rig.sensor_calibration {
+        tracing::info!(
+            "sensor calibration {} ({}) recorded in the session",
+            cal.id,
+            cal.file.display()
+        );
+    }
+    if let Some(record) = manifest.rig.as_mut() {
+        record.sensor_calibration = rig.sensor_calibration.clone();
+    }
     manifest.boards = rig.boards.clone();
     check_plan(&link, rig.board)?;
     let session = SessionWriter::create(out, manifest)?;

@@ -12,6 +12,9 @@
 //! ([`crate::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
 //! position in the camera frame ([`crate::calibrate::flash`]) and writes the `[flash]` section
 //! below the camera section. Frames whose highlight is rejected are listed with the reason.
+//! When the flash cannot be estimated (too few highlights, or rays that do not cross — an
+//! orbit aimed at the sphere) the camera section is still written, and the command fails with
+//! why and the photos to take for the flash ([`flash_not_measured`]).
 
 use std::path::PathBuf;
 
@@ -83,6 +86,23 @@ fn frame_causes(
     }
     parts.push(format!("{good} usable"));
     parts.join(", ")
+}
+
+/// The error of a `--sphere` run whose camera calibration succeeded and whose flash part did
+/// not: why, that the camera section is written, and the photos that would measure the flash.
+/// The flash is triangulated from the rays the highlights reflect towards it (fixed in the
+/// camera frame); photos that all see the sphere at one place in the image and one distance —
+/// an orbit aimed at its centre — give one ray again and again.
+pub fn flash_not_measured(why: &str) -> String {
+    format!(
+        "the flash position was not measured ({why}); the [camera] section is written. To \
+         measure the flash, capture a session of the glossy sphere on the board with the sphere \
+         at different places in the image — near each corner, the middle of each edge and the \
+         centre — at two distances (about 0.3 m and 0.5 m): 10 photos or more, each showing the \
+         sphere's highlight and at least 2 tags of the board (not an orbit aimed at the sphere: \
+         its highlights reflect one ray); then run `ellipso calibrate SESSION --sphere R,X,Y,Z` \
+         on that session"
+    )
 }
 
 /// Runs `ellipso calibrate`: claims the output, detects, calibrates, writes the rig sections;
@@ -182,63 +202,80 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
     );
     let mut text = cal.to_toml_camera_section();
     if let Some(sphere) = args.sphere {
-        // per calibrated view: its frame, board and pose → the highlight
-        let observations: Vec<HighlightObservation> = cal
-            .views
-            .par_iter()
-            .filter_map(|v| {
-                let board = &boards[detected[v.index].1?];
-                let entry = frames[v.index];
-                let found = session
-                    .load_frame(entry)
-                    .map_err(|e| e.to_string())
-                    .and_then(|(w, h, px)| {
-                        RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
-                    })
-                    .and_then(|raw| {
-                        let camera_from_world =
-                            v.camera_from_board * board.world_from_board().inverse();
-                        find_highlight(
-                            &raw,
-                            &cal.camera,
-                            &camera_from_world,
-                            &sphere,
-                            &HighlightConfig::default(),
-                        )
+        let flash: Result<String, String> = 'flash: {
+            // per calibrated view: its frame, board and pose → the highlight
+            let observations: Vec<HighlightObservation> = cal
+                .views
+                .par_iter()
+                .filter_map(|v| {
+                    let board = &boards[detected[v.index].1?];
+                    let entry = frames[v.index];
+                    let found = session
+                        .load_frame(entry)
                         .map_err(|e| e.to_string())
-                    });
-                match found {
-                    Ok(h) => Some(HighlightObservation {
-                        camera_from_board: v.camera_from_board,
-                        sphere_centre_board_m: board.world_from_board().inverse() * sphere.centre_m,
-                        sphere_radius_m: sphere.radius_m,
-                        highlight_px: h.pixel,
-                    }),
-                    Err(why) => {
-                        say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
-                        None
+                        .and_then(|(w, h, px)| {
+                            RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
+                        })
+                        .and_then(|raw| {
+                            let camera_from_world =
+                                v.camera_from_board * board.world_from_board().inverse();
+                            find_highlight(
+                                &raw,
+                                &cal.camera,
+                                &camera_from_world,
+                                &sphere,
+                                &HighlightConfig::default(),
+                            )
+                            .map_err(|e| e.to_string())
+                        });
+                    match found {
+                        Ok(h) => Some(HighlightObservation {
+                            camera_from_board: v.camera_from_board,
+                            sphere_centre_board_m: board.world_from_board().inverse()
+                                * sphere.centre_m,
+                            sphere_radius_m: sphere.radius_m,
+                            highlight_px: h.pixel,
+                        }),
+                        Err(why) => {
+                            say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
+                            None
+                        }
                     }
-                }
-            })
-            .collect();
-        let flash = estimate_flash_position(&cal.camera, &observations)
-            .context("estimating the flash position")?;
-        let p = flash.flash_camera_m.coords * 1e3;
-        let sd = flash.std_m.map(|v| v * 1e3);
-        say!(
-            say,
-            "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
-            p.x,
-            sd[0],
-            p.y,
-            sd[1],
-            p.z,
-            sd[2],
-            observations.len(),
-            flash.rms_angle_rad * 1e3
-        );
-        text.push('\n');
-        text.push_str(&flash.to_toml_flash_section());
+                })
+                .collect();
+            let flash = match estimate_flash_position(&cal.camera, &observations) {
+                Ok(flash) => flash,
+                Err(e) => break 'flash Err(e.to_string()),
+            };
+            let p = flash.flash_camera_m.coords * 1e3;
+            let sd = flash.std_m.map(|v| v * 1e3);
+            say!(
+                say,
+                "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
+                p.x,
+                sd[0],
+                p.y,
+                sd[1],
+                p.z,
+                sd[2],
+                observations.len(),
+                flash.rms_angle_rad * 1e3
+            );
+            Ok(flash.to_toml_flash_section())
+        };
+        match flash {
+            Ok(section) => {
+                text.push('\n');
+                text.push_str(&section);
+            }
+            Err(why) => {
+                // what was determined is kept: the camera section is written, then the flash
+                // part's failure is the command's error, with the photos that would measure it
+                out.write(text)?;
+                say!(say, "[camera] written to {}", out.shown().display());
+                return Err(RunError::msg(flash_not_measured(&why)));
+            }
+        }
     }
     out.write(text)?;
     say!(say, "rig sections written to {}", out.shown().display());
