@@ -538,7 +538,8 @@ mod tests {
                     }
                 })
                 .collect();
-            let frame = RawFrame::new(w, h, 12, layout, data).expect("frame");
+            let owned = crate::RawFrame::new(w, h, 12, layout, data).expect("frame");
+            let frame = owned.view();
             let levels = Levels::new(4095, 10.0, 4095);
             for colour in band_colours(layout) {
                 for a in Analyser::ALL {
