@@ -3,7 +3,7 @@ writes docs/python-bench.md (a bench report, not a test).
 
 Run from the repository root with the package installed (`python -m pip install ./python`):
 
-    python python/bench_polar.py [--repeats 40] [--report docs/python-bench.md]
+    python -P python/bench_polar.py [--repeats 40] [--report docs/python-bench.md]
 
 Python: `ellipso.polar(mosaic, layout=…, demosaic=…)` end to end (argument checks, the frame
 checked in numpy's own buffer — no copy of the samples — the processing, the planes handed to
@@ -113,7 +113,7 @@ def main():
         f"{platform.python_version()}, numpy {np.__version__}, ellipso {ellipso.__version__} "
         "(release build of the extension).",
         "",
-        "Reproduce: `python -m pip install ./python && python python/bench_polar.py`.",
+        "Reproduce: `python -m pip install ./python && python -P python/bench_polar.py` (`-P`: the installed package, not the source folder `python/ellipso` beside the script).",
         "",
     ]
     with open(args.report, "w", encoding="utf-8") as f:
