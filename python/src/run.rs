@@ -26,7 +26,6 @@ use ellipso_fit::session::SessionFitConfig;
 use ellipso_pipeline::fit_run::{FitDone, FitRequest};
 use ellipso_pipeline::steps::Steps;
 use ellipso_run_error::{RunError, Say};
-use numpy::PyArray1;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
