@@ -3,15 +3,15 @@ writes docs/python-bench.md (a bench report, not a test).
 
 Run from the repository root with the package installed (`python -m pip install ./python`):
 
-    python python/bench_polar.py [--repeats 40] [--report docs/python-bench.md]
+    python -P python/bench_polar.py [--repeats 40] [--report docs/python-bench.md]
 
-Python: `ellipso.polar(mosaic, layout=…, demosaic=…)` end to end (argument checks, the copy of
-the samples into the crate's frame, the processing, the planes handed to numpy, the result
-object). Rust: `RawFrame::new` + `ellipso_polar::process`, timed inside the same extension
-build (`ellipso._native._bench_polar_rust`), so both sides run the same compiled code and only
-the binding's cost differs — from a borrowed buffer (the samples copied into the frame, as a
-Rust caller holding a camera or file buffer does, and as Python does) and from a vector the
-caller already owns (no copy: the strictest baseline).
+Python: `ellipso.polar(mosaic, layout=…, demosaic=…)` end to end (argument checks, the frame
+checked in numpy's own buffer — no copy of the samples — the processing, the planes handed to
+numpy, the result object). Rust: `ellipso_polar::process` of a frame, timed inside the same
+extension build (`ellipso._native._bench_polar_rust`), so both sides run the same compiled code
+and only the binding's cost differs — over a borrowed buffer (`RawFrameView::new`, as a Rust
+caller holding a camera or file buffer does, and as Python does) and over a vector the caller
+already owns (`RawFrame::new`: the other way a Rust caller holds samples).
 
 Clock: the calling thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`; `time.thread_time` in
 Python), since the work runs on the calling thread in both cases and CPU time does not count
@@ -82,12 +82,12 @@ def main():
         "# Polarisation from Python against Rust (`python/bench_polar.py`)",
         "",
         "A 2448×2048 `uint16` mosaic (12-bit samples, seeded) through `ellipso.polar` from Python",
-        "and through `RawFrame::new` + `ellipso_polar::process` from Rust, in the same build of the",
-        "extension (`ellipso._native._bench_polar_rust`): the difference is what the binding costs",
-        "(checks, the samples copied into the crate's frame, the planes handed to numpy, the result",
-        "object). Rust starts from a borrowed buffer, copying it into the frame as Python does (a",
-        "Rust caller holding a camera or file buffer does the same), or from a vector it already",
-        "owns (the strictest baseline: no copy at all).",
+        "and through `ellipso_polar::process` from Rust, in the same build of the extension",
+        "(`ellipso._native._bench_polar_rust`): the difference is what the binding costs (argument",
+        "checks, the planes handed to numpy, the result object). Python reads the `uint16` array in",
+        "place (a `RawFrameView` over numpy's buffer: the samples are never copied); Rust starts from",
+        "a borrowed buffer the same way (`RawFrameView::new`, as a caller holding a camera or file",
+        "buffer does) or from a vector it owns (`RawFrame::new`); neither copies the samples.",
         "",
         "Clock: the calling thread's CPU time (`CLOCK_THREAD_CPUTIME_ID`, `time.thread_time`): the",
         "work runs on the calling thread on both sides, and on a shared machine CPU time does not",
@@ -113,7 +113,7 @@ def main():
         f"{platform.python_version()}, numpy {np.__version__}, ellipso {ellipso.__version__} "
         "(release build of the extension).",
         "",
-        "Reproduce: `python -m pip install ./python && python python/bench_polar.py`.",
+        "Reproduce: `python -m pip install ./python && python -P python/bench_polar.py` (`-P`: the installed package, not the source folder `python/ellipso` beside the script).",
         "",
     ]
     with open(args.report, "w", encoding="utf-8") as f:

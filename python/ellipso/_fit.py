@@ -172,7 +172,6 @@ class Fit(Mapping[str, np.ndarray]):
         vertex: Dict[str, np.ndarray],
         faces: Optional[np.ndarray],
         summary: Optional[Dict[str, Any]],
-        material: Optional[np.ndarray] = None,
     ) -> None:
         self.path = path
         self._vertex = vertex
@@ -182,7 +181,6 @@ class Fit(Mapping[str, np.ndarray]):
         self.faces = faces
         #: ``fit-summary.json`` (``None`` when the folder has none).
         self.summary = summary
-        self._material = material
 
     def __getitem__(self, name: str) -> np.ndarray:
         return self._vertex[name]
@@ -268,20 +266,19 @@ class Fit(Mapping[str, np.ndarray]):
 
     @property
     def material(self) -> Optional[np.ndarray]:
-        """Material index of every vertex (``-1``: none), where known: a ``material`` column
-        of ``fit.ply`` if the file has one, else what :func:`ellipso.fit` returned for a fit
-        run in this process; ``None`` otherwise."""
-        if "material" in self._vertex:
-            return self._vertex["material"]
-        return self._material
+        """Material of every vertex (``int32``): the index of step B's cluster in
+        :attr:`materials` order, ``-1`` where the vertex has none — ``fit.ply``'s ``material``
+        column (docs/fit-outputs.md); ``None`` for a ``fit.ply`` written before it existed."""
+        return self._vertex.get("material")
 
 
-def read_fit(path: PathLike, material: Optional[np.ndarray] = None) -> Fit:
+def read_fit(path: PathLike) -> Fit:
     """Reads a fit folder (``ellipso fit --out DIR``, the demo's ``fit/``) or its ``fit.ply``.
 
     :returns: a :class:`Fit`: ``fit["eta"]`` … for every per-vertex property of ``fit.ply``
         (same values and PLY types), ``positions``, ``faces``, ``params``, ``std``,
-        ``flags`` (:class:`FitFlag` bits), ``summary``, ``partition`` and ``materials``.
+        ``flags`` (:class:`FitFlag` bits), ``material`` (per vertex), ``summary``,
+        ``partition`` and ``materials``.
     :raises FileNotFoundError: no ``fit.ply`` at ``path``.
     :raises ValueError: a file that is not a readable PLY.
     """
@@ -298,4 +295,4 @@ def read_fit(path: PathLike, material: Optional[np.ndarray] = None) -> Fit:
     if os.path.exists(summary_path):
         with open(summary_path, encoding="utf-8") as f:
             summary = json.load(f)
-    return Fit(path, vertex, faces, summary, material)
+    return Fit(path, vertex, faces, summary)

@@ -115,7 +115,8 @@ def polar(
     The same code, defaults and checks as ``ellipso polar FRAME`` (results are bit-identical).
 
     :param mosaic: the raw frame as the camera delivered it: a 2-D C-contiguous ``uint8`` or
-        ``uint16`` array (right-aligned DN). Not copied by Python; read once by the crate.
+        ``uint16`` array (right-aligned DN). A ``uint16`` array is read in place, never copied
+        (a ``uint8`` one is widened to ``u16`` once).
     :param layout: ``'mono'`` (IMX250MZR) or ``'colour'`` (IMX250MYR); ``None`` detects it from
         the pixels and refuses when unclear.
     :param bit_depth: bits per sample; default 8 for ``uint8`` and 12 for ``uint16``.

@@ -62,8 +62,7 @@ def fit(
     the output folder is then not written (an earlier one is unchanged). An exception raised
     by ``progress`` stops the fit the same way and is re-raised.
 
-    :returns: the written fit (:func:`read_fit`), with ``material`` per vertex from the run
-        and ``run_files`` (every file written).
+    :returns: the written fit (:func:`read_fit`), with ``run_files`` (every file written).
     """
     kwargs: Dict[str, Any] = dict(
         mesh=None if mesh is None else os.fspath(mesh),
@@ -79,6 +78,6 @@ def fit(
     if grazing_cutoff_deg is not None:
         kwargs["grazing_cutoff_deg"] = float(grazing_cutoff_deg)
     done = _native.fit(_dir(session), os.fspath(out), **kwargs)
-    result = read_fit(done["out"], material=done["material"])
+    result = read_fit(done["out"])
     result.run_files = [os.fspath(f) for f in done["files"]]
     return result

@@ -8,14 +8,16 @@
 //! - Bad input raises, never crashes: not an array or a dtype other than `uint8`/`uint16` →
 //!   `TypeError`; not 2-D, not C-contiguous, a size that is not whole mosaic tiles, values
 //!   above the bit depth, bad levels → `ValueError`.
-//! - Memory: the samples are read from the array's buffer (one copy into the frame the crate
-//!   owns, as any caller of `RawFrame::new` makes); every output plane is the vector the crate
-//!   filled, handed to numpy without a copy. The GIL is released while the frame is copied,
-//!   checked and processed.
+//! - Memory: a `uint16` mosaic is read in numpy's own buffer (a `RawFrameView` over it: checked
+//!   and processed in place, no copy; the array is C-contiguous, or refused); a `uint8` one is
+//!   widened to `u16` once (the frame's sample type). Every output plane is the vector the crate
+//!   filled, handed to numpy without a copy. The GIL is released while the frame is checked and
+//!   processed (as numpy's own ufuncs do: another thread writing the array meanwhile races, as
+//!   it would with them).
 
 use ellipso_model::mosaic::SensorLayout;
 use ellipso_polar::layout::{Detection, detect};
-use ellipso_polar::{DemosaicMethod, PolarConfig, PolarImage, RawFrame, process};
+use ellipso_polar::{DemosaicMethod, PolarConfig, PolarImage, RawFrame, RawFrameView, process};
 use numpy::{PyArray1, PyArrayMethods, PyReadonlyArray2, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -124,14 +126,6 @@ pub fn samples<'py>(mosaic: &Bound<'py, PyAny>) -> PyResult<(Samples<'py>, usize
     Ok((samples, w, h))
 }
 
-/// The samples as the frame's `u16` vector (the GIL released by the caller).
-fn to_vec(samples: Slice<'_>) -> Vec<u16> {
-    match samples {
-        Slice::U16(s) => s.to_vec(),
-        Slice::U8(s) => s.iter().map(|&v| u16::from(v)).collect(),
-    }
-}
-
 /// The layout given, or detected from the pixels as `ellipso polar` does without `--layout`.
 fn settle_layout(
     given: Option<SensorLayout>,
@@ -168,33 +162,48 @@ pub struct Request {
 }
 
 thread_local! {
-    /// The last frame's sample vector of this thread, kept for the next call: its pages are
-    /// already mapped, so the copy into it is a copy, not page faults (at 2448×2048 the faults
-    /// of a fresh 10 MB vector cost several times the copy). One frame's samples per thread.
-    static SAMPLES: std::cell::RefCell<Vec<u16>> = const { std::cell::RefCell::new(Vec::new()) };
+    /// The widened samples of this thread's last `uint8` mosaic, kept for the next call: its
+    /// pages are already mapped, so the widening writes into memory, not page faults (at
+    /// 2448×2048 the faults of a fresh 10 MB vector cost several times the work). `uint16`
+    /// mosaics are never copied.
+    static WIDENED: std::cell::RefCell<Vec<u16>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-/// Copies, validates and processes (no GIL needed).
+/// Validates and processes (no GIL needed): a `uint16` mosaic in numpy's own buffer (a
+/// [`RawFrameView`]: checked and read in place, no copy), a `uint8` one widened to `u16` first
+/// (the frame's sample type).
 pub fn run(
     samples: Slice<'_>,
     w: usize,
     h: usize,
     request: &Request,
 ) -> Result<(PolarImage, u8), String> {
-    let mut data = SAMPLES.with(|s| std::mem::take(&mut *s.borrow_mut()));
-    data.clear();
     match samples {
-        Slice::U16(s) => data.extend_from_slice(s),
-        Slice::U8(s) => data.extend(s.iter().map(|&v| u16::from(v))),
-    }
-    let layout = settle_layout(request.layout, w, h, &data)?;
-    let bit_depth = request.bit_depth.unwrap_or(match samples {
-        Slice::U8(_) => 8,
         // the IMX250's ADC depth (Mono12/Polarized12), as `ellipso polar` assumes
-        _ => 12,
-    });
+        Slice::U16(s) => process_samples(s, w, h, 12, request),
+        Slice::U8(s) => {
+            let mut data = WIDENED.with(|v| std::mem::take(&mut *v.borrow_mut()));
+            data.clear();
+            data.extend(s.iter().map(|&v| u16::from(v)));
+            let result = process_samples(&data, w, h, 8, request);
+            WIDENED.with(|v| *v.borrow_mut() = data);
+            result
+        }
+    }
+}
+
+/// [`run`] over `u16` samples; `default_bits`: the container's bit depth when none was given.
+fn process_samples(
+    data: &[u16],
+    w: usize,
+    h: usize,
+    default_bits: u8,
+    request: &Request,
+) -> Result<(PolarImage, u8), String> {
+    let layout = settle_layout(request.layout, w, h, data)?;
+    let bit_depth = request.bit_depth.unwrap_or(default_bits);
     let too_big = |n: usize| format!("mosaic side {n} exceeds 4294967295");
-    let frame = RawFrame::new(
+    let frame = RawFrameView::new(
         u32::try_from(w).map_err(|_| too_big(w))?,
         u32::try_from(h).map_err(|_| too_big(h))?,
         bit_depth,
@@ -203,7 +212,6 @@ pub fn run(
     )
     .map_err(|e| format!("mosaic: {e}"))?;
     let image = process(&frame, &request.config).map_err(|e| format!("mosaic: {e}"))?;
-    SAMPLES.with(|s| *s.borrow_mut() = frame.into_data());
     Ok((image, bit_depth))
 }
 
@@ -297,11 +305,11 @@ pub fn thread_cpu_s() -> f64 {
     t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
 }
 
-/// Per call of the same work from Rust, `repeats` times one way, then `repeats` times the other, for the bench report (the
-/// GIL released throughout): `(cpu_s, wall_s)` of `from_slice` — starting, as `ellipso.polar`
-/// does, from a buffer the caller does not own (the samples copied into a vector kept from
-/// call to call, checked, processed) — then of `owned`, from a vector the caller already owns
-/// (checked, processed; no copy). CPU time is this thread's.
+/// Per call of the same work from Rust, `repeats` times one way, then `repeats` times the
+/// other, for the bench report (the GIL released throughout): `(cpu_s, wall_s)` of `borrowed`
+/// — a [`RawFrameView`] over the caller's buffer (checked in place, processed; what
+/// `ellipso.polar` does with a `uint16` array) — then of `owned`, from a vector the caller
+/// already owns (checked, processed; no copy). CPU time is this thread's.
 #[pyfunction]
 #[pyo3(signature = (mosaic, repeats, *, layout, demosaic="superpixel"))]
 pub fn _bench_polar_rust(
@@ -320,37 +328,36 @@ pub fn _bench_polar_rust(
     let bits = if samples.container_bits() == 8 { 8 } else { 12 };
     let slice = samples.slice();
     py.detach(|| {
-        let once = |data: Vec<u16>| -> Result<(PolarImage, Vec<u16>), String> {
-            let frame =
-                RawFrame::new(w as u32, h as u32, bits, layout, data).map_err(|e| e.to_string())?;
-            let image = process(&frame, &config).map_err(|e| e.to_string())?;
-            Ok((image, frame.into_data()))
+        let owned: Vec<u16> = match slice {
+            Slice::U16(s) => s.to_vec(),
+            Slice::U8(s) => s.iter().map(|&v| u16::from(v)).collect(),
+        };
+        // a u8 mosaic has no u16 buffer to borrow: its widened copy stands in for it
+        let borrowed: &[u16] = match slice {
+            Slice::U16(s) => s,
+            Slice::U8(_) => &owned,
         };
         let mut times = BenchTimes::default();
-        // the borrowed buffer is copied into a vector kept from call to call, as a stream's
-        // caller (and `ellipso.polar`) keeps it
-        let mut kept = to_vec(slice);
         for _ in 0..repeats {
             let (c, t) = (thread_cpu_s(), std::time::Instant::now());
-            kept.clear();
-            match slice {
-                Slice::U16(s) => kept.extend_from_slice(s),
-                Slice::U8(s) => kept.extend(s.iter().map(|&v| u16::from(v))),
-            }
-            let (image, back) = once(std::mem::take(&mut kept))?;
+            let frame = RawFrameView::new(w as u32, h as u32, bits, layout, borrowed)
+                .map_err(|e| e.to_string())?;
+            let image = process(&frame, &config).map_err(|e| e.to_string())?;
             times
                 .0
                 .push((thread_cpu_s() - c, t.elapsed().as_secs_f64()));
-            kept = back;
             drop(std::hint::black_box(image));
         }
+        let mut data = owned.clone();
         for _ in 0..repeats {
-            let data = to_vec(slice);
             let (c, t) = (thread_cpu_s(), std::time::Instant::now());
-            let (image, _) = once(data)?;
+            let frame = RawFrame::new(w as u32, h as u32, bits, layout, std::mem::take(&mut data))
+                .map_err(|e| e.to_string())?;
+            let image = process(&frame, &config).map_err(|e| e.to_string())?;
             times
                 .1
                 .push((thread_cpu_s() - c, t.elapsed().as_secs_f64()));
+            data = frame.into_data();
             drop(std::hint::black_box(image));
         }
         Ok::<_, String>(times)
@@ -358,5 +365,5 @@ pub fn _bench_polar_rust(
     .map_err(PyValueError::new_err)
 }
 
-/// `(from_slice, owned)`: `(cpu_s, wall_s)` per call.
+/// `(borrowed, owned)`: `(cpu_s, wall_s)` per call.
 pub type BenchTimes = (Vec<(f64, f64)>, Vec<(f64, f64)>);

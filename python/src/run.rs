@@ -26,7 +26,6 @@ use ellipso_fit::session::SessionFitConfig;
 use ellipso_pipeline::fit_run::{FitDone, FitRequest};
 use ellipso_pipeline::steps::Steps;
 use ellipso_run_error::{RunError, Say};
-use numpy::PyArray1;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -230,11 +229,10 @@ struct Fitted {
     out: PathBuf,
     files: Vec<PathBuf>,
     summary: ellipso_fit::summary::FitSummary,
-    /// Material (step B cluster) of every vertex, −1 where none.
-    material: Vec<i64>,
 }
 
-/// `ellipso fit SESSION --out OUT …`: returns `{out, files, summary, material}`.
+/// `ellipso fit SESSION --out OUT …`: returns `{out, files, summary}` (each vertex's material
+/// is `fit.ply`'s `material` column).
 #[pyfunction]
 #[pyo3(signature = (session, out, *, mesh=None, vertices=2500, outer=None, holdout=0.1, joint_only=false, normal_prior_deg=10.0, grazing_cutoff_deg=ellipso_fit::gate::GateConfig::default().grazing_cutoff_deg, view=None, no_hull=false, progress=None))]
 #[expect(
@@ -279,27 +277,11 @@ pub fn fit<'py>(
         };
         let say = fw.clone();
         match ellipso_pipeline::fit_run::run(request, fw, &say)? {
-            FitDone::Whole { out, run } => {
-                let n = run.fit.mesh.positions().len();
-                let material = match &run.fit.outcome.augmentation {
-                    Some(a) => (0..n)
-                        .map(|v| {
-                            a.assignment
-                                .get(v)
-                                .copied()
-                                .flatten()
-                                .map_or(-1, |j| j as i64)
-                        })
-                        .collect(),
-                    None => vec![-1; n],
-                };
-                Ok(Fitted {
-                    out,
-                    files: run.files,
-                    summary: run.summary,
-                    material,
-                })
-            }
+            FitDone::Whole { out, run } => Ok(Fitted {
+                out,
+                files: run.files,
+                summary: run.summary,
+            }),
             FitDone::Shard(_) => Err(RunError::msg("a shard was run where a whole fit was asked")),
         }
     })?;
@@ -307,7 +289,6 @@ pub fn fit<'py>(
     d.set_item("out", &fitted.out)?;
     d.set_item("files", &fitted.files)?;
     d.set_item("summary", to_python(py, &fitted.summary)?)?;
-    d.set_item("material", PyArray1::from_vec(py, fitted.material))?;
     Ok(d)
 }
 

@@ -47,6 +47,22 @@ def test_flags_are_the_fits_bits(fit_dir):
     assert not vertex[fit.has(FitFlag.Unobserved)].any()
 
 
+def test_material_per_vertex_is_read_from_fit_ply(fit_dir):
+    # the material partition from disk: fit.ply's `material` column, the assignment whose
+    # per-material counts fit-summary.json reports (observed vertices of each material)
+    fit = ellipso.read_fit(fit_dir)
+    material = fit.material
+    assert material is fit["material"] and material.dtype == np.int32
+    assert material.shape == (fit.vertex_count,)
+    k = len(fit.materials)
+    assert k >= 1 and fit.summary["materials"]
+    assert ((material >= -1) & (material < k)).all()
+    observed = ~fit.has(FitFlag.Unobserved)
+    for m in fit.summary["materials"]:
+        assert ((material == m["cluster"]) & observed).sum() == m["observed"], m
+    assert (material >= 0).any()
+
+
 def test_read_fit_refuses_what_is_not_a_fit(tmp_path):
     with pytest.raises(FileNotFoundError, match="fit.ply"):
         ellipso.read_fit(tmp_path)

@@ -78,6 +78,6 @@ pub fn write_fit_dir(dir: &Path) -> PathBuf {
         })
         .collect();
     std::fs::create_dir_all(dir).unwrap();
-    write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();
+    write_fit_ply(&dir.join("fit.ply"), &mesh, &fits, None).unwrap();
     dir.to_path_buf()
 }

@@ -522,3 +522,63 @@ fn gige_open_sends_no_discovery() {
         "opening by IP sent a discovery broadcast:\n{log}"
     );
 }
+
+/// `ellipso devices --gige --json` (the binary built with `--features aravis`) run inside the
+/// namespace: `(exit status, parsed report, stdout)`.
+fn devices_json() -> (std::process::ExitStatus, serde_json::Value, String) {
+    let out = Command::new(ellipso_tests::ellipso_bin())
+        .args(["devices", "--gige", "--json"])
+        .output()
+        .expect("spawn ellipso devices");
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(
+        !stderr.contains("--features aravis"),
+        "the ellipso binary lacks aravis: build it with `cargo build -p ellipso --features \
+         aravis` before this test (or point ELLIPSO_BIN at one that has it): {stderr}"
+    );
+    let report = serde_json::from_str(&stdout)
+        .unwrap_or_else(|e| panic!("devices --json is not JSON ({e}): {stdout}{stderr}"));
+    (out.status, report, stdout)
+}
+
+/// Issue 45: `ellipso devices` says nothing is attached (exit 0) where no camera answers, and
+/// lists the fake camera once one serves on the namespace's loopback.
+#[test]
+fn gige_devices_lists_the_fake_camera_and_says_when_nothing_is_attached() {
+    if reexec_in_netns("gige_devices_lists_the_fake_camera_and_says_when_nothing_is_attached") {
+        return;
+    }
+    let (status, none, text) = devices_json();
+    assert!(status.success(), "no camera is not an error: {text}");
+    assert_eq!(none["cameras"], serde_json::json!([]), "{text}");
+    // nothing else is attached in the namespace of a CI machine (no board, no video device):
+    // the report says so
+    if none["v4l2"] == serde_json::json!([]) && none["dfu_bootloaders"] == serde_json::json!([]) {
+        assert_eq!(none["nothing_attached"], true, "{text}");
+        let table = Command::new(ellipso_tests::ellipso_bin())
+            .args(["devices", "--gige"])
+            .output()
+            .expect("spawn ellipso devices");
+        assert!(table.status.success());
+        let table = String::from_utf8_lossy(&table.stdout);
+        assert!(table.contains("nothing attached"), "{table}");
+    }
+    let options = FakeGigeOptions::default();
+    let _fake = FakeGigeCamera::serve_on_loopback(&options, None).expect("fake camera on lo");
+    let (status, found, text) = devices_json();
+    assert!(status.success(), "{text}");
+    let cameras = found["cameras"].as_array().expect("cameras listed");
+    assert_eq!(cameras.len(), 1, "one fake camera serves: {text}");
+    assert_eq!(cameras[0]["address"], "127.0.0.1", "{text}");
+    assert!(
+        cameras[0]["id"]
+            .as_str()
+            .is_some_and(|id| id.contains(&options.serial)),
+        "its id names the fake's serial {}: {text}",
+        options.serial
+    );
+    assert_eq!(found["nothing_attached"], false, "{text}");
+}

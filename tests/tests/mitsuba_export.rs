@@ -88,7 +88,7 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
         })
         .collect();
     std::fs::create_dir_all(dir).unwrap();
-    write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();
+    write_fit_ply(&dir.join("fit.ply"), &mesh, &fits, None).unwrap();
     let eye = Point3::new(0.2, -0.25, 0.2);
     let world_from_camera = Isometry3::face_towards(&eye, &centre, &Vector3::z());
     // face_towards gives z forward, y up (OpenGL-like): flip y (and x) into OpenCV's y down.

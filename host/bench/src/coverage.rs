@@ -404,7 +404,8 @@ pub fn score_session_fit(
         .fits
         .iter()
         .zip(fit.mesh.positions())
-        .map(|(f, p)| {
+        .enumerate()
+        .map(|(v, (f, p))| {
             let params = ellipso_fit::export::ply::params_of(f);
             let std = f.reported_std_error();
             FitVertex {
@@ -415,6 +416,11 @@ pub fn score_session_fit(
                 normal_std_deg: f.reported_normal_std_deg() as f32,
                 samples: f.samples_used,
                 flags: f.output_mask(),
+                material: fit
+                    .completion
+                    .as_ref()
+                    .and_then(|c| c.labels.get(v).copied().flatten())
+                    .map(|m| m as u32),
             }
         })
         .collect();
@@ -573,6 +579,7 @@ mod tests {
             normal_std_deg: 1.0,
             samples: 20,
             flags,
+            material: None,
         };
         let fit = vec![
             vertex(1.505, 0),

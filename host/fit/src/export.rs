@@ -216,7 +216,8 @@ fn bounding_sphere(mesh: &TriangleMesh) -> (Point3<f64>, f64) {
     (c, r.max(1e-6))
 }
 
-/// Writes `fit.ply` and every picture into `out` (see the module doc).
+/// Writes `fit.ply` (with each vertex's `material`, [`ply::write_fit_ply`]) and every picture
+/// into `out` (see the module doc).
 #[expect(
     clippy::too_many_arguments,
     reason = "the export's inputs are independent values"
@@ -225,6 +226,7 @@ pub fn export_all(
     out: &Path,
     mesh: &TriangleMesh,
     fits: &[VertexFit],
+    material: Option<&[Option<usize>]>,
     camera: &CameraModel,
     world_from_camera: &Isometry3<f64>,
     flash: &FlashSpec,
@@ -237,7 +239,7 @@ pub fn export_all(
     })?;
     let mut report = ExportReport::default();
     let ply_path = out.join("fit.ply");
-    ply::write_fit_ply(&ply_path, mesh, fits)?;
+    ply::write_fit_ply(&ply_path, mesh, fits, material)?;
     report.files.push(ply_path);
     let (centre, radius) = bounding_sphere(mesh);
     let px = config.picture_px.max(16);

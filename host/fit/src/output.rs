@@ -118,6 +118,8 @@ pub fn export_fit(
         out,
         &fit.mesh,
         &fit.outcome.fits,
+        // each vertex's material as the summary's `materials` count it
+        fit.completion.as_ref().map(|c| c.labels.as_slice()),
         &rig.camera,
         &world_from_camera,
         &flash,

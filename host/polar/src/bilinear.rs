@@ -15,7 +15,7 @@
 use ellipso_model::mosaic::{Analyser, Channel, SensorLayout};
 
 use super::demosaic::{AnalyserBand, Levels, RowBuf};
-use super::frame::RawFrame;
+use super::frame::RawFrameView;
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;
 
@@ -75,7 +75,7 @@ fn tap_table(
 
 /// Interpolates at `(x, y)` from `taps`: `(value, weight used, saw a saturated sample)`.
 fn interpolate(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     taps: &[Tap],
     x: i32,
@@ -107,7 +107,7 @@ fn interpolate(
 
 /// A demosaiced band as full planes (the `demosaic()` API), built row by row.
 pub(crate) fn bilinear_band(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     colour: Option<Channel>,
 ) -> AnalyserBand {
@@ -133,14 +133,18 @@ pub(crate) fn bilinear_band(
 
 /// Streams bilinear output rows of one band, top to bottom, with O(width) memory.
 pub(crate) struct BilinearRows<'f> {
-    frame: &'f RawFrame,
+    frame: &'f RawFrameView<'f>,
     levels: Levels,
     planes: [PlaneRows; 4],
 }
 
 impl<'f> BilinearRows<'f> {
     /// Prepares the four analyser planes of band `colour`.
-    pub(crate) fn new(frame: &'f RawFrame, levels: &Levels, colour: Option<Channel>) -> Self {
+    pub(crate) fn new(
+        frame: &'f RawFrameView<'f>,
+        levels: &Levels,
+        colour: Option<Channel>,
+    ) -> Self {
         let layout = frame.layout();
         let width = frame.width() as usize;
         BilinearRows {
@@ -264,7 +268,7 @@ impl PlaneRows {
     /// Writes output row `y` of this plane into `out` and ORs its flags into `mask`.
     fn row(
         &mut self,
-        frame: &RawFrame,
+        frame: &RawFrameView<'_>,
         levels: &Levels,
         y: usize,
         out: &mut [f32],
@@ -287,7 +291,7 @@ impl PlaneRows {
     #[target_feature(enable = "avx2")]
     fn row_avx2(
         &mut self,
-        frame: &RawFrame,
+        frame: &RawFrameView<'_>,
         levels: &Levels,
         y: usize,
         out: &mut [f32],
@@ -299,7 +303,7 @@ impl PlaneRows {
     #[inline(always)]
     fn row_portable(
         &mut self,
-        frame: &RawFrame,
+        frame: &RawFrameView<'_>,
         levels: &Levels,
         y: usize,
         out: &mut [f32],
@@ -400,7 +404,7 @@ impl PlaneRows {
 /// The scattered lattice row `r`, computed into the older cache slot if not cached.
 fn cached_row<'c>(
     cache: &'c mut [ScatteredRow; 2],
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     lattice: Lattice,
     kernel: &[f32],
@@ -424,7 +428,7 @@ fn cached_row<'c>(
 
 /// Scatters lattice row `r` along x into `row.sums`.
 fn scatter(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     lattice: Lattice,
     kernel: &[f32],
@@ -465,7 +469,7 @@ fn scatter(
 /// twice-the-reach kernel, or `NoSamples`.
 fn fallback_pixel(
     fallback: &mut Option<Vec<Vec<Tap>>>,
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     colour: Option<Channel>,
     analyser: Analyser,
@@ -534,7 +538,8 @@ mod tests {
                     }
                 })
                 .collect();
-            let frame = RawFrame::new(w, h, 12, layout, data).expect("frame");
+            let owned = crate::RawFrame::new(w, h, 12, layout, data).expect("frame");
+            let frame = owned.view();
             let levels = Levels::new(4095, 10.0, 4095);
             for colour in band_colours(layout) {
                 for a in Analyser::ALL {

@@ -29,7 +29,7 @@ use ellipso_model::mosaic::{Analyser, Channel, SensorLayout};
 use serde::Serialize;
 
 use super::bilinear;
-use super::frame::RawFrame;
+use super::frame::{RawFrame, RawFrameView};
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;
 
@@ -156,8 +156,13 @@ pub(crate) fn band_colours(layout: SensorLayout) -> Vec<Option<Channel>> {
     }
 }
 
-/// Demosaics `frame` with `method` into normalised analyser planes.
-pub fn demosaic(frame: &RawFrame, levels: &Levels, method: DemosaicMethod) -> AnalyserImage {
+/// Demosaics `frame` (owned or borrowed samples) with `method` into normalised analyser planes.
+pub fn demosaic<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
+    levels: &Levels,
+    method: DemosaicMethod,
+) -> AnalyserImage {
+    let frame = &frame.view();
     let bands = match method {
         DemosaicMethod::Superpixel => band_colours(frame.layout())
             .into_iter()
@@ -197,7 +202,11 @@ impl RowBuf {
     }
 }
 
-fn superpixel_band(frame: &RawFrame, levels: &Levels, colour: Option<Channel>) -> AnalyserBand {
+fn superpixel_band(
+    frame: &RawFrameView<'_>,
+    levels: &Levels,
+    colour: Option<Channel>,
+) -> AnalyserBand {
     let (w, h) =
         DemosaicMethod::Superpixel.output_size(frame.layout(), frame.width(), frame.height());
     let mut band = AnalyserBand {
@@ -225,7 +234,7 @@ const POS_135: (usize, usize) = Analyser::Deg135.offset_in_block();
 
 /// Fills `buf` with superpixel output row `y_out` of band `colour`.
 pub(crate) fn superpixel_row(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     colour: Option<Channel>,
     y_out: usize,
@@ -242,7 +251,7 @@ pub(crate) fn superpixel_row(
 
 /// The hot path: one row of 2×2 superpixels; AVX2 where the CPU has it (same operations, so
 /// bit-identical results).
-fn superpixel_mono_row(frame: &RawFrame, levels: &Levels, y_out: usize, buf: &mut RowBuf) {
+fn superpixel_mono_row(frame: &RawFrameView<'_>, levels: &Levels, y_out: usize, buf: &mut RowBuf) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") {
@@ -258,13 +267,23 @@ fn superpixel_mono_row(frame: &RawFrame, levels: &Levels, y_out: usize, buf: &mu
 /// [`superpixel_mono_row_portable`] compiled for AVX2.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn superpixel_mono_row_avx2(frame: &RawFrame, levels: &Levels, y_out: usize, buf: &mut RowBuf) {
+fn superpixel_mono_row_avx2(
+    frame: &RawFrameView<'_>,
+    levels: &Levels,
+    y_out: usize,
+    buf: &mut RowBuf,
+) {
     superpixel_mono_row_portable(frame, levels, y_out, buf);
 }
 
 /// One row of 2×2 superpixels, iterator-driven (no bounds checks, no allocation).
 #[inline(always)]
-fn superpixel_mono_row_portable(frame: &RawFrame, levels: &Levels, y_out: usize, buf: &mut RowBuf) {
+fn superpixel_mono_row_portable(
+    frame: &RawFrameView<'_>,
+    levels: &Levels,
+    y_out: usize,
+    buf: &mut RowBuf,
+) {
     let w = frame.width() as usize;
     let data = frame.data_dn();
     let start = 2 * y_out * w;
@@ -305,7 +324,7 @@ fn superpixel_mono_row_portable(frame: &RawFrame, levels: &Levels, y_out: usize,
 /// One row of colour superpixels (4×4 tiles) for channel `colour`: R and B straight from their
 /// block; G from both G blocks, averaged where both are unsaturated, else the unsaturated one.
 fn superpixel_colour_row(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     colour: Channel,
     y_out: usize,
@@ -348,7 +367,7 @@ fn superpixel_colour_row(
 /// Normalised analyser values of 2×2 block `block` (block offsets in the 4×4 tile) for every
 /// tile of colour-superpixel row `y_out`, and whether any of its four samples is saturated.
 fn block_row(
-    frame: &RawFrame,
+    frame: &RawFrameView<'_>,
     levels: &Levels,
     y_out: usize,
     block: (usize, usize),

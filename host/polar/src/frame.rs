@@ -5,6 +5,12 @@
 //! 1..=16 and no sample above `2^bit_depth − 1`. Everything downstream relies on this and never
 //! re-checks it. Samples are right-aligned DN (a 12-bit camera's values lie in 0..=4095); data
 //! left-aligned in a 16-bit container is 16-bit data as far as this type is concerned.
+//!
+//! Storage: a frame owns its samples (`RawFrame`, a `Vec<u16>`) or borrows them
+//! ([`RawFrameView`], a `&[u16]`: a camera's or numpy's buffer, checked in place, never
+//! copied). Both are the same type over a different store and pass the same checks; the
+//! processing code reads every frame through a view ([`RawFrame::view`]), so an owned and a
+//! borrowed frame of the same samples run the same code and give bit-identical results.
 
 use ellipso_model::mosaic::{MosaicError, SensorLayout};
 
@@ -53,46 +59,51 @@ pub enum FrameError {
     },
 }
 
-/// A validated raw mosaic frame: `width × height` DN samples, row-major, rows growing downward.
+/// A validated raw mosaic frame: `width × height` DN samples, row-major, rows growing downward,
+/// stored in `D` (owned `Vec<u16>` by default; `&[u16]` for a [`RawFrameView`]).
 #[derive(Debug, Clone, PartialEq)]
-pub struct RawFrame {
+pub struct RawFrame<D = Vec<u16>> {
     width: u32,
     height: u32,
     bit_depth: u8,
     layout: SensorLayout,
-    data_dn: Vec<u16>,
+    data_dn: D,
 }
 
-impl RawFrame {
+/// A validated frame over samples it borrows (a camera's or numpy's buffer): no copy.
+pub type RawFrameView<'a> = RawFrame<&'a [u16]>;
+
+impl<D: AsRef<[u16]>> RawFrame<D> {
     /// Validates and wraps raw samples (see the module contract for what is checked).
     pub fn new(
         width: u32,
         height: u32,
         bit_depth: u8,
         layout: SensorLayout,
-        data_dn: Vec<u16>,
-    ) -> Result<RawFrame, FrameError> {
+        data_dn: D,
+    ) -> Result<RawFrame<D>, FrameError> {
         if !(1..=16).contains(&bit_depth) {
             return Err(FrameError::BitDepth { bit_depth });
         }
         layout.check_frame_size(width, height)?;
         let expected = width as usize * height as usize;
-        if data_dn.len() != expected {
+        let data = data_dn.as_ref();
+        if data.len() != expected {
             return Err(FrameError::Length {
                 width,
                 height,
                 expected,
-                actual: data_dn.len(),
+                actual: data.len(),
             });
         }
         let max = full_scale_dn(bit_depth);
-        let count = data_dn.iter().filter(|&&v| v > max).count();
-        if count > 0 {
-            let index = data_dn.iter().position(|&v| v > max).unwrap_or(0);
+        // one pass for the common case (nothing out of range), a second only to name the first
+        if let Some(index) = data.iter().position(|&v| v > max) {
+            let count = data.iter().filter(|&&v| v > max).count();
             return Err(FrameError::ValueAboveBitDepth {
                 x: (index % width as usize) as u32,
                 y: (index / width as usize) as u32,
-                value: data_dn[index],
+                value: data[index],
                 bit_depth,
                 max,
                 count,
@@ -134,12 +145,23 @@ impl RawFrame {
 
     /// All samples, row-major.
     pub fn data_dn(&self) -> &[u16] {
-        &self.data_dn
+        self.data_dn.as_ref()
+    }
+
+    /// The same frame over borrowed samples (no copy, no re-check).
+    pub fn view(&self) -> RawFrameView<'_> {
+        RawFrame {
+            width: self.width,
+            height: self.height,
+            bit_depth: self.bit_depth,
+            layout: self.layout,
+            data_dn: self.data_dn.as_ref(),
+        }
     }
 
     /// Row `y` of samples (`None` past the last row).
     pub fn row(&self, y: u32) -> Option<&[u16]> {
-        self.data_dn
+        self.data_dn()
             .chunks_exact(self.width as usize)
             .nth(y as usize)
     }
@@ -147,7 +169,7 @@ impl RawFrame {
     /// The sample at `(x, y)`, or `None` outside the frame.
     pub fn get(&self, x: u32, y: u32) -> Option<u16> {
         if x < self.width && y < self.height {
-            self.data_dn
+            self.data_dn()
                 .get(y as usize * self.width as usize + x as usize)
                 .copied()
         } else {
@@ -157,9 +179,11 @@ impl RawFrame {
 
     /// The largest sample in the frame (0 for an all-black frame).
     pub fn max_dn(&self) -> u16 {
-        self.data_dn.iter().copied().max().unwrap_or(0)
+        self.data_dn().iter().copied().max().unwrap_or(0)
     }
+}
 
+impl RawFrame {
     /// Consumes the frame, returning its samples.
     pub fn into_data(self) -> Vec<u16> {
         self.data_dn

@@ -21,8 +21,8 @@ pub enum IntensityPlane {
 }
 
 /// The picture `kind` of `frame`: `(plane, width, height)`, row-major.
-pub fn intensity_plane(
-    frame: &RawFrame,
+pub fn intensity_plane<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
     kind: IntensityPlane,
 ) -> Result<(Vec<f32>, usize, usize), PolarError> {
     let levels = PolarConfig::default().levels(frame)?;

@@ -76,7 +76,7 @@ use ellipso_model::mosaic::SensorLayout;
 pub use calibration::{AnalyserCalibration, CalibrationError, StokesMatrix};
 pub use channels::ObservationChannels;
 pub use demosaic::{AnalyserBand, AnalyserImage, DemosaicMethod, Levels, demosaic};
-pub use frame::{FrameError, RawFrame};
+pub use frame::{FrameError, RawFrame, RawFrameView};
 pub use mask::{MaskReason, MaskSummary, PixelMask};
 pub use plane::Plane;
 pub use sensor_calibration::{SensorCalibration, process_with_sensor};
@@ -163,7 +163,7 @@ pub enum PolarError {
 
 impl PolarConfig {
     /// Validates the configuration against `frame` and returns its normalisation levels.
-    pub fn levels(&self, frame: &RawFrame) -> Result<Levels, PolarError> {
+    pub fn levels<D: AsRef<[u16]>>(&self, frame: &RawFrame<D>) -> Result<Levels, PolarError> {
         let full_scale_dn = frame.full_scale_dn();
         let saturation_dn = self.saturation_dn.unwrap_or(full_scale_dn);
         if saturation_dn == 0 || saturation_dn > full_scale_dn {
@@ -237,8 +237,12 @@ impl PolarImage {
     }
 }
 
-/// Processes one frame: demosaic, Stokes, DoLP, AoLP, residual, channels, mask.
-pub fn process(frame: &RawFrame, config: &PolarConfig) -> Result<PolarImage, PolarError> {
+/// Processes one frame (owned samples, or a [`RawFrameView`] of a buffer the caller lends):
+/// demosaic, Stokes, DoLP, AoLP, residual, channels, mask.
+pub fn process<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
+    config: &PolarConfig,
+) -> Result<PolarImage, PolarError> {
     let mut out = PolarImage::empty();
     process_into(frame, config, &mut out)?;
     Ok(out)
@@ -247,11 +251,13 @@ pub fn process(frame: &RawFrame, config: &PolarConfig) -> Result<PolarImage, Pol
 /// [`process`] into existing buffers (no allocation once `out` has the right size): the path
 /// for streaming. Both methods run fused row by row (demosaic row → Stokes row), with no
 /// full-resolution intermediate.
-pub fn process_into(
-    frame: &RawFrame,
+pub fn process_into<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
     config: &PolarConfig,
     out: &mut PolarImage,
 ) -> Result<(), PolarError> {
+    // one compiled body for owned and borrowed samples: the same code, the same bits
+    let frame = &frame.view();
     let levels = config.levels(frame)?;
     let thresholds = config.thresholds()?;
     let layout = frame.layout();

@@ -6,7 +6,9 @@
 //!
 //! Read contract: the `vertex` element must have `x y z`; `nx ny nz` are used when all three are
 //! present; the first of the properties `region`, `region_id`, `material`, `material_index`,
-//! `material_id` becomes the per-vertex region id (a non-negative integer). The `face` element's
+//! `material_id` becomes the per-vertex region id (a non-negative integer; −1, the fit's
+//! "no material" in `fit.ply`'s `material`, at any vertex leaves the whole mesh without region
+//! ids, since a region id is needed at every vertex or none). The `face` element's
 //! list property `vertex_indices` (or `vertex_index`) gives polygons, fan-triangulated. Any other
 //! elements and properties are parsed and skipped. Truncated or malformed data gives
 //! [`MeshError::Ply`] naming the element, row and property.
@@ -310,6 +312,8 @@ struct MeshReader {
     positions: Vec<Point3<f64>>,
     normals: Option<Vec<Vector3<f64>>>,
     regions: Option<Vec<u32>>,
+    /// A vertex had region id −1 (none): the mesh has no region ids.
+    region_missing: bool,
     triangles: Vec<[u32; 3]>,
     saw_vertex: bool,
     saw_face: bool,
@@ -373,12 +377,16 @@ impl Visit for MeshReader {
                 }
                 if let (Some(r), Some(c)) = (self.regions.as_mut(), self.region_col) {
                     let v = scalars[c];
-                    if !(v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f64) {
+                    if v == -1.0 {
+                        self.region_missing = true;
+                        r.push(0);
+                    } else if !(v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f64) {
                         return Err(err(format!(
                             "vertex {row}: region id {v} is not a non-negative integer"
                         )));
+                    } else {
+                        r.push(v as u32);
                     }
-                    r.push(v as u32);
                 }
             }
             "face" => {
@@ -417,7 +425,7 @@ pub fn parse_ply(bytes: &[u8]) -> Result<TriangleMesh, MeshError> {
     TriangleMesh::new(
         reader.positions,
         reader.normals,
-        reader.regions,
+        reader.regions.filter(|_| !reader.region_missing),
         reader.triangles,
     )
 }

@@ -10,13 +10,18 @@
 //! material's pooled η entered — flag `EtaPooled` — and its final ones where none did),
 //! `float normal_std_deg` (≤ 180°, [`crate::data::MAX_REPORTED_ANGLE_STD_DEG`]), `int samples`,
 //! `int flags` (bit k set = [`FitFlag::ALL`]`[k]`, the output flags of
-//! [`VertexFit::output_flags`]), `int seen_lit gated_mixed gated_grazing gated_saturated
+//! [`VertexFit::output_flags`]), `int material` (the vertex's material: the index of step B's
+//! cluster, `fit-summary.json`'s `clusters`/`materials` order, that
+//! [`crate::complete::Completion::labels`] gives it — its own cluster where the fit identified
+//! it, the one it was completed from otherwise; [`NO_MATERIAL`] = −1 where it has none or the
+//! fit ran without step B), `int seen_lit gated_mixed gated_grazing gated_saturated
 //! gated_dark gated_colour_outlier gated_non_finite` (the frames that saw the vertex lit and
 //! what each pixel gate removed of them, [`GATE_COLUMNS`]) and `uchar red green blue` (the diffuse albedo π·ρ_d, sRGB, grey
 //! where the rule withholds the vertex), so Open3D, plyfile, trimesh and MeshLab read every
 //! property and show the object in its colours. Faces: `uchar`-counted `int` lists, so
 //! `fit.ply` also loads as a plain mesh. [`read_fit_ply`] reads back what [`write_fit_ply`]
-//! wrote, by property name (older files with `float` positions and `uint` flags too).
+//! wrote, by property name (older files with `float` positions and `uint` flags too, and without
+//! `material`).
 //!
 //! This module is the fit's schema only: the bytes are written by the model's one PLY writer
 //! (`ellipso_model::geometry::ply::write_table`) and read by its one reader
@@ -54,6 +59,9 @@ pub const GATE_COLUMNS: [(&str, GateCount); 7] = [
     ("gated_non_finite", |g| g.non_finite),
 ];
 
+/// The `material` value of a vertex without a material (module contract).
+pub const NO_MATERIAL: i32 = -1;
+
 /// Grey of the vertex colour where the rule withholds the vertex (the pictures' no-data grey).
 const WITHHELD_GREY: u8 = ellipso_report::figure::NO_DATA[0];
 
@@ -71,6 +79,9 @@ pub enum PlyError {
     /// One fit per mesh vertex is required.
     #[error("{0} fits for {1} mesh vertices")]
     Count(usize, usize),
+    /// One material label per mesh vertex is required.
+    #[error("{0} material labels for {1} mesh vertices")]
+    MaterialCount(usize, usize),
     /// Not a file this module wrote.
     #[error("{path}: {what}")]
     Format {
@@ -118,6 +129,8 @@ pub struct Row<'a> {
     pub identifiable: Identifiable,
     /// [`Identifiable::std_error`] of the fit's standard errors.
     pub std_error: [f64; 10],
+    /// The vertex's material (cluster index), `None`: none.
+    pub material: Option<usize>,
 }
 
 /// One vertex property: its name, type and value.
@@ -176,6 +189,9 @@ pub fn schema() -> Vec<Property> {
     }));
     s.push(property("samples", Int, |r| f64::from(r.fit.samples_used)));
     s.push(property("flags", Int, |r| f64::from(r.mask)));
+    s.push(property("material", Int, |r| {
+        r.material.map_or(f64::from(NO_MATERIAL), |m| m as f64)
+    }));
     // What the gates removed of the frames that saw the vertex lit, per reason (module doc).
     for (name, count) in GATE_COLUMNS {
         s.push(property(name, Int, move |r| count(&r.fit.gates) as f64));
@@ -193,11 +209,23 @@ pub fn schema() -> Vec<Property> {
     s
 }
 
-/// Writes `mesh` (refined positions) with `fits` (one per vertex, in order) to `path`.
-pub fn write_fit_ply(path: &Path, mesh: &TriangleMesh, fits: &[VertexFit]) -> Result<(), PlyError> {
+/// Writes `mesh` (refined positions) with `fits` (one per vertex, in order) and each vertex's
+/// material (`material`, one per vertex: [`crate::complete::Completion::labels`]; `None`: a fit
+/// without materials, every vertex [`NO_MATERIAL`]) to `path`.
+pub fn write_fit_ply(
+    path: &Path,
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    material: Option<&[Option<usize>]>,
+) -> Result<(), PlyError> {
     let n = mesh.positions().len();
     if fits.len() != n {
         return Err(PlyError::Count(fits.len(), n));
+    }
+    if let Some(labels) = material
+        && labels.len() != n
+    {
+        return Err(PlyError::MaterialCount(labels.len(), n));
     }
     let schema = schema();
     let columns: Vec<PlyColumn> = schema
@@ -219,6 +247,7 @@ pub fn write_fit_ply(path: &Path, mesh: &TriangleMesh, fits: &[VertexFit]) -> Re
                 mask,
                 identifiable,
                 std_error: identifiable.std_error(&f.std_error),
+                material: material.and_then(|m| m[v]),
             };
             for (value, prop) in values.iter_mut().zip(&schema) {
                 *value = (prop.value)(&row);
@@ -249,6 +278,9 @@ pub struct FitVertex {
     pub samples: u32,
     /// Flag bitmask ([`FLAG_BITS`]).
     pub flags: u32,
+    /// The vertex's material (cluster index); `None` where it has none ([`NO_MATERIAL`]) or
+    /// the file predates the `material` property.
+    pub material: Option<u32>,
 }
 
 impl FitVertex {
@@ -286,6 +318,8 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
     let normal_std = col("normal_std_deg")?;
     let samples = col("samples")?;
     let flags = col("flags")?;
+    // absent from files written before the property existed: no material
+    let material = table.column("material");
     Ok(table
         .rows
         .iter()
@@ -299,6 +333,10 @@ pub fn read_fit_ply(path: &Path) -> Result<Vec<FitVertex>, PlyError> {
                 normal_std_deg: f(normal_std),
                 samples: r[samples].max(0.0) as u32,
                 flags: r[flags].max(0.0) as u32,
+                material: material
+                    .map(|k| r[k])
+                    .filter(|&m| m >= 0.0)
+                    .map(|m| m as u32),
             }
         })
         .collect())
@@ -351,18 +389,45 @@ mod tests {
 
     /// The bytes of a small `fit.ply` as the fit's own writer wrote them before `fit.ply`
     /// became a schema over the model's PLY writer (captured at commit f22c554; re-captured
-    /// when the per-vertex gate counts, [`GATE_COLUMNS`], were added before the colours).
+    /// when the per-vertex gate counts, [`GATE_COLUMNS`], were added before the colours, and
+    /// when `material` was added after `flags`: the only change, checked below against the
+    /// file before it).
     #[test]
     fn fit_ply_bytes_are_those_the_previous_writer_wrote() {
         let (mesh, fits) = fixture(0);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("fit.ply");
-        write_fit_ply(&path, &mesh, &fits).unwrap();
+        write_fit_ply(&path, &mesh, &fits, None).unwrap();
         let got = std::fs::read(&path).unwrap();
         assert!(
             got == include_bytes!("testdata/fit_small.ply"),
             "fit.ply bytes changed"
         );
+        // the file before `material`: the same table with that one column fewer, and it still
+        // reads (no material)
+        let before: &[u8] = include_bytes!("testdata/fit_small_before_material.ply");
+        let (now, then) = (
+            read_vertex_table(&got).unwrap(),
+            read_vertex_table(before).unwrap(),
+        );
+        let k = now.column("material").unwrap();
+        assert!(then.column("material").is_none());
+        for (a, b) in now.rows.iter().zip(&then.rows) {
+            assert_eq!(a[k], f64::from(NO_MATERIAL));
+            let without: Vec<f64> = a
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != k)
+                .map(|(_, v)| *v)
+                .collect();
+            assert_eq!(&without, b);
+        }
+        assert_eq!(now.rows.len(), then.rows.len());
+        let old = dir.path().join("old.ply");
+        std::fs::write(&old, before).unwrap();
+        let back = read_fit_ply(&old).unwrap();
+        assert!(back.iter().all(|v| v.material.is_none()));
+        assert_eq!(back.len(), fits.len());
     }
 
     #[test]
@@ -370,13 +435,18 @@ mod tests {
         let (mesh, fits) = fixture(1);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("fit.ply");
-        write_fit_ply(&path, &mesh, &fits).unwrap();
+        // materials 0, 1, 2 in turn, none at every fifth vertex
+        let labels: Vec<Option<usize>> = (0..fits.len())
+            .map(|v| (v % 5 != 0).then_some(v % 3))
+            .collect();
+        write_fit_ply(&path, &mesh, &fits, Some(&labels)).unwrap();
         let back = read_fit_ply(&path).unwrap();
         assert_eq!(back.len(), fits.len());
-        for (b, f) in back.iter().zip(&fits) {
+        for ((b, f), label) in back.iter().zip(&fits).zip(&labels) {
             assert!((f64::from(b.params[0]) - f.params.eta).abs() < 1e-6);
             assert_eq!(b.samples, f.samples_used);
             assert_eq!(b.flags, f.output_mask());
+            assert_eq!(b.material, label.map(|m| m as u32));
         }
         assert!(back[3].std_error[0].is_infinite());
         assert_eq!(back[3].flags, (1 << 4) | (1 << 6));
@@ -393,6 +463,7 @@ mod tests {
             "property double x",
             "property int samples",
             "property int flags",
+            "property int material",
             "property uchar red",
         ] {
             assert!(header.contains(want), "{want}");
@@ -404,15 +475,22 @@ mod tests {
         assert_eq!(table.rows[4][red], f64::from(WITHHELD_GREY));
         let plain = parse_ply(&bytes).unwrap();
         assert_eq!(plain.triangles(), mesh.triangles());
+        // a vertex without a material (−1): no region ids in the plain mesh (model's reader)
+        assert_eq!(plain.regions(), None);
         // positions are exact (double): a fit on this mesh sees the same geometry
         assert_eq!(plain.positions()[5], mesh.positions()[5]);
         // Wrong count and unwritable paths are named.
         assert!(matches!(
-            write_fit_ply(&path, &mesh, &fits[1..]),
+            write_fit_ply(&path, &mesh, &fits[1..], None),
             Err(PlyError::Count(..))
         ));
+        let e = write_fit_ply(&path, &mesh, &fits, Some(&labels[1..])).unwrap_err();
+        assert!(matches!(e, PlyError::MaterialCount(..)), "{e}");
+        assert!(e.to_string().contains("material labels"), "{e}");
         let bad = dir.path().join("missing").join("fit.ply");
-        let e = write_fit_ply(&bad, &mesh, &fits).unwrap_err().to_string();
+        let e = write_fit_ply(&bad, &mesh, &fits, None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing"), "{e}");
     }
 }

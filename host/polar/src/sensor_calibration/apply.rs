@@ -171,8 +171,8 @@ impl PixelEstimators {
 
 /// [`crate::process`] with a sensor calibration (module doc); `config.calibration` must be
 /// `None` (one calibration at a time) and the demosaic superpixel.
-pub fn process_with_sensor(
-    frame: &RawFrame,
+pub fn process_with_sensor<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
     config: &PolarConfig,
     cal: &SensorCalibration,
 ) -> Result<PolarImage, PolarError> {
@@ -207,11 +207,12 @@ pub fn calibrated_config(
 }
 
 /// [`process_with_sensor`] with estimators built already (a session's frames share them).
-pub fn process_with_estimators(
-    frame: &RawFrame,
+pub fn process_with_estimators<D: AsRef<[u16]>>(
+    frame: &RawFrame<D>,
     config: &PolarConfig,
     estimators: &PixelEstimators,
 ) -> Result<PolarImage, PolarError> {
+    let frame = &frame.view();
     let levels = config.levels(frame)?;
     if levels != estimators.levels {
         return Err(PolarError::SensorCalibration(

@@ -252,7 +252,10 @@ pub fn from_bytes(
 
 impl SensorCalibration {
     /// Refuses a frame of another size or layout than the calibrated sensor.
-    pub fn check_frame(&self, frame: &RawFrame) -> Result<(), SensorCalibrationError> {
+    pub fn check_frame<D: AsRef<[u16]>>(
+        &self,
+        frame: &RawFrame<D>,
+    ) -> Result<(), SensorCalibrationError> {
         let s = &self.header.sensor;
         if (frame.width(), frame.height()) != (s.width, s.height) {
             return Err(SensorCalibrationError::SensorSize {

@@ -28,6 +28,29 @@ fn round_trips_ascii_and_binary() {
     }
 }
 
+/// `fit.ply`'s `material` is a region alias: −1 (no material) at one vertex leaves the mesh
+/// without regions (ids are needed at every vertex), every vertex with one gives them; other
+/// negatives are still refused.
+#[test]
+fn minus_one_region_means_no_regions() {
+    let file = |ids: [&str; 3]| {
+        format!(
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nproperty int material\nelement face 1\n\
+             property list uchar int vertex_indices\nend_header\n\
+             0 0 0 {}\n1 0 0 {}\n0 1 0 {}\n3 0 1 2\n",
+            ids[0], ids[1], ids[2]
+        )
+    };
+    let all = parse_ply(file(["0", "2", "1"]).as_bytes()).expect("parses");
+    assert_eq!(all.regions(), Some(&[0, 2, 1][..]));
+    let some = parse_ply(file(["0", "-1", "1"]).as_bytes()).expect("parses");
+    assert_eq!(some.regions(), None);
+    assert_eq!(some.triangles(), vec![[0, 1, 2]]);
+    let e = parse_ply(file(["0", "-2", "1"]).as_bytes()).unwrap_err();
+    assert!(e.to_string().contains("region id -2"), "{e}");
+}
+
 #[test]
 fn reads_quads_extra_elements_and_big_endian() {
     let text = "ply\nformat ascii 1.0\ncomment a quad\nelement vertex 4\nproperty float x\n\

@@ -38,7 +38,7 @@ fn fit_dir(dir: &Path, rho_d_red: f64) {
             gates: Default::default(),
         })
         .collect();
-    super::super::ply::write_fit_ply(&dir.join("fit.ply"), &mesh, &fits).unwrap();
+    super::super::ply::write_fit_ply(&dir.join("fit.ply"), &mesh, &fits, None).unwrap();
     let pose = Isometry3::from_parts(
         Translation3::new(0.0, 0.0, 0.5),
         UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
