@@ -434,6 +434,10 @@ impl SampleKernel {
     }
 }
 
+/// Per band the four analysers' DN at a point and the largest raw DN they draw on
+/// ([`AnalyserPixels::sample`]'s result).
+pub type AnalyserSample = ([[f32; 4]; 3], [[f32; 4]; 3]);
+
 /// A frame's analyser images as the sampler reads them (the recorded mosaic's [`DnImage`], or
 /// an ideal sensor's in the error budget): per band, the four analysers' dark-subtracted DN at
 /// a raw pixel position, and the largest raw DN of the pixels that value draws on (the
@@ -467,7 +471,7 @@ pub trait AnalyserPixels: Sync {
     }
 
     /// The value and peaks through that narrower interpolation ([`Self::sample`]'s form).
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<([[f32; 4]; 3], [[f32; 4]; 3])> {
+    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
         let _ = pixel;
         None
     }
@@ -495,7 +499,7 @@ impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
         (**self).narrow_footprint(pixel, min_weight)
     }
 
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<([[f32; 4]; 3], [[f32; 4]; 3])> {
+    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
         (**self).narrow_sample(pixel)
     }
 }
@@ -522,7 +526,7 @@ impl AnalyserPixels for DnImage {
             .then(|| self.footprint_with(pixel, min_weight, SampleKernel::Bilinear))
     }
 
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<([[f32; 4]; 3], [[f32; 4]; 3])> {
+    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
         (self.kernel != SampleKernel::Bilinear)
             .then(|| self.sample_with(pixel, SampleKernel::Bilinear))
     }

@@ -144,6 +144,7 @@ mod tests {
             exposure_us: 100,
             gain_db: 0.0,
             status: FrameStatus::Complete,
+            crc64: None,
         }
     }
 
