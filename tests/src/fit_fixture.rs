@@ -62,6 +62,7 @@ pub fn write_fit_dir(dir: &Path) -> PathBuf {
                 iterations: 6,
                 flags: vec![],
                 eta_unpooled: None,
+                eta_prior_only: false,
                 gates: Default::default(),
             };
             if d.z < -0.8 {

@@ -412,3 +412,59 @@ fn a_full_disk_changes_nothing_recorded_and_leaves_nothing_half_written() {
     }
     assert!(failed.is_empty(), "{failed:#?}");
 }
+
+/// `ellipso mesh SESSION --out OUT` (both paths as given).
+fn mesh(session: &Path, out: &Path) -> Output {
+    ellipso()
+        .arg("mesh")
+        .arg(session)
+        .arg("--out")
+        .arg(out)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn mesh_refuses_a_full_or_read_only_out_before_carving() {
+    let name = "mesh_refuses_a_full_or_read_only_out_before_carving";
+    let Some(outer) = reexec_in_mount_ns(name) else {
+        return;
+    };
+    if outer {
+        return;
+    }
+    let tmp = tempfile::tempdir().unwrap();
+    let recorded = tmp.path().join("recorded");
+    let o = capture(&recorded, "8");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let disk = Disk::mount(&tmp.path().join("disk"));
+    // a full disk: refused at the claim, naming the room, before the carving (whose own error
+    // on this one-sided 8-photo orbit, "meshing …", would otherwise come first)
+    disk.fill();
+    let out = disk.mount.join("mesh.ply");
+    let o = mesh(&recorded, &out);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("bytes free"), "the room is named: {err}");
+    assert!(
+        !err.contains("meshing"),
+        "refused before the carving: {err}"
+    );
+    assert!(!out.exists(), "nothing written: {err}");
+    disk.free();
+    // a read-only one: refused at the claim too
+    let s = Command::new("mount")
+        .args(["-o", "remount,ro"])
+        .arg(&disk.mount)
+        .status()
+        .unwrap();
+    assert!(s.success(), "remount read-only failed");
+    let o = mesh(&recorded, &out);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(!o.status.success(), "{err}");
+    assert!(err.to_lowercase().contains("read-only"), "{err}");
+    assert!(
+        !err.contains("meshing"),
+        "refused before the carving: {err}"
+    );
+}

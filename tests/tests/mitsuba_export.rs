@@ -83,6 +83,7 @@ fn write_fit_dir(dir: &Path) -> PathBuf {
                 iterations: 6,
                 flags: vec![],
                 eta_unpooled: None,
+                eta_prior_only: false,
                 gates: Default::default(),
             }
         })

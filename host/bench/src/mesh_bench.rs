@@ -365,9 +365,11 @@ fn bench_scene(
     );
     let fit = if args.fit {
         let session = ellipso_session::reader::open(session_dir)?;
+        // taken once for the carving and the fit (their warnings said once)
+        let poses = ellipso_pipeline::poses::poses_of(&session, say)?;
         let (_, _, hull) = ellipso_pipeline::mesh::mesh_of_session(
             &session,
-            None,
+            Some(&poses[..]),
             &ellipso_mesh::MeshConfig::default(),
             say,
             steps,
@@ -377,7 +379,6 @@ fn bench_scene(
             ..SessionFitConfig::default()
         };
         let config = ellipso_fit::session::with_session_sensor(&session, &config);
-        let poses = ellipso_pipeline::poses::poses_of(&session, say)?;
         let t0 = Instant::now();
         let fit = ellipso_fit::session::fit_session(&session, &mesh, &poses, &config, &mut |_| {})?;
         let fit_s = t0.elapsed().as_secs_f64();

@@ -401,6 +401,21 @@ pub fn pool_eta(
             let mut p = pool::random_effects(&points);
             p.se_blocks = pool::block_jackknife_se(&points, &spatial_blocks(set, list));
             p.prior_pull = pool::prior_pull(&points, p.mean, eta_prior);
+            // Members whose data did not move η from the default prior (whatever their σ,
+            // which a uniformly inflated recorded noise shrinks with the data: s² = cost/(m − p)
+            // scales the prior's row too) are the start value, not a measurement: a pool most
+            // of whose members are such repeats the start value with a small σ.
+            // (counted among the members that enter the pool: a finite own σ)
+            let entering: Vec<usize> = list
+                .iter()
+                .zip(&points)
+                .filter(|(_, (eta, se))| eta.is_finite() && se.is_finite())
+                .map(|(&v, _)| v)
+                .collect();
+            let prior_only = entering.iter().filter(|&&v| fits[v].eta_prior_only).count();
+            if p.usable && 2 * prior_only > entering.len() {
+                p.usable = false;
+            }
             if p.usable && p.weak(max_eta_std_error) {
                 // A pool whose σ, the prior's possible pull included, exceeds what a vertex
                 // may report is no measurement (`Pooled::weak`): no prior, and no value for

@@ -293,6 +293,7 @@ mod tests {
             iterations: 0,
             flags: Vec::new(),
             eta_unpooled: None,
+            eta_prior_only: false,
             gates: Default::default(),
         };
         let cap = 5.0;

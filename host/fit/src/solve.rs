@@ -696,6 +696,7 @@ fn finish(
         iterations: state.iterations,
         flags,
         eta_unpooled: None,
+        eta_prior_only: data_did_not_move_eta,
         gates: vertex.gates.clone(),
     }
 }
@@ -779,6 +780,7 @@ fn prior_fit(
         iterations: 0,
         flags,
         eta_unpooled: None,
+        eta_prior_only: false,
         gates: vertex.gates.clone(),
     }
 }

@@ -24,6 +24,7 @@ use ellipso_model::geometry::TriangleMesh;
 use ellipso_report::output::OutputDir;
 use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
+use nalgebra::Isometry3;
 
 use crate::fit_import::{ImportFlags, Imported};
 use crate::fit_shard::{ShardInputs, ShardRun};
@@ -148,15 +149,20 @@ pub fn run(
     let out_dir = out_dir.expect("claimed above without --shard");
     let out = out_dir.path().to_path_buf();
     let (given_mesh, import) = crate::fit_import::apply(models, &session, given_mesh, &out, say)?;
-    let imported_poses = import.as_ref().and_then(|i| i.poses.as_deref());
+    // the poses, taken once (checked, tracked where needed, their warnings said once) for the
+    // saved hull, the carving and the fit alike
+    let poses = match import.as_ref().and_then(|i| i.poses.clone()) {
+        Some(imported) => imported,
+        None => crate::poses::poses_of(&session, say)?,
+    };
     let (mesh, hull) = match given_mesh {
         Some(mesh) if no_hull => (mesh, None),
         Some(mesh) => {
             // the hull `ellipso mesh` saved beside this mesh, when it is this session's, carved
             // from the poses this fit takes, for this very file (crate::mesh_hull)
-            let saved = match (imported_poses, mesh_path) {
-                (None, Some(path)) => {
-                    let poses = crate::poses::poses_of(&session, say)?;
+            let imported = import.as_ref().is_some_and(|i| i.poses.is_some());
+            let saved = match (imported, mesh_path) {
+                (false, Some(path)) => {
                     let identity = crate::mesh_hull::SessionIdentity::of(&session);
                     match crate::mesh_hull::reusable_hull(path, &identity, &poses) {
                         Ok(hull) => hull.map(|h| (h, path)),
@@ -179,7 +185,7 @@ pub fn run(
                 say.err(format_args!(
                     "carving the visual hull from the frames (the surface update stays inside it)…"
                 ));
-                match mesh_of_session(&session, imported_poses, &mesh_config, say, steps) {
+                match mesh_of_session(&session, Some(&poses[..]), &mesh_config, say, steps) {
                     Ok((_, _, hull)) => (mesh, Some(hull)),
                     Err(e) => {
                         let e = e.into_boxed();
@@ -200,7 +206,7 @@ pub fn run(
             let mut mesh_config = mesh_config;
             mesh_config.remesh.target_vertices = vertices;
             let (mesh, report, hull) =
-                mesh_of_session(&session, imported_poses, &mesh_config, say, steps)?;
+                mesh_of_session(&session, Some(&poses[..]), &mesh_config, say, steps)?;
             let path = out.join("mesh.ply");
             write_mesh(&mesh, &report, &path)?;
             say.err(format_args!(
@@ -215,6 +221,7 @@ pub fn run(
     let run = fit_and_export(
         &session,
         &mesh,
+        Some(&poses[..]),
         import.as_ref(),
         OutputTo {
             dir: &out,
@@ -243,8 +250,9 @@ fn chain(e: &(dyn std::error::Error + 'static)) -> String {
 }
 
 /// Fits `mesh` to `session` and writes the outputs into `to` ([`ellipso_fit::output`]): with
-/// the poses and summary of `import` (`--poses`, `--mesh-frame`) where given, else the session's
-/// poses (tracked first where the log has none); pictures from frame `view`.
+/// `poses` where given (the caller took them already), else those of `import` (`--poses`,
+/// `--mesh-frame`), else the session's poses (tracked first where the log has none); the
+/// summary of `import` where given; pictures from frame `view`.
 #[expect(
     clippy::too_many_arguments,
     reason = "the session, mesh, import, output and settings are independent values"
@@ -252,6 +260,7 @@ fn chain(e: &(dyn std::error::Error + 'static)) -> String {
 pub fn fit_and_export(
     session: &Session,
     mesh: &TriangleMesh,
+    poses: Option<&[(u64, Isometry3<f64>)]>,
     import: Option<&Imported>,
     to: OutputTo<'_>,
     view: Option<u64>,
@@ -260,9 +269,10 @@ pub fn fit_and_export(
     say: &dyn Say,
 ) -> Result<FitRun, RunError> {
     let started = Instant::now();
-    let poses = match import.and_then(|i| i.poses.clone()) {
-        Some(poses) => poses,
-        None => crate::poses::poses_of(session, say)?,
+    let poses = match (poses, import.and_then(|i| i.poses.clone())) {
+        (Some(given), _) => given.to_vec(),
+        (None, Some(imported)) => imported,
+        (None, None) => crate::poses::poses_of(session, say)?,
     };
     // the pictures' frame is checked before the long work, not after it
     if let Some(id) = view {

@@ -98,6 +98,17 @@ pub fn write_mesh(
     Ok(json)
 }
 
+/// The least the mesh file of `config` takes, bytes: a lower bound, so that a disk refused
+/// for it is certainly too full. A closed triangle mesh of V vertices has 2V − 4 faces; the
+/// binary PLY stores 3 doubles a vertex (24 B) and a count byte and 3 indices a face (13 B),
+/// so 24 V + 13 (2V − 4) ≈ 50 V bytes (an OBJ's text is longer). The remesher aims at
+/// `target_vertices` only approximately; half of it is taken for V, a margin so that the bound
+/// stays below the file. The report and the hull come on top.
+pub fn least_mesh_bytes(config: &MeshConfig) -> u64 {
+    let v = (config.remesh.target_vertices / 2) as u64;
+    (24 * v + 13 * (2 * v).saturating_sub(4)).max(1)
+}
+
 /// What `ellipso mesh` wrote.
 #[derive(Debug)]
 pub struct MeshWritten {
@@ -140,6 +151,8 @@ pub fn mesh_command(
         None,
     )?;
     let hull_files = crate::mesh_hull::HullFiles::claim(out, session_dir)?;
+    // a full disk is said now, not after the carving
+    mesh_file.ensure_room(least_mesh_bytes(config))?;
     let session = ellipso_session::reader::open(session_dir)?;
     let started = std::time::Instant::now();
     let poses = crate::poses::poses_of(&session, say)?;

@@ -107,6 +107,21 @@ pub enum OutputError {
         /// The other run's staging directory.
         staging: PathBuf,
     },
+    /// The output's file system has less room than the results certainly take.
+    #[error(
+        "--out {}: the file system holding it has {free} bytes free, less than the {needed} bytes \
+         the results take at the least; free some space or choose another --out (checked before \
+         the work; nothing was written)",
+        out.display()
+    )]
+    NoRoom {
+        /// The output.
+        out: PathBuf,
+        /// Bytes free to this user there.
+        free: u64,
+        /// The least the results take.
+        needed: u64,
+    },
     /// The file system said no.
     #[error("{}: {source}", path.display())]
     Io {

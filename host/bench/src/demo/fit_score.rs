@@ -39,9 +39,11 @@ pub fn fit_and_score(
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let started = std::time::Instant::now();
+    // taken once for the carving and the fit (their warnings said once)
+    let poses = ellipso_pipeline::poses::poses_of(session, say)?;
     let (mesh, mesh_report, hull) = ellipso_pipeline::mesh::mesh_of_session(
         session,
-        None,
+        Some(&poses[..]),
         &ellipso_mesh::MeshConfig::default(),
         say,
         steps,
@@ -69,7 +71,15 @@ pub fn fit_and_score(
         publish: &|p| out.published(p),
     };
     let run = ellipso_pipeline::fit_run::fit_and_export(
-        session, &mesh, None, to, None, &config, steps, say,
+        session,
+        &mesh,
+        Some(&poses[..]),
+        None,
+        to,
+        None,
+        &config,
+        steps,
+        say,
     )?;
     let config = ellipso_fit::session::with_session_sensor(session, &config);
 

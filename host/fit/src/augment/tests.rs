@@ -158,6 +158,7 @@ fn fit_of(vertex: usize, params: PbrdfParams<f64>, normal: [f64; 3]) -> VertexFi
         iterations: 0,
         flags: Vec::new(),
         eta_unpooled: None,
+        eta_prior_only: false,
         gates: Default::default(),
     }
 }
@@ -466,4 +467,28 @@ fn degenerate_inputs() {
     };
     let a = augment(&empty, &[], &config);
     assert!(a.clusters.is_empty() && a.assignment.is_empty());
+}
+
+/// Issue 46 item 2: with a recorded noise inflated uniformly (`read_noise_e` 1000), every
+/// vertex's data leave η at the default prior's start, yet its σ (scaled by s² = cost/(m − p),
+/// which shrinks with the data rows) is small: such members pooled into η = 1.5000 ± 0.0004.
+/// A pool most of whose members' data did not move η is no measurement; the same members with
+/// data that did move it pool as before.
+#[test]
+fn a_pool_of_members_whose_data_did_not_move_eta_is_withheld() {
+    let pooled = |prior_only: bool| {
+        let mut s = scene(200, |_| 0, 0.001, 0.0);
+        for (v, f) in s.fits.iter_mut().enumerate() {
+            // the start value, with the small σ the inflated noise's s² gives (measured:
+            // 0.003 to 0.0034 on a 24-photo sphere capture)
+            f.params.eta = 1.5 + 1e-5 * ((v % 7) as f64 - 3.0);
+            f.std_error[0] = 0.0032;
+            f.eta_prior_only = prior_only;
+        }
+        let mut a = augment(&s.set, &s.fits, &small_config());
+        pool_eta(&mut a, &s.set, &s.fits, [1.5, 0.5], 0.05);
+        a.clusters.iter().any(|c| c.eta_pooled.usable)
+    };
+    assert!(pooled(false), "members whose data moved η pool");
+    assert!(!pooled(true), "the start value repeated is no pooled η");
 }

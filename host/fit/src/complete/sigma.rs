@@ -111,6 +111,7 @@ mod tests {
             iterations: 1,
             flags,
             eta_unpooled: None,
+            eta_prior_only: false,
             gates: Default::default(),
         }
     }

@@ -246,6 +246,7 @@ fn fits_of(vertices: &[super::ply::FitVertex]) -> Vec<VertexFit> {
                 iterations: 0,
                 flags: crate::data::FitFlag::from_mask(v.flags),
                 eta_unpooled: None,
+                eta_prior_only: false,
                 gates: Default::default(),
             }
         })

@@ -380,6 +380,7 @@ mod tests {
                     _ => vec![],
                 },
                 eta_unpooled: (v == 6).then_some([1.52, 0.04]),
+                eta_prior_only: false,
                 gates: Default::default(),
             })
             .collect();

@@ -42,6 +42,7 @@ fn fits(mesh: &TriangleMesh) -> Vec<VertexFit> {
                 vec![]
             },
             eta_unpooled: None,
+            eta_prior_only: false,
             gates: Default::default(),
         })
         .collect()

@@ -497,6 +497,7 @@ pub(super) fn fit(vertex: u32, normal: [f64; 3], sigma_deg: f64, flags: Vec<FitF
         iterations: 5,
         flags,
         eta_unpooled: None,
+        eta_prior_only: false,
         gates: Default::default(),
     }
 }

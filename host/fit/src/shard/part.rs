@@ -295,6 +295,7 @@ pub(crate) mod tests {
                 iterations: 3,
                 flags: vec![crate::data::FitFlag::TooFewViews],
                 eta_unpooled: None,
+                eta_prior_only: false,
                 gates: Default::default(),
             })
             .collect();

@@ -193,6 +193,23 @@ impl OutputFile {
         &self.shown
     }
 
+    /// Refuses, before the work, a file system that cannot hold `needed` bytes (the least the
+    /// caller will write there, its own lower bound): a full disk is then said at the claim,
+    /// not after minutes of computing. Bytes free are those available to this user
+    /// (`statvfs(3)`'s `f_bavail`); where they cannot be read nothing is refused (the write
+    /// still fails cleanly, [`crate::atomic_file`]).
+    pub fn ensure_room(&self, needed: u64) -> Result<(), OutputError> {
+        let dir = self.path.parent().unwrap_or(Path::new("."));
+        match free_bytes(dir) {
+            Some(free) if free < needed => Err(OutputError::NoRoom {
+                out: self.shown.clone(),
+                free,
+                needed,
+            }),
+            _ => Ok(()),
+        }
+    }
+
     /// The format claimed.
     pub fn format(&self) -> FileFormat {
         self.format
@@ -202,4 +219,16 @@ impl OutputFile {
     pub fn write(&self, bytes: impl AsRef<[u8]>) -> Result<(), OutputError> {
         crate::atomic_file::write(&self.path, bytes).map_err(|e| OutputError::io(&self.shown, e))
     }
+}
+
+/// Bytes available to this user on the file system holding `dir` (`None`: not readable).
+pub fn free_bytes(dir: &Path) -> Option<u64> {
+    use std::os::unix::ffi::OsStrExt;
+    let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+    // SAFETY: `c` is a valid NUL-terminated path; `st` is written by statvfs before it is read.
+    let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+    if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
+        return None;
+    }
+    Some((st.f_bavail as u64).saturating_mul(st.f_frsize as u64))
 }

@@ -35,6 +35,7 @@ fn fit_dir(dir: &Path, rho_d_red: f64) {
             iterations: 3,
             flags: vec![],
             eta_unpooled: None,
+            eta_prior_only: false,
             gates: Default::default(),
         })
         .collect();
