@@ -39,15 +39,30 @@ fn unreadable_frames_are_skipped_counted_and_left_untouched() {
     let dir = tempfile::tempdir().unwrap();
     let (session_dir, _, mut poses) = make_session(dir.path(), &SceneSpec::paint_mono());
     let frames = session_dir.join("frames");
-    // Frame 101: corrupt bytes. Frame 102: values beyond the 12-bit depth.
+    // Frame 101: corrupt bytes. Frame 102: values beyond the 12-bit depth, recorded as the
+    // session's own (its event's checksum is the new file's, so the depth check is what
+    // refuses it, not the provenance check).
     std::fs::write(frames.join("00000101.png"), b"\x89PNG garbage").unwrap();
-    ellipso_session::frame_png::write(
+    let crc = ellipso_session::frame_png::write(
         &frames.join("00000102.png"),
         256,
         200,
         &vec![65535u16; 256 * 200],
     )
     .unwrap();
+    let log = session_dir.join("events.jsonl");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let patched: String = text
+        .lines()
+        .map(|line| {
+            let mut e: serde_json::Value = serde_json::from_str(line).unwrap();
+            if e["type"] == "frame" && e["frame_id"] == 102 {
+                e["crc64"] = crc.into();
+            }
+            serde_json::to_string(&e).unwrap() + "\n"
+        })
+        .collect();
+    std::fs::write(&log, patched).unwrap();
     // A pose for a frame that does not exist.
     poses.push((999, poses[0].1));
     let before = snapshot(&session_dir);
