@@ -222,16 +222,6 @@ impl DnImage {
     /// analyser the largest raw DN in the kernel's footprint (NaN where a crop does not hold
     /// the taps, see the module contract).
     pub fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
-        self.sample_with(pixel, self.kernel)
-    }
-
-    /// [`DnImage::sample`] through `kernel` instead of the image's own; a kernel that reaches
-    /// no farther than the image's (every kernel against Catmull–Rom) finds its taps in a crop.
-    pub fn sample_with(
-        &self,
-        pixel: [f64; 2],
-        kernel: SampleKernel,
-    ) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
         let mut values = [[0f32; 4]; 3];
         let mut peaks = [[0f32; 4]; 3];
         let [fw, fh] = self.frame_size;
@@ -243,8 +233,8 @@ impl DnImage {
                 let [px, py] = band.offset_px[k];
                 let sx = (pixel[0] - px) / self.tile_px;
                 let sy = (pixel[1] - py) / self.tile_px;
-                let taps_x = kernel.taps(sx, fw);
-                let taps_y = kernel.taps(sy, fh);
+                let taps_x = self.kernel.taps(sx, fw);
+                let taps_y = self.kernel.taps(sy, fh);
                 let plane = &band.dn[k];
                 let mut v = 0.0;
                 let mut peak = f32::NEG_INFINITY;
@@ -272,23 +262,13 @@ impl DnImage {
     /// decides — one tile where a lattice sample sits on the point, four for a Catmull–Rom
     /// value halfway between samples.
     pub fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
-        self.footprint_with(pixel, min_weight, self.kernel)
-    }
-
-    /// [`DnImage::footprint`] of a value interpolated through `kernel`.
-    pub fn footprint_with(
-        &self,
-        pixel: [f64; 2],
-        min_weight: f64,
-        kernel: SampleKernel,
-    ) -> PixelRect {
         let mut min = [f64::INFINITY; 2];
         let mut max = [f64::NEG_INFINITY; 2];
         for band in self.bands.iter().take(3) {
             for offset in &band.offset_px {
                 for axis in 0..2 {
                     let s = (pixel[axis] - offset[axis]) / self.tile_px;
-                    for (i, w) in kernel.taps(s, self.frame_size[axis]) {
+                    for (i, w) in self.kernel.taps(s, self.frame_size[axis]) {
                         if w.abs() < min_weight || w == 0.0 {
                             continue;
                         }
@@ -434,10 +414,6 @@ impl SampleKernel {
     }
 }
 
-/// Per band the four analysers' DN at a point and the largest raw DN they draw on
-/// ([`AnalyserPixels::sample`]'s result).
-pub type AnalyserSample = ([[f32; 4]; 3], [[f32; 4]; 3]);
-
 /// A frame's analyser images as the sampler reads them (the recorded mosaic's [`DnImage`], or
 /// an ideal sensor's in the error budget): per band, the four analysers' dark-subtracted DN at
 /// a raw pixel position, and the largest raw DN of the pixels that value draws on (the
@@ -461,20 +437,6 @@ pub trait AnalyserPixels: Sync {
             max: pixel.map(|v| v + r),
         }
     }
-
-    /// The footprint of the narrower interpolation the sampler falls back to where this one's
-    /// footprint leaves the surface (`FrameSampler::observe`): `None` where the image has none
-    /// (a point sample, or a kernel that is already the narrowest).
-    fn narrow_footprint(&self, pixel: [f64; 2], min_weight: f64) -> Option<PixelRect> {
-        let _ = (pixel, min_weight);
-        None
-    }
-
-    /// The value and peaks through that narrower interpolation ([`Self::sample`]'s form).
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
-        let _ = pixel;
-        None
-    }
 }
 
 /// A shared image (a frame cache's crop) reads as the image itself.
@@ -494,14 +456,6 @@ impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
     fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
         (**self).footprint(pixel, min_weight)
     }
-
-    fn narrow_footprint(&self, pixel: [f64; 2], min_weight: f64) -> Option<PixelRect> {
-        (**self).narrow_footprint(pixel, min_weight)
-    }
-
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
-        (**self).narrow_sample(pixel)
-    }
 }
 
 impl AnalyserPixels for DnImage {
@@ -519,16 +473,6 @@ impl AnalyserPixels for DnImage {
 
     fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
         DnImage::footprint(self, pixel, min_weight)
-    }
-
-    fn narrow_footprint(&self, pixel: [f64; 2], min_weight: f64) -> Option<PixelRect> {
-        (self.kernel != SampleKernel::Bilinear)
-            .then(|| self.footprint_with(pixel, min_weight, SampleKernel::Bilinear))
-    }
-
-    fn narrow_sample(&self, pixel: [f64; 2]) -> Option<AnalyserSample> {
-        (self.kernel != SampleKernel::Bilinear)
-            .then(|| self.sample_with(pixel, SampleKernel::Bilinear))
     }
 }
 
@@ -597,42 +541,6 @@ mod tests {
             assert!(values[0].iter().chain(&peaks[0]).all(|v| v.is_nan()));
             assert!(!crop.covers(&rect.grown(12.0)));
         }
-    }
-
-    #[test]
-    fn the_narrow_fallback_is_the_bilinear_kernel_inside_the_cubic_footprint() {
-        let cubic = image(SampleKernel::CatmullRom);
-        let bilinear = image(SampleKernel::Bilinear);
-        // The cubic image's crop holds the bilinear taps too (they reach less far).
-        let rect = PixelRect {
-            min: [30.3, 20.7],
-            max: [61.9, 41.2],
-        };
-        let crop = cubic.crop(&rect);
-        let w = 0.01;
-        for p in [[40.5, 30.5], [45.2, 33.9], [33.0, 22.0]] {
-            let wide = AnalyserPixels::footprint(&cubic, p, w);
-            let narrow = AnalyserPixels::narrow_footprint(&cubic, p, w).expect("cubic has one");
-            assert!(
-                narrow.min[0] >= wide.min[0] && narrow.max[0] <= wide.max[0],
-                "{p:?}"
-            );
-            assert!(
-                narrow.min[1] >= wide.min[1] && narrow.max[1] <= wide.max[1],
-                "{p:?}"
-            );
-            assert_eq!(narrow, AnalyserPixels::footprint(&bilinear, p, w));
-            let s = AnalyserPixels::narrow_sample(&crop, p).expect("cubic has one");
-            assert!(same(s, bilinear.sample(p)), "{p:?}");
-        }
-        // Halfway between lattice points the cubic footprint is strictly wider.
-        let p = [41.0, 31.0];
-        let wide = AnalyserPixels::footprint(&cubic, p, w);
-        let narrow = AnalyserPixels::narrow_footprint(&cubic, p, w).unwrap();
-        assert!(narrow.max[0] - narrow.min[0] < wide.max[0] - wide.min[0]);
-        // The bilinear image is already the narrowest: no fallback.
-        assert!(AnalyserPixels::narrow_footprint(&bilinear, p, w).is_none());
-        assert!(AnalyserPixels::narrow_sample(&bilinear, p).is_none());
     }
 
     #[test]

@@ -10,11 +10,6 @@
 //!   value that looks unclipped. Every gate judges the frame's own DN, before the division by
 //!   the (flash-energy-scaled) normaliser: a highlight that clips at full energy is dropped in
 //!   that frame and kept in a shorter-pulse frame where it does not clip.
-//! - A sample whose footprint (the kernel's taps above the noise floor) leaves the vertex's
-//!   surface or reaches another material is read again through the image's narrower kernel
-//!   ([`AnalyserPixels::narrow_footprint`]: bilinear for a Catmull–Rom image) and kept when
-//!   that footprint stays on the surface: a vertex beside a silhouette or a boundary keeps
-//!   the pure samples it has; only a sample neither footprint keeps pure is gated as mixed.
 //! - Occlusion and shadow rays ignore the triangles incident to the vertex (a ray ending on a
 //!   vertex cannot be blocked by a triangle that contains it; this is exact) and hits within
 //!   [`RAY_T_EPS`] of either end (relative to the segment length: 50 nm at 0.5 m), which absorbs
@@ -332,26 +327,12 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        let min_weight = self.session.min_tap_weight;
-        let rect = self.image.footprint(pixel, min_weight);
-        let (values, peaks) =
-            if self.footprint_on_surface(v, &position, pixel, &rect, p_cam.z, cos_view) {
-                self.image.sample(pixel)
-            } else {
-                // Near a silhouette or a material boundary the cubic kernel's four tiles reach
-                // off the vertex's surface where the bilinear kernel's two may not: the vertex
-                // keeps a pure sample at the narrower footprint (its smoothing of curvature is
-                // the price, paid only by these samples) rather than none.
-                let narrow = self.image.narrow_footprint(pixel, min_weight);
-                match narrow.and_then(|rect| {
-                    self.footprint_on_surface(v, &position, pixel, &rect, p_cam.z, cos_view)
-                        .then(|| self.image.narrow_sample(pixel))
-                        .flatten()
-                }) {
-                    Some(sample) => sample,
-                    None => return Outcome::Mixed,
-                }
-            };
+        let rect = self.image.footprint(pixel, self.session.min_tap_weight);
+        if !self.footprint_on_surface(v, &position, pixel, &rect, p_cam.z, cos_view) {
+            return Outcome::Mixed;
+        }
+
+        let (values, peaks) = self.image.sample(pixel);
         let bands = self.image.band_count();
         let full_scale_dn = self.session.full_scale_dn;
         let gate = self.session.gate;
