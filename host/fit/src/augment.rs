@@ -405,11 +405,14 @@ pub fn pool_eta(
             // which a uniformly inflated recorded noise shrinks with the data: s² = cost/(m − p)
             // scales the prior's row too) are the start value, not a measurement: a pool most
             // of whose members are such repeats the start value with a small σ.
-            // (counted among the members that enter the pool: a finite own σ)
+            // (counted among the members whose own σ makes them informative,
+            // `pool::INFORMATIVE_SE`: those the pooled value is the median of; a vertex with too
+            // few samples is prior-only too, but its large own σ keeps it out of that median, so
+            // it must not withhold a pool its informative neighbours determine)
             let entering: Vec<usize> = list
                 .iter()
                 .zip(&points)
-                .filter(|(_, (eta, se))| eta.is_finite() && se.is_finite())
+                .filter(|(_, (eta, se))| eta.is_finite() && *se <= pool::INFORMATIVE_SE)
                 .map(|(&v, _)| v)
                 .collect();
             let prior_only = entering.iter().filter(|&&v| fits[v].eta_prior_only).count();
