@@ -290,6 +290,33 @@ fn stokes_row_portable(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds
     }
 }
 
+/// Writes pixel `k` of `out` from an estimator's `[s0, s1, s2, residual]`: DoLP, AoLP, I^d and
+/// the mask (the input's reasons with dark, unphysical and inconsistent added), as every
+/// estimator's row writes them.
+#[inline]
+fn write_estimate(
+    out: &mut StokesRow<'_>,
+    k: usize,
+    [v0, v1, v2, residual]: [f32; 4],
+    mask_in: PixelMask,
+    t: Thresholds,
+) {
+    let raw_dolp = (v1 * v1 + v2 * v2).sqrt() / v0.max(S0_FLOOR);
+    let lit = v0 > S0_FLOOR;
+    out.s0[k] = v0;
+    out.s1[k] = v1;
+    out.s2[k] = v2;
+    out.dolp[k] = if lit { raw_dolp.min(1.0) } else { 0.0 };
+    out.aolp_rad[k] = aolp_rad(v1, v2);
+    out.residual[k] = residual;
+    out.i_d[k] = v0 - v1;
+    let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
+    let unphysical =
+        u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE)) * MaskReason::Unphysical.bit();
+    let inconsistent = u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
+    out.mask[k] = PixelMask(mask_in.0 | dark | unphysical | inconsistent);
+}
+
 /// Row kernel for calibrated analysers: `s = A⁺ I`, residual `= nᵀ I`, and the observation
 /// channels of ideal analysers reconstructed from the corrected Stokes vector
 /// (`I^d = s0 − s1`; I^s = s1 and I^α = −s2 as always).
@@ -297,7 +324,7 @@ fn stokes_row_portable(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds
     clippy::needless_range_loop,
     reason = "one index drives four input and eight output slices of equal length"
 )]
-fn calibrated_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds, m: &StokesMatrix) {
+fn calibrated_row(input: AnalyserRow<'_>, mut out: StokesRow<'_>, t: Thresholds, m: &StokesMatrix) {
     let n = out.s0.len();
     let [i0, i45, i90, i135] = input.intensity;
     let (i0, i45, i90, i135, m_in) = (&i0[..n], &i45[..n], &i90[..n], &i135[..n], &input.mask[..n]);
@@ -306,21 +333,7 @@ fn calibrated_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds, m: 
     for k in 0..n {
         let (v0, v1, v2) = (dot(&m.rows[0], k), dot(&m.rows[1], k), dot(&m.rows[2], k));
         let residual = dot(&m.null, k);
-        let raw_dolp = (v1 * v1 + v2 * v2).sqrt() / v0.max(S0_FLOOR);
-        let lit = v0 > S0_FLOOR;
-        out.s0[k] = v0;
-        out.s1[k] = v1;
-        out.s2[k] = v2;
-        out.dolp[k] = if lit { raw_dolp.min(1.0) } else { 0.0 };
-        out.aolp_rad[k] = aolp_rad(v1, v2);
-        out.residual[k] = residual;
-        out.i_d[k] = v0 - v1;
-        let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
-        let unphysical = u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE))
-            * MaskReason::Unphysical.bit();
-        let inconsistent =
-            u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
-        out.mask[k] = PixelMask(m_in[k].0 | dark | unphysical | inconsistent);
+        write_estimate(&mut out, k, [v0, v1, v2, residual], m_in[k], t);
     }
 }
 
@@ -328,7 +341,7 @@ fn calibrated_row(input: AnalyserRow<'_>, out: StokesRow<'_>, t: Thresholds, m: 
 /// sensor calibration: `s = A⁺ (I − δ)`, residual `nᵀ(I − δ)`).
 pub(crate) fn per_pixel_row(
     input: AnalyserRow<'_>,
-    out: StokesRow<'_>,
+    mut out: StokesRow<'_>,
     t: Thresholds,
     estimators: &[StokesMatrix],
     offsets: &[[f32; 4]],
@@ -344,21 +357,7 @@ pub(crate) fn per_pixel_row(
         let dot = |r: &[f32; 4]| r[0] * i[0] + r[1] * i[1] + r[2] * i[2] + r[3] * i[3];
         let (v0, v1, v2) = (dot(&m.rows[0]), dot(&m.rows[1]), dot(&m.rows[2]));
         let residual = dot(&m.null);
-        let raw_dolp = (v1 * v1 + v2 * v2).sqrt() / v0.max(S0_FLOOR);
-        let lit = v0 > S0_FLOOR;
-        out.s0[k] = v0;
-        out.s1[k] = v1;
-        out.s2[k] = v2;
-        out.dolp[k] = if lit { raw_dolp.min(1.0) } else { 0.0 };
-        out.aolp_rad[k] = aolp_rad(v1, v2);
-        out.residual[k] = residual;
-        out.i_d[k] = v0 - v1;
-        let dark = u8::from(v0 < t.dark_s0) * MaskReason::Dark.bit();
-        let unphysical = u8::from(lit & (raw_dolp > 1.0 + DOLP_UNPHYSICAL_TOLERANCE))
-            * MaskReason::Unphysical.bit();
-        let inconsistent =
-            u8::from(residual.abs() > t.max_residual) * MaskReason::Inconsistent.bit();
-        out.mask[k] = PixelMask(m_in[k].0 | dark | unphysical | inconsistent);
+        write_estimate(&mut out, k, [v0, v1, v2, residual], m_in[k], t);
     }
 }
 
