@@ -48,7 +48,30 @@ struct Params<'a> {
     rho_d: Vec<[f64; 3]>,
 }
 
-impl Params<'_> {
+impl<'a> Params<'a> {
+    /// The six parameter arrays of `n = eta.len()` elements, their lengths checked
+    /// ([`Params::len`]).
+    fn read(
+        eta: &'a PyReadonlyArray1<'_, f64>,
+        sigma_s: &'a PyReadonlyArray1<'_, f64>,
+        sigma_ss: &'a PyReadonlyArray1<'_, f64>,
+        rho_s: &'a PyReadonlyArray1<'_, f64>,
+        rho_ss: &PyReadonlyArray2<'_, f64>,
+        rho_d: &PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Self> {
+        let n = eta.len();
+        let p = Params {
+            eta: flat("eta", eta)?,
+            sigma_s: flat("sigma_s", sigma_s)?,
+            sigma_ss: flat("sigma_ss", sigma_ss)?,
+            rho_s: flat("rho_s", rho_s)?,
+            rho_ss: rows3("rho_ss", rho_ss, n)?,
+            rho_d: rows3("rho_d", rho_d, n)?,
+        };
+        p.len()?;
+        Ok(p)
+    }
+
     fn len(&self) -> PyResult<usize> {
         let n = self.eta.len();
         for (name, len) in [
@@ -107,15 +130,7 @@ pub fn mueller<'py>(
     camera_up: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = eta.len();
-    let p = Params {
-        eta: flat("eta", &eta)?,
-        sigma_s: flat("sigma_s", &sigma_s)?,
-        sigma_ss: flat("sigma_ss", &sigma_ss)?,
-        rho_s: flat("rho_s", &rho_s)?,
-        rho_ss: rows3("rho_ss", &rho_ss, n)?,
-        rho_d: rows3("rho_d", &rho_d, n)?,
-    };
-    p.len()?;
+    let p = Params::read(&eta, &sigma_s, &sigma_ss, &rho_s, &rho_ss, &rho_d)?;
     let normal = rows3("normal", &normal, n)?;
     let to_light = rows3("to_light", &to_light, n)?;
     let to_camera = rows3("to_camera", &to_camera, n)?;
@@ -188,15 +203,7 @@ pub fn coaxial<'py>(
     normal_camera: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, numpy::PyArray4<f64>>> {
     let n = eta.len();
-    let p = Params {
-        eta: flat("eta", &eta)?,
-        sigma_s: flat("sigma_s", &sigma_s)?,
-        sigma_ss: flat("sigma_ss", &sigma_ss)?,
-        rho_s: flat("rho_s", &rho_s)?,
-        rho_ss: rows3("rho_ss", &rho_ss, n)?,
-        rho_d: rows3("rho_d", &rho_d, n)?,
-    };
-    p.len()?;
+    let p = Params::read(&eta, &sigma_s, &sigma_ss, &rho_s, &rho_ss, &rho_d)?;
     let normals = rows3("normal_camera", &normal_camera, n)?;
     let out = py
         .detach(|| {
