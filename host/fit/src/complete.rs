@@ -14,13 +14,12 @@
 //!   *completed*; one whose flags withhold only η ([`FitFlag::EtaUnidentifiable`]) gets its
 //!   material's η and keeps the rest. Vertices the fit identified are never touched. An
 //!   unobserved vertex stays withheld.
-//! - **Its material** ([`assign`]): the clusters whose colour lies within the virtual-sample
-//!   kernel's reach ([`crate::augment::POOL_COLOUR_DISTANCE`]) of the vertex's own colour (its
-//!   samples' ρd at the prior lobe) are its candidates (every cluster when it has no sample,
-//!   the nearest by colour when none is that close); of them, the one whose own-fit members are
-//!   nearest along the mesh's edges (multi-source Dijkstra per cluster). So a vertex takes the
-//!   material of its surroundings that its colour allows: two materials of one colour and
-//!   different η stay where they lie, and a small patch of another colour keeps it.
+//! - **Its material** ([`assign`], module `assign`): of the clusters its colour allows (every
+//!   cluster when it has no sample), the one whose own-fit members are nearest along the mesh.
+//!   So a vertex takes the material of its surroundings that its colour allows: two materials
+//!   of one colour and different η stay where they lie, and a small patch of another colour
+//!   keeps it. Where several materials of different η remain possible, its η's σ adds their
+//!   spread about the chosen one ([`membership_sd`]): nearness is no evidence of η.
 //! - **The material's values** ([`MaterialValues`], from the cluster's own-fit members): η the
 //!   pooled one (`Pooled::mean`) with the predictive spread of a member √(se² + τ²), or, where
 //!   no pool formed, the members' median η and robust spread; σs, σss, ρs, ρss the cluster's
@@ -39,13 +38,16 @@
 //!   [`Completion::eta_withheld`]): the reason is the material's, named in the report.
 //! - Deterministic: a function of its inputs, no randomness, serial over vertices.
 
+mod assign;
 mod sigma;
+
+pub use assign::{Assigned, assign, membership_sd};
 
 pub use sigma::{MESH_NORMAL_MIN_VERTICES, mesh_normal_std_deg};
 
 use ellipso_model::geometry::TriangleMesh;
 
-use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
+use crate::augment::Augmentation;
 use crate::data::{FitFlag, SampleSet, VertexFit};
 use crate::model::{SampleFrames, unit_sample_at};
 
@@ -65,6 +67,11 @@ pub struct Completion {
     /// rest completed.
     #[serde(default)]
     pub eta_withheld: usize,
+    /// Of the vertices given their material's η, those whose colour allows more than one
+    /// material of different η (or who have no sample to show a colour): their η's σ holds the
+    /// spread over those materials ([`membership_sd`]).
+    #[serde(default)]
+    pub material_open: usize,
     /// Vertices the views see (not [`FitFlag::Unobserved`]: in view, unoccluded and lit in at
     /// least one fitted frame, decided from the poses and the mesh, never from the gates).
     pub observed: usize,
@@ -148,10 +155,12 @@ impl Completion {
     pub fn describe(&self) -> String {
         format!(
             "completion: {} vertices the views see but their samples do not identify took their \
-             material's values ({} with their own ρd), {} their material's η{}{}",
+             material's values ({} with their own ρd), {} their material's η; {} of all these lie \
+             between materials of different η their data cannot tell apart (η's σ widened){}{}",
             self.completed,
             self.own_rho_d,
             self.eta_from_material,
+            self.material_open,
             if self.eta_withheld > 0 {
                 format!(
                     "; {} without η, their material having none identified",
@@ -265,76 +274,6 @@ impl MaterialValues {
 /// completion).
 pub(crate) fn own_vertex(f: &VertexFit) -> bool {
     f.identifiable().vertex && !f.flags.contains(&FitFlag::FromMaterial)
-}
-
-/// The material of every vertex that needs one (module doc, "Its material"): cluster index,
-/// or `None` (no cluster, or the vertex is not to be completed).
-pub fn assign(
-    set: &SampleSet,
-    fits: &[VertexFit],
-    a: &Augmentation,
-    mesh: &TriangleMesh,
-    needs: &[bool],
-) -> Vec<Option<usize>> {
-    let k = a.clusters.len();
-    if k == 0 {
-        return vec![None; fits.len()];
-    }
-    let adj = crate::neighbours::adjacency(mesh);
-    let distances: Vec<Vec<f64>> = (0..k)
-        .map(|j| {
-            let sources: Vec<usize> = (0..fits.len())
-                .filter(|&v| a.assignment.get(v) == Some(&Some(j)) && own_vertex(&fits[v]))
-                .collect();
-            crate::neighbours::graph_distance(&adj, &sources)
-        })
-        .collect();
-    let scaling = a.partition.scaling;
-    // A vertex's colour: its fit's ρd where it has samples (fitted, or at the prior lobe for a
-    // vertex with too few). A vertex whose every sample was mixed has none: what its mixed
-    // samples show is dominated, on the underside and at silhouettes, by the board and the
-    // neighbours its footprint reached.
-    let colours: Vec<Option<[f64; 3]>> = (0..fits.len())
-        .map(|v| {
-            let vertex = set.vertices.get(v)?;
-            (needs[v] && !vertex.samples.is_empty()).then_some(fits[v].params.rho_d)
-        })
-        .collect();
-    let colour_distance = |v: usize, j: usize| {
-        let Some(rho_d) = colours[v] else {
-            return f64::INFINITY;
-        };
-        let f = scaling.feature(rho_d, 1.5);
-        let c = &a.clusters[j].centroid;
-        (0..3).map(|i| (f[i] - c[i]).powi(2)).sum::<f64>().sqrt()
-    };
-    (0..fits.len())
-        .map(|v| {
-            if !needs[v] {
-                return None;
-            }
-            let mut candidates: Vec<usize> = if colours[v].is_some() {
-                (0..k)
-                    .filter(|&j| colour_distance(v, j) < POOL_COLOUR_DISTANCE)
-                    .collect()
-            } else {
-                (0..k).collect()
-            };
-            if candidates.is_empty() {
-                candidates = vec![
-                    (0..k)
-                        .min_by(|&i, &j| colour_distance(v, i).total_cmp(&colour_distance(v, j)))
-                        .unwrap_or(0),
-                ];
-            }
-            let nearest = candidates
-                .iter()
-                .copied()
-                .min_by(|&i, &j| distances[i][v].total_cmp(&distances[j][v]))
-                .unwrap_or(candidates[0]);
-            Some(nearest)
-        })
-        .collect()
 }
 
 /// The η a completed vertex `v` of material `j` takes: the material's `[η, σ]`, unless the
@@ -514,14 +453,26 @@ pub fn complete(
         if !needs[v] {
             continue;
         }
-        let Some(j) = labels[v] else {
+        let Some(Assigned {
+            material: j,
+            candidates,
+        }) = &labels[v]
+        else {
             report.unassigned += 1;
             continue;
         };
+        let j = *j;
         let m = &materials[j];
-        let material_eta = m
-            .eta
-            .map(|material| local_or(material, &rings, &identified, v, j));
+        let material_eta = m.eta.map(|material| {
+            let [eta, sd] = local_or(material, &rings, &identified, v, j);
+            // Which of its candidate materials the vertex is of, its data do not say: η's σ
+            // carries that (`assign` module doc, "How sure").
+            let open = membership_sd(eta, candidates, &materials);
+            if open > 0.0 {
+                report.material_open += 1;
+            }
+            [eta, sd.hypot(open)]
+        });
         let f = &mut fits[v];
         // A material without an identified η completes the rest; η stays withheld, flagged.
         let [eta, eta_sd] = material_eta.unwrap_or([f.params.eta, f64::INFINITY]);
@@ -579,6 +530,7 @@ pub fn complete(
         f.flags.dedup();
         report.completed += 1;
     }
+    let labels = labels.into_iter().map(|l| l.map(|l| l.material)).collect();
     tally(&mut report, fits, a, labels, &materials);
     report
 }
