@@ -18,6 +18,7 @@ pub mod dlt;
 pub mod estimate;
 pub mod homography;
 pub mod ippe;
+pub mod raw_edges;
 pub mod refine;
 
 pub use board::{Assembly, BoardCorners, TagGridBoard, assemble_correspondences};

@@ -12,7 +12,10 @@
 //! 2. Scale to 8 bits by the 99.5th percentile (AprilTag thresholds locally; the scaling only
 //!    keeps the dynamic range) and detect tags.
 //! 3. Superpixel corners back to raw pixels: a superpixel of a `t × t` tile at integer coordinate
-//!    `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw `t·u + (t − 1)/2`.
+//!    `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw `t·u + (t − 1)/2`. Then
+//!    each tag's sides are fitted on the raw pixels and its corners are their intersections
+//!    ([`crate::pose::raw_edges`]): the superpixel quantises a corner to the tile (4 raw pixels
+//!    on a colour sensor).
 //! 4. Joint PnP per board over all its detected corners (IPPE + LM with distortion, flip check),
 //!    keep the board with the most corners, and express the pose in the world through that
 //!    board's `world_from_board`.
@@ -20,6 +23,7 @@
 use ellipso_model::camera::CameraModel;
 use nalgebra::{Isometry3, Point3};
 
+use crate::pose::raw_edges::{RawImage, refine_corners};
 use crate::pose::{
     BoardCorners, BoardPose, DetectError, DetectorConfig, PoseConfig, TagDetection, TagDetector,
     TagFamily, assemble_correspondences, estimate_board_pose,
@@ -281,9 +285,19 @@ pub fn detect_frame(
         c[0] = t * c[0] + (t - 1.0) / 2.0;
         c[1] = t * c[1] + (t - 1.0) / 2.0;
     };
+    let raw = RawImage {
+        data: frame.data_dn(),
+        width: frame.width() as usize,
+        height: frame.height() as usize,
+        tile,
+    };
     for d in &mut detections {
         d.corners_px.iter_mut().for_each(to_raw);
         to_raw(&mut d.centre_px);
+        // The corners on the raw pixels (the superpixel quantises them to a tile).
+        if let Some(refined) = refine_corners(&raw, &d.corners_px, d.family) {
+            d.corners_px = refined;
+        }
     }
     Ok(detections)
 }
