@@ -65,6 +65,11 @@
 //!   this one withholds the vertex from every output, `data::FitFlag::withholds_vertex`).
 //!
 //! Every returned parameter is finite and inside its bounds (`PbrdfParams::validate`).
+//!
+//! Here: the per-vertex driver (flags from the gates, starts, coarse to fine, passes) and
+//! [`fit_all`]; the settings are in `config`, the step from a finished LM state to a
+//! [`VertexFit`] (errors, flags, the prior result) in `finish`, [`forward_cost_all`] in
+//! `forward`, one vertex's least-squares problem in `problem`.
 
 mod albedos;
 mod config;

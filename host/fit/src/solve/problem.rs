@@ -21,6 +21,10 @@
 //! - Measurement mode only, the priors (one row each, in standard deviations): η about its
 //!   centre (the solver's weak default or the cluster's pooled value), ln σs and ln σss about
 //!   theirs, and the normal's two tangent components about the mesh normal (the prior cone).
+//!
+//! Here: the prepared data ([`Problem`], [`Scratch`]) and the counts; the unknowns, their box and
+//! priors are in `unknowns`, the measurement loss's noise weights in `weights`, the evaluation of
+//! the residuals in `residuals`.
 
 mod residuals;
 mod unknowns;
