@@ -14,7 +14,7 @@
 //!   repeated `Start` that finds the capture already running (`Busy`) or already finished
 //!   (`NotArmed`) means the first one took. `FireOne` is never repeated (it would fire twice).
 //! - Pulse events, faults, edges and unsolicited status arrive on [`TriggerLink::events`], each
-//!   stamped with the host time its frame was decoded ([`HostTimeUs`]).
+//!   stamped with the host time its frame was decoded ([`HostTimeUs`](time::HostTimeUs)).
 //! - When the stream ends or fails, the reader sends one [`LinkEvent::Disconnected`] and stops;
 //!   every later command fails with [`LinkError::Disconnected`]. Nothing received before is lost.
 //!

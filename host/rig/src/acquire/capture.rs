@@ -7,7 +7,8 @@
 //! ```
 //! - The camera thread only moves frames from the camera into the queue, so slow disk or slow
 //!   processing never starves the camera's own buffers until the queue is full; then the camera
-//!   reports underruns (counted in its [`CameraCounters`]), never silently.
+//!   reports underruns (counted in its [`CameraCounters`](crate::camera::CameraCounters)),
+//!   never silently.
 //! - The main loop owns the session log: pulses, frames (after their PNG is in place), pairings
 //!   and pairing errors, faults, link counters, the end. Pose tracking and fitting run after the
 //!   recorder, never on this path.
