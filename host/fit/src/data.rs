@@ -499,7 +499,7 @@ pub struct VertexFit {
     pub eta_unpooled: Option<[f64; 2]>,
     /// The vertex's data carry less information on η than the solver's default prior: its
     /// whitened rows, the prior's included, leave η more than half the prior's variance
-    /// (`solve.rs`, measurement loss without a pooled prior; also flagged
+    /// (`solve/finish.rs`, measurement loss without a pooled prior; also flagged
     /// [`FitFlag::EtaUnidentifiable`]). Unlike the standard error it does not shrink when the
     /// recorded noise is inflated uniformly, so the material pool judges with it whether the
     /// data moved η at all (`crate::augment::pool_eta`).

@@ -14,196 +14,45 @@
 //!   repeated `Start` that finds the capture already running (`Busy`) or already finished
 //!   (`NotArmed`) means the first one took. `FireOne` is never repeated (it would fire twice).
 //! - Pulse events, faults, edges and unsolicited status arrive on [`TriggerLink::events`], each
-//!   stamped with the host time its frame was decoded ([`HostTimeUs`]).
+//!   stamped with the host time its frame was decoded ([`HostTimeUs`](time::HostTimeUs)).
 //! - When the stream ends or fails, the reader sends one [`LinkEvent::Disconnected`] and stops;
 //!   every later command fails with [`LinkError::Disconnected`]. Nothing received before is lost.
+//!
+//! Here: the link's settings and [`TriggerLink`] (open, handshake, commands, clock sync); the
+//! reader thread, its events and counters are in `reader`, the errors in `error`, the clock
+//! model in [`clock`].
 
 pub mod clock;
+mod error;
+mod reader;
 /// Host and device time types (they are part of the session contract).
 pub use ellipso_session::time;
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::{Read, Write};
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use crossbeam_channel::{Receiver, RecvTimeoutError};
 use ellipso_protocol::{
-    BoardInfo, BoardMessage, CaptureConfig, CommandKind, Decoder, Edge, Fault, FrameError,
-    HostMessage, MAX_FRAME_LEN, PROTOCOL_VERSION, PulseEvent, RejectReason, Status, encode,
+    BoardInfo, BoardMessage, CaptureConfig, CommandKind, HostMessage, MAX_FRAME_LEN,
+    PROTOCOL_VERSION, RejectReason, Status, encode,
 };
 
+pub use error::{LinkError, describe_reject};
+pub use reader::{LinkEvent, LinkStats};
+
 use clock::{ClockModel, ClockModelConfig, ClockSample};
-use time::{DeviceTimeUs, HostClock, HostTimeUs};
-
-/// Something the board sent that is not a reply to a command.
-#[derive(Debug, Clone, PartialEq)]
-pub enum LinkEvent {
-    /// One pulse fired.
-    Pulse {
-        /// The event as the board reported it.
-        event: PulseEvent,
-        /// When its frame was decoded on the host.
-        t_host_recv: HostTimeUs,
-    },
-    /// A fault on the board.
-    Fault {
-        /// What happened.
-        fault: Fault,
-        /// When its frame was decoded on the host.
-        t_host_recv: HostTimeUs,
-    },
-    /// An output transition (only when `report_edges` is configured).
-    Edge(Edge),
-    /// A status the board sent by itself (e.g. a counted capture completed).
-    Status(Status),
-    /// The stream ended or failed; no more events follow.
-    Disconnected {
-        /// What the reader saw.
-        reason: String,
-    },
-}
-
-/// Counters of the link, readable at any time.
-#[derive(Debug, Default)]
-pub struct LinkStats {
-    bytes_rx: AtomicU64,
-    bytes_tx: AtomicU64,
-    frames_ok: AtomicU64,
-    bad_cobs: AtomicU64,
-    bad_crc: AtomicU64,
-    too_short: AtomicU64,
-    overflow: AtomicU64,
-    unknown_message: AtomicU64,
-    malformed: AtomicU64,
-}
+use reader::{Reply, reader_loop};
+use time::{DeviceTimeUs, HostClock};
 
 pub use ellipso_session::link_counters::LinkCounters;
 
 /// How many times the requested pings [`TriggerLink::sync_clock`] may send again while the clock
 /// fit has too few usable samples (round trips too long on a loaded host are rejected).
 pub const SYNC_EXTRA_PING_FACTOR: usize = 4;
-
-impl LinkStats {
-    fn count_error(&self, e: &FrameError) {
-        let c = match e {
-            FrameError::BadCobs => &self.bad_cobs,
-            FrameError::BadCrc => &self.bad_crc,
-            FrameError::TooShort { .. } => &self.too_short,
-            FrameError::Overflow { .. } => &self.overflow,
-            FrameError::UnknownMessage { .. } => &self.unknown_message,
-            FrameError::Malformed => &self.malformed,
-        };
-        c.fetch_add(1, Ordering::Relaxed);
-    }
-
-    /// Current counters.
-    pub fn snapshot(&self) -> LinkCounters {
-        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
-        LinkCounters {
-            bytes_rx: g(&self.bytes_rx),
-            bytes_tx: g(&self.bytes_tx),
-            frames_ok: g(&self.frames_ok),
-            bad_cobs: g(&self.bad_cobs),
-            bad_crc: g(&self.bad_crc),
-            too_short: g(&self.too_short),
-            overflow: g(&self.overflow),
-            unknown_message: g(&self.unknown_message),
-            malformed: g(&self.malformed),
-        }
-    }
-}
-
-/// Errors of the trigger link.
-#[derive(Debug, thiserror::Error)]
-pub enum LinkError {
-    /// The port or socket could not be opened.
-    #[error("cannot open trigger board at {path}: {reason}")]
-    Open {
-        /// What was opened.
-        path: String,
-        /// Why it failed.
-        reason: String,
-    },
-    /// The board speaks another protocol version.
-    #[error(
-        "trigger board '{board_name}' speaks protocol v{board}, this ellipso speaks v{host}: \
-         flash matching firmware or use a matching ellipso"
-    )]
-    VersionMismatch {
-        /// The board's version.
-        board: u16,
-        /// Ours.
-        host: u16,
-        /// The board's name.
-        board_name: String,
-    },
-    /// No reply in time.
-    #[error("no reply from the trigger board to {command:?} within {timeout_ms} ms")]
-    Timeout {
-        /// The command.
-        command: CommandKind,
-        /// The timeout, ms.
-        timeout_ms: u64,
-    },
-    /// The board refused the command.
-    #[error("the trigger board refused {command:?}: {}", describe_reject(reason))]
-    Rejected {
-        /// The command.
-        command: CommandKind,
-        /// The board's reason.
-        reason: RejectReason,
-    },
-    /// The stream is gone.
-    #[error("trigger link disconnected: {0}")]
-    Disconnected(String),
-    /// Writing failed.
-    #[error("writing to the trigger link failed: {0}")]
-    Io(#[from] std::io::Error),
-}
-
-/// A readable sentence for a board's refusal.
-pub fn describe_reject(reason: &RejectReason) -> String {
-    match reason {
-        RejectReason::FlashOutsideExposure => {
-            "the flash would light outside the exposure (flash delay + on-time > exposure; with a \
-             bracket, its longest step's on-time)"
-                .into()
-        }
-        RejectReason::FlashTooLong { max_us } => {
-            format!("flash on-time above the LED's safe maximum of {max_us} µs")
-        }
-        RejectReason::DutyCycleTooHigh { max_permille } => format!(
-            "flash duty cycle above the LED's thermal limit of {:.1} %",
-            *max_permille as f64 / 10.0
-        ),
-        RejectReason::PeriodTooShort { min_us } => {
-            format!("frame period too short for exposure + readout: at least {min_us} µs")
-        }
-        RejectReason::ExposureOutOfRange => "exposure outside the board's range".into(),
-        RejectReason::PeriodOutOfRange => "frame period outside the board's range".into(),
-        RejectReason::CountOutOfRange => "pulse count 0 or above the board's maximum".into(),
-        RejectReason::NotConfigured => "no capture configured yet".into(),
-        RejectReason::NotArmed => "the board is not armed".into(),
-        RejectReason::Busy => "a capture is running; stop it first".into(),
-        RejectReason::WrongTriggerSource => {
-            "the capture's trigger source is not host command".into()
-        }
-        RejectReason::TooSoon { wait_us } => {
-            format!("too soon after the last pulse; wait {wait_us} µs")
-        }
-        RejectReason::ProtocolMismatch { board } => format!("the board speaks protocol v{board}"),
-        RejectReason::BracketStepOutOfRange { step } => {
-            format!("bracket step {step}: relative energy outside (0, 1]")
-        }
-        RejectReason::BracketStepTooShort { step } => format!(
-            "bracket step {step}: its flash on-time rounds to 0 µs (raise the flash duration or \
-             that step's energy; a bracket needs a flash)"
-        ),
-    }
-}
 
 /// Settings of a link.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -225,8 +74,6 @@ impl Default for LinkConfig {
         }
     }
 }
-
-type Reply = (BoardMessage, HostTimeUs);
 
 /// An open, handshaken link to a trigger board.
 pub struct TriggerLink {
@@ -594,73 +441,6 @@ impl Drop for TriggerLink {
             let _ = h.join();
         }
     }
-}
-
-fn reader_loop(
-    mut reader: Box<dyn Read + Send>,
-    clock: HostClock,
-    replies: Sender<Reply>,
-    events: Sender<LinkEvent>,
-    stats: &LinkStats,
-    connected: &AtomicBool,
-    stop: &AtomicBool,
-) {
-    let mut decoder = Decoder::<BoardMessage>::new();
-    let mut buf = [0u8; 512];
-    let reason = loop {
-        if stop.load(Ordering::Acquire) {
-            break "link closed by the host".to_string();
-        }
-        let n = match reader.read(&mut buf) {
-            Ok(0) => break "end of stream".to_string(),
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
-                ) =>
-            {
-                continue;
-            }
-            Err(e) => break e.to_string(),
-        };
-        stats.bytes_rx.fetch_add(n as u64, Ordering::Relaxed);
-        let t = clock.now();
-        for result in decoder.feed(&buf[..n]) {
-            let msg = match result {
-                Ok(m) => m,
-                Err(e) => {
-                    stats.count_error(&e);
-                    tracing::debug!("bad frame from the trigger board: {e}");
-                    continue;
-                }
-            };
-            stats.frames_ok.fetch_add(1, Ordering::Relaxed);
-            let event = match msg {
-                BoardMessage::Pulse(event) => LinkEvent::Pulse {
-                    event,
-                    t_host_recv: t,
-                },
-                BoardMessage::Fault(fault) => LinkEvent::Fault {
-                    fault,
-                    t_host_recv: t,
-                },
-                BoardMessage::Edge(edge) => LinkEvent::Edge(edge),
-                BoardMessage::Status(s) => {
-                    // both a possible reply and news for whoever watches the capture
-                    let _ = replies.send((BoardMessage::Status(s), t));
-                    LinkEvent::Status(s)
-                }
-                reply => {
-                    let _ = replies.send((reply, t));
-                    continue;
-                }
-            };
-            let _ = events.send(event);
-        }
-    };
-    connected.store(false, Ordering::Release);
-    let _ = events.send(LinkEvent::Disconnected { reason });
 }
 
 #[cfg(test)]

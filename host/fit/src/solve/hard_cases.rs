@@ -2,6 +2,8 @@
 //! result must be finite, inside its bounds, flagged with the right reason, and carry an
 //! uncertainty — never a silent wrong number.
 
+use ellipso_model::optics::pbrdf::PbrdfParams;
+
 use super::super::data::{GateCounts, Sample, VertexGuide, VertexSamples, VirtualSample};
 use super::super::synthetic::orbit_views;
 use super::tests::{MATERIALS, angle_deg, assert_sane, material, sensor, synth, views};

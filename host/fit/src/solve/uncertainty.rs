@@ -30,7 +30,7 @@ pub(super) struct Uncertainty {
     /// (JᵀJ)⁻¹ of η without the s² scale: in the measurement loss, whose rows are whitened by
     /// the claimed noise and include the prior's row, the variance the data and the prior
     /// together leave η. Compared with the prior's own variance it says whether the data moved
-    /// η at all (`solve.rs`, `EtaUnidentifiable`); +inf where η is null.
+    /// η at all (`solve/finish.rs`, `EtaUnidentifiable`); +inf where η is null.
     pub eta_variance_unscaled: f64,
 }
 
