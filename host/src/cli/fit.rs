@@ -34,7 +34,7 @@ pub struct Args {
     /// 8, fewer when the surface converges; a shard runs 1).
     #[arg(long, value_parser = super::limits::outer_iterations)]
     pub outer: Option<usize>,
-    /// Target vertex count of the mesh carved without `--mesh`, 16..=2000000.
+    /// Target vertex count of the mesh carved without `--mesh`, 100..=2000000.
     #[arg(long, default_value_t = 2500, value_parser = super::limits::vertices)]
     pub vertices: usize,
     /// Do not carve the visual hull for a `--mesh` (the surface update then runs without the

@@ -9,7 +9,7 @@
 //! - the photo interval: a finite number of ms in `(0, 3_600_000]`; the board then checks it
 //!   against the exposure before anything is recorded;
 //! - outer iterations of the fit: `1..=20` (each is a full solve and shape update);
-//! - mesh vertex counts: `16..=2_000_000`;
+//! - mesh vertex counts: `100..=2_000_000`;
 //! - real-valued settings: finite, inside the range their help text states.
 
 use std::fmt::Display;
