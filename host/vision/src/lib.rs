@@ -15,6 +15,7 @@
 #![cfg_attr(not(test), forbid(unsafe_code))] // a detector test reads a tag image through apriltag-sys
 
 pub mod calibrate;
+pub mod flat_raw;
 mod lm;
 pub mod pose;
 pub mod process;

@@ -4,18 +4,21 @@
 //! so a slow detector cannot drop frames.
 //!
 //! Per frame:
-//! 1. Superpixel demosaic (no interpolation) and pick the detection image ([`DetectImage`]):
+//! 1. The detection image ([`DetectImage`], [`detection_image`]): `s0` on the full raw
+//!    resolution with each mosaic phase's gain divided out ([`crate::flat_raw`]), `I0`/`I90` on
+//!    the superpixel demosaic (no interpolation):
 //!    `s0` by default — on matte paper boards it has twice the signal of one analyser and gave
 //!    ~5× smaller rotation errors than `I90` or `I0` in `ellipso bench pose` (docs/pose.md).
 //!    `I90` (cross-polarised) is the choice for glossy or laminated boards, where the flash's
 //!    specular glare lives in the co-polarised `I0` and `s0`.
 //! 2. Scale to 8 bits by the 99.5th percentile (AprilTag thresholds locally; the scaling only
 //!    keeps the dynamic range) and detect tags.
-//! 3. Superpixel corners back to raw pixels: a superpixel of a `t × t` tile at integer coordinate
-//!    `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw `t·u + (t − 1)/2`. Then
-//!    each tag's sides are fitted on the raw pixels and its corners are their intersections
-//!    ([`crate::pose::raw_edges`]): the superpixel quantises a corner to the tile (4 raw pixels
-//!    on a colour sensor).
+//! 3. Corners in raw pixels: `s0`'s are already; a superpixel of a `t × t` tile at integer
+//!    coordinate `u` covers raw pixels `t·u … t·u + t − 1`, so its centre is raw
+//!    `t·u + (t − 1)/2`. Then each tag's sides are fitted on the raw pixels with a level per
+//!    mosaic phase and its corners are their intersections ([`crate::pose::raw_edges`]): the
+//!    detector's corners carry the flattened image's residual phase pattern (`I0`/`I90`: the
+//!    tile's quantisation).
 //! 4. Joint PnP per board over all its detected corners (IPPE + LM with distortion, flip check),
 //!    keep the board with the most corners, and express the pose in the world through that
 //!    board's `world_from_board`.
@@ -231,12 +234,24 @@ pub fn detection_plane(
     intensity_plane(frame, plane).map_err(|e| TrackRejection::Frame(e.to_string()))
 }
 
-/// The 8-bit detection image of a frame (superpixel resolution) and its tile size.
+/// The 8-bit detection image of a frame and how many raw pixels one of its pixels spans: `s0`
+/// at the full raw resolution (each mosaic phase's gain divided out, [`crate::flat_raw`]: the
+/// board's ink and paper look the same through every phase), `I0`/`I90` on the superpixel image
+/// (one analyser's pixels are a quarter of the mosaic).
 pub fn detection_image(
     frame: &RawFrame,
     kind: DetectImage,
 ) -> Result<(Vec<u8>, usize, usize, usize), TrackRejection> {
-    let (plane, w, h) = detection_plane(frame, kind)?;
+    let (plane, w, h, span) = match kind {
+        DetectImage::S0 => {
+            let (plane, w, h) = crate::flat_raw::flat_raw(frame);
+            (plane, w, h, 1)
+        }
+        _ => {
+            let (plane, w, h) = detection_plane(frame, kind)?;
+            (plane, w, h, frame.layout().tile_px() as usize)
+        }
+    };
     let mut sorted: Vec<f32> = plane.iter().copied().filter(|v| v.is_finite()).collect();
     sorted.sort_by(f32::total_cmp);
     let p995 = sorted
@@ -249,11 +264,11 @@ pub fn detection_image(
         .iter()
         .map(|v| (v * scale).clamp(0.0, 255.0) as u8)
         .collect();
-    Ok((gray, w, h, frame.layout().tile_px() as usize))
+    Ok((gray, w, h, span))
 }
 
-/// Detections with a corner closer than this to the detection image's border (detection-image
-/// pixels; outside counts as closer) are dropped. A tag cut by the border is still decoded when
+/// Detections with a corner closer than this to the image border (superpixels: tiles of the
+/// raw image, whatever the detection image; outside counts as closer) are dropped. A tag cut by the border is still decoded when
 /// its bits are visible, but the quad's edge fit then runs into the frame edge: on the rendered
 /// calibration capture such corners were off by 2–27 px (`ellipso bench calibration`, docs/pose.md
 /// §3) and made whole views outliers.
@@ -267,20 +282,30 @@ pub fn detect_frame(
     frame: &RawFrame,
     image: DetectImage,
 ) -> Result<Vec<TagDetection>, TrackRejection> {
-    let (gray, w, h, tile) = detection_image(frame, image)?;
+    let (gray, w, h, span) = detection_image(frame, image)?;
+    // The quad search on a full-resolution image decimates by the tile besides: its quads are
+    // then searched at twice the linear resolution the superpixel image gave them (what makes
+    // 612×512 colour frames detectable: their superpixel image is 153×128), at a quarter of
+    // the cost the full resolution would take; decoding and edges stay at full resolution.
+    let tile = frame.layout().tile_px() as usize;
+    let base = detector.config().decimation;
+    detector.set_decimation(if span == 1 {
+        base * tile as f32 / 2.0
+    } else {
+        base
+    });
     let mut detections = detector
         .detect(&gray, w, h)
         .map_err(|e| TrackRejection::Frame(e.to_string()))?;
-    let (max_x, max_y) = (
-        w as f64 - 1.0 - BORDER_MARGIN_PX,
-        h as f64 - 1.0 - BORDER_MARGIN_PX,
-    );
+    // The margin is the same on the raw image whatever the detection image's resolution.
+    let margin = BORDER_MARGIN_PX * (tile / span) as f64;
+    let (max_x, max_y) = (w as f64 - 1.0 - margin, h as f64 - 1.0 - margin);
     detections.retain(|d| {
-        d.corners_px.iter().all(|c| {
-            (BORDER_MARGIN_PX..=max_x).contains(&c[0]) && (BORDER_MARGIN_PX..=max_y).contains(&c[1])
-        })
+        d.corners_px
+            .iter()
+            .all(|c| (margin..=max_x).contains(&c[0]) && (margin..=max_y).contains(&c[1]))
     });
-    let t = tile as f64;
+    let t = span as f64;
     let to_raw = |c: &mut [f64; 2]| {
         c[0] = t * c[0] + (t - 1.0) / 2.0;
         c[1] = t * c[1] + (t - 1.0) / 2.0;
@@ -294,7 +319,7 @@ pub fn detect_frame(
     for d in &mut detections {
         d.corners_px.iter_mut().for_each(to_raw);
         to_raw(&mut d.centre_px);
-        // The corners on the raw pixels (the superpixel quantises them to a tile).
+        // The corners fitted on the raw pixels (module doc, step 3).
         if let Some(refined) = refine_corners(&raw, &d.corners_px, d.family) {
             d.corners_px = refined;
         }

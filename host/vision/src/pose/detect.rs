@@ -178,6 +178,9 @@ pub struct TagDetection {
 pub struct TagDetector {
     inner: apriltag::Detector,
     config: DetectorConfig,
+    /// The quad decimation in use ([`TagDetector::set_decimation`]; `config.decimation` at
+    /// first).
+    decimation: f32,
 }
 
 impl std::fmt::Debug for TagDetector {
@@ -230,12 +233,25 @@ impl TagDetector {
         inner.set_sigma(config.blur_sigma);
         inner.set_refine_edges(config.refine_edges);
         inner.set_shapening(config.decode_sharpening);
-        Ok(TagDetector { inner, config })
+        Ok(TagDetector {
+            inner,
+            decimation: config.decimation,
+            config,
+        })
     }
 
     /// The settings this detector was built with.
     pub fn config(&self) -> &DetectorConfig {
         &self.config
+    }
+
+    /// Sets the quad-detection decimation (≥ 1 and finite; anything else is ignored) for the
+    /// next detections: an image of a different resolution may need another.
+    pub fn set_decimation(&mut self, decimation: f32) {
+        if decimation >= 1.0 && decimation.is_finite() && decimation != self.decimation {
+            self.inner.set_decimation(decimation);
+            self.decimation = decimation;
+        }
     }
 
     /// Detects tags in a row-major 8-bit grayscale image without padding (`gray.len() == w·h`).
@@ -259,7 +275,7 @@ impl TagDetector {
                 expected,
             });
         }
-        let decimation = self.config.decimation;
+        let decimation = self.decimation;
         if width.min(height) < MIN_TAG_SIDE_PX
             || quad_image_side(width, decimation).min(quad_image_side(height, decimation))
                 < MIN_QUAD_IMAGE_SIDE_PX
