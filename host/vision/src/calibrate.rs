@@ -21,6 +21,7 @@
 pub mod bundle;
 pub mod determined;
 pub mod flash;
+pub mod flash_polariser;
 pub mod highlight;
 pub mod report;
 pub mod session;
