@@ -2,7 +2,7 @@
 //! frames of the shipped glossy sphere with a known flash offset and polariser angle.
 
 use super::*;
-use crate::calibrate::flash::{HighlightObservation, estimate_flash_position, sphere_point};
+use crate::calibrate::flash::{HighlightObservation, SpherePoint, estimate_flash_position, sphere_point};
 use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
 use ellipso_model::mosaic::SensorLayout;
 use ellipso_polar::synthetic::mosaic_from_stokes;
@@ -24,10 +24,7 @@ fn view(polariser_deg: f64, dolp: f64, w: f64) -> HighlightStokes {
 }
 
 fn config() -> PolarConfig {
-    PolarConfig {
-        demosaic: ellipso_polar::DemosaicMethod::Bilinear,
-        ..PolarConfig::default()
-    }
+    stokes_config()
 }
 
 #[test]
@@ -51,6 +48,38 @@ fn weighted_circular_mean_and_its_scatter() {
         estimate_polariser_angle(&views[..1]),
         Err(PolariserError::TooFewViews(1))
     );
+}
+
+/// The model's reading is the polariser angle, within 0.1°, for a highlight on the optical
+/// axis (the analysers' nominal angles, Fresnel s ≈ p), turns off axis by a small amount that changes
+/// little with the angle, and is the negated AoLP (a 30° polariser does not read −30°).
+#[test]
+fn model_reading_on_and_off_axis() {
+    let flash = Point3::new(0.0, -0.03, 0.0);
+    let on_axis = SpherePoint {
+        point_camera_m: Point3::new(0.0, 0.0, 0.5),
+        // the mirror normal: bisecting the directions to the camera and to the flash
+        normal_camera: ((-nalgebra::Vector3::new(0.0, 0.0, 0.5)).normalize()
+            + (flash.coords - nalgebra::Vector3::new(0.0, 0.0, 0.5)).normalize())
+        .normalize(),
+    };
+    for p in [0.0, 7.0, 30.0, -60.0] {
+        let r = model_reading_deg(&on_axis, &flash, p).unwrap();
+        // the flash's own ray is 3.4° off the axis (its polarisation is across that ray) and
+        // r_s ≠ r_p at 1.7°: up to 0.07° at 30°
+        assert!((r - p).abs() < 0.1, "on axis: {p}° reads {r}°");
+    }
+    // 8° right of and 6° below the axis
+    let at = nalgebra::Vector3::new(0.07, 0.052, 0.5);
+    let normal = ((-at).normalize() + (flash.coords - at).normalize()).normalize();
+    let off = SpherePoint {
+        point_camera_m: Point3::from(at),
+        normal_camera: normal,
+    };
+    let c0 = model_reading_deg(&off, &flash, 0.0).unwrap();
+    let c7 = model_reading_deg(&off, &flash, 7.0).unwrap() - 7.0;
+    assert!(c0.abs() > 0.05 && c0.abs() < 2.0, "off-axis turn {c0}°");
+    assert!((c7 - c0).abs() < 0.05, "turn at 0° {c0}°, at 7° {c7}°");
 }
 
 /// A 12-bit mono mosaic: an unpolarised background of `bg` with a Gaussian spot (σ 3 superpixels)
