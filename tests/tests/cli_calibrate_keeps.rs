@@ -43,7 +43,7 @@ fn a_failed_flash_part_keeps_the_camera_and_names_the_photos() {
         "a flash was measured without a sphere:\n{stdout}"
     );
     for named in [
-        "flash position was not measured",
+        "flash (position and polariser angle) was not measured",
         "[camera] section is written",
         "near each corner",
         "two distances",

@@ -112,7 +112,7 @@ pub enum PolariserError {
     NoValidPixels { x: f64, y: f64 },
     /// The highlight is (nearly) unpolarised.
     #[error(
-        "the highlight at ({x:.1}, {y:.1}) px has DoLP {dolp:.2}, need ≥ {MIN_DOLP}: is the flash polariser fitted, and the sphere a glossy dielectric (glass, glazed ceramic, not chrome)?"
+        "the highlight at ({x:.1}, {y:.1}) px has DoLP {dolp:.2}, need ≥ {MIN_DOLP}: is the flash polariser fitted, and is the light at the highlight the flash's own reflection (a glossy sphere, no lamp reflected there)?"
     )]
     NotPolarised { x: f64, y: f64, dolp: f64 },
     /// Fewer than two views.
