@@ -8,9 +8,12 @@
 //! default 30 mm above the lens) behind a polariser turned by [`POLARISER_ERROR_DEG`] from the
 //! recorded 0° (the scene's `flash_polariser_error` effect: the session records 0°, the render
 //! uses the true angle). The session is written as `ellipso capture --sim` writes it and
-//! calibrated by [`ellipso_vision::calibrate::session::run`] in its `calibrate flash` mode —
-//! tags detected, the camera calibrated from the same frames, highlights found with the
-//! calibrated poses — so the errors include the pose and intrinsics errors a user's run has.
+//! calibrated by [`ellipso_vision::calibrate::session::run`] in its `calibrate flash` mode into
+//! a rig file whose `[camera]` is the simulator's (a calibrated rig's is within ~1e-4 of its
+//! camera, docs/pose.md §3) — tags detected, each view posed from them with that camera,
+//! highlights found with those poses — so the errors include the pose errors a user's run has.
+//! (Calibrating the camera from these frames too is refused: a hand-held walk around a sphere
+//! tilts the board by 8°, which leaves fx known to only 0.5 %.)
 //!
 //! Sizes: 816×680 is a third of the 5 MP camera's sides, the sphere ≈ 180 raw px across and
 //! its highlight ≈ 25 superpixels (the image side is measured at that size by the vision
@@ -130,7 +133,21 @@ pub fn run(work: &Path, say: &dyn Say) -> Result<FlashRecovered, RunError> {
         &mut |_, _| {},
     )
     .map_err(|e| RunError::msg(e.to_string()))?;
+    // a calibrated rig's file: its [camera] (here the simulator's) poses the views, and the
+    // [flash] table is written beside it
     let rig = work.join("rig.toml");
+    let camera = {
+        let r = Renderer::new(&scene, options).map_err(|e| RunError::msg(e.to_string()))?;
+        *r.camera()
+    };
+    let mut table = toml::Table::new();
+    table.insert(
+        "camera".into(),
+        toml::Value::try_from(camera).map_err(|e| RunError::msg(e.to_string()))?,
+    );
+    let text = toml::to_string(&table).map_err(|e| RunError::msg(e.to_string()))?;
+    std::fs::write(&rig, format!("# the flash bench's rig\n{text}"))
+        .map_err(|e| RunError::msg(format!("{}: {e}", rig.display())))?;
     let args = session::Args {
         session: dir,
         out: Some(rig),

@@ -24,7 +24,7 @@
 
 use std::path::PathBuf;
 
-use ellipso_model::camera::CAMERA_PARAM_NAMES;
+use ellipso_model::camera::{CAMERA_PARAM_NAMES, CameraModel};
 use ellipso_run_error::{Context, RunError, Say};
 use ellipso_run_error::{ensure, say};
 use rayon::prelude::*;
@@ -158,6 +158,12 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         &[&args.session],
         Some("calibration"),
     )?;
+    // `calibrate flash` into a rig file that has a [camera]: the views are posed with it
+    let rig_camera = if args.flash_only {
+        rig_camera(out.path()).map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?
+    } else {
+        None
+    };
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
     let boards = crate::process::boards_of(&session)?;
@@ -198,16 +204,151 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
     let usable = views.iter().filter(|v| v.len() >= 8).count();
     let causes = frame_causes(&detected);
     say!(say, "{usable} frames with ≥ 2 tags of one board ({causes})");
+    let detected_views: Vec<_> = detected
+        .iter()
+        .map(|d| d.as_ref().map(|(_, b)| *b).unwrap_or_default())
+        .collect();
+    let (camera, posed, camera_text) = match rig_camera {
+        Some(camera) => {
+            ensure!(
+                (camera.width, camera.height) == (s.width, s.height),
+                "{}: its [camera] is {}×{}, the session's frames {}×{}: not this camera's rig file",
+                out.shown().display(),
+                camera.width,
+                camera.height,
+                s.width,
+                s.height
+            );
+            let posed = pose_views(&camera, &views, say);
+            say!(
+                say,
+                "{} views posed with the [camera] of {}",
+                posed.len(),
+                out.shown().display()
+            );
+            (camera, posed, None)
+        }
+        None => {
+            let cal = calibrate_views(&views, args, (s.width, s.height), say)
+                .with_context(|| format!("{} frames: {causes}", frames.len()))?;
+            let posed = cal
+                .views
+                .iter()
+                .map(|v| (v.index, v.camera_from_board))
+                .collect();
+            (cal.camera, posed, Some(cal.to_toml_camera_section()))
+        }
+    };
+    let camera_text = camera_text.unwrap_or_default();
+    let Some(sphere) = args.sphere else {
+        out.write(camera_text)?;
+        say!(say, "rig sections written to {}", out.shown().display());
+        return Ok(SessionCalibration {
+            camera,
+            flash: None,
+        });
+    };
+    // per calibrated view: its frame, board and pose → the highlight and its polarisation
+    let highlights: Vec<ViewHighlight> = posed
+        .par_iter()
+        .filter_map(|(index, camera_from_board)| {
+            let board = &boards[detected_views[*index]?];
+            let entry = frames[*index];
+            let found = session
+                .load_frame(entry)
+                .map_err(|e| e.to_string())
+                .and_then(|(w, h, px)| {
+                    RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
+                })
+                .and_then(|raw| {
+                    view_highlight(
+                        &raw,
+                        &camera,
+                        camera_from_board,
+                        &board.world_from_board(),
+                        &sphere,
+                    )
+                });
+            match found {
+                Ok(h) => Some(h),
+                Err(why) => {
+                    say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
+                    None
+                }
+            }
+        })
+        .collect();
+    let flash = match measure_flash(&camera, &highlights) {
+        Ok(flash) => flash,
+        Err(e) => {
+            let why = e.to_string();
+            if args.flash_only {
+                return Err(RunError::msg(flash_not_measured(&why, true)));
+            }
+            // what was determined is kept: the camera section is written, then the flash
+            // part's failure is the command's error, with the photos that would measure it
+            out.write(camera_text)?;
+            say!(say, "[camera] written to {}", out.shown().display());
+            return Err(RunError::msg(flash_not_measured(&why, false)));
+        }
+    };
+    let p = flash.position.flash_camera_m.coords * 1e3;
+    let sd = flash.position.std_m.map(|v| v * 1e3);
+    say!(
+        say,
+        "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
+        p.x,
+        sd[0],
+        p.y,
+        sd[1],
+        p.z,
+        sd[2],
+        highlights.len(),
+        flash.position.rms_angle_rad * 1e3
+    );
+    say!(
+        say,
+        "flash polariser at {:.3} ± {:.3}° from camera x towards y (largest per-view geometric correction {:.3}°, lowest highlight DoLP {:.2})",
+        flash.polariser.polariser_deg,
+        flash.polariser.std_deg,
+        flash.polariser.max_correction_deg,
+        flash.polariser.min_dolp
+    );
+    let section = flash.to_toml_flash_section();
+    if args.flash_only {
+        // the rig file's other tables are kept as they are
+        let existing = match std::fs::read_to_string(out.path()) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+            Err(e) => return Err(RunError::msg(format!("{}: {e}", out.shown().display()))),
+        };
+        let text = replace_flash_section(&existing, &section)
+            .map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?;
+        out.write(text)?;
+        say!(say, "[flash] written to {}", out.shown().display());
+    } else {
+        out.write(format!("{camera_text}\n{section}"))?;
+        say!(say, "rig sections written to {}", out.shown().display());
+    }
+    Ok(SessionCalibration {
+        camera,
+        flash: Some(flash),
+    })
+}
+
+/// Calibrates the camera from the views and says the result (parameters ± σ, rejected views,
+/// the views' spread).
+fn calibrate_views(
+    views: &[crate::calibrate::views::View],
+    args: &Args,
+    size: (u32, u32),
+    say: &dyn Say,
+) -> Result<crate::calibrate::Calibration, crate::calibrate::CalibError> {
     let config = CalibConfig {
         fix_k3: !args.free_k3,
         ..CalibConfig::default()
     };
-    let cal = calibrate(&views, (s.width, s.height), &config)
-        .with_context(|| format!("{} frames: {causes}", frames.len()))?;
-    let detected: Vec<_> = detected
-        .into_iter()
-        .map(|d| d.unwrap_or_default())
-        .collect();
+    let cal = calibrate(views, size, &config)?;
     say!(
         say,
         "reprojection RMS {:.4} px over {} views ({} rejected)",
@@ -238,100 +379,65 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         cal.spread.out_of_plane_deg,
         cal.spread.common_direction_camera.as_slice()
     );
-    let camera_text = cal.to_toml_camera_section();
-    let Some(sphere) = args.sphere else {
-        out.write(camera_text)?;
-        say!(say, "rig sections written to {}", out.shown().display());
-        return Ok(SessionCalibration {
-            camera: cal.camera,
-            flash: None,
-        });
+    Ok(cal)
+}
+
+/// The `[camera]` table of the rig file at `path`, if the file exists and has one.
+fn rig_camera(path: &std::path::Path) -> Result<Option<CameraModel>, String> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e.to_string()),
     };
-    // per calibrated view: its frame, board and pose → the highlight and its polarisation
-    let views: Vec<ViewHighlight> = cal
-        .views
-        .par_iter()
-        .filter_map(|v| {
-            let board = &boards[detected[v.index].1?];
-            let entry = frames[v.index];
-            let found = session
-                .load_frame(entry)
-                .map_err(|e| e.to_string())
-                .and_then(|(w, h, px)| {
-                    RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
+    let table: toml::Table = toml::from_str(&text).map_err(|e| format!("not TOML: {e}"))?;
+    table
+        .get("camera")
+        .map(|c| {
+            c.clone()
+                .try_into::<CameraModel>()
+                .map_err(|e| format!("[camera]: {e}"))
+        })
+        .transpose()
+}
+
+/// Each view with at least 2 tags (8 corners) posed with a known camera: (view index,
+/// camera_from_board); a view whose pose is rejected (reprojection RMS over 1 px: a camera
+/// that is not this one; an ambiguous flip) is said with why and left out.
+fn pose_views(
+    camera: &CameraModel,
+    views: &[crate::calibrate::views::View],
+    say: &dyn Say,
+) -> Vec<(usize, ellipso_model::camera::Pose)> {
+    use crate::pose::estimate::{Correspondence, PoseConfig, estimate_board_pose};
+    // the views carry no tag ids (one board's corners): the tag count is not checked, the
+    // corner count and every other acceptance test of the tracker are
+    let config = PoseConfig {
+        min_tags: 0,
+        ..PoseConfig::default()
+    };
+    views
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.len() >= 8)
+        .filter_map(|(index, v)| {
+            // one board's corners, as `calibrate` poses its views (no tag ids: one tag)
+            let corr: Vec<Correspondence> = v
+                .iter()
+                .enumerate()
+                .map(|(k, (q, px))| Correspondence {
+                    tag_id: 0,
+                    corner: (k % 4) as u8,
+                    point_board_m: *q,
+                    pixel: [px.x, px.y],
                 })
-                .and_then(|raw| {
-                    view_highlight(
-                        &raw,
-                        &cal.camera,
-                        &v.camera_from_board,
-                        &board.world_from_board(),
-                        &sphere,
-                    )
-                });
-            match found {
-                Ok(h) => Some(h),
-                Err(why) => {
-                    say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
+                .collect();
+            match estimate_board_pose(camera, &corr, &config) {
+                Ok(p) => Some((index, p.camera_from_board)),
+                Err(e) => {
+                    say!(say, "  view {index}: not posed: {e}");
                     None
                 }
             }
         })
-        .collect();
-    let flash = match measure_flash(&cal.camera, &views) {
-        Ok(flash) => flash,
-        Err(e) => {
-            let why = e.to_string();
-            if args.flash_only {
-                return Err(RunError::msg(flash_not_measured(&why, true)));
-            }
-            // what was determined is kept: the camera section is written, then the flash
-            // part's failure is the command's error, with the photos that would measure it
-            out.write(camera_text)?;
-            say!(say, "[camera] written to {}", out.shown().display());
-            return Err(RunError::msg(flash_not_measured(&why, false)));
-        }
-    };
-    let p = flash.position.flash_camera_m.coords * 1e3;
-    let sd = flash.position.std_m.map(|v| v * 1e3);
-    say!(
-        say,
-        "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
-        p.x,
-        sd[0],
-        p.y,
-        sd[1],
-        p.z,
-        sd[2],
-        views.len(),
-        flash.position.rms_angle_rad * 1e3
-    );
-    say!(
-        say,
-        "flash polariser at {:.3} ± {:.3}° from camera x towards y (largest per-view geometric correction {:.3}°, lowest highlight DoLP {:.2})",
-        flash.polariser.polariser_deg,
-        flash.polariser.std_deg,
-        flash.polariser.max_correction_deg,
-        flash.polariser.min_dolp
-    );
-    let section = flash.to_toml_flash_section();
-    if args.flash_only {
-        // the rig file's other tables are kept as they are
-        let existing = match std::fs::read_to_string(out.path()) {
-            Ok(text) => text,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-            Err(e) => return Err(RunError::msg(format!("{}: {e}", out.shown().display()))),
-        };
-        let text = replace_flash_section(&existing, &section)
-            .map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?;
-        out.write(text)?;
-        say!(say, "[flash] written to {}", out.shown().display());
-    } else {
-        out.write(format!("{camera_text}\n{section}"))?;
-        say!(say, "rig sections written to {}", out.shown().display());
-    }
-    Ok(SessionCalibration {
-        camera: cal.camera,
-        flash: Some(flash),
-    })
+        .collect()
 }
