@@ -99,7 +99,9 @@ pub fn scene() -> Result<Scene, RunError> {
         .replace(stated, &format!("offset_m = {OFFSET_M:?}"))
         .replace(
             "[effects]\n",
-            &format!("[effects]\nflash_polariser_error = {{ angle_deg = {POLARISER_ERROR_DEG:?} }}\n"),
+            &format!(
+                "[effects]\nflash_polariser_error = {{ angle_deg = {POLARISER_ERROR_DEG:?} }}\n"
+            ),
         );
     Scene::from_toml_str(&text, &path).map_err(|e| RunError::msg(e.to_string()))
 }
@@ -216,9 +218,15 @@ mod tests {
         let sd = r.position_std_mm;
         let sd_norm = (sd[0] * sd[0] + sd[1] * sd[1] + sd[2] * sd[2]).sqrt();
         assert!(r.position_err_mm <= 4.0 * sd_norm + 0.05, "{r:?}");
-        assert!(r.polariser_err_deg <= 4.0 * r.polariser_std_deg + 0.02, "{r:?}");
+        assert!(
+            r.polariser_err_deg <= 4.0 * r.polariser_std_deg + 0.02,
+            "{r:?}"
+        );
         // the rig file holds what was estimated
         let text = std::fs::read_to_string(tmp.path().join("rig.toml")).unwrap();
-        assert!(text.contains("[flash]") && text.contains("polariser_deg = "), "{text}");
+        assert!(
+            text.contains("[flash]") && text.contains("polariser_deg = "),
+            "{text}"
+        );
     }
 }

@@ -160,7 +160,8 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
     )?;
     // `calibrate flash` into a rig file that has a [camera]: the views are posed with it
     let rig_camera = if args.flash_only {
-        rig_camera(out.path()).map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?
+        rig_camera(out.path())
+            .map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?
     } else {
         None
     };

@@ -2,7 +2,9 @@
 //! frames of the shipped glossy sphere with a known flash offset and polariser angle.
 
 use super::*;
-use crate::calibrate::flash::{HighlightObservation, SpherePoint, estimate_flash_position, sphere_point};
+use crate::calibrate::flash::{
+    HighlightObservation, SpherePoint, estimate_flash_position, sphere_point,
+};
 use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
 use ellipso_model::mosaic::SensorLayout;
 use ellipso_polar::synthetic::mosaic_from_stokes;
