@@ -2,7 +2,8 @@
 //! render the calibration captures of a real sensor (every fixed-pattern effect at realistic
 //! magnitudes), measure them as `ellipso calibrate sensor` does, compare what was recovered
 //! with what the simulator put in, and check `ellipso polar` with the calibration against the
-//! ideal sensor on a rendered object frame. Writes `docs/sensor-calibration.json` and the
+//! ideal sensor on a rendered object frame; `ellipso calibrate flash` on a simulated sphere
+//! capture against the simulator's flash ([`flash`]). Writes `docs/sensor-calibration.json` and the
 //! measured table of `docs/sensor-calibration.md` (between its markers).
 //!
 //! Contract: the scene is the demo's (its camera, gain, lens) with the effects of
@@ -11,6 +12,7 @@
 //! as `null` with the reason in `not_measured`.
 
 pub mod eta_shift;
+pub mod flash;
 
 use std::path::{Path, PathBuf};
 
@@ -52,9 +54,9 @@ pub struct Recovered {
     pub extinction_rel_err: f64,
     /// Largest relative error of the vignetting factor over the frame.
     pub vignetting_err: f64,
-    /// Not measured yet (`calibrate flash` is not built).
+    /// |flash offset estimated by `calibrate flash` − the simulator's|, mm ([`flash`]).
     pub flash_position_err_mm: Option<f64>,
-    /// Not measured yet.
+    /// |flash polariser angle estimated − the simulator's|, degrees ([`flash`]).
     pub flash_polariser_angle_err_deg: Option<f64>,
     /// Largest per-material η change (percentage points of the true η) between the effects
     /// capture fitted with its calibration and the ideal sensor's capture ([`eta_shift`]).
@@ -297,6 +299,16 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
     let effects_clean = demo_with(REAL_SENSOR_EFFECTS, false)?;
     let ideal = demo_with("vignetting = { exponent = 4.0 }\n", false)?;
     let (smax, srms, srms_u) = stokes_check(&effects_clean, &ideal, &cal, resolution)?;
+    let flash = flash::run(&work.join("flash"), say)?;
+    say!(
+        say,
+        "  flash: offset error {:.3} mm (1σ {:.3?} mm), polariser error {:.3}° (1σ {:.3}°) from {} highlights",
+        flash.position_err_mm,
+        flash.position_std_mm,
+        flash.polariser_err_deg,
+        flash.polariser_std_deg,
+        flash.highlights
+    );
     let shift = if photos > 0 {
         say!(
             say,
@@ -322,8 +334,8 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
         analyser_angle_rms_deg: (ang2 / na).sqrt(),
         extinction_rel_err,
         vignetting_err: vig_err,
-        flash_position_err_mm: None,
-        flash_polariser_angle_err_deg: None,
+        flash_position_err_mm: Some(flash.position_err_mm),
+        flash_polariser_angle_err_deg: Some(flash.polariser_err_deg),
         eta_shift_calibrated_points_max: shift.as_ref().map(|s| s.calibrated_points_max),
         eta_shift_uncalibrated_points_max: shift.as_ref().map(|s| s.uncalibrated_points_max),
         normal_shift_calibrated_deg_p95: shift.as_ref().map(|s| s.normals_calibrated.p95_deg),
@@ -347,20 +359,32 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
             f.hot_pixels as f64 / f64::from(w * h),
         ),
     ];
+    for (k, axis) in ["x", "y", "z"].iter().enumerate() {
+        figures.push((
+            format!("flash_offset_{axis}_mm"),
+            flash.offset_mm.0[k],
+            flash.offset_mm.1[k],
+        ));
+    }
+    figures.push((
+        "flash_polariser_deg".into(),
+        flash.polariser_deg.0,
+        flash.polariser_deg.1,
+    ));
     for (b, (t, e)) in er_true.iter().zip(&f.extinction_ratio).enumerate() {
         figures.push((format!("extinction_ratio_{}", ["R", "G", "B"][b]), *t, *e));
     }
     let report = Report {
         recovered,
         figures,
-        not_measured: std::iter::once(
-            "flash_position_err_mm, flash_polariser_angle_err_deg: `ellipso calibrate flash` is not built yet".to_string(),
-        )
-        .chain(shift.is_none().then(|| {
-            "eta_shift_calibrated_points_max: the end-to-end fits were skipped (--photos 0)"
-                .to_string()
-        }))
-        .collect(),
+        not_measured: shift
+            .is_none()
+            .then(|| {
+                "eta_shift_calibrated_points_max: the end-to-end fits were skipped (--photos 0)"
+                    .to_string()
+            })
+            .into_iter()
+            .collect(),
         command: "ellipso bench sensor".into(),
     };
     write_report(out, &report)?;
@@ -404,10 +428,14 @@ fn markdown_table(report: &Report) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`{}).\n",
+        "Measured by `{}` (demo camera at {}×{}, effects of `REAL_SENSOR_EFFECTS`; the flash \
+         from {} photos of the glossy sphere at {}×{}{}).\n",
         report.command,
         RESOLUTION[0],
         RESOLUTION[1],
+        flash::PHOTOS,
+        flash::RESOLUTION[0],
+        flash::RESOLUTION[1],
         r.eta_shift_photos
             .map_or(String::new(), |n| format!("; end-to-end fits on {n} views"))
     );

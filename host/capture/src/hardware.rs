@@ -42,6 +42,7 @@ pub fn rig_of_file(rig: &RigFile, bracket: Option<Bracket>) -> Result<HardwareRi
         },
         camera: rig.camera,
         flash_offset_m: rig.flash.map(|f| f.offset_m),
+        flash_polariser_deg: rig.flash.and_then(|f| f.polariser_deg),
         board,
         photos: rig.capture.photos,
         boards: rig.boards()?,

@@ -26,8 +26,9 @@
 //! flash_delay_us = 100
 //! flash_duration_us = 2000
 //!
-//! [flash]                        # optional; as `ellipso calibrate --sphere` writes it
+//! [flash]                        # optional; as `ellipso calibrate flash` writes it
 //! offset_m = [0.0, -0.03, 0.0]   # flash position in the camera frame (x right, y down, z forward)
+//! polariser_deg = 0.0            # optional (0): flash polariser axis, from camera x towards y
 //!
 //! [[boards]]
 //! file = "boards/base_a4.toml"   # relative to this rig file
@@ -151,6 +152,10 @@ pub struct BoardEntry {
 pub struct FlashSection {
     /// Flash position in the camera frame (OpenCV axes), m.
     pub offset_m: [f64; 3],
+    /// The flash polariser's transmission axis, degrees from camera x towards camera y (image
+    /// down); absent: 0, parallel to the sensor's 0° analyser.
+    #[serde(default)]
+    pub polariser_deg: Option<f64>,
 }
 
 /// A rig file.
@@ -412,6 +417,14 @@ impl RigFile {
             ));
         }
         if let Some(f) = &self.flash {
+            if let Some(deg) = f.polariser_deg
+                && !(deg.is_finite() && deg.abs() <= 180.0)
+            {
+                return Err(bad(
+                    "flash.polariser_deg",
+                    format!("is {deg}; an axis angle is finite, within ±180°"),
+                ));
+            }
             let d = nalgebra::Vector3::from(f.offset_m).norm();
             if d > ellipso_session::rig_ranges::MAX_FLASH_OFFSET_M {
                 return Err(bad(

@@ -3,6 +3,10 @@
 //! [`ellipso_vision::calibrate::session::Args`]; [`ellipso_vision::calibrate::session::run`]
 //! does the work and says its report, printed here.
 //!
+//! `ellipso calibrate flash SESSION --sphere R,X,Y,Z --out RIG.toml`: the flash position and
+//! polariser angle from a session of a glossy sphere on the board, written as the rig file's
+//! `[flash]` table with its other tables kept (docs/pose.md, "Calibrating the flash").
+//!
 //! `ellipso calibrate sensor CAPTURES --out FILE`: the per-pixel sensor calibration (EMVA 1288
 //! figures, dark levels, analysis vectors) from a captures folder
 //! ([`ellipso_polar::sensor_calibration::measure`]), written as a calibration file and its
@@ -33,8 +37,8 @@ pub struct Args {
     /// Also estimate k3 (needs corners out to the image corners).
     #[arg(long)]
     pub free_k3: bool,
-    /// Estimate the flash position from highlights on a glossy sphere: RADIUS,X,Y,Z in metres,
-    /// the centre in the world frame of the session's boards.
+    /// Estimate the flash position and polariser angle from highlights on a glossy sphere:
+    /// RADIUS,X,Y,Z in metres, the centre in the world frame of the session's boards.
     #[arg(long, value_parser = parse_sphere, value_name = "R,X,Y,Z")]
     pub sphere: Option<Sphere>,
 }
@@ -42,9 +46,30 @@ pub struct Args {
 /// What else `ellipso calibrate` calibrates.
 #[derive(Debug, clap::Subcommand)]
 pub enum What {
+    /// The flash (position and polariser angle) from a session of a glossy sphere on the board,
+    /// written into the rig file's `[flash]` table (docs/pose.md, "Calibrating the flash").
+    Flash(FlashArgs),
     /// The sensor (gain, read noise, black level, DSNU, PRNU, vignetting, per-pixel analysers)
     /// from a folder of dark, flat and polariser-sheet captures (`captures.json`).
     Sensor(SensorArgs),
+}
+
+/// Arguments of `ellipso calibrate flash`.
+#[derive(Debug, clap::Args)]
+pub struct FlashArgs {
+    /// Session directory: frames of the glossy sphere on the tag board, the sphere at different
+    /// places in the image and two distances.
+    pub session: PathBuf,
+    /// The sphere: RADIUS,X,Y,Z in metres, the centre in the world frame of the session's boards.
+    #[arg(long, value_parser = parse_sphere, value_name = "R,X,Y,Z")]
+    pub sphere: Sphere,
+    /// The rig file whose `[flash]` table is written (its other tables kept; created when
+    /// missing). Default `SESSION/calibration/flash.toml`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Detection image.
+    #[arg(long, value_enum, default_value_t = DetectImage::S0)]
+    pub image: DetectImage,
 }
 
 /// Arguments of `ellipso calibrate sensor`.
@@ -79,11 +104,27 @@ pub fn parse_sphere(s: &str) -> Result<Sphere, String> {
 
 /// Runs `ellipso calibrate`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let Some(What::Sensor(a)) = args.what {
-        return sensor(a);
+    match args.what {
+        Some(What::Sensor(a)) => return sensor(a),
+        Some(What::Flash(a)) => {
+            let options = session::Args {
+                session: a.session,
+                out: a.out,
+                image: a.image,
+                free_k3: false,
+                sphere: Some(a.sphere),
+                flash_only: true,
+            };
+            return session::run(&options, &super::out::Printed)
+                .map(|_| ())
+                .map_err(super::out::failed);
+        }
+        None => {}
     }
     let Some(session) = args.session else {
-        anyhow::bail!("calibrate: give a session directory, or `sensor CAPTURES --out FILE`");
+        anyhow::bail!(
+            "calibrate: give a session directory, `flash SESSION --sphere R,X,Y,Z`, or `sensor CAPTURES --out FILE`"
+        );
     };
     let options = session::Args {
         session,
@@ -91,8 +132,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         image: args.image,
         free_k3: args.free_k3,
         sphere: args.sphere,
+        flash_only: false,
     };
-    session::run(&options, &super::out::Printed).map_err(super::out::failed)
+    session::run(&options, &super::out::Printed)
+        .map(|_| ())
+        .map_err(super::out::failed)
 }
 
 fn sensor(args: SensorArgs) -> anyhow::Result<()> {

@@ -15,12 +15,16 @@
 //!    point known only roughly, or uncertainties the cost's shape contradicts (a near-degenerate
 //!    view set, [`spread`]), are refused with how to take calibration photos.
 //!
-//! [`flash`] estimates the flash position in the camera frame; [`session`] is `ellipso
-//! calibrate`: both on a recorded session, the rig file's sections written.
+//! [`flash`] estimates the flash position in the camera frame, [`flash_polariser`] its polariser
+//! angle, [`flash_session`] both from a session's sphere frames; [`session`] is `ellipso
+//! calibrate` (and `ellipso calibrate flash`): on a recorded session, the rig file's sections
+//! written.
 
 pub mod bundle;
 pub mod determined;
 pub mod flash;
+pub mod flash_polariser;
+pub mod flash_session;
 pub mod highlight;
 pub mod report;
 pub mod session;

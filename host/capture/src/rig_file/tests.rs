@@ -60,26 +60,55 @@ fn a_good_rig_file_loads_with_its_board() {
 
 #[test]
 fn the_flash_section_calibrate_writes_loads_back() {
-    let estimate = ellipso_vision::calibrate::flash::FlashEstimate {
-        flash_camera_m: nalgebra::Point3::new(0.000_1, -0.030_2, 0.001_7),
-        covariance_m2: nalgebra::Matrix3::identity() * 1e-8,
-        std_m: [1e-4; 3],
-        ray_angle_residuals_rad: vec![1e-3; 12],
-        rms_angle_rad: 1e-3,
+    use ellipso_vision::calibrate::flash_session::{FlashMeasurement, replace_flash_section};
+    let flash = FlashMeasurement {
+        position: ellipso_vision::calibrate::flash::FlashEstimate {
+            flash_camera_m: nalgebra::Point3::new(0.000_1, -0.030_2, 0.001_7),
+            covariance_m2: nalgebra::Matrix3::identity() * 1e-8,
+            std_m: [1e-4; 3],
+            ray_angle_residuals_rad: vec![1e-3; 12],
+            rms_angle_rad: 1e-3,
+        },
+        polariser: ellipso_vision::calibrate::flash_polariser::PolariserEstimate {
+            polariser_deg: 1.234_567,
+            std_deg: 0.01,
+            residuals_deg: vec![0.01; 12],
+            min_dolp: 0.9,
+            max_correction_deg: 0.8,
+        },
     };
     let tmp = tempfile::tempdir().unwrap();
-    let text = format!("{}\n{}", good(), estimate.to_toml_flash_section());
+    // `calibrate flash` puts the table into the rig file, whose other tables load as before
+    let text = replace_flash_section(&good(), &flash.to_toml_flash_section()).unwrap();
     let rig = RigFile::load(&write(tmp.path(), &text)).unwrap();
     assert_eq!(
         rig.flash.map(|f| f.offset_m),
         Some([0.000_1, -0.030_2, 0.001_7])
     );
+    assert_eq!(rig.flash.and_then(|f| f.polariser_deg), Some(1.234_567));
+    assert_eq!(
+        rig.camera,
+        RigFile::load(&write(tmp.path(), &good())).unwrap().camera
+    );
+    assert_eq!(rig.boards.len(), 1);
+    // a second run replaces the table
+    let again = replace_flash_section(&text, &flash.to_toml_flash_section()).unwrap();
+    assert_eq!(again, text);
     assert!(
         RigFile::load(&write(tmp.path(), &good()))
             .unwrap()
             .flash
             .is_none()
     );
+    // an old file without polariser_deg loads (0° is the default the capture records)
+    let old = format!("{}\n[flash]\noffset_m = [0.0, -0.03, 0.0]\n", good());
+    let rig = RigFile::load(&write(tmp.path(), &old)).unwrap();
+    assert_eq!(rig.flash.and_then(|f| f.polariser_deg), None);
+    let bad = format!("{old}polariser_deg = 400.0\n");
+    let e = RigFile::load(&write(tmp.path(), &bad))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("flash.polariser_deg"), "{e}");
 }
 
 #[test]

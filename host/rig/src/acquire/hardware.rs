@@ -51,8 +51,11 @@ pub struct HardwareRig {
     /// `[camera]` (the capture then records [`provisional_camera`], enough to detect tags for
     /// the calibration itself).
     pub camera: Option<CameraModel>,
-    /// The flash position in the camera frame, as `ellipso calibrate --sphere` measured it.
+    /// The flash position in the camera frame, as `ellipso calibrate flash` measured it.
     pub flash_offset_m: Option<[f64; 3]>,
+    /// The flash polariser's axis, degrees from camera x towards camera y, as `ellipso
+    /// calibrate flash` measured it (`None`: 0°, parallel to the 0° analyser).
+    pub flash_polariser_deg: Option<f64>,
     /// The board timing.
     pub board: CaptureConfig,
     /// Photos to take.
@@ -127,11 +130,13 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
     );
     manifest.rig = Some(RigRecord::relative(
         model,
-        // The flash as `ellipso calibrate --sphere` measured it (the fit needs it); the rest of
-        // the flash description takes the rig's defaults (polarised parallel to the 0° analyser).
+        // The flash as `ellipso calibrate flash` measured it (the fit needs it); the rest of
+        // the flash description takes the rig's defaults (polarised parallel to the 0° analyser
+        // unless the polariser angle was measured).
         rig.flash_offset_m
             .map(|offset_m| ellipso_model::rig::FlashSpec {
                 offset_m,
+                polariser_deg: rig.flash_polariser_deg.unwrap_or(0.0),
                 ..Default::default()
             }),
     ));

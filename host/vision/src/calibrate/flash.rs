@@ -101,6 +101,44 @@ pub enum FlashError {
     Degenerate,
 }
 
+/// Where a view's highlight ray meets its sphere: the near intersection and the outward unit
+/// normal there, camera frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpherePoint {
+    /// The highlight's point on the sphere, m.
+    pub point_camera_m: Point3<f64>,
+    /// The outward unit normal there.
+    pub normal_camera: Vector3<f64>,
+}
+
+/// The highlight's point on the sphere of observation `o` (number `view` in errors).
+pub fn sphere_point(
+    camera: &CameraModel,
+    view: usize,
+    o: &HighlightObservation,
+) -> Result<SpherePoint, FlashError> {
+    let r = o.sphere_radius_m;
+    if !(r.is_finite() && r > 0.0) {
+        return Err(FlashError::BadRadius { view, radius_m: r });
+    }
+    let d = camera
+        .unproject_to_ray(o.highlight_px)
+        .map_err(|source| FlashError::Unproject { view, source })?
+        .into_inner();
+    let c = (o.camera_from_board * o.sphere_centre_board_m).coords;
+    let dc = d.dot(&c);
+    let disc = dc * dc - c.norm_squared() + r * r;
+    if disc < 0.0 {
+        let miss_m = (c - d * dc).norm() - r;
+        return Err(FlashError::RayMissesSphere { view, miss_m });
+    }
+    let p = d * (dc - disc.sqrt());
+    Ok(SpherePoint {
+        point_camera_m: Point3::from(p),
+        normal_camera: (p - c) / r,
+    })
+}
+
 /// Estimates the flash position in the camera frame (see the module doc).
 pub fn estimate_flash_position(
     camera: &CameraModel,
@@ -111,24 +149,10 @@ pub fn estimate_flash_position(
     }
     let mut rays = Vec::with_capacity(observations.len());
     for (view, o) in observations.iter().enumerate() {
-        let r = o.sphere_radius_m;
-        if !(r.is_finite() && r > 0.0) {
-            return Err(FlashError::BadRadius { view, radius_m: r });
-        }
-        let d = camera
-            .unproject_to_ray(o.highlight_px)
-            .map_err(|source| FlashError::Unproject { view, source })?
-            .into_inner();
-        let c = (o.camera_from_board * o.sphere_centre_board_m).coords;
-        let dc = d.dot(&c);
-        let disc = dc * dc - c.norm_squared() + r * r;
-        if disc < 0.0 {
-            let miss_m = (c - d * dc).norm() - r;
-            return Err(FlashError::RayMissesSphere { view, miss_m });
-        }
-        let p = d * (dc - disc.sqrt());
-        let n = (p - c) / r;
-        let v = -d;
+        let sp = sphere_point(camera, view, o)?;
+        let p = sp.point_camera_m.coords;
+        let n = sp.normal_camera;
+        let v = -p.normalize();
         let m = (2.0 * n.dot(&v) * n - v).normalize();
         rays.push((p, m));
     }

@@ -10,21 +10,29 @@
 //! frame of the session's boards — the base board's frame when it sits at the world origin) it
 //! also finds the flash's specular highlight on the sphere in every calibrated frame
 //! ([`crate::calibrate::highlight`]), with that frame's calibrated pose, estimates the flash
-//! position in the camera frame ([`crate::calibrate::flash`]) and writes the `[flash]` section
-//! below the camera section. Frames whose highlight is rejected are listed with the reason.
-//! When the flash cannot be estimated (too few highlights, or rays that do not cross — an
-//! orbit aimed at the sphere) the camera section is still written, and the command fails with
+//! position in the camera frame and its polariser angle ([`crate::calibrate::flash_session`])
+//! and writes the `[flash]` section below the camera section. Frames whose highlight is
+//! rejected are listed with the reason. When the flash cannot be estimated (too few
+//! highlights, rays that do not cross — an orbit aimed at the sphere —, highlights saturated
+//! throughout or unpolarised) the camera section is still written, and the command fails with
 //! why and the photos to take for the flash ([`flash_not_measured`]).
+//!
+//! `ellipso calibrate flash SESSION --sphere R,X,Y,Z --out RIG.toml` ([`Args::flash_only`])
+//! does the same but writes only the `[flash]` table, into the rig file `RIG.toml`: its other
+//! tables and comments are kept ([`crate::calibrate::flash_session::replace_flash_section`]),
+//! and nothing is written when the flash is not measured.
 
 use std::path::PathBuf;
 
-use ellipso_model::camera::CAMERA_PARAM_NAMES;
+use ellipso_model::camera::{CAMERA_PARAM_NAMES, CameraModel};
 use ellipso_run_error::{Context, RunError, Say};
 use ellipso_run_error::{ensure, say};
 use rayon::prelude::*;
 
-use crate::calibrate::flash::{HighlightObservation, estimate_flash_position};
-use crate::calibrate::highlight::{HighlightConfig, Sphere, find_highlight};
+use crate::calibrate::flash_session::{
+    FlashMeasurement, ViewHighlight, measure_flash, replace_flash_section, view_highlight,
+};
+use crate::calibrate::highlight::Sphere;
 use crate::calibrate::views::board_view;
 use crate::calibrate::{CalibConfig, calibrate};
 use crate::pose::DetectorConfig;
@@ -43,9 +51,22 @@ pub struct Args {
     pub image: DetectImage,
     /// Also estimate k3 (needs corners out to the image corners).
     pub free_k3: bool,
-    /// Estimate the flash position from highlights on a glossy sphere: RADIUS,X,Y,Z in metres,
-    /// the centre in the world frame of the session's boards.
+    /// Estimate the flash position and polariser angle from highlights on a glossy sphere:
+    /// RADIUS,X,Y,Z in metres, the centre in the world frame of the session's boards.
     pub sphere: Option<Sphere>,
+    /// `ellipso calibrate flash`: only the flash, its `[flash]` table put into the rig file
+    /// `out` (its other tables kept; created when missing); the camera calibrated from the
+    /// session gives the views' poses and is not written. Needs `sphere`.
+    pub flash_only: bool,
+}
+
+/// What a run determined.
+#[derive(Debug, Clone)]
+pub struct SessionCalibration {
+    /// The calibrated camera.
+    pub camera: ellipso_model::camera::CameraModel,
+    /// The flash, when a sphere was given and it was measured.
+    pub flash: Option<FlashMeasurement>,
 }
 
 /// What the frames gave, in words: unreadable frames by reason, frames without a board's tag,
@@ -89,30 +110,47 @@ fn frame_causes(
 }
 
 /// The error of a `--sphere` run whose camera calibration succeeded and whose flash part did
-/// not: why, that the camera section is written, and the photos that would measure the flash.
+/// not: why, that the camera section is written (not for `calibrate flash`, `flash_only`: it
+/// writes nothing then), and the photos that would measure the flash.
 /// The flash is triangulated from the rays the highlights reflect towards it (fixed in the
 /// camera frame); photos that all see the sphere at one place in the image and one distance —
 /// an orbit aimed at its centre — give one ray again and again.
-pub fn flash_not_measured(why: &str) -> String {
+pub fn flash_not_measured(why: &str, flash_only: bool) -> String {
+    let kept = if flash_only {
+        "nothing is written"
+    } else {
+        "the [camera] section is written"
+    };
     format!(
-        "the flash position was not measured ({why}); the [camera] section is written. To \
+        "the flash (position and polariser angle) was not measured ({why}); {kept}. To \
          measure the flash, capture a session of the glossy sphere on the board with the sphere \
          at different places in the image — near each corner, the middle of each edge and the \
          centre — at two distances (about 0.3 m and 0.5 m): 10 photos or more, each showing the \
-         sphere's highlight and at least 2 tags of the board (not an orbit aimed at the sphere: \
-         its highlights reflect one ray); then run `ellipso calibrate SESSION --sphere R,X,Y,Z` \
-         on that session"
+         sphere's highlight (with an unsaturated edge) and at least 2 tags of the board (not an \
+         orbit aimed at the sphere: its highlights reflect one ray); then run `ellipso calibrate \
+         flash SESSION --sphere R,X,Y,Z --out RIG.toml` (or `ellipso calibrate SESSION --sphere \
+         R,X,Y,Z`) on that session"
     )
 }
 
 /// Runs `ellipso calibrate`: claims the output, detects, calibrates, writes the rig sections;
 /// every line of the report goes to `say`.
-pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
+pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
+    ensure!(
+        !args.flash_only || args.sphere.is_some(),
+        "calibrate flash: give the sphere, --sphere R,X,Y,Z (radius and centre in metres, in the \
+         world frame of the session's boards)"
+    );
     // claimed first: the session's own `calibration/` by default, never elsewhere inside it
+    let default_name = if args.flash_only {
+        "flash.toml"
+    } else {
+        "camera.toml"
+    };
     let out = args
         .out
         .clone()
-        .unwrap_or_else(|| args.session.join("calibration").join("camera.toml"));
+        .unwrap_or_else(|| args.session.join("calibration").join(default_name));
     let out = ellipso_report::output::OutputFile::claim(
         &out,
         "calibrate",
@@ -120,6 +158,13 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
         &[&args.session],
         Some("calibration"),
     )?;
+    // `calibrate flash` into a rig file that has a [camera]: the views are posed with it
+    let rig_camera = if args.flash_only {
+        rig_camera(out.path())
+            .map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?
+    } else {
+        None
+    };
     let session = reader::open(&args.session)?;
     // calibration needs the boards only: the camera model is what it estimates
     let boards = crate::process::boards_of(&session)?;
@@ -160,16 +205,151 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
     let usable = views.iter().filter(|v| v.len() >= 8).count();
     let causes = frame_causes(&detected);
     say!(say, "{usable} frames with ≥ 2 tags of one board ({causes})");
+    let detected_views: Vec<_> = detected
+        .iter()
+        .map(|d| d.as_ref().map(|(_, b)| *b).unwrap_or_default())
+        .collect();
+    let (camera, posed, camera_text) = match rig_camera {
+        Some(camera) => {
+            ensure!(
+                (camera.width, camera.height) == (s.width, s.height),
+                "{}: its [camera] is {}×{}, the session's frames {}×{}: not this camera's rig file",
+                out.shown().display(),
+                camera.width,
+                camera.height,
+                s.width,
+                s.height
+            );
+            let posed = pose_views(&camera, &views, say);
+            say!(
+                say,
+                "{} views posed with the [camera] of {}",
+                posed.len(),
+                out.shown().display()
+            );
+            (camera, posed, None)
+        }
+        None => {
+            let cal = calibrate_views(&views, args, (s.width, s.height), say)
+                .with_context(|| format!("{} frames: {causes}", frames.len()))?;
+            let posed = cal
+                .views
+                .iter()
+                .map(|v| (v.index, v.camera_from_board))
+                .collect();
+            (cal.camera, posed, Some(cal.to_toml_camera_section()))
+        }
+    };
+    let camera_text = camera_text.unwrap_or_default();
+    let Some(sphere) = args.sphere else {
+        out.write(camera_text)?;
+        say!(say, "rig sections written to {}", out.shown().display());
+        return Ok(SessionCalibration {
+            camera,
+            flash: None,
+        });
+    };
+    // per calibrated view: its frame, board and pose → the highlight and its polarisation
+    let highlights: Vec<ViewHighlight> = posed
+        .par_iter()
+        .filter_map(|(index, camera_from_board)| {
+            let board = &boards[detected_views[*index]?];
+            let entry = frames[*index];
+            let found = session
+                .load_frame(entry)
+                .map_err(|e| e.to_string())
+                .and_then(|(w, h, px)| {
+                    RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
+                })
+                .and_then(|raw| {
+                    view_highlight(
+                        &raw,
+                        &camera,
+                        camera_from_board,
+                        &board.world_from_board(),
+                        &sphere,
+                    )
+                });
+            match found {
+                Ok(h) => Some(h),
+                Err(why) => {
+                    say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
+                    None
+                }
+            }
+        })
+        .collect();
+    let flash = match measure_flash(&camera, &highlights) {
+        Ok(flash) => flash,
+        Err(e) => {
+            let why = e.to_string();
+            if args.flash_only {
+                return Err(RunError::msg(flash_not_measured(&why, true)));
+            }
+            // what was determined is kept: the camera section is written, then the flash
+            // part's failure is the command's error, with the photos that would measure it
+            out.write(camera_text)?;
+            say!(say, "[camera] written to {}", out.shown().display());
+            return Err(RunError::msg(flash_not_measured(&why, false)));
+        }
+    };
+    let p = flash.position.flash_camera_m.coords * 1e3;
+    let sd = flash.position.std_m.map(|v| v * 1e3);
+    say!(
+        say,
+        "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
+        p.x,
+        sd[0],
+        p.y,
+        sd[1],
+        p.z,
+        sd[2],
+        highlights.len(),
+        flash.position.rms_angle_rad * 1e3
+    );
+    say!(
+        say,
+        "flash polariser at {:.3} ± {:.3}° from camera x towards y (largest per-view geometric correction {:.3}°, lowest highlight DoLP {:.2})",
+        flash.polariser.polariser_deg,
+        flash.polariser.std_deg,
+        flash.polariser.max_correction_deg,
+        flash.polariser.min_dolp
+    );
+    let section = flash.to_toml_flash_section();
+    if args.flash_only {
+        // the rig file's other tables are kept as they are
+        let existing = match std::fs::read_to_string(out.path()) {
+            Ok(text) => text,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
+            Err(e) => return Err(RunError::msg(format!("{}: {e}", out.shown().display()))),
+        };
+        let text = replace_flash_section(&existing, &section)
+            .map_err(|e| RunError::msg(format!("{}: {e}", out.shown().display())))?;
+        out.write(text)?;
+        say!(say, "[flash] written to {}", out.shown().display());
+    } else {
+        out.write(format!("{camera_text}\n{section}"))?;
+        say!(say, "rig sections written to {}", out.shown().display());
+    }
+    Ok(SessionCalibration {
+        camera,
+        flash: Some(flash),
+    })
+}
+
+/// Calibrates the camera from the views and says the result (parameters ± σ, rejected views,
+/// the views' spread).
+fn calibrate_views(
+    views: &[crate::calibrate::views::View],
+    args: &Args,
+    size: (u32, u32),
+    say: &dyn Say,
+) -> Result<crate::calibrate::Calibration, crate::calibrate::CalibError> {
     let config = CalibConfig {
         fix_k3: !args.free_k3,
         ..CalibConfig::default()
     };
-    let cal = calibrate(&views, (s.width, s.height), &config)
-        .with_context(|| format!("{} frames: {causes}", frames.len()))?;
-    let detected: Vec<_> = detected
-        .into_iter()
-        .map(|d| d.unwrap_or_default())
-        .collect();
+    let cal = calibrate(views, size, &config)?;
     say!(
         say,
         "reprojection RMS {:.4} px over {} views ({} rejected)",
@@ -200,84 +380,65 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<(), RunError> {
         cal.spread.out_of_plane_deg,
         cal.spread.common_direction_camera.as_slice()
     );
-    let mut text = cal.to_toml_camera_section();
-    if let Some(sphere) = args.sphere {
-        let flash: Result<String, String> = 'flash: {
-            // per calibrated view: its frame, board and pose → the highlight
-            let observations: Vec<HighlightObservation> = cal
-                .views
-                .par_iter()
-                .filter_map(|v| {
-                    let board = &boards[detected[v.index].1?];
-                    let entry = frames[v.index];
-                    let found = session
-                        .load_frame(entry)
-                        .map_err(|e| e.to_string())
-                        .and_then(|(w, h, px)| {
-                            RawFrame::new(w, h, s.bit_depth, layout, px).map_err(|e| e.to_string())
-                        })
-                        .and_then(|raw| {
-                            let camera_from_world =
-                                v.camera_from_board * board.world_from_board().inverse();
-                            find_highlight(
-                                &raw,
-                                &cal.camera,
-                                &camera_from_world,
-                                &sphere,
-                                &HighlightConfig::default(),
-                            )
-                            .map_err(|e| e.to_string())
-                        });
-                    match found {
-                        Ok(h) => Some(HighlightObservation {
-                            camera_from_board: v.camera_from_board,
-                            sphere_centre_board_m: board.world_from_board().inverse()
-                                * sphere.centre_m,
-                            sphere_radius_m: sphere.radius_m,
-                            highlight_px: h.pixel,
-                        }),
-                        Err(why) => {
-                            say!(say, "  frame {}: no highlight: {why}", entry.frame_id);
-                            None
-                        }
-                    }
+    Ok(cal)
+}
+
+/// The `[camera]` table of the rig file at `path`, if the file exists and has one.
+fn rig_camera(path: &std::path::Path) -> Result<Option<CameraModel>, String> {
+    let text = match std::fs::read_to_string(path) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+        Err(e) => return Err(e.to_string()),
+    };
+    let table: toml::Table = toml::from_str(&text).map_err(|e| format!("not TOML: {e}"))?;
+    table
+        .get("camera")
+        .map(|c| {
+            c.clone()
+                .try_into::<CameraModel>()
+                .map_err(|e| format!("[camera]: {e}"))
+        })
+        .transpose()
+}
+
+/// Each view with at least 2 tags (8 corners) posed with a known camera: (view index,
+/// camera_from_board); a view whose pose is rejected (reprojection RMS over 1 px: a camera
+/// that is not this one; an ambiguous flip) is said with why and left out.
+fn pose_views(
+    camera: &CameraModel,
+    views: &[crate::calibrate::views::View],
+    say: &dyn Say,
+) -> Vec<(usize, ellipso_model::camera::Pose)> {
+    use crate::pose::estimate::{Correspondence, PoseConfig, estimate_board_pose};
+    // the views carry no tag ids (one board's corners): the tag count is not checked, the
+    // corner count and every other acceptance test of the tracker are
+    let config = PoseConfig {
+        min_tags: 0,
+        ..PoseConfig::default()
+    };
+    views
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.len() >= 8)
+        .filter_map(|(index, v)| {
+            // one board's corners, as `calibrate` poses its views (no tag ids: one tag)
+            let corr: Vec<Correspondence> = v
+                .iter()
+                .enumerate()
+                .map(|(k, (q, px))| Correspondence {
+                    tag_id: 0,
+                    corner: (k % 4) as u8,
+                    point_board_m: *q,
+                    pixel: [px.x, px.y],
                 })
                 .collect();
-            let flash = match estimate_flash_position(&cal.camera, &observations) {
-                Ok(flash) => flash,
-                Err(e) => break 'flash Err(e.to_string()),
-            };
-            let p = flash.flash_camera_m.coords * 1e3;
-            let sd = flash.std_m.map(|v| v * 1e3);
-            say!(
-                say,
-                "flash at ({:.2} ± {:.2}, {:.2} ± {:.2}, {:.2} ± {:.2}) mm in the camera frame from {} highlights, ray-angle RMS {:.3} mrad",
-                p.x,
-                sd[0],
-                p.y,
-                sd[1],
-                p.z,
-                sd[2],
-                observations.len(),
-                flash.rms_angle_rad * 1e3
-            );
-            Ok(flash.to_toml_flash_section())
-        };
-        match flash {
-            Ok(section) => {
-                text.push('\n');
-                text.push_str(&section);
+            match estimate_board_pose(camera, &corr, &config) {
+                Ok(p) => Some((index, p.camera_from_board)),
+                Err(e) => {
+                    say!(say, "  view {index}: not posed: {e}");
+                    None
+                }
             }
-            Err(why) => {
-                // what was determined is kept: the camera section is written, then the flash
-                // part's failure is the command's error, with the photos that would measure it
-                out.write(text)?;
-                say!(say, "[camera] written to {}", out.shown().display());
-                return Err(RunError::msg(flash_not_measured(&why)));
-            }
-        }
-    }
-    out.write(text)?;
-    say!(say, "rig sections written to {}", out.shown().display());
-    Ok(())
+        })
+        .collect()
 }
