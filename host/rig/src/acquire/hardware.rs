@@ -88,6 +88,20 @@ pub fn provisional_camera(width: u32, height: u32) -> CameraModel {
 pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture, RunError> {
     let clock = HostClock::new();
     let camera = open_camera(rig, clock)?;
+    let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
+    prepare_with(rig, out, clock, link, camera)
+}
+
+/// [`prepare`] with the trigger link and the camera already open (both on `clock`): what
+/// `ellipso rig check --fire --sim-camera` uses to put the simulated camera of an `ellipso sim
+/// serve` board in the rig file's place, so its check runs the very capture `prepare` sets up.
+pub fn prepare_with(
+    rig: &HardwareRig,
+    out: &std::path::Path,
+    clock: HostClock,
+    link: TriggerLink,
+    camera: Box<dyn Camera>,
+) -> Result<ReadyCapture, RunError> {
     let info = camera.info();
     let model = match rig.camera {
         Some(model) => {
@@ -111,7 +125,6 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
             provisional_camera(info.width, info.height)
         }
     };
-    let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
     let mut manifest = Manifest::new(
         SessionSource::Hardware {
             trigger_port: rig.trigger_port.clone(),
