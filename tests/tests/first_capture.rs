@@ -106,6 +106,8 @@ fn the_walkthrough_runs_on_the_simulated_rig() {
         }
         if line.starts_with("ellipso rig check") {
             assert!(text.contains("accepts the capture timing"), "{text}");
+            // without --fire it says that no flash was fired, never silently nothing
+            assert!(text.contains("flashes: none fired"), "{text}");
         }
     }
     for f in ["calib.pdf", "base_a4.png", "rig.toml", "camera.toml"] {

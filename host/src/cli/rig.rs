@@ -305,12 +305,12 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
         Ok(()) => {
             timing_ok = true;
             crate::outln!(
-            "  the board accepts the capture timing: exposure {} µs, flash {} µs after its start \
+                "  the board accepts the capture timing: exposure {} µs, flash {} µs after its start \
              for {} µs, one photo per {} ms",
-            rig.sensor.exposure_us,
-            rig.capture.flash_delay_us,
-            rig.capture.flash_duration_us,
-            rig.capture.interval_ms
+                rig.sensor.exposure_us,
+                rig.capture.flash_delay_us,
+                rig.capture.flash_duration_us,
+                rig.capture.interval_ms
             )
         }
         Err(LinkError::Rejected { reason, .. }) => todo.push(format!(
@@ -337,9 +337,9 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
             "  flashes: none fired, camera {camera} not opened (`--fire` fires 5 test flashes \
              and checks pairing, flash timing, black level and saturation)"
         ),
-        Some(_) if !timing_ok => crate::outln!(
-            "  flashes: none fired: the board refuses the capture timing (below)"
-        ),
+        Some(_) if !timing_ok => {
+            crate::outln!("  flashes: none fired: the board refuses the capture timing (below)")
+        }
         Some(n) => {
             let stand_in = match (&args.sim_camera, &args.wire) {
                 (Some(scene), Some(wire)) => Some(fire::SimStandIn {

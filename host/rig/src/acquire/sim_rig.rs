@@ -204,7 +204,10 @@ pub fn prepare(
 /// is taken: a few milliseconds of pings cannot resolve a crystal's ppm drift (a loaded machine
 /// made the slope absurd), and ignoring 25 ppm costs 250 µs over 10 s, far inside the camera's
 /// latency jitter.
-fn external_board_clock(link: &TriggerLink, clock: HostClock) -> Result<rig::LinearClock, RunError> {
+fn external_board_clock(
+    link: &TriggerLink,
+    clock: HostClock,
+) -> Result<rig::LinearClock, RunError> {
     let fit = link
         .sync_clock(20)?
         .context("the trigger board's clock did not settle")?;

@@ -83,7 +83,9 @@ pub fn fire(rig: &RigFile, n: u32, stand_in: Option<&SimStandIn>) -> anyhow::Res
             hardware::prepare_with(&hw, &dir, clock, link, camera).map_err(out::failed)?
         }
     };
-    let recorded = Recording { quiet: true }.record(ready).map_err(out::failed)?;
+    let recorded = Recording { quiet: true }
+        .record(ready)
+        .map_err(out::failed)?;
     if let Some(signal) = recorded.signal {
         anyhow::bail!("the check was stopped by signal {signal}; nothing was kept");
     }

@@ -191,24 +191,26 @@ pub fn read(session: &Session, asked: u32, clock: Option<&ClockFit>) -> FlashChe
         .iter()
         .map(|(&seq, &(trigger_device_us, on, off))| {
             let frame_id = pairs.get(&seq).copied();
-            let timing = frame_id.and_then(|id| frames.get(&id)).map(|&(t_cam, exp)| {
-                let exposure_start_us = match (t_cam, latch, fit) {
-                    (Some(t_cam), Some((cam_us, host_us, half)), Some((gain, offset, rms))) => {
-                        let cam = t_cam as f64 / 1e3;
-                        let exposure_host = host_us + (cam - cam_us);
-                        let trigger_host = gain * trigger_device_us as f64 + offset;
-                        let u = half + rms + DRIFT_BOUND * (cam - cam_us).abs();
-                        Some((exposure_host - trigger_host, u))
+            let timing = frame_id
+                .and_then(|id| frames.get(&id))
+                .map(|&(t_cam, exp)| {
+                    let exposure_start_us = match (t_cam, latch, fit) {
+                        (Some(t_cam), Some((cam_us, host_us, half)), Some((gain, offset, rms))) => {
+                            let cam = t_cam as f64 / 1e3;
+                            let exposure_host = host_us + (cam - cam_us);
+                            let trigger_host = gain * trigger_device_us as f64 + offset;
+                            let u = half + rms + DRIFT_BOUND * (cam - cam_us).abs();
+                            Some((exposure_host - trigger_host, u))
+                        }
+                        _ => None,
+                    };
+                    Timing {
+                        flash_on_us: on,
+                        flash_off_us: off,
+                        exposure_us: exp,
+                        exposure_start_us,
                     }
-                    _ => None,
-                };
-                Timing {
-                    flash_on_us: on,
-                    flash_off_us: off,
-                    exposure_us: exp,
-                    exposure_start_us,
-                }
-            });
+                });
             let (mut levels_of, mut unreadable) = (None, None);
             if let Some(entry) = frame_id.and_then(|id| entries.get(&id)) {
                 match session.load_frame(entry) {
@@ -254,7 +256,7 @@ impl FlashCheck {
                 ));
                 match t.exposure_start_us {
                     Some((d, u)) => line.push_str(&format!(
-                        ", exposure +{d:.0} ± {u:.0} µs for {:.0} µs: flash {}",
+                        ", exposure {d:+.0} ± {u:.0} µs for {:.0} µs: flash {}",
                         t.exposure_us,
                         if t.starts_early() {
                             "starts before the exposure"
@@ -321,7 +323,11 @@ impl FlashCheck {
                 self.frames_without_flash.len()
             ));
         }
-        let timings: Vec<&Timing> = self.flashes.iter().filter_map(|f| f.timing.as_ref()).collect();
+        let timings: Vec<&Timing> = self
+            .flashes
+            .iter()
+            .filter_map(|f| f.timing.as_ref())
+            .collect();
         let early = timings.iter().filter(|t| t.starts_early()).count();
         if early > 0 {
             fixes.push(format!(
@@ -345,7 +351,11 @@ impl FlashCheck {
                     .into(),
             );
         }
-        let levels: Vec<&Levels> = self.flashes.iter().filter_map(|f| f.levels.as_ref()).collect();
+        let levels: Vec<&Levels> = self
+            .flashes
+            .iter()
+            .filter_map(|f| f.levels.as_ref())
+            .collect();
         let m = levels.len();
         let over = levels
             .iter()
