@@ -179,6 +179,28 @@ fn rig_check_fires_through_the_capture_and_reports_pairing_timing_and_levels() {
     assert!(!text.contains("fix before capturing"), "{text}");
     assert_eq!(leftovers(), before, "the temporary session is removed");
 
+    // without --fire: nothing fired, and it says so
+    let o = check(&rig, &[]);
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(o.status.success(), "{text}");
+    assert!(text.contains("flashes: none fired"), "{text}");
+    assert!(flash_lines(&text).is_empty(), "{text}");
+    // --fire with the rig file's own camera, which is not there: a clear error, not a report
+    let o = check(&rig, &["--fire", "2"]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    let last = err.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("error: ") && last.contains("firing test flashes"),
+        "{err}"
+    );
+    assert!(err.contains("aravis") || err.contains("camera"), "{err}");
+    assert_eq!(
+        leftovers(),
+        before,
+        "no session left by a camera that did not open"
+    );
+
     let hot = scene(tmp.path(), "hot.toml", 500.0);
     let args = sim(&hot);
     let o = check(&rig, &args.iter().map(String::as_str).collect::<Vec<_>>());

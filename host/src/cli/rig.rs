@@ -354,8 +354,7 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
                 None => format!("camera {camera}"),
             };
             crate::outln!("  firing {n} test flashes (free run) with {who}");
-            let check = fire::fire(&rig, n, stand_in.as_ref())
-                .with_context(|| format!("{}: firing test flashes", args.rig.display()))?;
+            let check = fire::fire(&rig, n, stand_in.as_ref()).context("firing test flashes")?;
             crate::outln!("  flashes: {} of {n} paired with a frame", check.paired());
             for line in check.lines() {
                 crate::outln!("    {line}");

@@ -6,7 +6,8 @@
 //! frame size of the rig's camera model; a backend not compiled in is refused by name with the
 //! cargo feature that adds it. The session records the trigger port, the camera's backend and
 //! address, and a relative-radiometry rig record with the calibrated flash offset. Nothing here
-//! prints.
+//! prints. [`prepare_with`] is the same with the link and the camera opened by the caller
+//! (`ellipso rig check --fire --sim-camera` puts the simulated camera in the camera's place).
 
 use std::path::PathBuf;
 
