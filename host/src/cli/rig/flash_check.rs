@@ -17,8 +17,9 @@
 //! - black level: the 1st percentile of the raw samples. In a flash-lit scene the background
 //!   and the shadows far from the flash get almost no light, so the darkest 1 % is the sensor's
 //!   black level plus any ambient light. It reads 0 when the camera's offset clips the noise
-//!   floor (the fit's noise model then sees truncated noise) — a fix; above [`AMBIENT_SHARE`] of
-//!   full scale the "dark" pixels are lit by something other than the flash — a fix.
+//!   floor (the fit's noise model then sees truncated noise) — a note, as only the darkest
+//!   surfaces suffer; above [`AMBIENT_SHARE`] of full scale the "dark" pixels are lit by
+//!   something other than the flash — a fix.
 //! - saturation: samples at full scale (`2^bit_depth − 1`). A flash highlight on a glossy object
 //!   covers far less than 1 % of the frame (a 20 mm ball at 0.3 m: a few hundred pixels of 5 MP,
 //!   under 0.01 %), so up to [`SATURATED_SHARE`] at full scale is a clipped highlight (a note:
@@ -380,9 +381,10 @@ impl FlashCheck {
         }
         let zero = levels.iter().filter(|l| l.black_dn == 0).count();
         if zero > 0 {
-            fixes.push(format!(
-                "the darkest pixels read 0 in {zero} of {m} frames: the camera's black level \
-                 clips the noise floor; raise its black-level offset"
+            notes.push(format!(
+                "the darkest pixels read 0 in {zero} of {m} frames: the camera's black-level \
+                 offset may clip the noise floor (dark pixels then read too bright on average); \
+                 raise it if dark surfaces matter"
             ));
         }
         let ambient = levels
