@@ -1,6 +1,7 @@
 //! docs/first-real-capture.md cannot drift from the code: its `sh sim-walkthrough` block is run
 //! here line by line on the simulated rig — `$PTY` is a virtual trigger board served by
-//! `ellipso sim serve --pty`, `$FW` a firmware-shaped image (vector table and seeded bytes)
+//! `ellipso sim serve --pty`, `$WIRE` its trigger-wire socket (`--wire`, where `rig check
+//! --fire --sim-camera` hangs the simulated camera), `$FW` a firmware-shaped image (vector table and seeded bytes)
 //! that `board flash --model` writes to the DfuSe device model — in a scratch folder where
 //! `sim/` is the repository's. Every line must succeed.
 
@@ -63,7 +64,14 @@ fn the_walkthrough_runs_on_the_simulated_rig() {
     std::os::unix::fs::symlink(repo().join("sim"), dir.path().join("sim")).expect("link sim/");
     let fw = firmware(dir.path());
     let mut serve = Command::new(ellipso_bin())
-        .args(["sim", "serve", "sim/scenes/sphere.toml", "--pty"])
+        .args([
+            "sim",
+            "serve",
+            "sim/scenes/sphere.toml",
+            "--pty",
+            "--wire",
+            "wire.sock",
+        ])
         .current_dir(dir.path())
         .stdout(Stdio::piped())
         .stderr(Stdio::null())
@@ -82,7 +90,8 @@ fn the_walkthrough_runs_on_the_simulated_rig() {
     for line in &lines {
         let line = line
             .replace("$PTY", &pty)
-            .replace("$FW", fw.to_str().expect("utf-8"));
+            .replace("$FW", fw.to_str().expect("utf-8"))
+            .replace("$WIRE", "wire.sock");
         let words: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(words[0], "ellipso", "{line}");
         if words.get(1) == Some(&"view") {
@@ -106,6 +115,16 @@ fn the_walkthrough_runs_on_the_simulated_rig() {
         }
         if line.starts_with("ellipso rig check") {
             assert!(text.contains("accepts the capture timing"), "{text}");
+            if line.contains("--fire 3") {
+                assert!(
+                    text.contains("flashes: 3 of 3 paired with a frame"),
+                    "{text}"
+                );
+                assert!(text.contains("flash inside the exposure"), "{text}");
+            } else {
+                // without --fire it says that no flash was fired, never silently nothing
+                assert!(text.contains("flashes: none fired"), "{text}");
+            }
         }
     }
     for f in ["calib.pdf", "base_a4.png", "rig.toml", "camera.toml"] {

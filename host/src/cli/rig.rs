@@ -4,6 +4,8 @@
 //!   camera; `[camera]` is left out until `ellipso calibrate` writes it.
 //! - `rig check RIG.toml`: loads the file (every error names the key), loads its boards, asks
 //!   the trigger board `Hello` and offers it the capture's timing, and says what to fix.
+//!   `--fire [N]` also fires N test flashes through the capture ([`fire`]) and reports what
+//!   they show ([`flash_check`]); without it the check says that no flash was fired.
 //!
 //! The fields, their units and ranges are documented in docs/rig-file.md.
 
@@ -14,6 +16,9 @@ use anyhow::{Context as _, bail};
 use ellipso_capture::rig_file::RigFile;
 use ellipso_rig::link::time::HostClock;
 use ellipso_rig::link::{LinkConfig, LinkError, TriggerLink, describe_reject};
+
+mod fire;
+mod flash_check;
 
 /// Subcommands of `ellipso rig`.
 #[derive(Debug, clap::Subcommand)]
@@ -65,6 +70,22 @@ pub struct InitArgs {
 pub struct CheckArgs {
     /// Rig file.
     pub rig: PathBuf,
+    /// Also fire N test flashes (1 to 50; 5 with a bare `--fire`) through the capture, into a
+    /// temporary session removed afterwards, and report per flash its frame, where the flash
+    /// fell in the exposure, the black level and saturation, then what to fix.
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "5",
+          value_parser = fire::flashes)]
+    pub fire: Option<u32>,
+    /// With --fire: the simulated camera of this scene stands in for the rig file's camera, on
+    /// the trigger wire of `ellipso sim serve --wire` (the rig file's port is its pty).
+    #[arg(long, value_name = "SCENE", requires_all = ["wire", "fire"])]
+    pub sim_camera: Option<PathBuf>,
+    /// Trigger-wire socket of `ellipso sim serve --wire` (with --sim-camera).
+    #[arg(long, value_name = "SOCKET", requires = "sim_camera")]
+    pub wire: Option<PathBuf>,
+    /// Render the stand-in camera at WIDTHxHEIGHT (with --sim-camera; even sides).
+    #[arg(long, requires = "sim_camera", value_parser = super::limits::resolution)]
+    pub resolution: Option<[u32; 2]>,
 }
 
 /// Runs `ellipso rig …`.
@@ -279,15 +300,19 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
         v.patch,
         b.protocol_version
     );
+    let mut timing_ok = false;
     match link.configure(rig.board_config()) {
-        Ok(()) => crate::outln!(
-            "  the board accepts the capture timing: exposure {} µs, flash {} µs after its start \
+        Ok(()) => {
+            timing_ok = true;
+            crate::outln!(
+                "  the board accepts the capture timing: exposure {} µs, flash {} µs after its start \
              for {} µs, one photo per {} ms",
-            rig.sensor.exposure_us,
-            rig.capture.flash_delay_us,
-            rig.capture.flash_duration_us,
-            rig.capture.interval_ms
-        ),
+                rig.sensor.exposure_us,
+                rig.capture.flash_delay_us,
+                rig.capture.flash_duration_us,
+                rig.capture.interval_ms
+            )
+        }
         Err(LinkError::Rejected { reason, .. }) => todo.push(format!(
             "the board refuses the capture timing: {} (fix [capture] / sensor.exposure_us)",
             describe_reject(&reason)
@@ -297,14 +322,64 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
             args.rig.display()
         ),
     }
-    crate::outln!(
-        "  camera {} at {}: not opened by this check (a capture opens it)",
+    drop(link); // the capture of --fire opens the port again
+    let camera = format!(
+        "{} at {}",
         match rig.sensor.backend {
             ellipso_capture::rig_file::Backend::Aravis => "aravis",
             ellipso_capture::rig_file::Backend::V4l => "v4l",
         },
         rig.sensor.address
     );
+    let mut fire_fixes = Vec::new();
+    match args.fire {
+        None => crate::outln!(
+            "  flashes: none fired, camera {camera} not opened (`--fire` fires 5 test flashes \
+             and checks pairing, flash timing, black level and saturation)"
+        ),
+        Some(_) if !timing_ok => {
+            crate::outln!("  flashes: none fired: the board refuses the capture timing (below)")
+        }
+        Some(n) => {
+            let stand_in = match (&args.sim_camera, &args.wire) {
+                (Some(scene), Some(wire)) => Some(fire::SimStandIn {
+                    scene: scene.clone(),
+                    wire: wire.clone(),
+                    resolution: args.resolution,
+                }),
+                _ => None,
+            };
+            let who = match &stand_in {
+                Some(s) => format!("the simulated camera of {}", s.scene.display()),
+                None => format!("camera {camera}"),
+            };
+            crate::outln!("  firing {n} test flashes (free run) with {who}");
+            let check = fire::fire(&rig, n, stand_in.as_ref()).context("firing test flashes")?;
+            crate::outln!("  flashes: {} of {n} paired with a frame", check.paired());
+            for line in check.lines() {
+                crate::outln!("    {line}");
+            }
+            let (fixes, notes) = check.fixes();
+            for n in notes {
+                crate::outln!("  note: {n}");
+            }
+            fire_fixes = fixes;
+        }
+    }
+    if !fire_fixes.is_empty() {
+        crate::outln!("fix before capturing:");
+        for f in &fire_fixes {
+            crate::outln!("  - {f}");
+        }
+        for t in &todo {
+            crate::outln!("  - {t}");
+        }
+        bail!(
+            "{}: the test flashes found {} problem(s), listed above",
+            args.rig.display(),
+            fire_fixes.len()
+        );
+    }
     if todo.is_empty() {
         crate::outln!(
             "ready to capture: `ellipso capture --rig {}`",

@@ -6,7 +6,8 @@
 //! frame size of the rig's camera model; a backend not compiled in is refused by name with the
 //! cargo feature that adds it. The session records the trigger port, the camera's backend and
 //! address, and a relative-radiometry rig record with the calibrated flash offset. Nothing here
-//! prints.
+//! prints. [`prepare_with`] is the same with the link and the camera opened by the caller
+//! (`ellipso rig check --fire --sim-camera` puts the simulated camera in the camera's place).
 
 use std::path::PathBuf;
 
@@ -91,6 +92,20 @@ pub fn provisional_camera(width: u32, height: u32) -> CameraModel {
 pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture, RunError> {
     let clock = HostClock::new();
     let camera = open_camera(rig, clock)?;
+    let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
+    prepare_with(rig, out, clock, link, camera)
+}
+
+/// [`prepare`] with the trigger link and the camera already open (both on `clock`): what
+/// `ellipso rig check --fire --sim-camera` uses to put the simulated camera of an `ellipso sim
+/// serve` board in the rig file's place, so its check runs the very capture `prepare` sets up.
+pub fn prepare_with(
+    rig: &HardwareRig,
+    out: &std::path::Path,
+    clock: HostClock,
+    link: TriggerLink,
+    camera: Box<dyn Camera>,
+) -> Result<ReadyCapture, RunError> {
     let info = camera.info();
     let model = match rig.camera {
         Some(model) => {
@@ -114,7 +129,6 @@ pub fn prepare(rig: &HardwareRig, out: &std::path::Path) -> Result<ReadyCapture,
             provisional_camera(info.width, info.height)
         }
     };
-    let link = TriggerLink::open(&rig.trigger_port, clock, LinkConfig::default())?;
     let mut manifest = Manifest::new(
         SessionSource::Hardware {
             trigger_port: rig.trigger_port.clone(),

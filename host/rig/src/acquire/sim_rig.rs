@@ -107,18 +107,7 @@ pub fn prepare(
         }) => {
             let link = TriggerLink::open(port, clock, LinkConfig::default())?;
             let edges = rig::connect_wire(wire)?;
-            // The simulated camera places exposures in host time from the edges' device times;
-            // across processes it learns the board's clock the way the host does, by ping/pong.
-            // Only the offset is taken: a few milliseconds of pings cannot resolve a crystal's
-            // ppm drift (a loaded machine made the slope absurd), and ignoring 25 ppm costs
-            // 250 µs over 10 s, far inside the camera's latency jitter.
-            let fit = link
-                .sync_clock(20)?
-                .context("the trigger board's clock did not settle")?;
-            let now = clock.now().0 as f64;
-            let device_now = (now - fit.offset_us) / fit.gain;
-            let device_at_epoch = (device_now - now).max(0.0).round() as u64;
-            let board_clock = rig::LinearClock::new(clock.epoch(), device_at_epoch, 0.0)?;
+            let board_clock = external_board_clock(&link, clock)?;
             (link, None, edges, Some(board_clock))
         }
         None => {
@@ -207,6 +196,77 @@ pub fn prepare(
         photos,
         board,
     })
+}
+
+/// The clock of an external board (`ellipso sim serve`) as the simulated camera uses it: the
+/// simulated camera places exposures in host time from the edges' device times; across
+/// processes it learns the board's clock the way the host does, by ping/pong. Only the offset
+/// is taken: a few milliseconds of pings cannot resolve a crystal's ppm drift (a loaded machine
+/// made the slope absurd), and ignoring 25 ppm costs 250 µs over 10 s, far inside the camera's
+/// latency jitter.
+fn external_board_clock(
+    link: &TriggerLink,
+    clock: HostClock,
+) -> Result<rig::LinearClock, RunError> {
+    let fit = link
+        .sync_clock(20)?
+        .context("the trigger board's clock did not settle")?;
+    let now = clock.now().0 as f64;
+    let device_now = (now - fit.offset_us) / fit.gain;
+    let device_at_epoch = (device_now - now).max(0.0).round() as u64;
+    Ok(rig::LinearClock::new(clock.epoch(), device_at_epoch, 0.0)?)
+}
+
+/// The simulated camera of a scene standing in for a rig file's camera, on the trigger wire of
+/// an external `ellipso sim serve` board (`ellipso rig check --fire --sim-camera`).
+#[derive(Debug, Clone)]
+pub struct StandInCamera {
+    /// Scene file: what the camera sees, its sensor (layout, bit depth) and its faults.
+    pub scene: PathBuf,
+    /// The board's trigger-wire socket.
+    pub wire: PathBuf,
+    /// Render at WIDTHxHEIGHT instead of the scene's resolution.
+    pub resolution: Option<[u32; 2]>,
+    /// Exposure, µs: the rig file's, so the camera exposes for what it was told.
+    pub exposure_us: u32,
+    /// The rig's full flash pulse, µs (the camera meters each exposure's on-time against it).
+    pub flash_duration_us: u32,
+}
+
+/// Opens the stand-in camera `cam` on the board behind `link` (whose clock it learns by
+/// ping/pong, as [`prepare`] does for an external board); renders at 1 ray per pixel.
+pub fn stand_in_camera(
+    cam: &StandInCamera,
+    link: &TriggerLink,
+    clock: HostClock,
+) -> Result<Box<dyn crate::camera::Camera>, RunError> {
+    let scene = Scene::load(&cam.scene)?;
+    let scene: &'static Scene = Box::leak(Box::new(scene));
+    let render_options = RenderOptions {
+        supersampling: 1,
+        resolution_px: cam.resolution,
+        ..RenderOptions::default()
+    };
+    let renderer = Renderer::new(scene, render_options)?;
+    let camera_model = *renderer.camera();
+    let layout = renderer.layout();
+    let size = (camera_model.width, camera_model.height);
+    let source: Arc<dyn FrameSource> = Arc::new(RenderSource { renderer, size });
+    let edges = rig::connect_wire(&cam.wire)?;
+    let board_clock = external_board_clock(link, clock)?;
+    let mut config = SimCameraConfig::from_scene(scene, board_clock);
+    config.timing.exposure_us = cam.exposure_us.max(1);
+    config.flash_reference_us = (cam.flash_duration_us > 0).then_some(cam.flash_duration_us);
+    let sim_camera = SimCamera::spawn(config, source, edges)?;
+    let info = CameraInfo {
+        backend: "sim",
+        model: format!("simulated camera of {}", cam.scene.display()),
+        width: size.0,
+        height: size.1,
+        layout: layout_name(layout).to_string(),
+        bit_depth: scene.rig.camera.bit_depth,
+    };
+    Ok(Box::new(SimCameraBackend::new(sim_camera, clock, info)))
 }
 
 /// The board timing for a scene: its exposure, a flash inside it, its photo interval, and its
