@@ -80,6 +80,7 @@ fn fit_and_complete(
         &c.truth.mesh,
         config.solver.normal_prior_deg,
         config.solver.albedo_cap,
+        config.solver.max_eta_std_error,
     );
     (fits, completion, dropped)
 }

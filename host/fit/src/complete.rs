@@ -39,6 +39,7 @@
 //! - Deterministic: a function of its inputs, no randomness, serial over vertices.
 
 mod assign;
+mod report;
 mod sigma;
 
 pub use assign::{Assigned, assign, membership_sd};
@@ -113,71 +114,6 @@ pub struct MaterialCoverage {
     pub coverage: f64,
 }
 
-impl Completion {
-    /// The per-material coverage as report lines (material η, observed vertices and how they
-    /// were answered), then the whole.
-    pub fn report_lines(&self) -> Vec<String> {
-        let mut lines =
-            vec!["materials (step B's clusters) over the surface the views see:".to_string()];
-        for m in &self.materials {
-            let eta = match (m.eta, m.eta_se, m.eta_withheld_se) {
-                (Some(e), Some(se), _) => format!("η {e:.4} ± {se:.4}"),
-                (_, _, Some([se, pull])) => format!(
-                    "η withheld (its pool's σ {se:.3}, of which the default prior's possible \
-                     pull {pull:.3}, is above what a vertex may report)"
-                ),
-                _ => "η not identified".to_string(),
-            };
-            lines.push(format!(
-                "  material {:<2} {eta} · {} vertices observed: {} from their own samples, {} \
-                 from the material, {} withheld (coverage {:.3})",
-                m.cluster, m.observed, m.own, m.from_material, m.withheld, m.coverage
-            ));
-        }
-        lines.push(format!(
-            "  all         {} of {} observed vertices with a full parameter set (coverage {:.3}){}",
-            self.full_set,
-            self.observed,
-            self.coverage,
-            if self.unassigned > 0 {
-                format!(
-                    "; {} without a material to take values from",
-                    self.unassigned
-                )
-            } else {
-                String::new()
-            }
-        ));
-        lines
-    }
-
-    /// One line for progress output.
-    pub fn describe(&self) -> String {
-        format!(
-            "completion: {} vertices the views see but their samples do not identify took their \
-             material's values ({} with their own ρd), {} their material's η; {} of all these lie \
-             between materials of different η their data cannot tell apart (η's σ widened){}{}",
-            self.completed,
-            self.own_rho_d,
-            self.eta_from_material,
-            self.material_open,
-            if self.eta_withheld > 0 {
-                format!(
-                    "; {} without η, their material having none identified",
-                    self.eta_withheld
-                )
-            } else {
-                String::new()
-            },
-            if self.unassigned > 0 {
-                format!("; {} had no material to take it from", self.unassigned)
-            } else {
-                String::new()
-            }
-        )
-    }
-}
-
 /// One material's values and spreads, from its cluster's own-fit members.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MaterialValues {
@@ -208,8 +144,14 @@ fn median(values: &mut [f64]) -> f64 {
 }
 
 impl MaterialValues {
-    /// The values of cluster `j` of `a` from its own-fit members' `fits`.
-    fn of_cluster(a: &Augmentation, j: usize, members: &[&VertexFit]) -> Self {
+    /// The values of cluster `j` of `a` from its own-fit members' `fits`; a material η whose
+    /// spread exceeds `max_eta_std_error` (the solver's per-vertex limit) is withheld.
+    fn of_cluster(
+        a: &Augmentation,
+        j: usize,
+        members: &[&VertexFit],
+        max_eta_std_error: f64,
+    ) -> Self {
         let c = &a.clusters[j];
         let column = |f: &dyn Fn(&VertexFit) -> f64| -> Vec<f64> {
             members
@@ -219,6 +161,7 @@ impl MaterialValues {
                 .collect()
         };
         let spread = |f: &dyn Fn(&VertexFit) -> f64| robust_sd(&mut column(f));
+        let mut members_sd = f64::NAN;
         let eta = if c.eta_pooled.usable {
             // A vertex that takes its material's η is a new member of the pool: its η is the
             // material's, uncertain by the pooled value's own standard error and the
@@ -239,12 +182,25 @@ impl MaterialValues {
             });
             let centre = median(&mut etas);
             let sd = robust_sd(&mut etas);
-            (centre.is_finite() && sd.is_finite()).then_some([centre, sd])
+            members_sd = sd;
+            // The rule of a weak pool (`Pooled::weak`): members that spread wider than what a
+            // vertex may report are no measurement of one material's η — they are several
+            // materials the clustering joined (measured on a generated scene at 612×512: seven
+            // materials of η 1.33–2.37 in one cluster, spread 0.20, gave every completed vertex
+            // η 2.26).
+            (centre.is_finite() && sd.is_finite() && sd <= max_eta_std_error)
+                .then_some([centre, sd])
         };
         let rho_d: [f64; 3] = std::array::from_fn(|k| median(&mut column(&|m| m.params.rho_d[k])));
         let p = c.eta_pooled;
-        let eta_withheld_se = (eta.is_none() && p.vertices > 0 && p.se.is_finite() && p.se > 0.0)
-            .then(|| [p.se_reported(), p.prior_pull]);
+        let eta_withheld_se = if eta.is_none() && p.vertices > 0 && p.se.is_finite() && p.se > 0.0 {
+            Some([p.se_reported(), p.prior_pull])
+        } else if eta.is_none() && members_sd.is_finite() {
+            // No pool formed; the members' own spread withheld it (above).
+            Some([members_sd, 0.0])
+        } else {
+            None
+        };
         Self {
             eta,
             eta_withheld_se,
@@ -399,7 +355,8 @@ pub(crate) fn rho_d_of(
 
 /// Completes `fits` (one per vertex of `set`, in order) from the materials of `a` (module doc).
 /// `mesh` is the surface the fit ends on (its normals are the completed vertices' normals);
-/// `normal_std_deg` is that surface's normal σ; `albedo_cap` the solver's.
+/// `normal_std_deg` is that surface's normal σ; `albedo_cap` and `max_eta_std_error` the
+/// solver's.
 pub fn complete(
     set: &SampleSet,
     fits: &mut [VertexFit],
@@ -407,6 +364,7 @@ pub fn complete(
     mesh: &TriangleMesh,
     normal_std_deg: f64,
     albedo_cap: f64,
+    max_eta_std_error: f64,
 ) -> Completion {
     let k = a.clusters.len();
     let mut report = Completion::default();
@@ -431,7 +389,7 @@ pub fn complete(
                 .filter(|(v, f)| a.assignment.get(*v) == Some(&Some(j)) && own_vertex(f))
                 .map(|(_, f)| f)
                 .collect();
-            MaterialValues::of_cluster(a, j, &members)
+            MaterialValues::of_cluster(a, j, &members, max_eta_std_error)
         })
         .collect();
     let labels = assign(set, fits, a, mesh, &needs);

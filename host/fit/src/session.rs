@@ -391,6 +391,7 @@ fn complete_fits(
         mesh,
         normal_std_deg,
         config.fit.solver.albedo_cap,
+        config.fit.solver.max_eta_std_error,
     ))
 }
 
