@@ -3,30 +3,15 @@
 use std::fs;
 
 use super::*;
-use crate::manifest::{Manifest, SensorInfo, SessionSource};
 use crate::paths;
+use crate::test_fixture::{manifest, pixels};
 use crate::time::HostTimeUs;
 use crate::writer::{FrameRecord, SessionAppender, SessionWriter};
 
 fn session(dir: &Path, frames: u64) {
-    let manifest = Manifest::new(
-        SessionSource::Simulator {
-            scene: "sphere.toml".into(),
-            seed: 7,
-        },
-        SensorInfo {
-            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
-            width: 8,
-            height: 6,
-            bit_depth: 12,
-        },
-        1_700_000_000_000_000,
-    );
-    let mut w = SessionWriter::create(dir, manifest).unwrap();
+    let mut w = SessionWriter::create(dir, manifest()).unwrap();
     for id in 0..frames {
-        let px: Vec<u16> = (0..48)
-            .map(|i| ((i * 97 + id * 13) % 4096) as u16)
-            .collect();
+        let px = pixels(id);
         w.write_frame(FrameRecord {
             t_host_us: HostTimeUs(id),
             frame_id: id,
