@@ -31,3 +31,5 @@ pub mod radiometry;
 pub mod rig;
 pub mod stats;
 pub mod tags;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_support;

@@ -28,6 +28,8 @@ pub mod record;
 pub mod render;
 pub mod rig;
 pub mod scene;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_support;
 
 #[cfg(test)]
 mod tag_checks;

@@ -6,32 +6,9 @@
 pub(crate) mod detect;
 
 use ellipso_model::geometry::Ray;
-use ellipso_model::tags::{Board, BoardAxes, BoardOrigin, BoardSpec, GridSpec, TagFamily};
+use ellipso_model::tags::{Board, TagFamily};
+use ellipso_model::test_support::grid_spec;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
-
-/// A `cols × rows` grid board of tag36h11 tags of side `size` (ids 3…), `spacing` apart.
-fn grid_spec(cols: u32, rows: u32, size: f64, spacing: f64) -> BoardSpec {
-    BoardSpec {
-        name: None,
-        family: TagFamily::Tag36h11,
-        tag_size_m: size,
-        sheet_size_m: None,
-        margin_m: 0.01,
-        white_albedo: 0.85,
-        black_albedo: 0.04,
-        origin: BoardOrigin::SheetTopLeft,
-        axes: BoardAxes::XRightYDown,
-        grid: Some(GridSpec {
-            cols,
-            rows,
-            spacing_m: spacing,
-            first_id: 3,
-            ids: None,
-            first_centre_m: None,
-        }),
-        tags: Vec::new(),
-    }
-}
 
 /// The embedded tables against the C library's `apriltag_family_t`, field by field.
 #[test]

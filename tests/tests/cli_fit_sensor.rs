@@ -13,61 +13,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 use ellipso_model::mosaic::SensorLayout;
-use ellipso_polar::sensor_calibration::{
-    FORMAT, PixelRecord, SensorCalibration, SensorFigures, SensorHeader, VERSION, file,
-};
+use ellipso_polar::sensor_calibration::{SensorCalibration, file};
+use ellipso_polar::test_support::ideal_calibration;
 use ellipso_session::manifest::SensorInfo;
 use ellipso_tests::fit_fixture::sphere_mesh;
 use ellipso_tests::{ellipso_bin, shipped_scene as scene};
-
-/// A calibration of ideal analysers (black level 0, unit transmission) for a `w`×`h` sensor;
-/// `dark_dn` tells two files apart.
-fn ideal_calibration(layout: SensorLayout, w: u32, h: u32, dark_dn: f32) -> SensorCalibration {
-    let pixels = (0..h)
-        .flat_map(|y| (0..w).map(move |x| (x, y)))
-        .map(|(x, y)| {
-            let (s2, c2) = (2.0 * layout.analyser_at(x, y).angle_rad()).sin_cos();
-            PixelRecord {
-                dark_dn,
-                analysis: [0.5, (0.5 * c2) as f32, (0.5 * s2) as f32],
-            }
-        })
-        .collect();
-    SensorCalibration {
-        header: SensorHeader {
-            format: FORMAT.into(),
-            version: VERSION,
-            sensor: SensorInfo {
-                layout,
-                width: w,
-                height: h,
-                bit_depth: 12,
-            },
-            gain_db: 0.0,
-            figures: SensorFigures {
-                gain_dn_per_e: 0.39,
-                gain_e_per_dn: 1.0 / 0.39,
-                read_noise_dn: 0.9,
-                read_noise_e: 2.3,
-                black_level_dn: f64::from(dark_dn),
-                dsnu_dn: 0.0,
-                prnu_rel: 0.0,
-                saturation_dn: 4095.0,
-                saturation_e: 10_500.0,
-                vignetting_exponent: 0.0,
-                // the file's JSON header holds finite numbers only
-                extinction_ratio: vec![1e9],
-                analyser_angle_mean_error_deg: [0.0; 4],
-                analyser_angle_sd_deg: 0.0,
-                hot_pixels: 0,
-                photon_transfer: Vec::new(),
-            },
-            source: "test: ideal sensor".into(),
-        },
-        pixels,
-        checksum: 0,
-    }
-}
 
 fn write_calibration(mut cal: SensorCalibration, path: &Path) -> String {
     file::write(&mut cal, path).unwrap()

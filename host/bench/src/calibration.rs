@@ -16,6 +16,7 @@ use ellipso_vision::calibrate::{CalibConfig, Calibration, calibrate};
 use ellipso_vision::pose::DetectorConfig;
 use ellipso_vision::track::{DetectImage, FamilyDetectors};
 
+use crate::table::{self, Align::Left as L};
 use ellipso_run_error::say;
 use ellipso_run_error::{RunError, Say};
 
@@ -295,11 +296,18 @@ pub fn run(args: &CalibrationOptions, say: &dyn Say) -> Result<(), RunError> {
         b.points,
         b.rms_px
     );
-    say!(
-        say,
-        "| param | true | estimated | relative error | std error | error/σ |"
-    );
-    say!(say, "|---|---|---|---|---|---|");
+    for line in table::head(&[
+        ("param", L),
+        ("true", L),
+        ("estimated", L),
+        ("relative error", L),
+        ("std error", L),
+        ("error/σ", L),
+    ])
+    .lines()
+    {
+        say!(say, "{line}");
+    }
     for r in &b.params {
         let rel = if r.relative_error.is_finite() {
             format!("{:.2e}", r.relative_error)

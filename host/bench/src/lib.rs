@@ -30,6 +30,7 @@
 //! | [`generalize`] | `ellipso bench generalize`: the whole chain on procedurally generated scenes (held-out seeds ≥ 1000), `docs/generalize.md` |
 //! | [`generalize_report`] | its figures over a set of scenes and its Markdown report |
 //! | [`mesh_bench`] | `ellipso bench mesh`: the built-in mesh (and with `--fit` the refined one) against the truth, its cost, `docs/mesh-bench.md` |
+//! | [`table`] | the head of a report's Markdown table (column names and alignment rule) from one list |
 #![forbid(unsafe_code)]
 
 pub mod accuracy;
@@ -51,6 +52,7 @@ pub mod score;
 pub mod sensor_calibration;
 pub mod sim_render;
 pub mod surface;
+pub mod table;
 pub mod truth;
 pub mod truth_map;
 pub mod variant;

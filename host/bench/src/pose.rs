@@ -21,6 +21,7 @@ use ellipso_sim::scene::error::Located;
 
 use ellipso_polar::frame::RawFrame;
 
+use crate::table::{self, Align::Left as L};
 use ellipso_run_error::{RunError, Say};
 use ellipso_run_error::{ensure, say};
 use ellipso_vision::track::{DetectImage, TrackConfig, TrackedBoard, Tracker};
@@ -185,11 +186,20 @@ pub fn run(args: &PoseOptions, say: &dyn Say) -> Result<(), RunError> {
             rejected,
         });
     }
-    say!(
-        say,
-        "| image | posed | median rot (°) | p90 rot (°) | median trans (mm) | p90 trans (mm) | flipped | ms/frame |"
-    );
-    say!(say, "|---|---|---|---|---|---|---|---|");
+    for line in table::head(&[
+        ("image", L),
+        ("posed", L),
+        ("median rot (°)", L),
+        ("p90 rot (°)", L),
+        ("median trans (mm)", L),
+        ("p90 trans (mm)", L),
+        ("flipped", L),
+        ("ms/frame", L),
+    ])
+    .lines()
+    {
+        say!(say, "{line}");
+    }
     for r in &results {
         say!(
             say,

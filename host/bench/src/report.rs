@@ -14,6 +14,7 @@ use std::path::Path;
 
 use crate::BenchError;
 use crate::chain::RunResult;
+use crate::table::{self, Align, Align::Left as L, Align::Right as R};
 
 /// A stage whose replacement moves a material's η by more than this many points (percent of
 /// η) is named as a limit.
@@ -130,17 +131,32 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
 
     // Table 1: every run.
     let _ = writeln!(s, "## Every run\n");
-    let mut head = String::from(
-        "| run | posed | vertices scored (coverage of the visible surface, lowest material) |",
-    );
-    let mut rule = String::from("|---|---:|---:|");
-    for m in &materials {
-        head += &format!(" η {m} (%) |");
-        rule += "---:|";
-    }
-    head += " η per vertex, pooled / unpooled (%) | normal med / p90 (°) | ρd (%) | σs / σss abs | held-out s0, fit / truth | I^s | I^α | fit (s) |";
-    rule += "---|---|---:|---|---|---|---|---:|";
-    let _ = writeln!(s, "{head}\n{rule}");
+    let columns: Vec<(String, Align)> = [
+        ("run", L),
+        ("posed", R),
+        (
+            "vertices scored (coverage of the visible surface, lowest material)",
+            R,
+        ),
+    ]
+    .map(|(name, align)| (name.to_string(), align))
+    .into_iter()
+    .chain(materials.iter().map(|m| (format!("η {m} (%)"), R)))
+    .chain(
+        [
+            ("η per vertex, pooled / unpooled (%)", L),
+            ("normal med / p90 (°)", L),
+            ("ρd (%)", R),
+            ("σs / σss abs", L),
+            ("held-out s0, fit / truth", L),
+            ("I^s", L),
+            ("I^α", L),
+            ("fit (s)", R),
+        ]
+        .map(|(name, align)| (name.to_string(), align)),
+    )
+    .collect();
+    let _ = writeln!(s, "{}", table::head(&columns));
     for r in runs {
         let sc = &r.scores;
         let mut row = format!(
@@ -198,15 +214,16 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
          them: its Δη there carries the carved mesh's change too (a different mesh from \
          different noise); the same effect's row on the true geometry is its own cost.\n"
     );
-    let mut head = String::from("| stage replaced | in |");
-    let mut rule = String::from("|---|---|");
-    for m in &materials {
-        head += &format!(" Δη {m} |");
-        rule += "---:|";
-    }
-    head += " largest \\|Δη\\| | verdict |";
-    rule += "---:|---|";
-    let _ = writeln!(s, "{head}\n{rule}");
+    let columns: Vec<(String, Align)> = [("stage replaced", L), ("in", L)]
+        .map(|(name, align)| (name.to_string(), align))
+        .into_iter()
+        .chain(materials.iter().map(|m| (format!("Δη {m}"), R)))
+        .chain(
+            [("largest \\|Δη\\|", R), ("verdict", L)]
+                .map(|(name, align)| (name.to_string(), align)),
+        )
+        .collect();
+    let _ = writeln!(s, "{}", table::head(&columns));
     for r in runs {
         let Some(base) = reference(r, runs) else {
             continue;
@@ -241,7 +258,20 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
     );
     let _ = writeln!(
         s,
-        "| run | material | samples | gain I^d | gain I^s | gain I^α | gain I^t | RMS/σ I^d | RMS/σ I^s | RMS/σ I^α | mixed / kept |\n|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|"
+        "{}",
+        table::head(&[
+            ("run", L),
+            ("material", L),
+            ("samples", R),
+            ("gain I^d", R),
+            ("gain I^s", R),
+            ("gain I^α", R),
+            ("gain I^t", R),
+            ("RMS/σ I^d", R),
+            ("RMS/σ I^s", R),
+            ("RMS/σ I^α", R),
+            ("mixed / kept", L)
+        ])
     );
     for r in runs.iter().filter(|r| {
         [
@@ -441,7 +471,19 @@ pub fn end_to_end_section(runs: &[RunResult]) -> String {
     );
     let _ = writeln!(
         s,
-        "| photos | posed | vertices scored | fit (s) | chain (s) | η per material, mean / max abs (%) | η per vertex mean / median (%) | normal med / p90 (°) | ρd (%) | held-out s0, fit / truth |\n|---:|---:|---:|---:|---:|---|---|---|---:|---|"
+        "{}",
+        table::head(&[
+            ("photos", R),
+            ("posed", R),
+            ("vertices scored", R),
+            ("fit (s)", R),
+            ("chain (s)", R),
+            ("η per material, mean / max abs (%)", L),
+            ("η per vertex mean / median (%)", L),
+            ("normal med / p90 (°)", L),
+            ("ρd (%)", R),
+            ("held-out s0, fit / truth", L)
+        ])
     );
     for r in runs {
         let sc = &r.scores;

@@ -16,6 +16,7 @@ pub mod flash;
 
 use std::path::{Path, PathBuf};
 
+use crate::table::{self, Align::Left as L};
 use ellipso_polar::sensor_calibration::{MeasureOptions, SensorCalibration, measure};
 use ellipso_polar::{PolarConfig, RawFrame, process, process_with_sensor};
 use ellipso_run_error::{Context, RunError, Say, say};
@@ -439,7 +440,11 @@ fn markdown_table(report: &Report) -> String {
         r.eta_shift_photos
             .map_or(String::new(), |n| format!("; end-to-end fits on {n} views"))
     );
-    let _ = writeln!(s, "| key | recovered | target |\n|---|---|---|");
+    let _ = writeln!(
+        s,
+        "{}",
+        table::head(&[("key", L), ("recovered", L), ("target", L)])
+    );
     let opt = |v: Option<f64>| v.map_or("not measured".to_string(), |v| format!("{v:.4}"));
     for (k, v, t) in [
         ("gain_rel_err", format!("{:.4}", r.gain_rel_err), "≤ 0.02"),
@@ -517,7 +522,11 @@ fn markdown_table(report: &Report) -> String {
     ] {
         let _ = writeln!(s, "| `{k}` | {v} | {t} |");
     }
-    let _ = writeln!(s, "\n| figure | simulator | calibration |\n|---|---|---|");
+    let _ = writeln!(
+        s,
+        "\n{}",
+        table::head(&[("figure", L), ("simulator", L), ("calibration", L)])
+    );
     for (name, t, e) in &report.figures {
         let _ = writeln!(s, "| {name} | {t:.5} | {e:.5} |");
     }

@@ -251,8 +251,10 @@ pub fn export_all(
         centre + camera.world_from_camera.rotation * offset_camera
     };
     let light = light_for(&view);
+    // one rasterisation of the view for the float maps and the PNG pictures
+    let hits = raster::rasterise(mesh, &view);
     let maps_path = out.join("maps.exr");
-    float_maps::maps_image(mesh, fits, &view)?.write(&maps_path)?;
+    float_maps::maps_image(&hits, fits, &view)?.write(&maps_path)?;
     report.files.push(maps_path);
     let record =
         view_file::PictureView::new(&view, &flash.position_world(world_from_camera), &light)
@@ -266,7 +268,7 @@ pub fn export_all(
         source,
     })?;
     report.files.push(view_path);
-    let (mut pictures, holes) = images::pictures(mesh, fits, &view, flash, &light);
+    let (mut pictures, holes) = images::pictures(&hits, fits, &view, flash, &light);
     report.holes.push(holes);
     // The novel view: the chosen view turned about the world z axis through the centre.
     let turn = UnitQuaternion::from_axis_angle(

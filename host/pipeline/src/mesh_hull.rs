@@ -94,9 +94,9 @@ pub fn sidecar_paths(mesh: &Path) -> (PathBuf, PathBuf) {
     )
 }
 
+/// CRC-64/XZ of `bytes` (the session's [`ellipso_session::provenance::crc64`]), as 16 hex digits.
 fn crc64(bytes: &[u8]) -> String {
-    const CRC: crc::Crc<u64> = crc::Crc::<u64>::new(&crc::CRC_64_XZ);
-    format!("{:016x}", CRC.checksum(bytes))
+    format!("{:016x}", ellipso_session::provenance::crc64(bytes))
 }
 
 /// CRC-64 of poses: each frame id (u64 LE) and its 4×4 matrix (row-major f64 LE), in order.

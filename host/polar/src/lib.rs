@@ -70,6 +70,8 @@ pub mod plane;
 pub mod sensor_calibration;
 pub mod stokes;
 pub mod synthetic;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_support;
 
 use ellipso_model::mosaic::SensorLayout;
 

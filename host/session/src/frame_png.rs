@@ -46,6 +46,14 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, SessionError> {
         .map_err(SessionError::io(path))
 }
 
+/// A frame file's bytes ([`read_bytes`]) and their CRC-64/XZ: the one place a session hashes
+/// a frame file it reads (`Session::check_frames`, `Session::load_frame`).
+pub fn read_hashed(path: &Path) -> Result<(Vec<u8>, u64), SessionError> {
+    let bytes = read_bytes(path)?;
+    let crc64 = crate::provenance::crc64(&bytes);
+    Ok((bytes, crc64))
+}
+
 /// Decodes the bytes of the 16-bit grayscale PNG at `path` (named in errors), within the
 /// largest sensor the manifest allows: `(width, height, pixels)`.
 pub fn decode(path: &Path, bytes: &[u8]) -> Result<(u32, u32, Vec<u16>), SessionError> {

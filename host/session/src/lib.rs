@@ -32,6 +32,9 @@ pub mod rig_ranges;
 pub mod time;
 pub mod writer;
 
+#[cfg(test)]
+mod test_fixture;
+
 pub use events::SessionEvent;
 pub use manifest::Manifest;
 pub use poses::SessionPoses;

@@ -36,11 +36,10 @@ pub fn crc64(bytes: &[u8]) -> u64 {
     CRC64.checksum(bytes)
 }
 
-/// CRC-64/XZ of a frame file's bytes (a regular file of a frame's size at most).
+/// CRC-64/XZ of a frame file's bytes (a regular file of a frame's size at most), as
+/// [`crate::frame_png::read_hashed`] computes it for every frame read.
 pub fn file_crc64(path: &Path) -> Result<u64, SessionError> {
-    ellipso_model::file_io::read_bounded(path, ellipso_model::file_io::caps::FRAME)
-        .map(|b| crc64(&b))
-        .map_err(SessionError::io(path))
+    crate::frame_png::read_hashed(path).map(|(_, crc64)| crc64)
 }
 
 /// The identity of a set of board definitions: CRC-64/XZ of their JSON as the manifest records

@@ -156,6 +156,9 @@ fn list(ids: &[u64]) -> String {
     s.join(", ")
 }
 
+/// A frame's raw samples: `(width, height, pixels)`, row-major.
+pub type FrameSamples = (u32, u32, Vec<u16>);
+
 /// A session opened for reading.
 #[derive(Debug, Clone)]
 pub struct Session {
@@ -176,12 +179,36 @@ impl Session {
     /// against the checksum its `frame` event recorded (`crate::provenance`): a file that is not
     /// the one recorded is a bad frame, so every stage skips it rather than pairing another
     /// capture's pixels with this frame's pose.
-    pub fn load_frame(&self, entry: &FrameEntry) -> Result<(u32, u32, Vec<u16>), SessionError> {
-        let bytes = frame_png::read_bytes(&entry.path)?;
+    pub fn load_frame(&self, entry: &FrameEntry) -> Result<FrameSamples, SessionError> {
+        self.load_frame_and_crc64(entry).1
+    }
+
+    /// [`Session::load_frame`], with the CRC-64/XZ of the bytes it read (`None`: the file could
+    /// not be read): one read and one hash of the file ([`frame_png::read_hashed`]) serve both
+    /// the check against the recorded checksum and the caller's record of what it loaded
+    /// (tracking's `TrackedFrom`).
+    pub fn load_frame_and_crc64(
+        &self,
+        entry: &FrameEntry,
+    ) -> (Option<u64>, Result<FrameSamples, SessionError>) {
+        match frame_png::read_hashed(&entry.path) {
+            Err(e) => (None, Err(e)),
+            Ok((bytes, crc64)) => (Some(crc64), self.decode_frame(entry, &bytes, crc64)),
+        }
+    }
+
+    /// Decodes a frame file's `bytes` (whose CRC-64/XZ is `crc64`), refusing bytes that are not
+    /// the ones its `frame` event recorded or a size that is not the manifest's.
+    fn decode_frame(
+        &self,
+        entry: &FrameEntry,
+        bytes: &[u8],
+        crc64: u64,
+    ) -> Result<FrameSamples, SessionError> {
         if let Some(SessionEvent::Frame {
             crc64: Some(want), ..
         }) = &entry.event
-            && crate::provenance::crc64(&bytes) != *want
+            && crc64 != *want
         {
             return Err(SessionError::BadFrame {
                 path: entry.path.clone(),
@@ -190,7 +217,7 @@ impl Session {
                     .into(),
             });
         }
-        let (w, h, px) = frame_png::decode(&entry.path, &bytes)?;
+        let (w, h, px) = frame_png::decode(&entry.path, bytes)?;
         let s = &self.manifest.sensor;
         if (w, h) != (s.width, s.height) {
             return Err(SessionError::BadFrame {

@@ -121,25 +121,31 @@ pub fn track_frames(
         .map_init(
             || Tracker::new(camera, boards.clone(), config.clone()),
             |tracker, entry| {
-                let from = TrackedFrom {
-                    frame_crc64: ellipso_session::provenance::file_crc64(&entry.path).ok(),
-                    boards_crc64,
-                };
-                let result = match tracker {
-                    Err(e) => Err(TrackRejection::Frame(e.to_string())),
-                    Ok(tracker) => session
-                        .load_frame(entry)
-                        .map_err(|e| TrackRejection::Frame(e.to_string()))
-                        .and_then(|(w, h, px)| {
-                            RawFrame::new(w, h, bit_depth, layout, px)
-                                .map_err(|e| TrackRejection::Frame(e.to_string()))
-                        })
-                        .and_then(|raw| tracker.track(&raw)),
+                // one read and one hash of the file: the checksum of the bytes tracked
+                let (frame_crc64, result) = match tracker {
+                    Err(e) => (
+                        ellipso_session::provenance::file_crc64(&entry.path).ok(),
+                        Err(TrackRejection::Frame(e.to_string())),
+                    ),
+                    Ok(tracker) => {
+                        let (crc64, loaded) = session.load_frame_and_crc64(entry);
+                        let result = loaded
+                            .map_err(|e| TrackRejection::Frame(e.to_string()))
+                            .and_then(|(w, h, px)| {
+                                RawFrame::new(w, h, bit_depth, layout, px)
+                                    .map_err(|e| TrackRejection::Frame(e.to_string()))
+                            })
+                            .and_then(|raw| tracker.track(&raw));
+                        (crc64, result)
+                    }
                 };
                 TrackedFrame {
                     frame_id: entry.frame_id,
                     result,
-                    from,
+                    from: TrackedFrom {
+                        frame_crc64,
+                        boards_crc64,
+                    },
                 }
             },
         )

@@ -4,30 +4,8 @@
 
 use super::*;
 use crate::geometry::Ray;
+use crate::test_support::grid_spec;
 use nalgebra::{Isometry3, Point2, Point3, Translation3, UnitQuaternion, Vector3};
-
-fn grid_spec(cols: u32, rows: u32, size: f64, spacing: f64) -> BoardSpec {
-    BoardSpec {
-        name: None,
-        family: TagFamily::Tag36h11,
-        tag_size_m: size,
-        sheet_size_m: None,
-        margin_m: 0.01,
-        white_albedo: 0.85,
-        black_albedo: 0.04,
-        origin: BoardOrigin::SheetTopLeft,
-        axes: BoardAxes::XRightYDown,
-        grid: Some(GridSpec {
-            cols,
-            rows,
-            spacing_m: spacing,
-            first_id: 3,
-            ids: None,
-            first_centre_m: None,
-        }),
-        tags: Vec::new(),
-    }
-}
 
 #[test]
 fn grid_corners_follow_apriltag_order_and_spacing() {

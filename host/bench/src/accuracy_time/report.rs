@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use super::RunResult;
+use crate::table::{self, Align::Left as L, Align::Right as R};
 
 /// The report text. `command` is the command line that made it (without the program name);
 /// `dir` is the report's folder (plots are linked relative to it).
@@ -76,11 +77,27 @@ pub fn markdown(
         let _ = writeln!(s, "## {title}\n");
         let _ = writeln!(
             s,
-            "| scene | solver | photos | vertices (scored of observed: coverage) | samples | fit (s) | A / B / C (s) | ×fwd | η err per vertex mean / median (%) | η err per material (%) | normal med / p90 (°) | input normal (°) | ρd err mean / median (%) | σs / σss abs err | re-render RMSE | held-out s0 RMSE / PSNR | peak memory (GB) | flagged |"
-        );
-        let _ = writeln!(
-            s,
-            "|---|---|---:|---:|---:|---:|---|---:|---|---:|---|---:|---:|---|---:|---|---:|---|"
+            "{}",
+            table::head(&[
+                ("scene", L),
+                ("solver", L),
+                ("photos", R),
+                ("vertices (scored of observed: coverage)", R),
+                ("samples", R),
+                ("fit (s)", R),
+                ("A / B / C (s)", L),
+                ("×fwd", R),
+                ("η err per vertex mean / median (%)", L),
+                ("η err per material (%)", R),
+                ("normal med / p90 (°)", L),
+                ("input normal (°)", R),
+                ("ρd err mean / median (%)", R),
+                ("σs / σss abs err", L),
+                ("re-render RMSE", R),
+                ("held-out s0 RMSE / PSNR", L),
+                ("peak memory (GB)", R),
+                ("flagged", L)
+            ])
         );
         for r in &rows {
             let flags = r
@@ -143,9 +160,18 @@ pub fn markdown(
     );
     let _ = writeln!(
         s,
-        "| scene | sweep | solver | photos | clusters | vertices pooled | median η se before | after |"
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("sweep", L),
+            ("solver", L),
+            ("photos", R),
+            ("clusters", R),
+            ("vertices pooled", R),
+            ("median η se before", R),
+            ("after", R)
+        ])
     );
-    let _ = writeln!(s, "|---|---|---|---:|---:|---:|---:|---:|");
     for r in results {
         if let Some(p) = &r.pooling {
             let _ = writeln!(
@@ -166,11 +192,22 @@ pub fn markdown(
     let _ = writeln!(s, "## η error per material\n");
     let _ = writeln!(
         s,
-        "| scene | sweep | solver | photos | material | η true | η median | material η err (%) | vertex η err mean / median (%) | σs median | σss median | ρd err (%) | normal med (°) |"
-    );
-    let _ = writeln!(
-        s,
-        "|---|---|---|---:|---|---:|---:|---:|---|---:|---:|---:|---:|"
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("sweep", L),
+            ("solver", L),
+            ("photos", R),
+            ("material", L),
+            ("η true", R),
+            ("η median", R),
+            ("material η err (%)", R),
+            ("vertex η err mean / median (%)", L),
+            ("σs median", R),
+            ("σss median", R),
+            ("ρd err (%)", R),
+            ("normal med (°)", R)
+        ])
     );
     for r in results {
         for m in &r.scores.materials {
@@ -219,11 +256,23 @@ fn bracket_section(s: &mut String, results: &[RunResult]) {
     );
     let _ = writeln!(
         s,
-        "| run | photos | energies | material | σs true | cluster σs | error (%) | share | vertices with a near-mirror view | … kept a peak sample | peak samples kept / near-mirror views | kept / views per energy | η err per material (%) | fit (s) |"
-    );
-    let _ = writeln!(
-        s,
-        "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---|---|---:|---:|"
+        "{}",
+        table::head(&[
+            ("run", L),
+            ("photos", R),
+            ("energies", L),
+            ("material", L),
+            ("σs true", R),
+            ("cluster σs", R),
+            ("error (%)", R),
+            ("share", R),
+            ("vertices with a near-mirror view", R),
+            ("… kept a peak sample", R),
+            ("peak samples kept / near-mirror views", L),
+            ("kept / views per energy", L),
+            ("η err per material (%)", R),
+            ("fit (s)", R)
+        ])
     );
     for r in rows {
         let energies = if r.bracket.is_empty() {

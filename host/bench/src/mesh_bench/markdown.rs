@@ -11,6 +11,7 @@ use super::{
     DEFAULT_REPORT, DEFAULT_SCENES, FailedCapture, MeshBenchRequest, ScaleResult, SceneResult,
 };
 use crate::surface::EtaBeside;
+use crate::table::{self, Align::Left as L, Align::Right as R};
 
 /// The report (module doc); `total_s`: the whole run's wall time.
 pub fn markdown(
@@ -46,9 +47,19 @@ pub fn markdown(
     );
     let _ = writeln!(
         s,
-        "| scene | frames | vertices | Chamfer (mm) | Hausdorff (mm) | p90 (mm) | mesh → truth / truth → mesh (mm) | time (s) | peak memory (MB) |"
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("frames", R),
+            ("vertices", R),
+            ("Chamfer (mm)", R),
+            ("Hausdorff (mm)", R),
+            ("p90 (mm)", R),
+            ("mesh → truth / truth → mesh (mm)", L),
+            ("time (s)", R),
+            ("peak memory (MB)", R)
+        ])
     );
-    let _ = writeln!(s, "|---|---:|---:|---:|---:|---:|---|---:|---:|");
     for r in results {
         let d = &r.before_fit;
         let _ = writeln!(
@@ -86,9 +97,20 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| scene | observed / unobserved vertices | observed: before → after (mm) | p90 after (mm) | signed median after (mm) | unobserved: before → after (mm) | normals: mesh before → fit after (°) | normals on the true mesh (°) | Chamfer before → after (mm) | fit (s) |"
+            "{}",
+            table::head(&[
+                ("scene", L),
+                ("observed / unobserved vertices", L),
+                ("observed: before → after (mm)", L),
+                ("p90 after (mm)", R),
+                ("signed median after (mm)", R),
+                ("unobserved: before → after (mm)", L),
+                ("normals: mesh before → fit after (°)", L),
+                ("normals on the true mesh (°)", R),
+                ("Chamfer before → after (mm)", L),
+                ("fit (s)", R)
+            ])
         );
-        let _ = writeln!(s, "|---|---|---|---:|---:|---|---|---:|---|---:|");
         for r in results {
             let Some(f) = &r.fit else { continue };
             let _ = writeln!(
@@ -123,9 +145,20 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| scene | material | η true | carved mesh (%) | true mesh (%) | difference (points) | noise, 1σ (points) | target | vertices reporting η (carved / true) | coverage of the visible surface (carved) |"
+            "{}",
+            table::head(&[
+                ("scene", L),
+                ("material", L),
+                ("η true", R),
+                ("carved mesh (%)", R),
+                ("true mesh (%)", R),
+                ("difference (points)", R),
+                ("noise, 1σ (points)", R),
+                ("target", L),
+                ("vertices reporting η (carved / true)", L),
+                ("coverage of the visible surface (carved)", R)
+            ])
         );
-        let _ = writeln!(s, "|---|---|---:|---:|---:|---:|---:|---|---|---:|");
         for r in results {
             let Some(f) = &r.fit else { continue };
             for m in &f.eta {
@@ -172,9 +205,18 @@ pub fn markdown(
         );
         let _ = writeln!(
             s,
-            "| target | vertices | wall (s) | observe (s) | joint solve (s) | surface (s) | peak memory (MB) | observed surface (mm) |"
+            "{}",
+            table::head(&[
+                ("target", R),
+                ("vertices", R),
+                ("wall (s)", R),
+                ("observe (s)", R),
+                ("joint solve (s)", R),
+                ("surface (s)", R),
+                ("peak memory (MB)", R),
+                ("observed surface (mm)", R)
+            ])
         );
-        let _ = writeln!(s, "|---:|---:|---:|---:|---:|---:|---:|---:|");
         for r in scale {
             let t = |k: &str| {
                 r.times_s[k]
@@ -260,7 +302,8 @@ fn failures(s: &mut String, failed: &[FailedCapture]) {
         s,
         "\n## Captures that failed\n\nThese captures have no row above: the bench could not \
          make, mesh or fit them (`ellipso bench mesh` ends in an error after writing this \
-         report).\n\n| scene | error |\n|---|---|"
+         report).\n\n{}",
+        table::head(&[("scene", L), ("error", L)])
     );
     for f in failed {
         let _ = writeln!(
@@ -302,9 +345,15 @@ fn across_captures(s: &mut String, results: &[SceneResult]) {
     );
     let _ = writeln!(
         s,
-        "| scene | material | difference per capture (points) | mean | captures within 0.2 points |"
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("material", L),
+            ("difference per capture (points)", L),
+            ("mean", R),
+            ("captures within 0.2 points", L)
+        ])
     );
-    let _ = writeln!(s, "|---|---|---|---:|---|");
     for (scene, captures) in scenes {
         let Some(first) = captures[0].fit.as_ref() else {
             continue;

@@ -11,21 +11,20 @@
 //! identifiability rule is the PNG maps': where `map-eta.png` is grey on the object, `eta` is
 //! NaN and `eta_std` +inf.
 
-use ellipso_model::geometry::TriangleMesh;
 use ellipso_report::exr_image::{ExrError, FloatImage};
 use nalgebra::Vector3;
 
-use super::raster::ViewCamera;
+use super::raster::{Hit, ViewCamera};
 use crate::data::VertexFit;
 
-/// The float maps of `fits` on `mesh` seen by `camera` (module doc).
+/// The float maps of `fits` seen by `camera`, from the mesh's rasterisation in that camera
+/// (`hits`, [`super::raster::rasterise`]: the one the PNG maps draw) (module doc).
 pub fn maps_image(
-    mesh: &TriangleMesh,
+    hits: &[Option<Hit>],
     fits: &[VertexFit],
     camera: &ViewCamera,
 ) -> Result<FloatImage, ExrError> {
-    let models = super::images::pixel_models(mesh, fits, camera);
-    let hits = super::raster::rasterise(mesh, camera);
+    let models = super::images::pixel_models_of(hits, fits);
     let eta_std: Vec<[f64; 1]> = fits.iter().map(|f| [f.reported_std_error()[0]]).collect();
     let eta_ok: Vec<bool> = fits.iter().map(|f| f.identifiable().eta).collect();
     let masks: Vec<u32> = fits.iter().map(VertexFit::output_mask).collect();

@@ -134,9 +134,10 @@ fn model_geometry(
     g.model::<f64>(Vec3::from_f64(normal)).ok()
 }
 
-/// The maps, Mueller grid, DoLP/AoLP and relit pictures of one view.
+/// The maps, Mueller grid, DoLP/AoLP and relit pictures of one view, `camera`, from the mesh's
+/// rasterisation in it (`hits`, [`rasterise`]).
 pub fn pictures(
-    mesh: &TriangleMesh,
+    hits: &[Option<Hit>],
     fits: &[VertexFit],
     camera: &ViewCamera,
     flash: &FlashSpec,
@@ -144,7 +145,7 @@ pub fn pictures(
 ) -> (Vec<Picture>, Holes) {
     let field = Field::new(fits);
     let (w, h) = (camera.width, camera.height);
-    let (at, holes) = models_and_holes(mesh, &field, camera, "map-eta");
+    let (at, holes) = models_and_holes(hits, &field, "map-eta");
     let mut out = Vec::new();
     let ranges = super::colour::MapRanges::of_fits(fits);
     let scalar = |name: &'static str,
@@ -517,7 +518,12 @@ pub fn pixel_models(
     fits: &[VertexFit],
     camera: &ViewCamera,
 ) -> Vec<PixelModel> {
-    models_of(mesh, &Field::new(fits), camera)
+    pixel_models_of(&rasterise(mesh, camera), fits)
+}
+
+/// [`pixel_models`] of a view already rasterised (`hits`, [`rasterise`]).
+pub fn pixel_models_of(hits: &[Option<Hit>], fits: &[VertexFit]) -> Vec<PixelModel> {
+    models_and_holes(hits, &Field::new(fits), "").0
 }
 
 /// [`pixel_models`] with the view's [`Holes`] counted from the same rasterisation.
@@ -527,30 +533,24 @@ pub fn pixel_models_and_holes(
     camera: &ViewCamera,
     view: &'static str,
 ) -> (Vec<PixelModel>, Holes) {
-    models_and_holes(mesh, &Field::new(fits), camera, view)
+    models_and_holes(&rasterise(mesh, camera), &Field::new(fits), view)
 }
 
-/// Rasterises `mesh` and interpolates `field` at every hit.
-fn models_of(mesh: &TriangleMesh, field: &Field, camera: &ViewCamera) -> Vec<PixelModel> {
-    models_and_holes(mesh, field, camera, "").0
-}
-
-/// Rasterises `mesh` once: `field` interpolated at every hit, and the [`Holes`] of the
-/// observed surface among those hits.
+/// `field` interpolated at every hit of one rasterisation, and the [`Holes`] of the observed
+/// surface among those hits.
 fn models_and_holes(
-    mesh: &TriangleMesh,
+    hits: &[Option<Hit>],
     field: &Field,
-    camera: &ViewCamera,
     view: &'static str,
 ) -> (Vec<PixelModel>, Holes) {
     let mut holes = Holes {
         view,
         ..Holes::default()
     };
-    let models = rasterise(mesh, camera)
-        .into_iter()
+    let models = hits
+        .iter()
         .map(|hit| {
-            let hit = hit?;
+            let hit = (*hit)?;
             let at = field.at(&hit);
             if hit.vertices.iter().all(|&v| field.observed[v as usize]) {
                 holes.observed_px += 1;

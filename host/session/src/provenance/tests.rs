@@ -3,30 +3,15 @@
 use std::fs;
 
 use super::*;
-use crate::manifest::{Manifest, SensorInfo, SessionSource};
 use crate::paths;
+use crate::test_fixture::{manifest, pixels};
 use crate::time::HostTimeUs;
 use crate::writer::{FrameRecord, SessionAppender, SessionWriter};
 
 fn session(dir: &Path, frames: u64) {
-    let manifest = Manifest::new(
-        SessionSource::Simulator {
-            scene: "sphere.toml".into(),
-            seed: 7,
-        },
-        SensorInfo {
-            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
-            width: 8,
-            height: 6,
-            bit_depth: 12,
-        },
-        1_700_000_000_000_000,
-    );
-    let mut w = SessionWriter::create(dir, manifest).unwrap();
+    let mut w = SessionWriter::create(dir, manifest()).unwrap();
     for id in 0..frames {
-        let px: Vec<u16> = (0..48)
-            .map(|i| ((i * 97 + id * 13) % 4096) as u16)
-            .collect();
+        let px = pixels(id);
         w.write_frame(FrameRecord {
             t_host_us: HostTimeUs(id),
             frame_id: id,
@@ -107,6 +92,33 @@ fn a_single_damaged_frame_is_skipped_and_said_not_refused() {
     let e = s.load_frame(&s.frames[2]).unwrap_err().to_string();
     assert!(e.contains("not the ones this session recorded"), "{e}");
     assert!(s.load_frame(&s.frames[1]).is_ok());
+}
+
+#[test]
+fn a_frame_loaded_with_its_checksum_gives_the_check_s_checksum_of_the_bytes_it_read() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path().join("s");
+    session(&dir, 3);
+    // frame 1 replaced by another capture's valid frame; frame 2 unreadable
+    crate::frame_png::write(&frame(&dir, 1), 8, 6, &[7u16; 48]).unwrap();
+    fs::remove_file(frame(&dir, 2)).unwrap();
+    fs::create_dir(frame(&dir, 2)).unwrap();
+    let s = crate::reader::open(&dir).unwrap();
+    let check = s.check_frames();
+    for f in s.frames.iter().filter(|f| f.complete) {
+        let (crc64, loaded) = s.load_frame_and_crc64(f);
+        // the checksum of the bytes read, recorded or not: what tracking says it tracked
+        assert_eq!(crc64, check.current[&f.frame_id], "frame {}", f.frame_id);
+        assert_eq!(
+            loaded.as_ref().map_err(ToString::to_string),
+            s.load_frame(f).as_ref().map_err(ToString::to_string),
+            "frame {}",
+            f.frame_id
+        );
+        assert_eq!(loaded.is_ok(), f.frame_id == 0, "frame {}", f.frame_id);
+    }
+    assert_eq!(check.current[&2], None);
+    assert_ne!(check.current[&1], check.expected[&1]);
 }
 
 #[test]

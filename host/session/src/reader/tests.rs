@@ -4,31 +4,9 @@ use std::fs;
 use std::io::Write;
 
 use super::*;
-use crate::manifest::{SensorInfo, SessionSource};
+use crate::test_fixture::{manifest, pixels};
 use crate::time::HostTimeUs;
 use crate::writer::{FrameRecord, SessionWriter};
-
-fn manifest() -> Manifest {
-    Manifest::new(
-        SessionSource::Simulator {
-            scene: "sphere.toml".into(),
-            seed: 7,
-        },
-        SensorInfo {
-            layout: ellipso_model::mosaic::SensorLayout::MonoPolar,
-            width: 8,
-            height: 6,
-            bit_depth: 12,
-        },
-        1_700_000_000_000_000,
-    )
-}
-
-fn pixels(id: u64) -> Vec<u16> {
-    (0..48)
-        .map(|i| ((i as u64 * 97 + id * 13) % 4096) as u16)
-        .collect()
-}
 
 fn record(w: &mut SessionWriter, id: u64) {
     let px = pixels(id);
