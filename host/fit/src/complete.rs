@@ -22,7 +22,9 @@
 //!   spread about the chosen one ([`membership_sd`]): nearness is no evidence of η.
 //! - **The material's values** ([`MaterialValues`], from the cluster's own-fit members): η the
 //!   pooled one (`Pooled::mean`) with the predictive spread of a member √(se² + τ²), or, where
-//!   no pool formed, the members' median η and robust spread; σs, σss, ρs, ρss the cluster's
+//!   no pool formed, the members' median η and robust spread — none where that spread exceeds
+//!   the solver's per-vertex limit `max_eta_std_error`, the weak pool's rule (several materials
+//!   the clustering joined have no one η); σs, σss, ρs, ρss the cluster's
 //!   two-lobe model with the members' robust spread (1.4826·MAD) of their own values; ρd the
 //!   members' median and robust spread, used only where the vertex has no sample.
 //! - **Its own ρd** ([`own_rho_d`]): per colour channel the weighted least-squares albedo of its
