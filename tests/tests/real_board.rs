@@ -75,7 +75,9 @@ fn a_real_board_answers_and_takes_a_firmware_image() {
         match probe(&port) {
             Ok(b) if answers(&b) => break b,
             other if started.elapsed() > REBOOT_WAIT => {
-                panic!("the flashed board did not answer on {port} within {REBOOT_WAIT:?}: {other:?}")
+                panic!(
+                    "the flashed board did not answer on {port} within {REBOOT_WAIT:?}: {other:?}"
+                )
             }
             _ => std::thread::sleep(Duration::from_millis(500)),
         }
