@@ -113,8 +113,14 @@ def test_ctrl_c_stops_the_fit_with_nothing_written(session_dir, fit_dir, tmp_pat
             started.set()
             os.kill(os.getpid(), signal.SIGINT)
 
-    with pytest.raises(KeyboardInterrupt):
-        ellipso.fit(session_dir, out, mesh=fit_dir / "mesh.ply", outer=2, no_hull=True, progress=progress)
+    # Python leaves SIGINT ignored when it started with it ignored (a job started in the
+    # background by a non-interactive shell): Ctrl-C's handler is set here, as a terminal has it.
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ellipso.fit(session_dir, out, mesh=fit_dir / "mesh.ply", outer=2, no_hull=True, progress=progress)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     assert started.is_set()
     assert not out.exists() and _leftovers(tmp_path, set()) == []
 
