@@ -111,6 +111,15 @@ impl TexelGrid {
             .then(|| v as usize * self.nx + u as usize)
     }
 
+    /// The centre of texel `t`, metres.
+    pub fn centre(&self, t: usize) -> [f64; 2] {
+        let (i, j) = (t % self.nx.max(1), t / self.nx.max(1));
+        [
+            self.origin_m[0] + (i as f64 + 0.5) * self.texel_m,
+            self.origin_m[1] + (j as f64 + 0.5) * self.texel_m,
+        ]
+    }
+
     /// Number of texels.
     pub fn len(&self) -> usize {
         self.nx * self.ny
@@ -329,6 +338,7 @@ impl Reservoirs {
             grid: self.grid,
             texels,
             learned,
+            print: Default::default(),
         }
     }
 }
@@ -369,6 +379,8 @@ pub struct Board {
     pub texels: Vec<Option<TexelSample>>,
     /// Number of learned texels.
     pub learned: usize,
+    /// Where tags are printed, and the paper's value ([`crate::print`]); empty when not known.
+    pub print: crate::print::PrintedArea,
 }
 
 impl Board {

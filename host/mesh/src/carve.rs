@@ -18,7 +18,9 @@
 //!   are nodes that are not carved but that fewer than k views, or fewer than half of the views
 //!   that see them, see *something other than the board* through (pixels that disagree with a
 //!   learned texel): where views show unknown board (beyond the learned region, blurred tag
-//!   edges), there is no evidence of an object either. This rule runs on the coarse grid only.
+//!   edges), there is no evidence of an object either. Views that see only the print of a tag
+//!   through a node (`crate::print`: ink and paper mixed below a pixel) do not count towards
+//!   that half. This rule runs on the coarse grid only.
 //! - Views stream past: only the k largest values per node are kept (`k × 4` bytes per node),
 //!   updated in parallel over nodes in view order, so results do not depend on the thread count.
 
@@ -103,6 +105,8 @@ pub struct TopK {
     values: Vec<f32>,
     seen: Vec<u16>,
     solid: Vec<u16>,
+    /// Views in which the node projects onto an ambiguous print pixel ([`crate::print`]).
+    print: Vec<u16>,
 }
 
 impl TopK {
@@ -114,12 +118,13 @@ impl TopK {
             values: vec![f32::NEG_INFINITY; nodes * k],
             seen: vec![0; nodes],
             solid: vec![0; nodes],
+            print: vec![0; nodes],
         }
     }
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        self.values.len() * 4 + self.seen.len() * 4
+        self.values.len() * 4 + self.seen.len() * 6
     }
 
     /// Views in which a node projects onto a pixel that disagrees with the board.
@@ -135,6 +140,14 @@ impl TopK {
     /// Views that saw a node.
     pub fn seen(&self, node: usize) -> usize {
         self.seen[node] as usize
+    }
+
+    /// Whether a node that is not carved has evidence of an object: at least k views, and
+    /// at least half of the views that could judge it (those that saw it, less those that saw
+    /// only the print of a tag through it), see something other than the board through it.
+    pub fn has_evidence(&self, node: usize) -> bool {
+        let judging = self.seen[node].saturating_sub(self.print[node]) as usize;
+        self.solid(node) >= self.k.max(judging / 2)
     }
 }
 
@@ -243,9 +256,15 @@ pub fn vote(
         .par_chunks_mut(chunk * k)
         .zip(top.seen.par_chunks_mut(chunk))
         .zip(top.solid.par_chunks_mut(chunk))
+        .zip(top.print.par_chunks_mut(chunk))
         .enumerate()
-        .for_each(|(c, ((values, seen), solid))| {
-            for (o, (seen, solid)) in seen.iter_mut().zip(solid.iter_mut()).enumerate() {
+        .for_each(|(c, (((values, seen), solid), print))| {
+            for (o, ((seen, solid), print)) in seen
+                .iter_mut()
+                .zip(solid.iter_mut())
+                .zip(print.iter_mut())
+                .enumerate()
+            {
                 let node = c * chunk + o;
                 if active.is_some_and(|a| !a[node]) {
                     continue;
@@ -265,6 +284,8 @@ pub fn vote(
                     };
                     if voter.distance.disagrees_at(u, v) {
                         *solid = solid.saturating_add(1);
+                    } else if voter.distance.print_at(u, v) {
+                        *print = print.saturating_add(1);
                     }
                     let metres = (f64::from(s) * pc.z / f_sp) as f32;
                     push(
@@ -286,7 +307,7 @@ pub fn field(top: &TopK, truncation_m: f64) -> (Vec<f32>, usize) {
     let mut unseen = 0;
     let values = (0..top.seen.len())
         .map(|n| match top.kth(n) {
-            Some(v) if v >= 0.0 || top.solid(n) >= top.k.max(top.seen(n) / 2) => v,
+            Some(v) if v >= 0.0 || top.has_evidence(n) => v,
             _ => {
                 unseen += 1;
                 truncation_m as f32
@@ -301,7 +322,7 @@ pub fn field(top: &TopK, truncation_m: f64) -> (Vec<f32>, usize) {
 pub fn unjudged(top: &TopK) -> Vec<bool> {
     (0..top.seen.len())
         .map(|n| match top.kth(n) {
-            Some(v) => v < 0.0 && top.solid(n) < top.k.max(top.seen(n) / 2),
+            Some(v) => v < 0.0 && !top.has_evidence(n),
             None => true,
         })
         .collect()

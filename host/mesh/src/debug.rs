@@ -1,5 +1,7 @@
 //! Diagnostic pictures of a carving (`MeshConfig::debug_dir`, `ellipso mesh --debug DIR`):
-//! every view's board pixels (white: shows the board as learned) and horizontal slices of a
+//! every view's board pixels (white: shows the board as learned; black: disagrees with a
+//! learned texel, evidence of an object; dark grey: a tag's print, ambiguous; grey: neither)
+//! and horizontal slices of a
 //! grid field (grey: distance outside, dark red: inside, white on the zero crossing).
 
 use std::path::Path;
@@ -11,10 +13,17 @@ use super::silhouette::Silhouette;
 pub fn write_silhouette(dir: &Path, s: &Silhouette) -> std::io::Result<()> {
     let pixels: Vec<u8> = (0..s.width * s.height)
         .map(|k| {
-            if s.is_board((k % s.width) as isize, (k / s.width) as isize) {
+            let (x, y) = ((k % s.width) as isize, (k / s.width) as isize);
+            if s.is_board(x, y) {
                 255
-            } else {
+            } else if s.disagrees(x, y) {
                 0
+            } else if s.is_print(x, y) {
+                // a tag's print as a mix of ink and paper could give it
+                80
+            } else {
+                // neither: unknown board, a dark pixel near a dim ramp, a ray off the board
+                128
             }
         })
         .collect();

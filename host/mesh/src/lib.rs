@@ -38,6 +38,7 @@ pub mod frames;
 pub mod halfedge;
 pub mod implicit;
 pub mod pipeline;
+pub mod print;
 pub mod remesh;
 pub mod silhouette;
 pub mod volume;

@@ -51,6 +51,8 @@ struct Setup<'a> {
     volume: Volume,
     frames: Vec<PosedFrame<'a>>,
     views: Vec<View>,
+    /// The base board's tag squares (their four corners), volume frame x–y, metres.
+    tag_squares_m: Vec<[[f64; 2]; 4]>,
     floor_dn: f64,
     full_scale_dn: f64,
     /// The calibrated demosaic where the frames are read with a sensor calibration.
@@ -172,6 +174,18 @@ fn setup<'a>(
     report.board_name = volume.board_name.clone();
     report.volume_min_m = volume.min_m.coords.into();
     report.volume_max_m = volume.max_m.coords.into();
+    let volume_from_board =
+        volume.world_from_volume.inverse() * boards[volume.board].world_from_board();
+    let tag_squares_m = boards[volume.board]
+        .corners_board_m
+        .values()
+        .map(|corners| {
+            corners.map(|c| {
+                let p = volume_from_board * nalgebra::Point3::from(c);
+                [p.x, p.y]
+            })
+        })
+        .collect();
     let tile = layout.tile_px() as usize;
     let rays = RayTable::new(&camera, tile);
     let views = frames
@@ -188,6 +202,7 @@ fn setup<'a>(
         volume,
         frames,
         views,
+        tag_squares_m,
         floor_dn,
         full_scale_dn: radiometry.full_scale_dn,
         calibrated: config.sensor_calibration.as_ref().map(|cal| {

@@ -8,7 +8,9 @@
 //!   that is saturated or whose ray misses the board plane is *not board*. Only board pixels
 //!   carve.
 //! - Pixels that disagree are kept as a second mask: a voxel is solid only where views see
-//!   something other than the board through it, not merely no board (`carve`).
+//!   something other than the board through it, not merely no board (`carve`). Those that
+//!   disagree with a printed texel only as a mixture of its ink and paper would are a third
+//!   mask instead, *print* ([`crate::print`]): evidence of neither.
 //! - Board islands are made not-board (4-connected): those smaller than `min_island_px`, and
 //!   those *enclosed* (not reaching the image border) with less than `max_enclosed_fraction` of
 //!   the view's board pixels. Pixels of an object that happen to match the board behind them
@@ -46,6 +48,11 @@ pub struct Silhouette {
     pub board_px: usize,
     /// Pixels that disagree with a learned texel.
     pub disagree_px: usize,
+    /// Pixels that disagree with a printed texel as a mixture of its ink and paper could
+    /// ([`crate::print`]): neither board nor evidence of an object.
+    print: Vec<u64>,
+    /// Such pixels.
+    pub print_px: usize,
     /// Board islands removed, pixels.
     pub removed_island_px: usize,
     /// Where the edge lies inside the boundary pixels whose cover could be measured
@@ -72,6 +79,15 @@ impl Silhouette {
         self.disagree[k / 64] >> (k % 64) & 1 == 1
     }
 
+    /// Whether pixel `(x, y)` is an ambiguous print pixel ([`crate::print`]; false outside).
+    pub fn is_print(&self, x: isize, y: isize) -> bool {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return false;
+        }
+        let k = y as usize * self.width + x as usize;
+        self.print[k / 64] >> (k % 64) & 1 == 1
+    }
+
     fn set(&mut self, k: usize, on: bool) {
         if on {
             self.bits[k / 64] |= 1 << (k % 64);
@@ -82,7 +98,7 @@ impl Silhouette {
 
     /// Bytes held.
     pub fn bytes(&self) -> usize {
-        (self.bits.len() + self.disagree.len()) * 8 + self.edge.bytes()
+        (self.bits.len() + self.disagree.len() + self.print.len()) * 8 + self.edge.bytes()
     }
 }
 
@@ -162,6 +178,8 @@ pub fn classify(
         disagree: vec![0; (w * h).div_ceil(64)],
         board_px: 0,
         disagree_px: 0,
+        print: vec![0; (w * h).div_ceil(64)],
+        print_px: 0,
         removed_island_px: 0,
         edge: EdgeOffsets::default(),
     };
@@ -187,8 +205,14 @@ pub fn classify(
                 s.board_px += 1;
             }
             Some(Verdict::Other) => {
-                s.disagree[k / 64] |= 1 << (k % 64);
-                s.disagree_px += 1;
+                if board.print.ambiguous(rule, texel, &sample) {
+                    s.print[k / 64] |= 1 << (k % 64);
+                    s.print_px += 1;
+                } else {
+                    s.disagree[k / 64] |= 1 << (k % 64);
+                    s.disagree_px += 1;
+                }
+                // either way a dim ramp may be an object's limb darkening into the print
                 if rule.dim(&sample) {
                     dim_px.push(k);
                 }
@@ -315,6 +339,8 @@ pub struct SignedDistance {
     pub values: Vec<f32>,
     /// Per pixel of the crop: it disagrees with the learned board.
     pub disagree: Vec<bool>,
+    /// Per pixel of the crop: an ambiguous print pixel ([`crate::print`]).
+    pub print: Vec<bool>,
 }
 
 /// Large finite stand-in for "no feature pixel" (keeps the parabola arithmetic finite).
@@ -429,24 +455,35 @@ impl SignedDistance {
         let disagree = (0..w * h)
             .map(|k| s.disagrees(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
             .collect();
+        let print = (0..w * h)
+            .map(|k| s.is_print(crop.x0 + (k % w) as isize, crop.y0 + (k / w) as isize))
+            .collect();
         Self {
             crop,
             values,
             disagree,
+            print,
         }
     }
 
-    /// Whether the pixel nearest superpixel coordinate `(x, y)` disagrees with the board.
-    pub fn disagrees_at(&self, x: f64, y: f64) -> bool {
+    /// Whether the pixel nearest superpixel coordinate `(x, y)` is an ambiguous print pixel.
+    pub fn print_at(&self, x: f64, y: f64) -> bool {
+        self.nearest(x, y).is_some_and(|k| self.print[k])
+    }
+
+    /// The crop index of the pixel nearest superpixel coordinate `(x, y)`.
+    fn nearest(&self, x: f64, y: f64) -> Option<usize> {
         let (u, v) = (
             (x - self.crop.x0 as f64).round(),
             (y - self.crop.y0 as f64).round(),
         );
-        u >= 0.0
-            && v >= 0.0
-            && (u as usize) < self.crop.width
-            && (v as usize) < self.crop.height
-            && self.disagree[v as usize * self.crop.width + u as usize]
+        (u >= 0.0 && v >= 0.0 && (u as usize) < self.crop.width && (v as usize) < self.crop.height)
+            .then(|| v as usize * self.crop.width + u as usize)
+    }
+
+    /// Whether the pixel nearest superpixel coordinate `(x, y)` disagrees with the board.
+    pub fn disagrees_at(&self, x: f64, y: f64) -> bool {
+        self.nearest(x, y).is_some_and(|k| self.disagree[k])
     }
 
     /// Bilinear value at superpixel coordinate `(x, y)`, `None` outside the crop.
@@ -551,6 +588,8 @@ mod tests {
             disagree: vec![0; (w * h).div_ceil(64)],
             board_px: 0,
             disagree_px: 0,
+            print: vec![0; (w * h).div_ceil(64)],
+            print_px: 0,
             removed_island_px: 0,
             edge: EdgeOffsets::default(),
         };

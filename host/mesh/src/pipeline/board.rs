@@ -93,7 +93,14 @@ pub(super) fn learn_board(
         reservoirs.add(i as u32, &samples);
     });
     report.peak_bytes = report.peak_bytes.max((reservoirs.bytes() + held) as u64);
-    let board = reservoirs.learn(&rule, a.min_support);
+    let mut board = reservoirs.learn(&rule, a.min_support);
+    let (lo, hi) = (setup.volume.min_m, setup.volume.max_m);
+    board.print = crate::print::PrintedArea::new(
+        &grid,
+        &setup.tag_squares_m,
+        &board.texels,
+        [[lo.x, lo.y], [hi.x, hi.y]],
+    );
     if let Some(dir) = &config.debug_dir {
         let _ = std::fs::create_dir_all(dir);
         let _ = crate::debug::write_board(dir, &board);
