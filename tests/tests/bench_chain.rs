@@ -91,7 +91,12 @@ fn a_hand_held_walk_at_612_meshes_past_the_tags_print() {
         serde_json::from_slice(&std::fs::read(report.with_extension("json")).unwrap()).unwrap();
     let scene = &json["scenes"][0];
     assert_eq!(scene["seed"], 0);
-    assert!(scene["description"].as_str().unwrap().contains("hand-held walk"));
+    assert!(
+        scene["description"]
+            .as_str()
+            .unwrap()
+            .contains("hand-held walk")
+    );
     assert!(scene["error"].is_null(), "{}", scene["error"]);
     assert!(scene["coverage"]["visible"].as_u64().unwrap() > 1000);
 }
