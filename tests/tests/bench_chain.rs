@@ -99,4 +99,17 @@ fn a_hand_held_walk_at_612_meshes_past_the_tags_print() {
     );
     assert!(scene["error"].is_null(), "{}", scene["error"]);
     assert!(scene["coverage"]["visible"].as_u64().unwrap() > 1000);
+    // the poses it carved and fitted from are the ones recorded in the session's log, as
+    // `ellipso mesh` records them (what a user's later commands read)
+    let log = std::fs::read_to_string(tmp.path().join("work/seed-0/ss2/session/events.jsonl"))
+        .expect("the scene's session log");
+    let posed = log
+        .lines()
+        .filter(|l| l.contains("rotation_camera_from_world"))
+        .count();
+    assert_eq!(
+        posed as u64,
+        scene["frames_posed"].as_u64().unwrap(),
+        "{log}"
+    );
 }
