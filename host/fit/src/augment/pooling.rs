@@ -123,12 +123,7 @@ pub fn pool_eta(
     let mut own: Vec<Option<(usize, f64, f64)>> = vec![None; fits.len()];
     for (j, list) in members.iter().enumerate() {
         for &v in list {
-            let f = &fits[v];
-            let (eta, se) = if eta_trusted(f) {
-                pool::without_prior(f.params.eta, f.std_error[0], eta_prior)
-            } else {
-                (f.params.eta, f64::INFINITY)
-            };
+            let (eta, se) = own_estimate(&fits[v], eta_prior);
             own[v] = Some((roots[j], eta, se));
         }
     }
@@ -138,14 +133,7 @@ pub fn pool_eta(
             continue;
         };
         for &v in list {
-            let f = &fits[v];
-            // A vertex whose η its own flags disown takes the material's η without the
-            // agreement test.
-            let (eta, se) = if eta_trusted(f) {
-                pool::without_prior(f.params.eta, f.std_error[0], eta_prior)
-            } else {
-                (f.params.eta, f64::INFINITY)
-            };
+            let (eta, se) = own_estimate(&fits[v], eta_prior);
             // Nor may a vertex borrow where its surroundings disagree with the pool: a patch
             // of another η too small to be a cluster of its own (a vertex of it may say too
             // little alone, its patch does not).
@@ -174,6 +162,17 @@ pub fn pool_eta(
         a.guides[v].eta_prior = prior;
     }
     a.vertices_with_eta_prior = a.guides.iter().filter(|g| g.eta_prior.is_some()).count();
+}
+
+/// A member's own η and its standard error: its step-A estimate with the default prior
+/// `eta_prior` removed ([`pool::without_prior`]); a vertex whose η its own flags disown gives
+/// an infinite standard error, so it takes the material's η without the agreement test.
+fn own_estimate(f: &VertexFit, eta_prior: [f64; 2]) -> (f64, f64) {
+    if eta_trusted(f) {
+        pool::without_prior(f.params.eta, f.std_error[0], eta_prior)
+    } else {
+        (f.params.eta, f64::INFINITY)
+    }
 }
 
 /// Rings of a vertex's surroundings the local η reads ([`local_eta`]): two rings hold about
