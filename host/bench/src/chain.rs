@@ -318,12 +318,7 @@ pub fn tracked_poses(session: &Session) -> Result<Vec<(u64, Isometry3<f64>)>, Be
     if !recorded.is_empty() {
         return Ok(recorded);
     }
-    struct Quiet;
-    impl ellipso_run_error::Say for Quiet {
-        fn out(&self, _: std::fmt::Arguments<'_>) {}
-        fn err(&self, _: std::fmt::Arguments<'_>) {}
-    }
-    ellipso_vision::process::track_and_append(&session.dir, &Quiet)
+    ellipso_vision::process::track_and_append(&session.dir, &ellipso_run_error::Silent)
         .map_err(|e| BenchError::stage("tracking", e))?;
     let reread = ellipso_session::reader::open(&session.dir)
         .map_err(|e| BenchError::Session(e.to_string()))?;

@@ -150,6 +150,15 @@ pub trait Say: Sync {
     fn err(&self, line: fmt::Arguments<'_>);
 }
 
+/// A [`Say`] that drops every line: for callers that run a command's body for its result
+/// alone (a bench's own copy of a stage, a test that looks at the files).
+pub struct Silent;
+
+impl Say for Silent {
+    fn out(&self, _: fmt::Arguments<'_>) {}
+    fn err(&self, _: fmt::Arguments<'_>) {}
+}
+
 /// `println!` into a [`Say`].
 #[macro_export]
 macro_rules! say {

@@ -5,6 +5,8 @@ use std::fs;
 use std::path::Path;
 
 use ellipso_model::mosaic::{Channel, SensorLayout};
+// Warnings are not what these tests look at.
+use ellipso_run_error::Silent as Quiet;
 
 use super::*;
 use crate::synthetic::mosaic_from_stokes;
@@ -23,14 +25,6 @@ fn args(frame: &Path, out: &Path) -> Args {
         calibration: None,
         npy: false,
     }
-}
-
-/// Warnings are not what these tests look at.
-struct Quiet;
-
-impl ellipso_run_error::Say for Quiet {
-    fn out(&self, _: std::fmt::Arguments<'_>) {}
-    fn err(&self, _: std::fmt::Arguments<'_>) {}
 }
 
 fn write_png16(path: &Path, w: u32, h: u32, data: Vec<u16>) {
