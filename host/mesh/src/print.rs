@@ -33,8 +33,8 @@ use super::appearance::{Agreement, TexelGrid, TexelSample};
 pub struct PrintedArea {
     /// Per texel: within one texel of a tag's square.
     pub printed: Vec<bool>,
-    /// The paper's learned value (`None` when no unprinted texel was learned).
-    pub paper: Option<TexelSample>,
+    /// The paper's learned value per band (`None` when no unprinted texel was learned).
+    pub paper: Option<[f32; 3]>,
 }
 
 /// Signed distance of `p` inside the convex quad `quad` (negative outside), metres.
@@ -67,15 +67,15 @@ impl PrintedArea {
         texels: &[Option<TexelSample>],
         [lo, hi]: [[f64; 2]; 2],
     ) -> Self {
+        // the texel's half diagonal plus one texel of footprint reach
+        let reach = grid.texel_m * (1.0 + std::f64::consts::FRAC_1_SQRT_2);
         let printed: Vec<bool> = (0..grid.len())
             .map(|t| {
                 let centre = grid.centre(t);
-                // the texel's half diagonal plus one texel of footprint reach
-                let reach = grid.texel_m * (1.0 + std::f64::consts::FRAC_1_SQRT_2);
                 tags.iter().any(|q| inside_distance(q, centre) >= -reach)
             })
             .collect();
-        let mut bands: [Vec<f32>; 5] = Default::default();
+        let mut bands: [Vec<f32>; 3] = Default::default();
         for (t, texel) in texels.iter().enumerate() {
             let c = grid.centre(t);
             let in_footprint = c[0] >= lo[0] && c[0] <= hi[0] && c[1] >= lo[1] && c[1] <= hi[1];
@@ -83,22 +83,13 @@ impl PrintedArea {
                 for (band, &v) in bands.iter_mut().zip(&s.value) {
                     band.push(v);
                 }
-                bands[3].push(s.p);
-                bands[4].push(s.s0_dn);
             }
         }
-        let median = |v: &mut Vec<f32>| {
-            v.sort_by(f32::total_cmp);
-            v[v.len() / 2]
-        };
         let paper = (!bands[0].is_empty()).then(|| {
-            let mut s = TexelSample::default();
-            for (v, band) in s.value.iter_mut().zip(bands.iter_mut()) {
-                *v = median(band);
-            }
-            s.p = median(&mut bands[3]);
-            s.s0_dn = median(&mut bands[4]);
-            s
+            bands.map(|mut v| {
+                v.sort_by(f32::total_cmp);
+                v[v.len() / 2]
+            })
         });
         Self { printed, paper }
     }
@@ -113,7 +104,7 @@ impl PrintedArea {
         // no brighter than the paper in any band
         sample.value[..rule.bands()]
             .iter()
-            .zip(&paper.value)
+            .zip(paper)
             .all(|(&v, &w)| v <= w * (1.0 + tol) + sample.floor)
     }
 }
@@ -143,7 +134,7 @@ mod tests {
         let beside = grid.index([0.0115, 0.02]).unwrap();
         let off = grid.index([-0.02, -0.02]).unwrap();
         assert!(area.printed[on_tag] && area.printed[beside] && !area.printed[off]);
-        assert_eq!(area.paper.unwrap().value[0], 100.0);
+        assert_eq!(area.paper.unwrap()[0], 100.0);
         let rule = Agreement::new(&AppearanceConfig::default(), 3, 4095.0);
         // half ink, half paper: ambiguous on the tag, evidence off it
         assert!(area.ambiguous(&rule, on_tag, &sample(52.0, 0.0)));
