@@ -47,10 +47,13 @@
 
 pub mod cluster;
 pub mod eta_fit;
+mod labels;
 pub mod lobe_fit;
 pub mod pool;
 mod pooling;
 pub mod virtual_samples;
+
+pub use labels::material_labels;
 
 #[cfg(test)]
 mod tests;
@@ -250,6 +253,42 @@ pub fn sample_geometry(
 /// virtual samples share a material.
 pub const POOL_COLOUR_DISTANCE: f64 = 0.3035;
 
+/// The ρd part of a vertex's feature.
+fn colour_of(scaling: &FeatureScaling, rho_d: [f64; 3]) -> [f64; 3] {
+    let f = scaling.feature(rho_d, 1.5);
+    [f[0], f[1], f[2]]
+}
+
+/// The median η of the `count` entries of `informative` (scaled colour, η) nearest `colour`:
+/// where an uncertain η is shrunk to (`pool::EtaShrink::apply_towards`). `count` is the
+/// smallest cluster a material may form, so a material of a colour of its own has that many
+/// members and they are its own; towards one median over every material, an uncertain vertex
+/// of a minority material was placed among the majority's η, a mode of its own that the
+/// separation rule then kept as a second "material" (dev scene 16: lithium niobate split in
+/// two clusters whose pools were both withheld). `None` without informative members.
+fn colour_median_eta(
+    informative: &[([f64; 3], f64)],
+    colour: [f64; 3],
+    count: usize,
+) -> Option<f64> {
+    if informative.is_empty() {
+        return None;
+    }
+    let mut by_distance: Vec<(f64, f64)> = informative
+        .iter()
+        .map(|(c, eta)| {
+            (
+                (0..3).map(|i| (c[i] - colour[i]).powi(2)).sum::<f64>(),
+                *eta,
+            )
+        })
+        .collect();
+    let count = count.clamp(1, by_distance.len());
+    by_distance.select_nth_unstable_by(count - 1, |a, b| a.0.total_cmp(&b.0));
+    let mut etas: Vec<f64> = by_distance[..count].iter().map(|p| p.1).collect();
+    Some(ellipso_model::stats::median(&mut etas))
+}
+
 /// Whether a vertex's step-A η is its data's (not flagged `EtaUnidentifiable`, `GrazingOnly`
 /// or `AtBound`): only then does it place the vertex in η and decide whether the pooled η
 /// applies to it.
@@ -380,6 +419,17 @@ impl<'f> Clustering<'f> {
                 })
                 .collect::<Vec<_>>(),
         );
+        // The shrinkage target: the median η of the informative members nearest in colour.
+        let informative: Vec<([f64; 3], f64)> = members
+            .iter()
+            .filter_map(|&v| {
+                let f = by_vertex[v]?;
+                let trusted = eta_trusted(f) && f.std_error[0] <= pool::INFORMATIVE_SE;
+                trusted.then(|| (colour_of(&scaling, f.params.rho_d), f.params.eta))
+            })
+            .collect();
+        let neighbours =
+            cluster::effective_min_cluster_vertices(config.min_cluster_vertices, members.len());
         let features: Vec<Option<Feature>> = by_vertex
             .iter()
             .map(|f| {
@@ -390,7 +440,13 @@ impl<'f> Clustering<'f> {
                     } else {
                         f64::INFINITY
                     };
-                    scaling.feature(f.params.rho_d, shrink.apply(f.params.eta, se))
+                    let colour = colour_of(&scaling, f.params.rho_d);
+                    let target = colour_median_eta(&informative, colour, neighbours)
+                        .unwrap_or(shrink.median_eta);
+                    scaling.feature(
+                        f.params.rho_d,
+                        shrink.apply_towards(f.params.eta, se, target),
+                    )
                 })
             })
             .collect();
@@ -408,25 +464,6 @@ impl<'f> Clustering<'f> {
             scaling,
         }
     }
-}
-
-/// Step A's fits of `n` vertices grouped into materials as [`augment`] groups them (features,
-/// k-means, choice of k): each vertex's material — the group ([`cluster::separated_groups`])
-/// of its nearest centroid's cluster — or `None` without a finite fit. What the next outer
-/// iteration's extraction uses to gate samples that mix materials
-/// (`ObserveConfig::vertex_labels`), so clusters that one material's spread split apart do
-/// not gate each other.
-pub fn material_labels(n: usize, fits: &[VertexFit], config: &ClusterConfig) -> Vec<Option<usize>> {
-    let c = Clustering::new(n, fits, config);
-    let partition = &c.selection.partition;
-    if partition.centroids.is_empty() {
-        return vec![None; n];
-    }
-    let groups = cluster::separated_groups(&c.member_features, partition);
-    c.features
-        .iter()
-        .map(|f| f.map(|f| groups[cluster::nearest(&f, &partition.centroids).0]))
-        .collect()
 }
 
 /// Clusters the joint solve's vertices, fits the cluster models and builds every vertex's

@@ -39,6 +39,9 @@ use rayon::prelude::*;
 use super::stream_seed;
 use crate::data::FitFlag;
 
+mod separation;
+pub use separation::{SPLIT_RATIO_NOISE, UNIMODAL_SPLIT_RATIO, separated_groups, split_ratio};
+
 /// Number of feature dimensions: ρ_d RGB and 2·min(η, 3).
 pub const FEATURE_DIM: usize = 4;
 
@@ -394,50 +397,6 @@ pub fn silhouette(points: &[Feature], labels: &[usize], max_points: usize, seed:
         })
         .collect();
     scores.iter().sum::<f64>() / scores.len() as f64
-}
-
-/// Clusters whose centres lie closer than this many times the sum of their spreads (each the
-/// median distance of its members to their centre) are one material for the mixed-material
-/// gate ([`separated_groups`]).
-pub const GATE_SEPARATION: f64 = 4.0;
-
-/// The groups of `partition`'s clusters (a group index per cluster, the smallest cluster index
-/// of its group) that a vertex's own fit can tell apart: clusters `i`, `j` join one group
-/// when ‖c_i − c_j‖ < [`GATE_SEPARATION`] · (s_i + s_j), s the median distance of a cluster's
-/// members to its centre, and groups join transitively.
-///
-/// Why: k-means splits whatever it is given, and the silhouette accepts a split of one
-/// unimodal spread (its halves' centres lie about twice their spreads apart). One material's
-/// noise, or a region whose fits share a bias (the underside's unidentified albedo), then
-/// becomes two "materials", and a gate that drops every sample whose footprint crosses their
-/// border drops real samples for nothing: mixing two clusters that differ by less than their
-/// own members do changes a sample by no more than the material's own variation. Materials
-/// that differ stay apart. Measured: splits of the glass sphere's one material lie 1.6–2.8
-/// spreads apart, the demo's materials 12–24 (docs/fit-augment.md "Gating mixed samples").
-pub fn separated_groups(points: &[Feature], partition: &Partition) -> Vec<usize> {
-    let k = partition.centroids.len();
-    let mut distances: Vec<Vec<f64>> = vec![Vec::new(); k];
-    for (p, &label) in points.iter().zip(&partition.labels) {
-        distances[label].push(distance_sq(p, &partition.centroids[label]).sqrt());
-    }
-    let spread: Vec<f64> = distances
-        .into_iter()
-        .map(|mut d| {
-            if d.is_empty() {
-                0.0
-            } else {
-                ellipso_model::stats::median(&mut d)
-            }
-        })
-        .collect();
-    join_pairs(k, |i, j| {
-        let d = distance_sq(&partition.centroids[i], &partition.centroids[j]).sqrt();
-        tracing::debug!(
-            "clusters {i} and {j}: centres {d:.3} apart, {:.2} times their spreads",
-            d / (spread[i] + spread[j])
-        );
-        d < GATE_SEPARATION * (spread[i] + spread[j])
-    })
 }
 
 /// Groups of `0..k` joined pairwise (union-find): every pair i < j for which `same(i, j)` holds

@@ -21,7 +21,8 @@
 //!   new member's η — only when its own estimate agrees with it (within [`AGREE_SIGMAS`] of the
 //!   combined spread): a precise vertex of another material keeps its own η.
 //! - [`EtaShrink`]: the η a vertex contributes to the clustering features, shrunk towards the
-//!   members' median by the empirical-Bayes factor r = τ²/(τ² + s²) (James & Stein 1961;
+//!   members' median (the fit passes the median of the informative members nearest in colour,
+//!   `EtaShrink::apply_towards`) by the empirical-Bayes factor r = τ²/(τ² + s²) (James & Stein 1961;
 //!   Efron & Morris 1975), τ the members' between-vertex spread of η ([`random_effects`] over
 //!   all of them). On a single material τ ≈ 0, so η's noise cannot split it into clusters of
 //!   high and low η (whose pooled values would then be biased by that very selection); with
@@ -327,12 +328,18 @@ impl EtaShrink {
 
     /// The feature η of a vertex with estimate `eta` ± `se`.
     pub fn apply(&self, eta: f64, se: f64) -> f64 {
+        self.apply_towards(eta, se, self.median_eta)
+    }
+
+    /// [`EtaShrink::apply`] shrinking towards `target` instead of the members' median (the
+    /// fit shrinks towards the median of the members nearest in colour).
+    pub fn apply_towards(&self, eta: f64, se: f64, target: f64) -> f64 {
         if !eta.is_finite() || !se.is_finite() {
-            return self.median_eta;
+            return target;
         }
         let t2 = self.tau * self.tau;
         let r = if t2 > 0.0 { t2 / (t2 + se * se) } else { 0.0 };
-        self.median_eta + r * (eta - self.median_eta)
+        target + r * (eta - target)
     }
 }
 

@@ -9,6 +9,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
+use super::labels::confident_group;
 use super::lobe_fit::{self, LobeSample};
 use super::*;
 use crate::data::{FitFlag, GateCounts, Sample, VertexSamples, ViewGeometry};
@@ -491,4 +492,43 @@ fn a_pool_of_members_whose_data_did_not_move_eta_is_withheld() {
     };
     assert!(pooled(false), "members whose data moved η pool");
     assert!(!pooled(true), "the start value repeated is no pooled η");
+}
+
+#[test]
+fn a_vertex_is_labelled_only_where_its_own_eta_decides_its_material() {
+    // Two materials of one colour (η 1.59 and 1.85) and one of another colour.
+    let centroids: Vec<Feature> = vec![
+        [2.0, 0.9, 0.1, 3.18],
+        [2.0, 0.9, 0.1, 3.70],
+        [0.2, 0.4, 1.8, 3.18],
+    ];
+    let groups = vec![0, 1, 2];
+    let at = |eta: f64| [2.0, 0.9, 0.1, 2.0 * eta];
+    // A well-measured η places the vertex.
+    assert_eq!(
+        confident_group(&at(1.85), 0.01, &centroids, &groups),
+        Some(1)
+    );
+    assert_eq!(
+        confident_group(&at(1.60), 0.01, &centroids, &groups),
+        Some(0)
+    );
+    // An η whose interval reaches the midpoint between the two (1.72) does not.
+    assert_eq!(confident_group(&at(1.66), 0.05, &centroids, &groups), None);
+    // Unidentified η: between the two of its colour it is unlabelled…
+    assert_eq!(
+        confident_group(&at(1.5), f64::INFINITY, &centroids, &groups),
+        None
+    );
+    // …and its colour alone places it where no other material has that colour.
+    let blue = [0.2, 0.4, 1.8, 3.0];
+    assert_eq!(
+        confident_group(&blue, f64::INFINITY, &centroids, &groups),
+        Some(2)
+    );
+    // Clusters of one group (a split of one material) never make a vertex ambiguous.
+    assert_eq!(
+        confident_group(&at(1.5), f64::INFINITY, &centroids, &[0, 0, 2]),
+        Some(0)
+    );
 }

@@ -219,3 +219,54 @@ fn joining_keeps_every_point_and_recomputes_the_centres() {
         .sum();
     assert!((joined.inertia - inertia).abs() < 1e-9 * inertia);
 }
+
+#[test]
+fn same_colour_materials_apart_in_eta_stay_apart_whatever_the_colour_noise() {
+    // Two materials of one colour whose η differ by 0.26 (feature 0.52), η noise 0.023
+    // (feature 0.046), the albedo's noise 0.08 per channel: the old rule on the full distance
+    // (centres within 4 × the sum of the median distances, ≈ 1.2) joined them; the distance
+    // across the centres' line does not count.
+    let mut rng = ChaCha8Rng::seed_from_u64(21);
+    let colour = Normal::new(0.0, 0.08).unwrap();
+    let eta = Normal::new(0.0, 0.046).unwrap();
+    let mut pts = Vec::new();
+    for (centre, n) in [(3.18, 700), (3.70, 250)] {
+        for _ in 0..n {
+            pts.push([
+                2.0 + colour.sample(&mut rng),
+                0.9 + colour.sample(&mut rng),
+                0.1 + colour.sample(&mut rng),
+                centre + eta.sample(&mut rng),
+            ]);
+        }
+    }
+    let p = kmeans(&pts, 2, 4, 100, 7);
+    let (ratio, threshold) = split_ratio(&pts, &p, 0, 1);
+    assert!(ratio > 2.0 * threshold, "{ratio} vs {threshold}");
+    assert_eq!(separated_groups(&pts, &p), vec![0, 1]);
+    let s = select(&pts, &ClusterConfig::default());
+    assert_eq!(s.partition.centroids.len(), 2, "tried {:?}", s.tried);
+}
+
+#[test]
+fn a_flat_spread_cut_in_two_is_one_material_at_every_size() {
+    // The uniform density is the unimodal shape whose halves lie farthest apart: at the 99 %
+    // level of `SPLIT_RATIO_NOISE` no more than a few of 200 draws may separate.
+    let mut separated = 0;
+    for seed in 0..200u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let n = [40, 100, 400][seed as usize % 3];
+        let pts: Vec<Feature> = (0..n)
+            .map(|_| [1.0, 1.0, 1.0, 3.0 + rng.random_range(-0.5..0.5)])
+            .collect();
+        let p = kmeans(&pts, 2, 1, 100, seed);
+        if p.centroids.len() == 2 && separated_groups(&pts, &p) == vec![0, 1] {
+            separated += 1;
+        }
+    }
+    assert!(separated <= 6, "{separated} of 200 flat spreads split");
+    // Two equal normal materials 5σ apart are two at 100 members each.
+    let (pts, _) = blobs(&[[1.0, 1.0, 1.0, 3.0], [1.0, 1.0, 1.0, 3.5]], 100, 0.1, 3);
+    let p = kmeans(&pts, 2, 4, 100, 7);
+    assert_eq!(separated_groups(&pts, &p), vec![0, 1]);
+}
