@@ -44,7 +44,7 @@ mod assign;
 mod report;
 mod sigma;
 
-pub use assign::{Assigned, assign, membership_sd};
+pub use assign::{Assigned, assign, colour_within_reach, membership_sd};
 
 pub use sigma::{MESH_NORMAL_MIN_VERTICES, mesh_normal_std_deg};
 
@@ -131,6 +131,23 @@ pub struct MaterialValues {
     pub rho_d: [f64; 3],
     /// Its spread.
     pub rho_d_spread: [f64; 3],
+}
+
+impl MaterialValues {
+    /// `base` with this material's lobe model and η `eta` (ρd left as it is).
+    pub fn params(
+        &self,
+        base: ellipso_model::optics::pbrdf::PbrdfParams<f64>,
+        eta: f64,
+    ) -> ellipso_model::optics::pbrdf::PbrdfParams<f64> {
+        let mut params = base;
+        params.eta = eta;
+        params.sigma_s = self.lobe[0];
+        params.sigma_ss = self.lobe[1].max(self.lobe[0]);
+        params.rho_s = self.lobe[2];
+        params.rho_ss = [self.lobe[3], self.lobe[4], self.lobe[5]];
+        params
+    }
 }
 
 /// 1.4826·MAD: the robust standard deviation (NaN below two values).
@@ -394,7 +411,17 @@ pub fn complete(
             MaterialValues::of_cluster(a, j, &members, max_eta_std_error)
         })
         .collect();
-    let labels = assign(set, fits, a, mesh, &needs);
+    let own_colour = |v: usize, j: usize| {
+        let m = &materials[j];
+        let f = &fits[v];
+        let normal: [f64; 3] = mesh
+            .normals()
+            .get(v)
+            .map_or(f.normal_world, |n| n.into_inner().into());
+        let params = m.params(f.params, m.eta.map_or(f.params.eta, |e| e[0]));
+        own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
+    };
+    let labels = assign(set, fits, a, mesh, &needs, own_colour);
     // What the fit identified of η, and its material, before any completion.
     let identified: Vec<Option<(usize, f64, f64)>> = fits
         .iter()
@@ -455,12 +482,7 @@ pub fn complete(
             .normals()
             .get(v)
             .map_or(f.normal_world, |n| n.into_inner().into());
-        let mut params = f.params;
-        params.eta = eta;
-        params.sigma_s = m.lobe[0];
-        params.sigma_ss = m.lobe[1].max(m.lobe[0]);
-        params.rho_s = m.lobe[2];
-        params.rho_ss = [m.lobe[3], m.lobe[4], m.lobe[5]];
+        let mut params = m.params(f.params, eta);
         let (rho_d, rho_d_se) = match own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
         {
             Some(own) => {

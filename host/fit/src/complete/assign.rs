@@ -3,9 +3,18 @@
 //!
 //! Contract:
 //! - **Candidates.** The clusters whose colour lies within the virtual-sample kernel's reach
-//!   ([`POOL_COLOUR_DISTANCE`]) of the vertex's own colour (its fit's ρd from its samples);
-//!   every cluster when the vertex has no sample (its colour is unknown); the nearest by colour
-//!   when none is that close.
+//!   ([`POOL_COLOUR_DISTANCE`]) plus 1.96 standard errors ([`colour_within_reach`]) of the
+//!   vertex's own colour *under that cluster's model*: its least-squares ρd from its samples
+//!   with the cluster's η and lobes at the surface normal (`super::own_rho_d`), so a glossy
+//!   material's vertex is not judged by a colour fitted with another's lobe (the step-A fit of
+//!   a vertex with too few samples sits at the prior lobe: on dev scene 8, 342 of the 487 zinc
+//!   sulfide vertices took polystyrene's η, −33 %). Every cluster when the vertex has no
+//!   sample (its colour is unknown), and every cluster too when none is that close: a colour
+//!   no material has (a blend across a border, a material no own-fit vertex represents)
+//!   cannot choose between them, and the choice's σ (below) then spans them all. (Taking the
+//!   nearest colour instead gave a dark grey patch of dev scene 12, η 1.491, a blue
+//!   material's η 2.02 with that material's σ 0.009; now the same value with σ spanning every
+//!   material's η.)
 //! - **The choice.** Of the candidates, the one whose own-fit members are nearest along the
 //!   mesh's edges (multi-source Dijkstra per cluster): a vertex takes the material of its
 //!   surroundings that its colour allows.
@@ -26,6 +35,7 @@
 use ellipso_model::geometry::TriangleMesh;
 
 use super::{MaterialValues, own_vertex};
+use crate::augment::cluster::FeatureScaling;
 use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
 use crate::data::{SampleSet, VertexFit};
 
@@ -46,6 +56,7 @@ pub fn assign(
     a: &Augmentation,
     mesh: &TriangleMesh,
     needs: &[bool],
+    own_colour: impl Fn(usize, usize) -> Option<([f64; 3], [f64; 3])>,
 ) -> Vec<Option<Assigned>> {
     let k = a.clusters.len();
     if k == 0 {
@@ -61,42 +72,27 @@ pub fn assign(
         })
         .collect();
     let scaling = a.partition.scaling;
-    // A vertex's colour: its fit's ρd where it has samples (fitted, or at the prior lobe for a
-    // vertex with too few). A vertex whose every sample was mixed has none: what its mixed
-    // samples show is dominated, on the underside and at silhouettes, by the board and the
-    // neighbours its footprint reached.
-    let colours: Vec<Option<[f64; 3]>> = (0..fits.len())
-        .map(|v| {
-            let vertex = set.vertices.get(v)?;
-            (needs[v] && !vertex.samples.is_empty()).then_some(fits[v].params.rho_d)
-        })
-        .collect();
-    let colour_distance = |v: usize, j: usize| {
-        let Some(rho_d) = colours[v] else {
-            return f64::INFINITY;
-        };
-        let f = scaling.feature(rho_d, 1.5);
-        let c = &a.clusters[j].centroid;
-        (0..3).map(|i| (f[i] - c[i]).powi(2)).sum::<f64>().sqrt()
-    };
     (0..fits.len())
         .map(|v| {
             if !needs[v] {
                 return None;
             }
-            let mut candidates: Vec<usize> = if colours[v].is_some() {
-                (0..k)
-                    .filter(|&j| colour_distance(v, j) < POOL_COLOUR_DISTANCE)
-                    .collect()
-            } else {
-                (0..k).collect()
-            };
+            // A vertex whose every sample was mixed has no colour: what its mixed samples show
+            // is dominated, on the underside and at silhouettes, by the board and the
+            // neighbours its footprint reached.
+            let sampled = set.vertices.get(v).is_some_and(|s| !s.samples.is_empty());
+            // Its colour under each cluster's own lobes, within reach of the cluster's or not
+            // (module doc).
+            let mut candidates: Vec<usize> = (0..k)
+                .filter(|&j| match own_colour(v, j).filter(|_| sampled) {
+                    Some((rho, se)) => {
+                        colour_within_reach(scaling, &a.clusters[j].centroid, rho, se)
+                    }
+                    None => true,
+                })
+                .collect();
             if candidates.is_empty() {
-                candidates = vec![
-                    (0..k)
-                        .min_by(|&i, &j| colour_distance(v, i).total_cmp(&colour_distance(v, j)))
-                        .unwrap_or(0),
-                ];
+                candidates = (0..k).collect();
             }
             let material = candidates
                 .iter()
@@ -109,6 +105,36 @@ pub fn assign(
             })
         })
         .collect()
+}
+
+/// Two-sided 95 % normal quantile: how many standard errors of a vertex's own ρd its colour
+/// may lie from a material's and still be of it ([`colour_within_reach`]).
+const COLOUR_Z: f64 = 1.96;
+
+/// Distance of the colour `rho` from a cluster's `centroid` in the clustering's scaled units.
+fn colour_distance(scaling: FeatureScaling, centroid: &[f64], rho: [f64; 3]) -> f64 {
+    let f = scaling.feature(rho, 1.5);
+    (0..3)
+        .map(|i| (f[i] - centroid[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Whether the colour `rho` ± `se` (per channel) lies within the kernel's reach
+/// ([`POOL_COLOUR_DISTANCE`], in the clustering's scaled units) of the cluster's `centroid`
+/// plus [`COLOUR_Z`] of its standard error there. A non-finite standard error is within reach
+/// (that colour cannot rule a material out).
+pub fn colour_within_reach(
+    scaling: FeatureScaling,
+    centroid: &[f64],
+    rho: [f64; 3],
+    se: [f64; 3],
+) -> bool {
+    let se_scaled = se.iter().map(|s| s * s).sum::<f64>().sqrt() * scaling.rho_d_scale;
+    if !se_scaled.is_finite() {
+        return true;
+    }
+    colour_distance(scaling, centroid, rho) <= POOL_COLOUR_DISTANCE + COLOUR_Z * se_scaled
 }
 
 /// The spread of η over a vertex's candidate materials about `eta` (the value it reports): the
@@ -140,6 +166,35 @@ mod tests {
             rho_d: [0.5; 3],
             rho_d_spread: [0.01; 3],
         }
+    }
+
+    #[test]
+    fn a_colour_is_out_of_reach_only_beyond_the_kernel_and_its_own_error() {
+        let scaling = FeatureScaling {
+            rho_d_clip: f64::MAX,
+            rho_d_scale: 3.0,
+        };
+        // A blue material, scaled ×3.
+        let blue = [0.15, 0.57, 1.29, 3.0];
+        let grey = [0.04, 0.04, 0.045];
+        // A well-measured dark grey is not the blue.
+        assert!(!colour_within_reach(scaling, &blue, grey, [0.005; 3]));
+        // Measured too loosely to tell, it may be.
+        assert!(colour_within_reach(scaling, &blue, grey, [0.3; 3]));
+        // An unknown error cannot rule a material out.
+        assert!(colour_within_reach(
+            scaling,
+            &blue,
+            grey,
+            [f64::INFINITY; 3]
+        ));
+        // The blue itself is within reach.
+        assert!(colour_within_reach(
+            scaling,
+            &blue,
+            [0.05, 0.19, 0.43],
+            [0.005; 3]
+        ));
     }
 
     #[test]
