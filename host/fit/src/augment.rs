@@ -253,12 +253,6 @@ pub fn sample_geometry(
 /// virtual samples share a material.
 pub const POOL_COLOUR_DISTANCE: f64 = 0.3035;
 
-/// The ρd part of a vertex's feature.
-fn colour_of(scaling: &FeatureScaling, rho_d: [f64; 3]) -> [f64; 3] {
-    let f = scaling.feature(rho_d, 1.5);
-    [f[0], f[1], f[2]]
-}
-
 /// The median η of the `count` entries of `informative` (scaled colour, η) nearest `colour`:
 /// where an uncertain η is shrunk to (`pool::EtaShrink::apply_towards`). `count` is the
 /// smallest cluster a material may form, so a material of a colour of its own has that many
@@ -300,6 +294,16 @@ fn eta_trusted(f: &VertexFit) -> bool {
             FitFlag::EtaUnidentifiable | FitFlag::GrazingOnly | FitFlag::AtBound
         )
     })
+}
+
+/// A vertex's step-A standard error of η where [`eta_trusted`], infinite where its flags
+/// disown its η.
+fn trusted_se(f: &VertexFit) -> f64 {
+    if eta_trusted(f) {
+        f.std_error[0]
+    } else {
+        f64::INFINITY
+    }
 }
 
 fn fit_is_finite(f: &VertexFit) -> bool {
@@ -425,7 +429,7 @@ impl<'f> Clustering<'f> {
             .filter_map(|&v| {
                 let f = by_vertex[v]?;
                 let trusted = eta_trusted(f) && f.std_error[0] <= pool::INFORMATIVE_SE;
-                trusted.then(|| (colour_of(&scaling, f.params.rho_d), f.params.eta))
+                trusted.then(|| (scaling.colour(f.params.rho_d), f.params.eta))
             })
             .collect();
         let neighbours =
@@ -435,17 +439,12 @@ impl<'f> Clustering<'f> {
             .map(|f| {
                 f.map(|f| {
                     // A vertex whose own η its flags disown is placed by its colour alone.
-                    let se = if eta_trusted(f) {
-                        f.std_error[0]
-                    } else {
-                        f64::INFINITY
-                    };
-                    let colour = colour_of(&scaling, f.params.rho_d);
+                    let colour = scaling.colour(f.params.rho_d);
                     let target = colour_median_eta(&informative, colour, neighbours)
                         .unwrap_or(shrink.median_eta);
                     scaling.feature(
                         f.params.rho_d,
-                        shrink.apply_towards(f.params.eta, se, target),
+                        shrink.apply_towards(f.params.eta, trusted_se(f), target),
                     )
                 })
             })

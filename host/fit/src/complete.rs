@@ -150,6 +150,13 @@ impl MaterialValues {
     }
 }
 
+/// Vertex `v`'s normal on the refined surface (`mesh`), or its fit's where the mesh has none.
+fn surface_normal(mesh: &TriangleMesh, v: usize, f: &VertexFit) -> [f64; 3] {
+    mesh.normals()
+        .get(v)
+        .map_or(f.normal_world, |n| n.into_inner().into())
+}
+
 /// 1.4826·MAD: the robust standard deviation (NaN below two values).
 fn robust_sd(values: &mut [f64]) -> f64 {
     if values.len() < 2 {
@@ -414,14 +421,11 @@ pub fn complete(
     let own_colour = |v: usize, j: usize| {
         let m = &materials[j];
         let f = &fits[v];
-        let normal: [f64; 3] = mesh
-            .normals()
-            .get(v)
-            .map_or(f.normal_world, |n| n.into_inner().into());
         let params = m.params(f.params, m.eta.map_or(f.params.eta, |e| e[0]));
+        let normal = surface_normal(mesh, v, f);
         own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
     };
-    let labels = assign(set, fits, a, mesh, &needs, own_colour);
+    let labels = assign(fits, a, mesh, &needs, own_colour);
     // What the fit identified of η, and its material, before any completion.
     let identified: Vec<Option<(usize, f64, f64)>> = fits
         .iter()
@@ -478,10 +482,7 @@ pub fn complete(
             report.eta_from_material += 1;
             continue;
         }
-        let normal: [f64; 3] = mesh
-            .normals()
-            .get(v)
-            .map_or(f.normal_world, |n| n.into_inner().into());
+        let normal = surface_normal(mesh, v, f);
         let mut params = m.params(f.params, eta);
         let (rho_d, rho_d_se) = match own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
         {

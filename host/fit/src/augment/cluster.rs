@@ -166,8 +166,13 @@ impl FeatureScaling {
 
     /// The feature of one vertex.
     pub fn feature(&self, rho_d: [f64; 3], eta: f64) -> Feature {
-        let r = rho_d.map(|v| v.min(self.rho_d_clip) * self.rho_d_scale);
-        [r[0], r[1], r[2], 2.0 * eta.min(3.0)]
+        let [r, g, b] = self.colour(rho_d);
+        [r, g, b, 2.0 * eta.min(3.0)]
+    }
+
+    /// The ρ_d part of a feature: `rho_d` clipped and scaled.
+    pub fn colour(&self, rho_d: [f64; 3]) -> [f64; 3] {
+        rho_d.map(|v| v.min(self.rho_d_clip) * self.rho_d_scale)
     }
 }
 

@@ -2,9 +2,8 @@
 //! group of clusters its own fit places it in, or none where its data leave that open
 //! (docs/fit-augment.md "Gating mixed samples").
 
-use super::cluster::ClusterConfig;
-use super::cluster::{self, FEATURE_DIM, Feature};
-use super::{Clustering, eta_trusted};
+use super::cluster::{self, ClusterConfig, FEATURE_DIM, Feature};
+use super::{Clustering, trusted_se};
 use crate::data::VertexFit;
 
 /// Step A's fits of `n` vertices grouped into materials as [`super::augment`] groups them (features,
@@ -25,13 +24,8 @@ pub fn material_labels(n: usize, fits: &[VertexFit], config: &ClusterConfig) -> 
         .iter()
         .map(|f| {
             let f = (*f)?;
-            let se = if eta_trusted(f) {
-                f.std_error[0]
-            } else {
-                f64::INFINITY
-            };
             let own = c.scaling.feature(f.params.rho_d, f.params.eta);
-            confident_group(&own, se, &partition.centroids, &groups)
+            confident_group(&own, trusted_se(f), &partition.centroids, &groups)
         })
         .collect()
 }

@@ -37,7 +37,7 @@ use ellipso_model::geometry::TriangleMesh;
 use super::{MaterialValues, own_vertex};
 use crate::augment::cluster::FeatureScaling;
 use crate::augment::{Augmentation, POOL_COLOUR_DISTANCE};
-use crate::data::{SampleSet, VertexFit};
+use crate::data::VertexFit;
 
 /// A vertex's material ([`assign`]): the chosen cluster and every cluster it could be of.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,9 +49,9 @@ pub struct Assigned {
 }
 
 /// The material of every vertex that needs one (module doc): `None` where there is no cluster
-/// or the vertex is not to be completed.
+/// or the vertex is not to be completed. `own_colour(v, j)` is vertex `v`'s ρd and its standard
+/// error from its samples under cluster `j`'s model, `None` without a usable sample.
 pub fn assign(
-    set: &SampleSet,
     fits: &[VertexFit],
     a: &Augmentation,
     mesh: &TriangleMesh,
@@ -77,14 +77,12 @@ pub fn assign(
             if !needs[v] {
                 return None;
             }
-            // A vertex whose every sample was mixed has no colour: what its mixed samples show
-            // is dominated, on the underside and at silhouettes, by the board and the
-            // neighbours its footprint reached.
-            let sampled = set.vertices.get(v).is_some_and(|s| !s.samples.is_empty());
             // Its colour under each cluster's own lobes, within reach of the cluster's or not
-            // (module doc).
+            // (module doc). A vertex whose every sample was mixed has no colour (`own_colour`
+            // gives none): what its mixed samples show is dominated, on the underside and at
+            // silhouettes, by the board and the neighbours its footprint reached.
             let mut candidates: Vec<usize> = (0..k)
-                .filter(|&j| match own_colour(v, j).filter(|_| sampled) {
+                .filter(|&j| match own_colour(v, j) {
                     Some((rho, se)) => {
                         colour_within_reach(scaling, &a.clusters[j].centroid, rho, se)
                     }
@@ -113,7 +111,7 @@ const COLOUR_Z: f64 = 1.96;
 
 /// Distance of the colour `rho` from a cluster's `centroid` in the clustering's scaled units.
 fn colour_distance(scaling: FeatureScaling, centroid: &[f64], rho: [f64; 3]) -> f64 {
-    let f = scaling.feature(rho, 1.5);
+    let f = scaling.colour(rho);
     (0..3)
         .map(|i| (f[i] - centroid[i]).powi(2))
         .sum::<f64>()
