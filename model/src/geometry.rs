@@ -1,4 +1,4 @@
-//! Geometry for the simulator: rays, hits, bounding boxes, a binned-SAH BVH, triangle meshes
+//! Geometry for the simulator: rays, hits, bounding boxes and spheres, a binned-SAH BVH, triangle meshes
 //! (PLY / OBJ loading, procedural assets), analytic shapes, per-object affine transforms and the
 //! similarity between two reconstructions of the same cameras, the error between two poses, and
 //! the distances between two meshes (Chamfer, Hausdorff: [`distance`], for scoring a mesh).
@@ -15,6 +15,7 @@
 //!   shapes. Callers that need a front-facing normal flip both with `dot(dir, n) > 0`.
 
 pub mod aabb;
+pub mod bound;
 pub mod bvh;
 pub mod distance;
 pub mod mesh;
@@ -29,6 +30,7 @@ pub mod transform;
 use nalgebra::{Point3, Unit, Vector3};
 
 pub use aabb::Aabb;
+pub use bound::BoundingSphere;
 pub use bvh::Bvh;
 pub use mesh::{MeshError, TriangleMesh};
 pub use pose_error::{PoseError, angle_between_deg, pose_error};
@@ -46,11 +48,13 @@ pub struct Ray {
 
 impl Ray {
     /// A ray from `origin` along `dir`.
+    #[inline]
     pub fn new(origin: Point3<f64>, dir: Vector3<f64>) -> Self {
         Self { origin, dir }
     }
 
     /// The point at parameter `t`.
+    #[inline]
     pub fn at(&self, t: f64) -> Point3<f64> {
         self.origin + self.dir * t
     }

@@ -51,7 +51,7 @@ use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams
 use crate::scene::{Scene, SensorKind};
 use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::Ray;
-use ellipso_model::mosaic::{MosaicError, SensorLayout};
+use ellipso_model::mosaic::{Analyser, MosaicError, SensorLayout};
 use ellipso_model::optics::OpticsError;
 use ellipso_model::optics::pbrdf::PbrdfParams;
 use ellipso_model::rig::FlashSpec;
@@ -207,6 +207,9 @@ pub struct Renderer<'s> {
     seed: u64,
     pattern: FixedPattern,
     flash: FlashSpec,
+    /// The pixel of each nominal analyser ([`Analyser::index`] order) with no angle error: its
+    /// trigonometry taken once per render, not twice per pixel.
+    nominal_pixels: [PixelSensor; 4],
 }
 
 /// The flash a render lights the scene with: the scene's (what a session records), turned by
@@ -289,6 +292,7 @@ impl<'s> Renderer<'s> {
         let radiometry = Radiometry::new(&scene.rig.camera, &flash, vignetting);
         let pattern = FixedPattern::new(&plan, layout, scene.effects.sensor_seed);
         Ok(Self {
+            nominal_pixels: Analyser::ALL.map(|a| PixelSensor::new(a.angle_rad(), [0.0; 3])),
             flash,
             pattern,
             scene,
@@ -431,10 +435,17 @@ impl<'s> Renderer<'s> {
             }
             None => [1.0 / 3.0; 3],
         };
-        let angle = self.layout.analyser_at(x, y).angle_rad() + pattern.angle_error_rad;
+        let analyser = self.layout.analyser_at(x, y);
+        let sensor = if pattern.angle_error_rad == 0.0 {
+            // θ + 0 is θ: the same values as computing them here.
+            self.nominal_pixels[analyser.index()]
+        } else {
+            PixelSensor::new(analyser.angle_rad() + pattern.angle_error_rad, weights)
+        };
         PixelSensor {
+            weights,
             extinction: pattern.inverse_extinction,
-            ..PixelSensor::new(angle, weights)
+            ..sensor
         }
     }
 

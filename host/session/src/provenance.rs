@@ -21,7 +21,7 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crc::{CRC_64_XZ, Crc};
+use crc::{CRC_64_XZ, Crc, Table};
 
 use crate::SessionError;
 use crate::events::{SessionEvent, TrackedFrom};
@@ -29,7 +29,9 @@ use crate::poses::SessionPoses;
 use crate::reader::Session;
 use crate::rig::TrackedBoard;
 
-const CRC64: Crc<u64> = Crc::<u64>::new(&CRC_64_XZ);
+/// Slice-by-16 tables (the same checksum as the byte-wise table, several times faster: every
+/// frame file of a session is hashed by every stage that reads it).
+const CRC64: Crc<u64, Table<16>> = Crc::<u64, Table<16>>::new(&CRC_64_XZ);
 
 /// CRC-64/XZ of `bytes`.
 pub fn crc64(bytes: &[u8]) -> u64 {

@@ -37,6 +37,7 @@ impl ObjectTransform {
     }
 
     /// Maps a world ray into the (unscaled) object frame; `t` is preserved.
+    #[inline]
     pub fn ray_to_object(&self, ray: &Ray) -> Ray {
         let o = self.world_from_object.inverse_transform_point(&ray.origin);
         let d = self.world_from_object.inverse_transform_vector(&ray.dir);

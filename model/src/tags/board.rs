@@ -51,6 +51,8 @@ pub struct BoardTag {
     centre_sheet_m: Vector2<f64>,
     /// In-plane rotation (clockwise seen from the front), radians.
     rotation_rad: f64,
+    /// `rotation_rad.sin_cos()`, taken once (the renderer asks for it at every board hit).
+    rotation_sin_cos: (f64, f64),
     /// Key path of the spec entry that placed this tag (for error messages).
     key: String,
 }
@@ -100,6 +102,11 @@ pub struct Board {
     /// Board frame from sheet frame.
     pub board_from_sheet: Isometry3<f64>,
     cells: HashMap<u32, TagCells>,
+    /// The cells of `tags[k]` at index `k` (a copy of `cells[&id]`: no hash lookup per board hit).
+    cells_by_tag: Vec<TagCells>,
+    /// [`Board::front_normal_board`], computed once from `board_from_sheet` (which nothing
+    /// changes after [`Board::from_spec`]).
+    front_normal_board: Unit<Vector3<f64>>,
     /// Uniform lookup grid over the sheet: bucket → tag indices.
     buckets: Vec<Vec<u32>>,
     bucket_size_m: f64,
@@ -338,10 +345,14 @@ impl Board {
                     corners_board_m: corners_tag.map(|p| board_from_tag * p),
                     centre_sheet_m: c,
                     rotation_rad: rot,
+                    rotation_sin_cos: rot.sin_cos(),
                     key,
                 }
             })
             .collect();
+        let cells_by_tag = tags.iter().map(|t| cells[&t.id].clone()).collect();
+        let front_normal_board =
+            Unit::new_normalize(board_from_sheet.transform_vector(&-Vector3::z()));
         let mut board = Self {
             name: spec.name.clone(),
             family: spec.family,
@@ -352,6 +363,8 @@ impl Board {
             tags,
             board_from_sheet,
             cells,
+            cells_by_tag,
+            front_normal_board,
             buckets: Vec::new(),
             bucket_size_m: 2.0 * outer_half,
             bucket_dims: [0, 0],
@@ -422,7 +435,11 @@ impl Board {
 
     /// Whether a board-plane point lies on the sheet.
     pub fn contains(&self, point_board_m: &Point2<f64>) -> bool {
-        let p = self.sheet_point(point_board_m);
+        self.sheet_contains(&self.sheet_point(point_board_m))
+    }
+
+    /// [`Board::contains`] of a point already in sheet coordinates.
+    fn sheet_contains(&self, p: &Point2<f64>) -> bool {
         (0.0..=self.sheet_size_m[0]).contains(&p.x) && (0.0..=self.sheet_size_m[1]).contains(&p.y)
     }
 
@@ -438,7 +455,11 @@ impl Board {
     /// Printed albedo at a board-plane point: black or white print; the quiet zone and the rest of
     /// the sheet (and anything off the sheet) are white.
     pub fn albedo_at(&self, point_board_m: &Point2<f64>) -> f32 {
-        let p = self.sheet_point(point_board_m);
+        self.albedo_at_sheet(&self.sheet_point(point_board_m))
+    }
+
+    /// [`Board::albedo_at`] of a point already in sheet coordinates.
+    fn albedo_at_sheet(&self, p: &Point2<f64>) -> f32 {
         let [nx, ny] = self.bucket_dims;
         if !(p.x >= 0.0 && p.y >= 0.0 && p.x < self.sheet_size_m[0] && p.y < self.sheet_size_m[1]) {
             return self.white_albedo;
@@ -456,13 +477,13 @@ impl Board {
             let t = &self.tags[k as usize];
             let d = p.coords - t.centre_sheet_m;
             // Rotate into the tag frame (inverse of the clockwise-seen-from-front rotation).
-            let (sin, cos) = t.rotation_rad.sin_cos();
+            let (sin, cos) = t.rotation_sin_cos;
             let local = Vector2::new(cos * d.x + sin * d.y, -sin * d.x + cos * d.y);
             let u = (local.x + 0.5 * total) / cell;
             let v = (local.y + 0.5 * total) / cell;
             if u >= 0.0 && v >= 0.0 && u < table.total_width as f64 && v < table.total_width as f64
             {
-                let white = self.cells[&t.id].is_white(u as usize, v as usize);
+                let white = self.cells_by_tag[k as usize].is_white(u as usize, v as usize);
                 return if white {
                     self.white_albedo
                 } else {
@@ -474,8 +495,9 @@ impl Board {
     }
 
     /// Unit normal of the printed side in board frame (`-z` for y-down axes, `+z` for y-up).
+    #[inline]
     pub fn front_normal_board(&self) -> Unit<Vector3<f64>> {
-        Unit::new_normalize(self.board_from_sheet.transform_vector(&-Vector3::z()))
+        self.front_normal_board
     }
 
     /// Ray (in board frame) against the sheet rectangle; both sides are solid.
@@ -495,12 +517,13 @@ impl Board {
         }
         let p = ray.at(t);
         let point = Point2::new(p.x, p.y);
-        if !self.contains(&point) {
+        let sheet = self.sheet_point(&point);
+        if !self.sheet_contains(&sheet) {
             return None;
         }
-        let front = ray.dir.dot(&self.front_normal_board()) < 0.0;
+        let front = ray.dir.dot(&self.front_normal_board) < 0.0;
         let albedo = if front {
-            self.albedo_at(&point)
+            self.albedo_at_sheet(&sheet)
         } else {
             self.white_albedo
         };

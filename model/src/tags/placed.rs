@@ -19,6 +19,7 @@ pub struct PlacedBoard {
 
 impl PlacedBoard {
     /// Intersects a world-space ray with the sheet.
+    #[inline]
     pub fn intersect(&self, ray_world: &Ray, t_min: f64, t_max: f64) -> Option<BoardHit> {
         let ray_board = Ray::new(
             self.world_from_board

@@ -151,7 +151,9 @@ impl<'s> Renderer<'s> {
                 } else {
                     1.0
                 };
-                let ray_pixel = pixel.for_ray(&dir_camera);
+                // The analyser's effective axis along this ray, taken when a hit's shading
+                // reads it (the same for every instant: it depends on the camera-frame ray).
+                let mut ray_pixel: Option<PixelSensor> = None;
                 for ctx in &frame.contexts {
                     if blur {
                         counts.add(Stage::MotionBlur, 1);
@@ -159,7 +161,12 @@ impl<'s> Renderer<'s> {
                     let w2c = &ctx.world_from_camera;
                     let ray = Ray::new(w2c.translation.vector.into(), w2c.rotation * dir_camera);
                     if let Some(hit) = self.scene.intersect(&ray, 0.0, f64::INFINITY) {
-                        signal += vig * frame.shader.sample(ctx, &ray, &hit, &ray_pixel, counts);
+                        let seen_by = if Shader::reads_analyser_axis(&hit) {
+                            &*ray_pixel.get_or_insert_with(|| pixel.for_ray(&dir_camera))
+                        } else {
+                            pixel
+                        };
+                        signal += vig * frame.shader.sample(ctx, &ray, &hit, seen_by, counts);
                     }
                 }
             }

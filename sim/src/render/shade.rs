@@ -83,6 +83,8 @@ impl PoseContext {
 pub(crate) struct PixelSensor {
     /// Nominal analyser angle (from image right toward image up), radians.
     pub angle_rad: f64,
+    /// `angle_rad.sin_cos()`, taken once per pixel for all of its rays.
+    pub angle_sin_cos: (f64, f64),
     /// cos 2ψ of the analyser's effective axis for the ray being shaded (the nominal angle
     /// until [`PixelSensor::for_ray`]).
     pub cos2: f64,
@@ -101,6 +103,7 @@ impl PixelSensor {
         let (sin2, cos2) = (2.0 * angle_rad).sin_cos();
         Self {
             angle_rad,
+            angle_sin_cos: angle_rad.sin_cos(),
             cos2,
             sin2,
             weights,
@@ -114,8 +117,9 @@ impl PixelSensor {
     /// optical axis") — the same model the fit inverts.
     pub fn for_ray(&self, dir_camera: &Vector3<f64>) -> Self {
         let to_camera = [-dir_camera.x, -dir_camera.y, -dir_camera.z];
-        let (cos2, sin2) = ellipso_model::optics::measure::effective_cos_sin_2(
+        let (cos2, sin2) = ellipso_model::optics::measure::effective_cos_sin_2_of(
             self.angle_rad,
+            self.angle_sin_cos,
             [1.0, 0.0, 0.0],
             [0.0, -1.0, 0.0],
             to_camera,
@@ -156,6 +160,14 @@ impl Shader<'_> {
         }
         let e = pixel.extinction.unwrap_or(self.extinction);
         0.5 * ((1.0 + e) * s.s0 + (1.0 - e) * (s.s1 * pixel.cos2 + s.s2 * pixel.sin2))
+    }
+
+    /// Whether shading `hit` reads the analyser's axis (`PixelSensor::cos2`, `sin2`): only an
+    /// object's polarised light does; a board is a depolariser, whose analysed response
+    /// ([`Shader::analyse_unpolarised`]) does not depend on it. A ray that hits a board needs
+    /// no [`PixelSensor::for_ray`] (its wire-grid geometry is a tenth of a frame's time).
+    pub fn reads_analyser_axis(hit: &SceneHit) -> bool {
+        matches!(hit.kind, SurfaceKind::Object { .. })
     }
 
     /// Analysed response to unpolarised light of intensity `s0` (a depolarising surface).

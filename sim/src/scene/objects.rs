@@ -8,7 +8,7 @@
 use super::error::{Located, SceneError};
 use super::spec::{MaterialSpec, ObjectSpec, RegionBlend, ScaleSpec, ShapeKind, positive};
 use ellipso_model::geometry::{
-    Intersect, ObjectTransform, Plane, Ray, Sphere, SurfaceHit, TriangleMesh,
+    BoundingSphere, Intersect, ObjectTransform, Plane, Ray, Sphere, SurfaceHit, TriangleMesh,
 };
 use nalgebra::Vector3;
 use std::collections::{BTreeMap, HashMap};
@@ -73,9 +73,41 @@ pub struct SceneObject {
     pub transform: ObjectTransform,
     /// Material binding.
     pub material: MaterialBinding,
+    /// The world sphere around the placed geometry, which rejects most rays before they are
+    /// mapped into the object's frame (`None`: unbounded geometry). Derived from `geometry` and
+    /// `transform` by [`SceneObject::new`]; the only constructor, so it cannot go stale.
+    bound: Option<BoundingSphere>,
 }
 
 impl SceneObject {
+    /// A placed object (its world bound computed here).
+    pub fn new(
+        name: String,
+        geometry: ObjectGeometry,
+        transform: ObjectTransform,
+        material: MaterialBinding,
+    ) -> Self {
+        let bound = match &geometry {
+            ObjectGeometry::Mesh(mesh) => {
+                BoundingSphere::around_points(&transform, mesh.positions())
+            }
+            other => BoundingSphere::around(&transform, &other.as_intersect().bounds()),
+        };
+        Self {
+            name,
+            geometry,
+            transform,
+            material,
+            bound,
+        }
+    }
+
+    /// Whether the world ray can come near the object at all (conservative: a `false` is
+    /// exactly what the exact test would say).
+    fn may_hit(&self, ray_world: &Ray, t_min: f64) -> bool {
+        self.bound.is_none_or(|b| b.may_hit(ray_world, t_min))
+    }
+
     /// Nearest world-space hit with its material.
     pub fn intersect(
         &self,
@@ -83,6 +115,9 @@ impl SceneObject {
         t_min: f64,
         t_max: f64,
     ) -> Option<(SurfaceHit, MaterialSample)> {
+        if !self.may_hit(ray_world, t_min) {
+            return None;
+        }
         let ray_obj = self.transform.ray_to_object(ray_world);
         let hit = self
             .geometry
@@ -94,6 +129,9 @@ impl SceneObject {
 
     /// Whether the object blocks the world-space segment.
     pub fn occluded(&self, ray_world: &Ray, t_min: f64, t_max: f64) -> bool {
+        if !self.may_hit(ray_world, t_min) {
+            return false;
+        }
         let ray_obj = self.transform.ray_to_object(ray_world);
         self.geometry
             .as_intersect()
@@ -238,12 +276,12 @@ pub fn build_objects(
             ));
         }
         let material = bind_material(spec, &geometry, &ids, &key, loc)?;
-        out.push(SceneObject {
-            name: spec.name.clone(),
+        out.push(SceneObject::new(
+            spec.name.clone(),
             geometry,
-            transform: ObjectTransform::new(pose, scale),
+            ObjectTransform::new(pose, scale),
             material,
-        });
+        ));
     }
     Ok(out)
 }
