@@ -357,3 +357,58 @@ fn a_one_sided_capture_is_blamed_not_the_objects_placement() {
     );
     assert!(!err.contains("Place the object on the board"), "{err}");
 }
+
+/// A top-down capture (every view 77–88° above the board, all around the sphere): the views
+/// bound the hull's height only through their lowest elevation, so the hull rises far above the
+/// sphere and a phantom part stands over it. It was blamed on the object ("carve one object at
+/// a time"); the message now names the steepness and asks for photos from lower down.
+#[test]
+fn a_top_down_capture_is_blamed_on_its_steep_views() {
+    let tmp = tempfile::tempdir().unwrap();
+    let shipped = std::fs::read_to_string(scene("sphere.toml")).unwrap();
+    let board = scene("../boards/base_a4.toml");
+    let steep = shipped
+        .replace(
+            "elevation_deg = [25.0, 65.0]",
+            "elevation_deg = [78.0, 88.0]",
+        )
+        .replace("photo_count = 150", "photo_count = 24")
+        .replace("turns = 2.0", "turns = 1.0")
+        .replace(
+            "\"../boards/base_a4.toml\"",
+            &format!("{:?}", board.display().to_string()),
+        );
+    assert!(steep.contains("[78.0, 88.0]") && steep.contains("photo_count = 24"));
+    let scene_file = tmp.path().join("top_down.toml");
+    std::fs::write(&scene_file, steep).unwrap();
+    let s = tmp.path().join("s");
+    let o = Command::new(ellipso_bin())
+        .args(["capture", "--sim"])
+        .arg(&scene_file)
+        .arg("--out")
+        .arg(&s)
+        .args([
+            "--resolution",
+            "612x512",
+            "--supersampling",
+            "1",
+            "--interval-ms",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "capture: {}", stderr(&o));
+    let o = ellipso(&[
+        "mesh".as_ref(),
+        s.as_os_str(),
+        "--out".as_ref(),
+        tmp.path().join("m.ply").as_os_str(),
+    ]);
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("all look from above") && err.contains("Take photos from lower down"),
+        "{err}"
+    );
+    assert!(!err.contains("carve one object at a time"), "{err}");
+}

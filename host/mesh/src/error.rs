@@ -92,15 +92,15 @@ pub enum MeshError {
     /// one side (`crate::coverage`): the capture lacks views there, not the object's placement.
     #[error(
         "the hull {what}, where too few views constrain it: {why}; frames {frames}. The object \
-         may well be on the board and alone: the space behind it was never seen from its other \
-         side, so it could not be carved. Take photos from all around the object (no gap of \
-         more than half a turn) and mesh again"
+         may well be on the board and alone: {advice}"
     )]
     UnderViewed {
         /// What the hull does there.
         what: String,
         /// What the views lack (`Coverage::describe`).
         why: String,
+        /// What to photograph (`Coverage::advice`).
+        advice: String,
         /// The frames that see it.
         frames: String,
     },

@@ -63,6 +63,7 @@ pub(super) fn under_viewed(
         MeshError::UnderViewed {
             what,
             why: cover.describe(votes),
+            advice: cover.advice().to_string(),
             frames: frame_list(&ids, 10),
         }
     })
