@@ -74,12 +74,18 @@ fn scene(dir: &Path, name: &str, flash_w_per_sr: f64) -> PathBuf {
 /// A rig file on trigger port `port`: 8 ms exposure, the flash 100 µs after its start for 2 ms,
 /// one photo per 200 ms.
 fn rig(dir: &Path, port: &str) -> PathBuf {
-    let path = dir.join("rig.toml");
+    rig_with_gain(dir, "rig.toml", port, 0.0)
+}
+
+/// [`rig`] with the sensor's analogue gain `gain_db`.
+fn rig_with_gain(dir: &Path, name: &str, port: &str, gain_db: f64) -> PathBuf {
+    let path = dir.join(name);
     std::fs::write(
         &path,
         format!(
             "[trigger]\nport = \"{port}\"\n\n[sensor]\nbackend = \"aravis\"\naddress = \
-             \"127.0.0.1\"\nlayout = \"monopolar\"\nbit_depth = 12\nexposure_us = 8000\n\n\
+             \"127.0.0.1\"\nlayout = \"monopolar\"\nbit_depth = 12\nexposure_us = 8000\n\
+             gain_db = {gain_db:?}\n\n\
              [capture]\nphotos = 150\ninterval_ms = 200.0\nflash_delay_us = 100\n\
              flash_duration_us = 2000\n"
         ),
@@ -225,6 +231,29 @@ fn rig_check_fires_through_the_capture_and_reports_pairing_timing_and_levels() {
         "{err}"
     );
     assert_eq!(leftovers(), before, "removed after a failed check too");
+
+    // the well-lit scene through a rig file that sets 40 dB of gain (100×): the stand-in camera
+    // amplifies by the rig file's gain, as the real one would, so the frames clip; the scene's
+    // own gain (0 dB) no longer decides (before, the check passed whatever the rig file said)
+    let loud = rig_with_gain(tmp.path(), "loud.toml", &pty, 40.0);
+    let args = sim(&good);
+    let o = check(&loud, &args.iter().map(String::as_str).collect::<Vec<_>>());
+    let text = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(!o.status.success(), "40 dB clips the frames: {text}");
+    assert!(
+        text.contains("3 of 3 frames saturated") && text.contains("lower sensor.gain_db"),
+        "{text}"
+    );
+    // a gain the simulated camera does not have is refused by its key
+    let absurd = rig_with_gain(tmp.path(), "absurd.toml", &pty, 55.0);
+    let o = check(
+        &absurd,
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{err}");
+    assert!(err.contains("sensor.gain_db = 55 dB"), "{err}");
+    assert_eq!(leftovers(), before, "removed after a refused camera too");
 }
 
 /// `--fire 0`, an absurd count and a port that does not exist are refused, each by name.

@@ -231,6 +231,9 @@ pub struct StandInCamera {
     pub exposure_us: u32,
     /// The rig's full flash pulse, µs (the camera meters each exposure's on-time against it).
     pub flash_duration_us: u32,
+    /// Analogue gain, dB: the rig file's `sensor.gain_db`, so the camera amplifies by what it
+    /// was told (the scene's own gain is replaced).
+    pub gain_db: f64,
 }
 
 /// Opens the stand-in camera `cam` on the board behind `link` (whose clock it learns by
@@ -240,7 +243,16 @@ pub fn stand_in_camera(
     link: &TriggerLink,
     clock: HostClock,
 ) -> Result<Box<dyn crate::camera::Camera>, RunError> {
-    let scene = Scene::load(&cam.scene)?;
+    let mut scene = Scene::load(&cam.scene)?;
+    // the simulated camera's gain range is a scene file's (the IMX250's 0–48 dB)
+    if !(cam.gain_db.is_finite() && (0.0..=48.0).contains(&cam.gain_db)) {
+        return Err(RunError::msg(format!(
+            "sensor.gain_db = {} dB: the simulated camera amplifies 0 to 48 dB (the IMX250's \
+             range)",
+            cam.gain_db
+        )));
+    }
+    scene.rig.camera.gain_db = cam.gain_db;
     let scene: &'static Scene = Box::leak(Box::new(scene));
     let render_options = RenderOptions {
         supersampling: 1,

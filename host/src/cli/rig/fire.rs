@@ -76,6 +76,7 @@ pub fn fire(rig: &RigFile, n: u32, stand_in: Option<&SimStandIn>) -> anyhow::Res
                 resolution: s.resolution,
                 exposure_us: hw.board.exposure_us,
                 flash_duration_us: hw.board.flash_duration_us,
+                gain_db: f64::from(hw.settings.gain_db),
             };
             let camera = stand_in_camera(&cam, &link, clock)
                 .map_err(out::failed)
