@@ -17,7 +17,7 @@ fn capture_frames_equal_direct_renders() {
     let scene_path = shipped_scene("sphere.toml");
     let rig_dir = tmp.path().join("rig");
     let status = Command::new(ellipso_bin())
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(&scene_path)
         .arg("--out")
         .arg(&rig_dir)

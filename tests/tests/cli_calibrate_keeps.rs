@@ -15,7 +15,7 @@ fn a_failed_flash_part_keeps_the_camera_and_names_the_photos() {
     let tmp = tempfile::tempdir().unwrap();
     let session = tmp.path().join("scan");
     let o = Command::new(ellipso_bin())
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(scene("calibration.toml"))
         .args(["--resolution", "1224x1024"])
         .args(["--supersampling", "1", "--out"])

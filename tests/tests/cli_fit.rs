@@ -30,7 +30,7 @@ fn fit_of_a_recorded_session_writes_its_outputs_and_keeps_the_frames() {
     let tmp = tempfile::tempdir().unwrap();
     let session = tmp.path().join("session");
     let o = Command::new(ellipso_bin())
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(scene("sphere.toml"))
         .args([
             "--photos",

@@ -39,7 +39,7 @@ fn sphere_mesh(dir: &Path, name: &str, centre: [f64; 3]) -> PathBuf {
 fn capture(cwd: &Path, scene: &Path, out: &str) -> PathBuf {
     let o = Command::new(ellipso_bin())
         .current_dir(cwd)
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(scene)
         .args(["--out", out, "--photos", "12", "--resolution", "612x512"])
         .args(["--supersampling", "1"])

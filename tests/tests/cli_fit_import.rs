@@ -179,6 +179,8 @@ fn poses_and_a_mesh_from_another_frame_come_into_the_fit() {
     let scene = grid_scene(t);
     ok(ellipso(&[
         "capture".as_ref(),
+        "--interval-ms".as_ref(),
+        "50".as_ref(),
         "--sim".as_ref(),
         scene.as_os_str(),
         "--photos".as_ref(),

@@ -27,7 +27,7 @@ fn write_calibration(mut cal: SensorCalibration, path: &Path) -> String {
 fn hardware_session(dir: &Path) -> (PathBuf, SensorInfo) {
     let session = dir.join("session");
     let o = Command::new(ellipso_bin())
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(scene("sphere.toml"))
         .args(["--photos", "12", "--resolution", "612x512"])
         .args(["--supersampling", "1", "--out"])

@@ -75,6 +75,8 @@ fn three_shard_processes_merge_bit_identical_to_one_run() {
         ellipso(
             &[
                 "capture".as_ref(),
+                "--interval-ms".as_ref(),
+                "50".as_ref(),
                 "--sim".as_ref(),
                 scene("sphere.toml").as_os_str(),
                 "--photos".as_ref(),

@@ -107,7 +107,7 @@ fn ellipso() -> Command {
 
 fn capture(out: &Path, photos: &str) -> Output {
     ellipso()
-        .args(["capture", "--sim"])
+        .args(["capture", "--interval-ms", "50", "--sim"])
         .arg(shipped_scene("sphere.toml"))
         .arg("--out")
         .arg(out)

@@ -88,7 +88,7 @@ pub fn fixture40() -> &'static Path {
 fn capture_sphere(photos: u32) -> PathBuf {
     let root = tempfile::tempdir().unwrap().keep();
     let out = root.join("session");
-    let o = ellipso(&["capture", "--sim"])
+    let o = ellipso(&["capture", "--interval-ms", "50", "--sim"])
         .arg(shipped_scene("sphere.toml").canonicalize().unwrap())
         .arg("--out")
         .arg(&out)
