@@ -94,13 +94,27 @@ struct Projected {
     residuals: Vec<f64>,
     /// Per pixel: the step's argument x.
     arguments: Vec<f64>,
+    /// Per pixel: the step S(x) (kept for the Jacobian, which would take it again).
+    shape: Vec<f64>,
     /// Per phase: (a, b) = (B, W − B).
     levels: Vec<[f64; 2]>,
 }
 
-/// Logistic step.
+/// Logistic step, `1 / (1 + e^−x)`. Far out on either side the exponential overflows to ∞ or
+/// underflows to 0, which libm reaches on a slow path that sets `errno` (a fifth of a
+/// calibration's time on sharp edges, whose far pixels have |x| in the thousands); the step is
+/// then exactly 0 or 1, returned here without the call — the same bits.
 fn step(x: f64) -> f64 {
-    1.0 / (1.0 + (-x).exp())
+    let t = -x;
+    if t > 710.0 {
+        // e^t overflows above ln(f64::MAX) = 709.78: 1 / (1 + ∞) = 0
+        0.0
+    } else if t < -746.0 {
+        // e^t underflows below ln(smallest subnormal / 2) = −745.13: 1 / (1 + 0) = 1
+        1.0
+    } else {
+        1.0 / (1.0 + t.exp())
+    }
 }
 
 impl SidePixels {
@@ -142,6 +156,7 @@ impl SidePixels {
         Some(Projected {
             residuals: r,
             arguments: x,
+            shape,
             levels: coef,
         })
     }
@@ -149,9 +164,9 @@ impl SidePixels {
     /// The Jacobian row of pixel `i` with the levels held (Kaufman 1975's simplification of
     /// variable projection: the levels' own change with the step is left out of the
     /// derivative, not of the residual, which costs iterations, never accuracy).
-    fn jacobian_row(&self, i: usize, x: f64, coef: &[[f64; 2]], w: f64) -> Vector3<f64> {
+    fn jacobian_row(&self, i: usize, x: f64, s: f64, coef: &[[f64; 2]], w: f64) -> Vector3<f64> {
+        // s = S(x), as `residuals` took it
         let b = coef[self.phase[i]][1];
-        let s = step(x);
         // r = v − a − b·S(x), x = (d − δ − α·s)/w: ∂r/∂θ = −b·S'(x)·∂x/∂θ.
         let ds = -b * s * (1.0 - s);
         Vector3::new(-ds / w, -ds * self.s[i] / w, -ds * x)
@@ -252,13 +267,15 @@ fn fit_side(img: &RawImage<'_>, a: [f64; 2], b: [f64; 2], reach: f64) -> Option<
         px.d.iter_mut().for_each(|d| *d = -*d);
         px.s.iter_mut().for_each(|s| *s = -*s);
     }
-    let cost = |p: &(Vector3<f64>, f64)| p.1;
-    let eval = |p: Vector3<f64>| -> Option<(Vector3<f64>, f64)> {
+    // A state carries its own residuals, so the next step's Jacobian does not take them again.
+    let cost = |p: &(Vector3<f64>, f64, Projected)| p.1;
+    let eval = |p: Vector3<f64>| -> Option<(Vector3<f64>, f64, Projected)> {
         if !(p[0].abs() < reach && p[1].abs() < reach && p[2].is_finite()) {
             return None;
         }
-        let r = px.residuals(&p)?.residuals;
-        Some((p, r.iter().map(|e| e * e).sum()))
+        let projected = px.residuals(&p)?;
+        let cost = projected.residuals.iter().map(|e| e * e).sum();
+        Some((p, cost, projected))
     };
     // Start on the detected side, blur one pixel.
     let start = eval(Vector3::new(0.0, 0.0, 0.0))?;
@@ -270,20 +287,18 @@ fn fit_side(img: &RawImage<'_>, a: [f64; 2], b: [f64; 2], reach: f64) -> Option<
         step_tolerance: 1e-3,
     };
     let (fitted, _) = minimise(start, cost, &schedule, 60, |state, lambda| {
-        let p = state.0;
-        let Some(Projected {
+        let (p, _, projected) = state;
+        let Projected {
             residuals: r,
             arguments: x,
+            shape,
             levels: coef,
-        }) = px.residuals(&p)
-        else {
-            return Step::Singular;
-        };
+        } = projected;
         let w = p[2].exp();
         let mut jtj = Matrix3::zeros();
         let mut jtr = Vector3::zeros();
-        for (i, (ri, xi)) in r.iter().zip(&x).enumerate() {
-            let row = px.jacobian_row(i, *xi, &coef, w);
+        for (i, (ri, xi)) in r.iter().zip(x).enumerate() {
+            let row = px.jacobian_row(i, *xi, shape[i], coef, w);
             jtj += row * row.transpose();
             jtr += row * *ri;
         }

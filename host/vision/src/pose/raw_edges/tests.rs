@@ -131,3 +131,21 @@ fn a_tag_too_small_for_its_tile_or_a_flat_image_keeps_its_corners() {
     let square = [[40.0, 40.0], [120.0, 40.0], [120.0, 120.0], [40.0, 120.0]];
     assert!(refine_corners(&img, &square, TagFamily::Tag36h11).is_none());
 }
+
+#[test]
+fn the_step_is_the_logistic_to_the_bit_and_saturates_without_libm() {
+    let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
+    let mut x = -5000.0;
+    while x <= 5000.0 {
+        assert_eq!(step(x).to_bits(), logistic(x).to_bits(), "x = {x}");
+        x += 0.37;
+    }
+    for x in [
+        -746.5, -745.2, -709.9, -709.7, 708.0, 745.2, 746.5, 1e300, -1e300,
+    ] {
+        assert_eq!(step(x).to_bits(), logistic(x).to_bits(), "x = {x}");
+    }
+    assert_eq!(step(-1e6), 0.0);
+    assert_eq!(step(1e6), 1.0);
+    assert!(step(f64::NAN).is_nan());
+}
