@@ -388,83 +388,13 @@ pub fn extract_from(
 ) -> Result<Extraction, ObserveError> {
     let camera = camera_of(session)?;
     let layout = session.manifest.sensor.layout;
-    if u32::try_from(mesh.positions().len()).is_err() {
-        return Err(ObserveError::Mesh(format!(
-            "{} vertices exceed the sample format's u32 index",
-            mesh.positions().len()
-        )));
-    }
-    let mut poses = poses.to_vec();
-    poses.sort_by_key(|p| p.0);
-    for w in poses.windows(2) {
-        if w[0].0 == w[1].0 {
-            return Err(ObserveError::Pose {
-                frame_id: w[0].0,
-                what: "given twice".into(),
-            });
-        }
-    }
-    for (id, p) in &poses {
-        let finite = p.translation.vector.iter().all(|v| v.is_finite())
-            && p.rotation.coords.iter().all(|v| v.is_finite());
-        if !finite {
-            return Err(ObserveError::Pose {
-                frame_id: *id,
-                what: "not finite".into(),
-            });
-        }
-    }
+    let poses = checked_poses(mesh, poses)?;
 
     let mut report = ObserveReport {
         frames_posed: poses.len(),
         ..ObserveReport::default()
     };
-    let mut jobs = Vec::new();
-    for (frame_id, pose) in &poses {
-        let skip = |reason: &str| SkippedFrame {
-            frame_id: *frame_id,
-            reason: reason.into(),
-        };
-        let Ok(k) = session
-            .frames
-            .binary_search_by_key(frame_id, |f| f.frame_id)
-        else {
-            report.skipped.push(skip("no frame file in the session"));
-            continue;
-        };
-        let entry = &session.frames[k];
-        if !entry.complete {
-            report.skipped.push(skip("flagged incomplete at capture"));
-            continue;
-        }
-        let Some(SessionEvent::Frame {
-            exposure_us,
-            gain_db,
-            ..
-        }) = &entry.event
-        else {
-            report
-                .skipped
-                .push(skip("no `frame` event: exposure and gain unknown"));
-            continue;
-        };
-        // The reader turns a non-finite or negative recorded energy into "not recorded" (1.0),
-        // so anything not > 0 here is a pulse that did not light the frame.
-        let lit = entry.flash_energy_rel > 0.0;
-        if !lit {
-            report.skipped.push(skip(NO_FLASH_REASON));
-            report.frames_unlit += 1;
-            continue;
-        }
-        jobs.push(Job {
-            frame_id: *frame_id,
-            pose: *pose,
-            entry,
-            exposure_us: f64::from(*exposure_us),
-            gain_db: f64::from(*gain_db),
-            flash_energy_rel: entry.flash_energy_rel,
-        });
-    }
+    let jobs = frame_jobs(session, &poses, &mut report);
 
     let owned: Vec<usize> = shard.vertices(mesh.positions().len()).collect();
     let rings = VertexRings::new(mesh);
@@ -525,15 +455,7 @@ pub fn extract_from(
     let base_bytes = rings.bytes() as u64;
     let in_flight = config.frames_in_flight.max(1);
     let total = jobs.len();
-    let pool = match config.threads {
-        None => None,
-        Some(n) => Some(
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(n.max(1))
-                .build()
-                .map_err(|e| ObserveError::Threads(e.to_string()))?,
-        ),
-    };
+    let pool = thread_pool(config.threads)?;
     progress(0, total);
     for (c, chunk) in jobs.chunks(in_flight).enumerate() {
         let work = || {
@@ -567,22 +489,7 @@ pub fn extract_from(
             };
             let index = views.len() as u32;
             views.push(view);
-            for (vs, outcome) in vertices.iter_mut().zip(outcomes) {
-                let g = &mut vs.gates;
-                match outcome {
-                    Outcome::Kept(mut s) => {
-                        s.view = index;
-                        vs.samples.push(s);
-                        g.kept += 1;
-                        kept += 1;
-                    }
-                    Outcome::NotInView => g.not_in_view += 1,
-                    Outcome::Occluded => g.occluded += 1,
-                    Outcome::Mixed => g.mixed += 1,
-                    Outcome::Shadowed => g.shadowed += 1,
-                    Outcome::Gate(r) => r.count(g),
-                }
-            }
+            kept += tally(&mut vertices, outcomes, index);
         }
         progress(((c + 1) * in_flight).min(total), total);
     }
@@ -614,4 +521,132 @@ pub fn extract_from(
         },
         report,
     })
+}
+
+/// `poses` sorted by frame id, each frame once and finite; `mesh` small enough for the
+/// sample format's u32 vertex index.
+fn checked_poses(
+    mesh: &TriangleMesh,
+    poses: &[(u64, Isometry3<f64>)],
+) -> Result<Vec<(u64, Isometry3<f64>)>, ObserveError> {
+    if u32::try_from(mesh.positions().len()).is_err() {
+        return Err(ObserveError::Mesh(format!(
+            "{} vertices exceed the sample format's u32 index",
+            mesh.positions().len()
+        )));
+    }
+    let mut poses = poses.to_vec();
+    poses.sort_by_key(|p| p.0);
+    for w in poses.windows(2) {
+        if w[0].0 == w[1].0 {
+            return Err(ObserveError::Pose {
+                frame_id: w[0].0,
+                what: "given twice".into(),
+            });
+        }
+    }
+    for (id, p) in &poses {
+        let finite = p.translation.vector.iter().all(|v| v.is_finite())
+            && p.rotation.coords.iter().all(|v| v.is_finite());
+        if !finite {
+            return Err(ObserveError::Pose {
+                frame_id: *id,
+                what: "not finite".into(),
+            });
+        }
+    }
+    Ok(poses)
+}
+
+/// The frames of `poses` to read (complete, with a `frame` event, lit); the others are listed
+/// in `report` with the reason.
+fn frame_jobs<'s>(
+    session: &'s Session,
+    poses: &[(u64, Isometry3<f64>)],
+    report: &mut ObserveReport,
+) -> Vec<Job<'s>> {
+    let mut jobs = Vec::new();
+    for (frame_id, pose) in poses {
+        let skip = |reason: &str| SkippedFrame {
+            frame_id: *frame_id,
+            reason: reason.into(),
+        };
+        let Ok(k) = session
+            .frames
+            .binary_search_by_key(frame_id, |f| f.frame_id)
+        else {
+            report.skipped.push(skip("no frame file in the session"));
+            continue;
+        };
+        let entry = &session.frames[k];
+        if !entry.complete {
+            report.skipped.push(skip("flagged incomplete at capture"));
+            continue;
+        }
+        let Some(SessionEvent::Frame {
+            exposure_us,
+            gain_db,
+            ..
+        }) = &entry.event
+        else {
+            report
+                .skipped
+                .push(skip("no `frame` event: exposure and gain unknown"));
+            continue;
+        };
+        // The reader turns a non-finite or negative recorded energy into "not recorded" (1.0),
+        // so anything not > 0 here is a pulse that did not light the frame.
+        let lit = entry.flash_energy_rel > 0.0;
+        if !lit {
+            report.skipped.push(skip(NO_FLASH_REASON));
+            report.frames_unlit += 1;
+            continue;
+        }
+        jobs.push(Job {
+            frame_id: *frame_id,
+            pose: *pose,
+            entry,
+            exposure_us: f64::from(*exposure_us),
+            gain_db: f64::from(*gain_db),
+            flash_energy_rel: entry.flash_energy_rel,
+        });
+    }
+    jobs
+}
+
+/// A pool of `threads` workers, or `None` for rayon's global pool.
+fn thread_pool(threads: Option<usize>) -> Result<Option<rayon::ThreadPool>, ObserveError> {
+    Ok(match threads {
+        None => None,
+        Some(n) => Some(
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build()
+                .map_err(|e| ObserveError::Threads(e.to_string()))?,
+        ),
+    })
+}
+
+/// Adds one frame's `outcomes` (one per vertex of `vertices`, in order) to the vertices: a
+/// kept sample with its view `index`, every other outcome to its gate count. Returns the
+/// number of samples kept.
+fn tally(vertices: &mut [VertexSamples], outcomes: Vec<Outcome>, index: u32) -> u64 {
+    let mut kept = 0;
+    for (vs, outcome) in vertices.iter_mut().zip(outcomes) {
+        let g = &mut vs.gates;
+        match outcome {
+            Outcome::Kept(mut s) => {
+                s.view = index;
+                vs.samples.push(s);
+                g.kept += 1;
+                kept += 1;
+            }
+            Outcome::NotInView => g.not_in_view += 1,
+            Outcome::Occluded => g.occluded += 1,
+            Outcome::Mixed => g.mixed += 1,
+            Outcome::Shadowed => g.shadowed += 1,
+            Outcome::Gate(r) => r.count(g),
+        }
+    }
+    kept
 }
