@@ -18,6 +18,7 @@ pub mod capture;
 pub mod effects;
 pub mod error;
 pub mod objects;
+mod pose;
 pub mod rig;
 pub mod shipped;
 pub mod spec;

@@ -19,13 +19,13 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use crate::truth::TruthObject;
+use crate::truth::{true_mesh, truth_for_scoring};
 use ellipso_fit::observe::MosaicFrames;
 use ellipso_fit::session::{SessionFit, SessionFitConfig, fit_session_with};
 use ellipso_model::geometry::TriangleMesh;
 use ellipso_session::reader::Session;
 use ellipso_sim::render::{Footprint, RenderOptions, Renderer};
-use ellipso_sim::scene::{ObjectGeometry, Scene};
+use ellipso_sim::scene::Scene;
 use nalgebra::Isometry3;
 use serde::Serialize;
 
@@ -136,24 +136,6 @@ pub struct Bench {
     pub resolution: Option<[u32; 2]>,
     /// The fit's settings (the demo's).
     pub fit: SessionFitConfig,
-}
-
-/// The truth object the bench scores against: the scene object's own mesh (a sphere refined to
-/// icosphere 6 for the closest-point search).
-pub fn truth_for_scoring(scene: &Scene) -> Result<TruthObject, BenchError> {
-    let sphere = matches!(
-        scene.objects.first().map(|o| &o.geometry),
-        Some(ObjectGeometry::Sphere(_))
-    );
-    TruthObject::from_scene(scene, sphere.then_some(6)).map_err(|e| BenchError::stage("truth", e))
-}
-
-/// The true mesh the fit runs on with [`MeshSource::True`]: the object's own mesh (icosphere 4
-/// for a sphere).
-pub fn true_mesh(scene: &Scene) -> Result<TriangleMesh, BenchError> {
-    Ok(TruthObject::from_scene(scene, None)
-        .map_err(|e| BenchError::stage("truth", e))?
-        .mesh)
 }
 
 impl Bench {

@@ -445,7 +445,7 @@ pub fn score_fit_vertices(
         .collect();
     let camera = ellipso_fit::observe::camera_of(session)?;
     let flash = ellipso_fit::observe::flash_of(session)?;
-    let truth = crate::chain::truth_for_scoring(scene)?;
+    let truth = crate::truth::truth_for_scoring(scene)?;
     let positions: Vec<Point3<f64>> = fit
         .iter()
         .map(|v| Point3::from(v.position.map(f64::from)))

@@ -8,7 +8,86 @@
 use serde::Serialize;
 
 use crate::coverage::CoverageScores;
-use crate::generalize::{Report, SceneResult};
+use crate::surface::VisibleDistance;
+
+/// One material of a generated scene as the report lists it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SceneMaterial {
+    /// Name (the table row's).
+    pub name: String,
+    /// True η.
+    pub eta: f64,
+    /// Specular roughness σs.
+    pub sigma_s: f64,
+    /// Share of the surface area, as grown.
+    pub area_fraction: f64,
+}
+
+/// One scene's result ([`crate::generalize`]'s module doc).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SceneResult {
+    /// The seed.
+    pub seed: u64,
+    /// Whether the seed is held out (≥ 1000).
+    pub held_out: bool,
+    /// What the seed drew, one line.
+    pub description: String,
+    /// Shape kind.
+    pub shape: String,
+    /// Capture path (`orbit`, `hand_held`).
+    pub path: String,
+    /// Materials.
+    pub materials: Vec<SceneMaterial>,
+    /// A same-colour pair was drawn.
+    pub same_colour_pair: bool,
+    /// Dark object.
+    pub dark_object: bool,
+    /// Dark board.
+    pub dark_board: bool,
+    /// Why the chain failed (no figures then).
+    pub error: Option<String>,
+    /// Frames posed by tracking.
+    pub frames_posed: usize,
+    /// Frames in the session.
+    pub frames: usize,
+    /// Carved mesh vertices.
+    pub vertices: usize,
+    /// Mean over the scene's materials of |η error|, % (materials reporting η).
+    pub eta_material_mean_pct: f64,
+    /// 90th percentile of the same.
+    pub eta_material_p90_pct: f64,
+    /// Largest of the same.
+    pub eta_material_worst_pct: f64,
+    /// Materials with visible vertices but none reporting η.
+    pub materials_unreported: usize,
+    /// Coverage and accuracy ([`crate::coverage`], the scorer of `ellipso bench score`).
+    pub coverage: Option<CoverageScores>,
+    /// Distance of the visible fitted vertices to the true surface.
+    pub visible_distance: Option<VisibleDistance>,
+    /// Stage times, s: render, track, mesh, fit.
+    pub times_s: [f64; 4],
+}
+
+/// The report's JSON (docs/generalize.json).
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    /// The rule the figures follow ([`crate::generalize`]'s module doc).
+    pub rule: String,
+    /// The command that made it.
+    pub command: String,
+    /// Image size, px.
+    pub resolution_px: [u32; 2],
+    /// Photos per scene.
+    pub photos: u32,
+    /// Every scene run, by seed.
+    pub scenes: Vec<SceneResult>,
+    /// Over the held-out seeds (≥ 1000); `None` when none was run.
+    pub summary: Option<Summary>,
+    /// Over the development seeds (< 1000); `None` when none was run.
+    pub development_summary: Option<Summary>,
+    /// Wall time of the whole run, s.
+    pub total_s: f64,
+}
 
 /// Figures over a set of scenes (module doc of `crate::generalize`).
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]

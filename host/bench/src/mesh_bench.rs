@@ -423,13 +423,13 @@ pub fn mesh_scores(
     config: &SessionFitConfig,
     say: &dyn Say,
 ) -> Result<MeshScores, RunError> {
-    let truth = crate::chain::truth_for_scoring(scene)?;
+    let truth = crate::truth::truth_for_scoring(scene)?;
     let poses = ellipso_pipeline::poses::poses_of(session, say)?;
     let true_config = SessionFitConfig {
         hull: None,
         ..config.clone()
     };
-    let true_mesh = crate::chain::true_mesh(scene)?;
+    let true_mesh = crate::truth::true_mesh(scene)?;
     let t0 = Instant::now();
     let on_truth =
         ellipso_fit::session::fit_session(session, &true_mesh, &poses, &true_config, &mut |_| {})?;
@@ -501,7 +501,7 @@ fn scale_run(
             )
         })
         .collect();
-    let truth = crate::chain::truth_for_scoring(scene)?;
+    let truth = crate::truth::truth_for_scoring(scene)?;
     let at = crate::truth_map::truth_at(&truth, &positions);
     let d: Vec<f64> = at
         .iter()

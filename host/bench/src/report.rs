@@ -80,6 +80,16 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         .first()
         .map(|r| r.scores.materials.iter().map(|m| m.name.clone()).collect())
         .unwrap_or_default();
+    intro(&mut s, runs, meta);
+    every_run(&mut s, runs, &materials);
+    stage_costs(&mut s, runs, &materials);
+    observations_against_truth(&mut s, runs);
+    targets(&mut s, runs);
+    s
+}
+
+/// The report's title, provenance and how to read its rows and figures.
+fn intro(s: &mut String, runs: &[RunResult], meta: &ReportMeta) {
     let _ = writeln!(s, "# Error budget of the whole chain\n");
     let _ = writeln!(
         s,
@@ -128,8 +138,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
          parameters and normals on the same samples is the floor the sensor noise and the \
          sampling leave.\n"
     );
+}
 
-    // Table 1: every run.
+/// Table 1: every run, with its per-material η error (`materials`: the columns).
+fn every_run(s: &mut String, runs: &[RunResult], materials: &[String]) {
     let _ = writeln!(s, "## Every run\n");
     let columns: Vec<(String, Align)> = [
         ("run", L),
@@ -168,7 +180,7 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
             r.coverage.coverage_visible,
             r.coverage.coverage_material_min
         );
-        for m in &materials {
+        for m in materials {
             let cell = sc
                 .materials
                 .iter()
@@ -201,8 +213,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         );
         let _ = writeln!(s, "{row}");
     }
+}
 
-    // Table 2: stage costs.
+/// Table 2: what each stage costs, as the Δη its replacement makes.
+fn stage_costs(s: &mut String, runs: &[RunResult], materials: &[String]) {
     let _ = writeln!(s, "\n## What each stage costs\n");
     let _ = writeln!(
         s,
@@ -230,7 +244,7 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         };
         let mut row = format!("| {} | {} |", cell(&r.spec.name), cell(&base.spec.name));
         let mut largest: f64 = 0.0;
-        for m in &materials {
+        for m in materials {
             let d = eta_error(r, m) - eta_error(base, m);
             if d.is_finite() {
                 largest = largest.max(d.abs());
@@ -245,8 +259,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
         row += &format!(" {largest:.2} | {verdict} |");
         let _ = writeln!(s, "{row}");
     }
+}
 
-    // Table 3: residuals at the truth.
+/// Table 3: the fitted observations against the true model, before any fit.
+fn observations_against_truth(s: &mut String, runs: &[RunResult]) {
     let _ = writeln!(s, "\n## The observations against the truth\n");
     let _ = writeln!(
         s,
@@ -300,8 +316,10 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
             );
         }
     }
+}
 
-    // Targets.
+/// The targets, each met or not.
+fn targets(s: &mut String, runs: &[RunResult]) {
     let _ = writeln!(s, "\n## Targets\n");
     let find = |n: &str| runs.iter().find(|r| r.spec.name == n);
     let max_abs = |r: &RunResult| {
@@ -393,7 +411,6 @@ pub fn markdown(runs: &[RunResult], meta: &ReportMeta) -> String {
             }
         );
     }
-    s
 }
 
 /// Draws the per-material η error of every run (rows) to `path`.

@@ -22,6 +22,8 @@ use nalgebra::{Point3, Vector3};
 
 use ellipso_fit::data::ViewGeometry;
 
+use crate::BenchError;
+
 /// Why a scene has no usable truth object.
 #[derive(Debug, thiserror::Error)]
 pub enum TruthError {
@@ -143,6 +145,24 @@ pub fn views_of_scene(scene: &Scene, poses: &[CameraPose]) -> Vec<ViewGeometry> 
         .enumerate()
         .map(|(k, p)| ViewGeometry::from_rig(k as u64, &p.world_from_camera, &scene.rig.flash))
         .collect()
+}
+
+/// The truth object the bench scores against: the scene object's own mesh (a sphere refined to
+/// icosphere 6 for the closest-point search).
+pub fn truth_for_scoring(scene: &Scene) -> Result<TruthObject, BenchError> {
+    let sphere = matches!(
+        scene.objects.first().map(|o| &o.geometry),
+        Some(ObjectGeometry::Sphere(_))
+    );
+    TruthObject::from_scene(scene, sphere.then_some(6)).map_err(|e| BenchError::stage("truth", e))
+}
+
+/// The true mesh the fit runs on with [`MeshSource::True`](crate::chain::MeshSource::True): the object's own mesh (icosphere 4
+/// for a sphere).
+pub fn true_mesh(scene: &Scene) -> Result<TriangleMesh, BenchError> {
+    Ok(TruthObject::from_scene(scene, None)
+        .map_err(|e| BenchError::stage("truth", e))?
+        .mesh)
 }
 
 #[cfg(test)]

@@ -72,6 +72,7 @@
 //! `forward`, one vertex's least-squares problem in `problem`.
 
 mod albedos;
+mod box_coords;
 mod config;
 mod finish;
 mod forward;

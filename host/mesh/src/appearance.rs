@@ -380,7 +380,7 @@ pub struct Board {
     /// Number of learned texels.
     pub learned: usize,
     /// Where tags are printed, and the paper's value ([`crate::print`]); empty when not known.
-    pub print: crate::print::PrintedArea,
+    pub print: PrintedArea,
 }
 
 impl Board {
@@ -388,4 +388,14 @@ impl Board {
     pub fn bytes(&self) -> usize {
         self.texels.len() * std::mem::size_of::<Option<TexelSample>>()
     }
+}
+
+/// Where the board is printed, and the paper's value: computed and read by [`crate::print`]
+/// (its contract), held here by the [`Board`] it belongs to.
+#[derive(Clone, Debug, Default)]
+pub struct PrintedArea {
+    /// Per texel: within one texel of a tag's square.
+    pub printed: Vec<bool>,
+    /// The paper's learned value per band (`None` when no unprinted texel was learned).
+    pub paper: Option<[f32; 3]>,
 }

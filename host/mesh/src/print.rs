@@ -26,16 +26,8 @@
 //!   than the paper stays evidence of an object, printed texel or not; so does every pixel
 //!   off the print.
 
+pub use super::appearance::PrintedArea;
 use super::appearance::{Agreement, TexelGrid, TexelSample};
-
-/// Where the board is printed, and the paper's value.
-#[derive(Clone, Debug, Default)]
-pub struct PrintedArea {
-    /// Per texel: within one texel of a tag's square.
-    pub printed: Vec<bool>,
-    /// The paper's learned value per band (`None` when no unprinted texel was learned).
-    pub paper: Option<[f32; 3]>,
-}
 
 /// Signed distance of `p` inside the convex quad `quad` (negative outside), metres.
 fn inside_distance(quad: &[[f64; 2]; 4], p: [f64; 2]) -> f64 {

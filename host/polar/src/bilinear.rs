@@ -14,7 +14,7 @@
 
 use ellipso_model::mosaic::{Analyser, Channel, SensorLayout};
 
-use super::demosaic::{AnalyserBand, Levels, RowBuf};
+use super::band::{AnalyserBand, Levels, RowBuf};
 use super::frame::RawFrameView;
 use super::mask::{MaskReason, PixelMask};
 use super::plane::Plane;

@@ -57,6 +57,7 @@
 //! optionally, large consistency residuals are flagged per output pixel ([`MaskReason`]).
 //! Every output is finite for every valid frame (guards documented in [`stokes`]).
 
+mod band;
 mod bilinear;
 pub mod calibration;
 pub mod channels;

@@ -18,7 +18,7 @@ pub mod pdf;
 pub mod raster;
 pub mod svg;
 
-use ellipso_model::tags::Board;
+use ellipso_model::tags::{Board, TagCells};
 
 /// Height of the label's text, mm: about 7 pt type, legible on the bench.
 pub const TEXT_MM: f64 = 2.5;
@@ -164,31 +164,7 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
         let cells = board
             .tag_cells(tag.id)
             .unwrap_or_else(|| unreachable!("a built board holds the cells of its tags"));
-        let n = cells.width;
-        for row in 0..n {
-            // runs of black cells in a row become one quad (no seams between cells)
-            let mut col = 0;
-            while col < n {
-                if cells.is_white(col, row) {
-                    col += 1;
-                    continue;
-                }
-                let start = col;
-                while col < n && !cells.is_white(col, row) {
-                    col += 1;
-                }
-                let x0 = start as f64 * cell_mm - 0.5 * total_mm;
-                let x1 = col as f64 * cell_mm - 0.5 * total_mm;
-                let y0 = row as f64 * cell_mm - 0.5 * total_mm;
-                let y1 = y0 + cell_mm;
-                quads.push(Quad([
-                    to_sheet(x0, y0),
-                    to_sheet(x1, y0),
-                    to_sheet(x1, y1),
-                    to_sheet(x0, y1),
-                ]));
-            }
-        }
+        push_tag_quads(cells, cell_mm, total_mm, &to_sheet, &mut quads);
     }
     let ids = id_ranges(board.tags.iter().map(|t| t.id).collect());
     let line1 = format!(
@@ -228,25 +204,7 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
                 || b[3] + clear <= y
         })
     };
-    // Scan from the bottom-left in 1 mm steps: the first free place, bottom rows first.
-    let (x_max, y_max) = (
-        paper_mm[0] - margin_mm - block_w,
-        paper_mm[1] - margin_mm - block_h,
-    );
-    let mut place = None;
-    let mut y = y_max;
-    'scan: while y >= margin_mm {
-        let mut x = margin_mm;
-        while x <= x_max {
-            if free(x, y) {
-                place = Some((x, y));
-                break 'scan;
-            }
-            x += 1.0;
-        }
-        y -= 1.0;
-    }
-    let Some((x, y)) = place else {
+    let Some((x, y)) = first_free_place(&free, paper_mm, margin_mm, [block_w, block_h]) else {
         return Err(PrintError::NoRoomForLabel {
             w_mm: block_w,
             h_mm: block_h,
@@ -272,6 +230,89 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
     // Scale bar: ten 10 mm segments, alternately solid and outlined, under the label.
     let bar_top = y + 2.0 * (TEXT_MM + gap);
     let bar_bottom = bar_top + SCALE_BAR_HEIGHT_MM;
+    push_scale_bar(x, bar_top, bar_bottom, &mut quads);
+    texts.push(Text {
+        x_mm: x + SCALE_BAR_MM + gap,
+        baseline_mm: bar_bottom,
+        size_mm: TEXT_MM,
+        text: bar_label,
+    });
+    Ok(Drawing {
+        paper_mm,
+        quads,
+        texts,
+    })
+}
+
+/// The black cells of one tag as quads on the sheet, mm: each run of black cells in a row is
+/// one quad (no seams between cells). `to_sheet` maps tag-local mm (x right, y down, origin at
+/// the tag's centre) to the sheet.
+fn push_tag_quads(
+    cells: &TagCells,
+    cell_mm: f64,
+    total_mm: f64,
+    to_sheet: &dyn Fn(f64, f64) -> [f64; 2],
+    quads: &mut Vec<Quad>,
+) {
+    let n = cells.width;
+    for row in 0..n {
+        // runs of black cells in a row become one quad (no seams between cells)
+        let mut col = 0;
+        while col < n {
+            if cells.is_white(col, row) {
+                col += 1;
+                continue;
+            }
+            let start = col;
+            while col < n && !cells.is_white(col, row) {
+                col += 1;
+            }
+            let x0 = start as f64 * cell_mm - 0.5 * total_mm;
+            let x1 = col as f64 * cell_mm - 0.5 * total_mm;
+            let y0 = row as f64 * cell_mm - 0.5 * total_mm;
+            let y1 = y0 + cell_mm;
+            quads.push(Quad([
+                to_sheet(x0, y0),
+                to_sheet(x1, y0),
+                to_sheet(x1, y1),
+                to_sheet(x0, y1),
+            ]));
+        }
+    }
+}
+
+/// The label block's place, mm: scanning from the bottom-left in 1 mm steps, the first
+/// top-left corner (bottom rows first) inside the margins where `free` holds; `None` when
+/// there is none. `block_mm`: the block's width and height.
+fn first_free_place(
+    free: &dyn Fn(f64, f64) -> bool,
+    paper_mm: [f64; 2],
+    margin_mm: f64,
+    [block_w, block_h]: [f64; 2],
+) -> Option<(f64, f64)> {
+    let (x_max, y_max) = (
+        paper_mm[0] - margin_mm - block_w,
+        paper_mm[1] - margin_mm - block_h,
+    );
+    let mut place = None;
+    let mut y = y_max;
+    'scan: while y >= margin_mm {
+        let mut x = margin_mm;
+        while x <= x_max {
+            if free(x, y) {
+                place = Some((x, y));
+                break 'scan;
+            }
+            x += 1.0;
+        }
+        y -= 1.0;
+    }
+    place
+}
+
+/// Ten 10 mm segments from `x`, mm, between `bar_top` and `bar_bottom`, alternately solid and
+/// outlined, and the end tick at 100 mm.
+fn push_scale_bar(x: f64, bar_top: f64, bar_bottom: f64, quads: &mut Vec<Quad>) {
     let rect = |x0: f64, y0: f64, x1: f64, y1: f64| Quad([[x0, y0], [x1, y0], [x1, y1], [x0, y1]]);
     let line_mm = 0.2;
     for k in 0..10 {
@@ -291,17 +332,6 @@ pub fn layout(board: &Board, margin_mm: f64) -> Result<Drawing, PrintError> {
         x + SCALE_BAR_MM,
         bar_bottom,
     ));
-    texts.push(Text {
-        x_mm: x + SCALE_BAR_MM + gap,
-        baseline_mm: bar_bottom,
-        size_mm: TEXT_MM,
-        text: bar_label,
-    });
-    Ok(Drawing {
-        paper_mm,
-        quads,
-        texts,
-    })
 }
 
 /// Output formats, chosen by the file's extension.

@@ -10,6 +10,9 @@
 /// An sRGB colour.
 pub type Rgb = [u8; 3];
 
+/// Pixels without a value (background, unfitted, masked): mid-grey, no hue.
+pub const NO_DATA: Rgb = [96, 96, 96];
+
 /// A colour map over [0, 1].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColourMap {
@@ -74,10 +77,10 @@ pub fn aolp_dolp(aolp_rad: f64, dolp: f64, value: f64) -> Rgb {
 
 /// The one colouring of DoLP every picture and the view use: viridis over [0, 1]; `None` (a
 /// masked pixel: dark, saturated, …, whose DoLP is noise) is the pictures' no-data grey
-/// ([`crate::figure::NO_DATA`]).
+/// ([`NO_DATA`]).
 pub fn dolp_colour(dolp: Option<f64>) -> Rgb {
     dolp.filter(|d| d.is_finite())
-        .map_or(crate::figure::NO_DATA, |d| ColourMap::Viridis.at(d))
+        .map_or(NO_DATA, |d| ColourMap::Viridis.at(d))
 }
 
 /// The one AoLP colouring every picture and the view use: [`aolp_dolp`] with value 1 (hue =
@@ -86,7 +89,7 @@ pub fn dolp_colour(dolp: Option<f64>) -> Rgb {
 pub fn aolp_colour(aolp_rad: Option<f64>, dolp: Option<f64>) -> Rgb {
     match (aolp_rad, dolp) {
         (Some(a), Some(d)) if a.is_finite() && d.is_finite() => aolp_dolp(a, d, 1.0),
-        _ => crate::figure::NO_DATA,
+        _ => NO_DATA,
     }
 }
 

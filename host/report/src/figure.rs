@@ -16,6 +16,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 
 use super::ReportError;
+pub use super::colour::NO_DATA;
 use super::colour::{ColourMap, Rgb, aolp_dolp};
 use super::font::{FAMILY, ensure_registered};
 
@@ -23,8 +24,6 @@ use super::font::{FAMILY, ensure_registered};
 pub const PAPER: Rgb = [24, 24, 24];
 /// Text and axes on [`PAPER`].
 pub const INK: Rgb = [235, 235, 235];
-/// Pixels without a value (background, unfitted, masked): mid-grey, no hue.
-pub const NO_DATA: Rgb = [96, 96, 96];
 
 /// An RGB image, row-major, origin top-left.
 #[derive(Clone, Debug, PartialEq)]

@@ -29,7 +29,7 @@ pub fn write(path: &Path, width: u32, height: u32, pixels: &[u16]) -> Result<u64
     img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .map_err(|e| bad(e.to_string()))?;
     std::fs::write(path, &png).map_err(SessionError::io(path))?;
-    Ok(crate::provenance::crc64(&png))
+    Ok(crate::checksum::crc64(&png))
 }
 
 /// Reads a 16-bit grayscale PNG: `(width, height, pixels)`.
@@ -50,7 +50,7 @@ pub fn read_bytes(path: &Path) -> Result<Vec<u8>, SessionError> {
 /// a frame file it reads (`Session::check_frames`, `Session::load_frame`).
 pub fn read_hashed(path: &Path) -> Result<(Vec<u8>, u64), SessionError> {
     let bytes = read_bytes(path)?;
-    let crc64 = crate::provenance::crc64(&bytes);
+    let crc64 = crate::checksum::crc64(&bytes);
     Ok((bytes, crc64))
 }
 

@@ -20,6 +20,7 @@
 //!   `#[serde(default)]` and unknown event types are kept as [`events::SessionEvent::Unknown`].
 
 pub mod calibration_captures;
+mod checksum;
 pub mod events;
 pub mod frame_png;
 pub mod link_counters;

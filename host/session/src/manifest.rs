@@ -8,7 +8,7 @@
 use ellipso_model::mosaic::SensorLayout;
 use serde::{Deserialize, Serialize};
 
-use crate::rig::{RigRecord, TrackedBoard};
+use crate::rig::{FitInputs, RadiometryRecord, RigError, RigRecord, TrackedBoard};
 
 /// The sensor layout as a manifest spells it: `mono_polar` / `colour_polar` written; the
 /// simulator's older `monopolar` / `colourpolar` also read. An unknown name is refused with
@@ -168,6 +168,36 @@ impl Manifest {
             boards: Vec::new(),
             end: None,
         }
+    }
+}
+
+impl Manifest {
+    /// What the fit needs of this session's rig: the flash, the radiometry (relative for
+    /// hardware and replayed sessions whose record predates it), noise and extinction, each
+    /// value checked against its physical range ([`crate::rig_ranges`]).
+    /// `dir` is the session directory (named in [`RigError::NeedsUpgrade`]).
+    pub fn fit_inputs(&self, dir: &std::path::Path) -> Result<FitInputs, RigError> {
+        let rig = self.rig.as_ref().ok_or(RigError::Missing)?;
+        let flash = rig.flash.clone().ok_or(RigError::MissingFlash)?;
+        crate::rig_ranges::check(rig)?;
+        let radiometry = match (&rig.radiometry, &self.source) {
+            (Some(r), _) => r.clone(),
+            (None, SessionSource::Simulator { .. }) => {
+                return Err(RigError::NeedsUpgrade {
+                    dir: dir.display().to_string(),
+                });
+            }
+            // the old form of a hardware or replayed session is complete: relative radiometry
+            (None, SessionSource::Hardware { .. } | SessionSource::Replay { .. }) => {
+                RadiometryRecord::Relative
+            }
+        };
+        Ok(FitInputs {
+            flash,
+            radiometry,
+            noise: rig.noise.clone(),
+            analyser_extinction_ratio: rig.analyser_extinction_ratio,
+        })
     }
 }
 

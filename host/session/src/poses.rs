@@ -22,7 +22,6 @@ use std::collections::BTreeMap;
 use nalgebra::Isometry3;
 
 use crate::events::{SessionEvent, TrackedFrom, camera_from_world};
-use crate::reader::Session;
 
 /// One event's word on a frame's pose, as logged.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -222,13 +221,6 @@ impl SessionPoses {
             TrackedPose::Rejected(reason) => Some((id, reason.as_str())),
             TrackedPose::Posed(_) => None,
         })
-    }
-}
-
-impl Session {
-    /// The poses this session's log holds (module contract).
-    pub fn poses(&self) -> SessionPoses {
-        SessionPoses::from_events(&self.events)
     }
 }
 

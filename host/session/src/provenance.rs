@@ -21,22 +21,12 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use crc::{CRC_64_XZ, Crc, Table};
-
 use crate::SessionError;
+pub use crate::checksum::crc64;
 use crate::events::{SessionEvent, TrackedFrom};
 use crate::poses::SessionPoses;
 use crate::reader::Session;
 use crate::rig::TrackedBoard;
-
-/// Slice-by-16 tables (the same checksum as the byte-wise table, several times faster: every
-/// frame file of a session is hashed by every stage that reads it).
-const CRC64: Crc<u64, Table<16>> = Crc::<u64, Table<16>>::new(&CRC_64_XZ);
-
-/// CRC-64/XZ of `bytes`.
-pub fn crc64(bytes: &[u8]) -> u64 {
-    CRC64.checksum(bytes)
-}
 
 /// CRC-64/XZ of a frame file's bytes (a regular file of a frame's size at most), as
 /// [`crate::frame_png::read_hashed`] computes it for every frame read.

@@ -420,5 +420,12 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
     })
 }
 
+impl Session {
+    /// The poses this session's log holds (`crate::poses`' module contract).
+    pub fn poses(&self) -> crate::poses::SessionPoses {
+        crate::poses::SessionPoses::from_events(&self.events)
+    }
+}
+
 #[cfg(test)]
 mod tests;

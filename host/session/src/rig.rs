@@ -10,8 +10,8 @@
 //! - Completeness: a hardware or replayed session is complete with its camera and flash (its
 //!   radiometry is relative, its noise the fit's documented default). A simulator session also
 //!   needs its absolute radiometry and noise; sessions recorded before they were written lack
-//!   them, and [`Manifest::fit_inputs`] then refuses with [`RigError::NeedsUpgrade`], which names
-//!   `ellipso session upgrade`.
+//!   them, and [`Manifest::fit_inputs`](crate::manifest::Manifest::fit_inputs) then refuses with
+//!   [`RigError::NeedsUpgrade`], which names `ellipso session upgrade`.
 //! - The sensor layout is [`crate::manifest::SensorInfo::layout`], a typed
 //!   [`SensorLayout`](ellipso_model::mosaic::SensorLayout) written as `mono_polar` /
 //!   `colour_polar`; the simulator's older `monopolar` / `colourpolar` are still read.
@@ -19,8 +19,6 @@
 use ellipso_model::camera::CameraModel;
 use ellipso_model::radiometry::{CameraRadiometry, SensorNoiseSpec};
 use ellipso_model::rig::FlashSpec;
-
-use crate::manifest::{Manifest, SessionSource};
 
 /// Where a session's normaliser gets its absolute scale from.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -101,7 +99,8 @@ impl RigRecord {
     }
 }
 
-/// What the fit reads of a session's rig, complete (see [`Manifest::fit_inputs`]).
+/// What the fit reads of a session's rig, complete (see
+/// [`Manifest::fit_inputs`](crate::manifest::Manifest::fit_inputs)).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FitInputs {
     /// The flash.
@@ -142,37 +141,19 @@ pub enum RigError {
     },
     /// A value outside its physical range ([`crate::rig_ranges`]).
     #[error("{manifest}: {0}", manifest = crate::paths::MANIFEST)]
-    OutOfRange(#[from] crate::rig_ranges::RangeError),
+    OutOfRange(#[from] RangeError),
 }
 
-impl Manifest {
-    /// What the fit needs of this session's rig: the flash, the radiometry (relative for
-    /// hardware and replayed sessions whose record predates it), noise and extinction, each
-    /// value checked against its physical range ([`crate::rig_ranges`]).
-    /// `dir` is the session directory (named in [`RigError::NeedsUpgrade`]).
-    pub fn fit_inputs(&self, dir: &std::path::Path) -> Result<FitInputs, RigError> {
-        let rig = self.rig.as_ref().ok_or(RigError::Missing)?;
-        let flash = rig.flash.clone().ok_or(RigError::MissingFlash)?;
-        crate::rig_ranges::check(rig)?;
-        let radiometry = match (&rig.radiometry, &self.source) {
-            (Some(r), _) => r.clone(),
-            (None, SessionSource::Simulator { .. }) => {
-                return Err(RigError::NeedsUpgrade {
-                    dir: dir.display().to_string(),
-                });
-            }
-            // the old form of a hardware or replayed session is complete: relative radiometry
-            (None, SessionSource::Hardware { .. } | SessionSource::Replay { .. }) => {
-                RadiometryRecord::Relative
-            }
-        };
-        Ok(FitInputs {
-            flash,
-            radiometry,
-            noise: rig.noise.clone(),
-            analyser_extinction_ratio: rig.analyser_extinction_ratio,
-        })
-    }
+/// A rig value outside its physical range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("`{key}` = {value} is outside its physical range ({range})")]
+pub struct RangeError {
+    /// The manifest key, e.g. `rig.noise.read_noise_e`.
+    pub key: String,
+    /// The value as recorded.
+    pub value: String,
+    /// The range, in words with units.
+    pub range: &'static str,
 }
 
 /// What tracking needs of a board — its tag corners and its place in the world — in the form a
@@ -232,7 +213,7 @@ impl TrackedBoard {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::manifest::SensorInfo;
+    use crate::manifest::{Manifest, SensorInfo, SessionSource};
     use ellipso_model::camera::Intrinsics;
     use ellipso_model::mosaic::SensorLayout;
 

@@ -27,6 +27,7 @@
 use ellipso_model::radiometry::{CameraRadiometry, SensorNoiseSpec};
 use ellipso_model::rig::{FlashProfileKind, FlashSpec};
 
+pub use crate::rig::RangeError;
 use crate::rig::{RadiometryRecord, RigRecord};
 
 /// The farthest a flash may sit from the lens, m (module doc).
@@ -35,18 +36,6 @@ pub const MAX_FLASH_OFFSET_M: f64 = 1.0;
 /// The largest radiant intensity a flash may record, W/sr: a studio flash's peak electrical
 /// power is ≈10⁵ W, under 10⁴ W/sr of light; 10⁶ leaves a factor 100.
 pub const MAX_RADIANT_INTENSITY_W_PER_SR: f64 = 1e6;
-
-/// A rig value outside its physical range.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("`{key}` = {value} is outside its physical range ({range})")]
-pub struct RangeError {
-    /// The manifest key, e.g. `rig.noise.read_noise_e`.
-    pub key: String,
-    /// The value as recorded.
-    pub value: String,
-    /// The range, in words with units.
-    pub range: &'static str,
-}
 
 fn within(key: &str, v: f64, lo: f64, hi: f64, range: &'static str) -> Result<(), RangeError> {
     if v.is_finite() && (lo..=hi).contains(&v) {

@@ -22,3 +22,4 @@ pub mod process;
 pub mod replay;
 pub mod short_pulse_poses;
 pub mod track;
+mod tracked;

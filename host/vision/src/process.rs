@@ -12,31 +12,15 @@ use ellipso_model::camera::CameraModel;
 use ellipso_run_error::{RunError, Say};
 use rayon::prelude::*;
 
-use crate::track::{FramePose, TrackConfig, TrackRejection, TrackedBoard, Tracker};
+use crate::track::{TrackConfig, TrackRejection, TrackedBoard, Tracker};
 use ellipso_polar::frame::RawFrame;
-use ellipso_session::SessionError;
 use ellipso_session::events::{SessionEvent, TrackedFrom};
 use ellipso_session::reader::Session;
 use ellipso_session::time::HostTimeUs;
 use ellipso_session::writer::SessionAppender;
 
+pub use crate::tracked::{ProcessError, TrackedFrame};
 pub use ellipso_session::rig::RigRecord;
-
-/// Errors of the processing stages.
-#[derive(Debug, thiserror::Error)]
-pub enum ProcessError {
-    /// The session's manifest lacks what a stage needs.
-    #[error("{path}: {what}")]
-    Manifest {
-        /// The manifest.
-        path: String,
-        /// What is missing or wrong.
-        what: String,
-    },
-    /// Reading or appending to the session failed.
-    #[error(transparent)]
-    Session(#[from] SessionError),
-}
 
 fn manifest_error(session: &Session, what: String) -> ProcessError {
     let path = session
@@ -66,18 +50,6 @@ pub fn rig_of(session: &Session) -> Result<(CameraModel, Vec<TrackedBoard>), Pro
             manifest_error(session, "`rig` is not recorded: no camera model".into())
         })?;
     Ok((rig.camera, boards_of(session)?))
-}
-
-/// One frame's tracking result.
-#[derive(Debug, Clone)]
-pub struct TrackedFrame {
-    /// Frame id.
-    pub frame_id: u64,
-    /// Pose or rejection.
-    pub result: Result<FramePose, TrackRejection>,
-    /// What it was computed from: the checksum of the frame file's bytes read, and of the
-    /// boards (`ellipso_session::provenance`).
-    pub from: TrackedFrom,
 }
 
 /// Tracks every complete frame of `session`, in parallel, ordered by frame id.

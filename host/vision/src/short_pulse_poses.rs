@@ -31,7 +31,7 @@ use std::path::Path;
 
 use nalgebra::{Isometry3, Translation3};
 
-use crate::process::{ProcessError, TrackedFrame};
+use crate::tracked::{ProcessError, TrackedFrame};
 use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::Session;
 use ellipso_session::time::HostTimeUs;

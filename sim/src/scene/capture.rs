@@ -19,8 +19,9 @@
 //!   `position_m` + a rotation (`rotation_deg` / `quaternion_wxyz`, the `world_from_camera`
 //!   rotation).
 
+use super::error::positive;
 use super::error::{Located, SceneError};
-use super::spec::{PoseSpec, positive};
+use super::pose::PoseSpec;
 use nalgebra::{
     Isometry3, Matrix3, Point3, Rotation3, Translation3, Unit, UnitQuaternion, Vector3,
 };

@@ -341,6 +341,15 @@ fn walk_value(v: &DeValue<'_>, offset: usize, path: &mut String) -> bool {
     }
 }
 
+/// Checks a finite positive length.
+pub fn positive(loc: &Located<'_>, key: &str, v: f64) -> Result<(), SceneError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(loc.invalid(key, format!("must be a positive, finite number, got {v}")))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -4,8 +4,8 @@
 //!
 //! Contract: [`RigSpec::validate`] enforces ranges and names the key under `rig`.
 
+use super::error::positive;
 use super::error::{Located, SceneError};
-use super::spec::positive;
 pub use ellipso_model::rig::{
     CameraSpec, FlashProfileKind, FlashProfileSpec, FlashSpec, MAX_SIDE_PX, SensorKind,
 };

@@ -19,6 +19,22 @@ pub fn markdown(
 ) -> String {
     let rel = |p: &Path| p.strip_prefix(dir).unwrap_or(p).display().to_string();
     let mut s = String::new();
+    intro(&mut s, results, total_s, command);
+    s += &crate::report::end_to_end_section(end_to_end);
+    if let Some((eta_png, normal_png)) = plots {
+        let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
+        let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));
+    }
+    sweep_tables(&mut s, results);
+    bracket_section(&mut s, results);
+    pooled_eta(&mut s, results);
+    let _ = writeln!(s);
+    eta_per_material(&mut s, results);
+    s
+}
+
+/// The title, provenance, how every row was made and the targets.
+fn intro(s: &mut String, results: &[RunResult], total_s: f64, command: &str) {
     let threads = rayon::current_num_threads();
     let _ = writeln!(s, "# Accuracy vs time\n");
     let _ = writeln!(
@@ -57,11 +73,11 @@ pub fn markdown(
          estimate is worth) and per material (the error of the material's median η, averaged \
          over materials: the paper's measure, 1.49 % on real objects).\n"
     );
-    s += &crate::report::end_to_end_section(end_to_end);
-    if let Some((eta_png, normal_png)) = plots {
-        let _ = writeln!(s, "![η error vs fit time]({})\n", rel(eta_png));
-        let _ = writeln!(s, "![normal error vs fit time]({})\n", rel(normal_png));
-    }
+}
+
+/// One table per sweep (photos, solver, vertices, bracket, large), with the scale section
+/// after the large one.
+fn sweep_tables(s: &mut String, results: &[RunResult]) {
     for sweep in ["photos", "solver", "vertices", "bracket", "large"] {
         let rows: Vec<&RunResult> = results.iter().filter(|r| r.sweep == sweep).collect();
         if rows.is_empty() {
@@ -148,10 +164,13 @@ pub fn markdown(
         }
         let _ = writeln!(s);
         if sweep == "large" {
-            scale_section(&mut s, &rows);
+            scale_section(s, &rows);
         }
     }
-    bracket_section(&mut s, results);
+}
+
+/// The pooled η prior's effect on the per-vertex standard error.
+fn pooled_eta(s: &mut String, results: &[RunResult]) {
     let _ = writeln!(s, "## Pooled η: per-vertex uncertainty before and after\n");
     let _ = writeln!(
         s,
@@ -188,7 +207,10 @@ pub fn markdown(
             );
         }
     }
-    let _ = writeln!(s);
+}
+
+/// The η error of every material of every run.
+fn eta_per_material(s: &mut String, results: &[RunResult]) {
     let _ = writeln!(s, "## η error per material\n");
     let _ = writeln!(
         s,
@@ -231,7 +253,6 @@ pub fn markdown(
             );
         }
     }
-    s
 }
 
 /// The flash-energy bracket comparison (issue 18): cluster σs per glossy material and samples

@@ -84,7 +84,7 @@ pub fn fit_and_score(
     let config = ellipso_fit::session::with_session_sensor(session, &config);
 
     // Only now the truth.
-    let truth = crate::chain::truth_for_scoring(scene)?;
+    let truth = crate::truth::truth_for_scoring(scene)?;
     let at = crate::truth_map::truth_at(&truth, run.fit.mesh.positions());
     let fits = &run.fit.outcome.fits;
     let score = crate::score::score_fit(fits, &at, &truth.material_names, run.fit.set.colour);

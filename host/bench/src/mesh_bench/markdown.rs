@@ -22,6 +22,25 @@ pub fn markdown(
     total_s: f64,
 ) -> String {
     let mut s = String::new();
+    title_and_meshes(&mut s, results, args, total_s);
+    failures(&mut s, failed);
+    if results.iter().any(|r| r.fit.is_some()) {
+        after_the_fit(&mut s, results);
+    }
+    if !scale.is_empty() {
+        resolution(&mut s, scale);
+    }
+    stages(&mut s, results);
+    s
+}
+
+/// The title, how the scenes were captured and meshed, and the mesh accuracy table.
+fn title_and_meshes(
+    s: &mut String,
+    results: &[SceneResult],
+    args: &MeshBenchRequest,
+    total_s: f64,
+) {
     let _ = writeln!(s, "# Built-in mesh: accuracy and cost\n");
     let _ = writeln!(
         s,
@@ -78,166 +97,174 @@ pub fn markdown(
                 .map_or("—".into(), |b| format!("{:.0}", b as f64 / 1e6)),
         );
     }
-    failures(&mut s, failed);
-    if results.iter().any(|r| r.fit.is_some()) {
+}
+
+/// The fit's surface update: distances and normals before and after, per-material η on the
+/// carved mesh beside the true mesh, and the update step by step.
+fn after_the_fit(s: &mut String, results: &[SceneResult]) {
+    let _ = writeln!(
+        s,
+        "\n## After the fit's surface update\n\nThe fit (default settings, the carved hull as \
+         constraint) on the carved mesh; *observed* vertices are those a fitted frame \
+         samples, the others (the underside, the contact with the board) are scored apart. \
+         Distance: vertex to the closest point of the true surface, mean (p90), and the \
+         median signed distance (negative: inside the true surface — a bias the mean \
+         hides, and the one the glaze's η answers to, fit-shape.md). Normals: \
+         median angle to the true normal over observed vertices — the carved mesh's own \
+         before, the fit's normals after (each refined normal combined with the refined \
+         surface's by their precisions, fit-shape.md \"The reported normal\"), and beside \
+         them the normals of the same session fitted on the true mesh (what the data give \
+         without a shape error). Targets (issue 27): observed surface ≤ 0.3 mm mean on the demo and the \
+         sphere with 150 photos (≤ 0.5 mm with 60), normals ≤ 1° median.\n"
+    );
+    let _ = writeln!(
+        s,
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("observed / unobserved vertices", L),
+            ("observed: before → after (mm)", L),
+            ("p90 after (mm)", R),
+            ("signed median after (mm)", R),
+            ("unobserved: before → after (mm)", L),
+            ("normals: mesh before → fit after (°)", L),
+            ("normals on the true mesh (°)", R),
+            ("Chamfer before → after (mm)", L),
+            ("fit (s)", R)
+        ])
+    );
+    for r in results {
+        let Some(f) = &r.fit else { continue };
         let _ = writeln!(
             s,
-            "\n## After the fit's surface update\n\nThe fit (default settings, the carved hull as \
-             constraint) on the carved mesh; *observed* vertices are those a fitted frame \
-             samples, the others (the underside, the contact with the board) are scored apart. \
-             Distance: vertex to the closest point of the true surface, mean (p90), and the \
-             median signed distance (negative: inside the true surface — a bias the mean \
-             hides, and the one the glaze's η answers to, fit-shape.md). Normals: \
-             median angle to the true normal over observed vertices — the carved mesh's own \
-             before, the fit's normals after (each refined normal combined with the refined \
-             surface's by their precisions, fit-shape.md \"The reported normal\"), and beside \
-             them the normals of the same session fitted on the true mesh (what the data give \
-             without a shape error). Targets (issue 27): observed surface ≤ 0.3 mm mean on the demo and the \
-             sphere with 150 photos (≤ 0.5 mm with 60), normals ≤ 1° median.\n"
+            "| {} | {} / {} | {:.3} → {:.3} | {:.3} | {:+.3} | {:.3} → {:.3} | {:.2} → {:.2} | {:.2} | {:.3} → {:.3} | {:.0} |",
+            r.scene,
+            f.after.observed_vertices,
+            f.after.unobserved_vertices,
+            f.before.observed_mean_m * 1e3,
+            f.after.observed_mean_m * 1e3,
+            f.after.observed_p90_m * 1e3,
+            f.after.observed_signed_median_m * 1e3,
+            f.before.unobserved_mean_m * 1e3,
+            f.after.unobserved_mean_m * 1e3,
+            f.before.mesh_normal_median_deg,
+            f.after.fit_normal_median_deg.unwrap_or(f64::NAN),
+            f.true_mesh_normal_median_deg,
+            f.distance_before.chamfer_m * 1e3,
+            f.distance_after.chamfer_m * 1e3,
+            f.fit_s
         );
-        let _ = writeln!(
-            s,
-            "{}",
-            table::head(&[
-                ("scene", L),
-                ("observed / unobserved vertices", L),
-                ("observed: before → after (mm)", L),
-                ("p90 after (mm)", R),
-                ("signed median after (mm)", R),
-                ("unobserved: before → after (mm)", L),
-                ("normals: mesh before → fit after (°)", L),
-                ("normals on the true mesh (°)", R),
-                ("Chamfer before → after (mm)", L),
-                ("fit (s)", R)
-            ])
-        );
-        for r in results {
-            let Some(f) = &r.fit else { continue };
+    }
+    let _ = writeln!(
+        s,
+        "\nPer-material η error of the material's median η (%), on the carved-and-refined \
+         mesh beside a fit of the same session on the true mesh (target: within 0.2 \
+         points). *Noise* is the 1σ of the difference that the data alone give: each \
+         median's standard error from the spread of its vertices' own (unpooled) η, \
+         1.2533·1.4826·MAD/√n, combined as independent (the two fits read the same frames \
+         but at other points; where they share pixels this overstates it). A difference \
+         within 2σ of it cannot be told from a second capture of the same object.\n"
+    );
+    let _ = writeln!(
+        s,
+        "{}",
+        table::head(&[
+            ("scene", L),
+            ("material", L),
+            ("η true", R),
+            ("carved mesh (%)", R),
+            ("true mesh (%)", R),
+            ("difference (points)", R),
+            ("noise, 1σ (points)", R),
+            ("target", L),
+            ("vertices reporting η (carved / true)", L),
+            ("coverage of the visible surface (carved)", R)
+        ])
+    );
+    for r in results {
+        let Some(f) = &r.fit else { continue };
+        for m in &f.eta {
+            let difference = m.difference_points();
             let _ = writeln!(
                 s,
-                "| {} | {} / {} | {:.3} → {:.3} | {:.3} | {:+.3} | {:.3} → {:.3} | {:.2} → {:.2} | {:.2} | {:.3} → {:.3} | {:.0} |",
+                "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {:.2} | {} | {} / {} | {} |",
                 r.scene,
-                f.after.observed_vertices,
-                f.after.unobserved_vertices,
-                f.before.observed_mean_m * 1e3,
-                f.after.observed_mean_m * 1e3,
-                f.after.observed_p90_m * 1e3,
-                f.after.observed_signed_median_m * 1e3,
-                f.before.unobserved_mean_m * 1e3,
-                f.after.unobserved_mean_m * 1e3,
-                f.before.mesh_normal_median_deg,
-                f.after.fit_normal_median_deg.unwrap_or(f64::NAN),
-                f.true_mesh_normal_median_deg,
-                f.distance_before.chamfer_m * 1e3,
-                f.distance_after.chamfer_m * 1e3,
-                f.fit_s
-            );
-        }
-        let _ = writeln!(
-            s,
-            "\nPer-material η error of the material's median η (%), on the carved-and-refined \
-             mesh beside a fit of the same session on the true mesh (target: within 0.2 \
-             points). *Noise* is the 1σ of the difference that the data alone give: each \
-             median's standard error from the spread of its vertices' own (unpooled) η, \
-             1.2533·1.4826·MAD/√n, combined as independent (the two fits read the same frames \
-             but at other points; where they share pixels this overstates it). A difference \
-             within 2σ of it cannot be told from a second capture of the same object.\n"
-        );
-        let _ = writeln!(
-            s,
-            "{}",
-            table::head(&[
-                ("scene", L),
-                ("material", L),
-                ("η true", R),
-                ("carved mesh (%)", R),
-                ("true mesh (%)", R),
-                ("difference (points)", R),
-                ("noise, 1σ (points)", R),
-                ("target", L),
-                ("vertices reporting η (carved / true)", L),
-                ("coverage of the visible surface (carved)", R)
-            ])
-        );
-        for r in results {
-            let Some(f) = &r.fit else { continue };
-            for m in &f.eta {
-                let difference = m.difference_points();
-                let _ = writeln!(
-                    s,
-                    "| {} | {} | {:.3} | {:+.2} | {:+.2} | {:.2} | {:.2} | {} | {} / {} | {} |",
-                    r.scene,
-                    m.name,
-                    m.eta_true,
-                    m.carved_pct,
-                    m.true_mesh_pct,
-                    difference,
-                    m.noise_points,
-                    eta_verdict(difference, m.noise_points),
-                    m.vertices[0],
-                    m.vertices[1],
-                    f.coverage
-                        .materials
-                        .iter()
-                        .find(|c| c.name == m.name)
-                        .map_or("—".to_string(), |c| format!(
-                            "{:.3} ({} of {})",
-                            c.coverage, c.full_set, c.visible
-                        ))
-                );
-            }
-        }
-        across_captures(&mut s, results);
-        let _ = writeln!(s, "\nThe surface update, step by step:\n");
-        for r in results {
-            let Some(f) = &r.fit else { continue };
-            for step in &f.surface_update {
-                let _ = writeln!(s, "- {}: {}", r.scene, step.describe());
-            }
-        }
-    }
-    if !scale.is_empty() {
-        let _ = writeln!(
-            s,
-            "\n## Resolution: `ellipso fit --vertices N` on the demo session\n\nThe whole \
-             `ellipso fit` (carving, outer loop with the surface update, final steps, held-out \
-             score, pictures) as its own process; peak memory is its VmHWM.\n"
-        );
-        let _ = writeln!(
-            s,
-            "{}",
-            table::head(&[
-                ("target", R),
-                ("vertices", R),
-                ("wall (s)", R),
-                ("observe (s)", R),
-                ("joint solve (s)", R),
-                ("surface (s)", R),
-                ("peak memory (MB)", R),
-                ("observed surface (mm)", R)
-            ])
-        );
-        for r in scale {
-            let t = |k: &str| {
-                r.times_s[k]
-                    .as_f64()
-                    .map_or("—".into(), |v| format!("{v:.1}"))
-            };
-            let _ = writeln!(
-                s,
-                "| {} | {} | {:.0} | {} | {} | {} | {} | {:.3} |",
-                r.target_vertices,
-                r.vertices,
-                r.wall_s,
-                t("observe_s"),
-                t("joint_s"),
-                t("shape_s"),
-                r.peak_rss_bytes
-                    .map_or("—".into(), |b| format!("{:.0}", b as f64 / 1e6)),
-                r.observed_mean_m * 1e3
+                m.name,
+                m.eta_true,
+                m.carved_pct,
+                m.true_mesh_pct,
+                difference,
+                m.noise_points,
+                eta_verdict(difference, m.noise_points),
+                m.vertices[0],
+                m.vertices[1],
+                f.coverage
+                    .materials
+                    .iter()
+                    .find(|c| c.name == m.name)
+                    .map_or("—".to_string(), |c| format!(
+                        "{:.3} ({} of {})",
+                        c.coverage, c.full_set, c.visible
+                    ))
             );
         }
     }
+    across_captures(s, results);
+    let _ = writeln!(s, "\nThe surface update, step by step:\n");
+    for r in results {
+        let Some(f) = &r.fit else { continue };
+        for step in &f.surface_update {
+            let _ = writeln!(s, "- {}: {}", r.scene, step.describe());
+        }
+    }
+}
+
+/// `ellipso fit --vertices N` on the demo session: wall time, stage times and memory per N.
+fn resolution(s: &mut String, scale: &[ScaleResult]) {
+    let _ = writeln!(
+        s,
+        "\n## Resolution: `ellipso fit --vertices N` on the demo session\n\nThe whole \
+         `ellipso fit` (carving, outer loop with the surface update, final steps, held-out \
+         score, pictures) as its own process; peak memory is its VmHWM.\n"
+    );
+    let _ = writeln!(
+        s,
+        "{}",
+        table::head(&[
+            ("target", R),
+            ("vertices", R),
+            ("wall (s)", R),
+            ("observe (s)", R),
+            ("joint solve (s)", R),
+            ("surface (s)", R),
+            ("peak memory (MB)", R),
+            ("observed surface (mm)", R)
+        ])
+    );
+    for r in scale {
+        let t = |k: &str| {
+            r.times_s[k]
+                .as_f64()
+                .map_or("—".into(), |v| format!("{v:.1}"))
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.0} | {} | {} | {} | {} | {:.3} |",
+            r.target_vertices,
+            r.vertices,
+            r.wall_s,
+            t("observe_s"),
+            t("joint_s"),
+            t("shape_s"),
+            r.peak_rss_bytes
+                .map_or("—".into(), |b| format!("{:.0}", b as f64 / 1e6)),
+            r.observed_mean_m * 1e3
+        );
+    }
+}
+
+/// Each mesh report's stage times and counts.
+fn stages(s: &mut String, results: &[SceneResult]) {
     let _ = writeln!(s, "\n## Stages (seconds, from each mesh report)\n");
     for r in results {
         let stages: Vec<String> = r
@@ -258,7 +285,6 @@ pub fn markdown(
             r.report.parts_dropped
         );
     }
-    s
 }
 
 /// The η row's verdict against issue 27's 0.2 points, with where the difference stands against

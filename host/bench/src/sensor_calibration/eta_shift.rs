@@ -70,8 +70,8 @@ pub fn run(
         photos,
     );
     let scene_path = ellipso_sim::scene::shipped_scene("demo.toml");
-    let truth = crate::chain::truth_for_scoring(&ideal)?;
-    let mesh = crate::chain::true_mesh(&ideal)?;
+    let truth = crate::truth::truth_for_scoring(&ideal)?;
+    let mesh = crate::truth::true_mesh(&ideal)?;
     let base = SessionFitConfig {
         outer_iterations: 1,
         holdout_fraction: 0.0,

@@ -200,7 +200,7 @@ pub fn schema() -> Vec<Property> {
         s.push(property(name, Uchar, move |r| {
             if r.identifiable.vertex {
                 let albedo = std::f64::consts::PI * r.fit.params.rho_d[k];
-                f64::from(super::colour::srgb(albedo))
+                f64::from(ellipso_model::colour::srgb_u8(albedo))
             } else {
                 f64::from(WITHHELD_GREY)
             }

@@ -21,7 +21,7 @@ use ellipso_model::optics::Dual;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use super::albedos::{AlbedoSystem, Albedos};
-use super::lm::{Mat, N_RAW, RawDual, Vector};
+use super::box_coords::{Mat, N_RAW, RawDual, Vector};
 use super::problem::{Chart, Nonlinear, Problem, Scratch};
 
 /// Physical unknowns with a dual slot each: η, σ_s, σ_ss, p, q.

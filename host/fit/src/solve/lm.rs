@@ -20,16 +20,11 @@
 //!   less than that, or on the classic relative-decrease and step tolerances.
 
 use ellipso_model::optics::{Dual, Real};
-use nalgebra::{SMatrix, SVector};
 
 use super::problem::{Albedos, Bounds, Chart, Nonlinear, Problem, Scratch};
 use super::{LossMode, SolverConfig};
 
-/// Box coordinates: η, ln σ_s, v (σ_ss fraction), tangent p, q.
-pub(super) const N_RAW: usize = 5;
-pub(super) type RawDual = Dual<N_RAW>;
-pub(super) type Mat = SMatrix<f64, N_RAW, N_RAW>;
-pub(super) type Vector = SVector<f64, N_RAW>;
+pub(super) use super::box_coords::{Mat, N_RAW, RawDual, Vector};
 
 /// The box of the coordinates: lower and upper bound per coordinate (±∞ for p, q).
 fn box_of(bounds: &Bounds) -> ([f64; N_RAW], [f64; N_RAW]) {

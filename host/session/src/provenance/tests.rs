@@ -2,6 +2,8 @@
 
 use std::fs;
 
+use crc::{CRC_64_XZ, Crc};
+
 use super::*;
 use crate::paths;
 use crate::test_fixture::{manifest, pixels};
