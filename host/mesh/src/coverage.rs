@@ -62,10 +62,16 @@ impl Coverage {
             .is_some_and(|e| e > STEEP_ELEVATION_DEG)
     }
 
+    /// Views all around the point (no gap over half a turn), but all steep: the steepness,
+    /// not a missing side, is what the capture lacks.
+    fn steep_all_around(&self) -> bool {
+        self.steep_only() && self.largest_gap_deg <= 180.0
+    }
+
     /// What the capture lacks, as advice: views from lower down when every view is steep (and
     /// they surround the point), else views from its other side.
     pub fn advice(&self) -> &'static str {
-        if self.steep_only() && self.largest_gap_deg <= 180.0 {
+        if self.steep_all_around() {
             "the space above and beside it was only ever seen from above, so it could not be \
              carved. Take photos from lower down as well (20–45° above the board) and mesh again"
         } else {
@@ -79,9 +85,7 @@ impl Coverage {
     /// 217°, leaving 288° with no view"`.
     pub fn describe(&self, votes: usize) -> String {
         match (self.from_to_deg, self.lowest_elevation_deg) {
-            (Some(_), Some(e))
-                if self.views >= votes && self.largest_gap_deg <= 180.0 && self.steep_only() =>
-            {
+            (Some(_), Some(e)) if self.views >= votes && self.steep_all_around() => {
                 format!(
                     "the {} frames that see it all look from above (the lowest {e:.0}° above the \
                      board: views all steeper than {STEEP_ELEVATION_DEG:.0}° let the hull rise \

@@ -101,8 +101,7 @@ pub struct Board {
     pub tags: Vec<BoardTag>,
     /// Board frame from sheet frame.
     pub board_from_sheet: Isometry3<f64>,
-    cells: HashMap<u32, TagCells>,
-    /// The cells of `tags[k]` at index `k` (a copy of `cells[&id]`: no hash lookup per board hit).
+    /// The printed cells of `tags[k]` at index `k` (by index: no lookup per board hit).
     cells_by_tag: Vec<TagCells>,
     /// [`Board::front_normal_board`], computed once from `board_from_sheet` (which nothing
     /// changes after [`Board::from_spec`]).
@@ -325,7 +324,7 @@ impl Board {
             Point3::new(hs, -hs, 0.0),
             Point3::new(-hs, -hs, 0.0),
         ];
-        let mut cells = HashMap::new();
+        let mut cells_by_tag = Vec::new();
         let tags: Vec<BoardTag> = placed
             .into_iter()
             .map(|(key, id, c, rot)| {
@@ -334,11 +333,11 @@ impl Board {
                     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rot),
                 );
                 let board_from_tag = board_from_sheet * sheet_from_tag;
-                cells.entry(id).or_insert_with(|| {
+                cells_by_tag.push(
                     table
                         .cells(id)
-                        .unwrap_or_else(|| unreachable!("id {id} checked above"))
-                });
+                        .unwrap_or_else(|| unreachable!("id {id} checked above")),
+                );
                 BoardTag {
                     id,
                     board_from_tag,
@@ -350,7 +349,6 @@ impl Board {
                 }
             })
             .collect();
-        let cells_by_tag = tags.iter().map(|t| cells[&t.id].clone()).collect();
         let front_normal_board =
             Unit::new_normalize(board_from_sheet.transform_vector(&-Vector3::z()));
         let mut board = Self {
@@ -362,7 +360,6 @@ impl Board {
             black_albedo: spec.black_albedo as f32,
             tags,
             board_from_sheet,
-            cells,
             cells_by_tag,
             front_normal_board,
             buckets: Vec::new(),
@@ -420,7 +417,8 @@ impl Board {
 
     /// The printed cells of tag `id` (its code, black border and white outer ring).
     pub fn tag_cells(&self, id: u32) -> Option<&TagCells> {
-        self.cells.get(&id)
+        let k = self.tags.iter().position(|t| t.id == id)?;
+        Some(&self.cells_by_tag[k])
     }
 
     /// Corners of tag `id` in board frame, AprilTag detection order (see the module doc).

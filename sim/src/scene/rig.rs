@@ -11,6 +11,10 @@ pub use ellipso_model::rig::{
 };
 use serde::{Deserialize, Serialize};
 
+/// The analogue gain a simulated camera has, dB: the IMX250's 0–48 dB (scene files and the
+/// stand-in camera of `rig check --fire` both hold a gain to it).
+pub const GAIN_RANGE_DB: std::ops::RangeInclusive<f64> = 0.0..=48.0;
+
 /// Camera and flash.
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
@@ -70,7 +74,7 @@ impl RigSpec {
         if c.exposure_us > 10_000_000.0 {
             return Err(loc.invalid(k("exposure_us"), "longer than 10 s"));
         }
-        if !(c.gain_db.is_finite() && (0.0..=48.0).contains(&c.gain_db)) {
+        if !(c.gain_db.is_finite() && GAIN_RANGE_DB.contains(&c.gain_db)) {
             return Err(loc.invalid(k("gain_db"), format!("{} dB outside 0..=48", c.gain_db)));
         }
         positive(loc, &k("full_well_e"), c.full_well_e)?;

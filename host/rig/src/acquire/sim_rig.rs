@@ -245,7 +245,7 @@ pub fn stand_in_camera(
 ) -> Result<Box<dyn crate::camera::Camera>, RunError> {
     let mut scene = Scene::load(&cam.scene)?;
     // the simulated camera's gain range is a scene file's (the IMX250's 0–48 dB)
-    if !(cam.gain_db.is_finite() && (0.0..=48.0).contains(&cam.gain_db)) {
+    if !(cam.gain_db.is_finite() && ellipso_sim::scene::rig::GAIN_RANGE_DB.contains(&cam.gain_db)) {
         return Err(RunError::msg(format!(
             "sensor.gain_db = {} dB: the simulated camera amplifies 0 to 48 dB (the IMX250's \
              range)",
