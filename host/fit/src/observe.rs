@@ -40,6 +40,7 @@
 //!   frames in flight + a frame cache + per-frame results + mesh rings).
 
 mod extract;
+pub mod footprint;
 pub mod frames;
 pub mod image;
 pub mod radiometry;

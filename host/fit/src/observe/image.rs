@@ -26,6 +26,7 @@ use ellipso_polar::demosaic::{AnalyserImage, Levels};
 use ellipso_polar::frame::RawFrame;
 
 use super::SamplePoint;
+use super::footprint::{Footprint, Octagon};
 
 /// A rectangle of raw pixel positions, `min` to `max` inclusive (`x` right, `y` down).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -256,39 +257,43 @@ impl DnImage {
         (values, peaks)
     }
 
-    /// The raw pixels the value at `pixel` draws on through taps of weight at least
-    /// `min_weight` along each axis (every band and analyser; a tap covers its band's blocks,
-    /// each ±½ px): the sample's real footprint, which the kernel's phase at that pixel
-    /// decides — one tile where a lattice sample sits on the point, four for a Catmull–Rom
-    /// value halfway between samples.
-    pub fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
-        let mut min = [f64::INFINITY; 2];
-        let mut max = [f64::NEG_INFINITY; 2];
+    /// The raw pixels the value at `pixel` draws on through taps whose weight |w_x·w_y| is at
+    /// least `min_weight` (every band and analyser; a tap covers its band's blocks, each ±½ px),
+    /// as the probe points of their bounding octagon ([`Footprint`]): the sample's real
+    /// footprint, which the kernel's phase at that pixel decides — one tile where a lattice
+    /// sample sits on the point, a cross of four tiles' reach for a Catmull–Rom value halfway
+    /// between samples.
+    pub fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
+        let mut octagon = Octagon::default();
         for band in self.bands.iter().take(3) {
+            let half = band.spread_px.map(|s| s + 0.5);
             for offset in &band.offset_px {
-                for axis in 0..2 {
-                    let s = (pixel[axis] - offset[axis]) / self.tile_px;
-                    for (i, w) in self.kernel.taps(s, self.frame_size[axis]) {
-                        if w.abs() < min_weight || w == 0.0 {
+                let lattice = |axis: usize| (pixel[axis] - offset[axis]) / self.tile_px;
+                let taps_x = self.kernel.taps(lattice(0), self.frame_size[0]);
+                let taps_y = self.kernel.taps(lattice(1), self.frame_size[1]);
+                for &(iy, wy) in &taps_y {
+                    for &(ix, wx) in &taps_x {
+                        let w = wx * wy;
+                        if w == 0.0 || w.abs() < min_weight {
                             continue;
                         }
-                        let centre = i as f64 * self.tile_px + offset[axis];
-                        let half = band.spread_px[axis] + 0.5;
-                        min[axis] = min[axis].min(centre - half);
-                        max[axis] = max[axis].max(centre + half);
+                        let cx = ix as f64 * self.tile_px + offset[0];
+                        let cy = iy as f64 * self.tile_px + offset[1];
+                        octagon
+                            .add_block([cx - half[0], cx + half[0]], [cy - half[1], cy + half[1]]);
                     }
                 }
             }
         }
-        if min.iter().chain(&max).any(|v| !v.is_finite()) {
+        if octagon.is_empty() {
             // No tap (cannot happen: the weights sum to 1): the kernel's whole reach.
             let r = self.footprint_radius_px;
-            return PixelRect {
+            return Footprint::of_rect(&PixelRect {
                 min: pixel.map(|v| v - r),
                 max: pixel.map(|v| v + r),
-            };
+            });
         }
-        PixelRect { min, max }
+        octagon.footprint()
     }
 
     /// The superpixel range `[lo, hi)` per axis whose planes hold every tap of a sample inside
@@ -428,14 +433,15 @@ pub trait AnalyserPixels: Sync {
     /// (its footprint), px; 0 for a point sample.
     fn footprint_radius_px(&self) -> f64;
     /// The raw pixels the value at `pixel` draws on through taps weighing at least
-    /// `min_weight` (per axis); by default the square of [`Self::footprint_radius_px`].
-    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+    /// `min_weight`, as probe points ([`Footprint`]); by default the square of
+    /// [`Self::footprint_radius_px`].
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         let _ = min_weight;
         let r = self.footprint_radius_px();
-        PixelRect {
+        Footprint::of_rect(&PixelRect {
             min: pixel.map(|v| v - r),
             max: pixel.map(|v| v + r),
-        }
+        })
     }
 }
 
@@ -453,7 +459,7 @@ impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
         (**self).footprint_radius_px()
     }
 
-    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         (**self).footprint(pixel, min_weight)
     }
 }
@@ -471,7 +477,7 @@ impl AnalyserPixels for DnImage {
         self.footprint_radius_px
     }
 
-    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> PixelRect {
+    fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         DnImage::footprint(self, pixel, min_weight)
     }
 }
@@ -562,6 +568,32 @@ mod tests {
             max: [4.0, 4.0],
         });
         assert!(same(inner.sample([3.0, 3.0]), whole.sample([3.0, 3.0])));
+    }
+
+    #[test]
+    fn a_cubic_footprint_is_a_cross_and_a_lattice_point_reads_one_tile() {
+        let min_weight = 0.014;
+        let cubic = image(SampleKernel::CatmullRom);
+        // Between lattice samples: the corner taps (≤ 0.4 %) do not count, so the square's
+        // corners are cut and the farthest probe is nearer than the square's corner.
+        let p = [41.3, 29.7];
+        let f = cubic.footprint(p, min_weight);
+        let rect = f.rect().unwrap();
+        let corner = (rect.max[0] - rect.min[0]).hypot(rect.max[1] - rect.min[1]) / 2.0;
+        assert!(f.points().len() == 8, "{:?}", f.points());
+        assert!(
+            f.reach_px(p) < 0.95 * corner,
+            "{} vs {corner}",
+            f.reach_px(p)
+        );
+        // Every tap's block lies within the kernel's whole reach.
+        let r = cubic.footprint_radius_px;
+        for q in f.points() {
+            assert!((q[0] - p[0]).abs() <= r + 1e-9 && (q[1] - p[1]).abs() <= r + 1e-9);
+        }
+        // A bilinear value reaches less far than the cubic one.
+        let linear = image(SampleKernel::Bilinear);
+        assert!(linear.footprint(p, min_weight).reach_px(p) < f.reach_px(p));
     }
 
     #[test]

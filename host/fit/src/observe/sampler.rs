@@ -19,7 +19,8 @@ use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::{Intersect, Ray, TriangleMesh};
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::image::{AnalyserPixels, PixelRect};
+use super::footprint::Footprint;
+use super::image::AnalyserPixels;
 use super::radiometry::{PointNormaliser, SessionRadiometry};
 use crate::data::{OBSERVATION_CHANNELS, Sample, ViewGeometry};
 use crate::gate::{GateConfig, SampleGate};
@@ -219,10 +220,11 @@ impl<'a> FrameSampler<'a> {
     }
 
     /// Whether the sample's footprint — the raw pixels its value draws on at this pixel
-    /// ([`AnalyserPixels::footprint`], taps of weight ≥ [`SessionContext::min_tap_weight`]) —
-    /// lies on the vertex's visible surface and material: the rays through the rectangle's four
-    /// corners and four edge midpoints each meet the mesh within the distance a footprint of
-    /// that size can cover on the vertex's tangent plane (the farthest corner's image distance
+    /// ([`AnalyserPixels::footprint`], taps of weight |w_x·w_y| ≥
+    /// [`SessionContext::min_tap_weight`]) — lies on the vertex's visible surface and material:
+    /// the rays through its probe points (the corners of the taps' bounding octagon,
+    /// [`Footprint`]) each meet the mesh within the distance a footprint of that size can
+    /// cover on the vertex's tangent plane (the farthest probe's image distance
     /// at depth `depth_m`, stretched by 1/cos of the view angle, capped at 85°, plus the
     /// unstretched distance again as room for curvature), at a point of the vertex's own
     /// material. A ray that misses the mesh has left the object past a silhouette (or onto the
@@ -236,20 +238,11 @@ impl<'a> FrameSampler<'a> {
         v: usize,
         position: &Point3<f64>,
         pixel: [f64; 2],
-        rect: &PixelRect,
+        footprint: &Footprint,
         depth_m: f64,
         cos_view: f64,
     ) -> bool {
-        let corners = [
-            [rect.min[0], rect.min[1]],
-            [rect.max[0], rect.min[1]],
-            [rect.min[0], rect.max[1]],
-            [rect.max[0], rect.max[1]],
-        ];
-        let far_px = corners
-            .iter()
-            .map(|c| (c[0] - pixel[0]).hypot(c[1] - pixel[1]))
-            .fold(0.0, f64::max);
+        let far_px = footprint.reach_px(pixel);
         if far_px <= 0.0 {
             return true;
         }
@@ -257,20 +250,9 @@ impl<'a> FrameSampler<'a> {
         // On the tangent plane an image distance stretches by at most 1/cos θ.
         let reach_m = far_px * px_m * (1.0 + 1.0 / cos_view.max(COS_85_DEG));
         let origin = Point3::from(self.view.camera_position_world);
-        let mid = |a: f64, b: f64| 0.5 * (a + b);
         // Corners first: they reach farthest, so a mixed footprint fails in fewer rays (every
         // ray must pass, so the order does not change the verdict).
-        let points = [
-            corners[0],
-            corners[1],
-            corners[2],
-            corners[3],
-            [mid(rect.min[0], rect.max[0]), rect.min[1]],
-            [rect.min[0], mid(rect.min[1], rect.max[1])],
-            [rect.max[0], mid(rect.min[1], rect.max[1])],
-            [mid(rect.min[0], rect.max[0]), rect.max[1]],
-        ];
-        for p in points {
+        for &p in footprint.points() {
             let Ok(dir) = self.session.camera.unproject_to_ray(p) else {
                 return false;
             };
@@ -327,8 +309,8 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        let rect = self.image.footprint(pixel, self.session.min_tap_weight);
-        if !self.footprint_on_surface(v, &position, pixel, &rect, p_cam.z, cos_view) {
+        let footprint = self.image.footprint(pixel, self.session.min_tap_weight);
+        if !self.footprint_on_surface(v, &position, pixel, &footprint, p_cam.z, cos_view) {
             return Outcome::Mixed;
         }
 
