@@ -20,7 +20,9 @@
 //!   cluster. Deterministic for any thread count (assignment is per point, sums are serial).
 //! - [`select`]: with `k = Some(k)` that k; with `None` the k ∈ 2..=max_k with the highest mean
 //!   silhouette (Rousseeuw 1987) on a seeded subsample of ≤ [`SILHOUETTE_SUBSAMPLE`] vertices,
-//!   among partitions whose clusters all have ≥ [`effective_min_cluster_vertices`] members;
+//!   among partitions whose clusters all have ≥ [`effective_min_cluster_vertices`] members (a
+//!   partition with smaller clusters competes with those dropped and their members
+//!   re-assigned, `without_small_clusters`);
 //!   ties within [`SILHOUETTE_TIE`] go to the larger k (splitting one material costs less than
 //!   merging two: a merged cluster's lobe model is wrong for both). If no k ≥ 2 qualifies or
 //!   the best silhouette is below `min_silhouette` (0.5: "reasonable structure", Kaufman &
@@ -473,6 +475,39 @@ pub fn join_unseparated(points: &[Feature], mut partition: Partition) -> Partiti
     }
 }
 
+/// `p` with its clusters smaller than `min_size` dropped: their centres removed and Lloyd's
+/// iterations run again from the others, so their members join the nearest remaining cluster.
+/// `None` when fewer than two clusters remain, or when one of those ends below `min_size`.
+///
+/// Why: k-means gives a few outlying features (a vertex at a silhouette, a blend across a
+/// border) a centre of their own once they lie farther out than the materials lie apart — a
+/// cluster under the minimum size that, left as it is, disqualifies the whole partition, and
+/// with it the split of the materials the other centres found: with such outliers no k
+/// qualified and the materials were joined into one (test
+/// `a_few_outlying_features_do_not_veto_the_split_of_two_materials`; on the development
+/// scenes, partitions of k = 4–8 carried clusters of 1–2 such vertices). Trimming the outlying
+/// centre is the trimmed k-means idea (Cuesta-Albertos, Gordaliza & Matrán 1997, Ann. Statist.
+/// 25, 553), with the size rule as the trimming level.
+fn without_small_clusters(
+    points: &[Feature],
+    p: &Partition,
+    min_size: usize,
+    max_iterations: usize,
+) -> Option<Partition> {
+    let kept: Vec<Feature> = p
+        .centroids
+        .iter()
+        .zip(&p.sizes)
+        .filter(|(_, s)| **s >= min_size)
+        .map(|(c, _)| *c)
+        .collect();
+    if kept.len() < 2 {
+        return None;
+    }
+    let q = lloyd(points, kept, max_iterations);
+    (q.centroids.len() >= 2 && q.sizes.iter().all(|&s| s >= min_size)).then_some(q)
+}
+
 /// Clusters `points` as the config says (module doc).
 pub fn select(points: &[Feature], config: &ClusterConfig) -> Selection {
     let n = points.len();
@@ -510,14 +545,19 @@ pub fn select(points: &[Feature], config: &ClusterConfig) -> Selection {
     let mut candidates: Vec<(f64, Partition)> = Vec::new();
     let k_max = config.max_k.min(n / min_size.max(1));
     for k in 2..=k_max {
-        let p = run(k);
+        let mut p = run(k);
         if p.centroids.len() < k {
             // Fewer distinct feature values than k: larger k cannot do better.
             break;
         }
         if p.sizes.iter().any(|&s| s < min_size) {
-            tried.push((k, None));
-            continue;
+            match without_small_clusters(points, &p, min_size, config.max_iterations) {
+                Some(q) => p = q,
+                None => {
+                    tried.push((k, None));
+                    continue;
+                }
+            }
         }
         let s = score(&p).unwrap_or(0.0);
         tried.push((k, Some(s)));

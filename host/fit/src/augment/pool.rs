@@ -312,17 +312,32 @@ pub struct EtaShrink {
 
 impl EtaShrink {
     /// The statistics of the members' `(η, standard error)`.
+    ///
+    /// τ is the DerSimonian–Laird estimate over every usable member, *untrimmed*: the spread
+    /// between materials is what it must hold. [`random_effects`]' trimming round (right for one
+    /// material's pool) drops a minority material as outliers — a same-colour material on 16 %
+    /// of the members was trimmed away, τ came out 0, and every member's feature η collapsed
+    /// onto the median, so no partition could separate the two (dev scene 14).
     pub fn from_members(members: &[(f64, f64)]) -> Self {
-        let pooled = random_effects(members);
+        let usable: Vec<(f64, f64)> = members
+            .iter()
+            .copied()
+            .filter(|(eta, s)| eta.is_finite() && s.is_finite() && *s > 0.0)
+            .collect();
         let mut etas: Vec<f64> = members
             .iter()
             .map(|m| m.0)
             .filter(|v| v.is_finite())
             .collect();
         etas.sort_by(f64::total_cmp);
+        let tau = if usable.len() >= MIN_VERTICES {
+            dersimonian_laird(&usable).2
+        } else {
+            0.0
+        };
         Self {
             median_eta: etas.get(etas.len() / 2).copied().unwrap_or(1.5),
-            tau: if pooled.usable { pooled.tau } else { 0.0 },
+            tau: if tau.is_finite() { tau } else { 0.0 },
         }
     }
 
@@ -416,6 +431,12 @@ mod tests {
         assert!((s.apply(2.5, 1.0) - s.median_eta).abs() < 0.05);
         assert_eq!(s.apply(2.5, f64::INFINITY), s.median_eta);
         assert_eq!(s.apply(f64::NAN, 0.01), s.median_eta);
+        // A minority material of the same colour (15 %): its spread is not trimmed away.
+        let mut minority = draw(255, 1.59, 0.0, &[0.01], 11);
+        minority.extend(draw(45, 1.85, 0.0, &[0.01], 12));
+        let m = EtaShrink::from_members(&minority);
+        assert!(m.tau > 0.05, "{m:?}");
+        assert!((m.apply(1.85, 0.01) - 1.85).abs() < 0.01, "{m:?}");
         // One material with noisy η: (almost) no spread, so η's noise is shrunk by > 10×.
         let one = EtaShrink::from_members(&draw(300, 1.5, 0.0, &[0.1], 10));
         assert!(one.tau < 0.04, "{one:?}");

@@ -270,3 +270,33 @@ fn a_flat_spread_cut_in_two_is_one_material_at_every_size() {
     let p = kmeans(&pts, 2, 4, 100, 7);
     assert_eq!(separated_groups(&pts, &p), vec![0, 1]);
 }
+
+#[test]
+fn a_few_outlying_features_do_not_veto_the_split_of_two_materials() {
+    // Two materials (one colour, η 1.59 and 1.85; the feature holds 2η) of 300 and 60
+    // vertices, and 5 vertices far off in colour (a blend at a silhouette): every k-means
+    // partition gives those a centre of their own, under the minimum size, so no k qualified
+    // and the two materials were joined. Dropping that centre keeps the materials' split.
+    let (mut pts, mut truth) = blobs(&[[2.0, 0.87, 0.12, 3.18]], 300, 0.01, 21);
+    let (minority, _) = blobs(&[[2.0, 0.87, 0.12, 3.70]], 60, 0.01, 22);
+    pts.extend(&minority);
+    truth.extend(std::iter::repeat_n(1, minority.len()));
+    let (outliers, _) = blobs(&[[5.0, 3.0, 2.0, 3.2]], 5, 0.01, 23);
+    pts.extend(&outliers);
+    truth.extend(std::iter::repeat_n(0, outliers.len()));
+    let config = ClusterConfig::default();
+    let min_size = effective_min_cluster_vertices(config.min_cluster_vertices, pts.len());
+    assert!(outliers.len() < min_size && minority.len() >= min_size);
+    let s = select(&pts, &config);
+    assert_eq!(s.partition.centroids.len(), 2, "tried {:?}", s.tried);
+    assert!(s.partition.sizes.iter().all(|&n| n >= min_size));
+    // The minority material is a cluster of its own.
+    let minority_label = s.partition.labels[300];
+    let members = s
+        .partition
+        .labels
+        .iter()
+        .filter(|&&l| l == minority_label)
+        .count();
+    assert_eq!(members, 60, "{:?}", s.partition.sizes);
+}
