@@ -52,8 +52,9 @@ impl Completion {
             self.material_open,
             if self.eta_withheld > 0 {
                 format!(
-                    "; {} without η, their material having none identified",
-                    self.eta_withheld
+                    "; {} without η, their material having none identified ({} of them because \
+                     one of the materials they may be of has none)",
+                    self.eta_withheld, self.eta_open_withheld
                 )
             } else {
                 String::new()
