@@ -19,10 +19,7 @@
 //!   So a vertex takes the material of its surroundings that its colour allows: two materials
 //!   of one colour and different η stay where they lie, and a small patch of another colour
 //!   keeps it. Where several materials of different η remain possible, its η's σ adds their
-//!   spread about the chosen one ([`membership_sd`]): nearness is no evidence of η. Where one
-//!   of the candidates has no identified η, that spread is unbounded and η is withheld
-//!   ([`FitFlag::MaterialEtaUnidentified`], counted in [`Completion::eta_open_withheld`]): the
-//!   vertex may be of the material nothing measured.
+//!   spread about the chosen one ([`membership_sd`]): nearness is no evidence of η.
 //! - **The material's values** ([`MaterialValues`], from the cluster's own-fit members): η the
 //!   pooled one (`Pooled::mean`) with the predictive spread of a member √(se² + τ²), or, where
 //!   no pool formed, the members' median η and robust spread — none where that spread exceeds
@@ -69,9 +66,8 @@ pub struct Completion {
     /// Vertices that needed completing but had no material to take it from.
     pub unassigned: usize,
     /// Vertices that needed their material's η where the material has none identified
-    /// ([`FitFlag::MaterialEtaUnidentified`]: the pool is weak or absent), or where one of the
-    /// materials the vertex may be of has none ([`Completion::eta_open_withheld`]): η withheld,
-    /// the rest completed.
+    /// ([`FitFlag::MaterialEtaUnidentified`]: the pool is weak or absent): η withheld, the
+    /// rest completed.
     #[serde(default)]
     pub eta_withheld: usize,
     /// Of the vertices given their material's η, those whose colour allows more than one
@@ -79,10 +75,6 @@ pub struct Completion {
     /// spread over those materials ([`membership_sd`]).
     #[serde(default)]
     pub material_open: usize,
-    /// Of [`Completion::eta_withheld`], those whose candidates include a material without an
-    /// identified η ([`membership_sd`] +∞): the η they would report bounds nothing.
-    #[serde(default)]
-    pub eta_open_withheld: usize,
     /// Vertices the views see (not [`FitFlag::Unobserved`]: in view, unoccluded and lit in at
     /// least one fitted frame, decided from the poses and the mesh, never from the gates).
     pub observed: usize,
@@ -462,20 +454,15 @@ pub fn complete(
         };
         let j = *j;
         let m = &materials[j];
-        let material_eta = m.eta.and_then(|material| {
+        let material_eta = m.eta.map(|material| {
             let [eta, sd] = local_or(material, &rings, &identified, v, j);
             // Which of its candidate materials the vertex is of, its data do not say: η's σ
-            // carries that (`assign` module doc, "How sure"); a candidate without an η leaves
-            // it unbounded, and η is withheld.
+            // carries that (`assign` module doc, "How sure").
             let open = membership_sd(eta, candidates, &materials);
             if open > 0.0 {
                 report.material_open += 1;
             }
-            if open.is_infinite() {
-                report.eta_open_withheld += 1;
-                return None;
-            }
-            Some([eta, sd.hypot(open)])
+            [eta, sd.hypot(open)]
         });
         let f = &mut fits[v];
         // A material without an identified η completes the rest; η stays withheld, flagged.

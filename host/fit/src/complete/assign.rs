@@ -27,12 +27,7 @@
 //!   With no evidence between them, each candidate is as likely as another (the
 //!   maximum-entropy choice): [`membership_sd`] is the RMS difference between the candidates'
 //!   η and the chosen one's, the standard deviation of η under that uniform distribution about
-//!   the reported value, and the completed η's σ adds it in quadrature. A candidate whose
-//!   material has no identified η (its pool weak or absent) makes that spread unbounded (+∞),
-//!   and the vertex's η is withheld: measured on the generated development scenes, such
-//!   vertices reported the nearest other material's η with a σ that left the unmeasured
-//!   material out (dev scene 16: lithium niobate, its pool just above the per-vertex limit,
-//!   completed at sf11 glass's 1.79, −22 %). A material no vertex
+//!   the reported value, and the completed η's σ adds it in quadrature. A material no vertex
 //!   was fitted on is no candidate: a patch of a material the views never isolated, of the
 //!   same colour as its surroundings, cannot be told from them (a limit of the data, stated in
 //!   docs/fit-augment.md).
@@ -141,24 +136,14 @@ pub fn colour_within_reach(
 }
 
 /// The spread of η over a vertex's candidate materials about `eta` (the value it reports): the
-/// RMS of (η_c − `eta`) over the candidates `c` (module doc, "How sure"); 0 with fewer than
-/// two. +∞ when a candidate has no identified η: the vertex may be of a material whose η
-/// nothing measured, and no spread of the others bounds its own.
+/// RMS of (η_c − `eta`) over the candidates `c` whose material has an η (module doc, "How
+/// sure"); 0 with fewer than two such candidates.
 pub fn membership_sd(eta: f64, candidates: &[usize], materials: &[MaterialValues]) -> f64 {
-    let etas: Vec<Option<f64>> = candidates
+    let etas: Vec<f64> = candidates
         .iter()
-        .map(|&c| {
-            materials
-                .get(c)?
-                .eta
-                .map(|e| e[0])
-                .filter(|e| e.is_finite())
-        })
+        .filter_map(|&c| materials.get(c)?.eta.map(|e| e[0]))
+        .filter(|e| e.is_finite())
         .collect();
-    if etas.len() >= 2 && etas.iter().any(Option::is_none) {
-        return f64::INFINITY;
-    }
-    let etas: Vec<f64> = etas.into_iter().flatten().collect();
     if etas.len() < 2 || !eta.is_finite() {
         return 0.0;
     }
@@ -214,19 +199,11 @@ mod tests {
     fn one_candidate_leaves_the_material_spread_alone() {
         let m = [material(Some(1.5)), material(Some(2.0))];
         assert_eq!(membership_sd(1.5, &[0], &m), 0.0);
-        // A material without an η that is no candidate says nothing about it.
+        // A second candidate without an η says nothing about it.
         assert_eq!(
             membership_sd(1.5, &[0], &[material(Some(1.5)), material(None)]),
             0.0
         );
-    }
-
-    #[test]
-    fn a_candidate_without_an_eta_leaves_the_spread_unbounded() {
-        let m = [material(Some(1.5)), material(None), material(Some(1.52))];
-        assert_eq!(membership_sd(1.5, &[0, 1], &m), f64::INFINITY);
-        assert_eq!(membership_sd(1.5, &[0, 1, 2], &m), f64::INFINITY);
-        assert!(membership_sd(1.5, &[0, 2], &m).is_finite());
     }
 
     #[test]

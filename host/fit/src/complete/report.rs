@@ -52,9 +52,8 @@ impl Completion {
             self.material_open,
             if self.eta_withheld > 0 {
                 format!(
-                    "; {} without η, their material having none identified ({} of them because \
-                     one of the materials they may be of has none)",
-                    self.eta_withheld, self.eta_open_withheld
+                    "; {} without η, their material having none identified",
+                    self.eta_withheld
                 )
             } else {
                 String::new()
