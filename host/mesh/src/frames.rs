@@ -4,7 +4,8 @@
 //!
 //! Contract:
 //! - A posed frame is usable when its PNG exists, it was not flagged incomplete at capture, and
-//!   its `frame` event records the exposure and gain (the normaliser needs them); others are
+//!   its `frame` event records the exposure and gain (the normaliser needs them) — the
+//!   session's own rule, `Session::readable_frame`, which the fit applies too; others are
 //!   listed as [`SkippedFrame`]s with the reason, never silently dropped. Unreadable pixels
 //!   (corrupt PNG, wrong size) are skipped the same way when the frame is loaded.
 //! - Pixels are superpixels of `ellipso_polar::demosaic` (no interpolation), at raw position
@@ -30,7 +31,6 @@ use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
 use ellipso_polar::frame::RawFrame;
 use ellipso_polar::mask::MaskReason;
 use ellipso_polar::sensor_calibration::CalibratedDemosaic;
-use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
 
 /// A posed frame that can be read.
@@ -69,34 +69,16 @@ pub fn posed_frames<'a>(
             skipped.push(skip("its pose is not finite"));
             continue;
         }
-        let Ok(k) = session
-            .frames
-            .binary_search_by_key(&frame_id, |f| f.frame_id)
-        else {
-            skipped.push(skip("no frame file in the session"));
-            continue;
-        };
-        let entry = &session.frames[k];
-        if !entry.complete {
-            skipped.push(skip("flagged incomplete at capture"));
-            continue;
+        match session.readable_frame(frame_id) {
+            Ok(f) => usable.push(PosedFrame {
+                frame_id,
+                entry: f.entry,
+                world_from_camera: pose,
+                exposure_us: f.exposure_us,
+                gain_db: f.gain_db,
+            }),
+            Err(why) => skipped.push(skip(&why.to_string())),
         }
-        let Some(SessionEvent::Frame {
-            exposure_us,
-            gain_db,
-            ..
-        }) = &entry.event
-        else {
-            skipped.push(skip("no `frame` event: exposure and gain unknown"));
-            continue;
-        };
-        usable.push(PosedFrame {
-            frame_id,
-            entry,
-            world_from_camera: pose,
-            exposure_us: f64::from(*exposure_us),
-            gain_db: f64::from(*gain_db),
-        });
     }
     (usable, skipped)
 }

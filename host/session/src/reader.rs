@@ -425,6 +425,61 @@ impl Session {
     pub fn poses(&self) -> crate::poses::SessionPoses {
         crate::poses::SessionPoses::from_events(&self.events)
     }
+
+    /// Frame `frame_id` as a stage that needs its radiometry may read it — its file is on disk,
+    /// it was not flagged incomplete at capture, and its `frame` event recorded the exposure
+    /// and gain — or why not. The carving and the fit both choose their frames with it, so
+    /// they skip the same frames for the same reasons; whether the pixels decode is decided
+    /// when they are loaded ([`Session::load_frame`]).
+    pub fn readable_frame(&self, frame_id: u64) -> Result<ReadableFrame<'_>, FrameUnreadable> {
+        let k = self
+            .frames
+            .binary_search_by_key(&frame_id, |f| f.frame_id)
+            .map_err(|_| FrameUnreadable::NoFile)?;
+        let entry = &self.frames[k];
+        if !entry.complete {
+            return Err(FrameUnreadable::Incomplete);
+        }
+        let Some(SessionEvent::Frame {
+            exposure_us,
+            gain_db,
+            ..
+        }) = &entry.event
+        else {
+            return Err(FrameUnreadable::NoFrameEvent);
+        };
+        Ok(ReadableFrame {
+            entry,
+            exposure_us: f64::from(*exposure_us),
+            gain_db: f64::from(*gain_db),
+        })
+    }
+}
+
+/// A frame a stage may read ([`Session::readable_frame`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReadableFrame<'a> {
+    /// Its file and metadata.
+    pub entry: &'a FrameEntry,
+    /// Exposure its `frame` event recorded, µs.
+    pub exposure_us: f64,
+    /// Analogue gain its `frame` event recorded, dB.
+    pub gain_db: f64,
+}
+
+/// Why a frame may not be read ([`Session::readable_frame`]); the message is the reason the
+/// stages list it under.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum FrameUnreadable {
+    /// No file of that id in `frames/`.
+    #[error("no frame file in the session")]
+    NoFile,
+    /// The capture flagged it incomplete.
+    #[error("flagged incomplete at capture")]
+    Incomplete,
+    /// Its `frame` event is missing: exposure and gain unknown.
+    #[error("no `frame` event: exposure and gain unknown")]
+    NoFrameEvent,
 }
 
 #[cfg(test)]

@@ -15,7 +15,6 @@ use super::{
 };
 use crate::data::{GateCounts, Sample, SampleSet, VertexSamples, ViewGeometry};
 use crate::shard::Shard;
-use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::{FrameEntry, Session};
 
 /// A posed frame to read.
@@ -235,29 +234,14 @@ fn frame_jobs<'s>(
             frame_id: *frame_id,
             reason: reason.into(),
         };
-        let Ok(k) = session
-            .frames
-            .binary_search_by_key(frame_id, |f| f.frame_id)
-        else {
-            report.skipped.push(skip("no frame file in the session"));
-            continue;
+        let f = match session.readable_frame(*frame_id) {
+            Ok(f) => f,
+            Err(why) => {
+                report.skipped.push(skip(&why.to_string()));
+                continue;
+            }
         };
-        let entry = &session.frames[k];
-        if !entry.complete {
-            report.skipped.push(skip("flagged incomplete at capture"));
-            continue;
-        }
-        let Some(SessionEvent::Frame {
-            exposure_us,
-            gain_db,
-            ..
-        }) = &entry.event
-        else {
-            report
-                .skipped
-                .push(skip("no `frame` event: exposure and gain unknown"));
-            continue;
-        };
+        let entry = f.entry;
         // The reader turns a non-finite or negative recorded energy into "not recorded" (1.0),
         // so anything not > 0 here is a pulse that did not light the frame.
         let lit = entry.flash_energy_rel > 0.0;
@@ -270,8 +254,8 @@ fn frame_jobs<'s>(
             frame_id: *frame_id,
             pose: *pose,
             entry,
-            exposure_us: f64::from(*exposure_us),
-            gain_db: f64::from(*gain_db),
+            exposure_us: f.exposure_us,
+            gain_db: f.gain_db,
             flash_energy_rel: entry.flash_energy_rel,
         });
     }

@@ -110,6 +110,19 @@ fn a_killed_capture_keeps_every_written_frame() {
         assert_eq!(s.load_frame(f).unwrap().2, pixels(f.frame_id));
     }
     assert!(s.report.summary().contains("did not end cleanly"));
+    // What a stage that needs each frame's radiometry may read, and why not.
+    let ok = s.readable_frame(1).unwrap();
+    assert_eq!(
+        (ok.entry.frame_id, ok.exposure_us, ok.gain_db),
+        (1, 8000.0, 0.0)
+    );
+    assert_eq!(s.readable_frame(2), Err(FrameUnreadable::Incomplete));
+    assert_eq!(s.readable_frame(3), Err(FrameUnreadable::NoFrameEvent));
+    assert_eq!(s.readable_frame(9), Err(FrameUnreadable::NoFile));
+    assert_eq!(
+        FrameUnreadable::NoFrameEvent.to_string(),
+        "no `frame` event: exposure and gain unknown"
+    );
 }
 
 #[test]
