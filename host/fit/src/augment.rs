@@ -49,8 +49,10 @@ pub mod cluster;
 pub mod eta_fit;
 mod labels;
 pub mod lobe_fit;
+mod model;
 pub mod pool;
 mod pooling;
+mod seed;
 pub mod virtual_samples;
 
 pub use labels::material_labels;
@@ -70,7 +72,10 @@ use nalgebra::Point3;
 
 use self::eta_fit::DopSample;
 use self::lobe_fit::LobeSample;
+use self::model::eta_trusted;
+pub use self::model::{Augmentation, ClusterModel, POOL_COLOUR_DISTANCE, PartitionSummary};
 pub use self::pooling::{LOCAL_RINGS, pool_eta};
+pub use self::seed::stream_seed;
 use crate::data::{Sample, SampleSet, VertexFit, VertexGuide};
 
 /// Everything the augmentation can be told.
@@ -114,90 +119,6 @@ impl Default for AugmentConfig {
             seed: 0xa06_0e47,
         }
     }
-}
-
-/// The model of one cluster.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ClusterModel {
-    /// Centroid in feature space ([`cluster::FEATURE_DIM`] values).
-    pub centroid: Vec<f64>,
-    /// Member vertices.
-    pub members: usize,
-    /// η_cluster ∈ [1, 3].
-    pub eta: f64,
-    /// σ_s ∈ [`AugmentConfig::sigma_min`], 1].
-    pub sigma_s: f64,
-    /// σ_ss ∈ [σ_s, 1].
-    pub sigma_ss: f64,
-    /// ρ_s ≥ 0.
-    pub rho_s: f64,
-    /// ρ_ss ≥ 0 per channel.
-    pub rho_ss: [f64; 3],
-    /// RMS I^s residual of the two-lobe fit, model units.
-    pub fit_rms: f64,
-    /// DoP samples η was fitted to (0: too few, η is the members' median η).
-    pub eta_samples: usize,
-    /// Samples of the two-lobe fit.
-    pub lobe_samples: usize,
-    /// The members' pooled η (random-effects mean, [`pool`]).
-    pub eta_pooled: pool::Pooled,
-}
-
-/// How the vertices were partitioned.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct PartitionSummary {
-    /// Vertices clustered (fitted and not excluded by a flag).
-    pub members: usize,
-    /// Number of k-means clusters.
-    pub k: usize,
-    /// Members per k-means cluster.
-    pub sizes: Vec<usize>,
-    /// k-means inertia (sum of squared feature distances).
-    pub inertia: f64,
-    /// Mean silhouette of the partition (None for k ≤ 1).
-    pub silhouette: Option<f64>,
-    /// Automatic choice: (k, silhouette or None when a cluster was too small).
-    pub tried: Vec<(usize, Option<f64>)>,
-    /// Minimum members for a cluster model.
-    pub min_cluster_vertices: usize,
-    /// The silhouette's k when clusters of it that were not separated were joined into one
-    /// material (`cluster::join_unseparated`); absent when the partition stands as chosen.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub joined_from: Option<usize>,
-    /// Feature normalisation.
-    pub scaling: FeatureScaling,
-}
-
-/// The result of [`augment`] (module doc). Serialises as a compact summary: the per-vertex
-/// vectors are skipped, their counts kept.
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct Augmentation {
-    /// Clusters with a model.
-    pub clusters: Vec<ClusterModel>,
-    /// Per vertex: index into `clusters` of its nearest model cluster.
-    #[serde(skip)]
-    pub assignment: Vec<Option<usize>>,
-    /// Per vertex: virtual samples (weights sum to λ_g, or empty), σ_s floor (0: none), the
-    /// cluster lobe as a start and the pooled η prior, for the final pass.
-    #[serde(skip)]
-    pub guides: Vec<VertexGuide>,
-    /// Vertices with at least one virtual sample.
-    pub vertices_with_virtual_samples: usize,
-    /// Vertices with a pooled η prior.
-    pub vertices_with_eta_prior: usize,
-    /// The partition.
-    pub partition: PartitionSummary,
-}
-
-/// A seed for one purpose (`stream`) and item (`index`), decorrelated by SplitMix64
-/// (Steele, Lea & Flood 2014).
-pub fn stream_seed(seed: u64, stream: u64, index: u64) -> u64 {
-    let mut z = seed
-        ^ stream.wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        ^ index.wrapping_add(1).wrapping_mul(0xD1B5_4A32_D192_ED03);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// Draws up to `max` (vertex, sample index) pairs uniformly without replacement from the
@@ -248,11 +169,6 @@ pub fn sample_geometry(
     g.front_facing.then_some((g, view.flash_polariser()))
 }
 
-/// Clusters whose colour centroids are closer than this pool η together: the virtual-sample
-/// kernel's reach, 0.1·√(2 ln 100) ≈ 0.30 (`virtual_samples` module doc) — colours that share
-/// virtual samples share a material.
-pub const POOL_COLOUR_DISTANCE: f64 = 0.3035;
-
 /// The median η of the `count` entries of `informative` (scaled colour, η) nearest `colour`:
 /// where an uncertain η is shrunk to (`pool::EtaShrink::apply_towards`). `count` is the
 /// smallest cluster a material may form, so a material of a colour of its own has that many
@@ -281,19 +197,6 @@ fn colour_median_eta(
     by_distance.select_nth_unstable_by(count - 1, |a, b| a.0.total_cmp(&b.0));
     let mut etas: Vec<f64> = by_distance[..count].iter().map(|p| p.1).collect();
     Some(ellipso_model::stats::median(&mut etas))
-}
-
-/// Whether a vertex's step-A η is its data's (not flagged `EtaUnidentifiable`, `GrazingOnly`
-/// or `AtBound`): only then does it place the vertex in η and decide whether the pooled η
-/// applies to it.
-fn eta_trusted(f: &VertexFit) -> bool {
-    use crate::data::FitFlag;
-    !f.flags.iter().any(|flag| {
-        matches!(
-            flag,
-            FitFlag::EtaUnidentifiable | FitFlag::GrazingOnly | FitFlag::AtBound
-        )
-    })
 }
 
 /// A vertex's step-A standard error of η where [`eta_trusted`], infinite where its flags

@@ -44,6 +44,7 @@ pub mod footprint;
 pub mod frames;
 pub mod image;
 pub mod radiometry;
+pub mod rect;
 pub mod sampler;
 
 use std::path::PathBuf;

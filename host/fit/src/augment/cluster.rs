@@ -38,7 +38,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::stream_seed;
+use super::seed::stream_seed;
 use crate::data::FitFlag;
 
 mod separation;

@@ -2,7 +2,11 @@
 //! gives, and what each member vertex may borrow from it ([`pool_eta`]). The statistics of one
 //! cluster's pool (random effects, the prior removed, agreement) are [`super::pool`]'s.
 
-use super::*;
+use super::cluster::{self, Feature};
+use super::model::{Augmentation, POOL_COLOUR_DISTANCE, eta_trusted};
+use super::pool;
+use super::seed::stream_seed;
+use crate::data::{SampleSet, VertexFit};
 
 /// Pools η per cluster from `fits` (indexed like the set's vertices: step A's results, whose
 /// η carries the solver's weak default prior `eta_prior` = (mean, sd)) and gives each vertex

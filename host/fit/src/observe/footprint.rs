@@ -16,7 +16,7 @@
 //!   edge midpoints ([`Footprint::of_rect`]), a cross its eight corners — never more rays than
 //!   the rectangle's eight.
 
-use super::image::PixelRect;
+use super::rect::PixelRect;
 
 /// At most this many probe points.
 const MAX_POINTS: usize = 8;
