@@ -475,19 +475,14 @@ pub fn join_unseparated(points: &[Feature], mut partition: Partition) -> Partiti
     }
 }
 
-/// `p` with its clusters smaller than `min_size` dropped: their centres removed and Lloyd's
-/// iterations run again from the others, so their members join the nearest remaining cluster.
-/// `None` when fewer than two clusters remain, or when one of those ends below `min_size`.
-///
-/// Why: k-means gives a few outlying features (a vertex at a silhouette, a blend across a
-/// border) a centre of their own once they lie farther out than the materials lie apart — a
-/// cluster under the minimum size that, left as it is, disqualifies the whole partition, and
-/// with it the split of the materials the other centres found: with such outliers no k
-/// qualified and the materials were joined into one (test
-/// `a_few_outlying_features_do_not_veto_the_split_of_two_materials`; on the development
-/// scenes, partitions of k = 4–8 carried clusters of 1–2 such vertices). Trimming the outlying
-/// centre is the trimmed k-means idea (Cuesta-Albertos, Gordaliza & Matrán 1997, Ann. Statist.
-/// 25, 553), with the size rule as the trimming level.
+/// `p` with its clusters under `min_size` dropped: their centres removed and Lloyd run again
+/// from the others, their members joining the nearest. `None` when fewer than two remain or
+/// one ends under `min_size`. Why: a few outlying features (a blend at a silhouette) lying
+/// farther out than the materials lie apart take a centre of their own at every k, and the
+/// too-small cluster disqualified the partition and the materials' split with it (test
+/// `a_few_outlying_features_do_not_veto_the_split_of_two_materials`; the development scenes'
+/// partitions of k = 4–8 carried clusters of 1–2 such vertices). Trimmed k-means
+/// (Cuesta-Albertos, Gordaliza & Matrán 1997, Ann. Statist. 25, 553), the size rule its level.
 fn without_small_clusters(
     points: &[Feature],
     p: &Partition,
