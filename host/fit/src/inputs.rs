@@ -23,7 +23,6 @@ use std::collections::BTreeMap;
 
 use ellipso_model::camera::CameraModel;
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_session::SessionEvent;
 use ellipso_session::reader::Session;
 use nalgebra::{Isometry3, Point3, Vector3};
 
@@ -118,13 +117,7 @@ pub fn check_frames(session: &Session, poses: &[(u64, Isometry3<f64>)]) -> Resul
                 what,
             })
         };
-        if let Some(SessionEvent::Frame {
-            exposure_us,
-            gain_db,
-            ..
-        }) = &f.event
-        {
-            let (e, g) = (f64::from(*exposure_us), f64::from(*gain_db));
+        if let Some([e, g]) = f.recorded_exposure_gain() {
             if !(e > 0.0 && e <= EXPOSURE_MAX_US) {
                 return bad(format!(
                     "exposure_us = {e} is outside (0, {EXPOSURE_MAX_US}] µs: a frame exposed \

@@ -57,7 +57,6 @@ use nalgebra::Isometry3;
 use crate::data::{GateCounts, SampleSet, ViewGeometry};
 use crate::gate::GateConfig;
 use crate::shard::Shard;
-use ellipso_session::events::SessionEvent;
 use ellipso_session::reader::Session;
 
 pub use extract::extract_from;
@@ -281,20 +280,14 @@ pub fn point_normaliser(
             what: format!("frame {frame_id}: {NO_FLASH_REASON}"),
         });
     }
-    let event = entry.and_then(|f| f.event.as_ref());
-    let Some(SessionEvent::Frame {
-        exposure_us,
-        gain_db,
-        ..
-    }) = event
-    else {
+    let Some([exposure_us, gain_db]) = entry.and_then(|f| f.recorded_exposure_gain()) else {
         return Err(ObserveError::Manifest {
             path: session.dir.join(ellipso_session::paths::EVENTS),
             what: format!("frame {frame_id} has no `frame` event: exposure and gain unknown"),
         });
     };
     Ok(PointNormaliser::new(
-        radiometry.for_frame(f64::from(*exposure_us), f64::from(*gain_db)),
+        radiometry.for_frame(exposure_us, gain_db),
         &radiometry.flash,
         world_from_camera,
     )

@@ -45,6 +45,21 @@ pub struct FrameEntry {
     pub flash_energy_rel: f64,
 }
 
+impl FrameEntry {
+    /// The exposure (µs) and analogue gain (dB) its `frame` event recorded; `None` without
+    /// that event.
+    pub fn recorded_exposure_gain(&self) -> Option<[f64; 2]> {
+        match &self.event {
+            Some(SessionEvent::Frame {
+                exposure_us,
+                gain_db,
+                ..
+            }) => Some([f64::from(*exposure_us), f64::from(*gain_db)]),
+            _ => None,
+        }
+    }
+}
+
 /// What reading found wrong (nothing here prevents replay).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct ReadReport {
@@ -440,18 +455,13 @@ impl Session {
         if !entry.complete {
             return Err(FrameUnreadable::Incomplete);
         }
-        let Some(SessionEvent::Frame {
-            exposure_us,
-            gain_db,
-            ..
-        }) = &entry.event
-        else {
-            return Err(FrameUnreadable::NoFrameEvent);
-        };
+        let [exposure_us, gain_db] = entry
+            .recorded_exposure_gain()
+            .ok_or(FrameUnreadable::NoFrameEvent)?;
         Ok(ReadableFrame {
             entry,
-            exposure_us: f64::from(*exposure_us),
-            gain_db: f64::from(*gain_db),
+            exposure_us,
+            gain_db,
         })
     }
 }

@@ -60,8 +60,8 @@ pub struct PartitionSummary {
     pub scaling: FeatureScaling,
 }
 
-/// The result of [`super::augment()`] (module doc of `augment`). Serialises as a compact summary: the per-vertex
-/// vectors are skipped, their counts kept.
+/// The result of [`super::augment()`] (module doc of `augment`). Serialises as a compact
+/// summary: the per-vertex vectors are skipped, their counts kept.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Augmentation {
     /// Clusters with a model.

@@ -183,13 +183,18 @@ fn dersimonian_laird(points: &[(f64, f64)]) -> (f64, f64, f64) {
     (mean, (1.0 / sws).sqrt(), tau2.sqrt())
 }
 
-/// The pooled η of `(η, standard error)` pairs (module doc).
-pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
-    let usable: Vec<(f64, f64)> = members
+/// The `(η, standard error)` pairs with a finite η and a finite, positive standard error.
+fn usable(members: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    members
         .iter()
         .copied()
         .filter(|(eta, s)| eta.is_finite() && s.is_finite() && *s > 0.0)
-        .collect();
+        .collect()
+}
+
+/// The pooled η of `(η, standard error)` pairs (module doc).
+pub fn random_effects(members: &[(f64, f64)]) -> Pooled {
+    let usable = usable(members);
     if usable.len() < MIN_VERTICES {
         return Pooled::default();
     }
@@ -319,11 +324,7 @@ impl EtaShrink {
     /// of the members was trimmed away, τ came out 0, and every member's feature η collapsed
     /// onto the median, so no partition could separate the two (dev scene 14).
     pub fn from_members(members: &[(f64, f64)]) -> Self {
-        let usable: Vec<(f64, f64)> = members
-            .iter()
-            .copied()
-            .filter(|(eta, s)| eta.is_finite() && s.is_finite() && *s > 0.0)
-            .collect();
+        let usable = usable(members);
         let mut etas: Vec<f64> = members
             .iter()
             .map(|m| m.0)

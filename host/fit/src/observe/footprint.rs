@@ -34,6 +34,14 @@ impl Footprint {
         Octagon::of_rect(rect).footprint()
     }
 
+    /// [`Footprint::of_rect`] of the square of half-side `radius_px` about `pixel`.
+    pub fn square(pixel: [f64; 2], radius_px: f64) -> Footprint {
+        Footprint::of_rect(&PixelRect {
+            min: pixel.map(|v| v - radius_px),
+            max: pixel.map(|v| v + radius_px),
+        })
+    }
+
     /// The probe points, corners first (they reach farthest).
     pub fn points(&self) -> &[[f64; 2]] {
         &self.points[..self.len]
@@ -101,7 +109,7 @@ impl Octagon {
         widen(&mut self.diff, x[0] - y[1], x[1] - y[0]);
     }
 
-    /// Whether a block was added (all extremes finite).
+    /// Whether no block was added (an extreme is not finite).
     pub fn is_empty(&self) -> bool {
         [self.x, self.y, self.sum, self.diff]
             .iter()

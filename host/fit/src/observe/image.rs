@@ -258,11 +258,7 @@ impl DnImage {
         }
         if octagon.is_empty() {
             // No tap (cannot happen: the weights sum to 1): the kernel's whole reach.
-            let r = self.footprint_radius_px;
-            return Footprint::of_rect(&PixelRect {
-                min: pixel.map(|v| v - r),
-                max: pixel.map(|v| v + r),
-            });
+            return Footprint::square(pixel, self.footprint_radius_px);
         }
         octagon.footprint()
     }
@@ -408,11 +404,7 @@ pub trait AnalyserPixels: Sync {
     /// [`Self::footprint_radius_px`].
     fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         let _ = min_weight;
-        let r = self.footprint_radius_px();
-        Footprint::of_rect(&PixelRect {
-            min: pixel.map(|v| v - r),
-            max: pixel.map(|v| v + r),
-        })
+        Footprint::square(pixel, self.footprint_radius_px())
     }
 }
 
