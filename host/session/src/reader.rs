@@ -254,6 +254,27 @@ struct Paired {
 
 /// Opens the session in `dir`.
 pub fn open(dir: &Path) -> Result<Session, SessionError> {
+    let manifest = read_manifest(dir)?;
+    let mut report = ReadReport {
+        ended_cleanly: manifest.end.is_some(),
+        ..ReadReport::default()
+    };
+    let events = read_events(dir, &mut report)?;
+    let indexed = index_events(&events, &mut report);
+    let on_disk = frames_on_disk(dir)?;
+    let frames = frame_entries(on_disk, &indexed, &mut report);
+    Ok(Session {
+        dir: dir.to_path_buf(),
+        manifest,
+        events,
+        frames,
+        report,
+    })
+}
+
+/// Reads `dir`'s manifest: a schema version other than this build's is refused before the
+/// shape is checked (so a newer schema gets the right message), then the JSON and the sensor.
+fn read_manifest(dir: &Path) -> Result<Manifest, SessionError> {
     let manifest_path = dir.join(paths::MANIFEST);
     let text = read_bounded_text(&manifest_path, caps::MANIFEST)
         .map_err(SessionError::io(&manifest_path))?;
@@ -283,11 +304,12 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
             field,
             what,
         })?;
-    let mut report = ReadReport {
-        ended_cleanly: manifest.end.is_some(),
-        ..ReadReport::default()
-    };
+    Ok(manifest)
+}
 
+/// Every readable event of `dir`'s log, in log order (none without a log); a cut last line and
+/// corrupt lines go to `report`.
+fn read_events(dir: &Path, report: &mut ReadReport) -> Result<Vec<SessionEvent>, SessionError> {
     let log_path = dir.join(paths::EVENTS);
     let log = match read_bounded(&log_path, caps::EVENT_LOG) {
         Ok(b) => b,
@@ -313,14 +335,27 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
             Err(e) => report.bad_lines.push((i + 1, e.to_string())),
         }
     }
+    Ok(events)
+}
 
+/// What the log says about the frames.
+struct IndexedEvents {
+    /// Each frame id's first `frame` event.
+    logged: BTreeMap<u64, SessionEvent>,
+    /// Each frame id's last `pairing` event.
+    pairs: BTreeMap<u64, Paired>,
+}
+
+/// Indexes `events` by frame; duplicate `frame` and `pulse` events and pose events that
+/// disagree go to `report`.
+fn index_events(events: &[SessionEvent], report: &mut ReadReport) -> IndexedEvents {
     let mut logged: BTreeMap<u64, SessionEvent> = BTreeMap::new();
     let mut pairs: BTreeMap<u64, Paired> = BTreeMap::new();
     let mut pulses = std::collections::BTreeSet::new();
     // per frame and what it was computed from: its first pose value (rotation and translation;
     // empty for a rejection); a later outcome computed from other inputs is no conflict
     let mut poses: BTreeMap<(u64, crate::events::TrackedFrom), Vec<f64>> = BTreeMap::new();
-    for e in &events {
+    for e in events {
         let pose = match e.pose_event() {
             Some((_, crate::poses::PoseEvent::Interpolated { .. })) | None => None,
             Some((id, p)) => Some((
@@ -376,7 +411,12 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
             _ => {}
         }
     }
+    IndexedEvents { logged, pairs }
+}
 
+/// The frame files in `dir`'s `frames/` (none without it), by id; other names (`.partial`
+/// files included) are ignored.
+fn frames_on_disk(dir: &Path) -> Result<BTreeMap<u64, PathBuf>, SessionError> {
     let frames_dir = dir.join(paths::FRAMES);
     let mut on_disk: BTreeMap<u64, PathBuf> = BTreeMap::new();
     if frames_dir.is_dir() {
@@ -394,12 +434,23 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
             }
         }
     }
+    Ok(on_disk)
+}
+
+/// One entry per frame file, with its `frame` event and pairing where logged; frames without
+/// an event and events without a file go to `report`.
+fn frame_entries(
+    on_disk: BTreeMap<u64, PathBuf>,
+    indexed: &IndexedEvents,
+    report: &mut ReadReport,
+) -> Vec<FrameEntry> {
+    let (logged, pairs) = (&indexed.logged, &indexed.pairs);
     report.events_without_frame = logged
         .keys()
         .filter(|id| !on_disk.contains_key(id))
         .copied()
         .collect();
-    let frames = on_disk
+    on_disk
         .into_iter()
         .map(|(frame_id, path)| {
             let event = logged.get(&frame_id).cloned();
@@ -425,14 +476,7 @@ pub fn open(dir: &Path) -> Result<Session, SessionError> {
                 flash_energy_rel: paired.map_or(1.0, |p| p.flash_energy_rel),
             }
         })
-        .collect();
-    Ok(Session {
-        dir: dir.to_path_buf(),
-        manifest,
-        events,
-        frames,
-        report,
-    })
+        .collect()
 }
 
 impl Session {

@@ -19,7 +19,10 @@
 use super::family::{TagCells, TagFamily};
 pub use super::spec::{BoardAxes, BoardOrigin, BoardSpec, GridSpec, TagPlacementSpec};
 use nalgebra::{Isometry3, Point2, Point3, Translation3, Unit, UnitQuaternion, Vector2, Vector3};
-use std::collections::HashMap;
+
+mod placement;
+
+use placement::{Layout, PlacedTag};
 
 /// A validation error: the offending key (dotted path inside the board table) and what is wrong.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -29,13 +32,6 @@ pub struct BoardError {
     pub key: String,
     /// What is wrong.
     pub message: String,
-}
-
-fn bad(key: impl Into<String>, message: impl Into<String>) -> BoardError {
-    BoardError {
-        key: key.into(),
-        message: message.into(),
-    }
 }
 
 /// One tag on a built board.
@@ -115,208 +111,34 @@ pub struct Board {
     texture: Option<super::SheetTexture>,
 }
 
+/// The board frame from the sheet frame: the origin moved to the spec's (sheet's top-left
+/// corner or centre), then the axes flipped about x for `x_right_y_up`.
+fn board_from_sheet(spec: &BoardSpec, sheet_size_m: [f64; 2]) -> Isometry3<f64> {
+    let origin = match spec.origin {
+        BoardOrigin::SheetTopLeft => Vector3::zeros(),
+        BoardOrigin::SheetCentre => Vector3::new(0.5 * sheet_size_m[0], 0.5 * sheet_size_m[1], 0.0),
+    };
+    let flip = match spec.axes {
+        BoardAxes::XRightYDown => UnitQuaternion::identity(),
+        BoardAxes::XRightYUp => {
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
+        }
+    };
+    Isometry3::from_parts(Translation3::identity(), flip)
+        * Isometry3::from_parts(Translation3::from(-origin), UnitQuaternion::identity())
+}
+
 impl Board {
     /// Validates a spec and builds the board. Errors name the offending key.
     pub fn from_spec(spec: &BoardSpec) -> Result<Self, BoardError> {
         let table = spec.family.code_table();
         let s = spec.tag_size_m;
-        if !(s.is_finite() && s > 0.0) {
-            return Err(bad(
-                "tag_size_m",
-                format!("must be a positive length, got {s}"),
-            ));
-        }
-        if !(spec.margin_m.is_finite() && spec.margin_m >= 0.0) {
-            return Err(bad("margin_m", "must be a non-negative length"));
-        }
-        for (key, v) in [
-            ("white_albedo", spec.white_albedo),
-            ("black_albedo", spec.black_albedo),
-        ] {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(bad(key, format!("albedo must be in [0, 1], got {v}")));
-            }
-        }
-        if spec.black_albedo >= spec.white_albedo {
-            return Err(bad("black_albedo", "must be darker than white_albedo"));
-        }
-        let cell = s / table.width_at_border as f64;
-        let quiet = table.quiet_zone_cells() as f64 * cell;
-        // (key, id, centre in sheet, rotation rad)
-        let mut placed: Vec<(String, u32, Vector2<f64>, f64)> = Vec::new();
-        if let Some(g) = &spec.grid {
-            if g.cols == 0 || g.rows == 0 {
-                let key = if g.cols == 0 {
-                    "grid.cols"
-                } else {
-                    "grid.rows"
-                };
-                return Err(bad(key, "a grid needs at least one column and one row"));
-            }
-            if !(g.spacing_m.is_finite() && g.spacing_m >= s + quiet) {
-                return Err(bad(
-                    "grid.spacing_m",
-                    format!(
-                        "{} m leaves less than the {quiet:.4} m quiet zone between {s} m tags \
-                         (need ≥ {:.4} m)",
-                        g.spacing_m,
-                        s + quiet
-                    ),
-                ));
-            }
-            let n = g.cols as usize * g.rows as usize;
-            if n > table.len() {
-                return Err(bad(
-                    "grid.cols",
-                    format!(
-                        "{}×{} tags exceed the {} codes of {}",
-                        g.cols,
-                        g.rows,
-                        table.len(),
-                        spec.family.name()
-                    ),
-                ));
-            }
-            let ids: Vec<(String, u32)> = match &g.ids {
-                Some(ids) if ids.len() != n => {
-                    return Err(bad(
-                        "grid.ids",
-                        format!(
-                            "{} ids for a {}×{} grid (need {n})",
-                            ids.len(),
-                            g.cols,
-                            g.rows
-                        ),
-                    ));
-                }
-                Some(ids) => ids
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &i)| (format!("grid.ids[{k}]"), i))
-                    .collect(),
-                None => (0..n as u32)
-                    .map(|k| ("grid.first_id".to_string(), g.first_id.saturating_add(k)))
-                    .collect(),
-            };
-            let first = match g.first_centre_m {
-                Some(c) => Vector2::from(c),
-                None => Vector2::repeat(spec.margin_m + quiet + 0.5 * s),
-            };
-            if !first.iter().all(|v| v.is_finite()) {
-                return Err(bad("grid.first_centre_m", "must be finite"));
-            }
-            for (k, (key, id)) in ids.into_iter().enumerate() {
-                let (c, r) = ((k as u32 % g.cols) as f64, (k as u32 / g.cols) as f64);
-                placed.push((key, id, first + Vector2::new(c, r) * g.spacing_m, 0.0));
-            }
-        }
-        for (k, t) in spec.tags.iter().enumerate() {
-            if !(t.centre_m.iter().all(|v| v.is_finite()) && t.rotation_deg.is_finite()) {
-                return Err(bad(
-                    format!("tags[{k}]"),
-                    "centre_m and rotation_deg must be finite",
-                ));
-            }
-            placed.push((
-                format!("tags[{k}].id"),
-                t.id,
-                Vector2::from(t.centre_m),
-                t.rotation_deg.to_radians(),
-            ));
-        }
-        if placed.is_empty() {
-            return Err(bad("grid", "a board needs tags: give `grid` or `[[tags]]`"));
-        }
-        let mut seen: HashMap<u32, String> = HashMap::new();
-        for (key, id, _, _) in &placed {
-            if *id as usize >= table.len() {
-                return Err(bad(
-                    key.clone(),
-                    format!(
-                        "id {id} is not in {} (ids 0..{})",
-                        spec.family.name(),
-                        table.len() - 1
-                    ),
-                ));
-            }
-            if let Some(prev) = seen.insert(*id, key.clone()) {
-                return Err(bad(
-                    key.clone(),
-                    format!("id {id} appears twice (also at `{prev}`)"),
-                ));
-            }
-        }
-        // Tags (with one quiet zone between them) must not overlap: separating-axis test on the
-        // squares of side s + quiet.
-        let half = 0.5 * (s + quiet) - 1e-12;
-        for i in 0..placed.len() {
-            for j in 0..i {
-                if squares_overlap(placed[i].2, placed[i].3, placed[j].2, placed[j].3, half) {
-                    return Err(bad(
-                        placed[i].0.clone(),
-                        format!(
-                            "tag {} overlaps tag {} (or leaves no {quiet:.4} m quiet zone)",
-                            placed[i].1, placed[j].1
-                        ),
-                    ));
-                }
-            }
-        }
-        // Sheet: given, or the tags' extent including quiet zone plus margin.
-        let outer_half = 0.5 * s + quiet;
-        let extent = |(_, _, c, rot): &(String, u32, Vector2<f64>, f64)| {
-            let r = outer_half * (rot.cos().abs() + rot.sin().abs());
-            (c - Vector2::repeat(r), c + Vector2::repeat(r))
-        };
-        let sheet_size_m = match spec.sheet_size_m {
-            Some([w, h]) => {
-                if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
-                    return Err(bad(
-                        "sheet_size_m",
-                        format!("must be positive, got [{w}, {h}]"),
-                    ));
-                }
-                [w, h]
-            }
-            None => {
-                let max = placed
-                    .iter()
-                    .map(extent)
-                    .fold(Vector2::zeros(), |m, (_, hi)| m.sup(&hi));
-                [max.x + spec.margin_m, max.y + spec.margin_m]
-            }
-        };
-        for p in &placed {
-            let (lo, hi) = extent(p);
-            let tol = 1e-9;
-            if lo.x < -tol
-                || lo.y < -tol
-                || hi.x > sheet_size_m[0] + tol
-                || hi.y > sheet_size_m[1] + tol
-            {
-                return Err(bad(
-                    p.0.clone(),
-                    format!(
-                        "tag {} with its quiet zone reaches outside the {} × {} m sheet",
-                        p.1, sheet_size_m[0], sheet_size_m[1]
-                    ),
-                ));
-            }
-        }
-        let origin = match spec.origin {
-            BoardOrigin::SheetTopLeft => Vector3::zeros(),
-            BoardOrigin::SheetCentre => {
-                Vector3::new(0.5 * sheet_size_m[0], 0.5 * sheet_size_m[1], 0.0)
-            }
-        };
-        let flip = match spec.axes {
-            BoardAxes::XRightYDown => UnitQuaternion::identity(),
-            BoardAxes::XRightYUp => {
-                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-            }
-        };
-        let board_from_sheet = Isometry3::from_parts(Translation3::identity(), flip)
-            * Isometry3::from_parts(Translation3::from(-origin), UnitQuaternion::identity());
+        let Layout {
+            placed,
+            sheet_size_m,
+            outer_half,
+        } = placement::lay_out(spec)?;
+        let board_from_sheet = board_from_sheet(spec, sheet_size_m);
         let hs = 0.5 * s;
         let corners_tag = [
             Point3::new(-hs, hs, 0.0),
@@ -327,7 +149,13 @@ impl Board {
         let mut cells_by_tag = Vec::new();
         let tags: Vec<BoardTag> = placed
             .into_iter()
-            .map(|(key, id, c, rot)| {
+            .map(|placed| {
+                let PlacedTag {
+                    key,
+                    id,
+                    centre_sheet_m: c,
+                    rotation_rad: rot,
+                } = placed;
                 let sheet_from_tag = Isometry3::from_parts(
                     Translation3::new(c.x, c.y, 0.0),
                     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), rot),
@@ -371,6 +199,8 @@ impl Board {
         Ok(board)
     }
 
+    /// Fills the lookup grid over the sheet: every bucket that the bounding box of a tag's
+    /// square of half-side `outer_half` (the tag with its quiet zone) touches lists that tag.
     fn build_buckets(&mut self, outer_half: f64) {
         let size = self.bucket_size_m;
         // Guard: at most a few hundred thousand buckets even for tiny tags on a big sheet.
@@ -532,38 +362,4 @@ impl Board {
             front,
         })
     }
-}
-
-/// Separating-axis test for two squares of half-side `half` (centres, rotations in radians).
-fn squares_overlap(ca: Vector2<f64>, ra: f64, cb: Vector2<f64>, rb: f64, half: f64) -> bool {
-    let axes = |r: f64| {
-        [
-            Vector2::new(r.cos(), r.sin()),
-            Vector2::new(-r.sin(), r.cos()),
-        ]
-    };
-    let corners = |c: Vector2<f64>, r: f64| {
-        let [u, v] = axes(r);
-        [
-            c + (u + v) * half,
-            c + (u - v) * half,
-            c - (u + v) * half,
-            c - (u - v) * half,
-        ]
-    };
-    let (pa, pb) = (corners(ca, ra), corners(cb, rb));
-    for axis in axes(ra).into_iter().chain(axes(rb)) {
-        let proj = |pts: &[Vector2<f64>; 4]| {
-            pts.iter()
-                .map(|p| p.dot(&axis))
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
-                    (lo.min(x), hi.max(x))
-                })
-        };
-        let ((a0, a1), (b0, b1)) = (proj(&pa), proj(&pb));
-        if a1 <= b0 || b1 <= a0 {
-            return false;
-        }
-    }
-    true
 }

@@ -8,8 +8,10 @@ use ellipso_model::mosaic::{Channel, SensorLayout};
 // Warnings are not what these tests look at.
 use ellipso_run_error::Silent as Quiet;
 
+use super::pictures::symmetric_range;
 use super::*;
 use crate::synthetic::mosaic_from_stokes;
+use crate::{MaskReason, PixelMask};
 
 fn args(frame: &Path, out: &Path) -> Args {
     Args {
