@@ -27,8 +27,6 @@
 //! - [`forward_all`] evaluates the model once at every observation (no derivatives): the unit
 //!   against which the fit's time is reported.
 
-use std::collections::BTreeMap;
-
 use ellipso_model::geometry::{Intersect, Ray};
 use ellipso_model::optics::Vec3;
 use ellipso_model::optics::measure::observe;
@@ -40,16 +38,17 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use ellipso_fit::data::{
-    FitFlag, SampleGeometry, SampleSet, VertexFit, VertexSamples, ViewGeometry,
-};
+use ellipso_fit::data::{SampleGeometry, SampleSet, VertexFit, VertexSamples, ViewGeometry};
 use ellipso_fit::gate::GateConfig;
 use ellipso_fit::synthetic::{SensorNoise, synthesize_vertex};
 
 use crate::BenchError;
 use crate::truth::{TruthObject, views_of_scene};
 
+mod scores;
 pub mod specular;
+
+pub use scores::{MaterialErrors, Scores, evaluate};
 
 /// Relative offset along a ray before occlusion tests (avoids self-hits on the start triangle).
 const RAY_EPS_M: f64 = 1e-6;
@@ -102,78 +101,6 @@ pub struct SimulatedCapture {
     /// Per vertex, the frame ids of its near-mirror views (visible, and the half vector inside
     /// the true lobe's half maximum, [`specular::is_near_mirror`]), before any gate.
     pub near_mirror: Vec<Vec<u64>>,
-}
-
-/// Errors of one material.
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct MaterialErrors {
-    /// Material name.
-    pub name: String,
-    /// True η.
-    pub eta_true: f64,
-    /// Vertices scored.
-    pub vertices: usize,
-    /// Mean |η − η_true| / η_true, %.
-    pub eta_mean_pct: f64,
-    /// Median fitted η.
-    pub eta_median: f64,
-    /// Median over the material's vertices of |η − η_true| / η_true, %.
-    pub eta_vertex_median_pct: f64,
-    /// Median fitted σs.
-    pub sigma_s_median: f64,
-    /// Median fitted σss.
-    pub sigma_ss_median: f64,
-    /// Mean relative ρd error over RGB, %.
-    pub rho_d_mean_pct: f64,
-    /// Mean |σs − σs_true|.
-    pub sigma_s_abs: f64,
-    /// Mean |σss − σss_true|.
-    pub sigma_ss_abs: f64,
-    /// Median normal error, degrees.
-    pub normal_median_deg: f64,
-}
-
-/// The scores of one fit.
-#[derive(Clone, Debug, Default, serde::Serialize)]
-pub struct Scores {
-    /// Vertices in the object.
-    pub vertices: usize,
-    /// Vertices scored (not `TooFewViews`).
-    pub scored: usize,
-    /// Vertices some view sees lit (not `Unobserved`): what the coverage is of.
-    pub observed: usize,
-    /// `scored / observed`: the share of the seen surface the figures stand for (this
-    /// fit-only bench runs steps A–C without the completion from materials).
-    pub coverage: f64,
-    /// Kept observations.
-    pub samples: usize,
-    /// Mean η error over scored vertices, %.
-    pub eta_mean_pct: f64,
-    /// Median η error over scored vertices, %.
-    pub eta_median_pct: f64,
-    /// Mean over materials of the error of the material's η (median over its vertices), % —
-    /// the paper's measure (one η per object, 1.49 % on real objects).
-    pub eta_material_pct: f64,
-    /// Median normal error, degrees.
-    pub normal_median_deg: f64,
-    /// 90th percentile normal error, degrees.
-    pub normal_p90_deg: f64,
-    /// Median initial (input) normal error, degrees.
-    pub normal_input_median_deg: f64,
-    /// Mean relative ρd error, %.
-    pub rho_d_mean_pct: f64,
-    /// Median relative ρd error, % (robust to the few vertices whose ρd absorbs a highlight).
-    pub rho_d_median_pct: f64,
-    /// Mean |σs − σs_true|.
-    pub sigma_s_abs: f64,
-    /// Mean |σss − σss_true|.
-    pub sigma_ss_abs: f64,
-    /// Relative re-render RMSE over all observation channels.
-    pub rerender_rmse: f64,
-    /// Per material.
-    pub materials: Vec<MaterialErrors>,
-    /// Flag histogram.
-    pub flags: BTreeMap<String, usize>,
 }
 
 /// The solver's noise model for a scene's camera (DN per electron with its gain, read noise).
@@ -401,11 +328,6 @@ pub fn with_photo_count(scene: &Scene, photos: usize) -> Result<Scene, BenchErro
     Scene::from_toml_str(&text, &scene.source).map_err(|e| bad(e.to_string()))
 }
 
-/// Angle between two vectors, degrees: the model's one [`ellipso_model::geometry::angle_between_deg`].
-fn angle_deg(a: &Vector3<f64>, b: &Vector3<f64>) -> f64 {
-    ellipso_model::geometry::angle_between_deg(a, b)
-}
-
 /// Model prediction at every kept observation of `vertex` with `params`/`normal`: one
 /// `[I^d, I^s, I^α]` per colour channel per sample (`None` where the geometry degenerates).
 pub fn predict_vertex(
@@ -442,173 +364,4 @@ pub fn forward_all(set: &SampleSet, fits: &[VertexFit]) -> f64 {
                 .sum::<f64>()
         })
         .sum()
-}
-
-/// Scores `fits` against `capture`'s truth (see the module doc).
-pub fn evaluate(capture: &SimulatedCapture, fits: &[VertexFit]) -> Scores {
-    let truth = &capture.truth;
-    let set = &capture.set;
-    let mut flags = BTreeMap::new();
-    for f in fits {
-        for flag in &f.flags {
-            *flags.entry(format!("{flag:?}")).or_insert(0) += 1;
-        }
-    }
-    let mut per_material: Vec<Vec<usize>> = vec![Vec::new(); truth.material_names.len()];
-    for (v, f) in fits.iter().enumerate() {
-        if !f.flags.contains(&FitFlag::TooFewViews) {
-            per_material[truth.material[v]].push(v);
-        }
-    }
-    let normal_err = |v: usize| {
-        angle_deg(
-            &Vector3::from(fits[v].normal_world),
-            &truth.mesh.normals()[v].into_inner(),
-        )
-    };
-    let input_err = |v: usize| {
-        angle_deg(
-            &Vector3::from(set.vertices[v].normal_world),
-            &truth.mesh.normals()[v].into_inner(),
-        )
-    };
-    let eta_pct =
-        |v: usize| 100.0 * (fits[v].params.eta - truth.params[v].eta).abs() / truth.params[v].eta;
-    // A monochrome sensor sees the mean of the colour channels.
-    let true_rho_d = |v: usize, c: usize| {
-        let rho = truth.params[v].rho_d;
-        if set.colour {
-            rho[c]
-        } else {
-            rho.iter().sum::<f64>() / 3.0
-        }
-    };
-    let rho_d_pct = |v: usize| {
-        (0..3)
-            .map(|c| {
-                let t = true_rho_d(v, c);
-                100.0 * (fits[v].params.rho_d[c] - t).abs() / t.max(1e-6)
-            })
-            .sum::<f64>()
-            / 3.0
-    };
-    let mean = |xs: &[f64]| {
-        if xs.is_empty() {
-            f64::NAN
-        } else {
-            xs.iter().sum::<f64>() / xs.len() as f64
-        }
-    };
-    let mut materials = Vec::new();
-    for (m, members) in per_material.iter().enumerate() {
-        if members.is_empty() {
-            continue;
-        }
-        let tp = &truth.params[members[0]];
-        let mut etas: Vec<f64> = members.iter().map(|&v| fits[v].params.eta).collect();
-        let mut normals: Vec<f64> = members.iter().map(|&v| normal_err(v)).collect();
-        let mut sigma_s: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_s).collect();
-        let mut sigma_ss: Vec<f64> = members.iter().map(|&v| fits[v].params.sigma_ss).collect();
-        materials.push(MaterialErrors {
-            name: truth.material_names[m].clone(),
-            eta_true: tp.eta,
-            vertices: members.len(),
-            eta_mean_pct: mean(&members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
-            eta_median: ellipso_report::percentile(&mut etas, 0.5),
-            eta_vertex_median_pct: ellipso_report::percentile(
-                &mut members.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
-                0.5,
-            ),
-            sigma_s_median: ellipso_report::percentile(&mut sigma_s, 0.5),
-            sigma_ss_median: ellipso_report::percentile(&mut sigma_ss, 0.5),
-            rho_d_mean_pct: mean(&members.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
-            sigma_s_abs: mean(
-                &members
-                    .iter()
-                    .map(|&v| (fits[v].params.sigma_s - truth.params[v].sigma_s).abs())
-                    .collect::<Vec<_>>(),
-            ),
-            sigma_ss_abs: mean(
-                &members
-                    .iter()
-                    .map(|&v| (fits[v].params.sigma_ss - truth.params[v].sigma_ss).abs())
-                    .collect::<Vec<_>>(),
-            ),
-            normal_median_deg: ellipso_report::percentile(&mut normals, 0.5),
-        });
-    }
-    let scored: Vec<usize> = per_material.iter().flatten().copied().collect();
-    let mut normals: Vec<f64> = scored.iter().map(|&v| normal_err(v)).collect();
-    let mut inputs: Vec<f64> = scored.iter().map(|&v| input_err(v)).collect();
-    // Re-render RMSE over every kept observation of scored vertices.
-    let (sq_err, sq_obs) = scored
-        .par_iter()
-        .map(|&v| {
-            let vs = &set.vertices[v];
-            let pred = predict_vertex(&set.views, vs, &fits[v].params, fits[v].normal_world);
-            let mut e = 0.0;
-            let mut o = 0.0;
-            for (s, p) in vs.samples.iter().zip(pred) {
-                let Some(p) = p else { continue };
-                for (pc, sc) in p.iter().zip(&s.channels) {
-                    for (pk, sk) in pc.iter().zip(sc) {
-                        let obs = f64::from(*sk);
-                        e += (pk - obs).powi(2);
-                        o += obs * obs;
-                    }
-                }
-            }
-            (e, o)
-        })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-    let eta_material_pct = mean(
-        &materials
-            .iter()
-            .map(|m| 100.0 * (m.eta_median - m.eta_true).abs() / m.eta_true)
-            .collect::<Vec<_>>(),
-    );
-    let observed = fits
-        .iter()
-        .filter(|f| !f.flags.contains(&FitFlag::Unobserved))
-        .count();
-    Scores {
-        eta_material_pct,
-        vertices: fits.len(),
-        scored: scored.len(),
-        observed,
-        coverage: if observed == 0 {
-            f64::NAN
-        } else {
-            scored.len() as f64 / observed as f64
-        },
-        samples: set.vertices.iter().map(|v| v.samples.len()).sum(),
-        eta_mean_pct: mean(&scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>()),
-        eta_median_pct: ellipso_report::percentile(
-            &mut scored.iter().map(|&v| eta_pct(v)).collect::<Vec<_>>(),
-            0.5,
-        ),
-        normal_median_deg: ellipso_report::percentile(&mut normals, 0.5),
-        normal_p90_deg: ellipso_report::percentile(&mut normals, 0.9),
-        normal_input_median_deg: ellipso_report::percentile(&mut inputs, 0.5),
-        rho_d_mean_pct: mean(&scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>()),
-        rho_d_median_pct: ellipso_report::percentile(
-            &mut scored.iter().map(|&v| rho_d_pct(v)).collect::<Vec<_>>(),
-            0.5,
-        ),
-        sigma_s_abs: mean(
-            &scored
-                .iter()
-                .map(|&v| (fits[v].params.sigma_s - truth.params[v].sigma_s).abs())
-                .collect::<Vec<_>>(),
-        ),
-        sigma_ss_abs: mean(
-            &scored
-                .iter()
-                .map(|&v| (fits[v].params.sigma_ss - truth.params[v].sigma_ss).abs())
-                .collect::<Vec<_>>(),
-        ),
-        rerender_rmse: (sq_err / sq_obs.max(1e-300)).sqrt(),
-        materials,
-        flags,
-    }
 }

@@ -27,7 +27,7 @@ use ellipso_model::geometry::pose_error;
 use ellipso_pipeline::steps::Steps;
 use ellipso_report::plot::{LegendPosition, LinePlot};
 use ellipso_rig::acquire::capture::CaptureReport;
-use ellipso_rig::acquire::ready::{Recorder, report_lines};
+use ellipso_rig::acquire::ready::{Recorded, Recorder, report_lines};
 use ellipso_run_error::{Context, RunError, Say};
 use ellipso_run_error::{ensure, say};
 use ellipso_sim::scene::{Scene, shipped_scene};
@@ -138,6 +138,88 @@ pub fn run(
     steps: &mut dyn Steps,
     say: &dyn Say,
 ) -> Result<DemoRun, RunError> {
+    let setup = setup(request)?;
+    let (scene_path, scene, resolution) = (&setup.scene_path, &setup.scene, setup.resolution);
+    // the demo owns its output: a new or empty directory, or an earlier demo's (marker and
+    // all); everything is written beside it and swapped in whole at the end
+    let out = ellipso_report::output::OutputDir::claim(&request.out, "demo", &[scene_path])?;
+    let root = out.path().to_path_buf();
+    let session_dir = root.join("session");
+    say!(
+        say,
+        "ellipso demo: scene {} at {}×{}",
+        scene_path.display(),
+        resolution[0],
+        resolution[1]
+    );
+    say!(
+        say,
+        "[1/4] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
+    );
+    let captured = capture(request, &setup, &session_dir, recorder, say)?;
+    let (report, dir) = (captured.report, captured.dir);
+    if let Some(signal) = captured.signal {
+        // the partial demo goes with its staging directory; an earlier demo stays
+        return Ok(DemoRun::Stopped { signal });
+    }
+
+    say!(say, "[2/4] tracking camera poses from the AprilTags…");
+    let (tracked, session, accuracy) = track(scene, &dir, say)?;
+
+    say!(
+        say,
+        "[3/4] carving the mesh from the frames, fitting the polarimetric SVBRDF and shape per vertex…"
+    );
+    let fit = fit_score::fit_and_score(scene, &session, &out, request.quick, steps, say)?;
+
+    say!(say, "[4/4] pictures…");
+    let (polarisation, path_plot) =
+        pictures(scene, &session, &out, report.pulses as usize, &tracked, say)?;
+
+    let mut summary = serde_json::json!({
+        "scene": scene_path.display().to_string(),
+        "resolution": resolution,
+        "capture": report,
+        "pose_accuracy": accuracy,
+        "fit": fit.summary,
+    });
+    let summary_path = root.join("summary.json");
+    // every path in the summary is relative to its own folder (the staging folder moves whole)
+    ellipso_report::paths::paths_relative_to(&mut summary, &root);
+    ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
+    let shown = |p: &Path| out.published(p);
+    let report = DemoReport {
+        published: PathBuf::new(),
+        session: shown(&dir),
+        polarisation: shown(&polarisation),
+        camera_path: shown(&path_plot),
+        fit_ply: shown(&fit.ply),
+        fit_dir: shown(&fit.dir),
+        summary: shown(&summary_path),
+        capture: report,
+        pose_accuracy: accuracy,
+    };
+    let published = out.commit()?;
+    Ok(DemoRun::Done(Box::new(DemoReport {
+        published,
+        ..report
+    })))
+}
+
+/// The scene the demo captures and at what size.
+struct Setup {
+    /// The scene file.
+    scene_path: PathBuf,
+    /// The scene.
+    scene: Scene,
+    /// The capture's resolution, pixels (half the scene camera's sides; a quarter when quick).
+    resolution: [u32; 2],
+    /// Photos taken (`None`: the scene's whole path).
+    photos: Option<u32>,
+}
+
+/// Loads the requested scene (or the shipped one) and sizes the capture.
+fn setup(request: &DemoRequest) -> Result<Setup, RunError> {
     let scene_path = request
         .scene
         .clone()
@@ -162,28 +244,30 @@ pub fn run(
     } else {
         ([w / 2, h / 2], None)
     };
-    // the demo owns its output: a new or empty directory, or an earlier demo's (marker and
-    // all); everything is written beside it and swapped in whole at the end
-    let out = ellipso_report::output::OutputDir::claim(&request.out, "demo", &[&scene_path])?;
-    let root = out.path().to_path_buf();
-    let session_dir = root.join("session");
-    say!(
-        say,
-        "ellipso demo: scene {} at {}×{}",
-        scene_path.display(),
-        resolution[0],
-        resolution[1]
-    );
-    say!(
-        say,
-        "[1/4] capturing on the simulated rig (firmware core behind a pty, real link and pairing)…"
-    );
+    Ok(Setup {
+        scene_path,
+        scene,
+        resolution,
+        photos,
+    })
+}
+
+/// Captures the scene on the simulated rig into `session_dir`, paced as asked, and says the
+/// capture's summary.
+fn capture(
+    request: &DemoRequest,
+    setup: &Setup,
+    session_dir: &Path,
+    recorder: &mut dyn Recorder,
+    say: &dyn Say,
+) -> Result<Recorded, RunError> {
+    let (scene, resolution) = (&setup.scene, setup.resolution);
     // the photos as fast as the rig honestly takes them (the flash's duty limit, the sensor's
     // readout, the camera link), unless asked for the scene's hand-held pace
     let interval_ms = if request.real_time {
         scene.capture.interval_ms
     } else {
-        ellipso_rig::acquire::sim_rig::fastest_interval_ms(&scene, resolution)
+        ellipso_rig::acquire::sim_rig::fastest_interval_ms(scene, resolution)
     };
     say!(
         say,
@@ -199,32 +283,42 @@ pub fn run(
         }
     );
     let captured = crate::rig_capture::capture_on_sim_rig(
-        &scene_path,
-        &session_dir,
-        photos,
+        &setup.scene_path,
+        session_dir,
+        setup.photos,
         resolution,
         Some(interval_ms),
         recorder,
     )?;
-    let (report, dir) = (captured.report, captured.dir);
-    for line in report_lines(&report) {
+    for line in report_lines(&captured.report) {
         say!(say, "{line}");
     }
-    if let Some(signal) = captured.signal {
-        // the partial demo goes with its staging directory; an earlier demo stays
-        return Ok(DemoRun::Stopped { signal });
-    }
+    Ok(captured)
+}
 
-    say!(say, "[2/4] tracking camera poses from the AprilTags…");
-    let tracked = ellipso_vision::process::track_and_append(&dir, say)?;
-    let session = ellipso_session::reader::open(&dir)?;
+/// Tracks the camera poses of the session in `dir` from the AprilTags, opens it, and scores the
+/// poses against the scene's truth ([`pose_accuracy`]), said in one line.
+fn track(
+    scene: &Scene,
+    dir: &Path,
+    say: &dyn Say,
+) -> Result<
+    (
+        Vec<TrackedFrame>,
+        ellipso_session::reader::Session,
+        PoseAccuracy,
+    ),
+    RunError,
+> {
+    let tracked = ellipso_vision::process::track_and_append(dir, say)?;
+    let session = ellipso_session::reader::open(dir)?;
     let pairs: std::collections::BTreeMap<u64, u64> = session
         .frames
         .iter()
         .filter_map(|f| f.pulse_seq.map(|s| (f.frame_id, s)))
         .collect();
     let first_seq = pairs.values().min().copied().unwrap_or(0);
-    let accuracy = pose_accuracy(&scene, &tracked, &|id| {
+    let accuracy = pose_accuracy(scene, &tracked, &|id| {
         pairs.get(&id).map(|s| (s - first_seq) as usize)
     });
     say!(
@@ -237,15 +331,20 @@ pub fn run(
         accuracy.p90_rotation_deg,
         accuracy.p90_translation_mm
     );
+    Ok((tracked, session, accuracy))
+}
 
-    say!(
-        say,
-        "[3/4] carving the mesh from the frames, fitting the polarimetric SVBRDF and shape per vertex…"
-    );
-    let fit = fit_score::fit_and_score(&scene, &session, &out, request.quick, steps, say)?;
-
-    say!(say, "[4/4] pictures…");
-    let pictures = root.join("pictures");
+/// Writes the pictures: the polarisation images of the first complete frame and the camera path
+/// of the first `photos` poses; returns their paths (the polarisation folder, the plot).
+fn pictures(
+    scene: &Scene,
+    session: &ellipso_session::reader::Session,
+    out: &ellipso_report::output::OutputDir,
+    photos: usize,
+    tracked: &[TrackedFrame],
+    say: &dyn Say,
+) -> Result<(PathBuf, PathBuf), RunError> {
+    let pictures = out.path().join("pictures");
     std::fs::create_dir_all(&pictures)?;
     let first = session
         .frames
@@ -284,37 +383,9 @@ pub fn run(
         polar.files.len()
     );
     let path_plot = pictures.join("camera-path.png");
-    plot_path(&scene, report.pulses as usize, &tracked, &path_plot)?;
+    plot_path(scene, photos, tracked, &path_plot)?;
     say!(say, "  {}", out.published(&path_plot).display());
-
-    let mut summary = serde_json::json!({
-        "scene": scene_path.display().to_string(),
-        "resolution": resolution,
-        "capture": report,
-        "pose_accuracy": accuracy,
-        "fit": fit.summary,
-    });
-    let summary_path = root.join("summary.json");
-    // every path in the summary is relative to its own folder (the staging folder moves whole)
-    ellipso_report::paths::paths_relative_to(&mut summary, &root);
-    ellipso_report::atomic_file::write(&summary_path, serde_json::to_vec_pretty(&summary)?)?;
-    let shown = |p: &Path| out.published(p);
-    let report = DemoReport {
-        published: PathBuf::new(),
-        session: shown(&dir),
-        polarisation: shown(&pictures.join("frame0-polarisation")),
-        camera_path: shown(&path_plot),
-        fit_ply: shown(&fit.ply),
-        fit_dir: shown(&fit.dir),
-        summary: shown(&summary_path),
-        capture: report,
-        pose_accuracy: accuracy,
-    };
-    let published = out.commit()?;
-    Ok(DemoRun::Done(Box::new(DemoReport {
-        published,
-        ..report
-    })))
+    Ok((pictures.join("frame0-polarisation"), path_plot))
 }
 
 /// Top view of the camera path: truth (line) and tracked positions (points).

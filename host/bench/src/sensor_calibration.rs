@@ -13,11 +13,14 @@
 
 pub mod eta_shift;
 pub mod flash;
+mod pixel_truth;
 
 use std::path::{Path, PathBuf};
 
 use crate::table::{self, Align::Left as L};
-use ellipso_polar::sensor_calibration::{MeasureOptions, SensorCalibration, measure};
+use ellipso_polar::sensor_calibration::{
+    MeasureOptions, SensorCalibration, SensorFigures, measure,
+};
 use ellipso_polar::{PolarConfig, RawFrame, process, process_with_sensor};
 use ellipso_run_error::{Context, RunError, Say, say};
 use ellipso_sim::calibration_captures::{self, CapturePlan};
@@ -242,52 +245,9 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
     );
     let cal = calibrate(&scene, resolution, &work.join("captures"))?;
     let f = &cal.header.figures;
-    let renderer =
-        Renderer::new(&scene, options(resolution)).map_err(|e| RunError::msg(e.to_string()))?;
-    let pattern = renderer.fixed_pattern();
-    let layout = renderer.layout();
-    let camera = *renderer.camera();
-    let (w, h) = (camera.width, camera.height);
-    let k_true = renderer.radiometry().dn_per_electron();
+    let truth = pixel_truth::read(&scene, &cal, resolution)?;
+    let (k_true, black_true, er_true) = (truth.k_true, truth.black_true, &truth.er_true);
     let sigma_true = 2.3;
-    // truth figures from the pattern, over the non-hot pixels
-    let (mut off, mut cnt, mut ang2, mut na) = (0.0, 0.0, 0.0, 0.0);
-    let mut d_band = [(0.0f64, 0.0f64); 3];
-    let mut vig_err = 0.0f64;
-    for y in 0..h {
-        for x in 0..w {
-            let p = pattern.pixel(x, y);
-            let d = camera
-                .unproject_to_ray([f64::from(x), f64::from(y)])
-                .map_or(1.0, |r| r.z);
-            let v_true = renderer.radiometry().vignetting(d.clamp(-1.0, 1.0).acos());
-            vig_err = vig_err.max((d.powf(f.vignetting_exponent) / v_true - 1.0).abs());
-            if p.hot {
-                continue;
-            }
-            off += p.offset_dn;
-            cnt += 1.0;
-            let (est_deg, _) = cal.analyser(x, y);
-            let nominal = layout.analyser_at(x, y).angle_rad().to_degrees();
-            let true_deg = nominal + p.angle_error_rad.to_degrees();
-            let e = (est_deg - true_deg + 90.0).rem_euclid(180.0) - 90.0;
-            ang2 += e * e;
-            na += 1.0;
-            let e_inv = p.inverse_extinction.unwrap_or(0.0);
-            let band = layout.colour_at(x, y).map_or(0, |c| c.index());
-            d_band[band].0 += (1.0 - e_inv) / (1.0 + e_inv);
-            d_band[band].1 += 1.0;
-        }
-    }
-    let black_true = off / cnt;
-    let er_true: Vec<f64> = d_band
-        .iter()
-        .filter(|(_, c)| *c > 0.0)
-        .map(|(s, c)| {
-            let d = s / c;
-            (1.0 + d) / (1.0 - d)
-        })
-        .collect();
     let extinction_rel_err = er_true
         .iter()
         .zip(&f.extinction_ratio)
@@ -310,31 +270,14 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
         flash.polariser_std_deg,
         flash.highlights
     );
-    let shift = if photos > 0 {
-        say!(
-            say,
-            "fitting the demo captured with and without the effects ({photos} views, {}×{})",
-            resolution[0],
-            resolution[1]
-        );
-        let s = eta_shift::run(&cal, resolution, photos, &work.join("fits"), say)?;
-        for (name, ideal, c, u) in &s.materials {
-            say!(
-                say,
-                "  {name}: η error {ideal:+.3} % ideal sensor, {c:+.3} % calibrated, {u:+.3} % uncalibrated"
-            );
-        }
-        Some(s)
-    } else {
-        None
-    };
+    let shift = eta_shift_fits(&cal, resolution, photos, work, say)?;
     let recovered = Recovered {
         gain_rel_err: (f.gain_dn_per_e / k_true - 1.0).abs(),
         read_noise_rel_err: (f.read_noise_e / sigma_true - 1.0).abs(),
         black_level_err_dn: (f.black_level_dn - black_true).abs(),
-        analyser_angle_rms_deg: (ang2 / na).sqrt(),
+        analyser_angle_rms_deg: truth.analyser_angle_rms_deg,
         extinction_rel_err,
-        vignetting_err: vig_err,
+        vignetting_err: truth.vignetting_err,
         flash_position_err_mm: Some(flash.position_err_mm),
         flash_polariser_angle_err_deg: Some(flash.polariser_err_deg),
         eta_shift_calibrated_points_max: shift.as_ref().map(|s| s.calibrated_points_max),
@@ -347,6 +290,62 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
         stokes_rms_err_calibrated: srms,
         stokes_rms_err_uncalibrated: srms_u,
     };
+    let figures = figures(&truth, f, sigma_true, &flash);
+    let report = Report {
+        recovered,
+        figures,
+        not_measured: shift
+            .is_none()
+            .then(|| {
+                "eta_shift_calibrated_points_max: the end-to-end fits were skipped (--photos 0)"
+                    .to_string()
+            })
+            .into_iter()
+            .collect(),
+        command: "ellipso bench sensor".into(),
+    };
+    write_report(out, &report)?;
+    Ok(report)
+}
+
+/// The end-to-end fits of [`eta_shift`] on `photos` views (none when `photos` is 0), each
+/// material's η errors said.
+fn eta_shift_fits(
+    cal: &SensorCalibration,
+    resolution: [u32; 2],
+    photos: usize,
+    work: &Path,
+    say: &dyn Say,
+) -> Result<Option<eta_shift::EtaShift>, RunError> {
+    Ok(if photos > 0 {
+        say!(
+            say,
+            "fitting the demo captured with and without the effects ({photos} views, {}×{})",
+            resolution[0],
+            resolution[1]
+        );
+        let s = eta_shift::run(cal, resolution, photos, &work.join("fits"), say)?;
+        for (name, ideal, c, u) in &s.materials {
+            say!(
+                say,
+                "  {name}: η error {ideal:+.3} % ideal sensor, {c:+.3} % calibrated, {u:+.3} % uncalibrated"
+            );
+        }
+        Some(s)
+    } else {
+        None
+    })
+}
+
+/// Truth and estimate of each figure: the sensor's (`sigma_true`: the true read noise,
+/// electrons), the flash's and each colour band's extinction ratio.
+fn figures(
+    truth: &pixel_truth::PixelTruth,
+    f: &SensorFigures,
+    sigma_true: f64,
+    flash: &flash::FlashRecovered,
+) -> Vec<(String, f64, f64)> {
+    let (k_true, black_true, er_true) = (truth.k_true, truth.black_true, &truth.er_true);
     let mut figures = vec![
         ("gain_dn_per_e".to_string(), k_true, f.gain_dn_per_e),
         ("read_noise_e".into(), sigma_true, f.read_noise_e),
@@ -357,7 +356,7 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
         (
             "hot_pixels_fraction".into(),
             1e-4,
-            f.hot_pixels as f64 / f64::from(w * h),
+            f.hot_pixels as f64 / f64::from(truth.pixels),
         ),
     ];
     for (k, axis) in ["x", "y", "z"].iter().enumerate() {
@@ -375,21 +374,7 @@ pub fn run(out: &Path, work: &Path, photos: usize, say: &dyn Say) -> Result<Repo
     for (b, (t, e)) in er_true.iter().zip(&f.extinction_ratio).enumerate() {
         figures.push((format!("extinction_ratio_{}", ["R", "G", "B"][b]), *t, *e));
     }
-    let report = Report {
-        recovered,
-        figures,
-        not_measured: shift
-            .is_none()
-            .then(|| {
-                "eta_shift_calibrated_points_max: the end-to-end fits were skipped (--photos 0)"
-                    .to_string()
-            })
-            .into_iter()
-            .collect(),
-        command: "ellipso bench sensor".into(),
-    };
-    write_report(out, &report)?;
-    Ok(report)
+    figures
 }
 
 fn write_report(out: &Path, report: &Report) -> Result<(), RunError> {

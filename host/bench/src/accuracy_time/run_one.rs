@@ -9,6 +9,7 @@
 
 use std::time::Instant;
 
+use ellipso_fit::data::{SampleSet, VertexFit};
 use ellipso_fit::pipeline::{FitConfig, fit_sample_set};
 use ellipso_run_error::{RunError, Say};
 use ellipso_run_error::{ensure, say};
@@ -92,23 +93,7 @@ pub(super) fn one_run(
     let holdout = (!held.views.is_empty())
         .then(|| ellipso_fit::holdout::score(&held, &outcome.fits, full_scale).overall);
     let fit_s = outcome.times.fit_s();
-    // The forward pass is short (tens of milliseconds): its fastest of at least 3 repetitions
-    // and 0.25 s in all, so one scheduling hiccup does not move the ratio.
-    let mut forward_s = f64::INFINITY;
-    let mut spent_s = 0.0;
-    let mut repetitions = 0;
-    while repetitions < 3 || spent_s < 0.25 {
-        let t = Instant::now();
-        let checksum = forward_all(&capture.set, &outcome.fits);
-        let s = t.elapsed().as_secs_f64().max(1e-9);
-        ensure!(
-            checksum.is_finite(),
-            "forward evaluation produced a non-finite value"
-        );
-        forward_s = forward_s.min(s);
-        spent_s += s;
-        repetitions += 1;
-    }
+    let forward_s = fastest_forward_s(&capture.set, &outcome.fits)?;
     let scores = evaluate(&capture, &outcome.fits);
     let peak_rss_bytes = ellipso_report::memory::peak_rss_bytes().filter(|_| rss_reset);
     let lobes = crate::accuracy::specular::score(&capture, outcome.augmentation.as_ref());
@@ -143,6 +128,35 @@ pub(super) fn one_run(
         bracket,
         lobes,
     };
+    say_run(&r, say);
+    Ok(r)
+}
+
+/// The fastest of at least 3 forward evaluations of every observation of `set` with `fits`
+/// ([`forward_all`]) and 0.25 s of them in all, s; an error if one is not finite.
+fn fastest_forward_s(set: &SampleSet, fits: &[VertexFit]) -> Result<f64> {
+    // The forward pass is short (tens of milliseconds): its fastest of at least 3 repetitions
+    // and 0.25 s in all, so one scheduling hiccup does not move the ratio.
+    let mut forward_s = f64::INFINITY;
+    let mut spent_s = 0.0;
+    let mut repetitions = 0;
+    while repetitions < 3 || spent_s < 0.25 {
+        let t = Instant::now();
+        let checksum = forward_all(set, fits);
+        let s = t.elapsed().as_secs_f64().max(1e-9);
+        ensure!(
+            checksum.is_finite(),
+            "forward evaluation produced a non-finite value"
+        );
+        forward_s = forward_s.min(s);
+        spent_s += s;
+        repetitions += 1;
+    }
+    Ok(forward_s)
+}
+
+/// Says the run's summary line, then its clusters, the lobes' scores and each material's.
+fn say_run(r: &RunResult, say: &dyn Say) {
     say!(
         say,
         "{:<15} {:<8} {:<36} {:>4} photos {:>6} vertices ({:.3} of the observed scored) {:>8} samples  fit {:>7.2} s ({:>6.0}× forward)  η {:>6.2} % (median {:>5.2} %, material {:>5.2} %)  normal {:>5.2}°/{:>5.2}°  ρd {:>5.2} % (median {:>4.2} %)  re-render {:.4}  held-out s0 {}",
@@ -232,5 +246,4 @@ pub(super) fn one_run(
             m.normal_median_deg
         );
     }
-    Ok(r)
 }

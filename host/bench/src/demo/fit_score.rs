@@ -38,6 +38,41 @@ pub fn fit_and_score(
 ) -> Result<DemoFit, RunError> {
     let dir = out.path().join("fit");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let fitted = carve_and_fit(session, out, &dir, quick, steps, say)?;
+    // Only now the truth.
+    let scored = score_against_truth(scene, session, &fitted, say)?;
+    let summary = summary_json(&fitted, &scored);
+    say_mesh_scores(&scored.scores, say);
+    say_fit_scores(&fitted, &scored, say);
+    Ok(DemoFit {
+        ply: dir.join("fit.ply"),
+        dir,
+        summary,
+    })
+}
+
+/// The carved mesh and the fit on it, before any look at the truth.
+struct Fitted {
+    /// The mesh carved from the session's frames (the fit's input).
+    mesh: ellipso_model::geometry::TriangleMesh,
+    /// The carving's wall time, s.
+    mesh_s: f64,
+    /// The fit and its export.
+    run: ellipso_fit::output::FitRun,
+    /// The fit's settings with the session's sensor (what the true-mesh fit repeats).
+    config: ellipso_fit::session::SessionFitConfig,
+}
+
+/// Carves the mesh from the session's frames into `dir/mesh.ply` and fits it, its files and
+/// pictures written to `dir` (one outer iteration when `quick`).
+fn carve_and_fit(
+    session: &ellipso_session::reader::Session,
+    out: &ellipso_report::output::OutputDir,
+    dir: &std::path::Path,
+    quick: bool,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<Fitted, RunError> {
     let started = std::time::Instant::now();
     // taken once for the carving and the fit (their warnings said once)
     let poses = ellipso_pipeline::poses::poses_of(session, say)?;
@@ -67,7 +102,7 @@ pub fn fit_and_score(
         ..Default::default()
     };
     let to = ellipso_fit::output::OutputTo {
-        dir: &dir,
+        dir,
         publish: &|p| out.published(p),
     };
     let run = ellipso_pipeline::fit_run::fit_and_export(
@@ -82,8 +117,35 @@ pub fn fit_and_score(
         say,
     )?;
     let config = ellipso_fit::session::with_session_sensor(session, &config);
+    Ok(Fitted {
+        mesh,
+        mesh_s,
+        run,
+        config,
+    })
+}
 
-    // Only now the truth.
+/// The fit's scores against the simulator's truth.
+struct Scored {
+    /// Each fitted vertex against the truth at its closest true point.
+    score: crate::score::FitScores,
+    /// What the fit covers of the visible true surface.
+    coverage: crate::coverage::CoverageScores,
+    /// The held-out views' re-render errors, the fit's beside the truth's own.
+    held_out: Option<crate::score::HoldoutBeside>,
+    /// The meshes against the true surface and the same session fitted on the true mesh.
+    scores: crate::mesh_bench::MeshScores,
+}
+
+/// Reads the truth and scores the fit against it; fits the same session on the true mesh for
+/// the η beside it.
+fn score_against_truth(
+    scene: &Scene,
+    session: &ellipso_session::reader::Session,
+    fitted: &Fitted,
+    say: &dyn Say,
+) -> Result<Scored, RunError> {
+    let run = &fitted.run;
     let truth = crate::truth::truth_for_scoring(scene)?;
     let at = crate::truth_map::truth_at(&truth, run.fit.mesh.positions());
     let fits = &run.fit.outcome.fits;
@@ -96,20 +158,39 @@ pub fn fit_and_score(
         say,
         "scoring: the same session fitted on the true mesh, for η beside it…"
     );
-    let scores =
-        crate::mesh_bench::mesh_scores(scene, session, &mesh, &run.fit, run.wall_s, &config, say)?;
+    let scores = crate::mesh_bench::mesh_scores(
+        scene,
+        session,
+        &fitted.mesh,
+        &run.fit,
+        run.wall_s,
+        &fitted.config,
+        say,
+    )?;
+    Ok(Scored {
+        score,
+        coverage,
+        held_out,
+        scores,
+    })
+}
+
+/// The `fit` object of `summary.json`.
+fn summary_json(fitted: &Fitted, scored: &Scored) -> serde_json::Value {
+    let run = &fitted.run;
+    let (score, scores) = (&scored.score, &scored.scores);
     // the carved and refined meshes against the truth, as the mesh bench scores them
     let (before, after) = (&scores.distance_before, &scores.distance_after);
-    let summary = serde_json::json!({
-        "vertices": fits.len(),
+    serde_json::json!({
+        "vertices": run.fit.outcome.fits.len(),
         "fitted": score.scored,
-        "mesh_s": mesh_s,
+        "mesh_s": fitted.mesh_s,
         "wall_s": run.wall_s,
         "times_s": run.fit.outcome.times,
         "mesh_before_fit": before,
         "mesh_after_fit": after,
         "materials": score.materials,
-        "coverage": coverage,
+        "coverage": scored.coverage,
         "eta_material_mean_abs_error_pct": score.eta_material_mean_pct,
         "eta_material_max_abs_error_pct": score.eta_material_max_pct,
         "eta_vertex_median_error_pct": score.eta_vertex_median_pct,
@@ -117,7 +198,7 @@ pub fn fit_and_score(
         "normal_median_error_deg": score.normal_median_deg,
         "normal_p90_error_deg": score.normal_p90_deg,
         "rho_d_median_error_pct": score.rho_d_median_pct,
-        "held_out_beside_truth": held_out,
+        "held_out_beside_truth": scored.held_out,
         "input_mesh": "fit/mesh.ply",
         "surface": {
             "before": scores.before,
@@ -126,7 +207,13 @@ pub fn fit_and_score(
         },
         "eta_carved_vs_true_mesh": scores.eta,
         "true_mesh_fit_s": scores.true_mesh_fit_s,
-    });
+    })
+}
+
+/// Says the meshes against the truth (Chamfer, Hausdorff, the observed and unobserved surface)
+/// and each material's η from the carved mesh beside the true mesh's.
+fn say_mesh_scores(scores: &crate::mesh_bench::MeshScores, say: &dyn Say) {
+    let (before, after) = (&scores.distance_before, &scores.distance_after);
     say!(
         say,
         "mesh vs truth  Chamfer {:.3} mm before the fit, {:.3} mm after its shape refinement (Hausdorff {:.2} → {:.2} mm)",
@@ -175,6 +262,14 @@ pub fn fit_and_score(
             m.vertices[1]
         );
     }
+}
+
+/// Says the fit's scores: its normals and ρd, η per material with its coverage, the coverage of
+/// the visible surface with the σ calibration, η per vertex and the held-out views.
+fn say_fit_scores(fitted: &Fitted, scored: &Scored, say: &dyn Say) {
+    let run = &fitted.run;
+    let fits = &run.fit.outcome.fits;
+    let (score, coverage, held_out) = (&scored.score, &scored.coverage, &scored.held_out);
     say!(
         say,
         "fit          {}/{} vertices in {:.1} s · normal error median {:.2}° (90th percentile {:.2}°) · ρd error median {}",
@@ -254,11 +349,6 @@ pub fn fit_and_score(
             h.truth.alpha.relative_rmse,
         );
     }
-    Ok(DemoFit {
-        ply: dir.join("fit.ply"),
-        dir,
-        summary,
-    })
 }
 
 /// A signed percentage, or what its absence means: a median over no vertex is NaN, which the
