@@ -232,7 +232,16 @@ fn init(args: InitArgs) -> anyhow::Result<()> {
 
 fn check(args: CheckArgs) -> anyhow::Result<()> {
     let rig = RigFile::load(&args.rig)?;
-    let boards = ellipso_capture::hardware::rig_of_file(&rig, None)
+    let mut todo = check_file(&args, &rig)?;
+    let timing_ok = check_board(&args, &rig, &mut todo)?;
+    let fire_fixes = fire_test_flashes(&args, &rig, timing_ok)?;
+    verdict(&args, &todo, &fire_fixes)
+}
+
+/// The loaded rig file said: its boards (with their tag count) and camera. Returns the to-do
+/// for what it lacks (boards, camera, flash).
+fn check_file(args: &CheckArgs, rig: &RigFile) -> anyhow::Result<Vec<String>> {
+    let boards = ellipso_capture::hardware::rig_of_file(rig, None)
         .map_err(|e| anyhow::anyhow!("{e}"))?
         .boards;
     crate::outln!("rig file {}: loads", args.rig.display());
@@ -268,6 +277,13 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
                 .into(),
         );
     }
+    Ok(todo)
+}
+
+/// The trigger board on `trigger.port`: it must answer `Hello` (said), then is offered the
+/// capture's timing; a refusal goes to `todo`. Returns whether the board accepts the timing.
+/// The port is closed again on return.
+fn check_board(args: &CheckArgs, rig: &RigFile, todo: &mut Vec<String>) -> anyhow::Result<bool> {
     let port = &rig.trigger.port;
     if !port.starts_with("unix:") && !std::path::Path::new(port).exists() {
         bail!(
@@ -323,6 +339,17 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
         ),
     }
     drop(link); // the capture of --fire opens the port again
+    Ok(timing_ok)
+}
+
+/// `--fire N`: N test flashes fired through the capture ([`fire`]) and what they show said;
+/// returns what to fix. Without it (or when the board refuses the timing) it says that no flash
+/// was fired.
+fn fire_test_flashes(
+    args: &CheckArgs,
+    rig: &RigFile,
+    timing_ok: bool,
+) -> anyhow::Result<Vec<String>> {
     let camera = format!(
         "{} at {}",
         match rig.sensor.backend {
@@ -354,7 +381,7 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
                 None => format!("camera {camera}"),
             };
             crate::outln!("  firing {n} test flashes (free run) with {who}");
-            let check = fire::fire(&rig, n, stand_in.as_ref()).context("firing test flashes")?;
+            let check = fire::fire(rig, n, stand_in.as_ref()).context("firing test flashes")?;
             crate::outln!("  flashes: {} of {n} paired with a frame", check.paired());
             for line in check.lines() {
                 crate::outln!("    {line}");
@@ -366,12 +393,18 @@ fn check(args: CheckArgs) -> anyhow::Result<()> {
             fire_fixes = fixes;
         }
     }
+    Ok(fire_fixes)
+}
+
+/// The check's end: what the test flashes found to fix (an error) with the rest of the to-do,
+/// else ready to capture or the to-do before a fit.
+fn verdict(args: &CheckArgs, todo: &[String], fire_fixes: &[String]) -> anyhow::Result<()> {
     if !fire_fixes.is_empty() {
         crate::outln!("fix before capturing:");
-        for f in &fire_fixes {
+        for f in fire_fixes {
             crate::outln!("  - {f}");
         }
-        for t in &todo {
+        for t in todo {
             crate::outln!("  - {t}");
         }
         bail!(

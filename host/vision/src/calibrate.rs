@@ -33,7 +33,7 @@ pub mod views;
 pub mod zhang;
 
 use ellipso_model::camera::{CAMERA_PARAM_COUNT, CameraModel, Distortion, Pose};
-use nalgebra::{Point2, Point3, SMatrix};
+use nalgebra::{Matrix3, Point2, Point3, SMatrix};
 
 use crate::pose::estimate::{Correspondence, PoseConfig, PoseRejection, estimate_board_pose};
 use crate::pose::homography::{HomographyError, homography_dlt};
@@ -221,18 +221,32 @@ fn prepare(
     })
 }
 
-/// Calibrates a camera from views of a planar board (points on z = 0 of the board frame, with
-/// their observed pixels in the integer-centre convention). See the module doc.
-pub fn calibrate(
-    views: &[Vec<(Point3<f64>, Point2<f64>)>],
-    image_size: (u32, u32),
-    config: &CalibConfig,
-) -> Result<Calibration, CalibError> {
-    let (width, height) = image_size;
-    if width == 0 || height == 0 {
-        return Err(CalibError::EmptyImage { width, height });
+/// The error for `usable` views left when `config` needs more.
+fn too_few(usable: usize, rejected: &[RejectedView], config: &CalibConfig) -> CalibError {
+    CalibError::TooFewViews {
+        usable,
+        required: config.min_views.max(3),
+        rejected: rejected.to_vec(),
     }
-    let mut rejected = Vec::new();
+}
+
+/// The kept views as the joint optimisation reads them.
+fn view_data(kept: &[Prepared]) -> Vec<ViewData<'_>> {
+    kept.iter()
+        .map(|p| ViewData {
+            points_board: &p.points,
+            pixels: &p.pixels,
+        })
+        .collect()
+}
+
+/// Step 1: each view validated and its board→pixel homography fitted; the views that fail go
+/// to `rejected` with why. Returns the prepared views and their homographies, in input order.
+fn fit_homographies(
+    views: &[Vec<(Point3<f64>, Point2<f64>)>],
+    config: &CalibConfig,
+    rejected: &mut Vec<RejectedView>,
+) -> (Vec<Prepared>, Vec<Matrix3<f64>>) {
     let mut prepared = Vec::new();
     let mut homographies = Vec::new();
     for (index, view) in views.iter().enumerate() {
@@ -248,21 +262,31 @@ pub fn calibrate(
             Err(reason) => rejected.push(RejectedView { index, reason }),
         }
     }
-    let too_few = |usable: usize, rejected: &Vec<RejectedView>| CalibError::TooFewViews {
-        usable,
-        required: config.min_views.max(3),
-        rejected: rejected.clone(),
-    };
-    if prepared.len() < config.min_views.max(3) {
-        return Err(too_few(prepared.len(), &rejected));
-    }
-    let intrinsics = intrinsics_from_homographies(&homographies, width, height)?;
+    (prepared, homographies)
+}
+
+/// Step 2: the pinhole camera (zero distortion) of Zhang's closed form.
+fn closed_form_camera(
+    homographies: &[Matrix3<f64>],
+    width: u32,
+    height: u32,
+) -> Result<CameraModel, CalibError> {
+    let intrinsics = intrinsics_from_homographies(homographies, width, height)?;
     let pinhole = CameraModel::pinhole(width, height, intrinsics);
     pinhole
         .validate()
         .map_err(|_| CalibError::Optimisation("closed form gave an invalid camera"))?;
+    Ok(pinhole)
+}
 
-    // Initial poses with the pinhole camera; permissive: only geometry can reject here.
+/// Step 3: each view's initial `camera_from_board` with the pinhole camera; views it cannot
+/// pose go to `rejected`. Returns the kept views and their poses.
+fn initial_poses(
+    pinhole: &CameraModel,
+    prepared: Vec<Prepared>,
+    rejected: &mut Vec<RejectedView>,
+) -> (Vec<Prepared>, Vec<Pose>) {
+    // Permissive: only geometry can reject here.
     let pose_config = PoseConfig {
         min_tags: 0,
         min_corners: 4,
@@ -285,7 +309,7 @@ pub fn calibrate(
                 pixel: *px,
             })
             .collect();
-        match estimate_board_pose(&pinhole, &corr, &pose_config) {
+        match estimate_board_pose(pinhole, &corr, &pose_config) {
             Ok(bp) => {
                 poses.push(bp.camera_from_board);
                 kept.push(p);
@@ -296,29 +320,32 @@ pub fn calibrate(
             }),
         }
     }
-    if kept.len() < config.min_views.max(3) {
-        return Err(too_few(kept.len(), &rejected));
-    }
+    (kept, poses)
+}
 
-    // Radial initialisation (Zhang §3.3).
+/// Step 4: the pinhole camera with k1, k2 from the radial initialisation (Zhang §3.3).
+fn with_radial_start(pinhole: CameraModel, kept: &[Prepared], poses: &[Pose]) -> CameraModel {
     let mut samples = Vec::new();
-    for (p, pose) in kept.iter().zip(&poses) {
+    for (p, pose) in kept.iter().zip(poses) {
         for (q, px) in p.points.iter().zip(&p.pixels) {
             let c = pose * q;
             let norm = [c.x / c.z, c.y / c.z];
             samples.push((norm, pinhole.normalised_to_pixel(norm), *px));
         }
     }
-    let [k1, k2] = radial_initialisation(&intrinsics, &samples);
-    let mut camera = CameraModel {
+    let [k1, k2] = radial_initialisation(&pinhole.intrinsics, &samples);
+    CameraModel {
         distortion: Distortion {
             k1,
             k2,
             ..Distortion::ZERO
         },
         ..pinhole
-    };
+    }
+}
 
+/// Which camera parameters are estimated under `config`.
+fn free_parameters(config: &CalibConfig) -> [bool; CAMERA_PARAM_COUNT] {
     let mut free = [true; CAMERA_PARAM_COUNT];
     if config.fix_tangential {
         free[6] = false;
@@ -327,17 +354,23 @@ pub fn calibrate(
     if config.fix_k3 {
         free[8] = false;
     }
+    free
+}
 
+/// Steps 5 and 6: the joint LM, repeated without the outlier views (removed from `kept` and
+/// added to `rejected`) until none is left or the rounds run out. Returns the last round.
+fn adjust_rejecting_outliers(
+    mut camera: CameraModel,
+    mut poses: Vec<Pose>,
+    kept: &mut Vec<Prepared>,
+    free: &[bool; CAMERA_PARAM_COUNT],
+    config: &CalibConfig,
+    rejected: &mut Vec<RejectedView>,
+) -> Result<BundleResult, CalibError> {
     let mut round = 0;
-    let result: BundleResult = loop {
-        let data: Vec<ViewData<'_>> = kept
-            .iter()
-            .map(|p| ViewData {
-                points_board: &p.points,
-                pixels: &p.pixels,
-            })
-            .collect();
-        let result = bundle_adjust(&camera, &poses, &data, &free, config.max_iterations).ok_or(
+    loop {
+        let data = view_data(kept);
+        let result = bundle_adjust(&camera, &poses, &data, free, config.max_iterations).ok_or(
             CalibError::Optimisation("a board is behind the camera at the start"),
         )?;
         let mut rms: Vec<f64> = kept
@@ -352,7 +385,7 @@ pub fn calibrate(
             .filter(|&i| view_rms[i] > threshold)
             .collect();
         if outliers.is_empty() || round >= config.max_outlier_rounds {
-            break result;
+            return Ok(result);
         }
         round += 1;
         for &i in outliers.iter().rev() {
@@ -366,7 +399,7 @@ pub fn calibrate(
             });
         }
         if kept.len() < config.min_views.max(3) {
-            return Err(too_few(kept.len(), &rejected));
+            return Err(too_few(kept.len(), rejected, config));
         }
         camera = result.camera;
         poses = result
@@ -376,11 +409,27 @@ pub fn calibrate(
             .filter(|(i, _)| !outliers.contains(i))
             .map(|(_, p)| p)
             .collect();
-    };
-    rejected.sort_by_key(|r| r.index);
+    }
+}
 
-    let n_points: usize = kept.iter().map(|p| p.points.len()).sum();
-    let n_params = free.iter().filter(|f| **f).count() + 6 * kept.len();
+/// Step 7's result: the camera parameters' uncertainty.
+struct Uncertainty {
+    /// σ² = cost/(2N − p), px².
+    sigma2_px2: f64,
+    /// σ²·S⁻¹, rows and columns of fixed parameters 0.
+    covariance: SMatrix<f64, CAMERA_PARAM_COUNT, CAMERA_PARAM_COUNT>,
+    /// √ of the covariance diagonal.
+    std_errors: [f64; CAMERA_PARAM_COUNT],
+}
+
+/// Step 7: standard errors from σ²·S⁻¹ over `n_points` points of the kept views.
+fn uncertainty(
+    result: &BundleResult,
+    n_points: usize,
+    n_views: usize,
+    free: &[bool; CAMERA_PARAM_COUNT],
+) -> Result<Uncertainty, CalibError> {
+    let n_params = free.iter().filter(|f| **f).count() + 6 * n_views;
     // 2N > p whenever each view has ≥ 4 points and there are ≥ 3 views; max(1) guards anyway.
     let sigma2 = result.cost_px2 / (2 * n_points).saturating_sub(n_params).max(1) as f64;
     let inv = invert_scaled(&result.schur).ok_or(CalibError::Optimisation(
@@ -395,23 +444,55 @@ pub fn calibrate(
     }
     // Covariance diagonal ≥ 0 up to round-off: clamp before sqrt.
     let std_errors = std::array::from_fn(|k| covariance[(k, k)].max(0.0).sqrt());
+    Ok(Uncertainty {
+        sigma2_px2: sigma2,
+        covariance,
+        std_errors,
+    })
+}
+
+/// Calibrates a camera from views of a planar board (points on z = 0 of the board frame, with
+/// their observed pixels in the integer-centre convention). See the module doc.
+pub fn calibrate(
+    views: &[Vec<(Point3<f64>, Point2<f64>)>],
+    image_size: (u32, u32),
+    config: &CalibConfig,
+) -> Result<Calibration, CalibError> {
+    let (width, height) = image_size;
+    if width == 0 || height == 0 {
+        return Err(CalibError::EmptyImage { width, height });
+    }
+    let mut rejected = Vec::new();
+    let (prepared, homographies) = fit_homographies(views, config, &mut rejected);
+    if prepared.len() < config.min_views.max(3) {
+        return Err(too_few(prepared.len(), &rejected, config));
+    }
+    let pinhole = closed_form_camera(&homographies, width, height)?;
+    let (mut kept, poses) = initial_poses(&pinhole, prepared, &mut rejected);
+    if kept.len() < config.min_views.max(3) {
+        return Err(too_few(kept.len(), &rejected, config));
+    }
+    let camera = with_radial_start(pinhole, &kept, &poses);
+    let free = free_parameters(config);
+    let result = adjust_rejecting_outliers(camera, poses, &mut kept, &free, config, &mut rejected)?;
+    rejected.sort_by_key(|r| r.index);
+
+    let n_points: usize = kept.iter().map(|p| p.points.len()).sum();
+    let Uncertainty {
+        sigma2_px2,
+        covariance,
+        std_errors,
+    } = uncertainty(&result, n_points, kept.len(), &free)?;
     let spread = spread::view_spread(&result.poses);
-    let data: Vec<ViewData<'_>> = kept
-        .iter()
-        .map(|p| ViewData {
-            points_board: &p.points,
-            pixels: &p.pixels,
-        })
-        .collect();
     determined::check(
         &result.camera,
         &std_errors,
         &covariance,
         &result.poses,
-        &data,
+        &view_data(&kept),
         &free,
         result.cost_px2,
-        sigma2,
+        sigma2_px2,
         spread,
         config,
     )

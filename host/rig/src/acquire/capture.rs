@@ -32,16 +32,17 @@ mod main_loop;
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::thread;
+use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{bounded, unbounded};
+use crossbeam_channel::{Receiver, Sender, bounded, unbounded};
 use ellipso_protocol::PulseCount;
 
 pub use api::{CaptureError, CapturePlan, CaptureProgress, CaptureReport};
 
 use super::pairing::FrameArrival;
-use crate::camera::{Camera, CameraClockSample, CameraError, Frame, FrameStatus};
+use crate::camera::{Camera, CameraClockSample, CameraCounters, CameraError, Frame, FrameStatus};
+use crate::link::clock::ClockFit;
 use crate::link::{LinkError, TriggerLink, describe_reject};
 use ellipso_session::SessionError;
 use ellipso_session::events::SessionEvent;
@@ -89,6 +90,27 @@ pub fn capture(
     }
 }
 
+/// What the start measured before streaming: the device→host clock fit and the tightest
+/// latches of the camera's clock.
+struct Started {
+    clock: ClockFit,
+    latches: Vec<CameraClockSample>,
+}
+
+/// The running threads of a capture (camera thread → bounded queue → writer pool → main loop).
+struct Pipeline {
+    /// Set to stop the camera thread.
+    camera_stop: Arc<AtomicBool>,
+    /// Frames the camera has exposed but not yet delivered, as its thread last read them.
+    in_flight: Arc<AtomicU64>,
+    /// The camera thread; it returns the camera's counters.
+    camera_thread: JoinHandle<CameraCounters>,
+    /// The writer pool.
+    writers: Vec<JoinHandle<()>>,
+    /// Frames the writer pool has prepared, for the main loop.
+    written: Receiver<Result<Written, SessionError>>,
+}
+
 fn record(
     link: &TriggerLink,
     mut camera: Box<dyn Camera>,
@@ -97,8 +119,76 @@ fn record(
     stop: &AtomicBool,
     mut progress: impl FnMut(&CaptureProgress),
 ) -> Result<CaptureReport, CaptureError> {
-    let clock_now = || link.host_clock().now();
     let started = Instant::now();
+    let Started { clock, latches } = start_devices(link, camera.as_mut(), session, plan)?;
+    let Pipeline {
+        camera_stop,
+        in_flight,
+        camera_thread,
+        writers,
+        written: written_rx,
+    } = spawn_pipeline(camera, session, plan)?;
+
+    if let Err(e) = link.arm().and_then(|()| link.start()) {
+        camera_stop.store(true, Ordering::Release);
+        let _ = camera_thread.join();
+        for w in writers {
+            let _ = w.join();
+        }
+        return Err(e.into());
+    }
+
+    let expected = match plan.board.pulses {
+        PulseCount::Count(n) => Some(u64::from(n)),
+        PulseCount::Continuous => None,
+    };
+    let mut state = LoopState::new(plan, expected, clock.clone());
+    for l in &latches {
+        state.pairer.add_camera_clock_sample(l);
+    }
+    let ended = state.run(
+        link,
+        session,
+        &written_rx,
+        plan,
+        stop,
+        started,
+        &in_flight,
+        &mut progress,
+    );
+    // wind down — also after an error (a full disk): stop the board (idempotent), then the
+    // camera, then drain what is in flight
+    if link.is_connected()
+        && let Err(e) = link.stop()
+    {
+        tracing::warn!("stopping the trigger board: {e}");
+    }
+    camera_stop.store(true, Ordering::Release);
+    let camera_counters = camera_thread.join().unwrap_or_default();
+    for w in writers {
+        let _ = w.join();
+    }
+    let end_reason = ended?;
+    wind_up(
+        link,
+        session,
+        state,
+        &written_rx,
+        end_reason,
+        camera_counters,
+        started,
+    )
+}
+
+/// The start, logged: the board's identity, the clock fit, the camera configured and its clock
+/// latched, the camera started, then the board configured (a refusal is logged with why).
+fn start_devices(
+    link: &TriggerLink,
+    camera: &mut dyn Camera,
+    session: &mut SessionWriter,
+    plan: &CapturePlan,
+) -> Result<Started, CaptureError> {
+    let clock_now = || link.host_clock().now();
     let board = link.board();
     session.log(&SessionEvent::Board {
         t_host_us: clock_now(),
@@ -151,8 +241,16 @@ fn record(
         t_host_us: clock_now(),
         config: board_config_record(&plan.board),
     })?;
+    Ok(Started { clock, latches })
+}
 
-    // camera thread → bounded queue → writer pool → main loop
+/// Starts the camera thread (it owns `camera` from here) and the writer pool, joined by a queue
+/// of `plan.frame_queue` frames.
+fn spawn_pipeline(
+    mut camera: Box<dyn Camera>,
+    session: &SessionWriter,
+    plan: &CapturePlan,
+) -> Result<Pipeline, CaptureError> {
     let camera_stop = Arc::new(AtomicBool::new(false));
     let in_flight = Arc::new(AtomicU64::new(0));
     let (frame_tx, frame_rx) = bounded::<Frame>(plan.frame_queue.max(1));
@@ -191,39 +289,7 @@ fn record(
             let (rx, tx, dir) = (frame_rx.clone(), written_tx.clone(), frames_dir.clone());
             thread::Builder::new()
                 .name(format!("frame-writer-{i}"))
-                .spawn(move || {
-                    for frame in rx.iter() {
-                        let m = &frame.meta;
-                        let flagged = match &m.status {
-                            FrameStatus::Complete => None,
-                            FrameStatus::Flagged(r) => Some(r.as_str()),
-                        };
-                        let record = FrameRecord {
-                            t_host_us: m.t_host_us,
-                            frame_id: m.frame_id,
-                            t_camera_ns: m.t_camera_ns,
-                            exposure_us: m.exposure_us,
-                            gain_db: m.gain_db,
-                            width: m.width,
-                            height: m.height,
-                            pixels: &frame.pixels,
-                            flagged,
-                        };
-                        let r =
-                            SessionWriter::prepare_frame(&dir, record).map(|prepared| Written {
-                                prepared,
-                                arrival: FrameArrival {
-                                    frame_id: m.frame_id,
-                                    t_host_arrival: m.t_host_us,
-                                    t_camera_ns: m.t_camera_ns,
-                                },
-                                flagged: flagged.is_some(),
-                            });
-                        if tx.send(r).is_err() {
-                            break;
-                        }
-                    }
-                })
+                .spawn(move || write_frames(&rx, &tx, &dir))
         })
         .collect::<Result<_, _>>()
         .map_err(|e| CameraError::Stream {
@@ -231,47 +297,66 @@ fn record(
             reason: e.to_string(),
         })?;
     drop((frame_rx, written_tx));
+    Ok(Pipeline {
+        camera_stop,
+        in_flight,
+        camera_thread,
+        writers,
+        written: written_rx,
+    })
+}
 
-    if let Err(e) = link.arm().and_then(|()| link.start()) {
-        camera_stop.store(true, Ordering::Release);
-        let _ = camera_thread.join();
-        for w in writers {
-            let _ = w.join();
+/// A writer thread: each frame from `rx` prepared (PNG encoded) under `dir` and handed to the
+/// main loop on `tx`, until either side closes.
+fn write_frames(
+    rx: &Receiver<Frame>,
+    tx: &Sender<Result<Written, SessionError>>,
+    dir: &std::path::Path,
+) {
+    for frame in rx.iter() {
+        let m = &frame.meta;
+        let flagged = match &m.status {
+            FrameStatus::Complete => None,
+            FrameStatus::Flagged(r) => Some(r.as_str()),
+        };
+        let record = FrameRecord {
+            t_host_us: m.t_host_us,
+            frame_id: m.frame_id,
+            t_camera_ns: m.t_camera_ns,
+            exposure_us: m.exposure_us,
+            gain_db: m.gain_db,
+            width: m.width,
+            height: m.height,
+            pixels: &frame.pixels,
+            flagged,
+        };
+        let r = SessionWriter::prepare_frame(dir, record).map(|prepared| Written {
+            prepared,
+            arrival: FrameArrival {
+                frame_id: m.frame_id,
+                t_host_arrival: m.t_host_us,
+                t_camera_ns: m.t_camera_ns,
+            },
+            flagged: flagged.is_some(),
+        });
+        if tx.send(r).is_err() {
+            break;
         }
-        return Err(e.into());
     }
+}
 
-    let expected = match plan.board.pulses {
-        PulseCount::Count(n) => Some(u64::from(n)),
-        PulseCount::Continuous => None,
-    };
-    let mut state = LoopState::new(plan, expected, clock.clone());
-    for l in &latches {
-        state.pairer.add_camera_clock_sample(l);
-    }
-    let ended = state.run(
-        link,
-        session,
-        &written_rx,
-        plan,
-        stop,
-        started,
-        &in_flight,
-        &mut progress,
-    );
-    // wind down — also after an error (a full disk): stop the board (idempotent), then the
-    // camera, then drain what is in flight
-    if link.is_connected()
-        && let Err(e) = link.stop()
-    {
-        tracing::warn!("stopping the trigger board: {e}");
-    }
-    camera_stop.store(true, Ordering::Release);
-    let camera_counters = camera_thread.join().unwrap_or_default();
-    for w in writers {
-        let _ = w.join();
-    }
-    let end_reason = ended?;
+/// After the threads are joined: the frames still in `written_rx` committed and paired, the
+/// pairing finished and logged, the link counters logged, and the report.
+fn wind_up(
+    link: &TriggerLink,
+    session: &mut SessionWriter,
+    mut state: LoopState,
+    written_rx: &Receiver<Result<Written, SessionError>>,
+    end_reason: String,
+    camera_counters: CameraCounters,
+    started: Instant,
+) -> Result<CaptureReport, CaptureError> {
+    let clock_now = || link.host_clock().now();
     for w in written_rx.try_iter() {
         state.on_written(w?, session)?;
     }

@@ -33,12 +33,13 @@ use crate::calibrate::flash_session::{
     FlashMeasurement, ViewHighlight, measure_flash, replace_flash_section, view_highlight,
 };
 use crate::calibrate::highlight::Sphere;
-use crate::calibrate::views::board_view;
+use crate::calibrate::views::{View, board_view};
 use crate::calibrate::{CalibConfig, calibrate};
 use crate::pose::DetectorConfig;
-use crate::track::{DetectImage, FamilyDetectors};
+use crate::track::{DetectImage, FamilyDetectors, TrackedBoard};
 use ellipso_polar::frame::RawFrame;
-use ellipso_session::reader;
+use ellipso_report::output::OutputFile;
+use ellipso_session::reader::{self, FrameEntry, Session};
 
 /// What `ellipso calibrate` runs (its flags, parsed by the binary).
 #[derive(Debug, Clone)]
@@ -71,9 +72,7 @@ pub struct SessionCalibration {
 
 /// What the frames gave, in words: unreadable frames by reason, frames without a board's tag,
 /// frames with too few corners.
-fn frame_causes(
-    detected: &[Result<(crate::calibrate::views::View, Option<usize>), String>],
-) -> String {
+fn frame_causes(detected: &[Result<(View, Option<usize>), String>]) -> String {
     let mut unreadable: std::collections::BTreeMap<&str, usize> = Default::default();
     let (mut no_tags, mut few, mut good) = (0, 0, 0);
     for d in detected {
@@ -133,6 +132,26 @@ pub fn flash_not_measured(why: &str, flash_only: bool) -> String {
     )
 }
 
+/// The session's complete frames with what detection made of each (stage 2 of [`run`]).
+struct Detected<'a> {
+    /// The complete frames, in session order.
+    frames: Vec<&'a FrameEntry>,
+    /// Per frame its view (empty when it has none).
+    views: Vec<View>,
+    /// Per frame the index of the board its view is of, if any.
+    board_of_view: Vec<Option<usize>>,
+    /// What the frames gave, in words ([`frame_causes`]).
+    causes: String,
+}
+
+/// The camera the views are posed with, the posed views (index, camera_from_board) and the
+/// `[camera]` section to write (none when the rig file's camera was used).
+type PosedViews = (
+    CameraModel,
+    Vec<(usize, ellipso_model::camera::Pose)>,
+    Option<String>,
+);
+
 /// Runs `ellipso calibrate`: claims the output, detects, calibrates, writes the rig sections;
 /// every line of the report goes to `say`.
 pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
@@ -141,7 +160,53 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         "calibrate flash: give the sphere, --sphere R,X,Y,Z (radius and centre in metres, in the \
          world frame of the session's boards)"
     );
-    // claimed first: the session's own `calibration/` by default, never elsewhere inside it
+    let (out, rig_camera) = claim_output(args)?;
+    let session = reader::open(&args.session)?;
+    // calibration needs the boards only: the camera model is what it estimates
+    let boards = crate::process::boards_of(&session)?;
+    let detected = detect_views(args, &session, &boards, say)?;
+    let size = (
+        session.manifest.sensor.width,
+        session.manifest.sensor.height,
+    );
+    let (camera, posed, camera_text) =
+        camera_and_poses(rig_camera, &detected, size, args, &out, say)?;
+    let camera_text = camera_text.unwrap_or_default();
+    let Some(sphere) = args.sphere else {
+        out.write(camera_text)?;
+        say!(say, "rig sections written to {}", out.shown().display());
+        return Ok(SessionCalibration {
+            camera,
+            flash: None,
+        });
+    };
+    let highlights = sphere_highlights(&session, &detected, &boards, &camera, &posed, &sphere, say);
+    let flash = match measure_flash(&camera, &highlights) {
+        Ok(flash) => flash,
+        Err(e) => {
+            let why = e.to_string();
+            if args.flash_only {
+                return Err(RunError::msg(flash_not_measured(&why, true)));
+            }
+            // what was determined is kept: the camera section is written, then the flash
+            // part's failure is the command's error, with the photos that would measure it
+            out.write(camera_text)?;
+            say!(say, "[camera] written to {}", out.shown().display());
+            return Err(RunError::msg(flash_not_measured(&why, false)));
+        }
+    };
+    say_flash(&flash, highlights.len(), say);
+    write_flash(args, &out, &camera_text, &flash, say)?;
+    Ok(SessionCalibration {
+        camera,
+        flash: Some(flash),
+    })
+}
+
+/// Stage 1 of [`run`]: the output file claimed (the session's own `calibration/` by default,
+/// never elsewhere inside it) and, for `calibrate flash`, the `[camera]` of the rig file it
+/// names, if it has one.
+fn claim_output(args: &Args) -> Result<(OutputFile, Option<CameraModel>), RunError> {
     let default_name = if args.flash_only {
         "flash.toml"
     } else {
@@ -151,7 +216,7 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         .out
         .clone()
         .unwrap_or_else(|| args.session.join("calibration").join(default_name));
-    let out = ellipso_report::output::OutputFile::claim(
+    let out = OutputFile::claim(
         &out,
         "calibrate",
         ellipso_report::output::FileFormat::TOML,
@@ -165,9 +230,17 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
     } else {
         None
     };
-    let session = reader::open(&args.session)?;
-    // calibration needs the boards only: the camera model is what it estimates
-    let boards = crate::process::boards_of(&session)?;
+    Ok((out, rig_camera))
+}
+
+/// Stage 2 of [`run`]: tags detected on every complete frame (in parallel), each frame's view
+/// or why it has none; says how many frames are usable and what the others gave.
+fn detect_views<'a>(
+    args: &Args,
+    session: &'a Session,
+    boards: &[TrackedBoard],
+    say: &dyn Say,
+) -> Result<Detected<'a>, RunError> {
     let layout = session.manifest.sensor.layout;
     let s = &session.manifest.sensor;
     let frames: Vec<_> = session.frames.iter().filter(|f| f.complete).collect();
@@ -185,16 +258,16 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         args.image
     );
     // per frame: its view, or why it has none (kept, so a failed calibration can say why)
-    let detected: Vec<Result<(crate::calibrate::views::View, Option<usize>), String>> = frames
+    let detected: Vec<Result<(View, Option<usize>), String>> = frames
         .par_iter()
         .map_init(
-            || FamilyDetectors::new(&boards, DetectorConfig::default()),
+            || FamilyDetectors::new(boards, DetectorConfig::default()),
             |detectors, entry| {
                 let detectors = detectors.as_mut().map_err(|e| e.to_string())?;
                 let (w, h, px) = session.load_frame(entry).map_err(|e| e.to_string())?;
                 let raw = RawFrame::new(w, h, s.bit_depth, layout, px)
                     .map_err(|e| format!("{}: {e}", entry.path.display()))?;
-                board_view(detectors, &raw, &boards, args.image).map_err(|e| e.to_string())
+                board_view(detectors, &raw, boards, args.image).map_err(|e| e.to_string())
             },
         )
         .collect();
@@ -205,22 +278,41 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
     let usable = views.iter().filter(|v| v.len() >= 8).count();
     let causes = frame_causes(&detected);
     say!(say, "{usable} frames with ≥ 2 tags of one board ({causes})");
-    let detected_views: Vec<_> = detected
+    let board_of_view: Vec<_> = detected
         .iter()
         .map(|d| d.as_ref().map(|(_, b)| *b).unwrap_or_default())
         .collect();
-    let (camera, posed, camera_text) = match rig_camera {
+    Ok(Detected {
+        frames,
+        views,
+        board_of_view,
+        causes,
+    })
+}
+
+/// Stage 3 of [`run`]: the views posed with the rig file's camera when there is one (it must
+/// be of the session's frame size, `size`), else the camera calibrated from them.
+fn camera_and_poses(
+    rig_camera: Option<CameraModel>,
+    detected: &Detected<'_>,
+    size: (u32, u32),
+    args: &Args,
+    out: &OutputFile,
+    say: &dyn Say,
+) -> Result<PosedViews, RunError> {
+    let (width, height) = size;
+    Ok(match rig_camera {
         Some(camera) => {
             ensure!(
-                (camera.width, camera.height) == (s.width, s.height),
+                (camera.width, camera.height) == (width, height),
                 "{}: its [camera] is {}×{}, the session's frames {}×{}: not this camera's rig file",
                 out.shown().display(),
                 camera.width,
                 camera.height,
-                s.width,
-                s.height
+                width,
+                height
             );
-            let posed = pose_views(&camera, &views, say);
+            let posed = pose_views(&camera, &detected.views, say);
             say!(
                 say,
                 "{} views posed with the [camera] of {}",
@@ -230,8 +322,9 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
             (camera, posed, None)
         }
         None => {
-            let cal = calibrate_views(&views, args, (s.width, s.height), say)
-                .with_context(|| format!("{} frames: {causes}", frames.len()))?;
+            let cal = calibrate_views(&detected.views, args, (width, height), say).with_context(
+                || format!("{} frames: {}", detected.frames.len(), detected.causes),
+            )?;
             let posed = cal
                 .views
                 .iter()
@@ -239,22 +332,27 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
                 .collect();
             (cal.camera, posed, Some(cal.to_toml_camera_section()))
         }
-    };
-    let camera_text = camera_text.unwrap_or_default();
-    let Some(sphere) = args.sphere else {
-        out.write(camera_text)?;
-        say!(say, "rig sections written to {}", out.shown().display());
-        return Ok(SessionCalibration {
-            camera,
-            flash: None,
-        });
-    };
-    // per calibrated view: its frame, board and pose → the highlight and its polarisation
-    let highlights: Vec<ViewHighlight> = posed
+    })
+}
+
+/// Stage 4 of [`run`]: per posed view, its frame, board and pose → the highlight on `sphere`
+/// and its polarisation; frames without one are said with why and left out.
+fn sphere_highlights(
+    session: &Session,
+    detected: &Detected<'_>,
+    boards: &[TrackedBoard],
+    camera: &CameraModel,
+    posed: &[(usize, ellipso_model::camera::Pose)],
+    sphere: &Sphere,
+    say: &dyn Say,
+) -> Vec<ViewHighlight> {
+    let layout = session.manifest.sensor.layout;
+    let s = &session.manifest.sensor;
+    posed
         .par_iter()
         .filter_map(|(index, camera_from_board)| {
-            let board = &boards[detected_views[*index]?];
-            let entry = frames[*index];
+            let board = &boards[detected.board_of_view[*index]?];
+            let entry = detected.frames[*index];
             let found = session
                 .load_frame(entry)
                 .map_err(|e| e.to_string())
@@ -264,10 +362,10 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
                 .and_then(|raw| {
                     view_highlight(
                         &raw,
-                        &camera,
+                        camera,
                         camera_from_board,
                         &board.world_from_board(),
-                        &sphere,
+                        sphere,
                     )
                 });
             match found {
@@ -278,21 +376,12 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
                 }
             }
         })
-        .collect();
-    let flash = match measure_flash(&camera, &highlights) {
-        Ok(flash) => flash,
-        Err(e) => {
-            let why = e.to_string();
-            if args.flash_only {
-                return Err(RunError::msg(flash_not_measured(&why, true)));
-            }
-            // what was determined is kept: the camera section is written, then the flash
-            // part's failure is the command's error, with the photos that would measure it
-            out.write(camera_text)?;
-            say!(say, "[camera] written to {}", out.shown().display());
-            return Err(RunError::msg(flash_not_measured(&why, false)));
-        }
-    };
+        .collect()
+}
+
+/// Says the measured flash: its position (mm, camera frame) from `highlights` highlights, and
+/// its polariser angle.
+fn say_flash(flash: &FlashMeasurement, highlights: usize, say: &dyn Say) {
     let p = flash.position.flash_camera_m.coords * 1e3;
     let sd = flash.position.std_m.map(|v| v * 1e3);
     say!(
@@ -304,7 +393,7 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         sd[1],
         p.z,
         sd[2],
-        highlights.len(),
+        highlights,
         flash.position.rms_angle_rad * 1e3
     );
     say!(
@@ -315,6 +404,17 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         flash.polariser.max_correction_deg,
         flash.polariser.min_dolp
     );
+}
+
+/// Stage 5 of [`run`]: the `[flash]` section written — into the rig file `out` with its other
+/// tables kept (`calibrate flash`), else below `camera_text`.
+fn write_flash(
+    args: &Args,
+    out: &OutputFile,
+    camera_text: &str,
+    flash: &FlashMeasurement,
+    say: &dyn Say,
+) -> Result<(), RunError> {
     let section = flash.to_toml_flash_section();
     if args.flash_only {
         // the rig file's other tables are kept as they are
@@ -331,16 +431,13 @@ pub fn run(args: &Args, say: &dyn Say) -> Result<SessionCalibration, RunError> {
         out.write(format!("{camera_text}\n{section}"))?;
         say!(say, "rig sections written to {}", out.shown().display());
     }
-    Ok(SessionCalibration {
-        camera,
-        flash: Some(flash),
-    })
+    Ok(())
 }
 
 /// Calibrates the camera from the views and says the result (parameters ± σ, rejected views,
 /// the views' spread).
 fn calibrate_views(
-    views: &[crate::calibrate::views::View],
+    views: &[View],
     args: &Args,
     size: (u32, u32),
     say: &dyn Say,
@@ -406,7 +503,7 @@ fn rig_camera(path: &std::path::Path) -> Result<Option<CameraModel>, String> {
 /// that is not this one; an ambiguous flip) is said with why and left out.
 fn pose_views(
     camera: &CameraModel,
-    views: &[crate::calibrate::views::View],
+    views: &[View],
     say: &dyn Say,
 ) -> Vec<(usize, ellipso_model::camera::Pose)> {
     use crate::pose::estimate::{Correspondence, PoseConfig, estimate_board_pose};
