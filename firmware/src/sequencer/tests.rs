@@ -4,7 +4,10 @@
 use super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::{OutputEdge, PinOutputs, RecordingOutputs};
-use ellipso_protocol::{Bracket, CaptureConfig, PulseCount, PulseEvent};
+use ellipso_protocol::{
+    Bracket, CaptureConfig, Fault, PULSE_FLASH_FORCED_OFF, PULSE_LATE, PULSE_NO_FLASH, PulseCount,
+    PulseEvent,
+};
 use embedded_hal_mock::eh1::digital::{Mock as PinMock, State, Transaction as T};
 
 pub(super) const LEAD: u64 = SequencerTiming::DEFAULT.lead_us as u64;

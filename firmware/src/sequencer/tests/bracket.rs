@@ -4,7 +4,7 @@
 use super::super::tests::{LEAD, faults, plan, pulses, run_on_time, started};
 use super::super::*;
 use crate::outputs::RecordingOutputs;
-use ellipso_protocol::{Bracket, ENERGY_ONE_Q15, PulseCount};
+use ellipso_protocol::{Bracket, ENERGY_ONE_Q15, Fault, PULSE_LATE, PulseCount};
 
 const QUARTER: u16 = 0x2000;
 const SIXTEENTH: u16 = 0x0800;

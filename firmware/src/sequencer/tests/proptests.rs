@@ -19,7 +19,10 @@
 use super::super::*;
 use crate::config::LED_RIG_LIMITS;
 use crate::outputs::RecordingOutputs;
-use ellipso_protocol::{Bracket, CaptureConfig, ENERGY_ONE_Q15, PulseCount, PulseEvent};
+use ellipso_protocol::{
+    Bracket, CaptureConfig, ENERGY_ONE_Q15, Fault, PULSE_FLASH_FORCED_OFF, PULSE_NO_FLASH,
+    PulseCount, PulseEvent,
+};
 use proptest::prelude::*;
 use proptest::test_runner::RngSeed;
 
