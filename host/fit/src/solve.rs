@@ -97,7 +97,7 @@ use super::data::{FitFlag, SampleSet, VertexFit, VertexGuide, VertexSamples, Vie
 use finish::{finish, prior_fit};
 use lm::{LmState, RawDual, physical, raw_from};
 
-use problem::{Chart, Problem, Scratch};
+use problem::{Bounds, Chart, Problem, Scratch};
 
 /// The guide of a vertex without one (no virtual samples, no floor, the default priors).
 static NO_GUIDE: VertexGuide = VertexGuide {
@@ -126,97 +126,19 @@ pub fn fit_vertex(
 ) -> VertexFit {
     let mut problem = Problem::new(views, vertex, colour, guide, config);
     let n = problem.len();
-    let unknowns = if colour { 12 } else { 8 };
-    let mut flags = Vec::new();
-    if n < unknowns {
-        flags.push(FitFlag::UnderDetermined);
-    }
-    let g = &vertex.gates;
-    let mean_signal_dn = if n > 0 {
-        problem
-            .obs
-            .iter()
-            .enumerate()
-            .map(|(k, o)| {
-                let s: f64 = o.iter().take(problem.channels).map(|c| c[0]).sum();
-                s / problem.channels as f64 * problem.normalisers[k]
-            })
-            .sum::<f64>()
-            / n as f64
-    } else {
-        0.0
-    };
-    if g.dark > g.kept || (n > 0 && mean_signal_dn < config.dark_signal_dn) {
-        flags.push(FitFlag::Dark);
-    }
-    if g.saturated > 0
-        && g.saturated as f64 > config.saturated_fraction * (g.kept + g.saturated) as f64
-    {
-        flags.push(FitFlag::Saturated);
-    }
-    if g.grazing > g.kept {
-        flags.push(FitFlag::GrazingOnly);
-    }
-    let start_normal = init
-        .map(|f| f.normal_world)
-        .filter(|v| unit(*v).is_some())
-        .or_else(|| unit(vertex.normal_world))
-        .unwrap_or([0.0, 0.0, 1.0]);
-    let start_normal = unit(start_normal).unwrap_or([0.0, 0.0, 1.0]);
+    let mut flags = gate_flags(&problem, vertex, colour, config);
+    let start_normal = start_normal(vertex, init);
     if n < config.min_views.max(1) {
         flags.push(FitFlag::TooFewViews);
-        if vertex.samples.is_empty() && g.seen_lit() == 0 {
+        if vertex.samples.is_empty() && vertex.gates.seen_lit() == 0 {
             flags.push(FitFlag::Unobserved);
         }
         return prior_fit(&problem, vertex, start_normal, init, flags, config);
     }
-    let bounds = problem.bounds;
     let virtuals = problem.virtuals.len();
     let mut scratch_f = Scratch::<f64>::new(n, virtuals);
     let mut scratch_d = Scratch::<RawDual>::new(n, virtuals);
-    let mut starts: Vec<[f64; lm::N_RAW]> = match init {
-        Some(f) => {
-            let p = &f.params;
-            // A warm start may sit on a bound: the projected LM leaves it as soon as the
-            // gradient points into the box (lm.rs).
-            let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, &bounds)];
-            if let Some([eta, _]) = guide.eta_prior {
-                // The vertex's own lobes at the material's η: the starts are ranked by their
-                // cost, where an own η a few prior widths off would outweigh everything else
-                // although LM corrects it in one step.
-                s.push(raw_from(eta, p.sigma_s, p.sigma_ss, &bounds));
-            }
-            if let Some([sigma_s, sigma_ss, _]) = guide.lobe_start {
-                // The cluster's lobes with the material's η where it is pooled (the albedos,
-                // ρ_s included, are projected: only the lobe shapes are a start), and its sharp
-                // lobe with the broader of its and the vertex's own second lobe. Where the two
-                // lobes would start (nearly) equal — a cluster that saw one lobe returns
-                // σss = σs — the second starts at 3σs: on equal lobes the split of the light
-                // between them is undetermined and LM cannot tell which way to separate them.
-                let eta = guide.eta_prior.map_or(p.eta, |prior| prior[0]);
-                if sigma_ss >= 1.5 * sigma_s {
-                    s.push(raw_from(eta, sigma_s, sigma_ss, &bounds));
-                }
-                let mut broad = sigma_ss.max(p.sigma_ss);
-                if broad < 1.5 * sigma_s {
-                    broad = (3.0 * sigma_s).min(1.0);
-                }
-                if broad != sigma_ss {
-                    s.push(raw_from(eta, sigma_s, broad, &bounds));
-                }
-            }
-            s
-        }
-        None => config
-            .cold_starts
-            .iter()
-            .map(|s| raw_from(s[0], s[1], s[2], &bounds))
-            .collect(),
-    };
-    if starts.is_empty() {
-        let p = config.prior;
-        starts.push(raw_from(p[0], p[1], p[2], &bounds));
-    }
+    let starts = lm_starts(init, guide, &problem.bounds, config);
     let adaptive = config.effort == Effort::Adaptive;
     let rank = starts.len() > 1 && (adaptive || init.is_some());
     // Coarse to fine: a cold start ranks its starts and runs LM on a subsample of the views,
@@ -249,34 +171,13 @@ pub fn fit_vertex(
         first
     };
     let measurement = problem.loss == LossMode::Measurement;
-    for _ in 1..config.passes {
-        // Measurement mode: the weights at the current solution (the run used the weights of
-        // its start); another pass only if they moved by more than 10 %.
-        let moved = if measurement {
-            reweight_at(&mut problem, &state, &mut scratch_f)
-        } else {
-            0.0
-        };
-        if adaptive && state.converged && moved <= 0.1 {
-            break;
-        }
-        let again = lm::run(
-            &mut problem,
-            state.raw,
-            state.normal,
-            config,
-            &mut scratch_f,
-            &mut scratch_d,
-        );
-        let iterations = again.iterations;
-        // Measurement mode: a later pass has better weights, so its cost is not comparable;
-        // it is kept whenever it is finite.
-        if again.cost <= state.cost || (measurement && again.cost.is_finite()) {
-            state = again;
-        } else {
-            state.iterations = iterations;
-        }
-    }
+    further_passes(
+        &mut problem,
+        &mut state,
+        config,
+        &mut scratch_f,
+        &mut scratch_d,
+    );
     // The unit lobes at the final state, with their DoP fields (for the flags), and from them
     // the weights at the final state (for the standard errors).
     let x = physical(state.raw);
@@ -285,6 +186,155 @@ pub fn fit_vertex(
         let _ = problem.reweight(&scratch_f, &state.albedos);
     }
     finish(&problem, vertex, state, flags, guide, config, &scratch_f)
+}
+
+/// The flags the gates and the sample count decide before any fit: `UnderDetermined`, `Dark`,
+/// `Saturated` and `GrazingOnly` (see the module doc for their triggers).
+fn gate_flags(
+    problem: &Problem,
+    vertex: &VertexSamples,
+    colour: bool,
+    config: &SolverConfig,
+) -> Vec<FitFlag> {
+    let n = problem.len();
+    let unknowns = if colour { 12 } else { 8 };
+    let mut flags = Vec::new();
+    if n < unknowns {
+        flags.push(FitFlag::UnderDetermined);
+    }
+    let g = &vertex.gates;
+    let mean_signal_dn = if n > 0 {
+        problem
+            .obs
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let s: f64 = o.iter().take(problem.channels).map(|c| c[0]).sum();
+                s / problem.channels as f64 * problem.normalisers[k]
+            })
+            .sum::<f64>()
+            / n as f64
+    } else {
+        0.0
+    };
+    if g.dark > g.kept || (n > 0 && mean_signal_dn < config.dark_signal_dn) {
+        flags.push(FitFlag::Dark);
+    }
+    if g.saturated > 0
+        && g.saturated as f64 > config.saturated_fraction * (g.kept + g.saturated) as f64
+    {
+        flags.push(FitFlag::Saturated);
+    }
+    if g.grazing > g.kept {
+        flags.push(FitFlag::GrazingOnly);
+    }
+    flags
+}
+
+/// The normal the fit starts from: `init`'s where it is a usable direction, else the mesh
+/// normal, else +z; unit length.
+fn start_normal(vertex: &VertexSamples, init: Option<&VertexFit>) -> [f64; 3] {
+    let start_normal = init
+        .map(|f| f.normal_world)
+        .filter(|v| unit(*v).is_some())
+        .or_else(|| unit(vertex.normal_world))
+        .unwrap_or([0.0, 0.0, 1.0]);
+    unit(start_normal).unwrap_or([0.0, 0.0, 1.0])
+}
+
+/// The LM starts (raw coordinates): from `init` and the guide's pooled η and cluster lobes on a
+/// warm start, the configured cold starts otherwise, and the prior when that leaves none.
+fn lm_starts(
+    init: Option<&VertexFit>,
+    guide: &VertexGuide,
+    bounds: &Bounds,
+    config: &SolverConfig,
+) -> Vec<[f64; lm::N_RAW]> {
+    let mut starts: Vec<[f64; lm::N_RAW]> = match init {
+        Some(f) => {
+            let p = &f.params;
+            // A warm start may sit on a bound: the projected LM leaves it as soon as the
+            // gradient points into the box (lm.rs).
+            let mut s = vec![raw_from(p.eta, p.sigma_s, p.sigma_ss, bounds)];
+            if let Some([eta, _]) = guide.eta_prior {
+                // The vertex's own lobes at the material's η: the starts are ranked by their
+                // cost, where an own η a few prior widths off would outweigh everything else
+                // although LM corrects it in one step.
+                s.push(raw_from(eta, p.sigma_s, p.sigma_ss, bounds));
+            }
+            if let Some([sigma_s, sigma_ss, _]) = guide.lobe_start {
+                // The cluster's lobes with the material's η where it is pooled (the albedos,
+                // ρ_s included, are projected: only the lobe shapes are a start), and its sharp
+                // lobe with the broader of its and the vertex's own second lobe. Where the two
+                // lobes would start (nearly) equal — a cluster that saw one lobe returns
+                // σss = σs — the second starts at 3σs: on equal lobes the split of the light
+                // between them is undetermined and LM cannot tell which way to separate them.
+                let eta = guide.eta_prior.map_or(p.eta, |prior| prior[0]);
+                if sigma_ss >= 1.5 * sigma_s {
+                    s.push(raw_from(eta, sigma_s, sigma_ss, bounds));
+                }
+                let mut broad = sigma_ss.max(p.sigma_ss);
+                if broad < 1.5 * sigma_s {
+                    broad = (3.0 * sigma_s).min(1.0);
+                }
+                if broad != sigma_ss {
+                    s.push(raw_from(eta, sigma_s, broad, bounds));
+                }
+            }
+            s
+        }
+        None => config
+            .cold_starts
+            .iter()
+            .map(|s| raw_from(s[0], s[1], s[2], bounds))
+            .collect(),
+    };
+    if starts.is_empty() {
+        let p = config.prior;
+        starts.push(raw_from(p[0], p[1], p[2], bounds));
+    }
+    starts
+}
+
+/// Passes 2…[`SolverConfig::passes`] from `state` (updated in place): each reweights first in
+/// measurement mode; adaptive effort stops once converged and the weights moved ≤ 10 %.
+fn further_passes(
+    problem: &mut Problem,
+    state: &mut LmState,
+    config: &SolverConfig,
+    scratch_f: &mut Scratch<f64>,
+    scratch_d: &mut Scratch<RawDual>,
+) {
+    let adaptive = config.effort == Effort::Adaptive;
+    let measurement = problem.loss == LossMode::Measurement;
+    for _ in 1..config.passes {
+        // Measurement mode: the weights at the current solution (the run used the weights of
+        // its start); another pass only if they moved by more than 10 %.
+        let moved = if measurement {
+            reweight_at(problem, state, scratch_f)
+        } else {
+            0.0
+        };
+        if adaptive && state.converged && moved <= 0.1 {
+            break;
+        }
+        let again = lm::run(
+            problem,
+            state.raw,
+            state.normal,
+            config,
+            scratch_f,
+            scratch_d,
+        );
+        let iterations = again.iterations;
+        // Measurement mode: a later pass has better weights, so its cost is not comparable;
+        // it is kept whenever it is finite.
+        if again.cost <= state.cost || (measurement && again.cost.is_finite()) {
+            *state = again;
+        } else {
+            state.iterations = iterations;
+        }
+    }
 }
 
 /// LM from the best of `starts`: ranked by their cost at `start_normal` when `rank` (one f64

@@ -19,14 +19,15 @@ use std::time::Instant;
 
 use ellipso_fit::output::{FitRun, OutputTo, export_fit};
 use ellipso_fit::session::{SessionFitConfig, fit_session, with_session_sensor};
+use ellipso_fit::shape::hull::HullField;
 use ellipso_fit::shard::Shard;
 use ellipso_model::geometry::TriangleMesh;
-use ellipso_report::output::OutputDir;
+use ellipso_report::output::{OutputDir, OutputFile};
 use ellipso_run_error::{Context, RunError, Say};
 use ellipso_session::reader::Session;
 use nalgebra::Isometry3;
 
-use crate::fit_import::{ImportFlags, Imported};
+use crate::fit_import::{ImportFlags, Imported, Models};
 use crate::fit_shard::{ShardInputs, ShardRun};
 use crate::mesh::{mesh_of_session, write_mesh};
 use crate::steps::Steps;
@@ -72,68 +73,28 @@ pub enum FitDone {
 
 /// Runs `ellipso fit` (module contract).
 pub fn run(
-    request: FitRequest<'_>,
+    mut request: FitRequest<'_>,
     steps: &mut dyn Steps,
     say: &dyn Say,
 ) -> Result<FitDone, RunError> {
+    let Checked {
+        out_dir,
+        part_file,
+        given_mesh,
+        models,
+        session,
+        mesh_config,
+    } = check_request(&mut request, say)?;
     let FitRequest {
         session: session_dir,
         mesh: mesh_path,
-        out,
         view,
         vertices,
         no_hull,
         mut config,
         shard,
-        import,
-        sensor_calibration,
+        ..
     } = request;
-    // the output is claimed before any work: a bad --out is refused at once, not after the fit
-    let mut inputs: Vec<&Path> = vec![session_dir];
-    inputs.extend(mesh_path);
-    let (out_dir, part_file) = match shard {
-        Some(_) => (None, Some(crate::fit_shard::claim_part(out, &inputs)?)),
-        None => (Some(OutputDir::claim(out, "fit", &inputs)?), None),
-    };
-    // A given mesh is read first: a bad mesh is refused before the session is opened.
-    let given_mesh = mesh_path
-        .map(|path| {
-            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))
-        })
-        .transpose()?;
-    let models = crate::fit_import::read(&import, mesh_path.is_some(), shard.is_some())?;
-    let session = ellipso_session::reader::open(session_dir)?;
-    ellipso_run_error::ensure!(
-        (0.0..=0.5).contains(&config.holdout_fraction),
-        "--holdout {}: must be a fraction in [0, 0.5]",
-        config.holdout_fraction
-    );
-    // --view names a frame of the session: checked now, not after the fit
-    if let Some(id) = view {
-        ellipso_run_error::ensure!(
-            session
-                .frames
-                .iter()
-                .any(|f| f.frame_id == id && f.complete),
-            "--view {id}: {} has no complete frame {id}",
-            session_dir.display()
-        );
-    }
-    let sensor = crate::sensor::session_calibration(
-        &session,
-        sensor_calibration,
-        config.observe.dark_level_dn,
-        say,
-    )?;
-    config.observe.sensor_calibration = sensor.clone();
-    let mesh_config = ellipso_mesh::MeshConfig {
-        sensor_calibration: sensor,
-        ..Default::default()
-    };
-    let read = session.report.summary();
-    if read != "intact" {
-        say.err(format_args!("warning: {}: {read}", session_dir.display()));
-    }
     if let Some(shard) = shard {
         let inputs = ShardInputs {
             session: &session,
@@ -161,61 +122,19 @@ pub fn run(
             // the hull `ellipso mesh` saved beside this mesh, when it is this session's, carved
             // from the poses this fit takes, for this very file (crate::mesh_hull)
             let imported = import.as_ref().is_some_and(|i| i.poses.is_some());
-            let saved = match (imported, mesh_path) {
-                (false, Some(path)) => {
-                    let identity = crate::mesh_hull::SessionIdentity::of(&session);
-                    match crate::mesh_hull::reusable_hull(path, &identity, &poses) {
-                        Ok(hull) => hull.map(|h| (h, path)),
-                        Err(why) => {
-                            say.err(format_args!("not reusing the saved hull: {why}"));
-                            None
-                        }
-                    }
-                }
-                _ => None,
-            };
-            if let Some((hull, path)) = saved {
-                say.err(format_args!(
-                    "reusing the visual hull `ellipso mesh` saved beside {} (same session, \
-                     poses and mesh file; the surface update stays inside it)",
-                    path.display()
-                ));
-                (mesh, Some(hull))
-            } else {
-                say.err(format_args!(
-                    "carving the visual hull from the frames (the surface update stays inside it)…"
-                ));
-                match mesh_of_session(&session, Some(&poses[..]), &mesh_config, say, steps) {
-                    Ok((_, _, hull)) => (mesh, Some(hull)),
-                    Err(e) => {
-                        let e = e.into_boxed();
-                        say.err(format_args!(
-                            "warning: no visual hull ({}); the surface update runs without the \
-                         silhouettes' constraint",
-                            chain(e.as_ref())
-                        ));
-                        (mesh, None)
-                    }
-                }
-            }
+            let saved_beside = mesh_path.filter(|_| !imported);
+            let hull = hull_of_given_mesh(saved_beside, &session, &poses, &mesh_config, steps, say);
+            (mesh, hull)
         }
-        None => {
-            say.err(format_args!(
-                "no --mesh: carving the object's mesh from the frames first…"
-            ));
-            let mut mesh_config = mesh_config;
-            mesh_config.remesh.target_vertices = vertices;
-            let (mesh, report, hull) =
-                mesh_of_session(&session, Some(&poses[..]), &mesh_config, say, steps)?;
-            let path = out.join("mesh.ply");
-            write_mesh(&mesh, &report, &path)?;
-            say.err(format_args!(
-                "  {} ({} vertices)",
-                out_dir.published(&path).display(),
-                report.vertices
-            ));
-            (mesh, Some(hull))
-        }
+        None => carve_mesh(
+            &session,
+            &poses,
+            mesh_config,
+            vertices,
+            &out_dir,
+            steps,
+            say,
+        )?,
     };
     config.hull = hull.map(std::sync::Arc::new);
     let run = fit_and_export(
@@ -236,6 +155,166 @@ pub fn run(
         out: out_dir.commit()?,
         run: Box::new(run),
     })
+}
+
+/// What [`check_request`] claimed, read and checked before the long work.
+struct Checked {
+    /// The output folder, claimed (without a shard).
+    out_dir: Option<OutputDir>,
+    /// The part file, claimed (with a shard).
+    part_file: Option<OutputFile>,
+    /// The given mesh, read.
+    given_mesh: Option<TriangleMesh>,
+    /// The COLMAP models the import flags name, read.
+    models: Option<Models>,
+    /// The session, opened.
+    session: Session,
+    /// The carving's settings, with the sensor calibration the frames are read with.
+    mesh_config: ellipso_mesh::MeshConfig,
+}
+
+/// Everything that can be refused, in the module contract's order: claims the output, reads
+/// the given mesh and the import's models, opens the session, checks the held-out fraction and
+/// the pictures' frame, and settles the sensor calibration (set into `request.config`); warns
+/// when the session was not read intact.
+fn check_request(request: &mut FitRequest<'_>, say: &dyn Say) -> Result<Checked, RunError> {
+    let session_dir = request.session;
+    let mesh_path = request.mesh;
+    let shard = request.shard;
+    let config = &mut request.config;
+    // the output is claimed before any work: a bad --out is refused at once, not after the fit
+    let mut inputs: Vec<&Path> = vec![session_dir];
+    inputs.extend(mesh_path);
+    let (out_dir, part_file) = match shard {
+        Some(_) => (
+            None,
+            Some(crate::fit_shard::claim_part(request.out, &inputs)?),
+        ),
+        None => (Some(OutputDir::claim(request.out, "fit", &inputs)?), None),
+    };
+    // A given mesh is read first: a bad mesh is refused before the session is opened.
+    let given_mesh = mesh_path
+        .map(|path| {
+            TriangleMesh::load(path).with_context(|| format!("loading mesh {}", path.display()))
+        })
+        .transpose()?;
+    let models = crate::fit_import::read(&request.import, mesh_path.is_some(), shard.is_some())?;
+    let session = ellipso_session::reader::open(session_dir)?;
+    ellipso_run_error::ensure!(
+        (0.0..=0.5).contains(&config.holdout_fraction),
+        "--holdout {}: must be a fraction in [0, 0.5]",
+        config.holdout_fraction
+    );
+    // --view names a frame of the session: checked now, not after the fit
+    if let Some(id) = request.view {
+        ellipso_run_error::ensure!(
+            session
+                .frames
+                .iter()
+                .any(|f| f.frame_id == id && f.complete),
+            "--view {id}: {} has no complete frame {id}",
+            session_dir.display()
+        );
+    }
+    let sensor = crate::sensor::session_calibration(
+        &session,
+        request.sensor_calibration,
+        config.observe.dark_level_dn,
+        say,
+    )?;
+    config.observe.sensor_calibration = sensor.clone();
+    let mesh_config = ellipso_mesh::MeshConfig {
+        sensor_calibration: sensor,
+        ..Default::default()
+    };
+    let read = session.report.summary();
+    if read != "intact" {
+        say.err(format_args!("warning: {}: {read}", session_dir.display()));
+    }
+    Ok(Checked {
+        out_dir,
+        part_file,
+        given_mesh,
+        models,
+        session,
+        mesh_config,
+    })
+}
+
+/// The visual hull for a given mesh: the one `ellipso mesh` saved beside `saved_beside` (the
+/// mesh file, `None` where the poses are imported) when it is reusable, else carved from the
+/// frames; `None`, with a warning, when the carving fails.
+fn hull_of_given_mesh(
+    saved_beside: Option<&Path>,
+    session: &Session,
+    poses: &[(u64, Isometry3<f64>)],
+    mesh_config: &ellipso_mesh::MeshConfig,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Option<HullField> {
+    let saved = match saved_beside {
+        Some(path) => {
+            let identity = crate::mesh_hull::SessionIdentity::of(session);
+            match crate::mesh_hull::reusable_hull(path, &identity, poses) {
+                Ok(hull) => hull.map(|h| (h, path)),
+                Err(why) => {
+                    say.err(format_args!("not reusing the saved hull: {why}"));
+                    None
+                }
+            }
+        }
+        None => None,
+    };
+    if let Some((hull, path)) = saved {
+        say.err(format_args!(
+            "reusing the visual hull `ellipso mesh` saved beside {} (same session, \
+             poses and mesh file; the surface update stays inside it)",
+            path.display()
+        ));
+        Some(hull)
+    } else {
+        say.err(format_args!(
+            "carving the visual hull from the frames (the surface update stays inside it)…"
+        ));
+        match mesh_of_session(session, Some(poses), mesh_config, say, steps) {
+            Ok((_, _, hull)) => Some(hull),
+            Err(e) => {
+                let e = e.into_boxed();
+                say.err(format_args!(
+                    "warning: no visual hull ({}); the surface update runs without the \
+                 silhouettes' constraint",
+                    chain(e.as_ref())
+                ));
+                None
+            }
+        }
+    }
+}
+
+/// Without `--mesh`: the object's mesh carved from the frames (`vertices` vertices), written to
+/// `OUT/mesh.ply`, with its visual hull.
+fn carve_mesh(
+    session: &Session,
+    poses: &[(u64, Isometry3<f64>)],
+    mut mesh_config: ellipso_mesh::MeshConfig,
+    vertices: usize,
+    out_dir: &OutputDir,
+    steps: &mut dyn Steps,
+    say: &dyn Say,
+) -> Result<(TriangleMesh, Option<HullField>), RunError> {
+    say.err(format_args!(
+        "no --mesh: carving the object's mesh from the frames first…"
+    ));
+    mesh_config.remesh.target_vertices = vertices;
+    let (mesh, report, hull) = mesh_of_session(session, Some(poses), &mesh_config, say, steps)?;
+    let path = out_dir.path().join("mesh.ply");
+    write_mesh(&mesh, &report, &path)?;
+    say.err(format_args!(
+        "  {} ({} vertices)",
+        out_dir.published(&path).display(),
+        report.vertices
+    ));
+    Ok((mesh, Some(hull)))
 }
 
 /// An error and its causes on one line, `a: b: c` (as `anyhow`'s `{:#}` writes it).

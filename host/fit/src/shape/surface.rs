@@ -37,9 +37,13 @@ use nalgebra::{Point3, Vector3};
 
 #[cfg(test)]
 mod tests;
+mod unfold;
+
+pub use unfold::BACKTRACK_FRACTIONS;
+use unfold::{left_hull_by, turned_over, unfolded_step};
 
 use super::hull::HullField;
-use super::integrate::{IntegrateConfig, Targets, integrate, project_inside, step_size};
+use super::integrate::{IntegrateConfig, Integrated, Targets, integrate, step_size};
 use super::{ShapeError, mesh_with_positions};
 use crate::data::{SampleSet, VertexFit};
 
@@ -255,117 +259,8 @@ fn on_silhouette(
     tangent_views.take(hull.votes).count() >= hull.votes
 }
 
-/// The fractions of its solved move a vertex may be cut back to, in turn, where the whole
-/// step would turn one of its triangles over. Only the corners of the triangles that fold are
-/// cut back (and then the corners of any triangle the cut folds): a sliver next to a
-/// silhouette can fold under a step that moves the rest of the surface as it should. Refusing
-/// the whole step had ended the update after one step on the demo at 9 389 vertices (observed
-/// surface 0.25 mm); shortening the whole step for one sliver applied half of every step there
-/// (0.131 mm). The last fraction is 0: the corner stays exactly where it was (not even
-/// projected onto the hull), so a triangle with every corner there is the last good mesh's and
-/// cannot fold. Refusing the step when ⅛ still folded ended the update before its first step
-/// on a 60-photo capture of the demo, where the projection onto the hull folded two slivers of
-/// the unobserved underside (observed surface 0.521 mm, normals 1.80°).
-pub const BACKTRACK_FRACTIONS: [f64; 4] = [0.5, 0.25, 0.125, 0.0];
-
 fn full_step() -> f64 {
     1.0
-}
-
-/// The step `before → after` with the move of the corners of folding triangles cut back
-/// ([`BACKTRACK_FRACTIONS`]) until no triangle turns over, projected inside the hull (except
-/// the corners that do not move): the smallest fraction applied, the vertices cut back, the
-/// positions and the vertices projected. Ends: each round raises a corner's level, and a
-/// triangle with every corner at the last level is the one `before` had.
-fn unfolded_step(
-    triangles: &[[u32; 3]],
-    before: &[Point3<f64>],
-    after: &[Point3<f64>],
-    hull: Option<&HullField>,
-) -> Unfolded {
-    let fractions = |level: u8| match level {
-        0 => 1.0,
-        l => BACKTRACK_FRACTIONS[usize::from(l) - 1],
-    };
-    let last = BACKTRACK_FRACTIONS.len() as u8;
-    let mut level = vec![0u8; before.len()];
-    loop {
-        let mut positions: Vec<Point3<f64>> = before
-            .iter()
-            .zip(after)
-            .zip(&level)
-            .map(|((b, a), &l)| b + (a - b) * fractions(l))
-            .collect();
-        // Between two surfaces inside a hull that is not convex lies a surface that may leave
-        // it: projected back as the solve's own result is.
-        let projected = hull.map_or(0, |h| project_inside(h, &mut positions));
-        for ((p, b), &l) in positions.iter_mut().zip(before).zip(&level) {
-            if l == last {
-                *p = *b;
-            }
-        }
-        let folded: Vec<&[u32; 3]> = triangles
-            .iter()
-            .filter(|t| turns_over(before, &positions, t))
-            .collect();
-        if folded.is_empty() {
-            let shortened = level.iter().filter(|&&l| l > 0).count();
-            let deepest = level.iter().copied().max().unwrap_or(0);
-            return Unfolded {
-                fraction: fractions(deepest),
-                shortened,
-                positions,
-                projected,
-            };
-        }
-        for t in folded {
-            for &v in t {
-                let l = &mut level[v as usize];
-                // A folded triangle has a corner below the last level (module doc).
-                *l = (*l + 1).min(last);
-            }
-        }
-    }
-}
-
-/// How far a step `before → after` takes a vertex further outside the hull than it was (or
-/// than the hull's surface, for one that was inside), metres; ≤ 0 when none goes out. A vertex
-/// of the input mesh that lies outside (a mesh from elsewhere, the carved mesh's own
-/// extraction error, a corner held in place by [`unfolded_step`]) is not a step leaving it.
-fn left_hull_by(hull: &HullField, before: &[Point3<f64>], after: &[Point3<f64>]) -> f64 {
-    before
-        .iter()
-        .zip(after)
-        .map(|(b, a)| hull.value_world(a).0 - hull.value_world(b).0.max(0.0))
-        .filter(|d| !d.is_nan())
-        .fold(f64::NEG_INFINITY, f64::max)
-}
-
-/// What [`unfolded_step`] applied.
-struct Unfolded {
-    /// The smallest fraction of a vertex's move applied.
-    fraction: f64,
-    /// Vertices whose move was cut back.
-    shortened: usize,
-    positions: Vec<Point3<f64>>,
-    projected: usize,
-}
-
-/// Whether triangle `t` reverses its orientation between `before` and `after`.
-fn turns_over(before: &[Point3<f64>], after: &[Point3<f64>], t: &[u32; 3]) -> bool {
-    let normal = |p: &[Point3<f64>]| {
-        let [a, b, c] = t.map(|i| p[i as usize]);
-        (b - a).cross(&(c - a))
-    };
-    normal(before).dot(&normal(after)) < 0.0
-}
-
-/// Triangles whose orientation reverses between `before` and `after`.
-fn turned_over(triangles: &[[u32; 3]], before: &[Point3<f64>], after: &[Point3<f64>]) -> usize {
-    triangles
-        .iter()
-        .filter(|t| turns_over(before, after, t))
-        .count()
 }
 
 impl SurfaceState {
@@ -416,30 +311,45 @@ impl SurfaceState {
                 got: observed.len().min(self.anchors.len()),
             });
         }
-        let targets = super::normal_targets(mesh, fits, &config.integrate.weights)?;
-        let mut confidence = targets.confidence;
-        for (c, o) in confidence.iter_mut().zip(observed) {
-            if !o {
-                *c = 0.0;
-            }
+        let inputs = step_inputs(mesh, fits, observed, cameras, hull, config)?;
+        let step = self.solve(mesh, &inputs, hull, config)?;
+        let new_mesh = mesh_with_positions(mesh, step.solved.positions.clone())?;
+        let mut report = self.report(mesh, &new_mesh, observed, &inputs.trusted, &step);
+        let refused = self.refusal(mesh, hull, &step, &report, config);
+        report.on_silhouette = inputs.on_silhouette.iter().filter(|s| **s).count();
+        report.seconds = started.elapsed().as_secs_f64();
+        if let Some(why) = refused {
+            report.stopped = Some(why);
+            self.done = true;
+            self.iterations.push(report);
+            return Ok(None);
         }
-        let screening: Vec<f64> = observed
-            .iter()
-            .map(|&o| if o { 1.0 } else { 0.0 })
-            .collect();
-        let trusted: Vec<Option<Vector3<f64>>> = (0..n)
-            .map(|v| (confidence[v] > 0.0).then(|| Vector3::from(targets.normals_world[v])))
-            .collect();
-        let on_silhouette: Vec<bool> = match hull {
-            Some(h) => (0..n)
-                .map(|v| {
-                    trusted[v].is_some_and(|nv| {
-                        on_silhouette(h, &mesh.positions()[v], &nv, cameras, config)
-                    })
-                })
-                .collect(),
-            None => Vec::new(),
-        };
+        report.applied = true;
+        if step.full_step_rms_m < config.converged_rms_m {
+            report.stopped = Some(format!(
+                "converged: the step moved {:.4} mm RMS (< {:.4} mm)",
+                step.full_step_rms_m * 1e3,
+                config.converged_rms_m * 1e3
+            ));
+            self.done = true;
+        }
+        self.previous_normals = Some(inputs.trusted);
+        // After a shortened step the next one also carries what this one left out, so its
+        // size is not compared with this one's (the misfit and hull tests still apply).
+        self.previous_rms_m = (step.step_fraction == 1.0).then_some(step.full_step_rms_m);
+        self.iterations.push(report);
+        Ok(Some(new_mesh))
+    }
+
+    /// The screened integration towards `inputs`' normals, cut back where the whole step would
+    /// turn triangles over ([`unfolded_step`]).
+    fn solve(
+        &self,
+        mesh: &TriangleMesh,
+        inputs: &StepInputs,
+        hull: Option<&HullField>,
+        config: &SurfaceConfig,
+    ) -> Result<SolvedStep, ShapeError> {
         let mut integrate_config = config.integrate.clone();
         if hull.is_none() {
             integrate_config.weights.lambda_position = config.lambda_position_without_hull;
@@ -448,11 +358,11 @@ impl SurfaceState {
             mesh.positions(),
             mesh.triangles(),
             &Targets {
-                normals_world: &targets.normals_world,
-                confidence: &confidence,
+                normals_world: &inputs.normals_world,
+                confidence: &inputs.confidence,
                 anchors: &self.anchors,
-                screening: &screening,
-                on_silhouette: &on_silhouette,
+                screening: &inputs.screening,
+                on_silhouette: &inputs.on_silhouette,
             },
             hull,
             &integrate_config,
@@ -474,7 +384,25 @@ impl SurfaceState {
             step_fraction = u.fraction;
             shortened_vertices = u.shortened;
         }
-        let new_mesh = mesh_with_positions(mesh, solved.positions.clone())?;
+        Ok(SolvedStep {
+            solved,
+            full_step_rms_m,
+            turned_over_full_step,
+            step_fraction,
+            shortened_vertices,
+        })
+    }
+
+    /// The step's report, not yet applied, stopped or timed (`on_silhouette` still 0).
+    fn report(
+        &self,
+        mesh: &TriangleMesh,
+        new_mesh: &TriangleMesh,
+        observed: &[bool],
+        trusted: &[Option<Vector3<f64>>],
+        step: &SolvedStep,
+    ) -> SurfaceIteration {
+        let solved = &step.solved;
         let misfit = |m: &TriangleMesh| {
             median_angle_deg(
                 trusted
@@ -483,22 +411,22 @@ impl SurfaceState {
                     .filter_map(|(t, nm)| t.map(|t| (t, nm.into_inner()))),
             )
         };
-        let mut report = SurfaceIteration {
+        SurfaceIteration {
             iteration: self.iterations.len() + 1,
             observed: observed.iter().filter(|o| **o).count(),
-            vertices: n,
+            vertices: mesh.positions().len(),
             applied: false,
             rms_move_m: solved.rms_displacement_m,
             max_move_m: solved.max_displacement_m,
             normal_change_deg: self.previous_normals.as_ref().map(|prev| {
                 median_angle_deg(
                     prev.iter()
-                        .zip(&trusted)
+                        .zip(trusted)
                         .filter_map(|(a, b)| Some(((*a)?, (*b)?))),
                 )
             }),
             misfit_before_deg: misfit(mesh),
-            misfit_after_deg: misfit(&new_mesh),
+            misfit_after_deg: misfit(new_mesh),
             hull_active: solved.active_vertices,
             on_silhouette: 0,
             max_outside_m: solved.max_outside_m,
@@ -506,16 +434,29 @@ impl SurfaceState {
             rounds: solved.rounds,
             clamped: solved.clamped_vertices,
             projected: solved.projected_vertices,
-            step_fraction,
-            shortened_vertices,
-            turned_over_full_step,
+            step_fraction: step.step_fraction,
+            shortened_vertices: step.shortened_vertices,
+            turned_over_full_step: step.turned_over_full_step,
             seconds: 0.0,
             stopped: None,
-        };
+        }
+    }
+
+    /// Why the step is refused (module contract: it leaves the hull, or diverges in size or in
+    /// misfit), in words; `None` when it may be applied.
+    fn refusal(
+        &self,
+        mesh: &TriangleMesh,
+        hull: Option<&HullField>,
+        step: &SolvedStep,
+        report: &SurfaceIteration,
+        config: &SurfaceConfig,
+    ) -> Option<String> {
+        let full_step_rms_m = step.full_step_rms_m;
         let left_m = hull.map_or(0.0, |h| {
-            left_hull_by(h, mesh.positions(), &solved.positions)
+            left_hull_by(h, mesh.positions(), &step.solved.positions)
         });
-        let refused = if left_m > config.hull_tolerance_m {
+        if left_m > config.hull_tolerance_m {
             Some(format!(
                 "stopped: the surface would leave the visual hull by {:.3} mm (tolerance {:.3} mm); \
                  the last good mesh is kept",
@@ -540,29 +481,69 @@ impl SurfaceState {
             ))
         } else {
             None
-        };
-        report.on_silhouette = on_silhouette.iter().filter(|s| **s).count();
-        report.seconds = started.elapsed().as_secs_f64();
-        if let Some(why) = refused {
-            report.stopped = Some(why);
-            self.done = true;
-            self.iterations.push(report);
-            return Ok(None);
         }
-        report.applied = true;
-        if full_step_rms_m < config.converged_rms_m {
-            report.stopped = Some(format!(
-                "converged: the step moved {:.4} mm RMS (< {:.4} mm)",
-                full_step_rms_m * 1e3,
-                config.converged_rms_m * 1e3
-            ));
-            self.done = true;
-        }
-        self.previous_normals = Some(trusted);
-        // After a shortened step the next one also carries what this one left out, so its
-        // size is not compared with this one's (the misfit and hull tests still apply).
-        self.previous_rms_m = (step_fraction == 1.0).then_some(full_step_rms_m);
-        self.iterations.push(report);
-        Ok(Some(new_mesh))
     }
+}
+
+/// What a step integrates towards: the refined normals and their confidence (0 where no view
+/// observes the vertex), the screening (observed vertices only), the normals trusted (confidence
+/// above 0) and the vertices held on a silhouette (empty without a hull).
+struct StepInputs {
+    normals_world: Vec<[f64; 3]>,
+    confidence: Vec<f64>,
+    screening: Vec<f64>,
+    trusted: Vec<Option<Vector3<f64>>>,
+    on_silhouette: Vec<bool>,
+}
+
+/// The [`StepInputs`] of a step on `mesh` from the solve's `fits`.
+fn step_inputs(
+    mesh: &TriangleMesh,
+    fits: &[VertexFit],
+    observed: &[bool],
+    cameras: &[Point3<f64>],
+    hull: Option<&HullField>,
+    config: &SurfaceConfig,
+) -> Result<StepInputs, ShapeError> {
+    let n = mesh.positions().len();
+    let targets = super::normal_targets(mesh, fits, &config.integrate.weights)?;
+    let mut confidence = targets.confidence;
+    for (c, o) in confidence.iter_mut().zip(observed) {
+        if !o {
+            *c = 0.0;
+        }
+    }
+    let screening: Vec<f64> = observed
+        .iter()
+        .map(|&o| if o { 1.0 } else { 0.0 })
+        .collect();
+    let trusted: Vec<Option<Vector3<f64>>> = (0..n)
+        .map(|v| (confidence[v] > 0.0).then(|| Vector3::from(targets.normals_world[v])))
+        .collect();
+    let on_silhouette: Vec<bool> = match hull {
+        Some(h) => (0..n)
+            .map(|v| {
+                trusted[v]
+                    .is_some_and(|nv| on_silhouette(h, &mesh.positions()[v], &nv, cameras, config))
+            })
+            .collect(),
+        None => Vec::new(),
+    };
+    Ok(StepInputs {
+        normals_world: targets.normals_world,
+        confidence,
+        screening,
+        trusted,
+        on_silhouette,
+    })
+}
+
+/// The solved step: the integration's result (positions and sizes after any cut-back), the
+/// whole solved step's RMS move, the triangles it would turn over, and the cut-back applied.
+struct SolvedStep {
+    solved: Integrated,
+    full_step_rms_m: f64,
+    turned_over_full_step: usize,
+    step_fraction: f64,
+    shortened_vertices: usize,
 }

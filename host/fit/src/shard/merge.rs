@@ -61,9 +61,19 @@ fn name(path: &std::path::Path, shard: Shard) -> String {
 
 /// Checks `parts` (file, contents) and assembles them (see the module doc).
 pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError> {
-    let Some((first_path, first)) = parts.first() else {
+    if parts.is_empty() {
         return Err(MergeError::NoParts);
-    };
+    }
+    let slot = shard_slots(&parts)?;
+    check_agreement(&parts)?;
+    check_own_vertices(&parts)?;
+    Ok(assemble(parts, &slot))
+}
+
+/// Checks the shard counts and indices of non-empty `parts` and returns, by shard index, which
+/// part holds that shard (every slot filled).
+fn shard_slots(parts: &[(PathBuf, PartFile)]) -> Result<Vec<Option<usize>>, MergeError> {
+    let (first_path, first) = &parts[0];
     let n = first.shard.count;
     for (path, p) in &parts[1..] {
         if p.shard.count != n {
@@ -119,6 +129,13 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
             have.join("; ")
         )));
     }
+    Ok(slot)
+}
+
+/// Checks that every part of non-empty `parts` agrees with the first on hashes, version, vertex
+/// count and the frames read.
+fn check_agreement(parts: &[(PathBuf, PartFile)]) -> Result<(), MergeError> {
+    let (first_path, first) = &parts[0];
     let agree = |what: &'static str,
                  hint: &'static str,
                  value: &dyn Fn(&PartFile) -> String|
@@ -172,9 +189,14 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
                 .as_ref()
                 .map_or("none".into(), |h| format!("{:?}", h.views))
         },
-    )?;
-    let vertices = first.mesh_vertices as usize;
-    for (path, p) in &parts {
+    )
+}
+
+/// Checks that each part of non-empty `parts` holds exactly its own shard's vertices (samples,
+/// held-out samples and fits).
+fn check_own_vertices(parts: &[(PathBuf, PartFile)]) -> Result<(), MergeError> {
+    let vertices = parts[0].1.mesh_vertices as usize;
+    for (path, p) in parts {
         let own: Vec<u32> = p.shard.vertices(vertices).map(|v| v as u32).collect();
         let holds: Vec<u32> = p.set.vertices.iter().map(|v| v.vertex).collect();
         let held_ok = p
@@ -190,11 +212,17 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
             )));
         }
     }
+    Ok(())
+}
 
-    // Assemble in mesh order: vertex v is entry v / N of shard v % N.
-    let mut ordered: Vec<PartFile> = Vec::with_capacity(n as usize);
+/// Assembles checked `parts` in mesh order: vertex v is entry v / N of shard v % N (`slot`: the
+/// part holding each shard, from [`shard_slots`]).
+fn assemble(parts: Vec<(PathBuf, PartFile)>, slot: &[Option<usize>]) -> Merged {
+    let n = slot.len();
+    let vertices = parts[0].1.mesh_vertices as usize;
+    let mut ordered: Vec<PartFile> = Vec::with_capacity(n);
     let mut parts: Vec<Option<PartFile>> = parts.into_iter().map(|(_, p)| Some(p)).collect();
-    for s in &slot {
+    for s in slot {
         ordered.push(parts[s.expect("checked above")].take().expect("each once"));
     }
     let shard_seconds = ordered.iter().map(|p| (p.observe_s, p.joint_s)).collect();
@@ -243,7 +271,7 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
         })
         .collect();
     for v in 0..vertices {
-        let s = v % n as usize;
+        let s = v % n;
         set.vertices
             .push(samples[s].next().expect("counts checked above"));
         fits.push(part_fits[s].next().expect("counts checked above"));
@@ -254,7 +282,7 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
     }
     let mut first = ordered.swap_remove(0);
     first.held_out = None;
-    Ok(Merged {
+    Merged {
         first,
         extraction: Extraction {
             samples: set,
@@ -263,7 +291,7 @@ pub fn merge_parts(parts: Vec<(PathBuf, PartFile)>) -> Result<Merged, MergeError
         fits,
         held_out: held,
         shard_seconds,
-    })
+    }
 }
 
 /// What every shard must have read alike: the views and the skipped frames.
