@@ -4,14 +4,16 @@
 //! session manifests (`rig`) share these types, so both spell a rig the same way.
 //!
 //! Contract: plain numbers with units in their names; serde defaults are the documented ones
-//! (the scene loader range-checks them). Intrinsics use the OpenCV convention (pixel centres at
-//! integer coordinates, camera frame x right, y down, z forward). The flash offset is in that
-//! camera frame.
+//! (the scene loader range-checks them). The lens is the camera model's own
+//! [`Intrinsics`] and [`Distortion`] ([`crate::camera`]), read from the file's flat keys; OpenCV
+//! convention (pixel centres at integer coordinates, camera frame x right, y down, z forward).
+//! The flash offset is in that camera frame.
 //!
 //! Default flash geometry: 30 mm above the lens (`offset_m = [0, -0.03, 0]`), giving a
 //! camera–flash angle of `atan(0.03 / 0.5) = 3.43°` at a 0.5 m working distance — the ~3.5°
 //! near-coaxial geometry of the capture rig ([`FlashSpec::separation_deg_at`]).
 
+use crate::camera::{CameraModel, Distortion, Intrinsics};
 use nalgebra::{Isometry3, Point3, Unit, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -48,92 +50,151 @@ fn yes() -> bool {
     true
 }
 
-/// Pinhole + Brown–Conrady camera and sensor settings.
+/// Pinhole + Brown–Conrady camera and sensor settings. The lens is the shared camera model's
+/// [`Intrinsics`] and [`Distortion`]; the file spells them as flat keys (`fx_px`…`cy_px`,
+/// `k1`…`p2`) through the private `CameraSpecToml`, so scene files read and write as before.
 #[derive(Clone, Debug, PartialEq, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "CameraSpecToml", into = "CameraSpecToml")]
 pub struct CameraSpec {
     /// `[width, height]` in pixels (even, for the 2×2 mosaic).
     pub resolution_px: [u32; 2],
-    /// Focal length along x, pixels.
-    pub fx_px: f64,
-    /// Focal length along y, pixels.
-    pub fy_px: f64,
-    /// Principal point x, pixels.
-    pub cx_px: f64,
-    /// Principal point y, pixels.
-    pub cy_px: f64,
-    /// Radial distortion k1 (default 0).
-    #[serde(default)]
-    pub k1: f64,
-    /// Radial distortion k2 (default 0).
-    #[serde(default)]
-    pub k2: f64,
-    /// Radial distortion k3 (default 0).
-    #[serde(default)]
-    pub k3: f64,
-    /// Tangential distortion p1 (default 0).
-    #[serde(default)]
-    pub p1: f64,
-    /// Tangential distortion p2 (default 0).
-    #[serde(default)]
-    pub p2: f64,
+    /// Focal lengths and principal point, pixels (the file's `fx_px`, `fy_px`, `cx_px`,
+    /// `cy_px`).
+    pub intrinsics: Intrinsics,
+    /// Lens distortion (the file's `k1`, `k2`, `k3`, `p1`, `p2`; each 0 by default).
+    pub distortion: Distortion,
     /// Sensor type.
     pub sensor: SensorKind,
     /// ADC output bit depth: 8, 12 or 16 (default 12).
-    #[serde(default = "default_bit_depth")]
     pub bit_depth: u8,
     /// Exposure time, microseconds.
     pub exposure_us: f64,
     /// Analogue gain, dB (default 0).
-    #[serde(default)]
     pub gain_db: f64,
     /// Full-well capacity, electrons (default 10 500, IMX250 class).
-    #[serde(default = "default_full_well")]
     pub full_well_e: f64,
     /// Pixel pitch, micrometres (default 3.45).
-    #[serde(default = "default_pixel_pitch")]
     pub pixel_pitch_um: f64,
     /// Lens f-number (default 5.6).
-    #[serde(default = "default_f_number")]
     pub f_number: f64,
     /// Quantum efficiency, electrons per photon (default 0.6).
-    #[serde(default = "default_qe")]
     pub quantum_efficiency: f64,
     /// Whether the on-chip polariser mosaic analyses polarisation (default true). `false` models
     /// an S0-only camera: every pixel sees the unpolarised intensity.
-    #[serde(default = "yes")]
     pub analysers: bool,
 }
 
+/// The flat file form of [`CameraSpec`] (a scene's `[rig.camera]` table): its keys, their order
+/// and their defaults are the scene format's.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct CameraSpecToml {
+    resolution_px: [u32; 2],
+    fx_px: f64,
+    fy_px: f64,
+    cx_px: f64,
+    cy_px: f64,
+    #[serde(default)]
+    k1: f64,
+    #[serde(default)]
+    k2: f64,
+    #[serde(default)]
+    k3: f64,
+    #[serde(default)]
+    p1: f64,
+    #[serde(default)]
+    p2: f64,
+    sensor: SensorKind,
+    #[serde(default = "default_bit_depth")]
+    bit_depth: u8,
+    exposure_us: f64,
+    #[serde(default)]
+    gain_db: f64,
+    #[serde(default = "default_full_well")]
+    full_well_e: f64,
+    #[serde(default = "default_pixel_pitch")]
+    pixel_pitch_um: f64,
+    #[serde(default = "default_f_number")]
+    f_number: f64,
+    #[serde(default = "default_qe")]
+    quantum_efficiency: f64,
+    #[serde(default = "yes")]
+    analysers: bool,
+}
+
+impl From<CameraSpecToml> for CameraSpec {
+    fn from(t: CameraSpecToml) -> Self {
+        CameraSpec {
+            resolution_px: t.resolution_px,
+            intrinsics: Intrinsics {
+                fx: t.fx_px,
+                fy: t.fy_px,
+                cx: t.cx_px,
+                cy: t.cy_px,
+            },
+            distortion: Distortion {
+                k1: t.k1,
+                k2: t.k2,
+                k3: t.k3,
+                p1: t.p1,
+                p2: t.p2,
+            },
+            sensor: t.sensor,
+            bit_depth: t.bit_depth,
+            exposure_us: t.exposure_us,
+            gain_db: t.gain_db,
+            full_well_e: t.full_well_e,
+            pixel_pitch_um: t.pixel_pitch_um,
+            f_number: t.f_number,
+            quantum_efficiency: t.quantum_efficiency,
+            analysers: t.analysers,
+        }
+    }
+}
+
+impl From<CameraSpec> for CameraSpecToml {
+    fn from(c: CameraSpec) -> Self {
+        let (i, d) = (c.intrinsics, c.distortion);
+        CameraSpecToml {
+            resolution_px: c.resolution_px,
+            fx_px: i.fx,
+            fy_px: i.fy,
+            cx_px: i.cx,
+            cy_px: i.cy,
+            k1: d.k1,
+            k2: d.k2,
+            k3: d.k3,
+            p1: d.p1,
+            p2: d.p2,
+            sensor: c.sensor,
+            bit_depth: c.bit_depth,
+            exposure_us: c.exposure_us,
+            gain_db: c.gain_db,
+            full_well_e: c.full_well_e,
+            pixel_pitch_um: c.pixel_pitch_um,
+            f_number: c.f_number,
+            quantum_efficiency: c.quantum_efficiency,
+            analysers: c.analysers,
+        }
+    }
+}
+
 impl CameraSpec {
-    /// The shared pinhole + Brown–Conrady model ([`crate::camera::CameraModel`]) with this
-    /// camera's resolution, intrinsics and distortion.
-    pub fn camera_model(&self) -> crate::camera::CameraModel {
-        use crate::camera::{CameraModel, Distortion, Intrinsics};
+    /// The shared pinhole + Brown–Conrady model ([`CameraModel`]) with this camera's resolution,
+    /// intrinsics and distortion.
+    pub fn camera_model(&self) -> CameraModel {
         CameraModel {
             width: self.resolution_px[0],
             height: self.resolution_px[1],
-            intrinsics: Intrinsics {
-                fx: self.fx_px,
-                fy: self.fy_px,
-                cx: self.cx_px,
-                cy: self.cy_px,
-            },
-            distortion: Distortion {
-                k1: self.k1,
-                k2: self.k2,
-                k3: self.k3,
-                p1: self.p1,
-                p2: self.p2,
-            },
+            intrinsics: self.intrinsics,
+            distortion: self.distortion,
         }
     }
 
     /// Whether any distortion coefficient is non-zero.
     pub fn has_distortion(&self) -> bool {
-        [self.k1, self.k2, self.k3, self.p1, self.p2]
-            .iter()
-            .any(|&k| k != 0.0)
+        let d = self.distortion;
+        [d.k1, d.k2, d.k3, d.p1, d.p2].iter().any(|&k| k != 0.0)
     }
 }
 
@@ -280,6 +341,70 @@ impl FlashSpec {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_camera_reads_and_writes_the_scene_files_flat_keys() {
+        let text = "resolution_px = [64, 48]\nfx_px = 100.0\nfy_px = 101.0\ncx_px = 31.5\n\
+                    cy_px = 23.5\nk2 = 0.2\nsensor = \"mono_polar\"\nexposure_us = 2500.0\n";
+        let c: CameraSpec = toml::from_str(text).expect("parses");
+        assert_eq!(
+            c.camera_model(),
+            CameraModel {
+                width: 64,
+                height: 48,
+                intrinsics: Intrinsics {
+                    fx: 100.0,
+                    fy: 101.0,
+                    cx: 31.5,
+                    cy: 23.5
+                },
+                distortion: Distortion {
+                    k2: 0.2,
+                    ..Distortion::ZERO
+                },
+            }
+        );
+        assert!(c.has_distortion());
+        assert_eq!(
+            (c.bit_depth, c.full_well_e, c.analysers),
+            (12, 10_500.0, true)
+        );
+        let written = toml::to_string(&c).expect("writes");
+        let keys: Vec<&str> = written
+            .lines()
+            .filter_map(|l| l.split(" = ").next())
+            .collect();
+        assert_eq!(
+            keys,
+            [
+                "resolution_px",
+                "fx_px",
+                "fy_px",
+                "cx_px",
+                "cy_px",
+                "k1",
+                "k2",
+                "k3",
+                "p1",
+                "p2",
+                "sensor",
+                "bit_depth",
+                "exposure_us",
+                "gain_db",
+                "full_well_e",
+                "pixel_pitch_um",
+                "f_number",
+                "quantum_efficiency",
+                "analysers",
+            ]
+        );
+        assert_eq!(
+            toml::from_str::<CameraSpec>(&written).expect("reads back"),
+            c
+        );
+        let e = toml::from_str::<CameraSpec>(&format!("{text}fx = 1.0\n")).unwrap_err();
+        assert!(e.to_string().contains("unknown field `fx`"), "{e}");
+    }
 
     #[test]
     fn default_flash_is_about_three_and_a_half_degrees_at_half_a_metre() {

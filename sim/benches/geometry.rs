@@ -126,8 +126,8 @@ fn main() {
     let mut hits = 0usize;
     for v in 0..h {
         for u in 0..w {
-            let x = (u as f64 * 4.0 + 1.5 - cam.cx_px) / cam.fx_px;
-            let y = (v as f64 * 4.0 + 1.5 - cam.cy_px) / cam.fy_px;
+            let x = (u as f64 * 4.0 + 1.5 - cam.intrinsics.cx) / cam.intrinsics.fx;
+            let y = (v as f64 * 4.0 + 1.5 - cam.intrinsics.cy) / cam.intrinsics.fy;
             let dir = pose.world_from_camera * Vector3::new(x, y, 1.0);
             hits += usize::from(
                 scene

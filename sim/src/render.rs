@@ -44,7 +44,7 @@ mod tests;
 
 pub use fixed_pattern::{FixedPattern, PixelPattern};
 pub use footprint::{Footprint, IdealPixel, PointFrame};
-pub use truth::{BOARD_MATERIAL_BASE, CameraTruth, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
+pub use truth::{BOARD_MATERIAL_BASE, FrameTruth, NO_HIT_MATERIAL, PixelTruth};
 pub use uniform::UniformTarget;
 
 use crate::effects::{EffectPlan, LightTransport, Stage, StageCounts, StageParams, StageSet};

@@ -12,35 +12,32 @@
 use crate::scene::{CameraPose, MaterialSample, Scene, SurfaceKind};
 use ellipso_model::camera::CameraModel;
 use nalgebra::Isometry3;
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 
 /// Material code of board `i`: `BOARD_MATERIAL_BASE + i`.
 pub const BOARD_MATERIAL_BASE: u16 = 0xF000;
 /// Material code where no surface is hit.
 pub const NO_HIT_MATERIAL: u16 = 0xFFFF;
 
-/// Intrinsics and distortion a frame was rendered with (after any resolution override).
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct CameraTruth {
+/// The JSON form of the camera a frame was rendered with ([`FrameTruth::camera`]): the truth
+/// file's keys and layout, written from the shared [`CameraModel`].
+#[derive(Serialize)]
+struct CameraTruthJson {
     /// Width, pixels.
-    pub width: u32,
+    width: u32,
     /// Height, pixels.
-    pub height: u32,
+    height: u32,
     /// Focal lengths and principal point, pixels (OpenCV convention).
-    pub fx_px: f64,
-    /// See `fx_px`.
-    pub fy_px: f64,
-    /// See `fx_px`.
-    pub cx_px: f64,
-    /// See `fx_px`.
-    pub cy_px: f64,
+    fx_px: f64,
+    fy_px: f64,
+    cx_px: f64,
+    cy_px: f64,
     /// Brown–Conrady coefficients `[k1, k2, p1, p2, k3]` (OpenCV order).
-    pub distortion: [f64; 5],
+    distortion: [f64; 5],
 }
 
-impl CameraTruth {
-    /// From the model the renderer used.
-    pub fn of(m: &CameraModel) -> Self {
+impl From<&CameraModel> for CameraTruthJson {
+    fn from(m: &CameraModel) -> Self {
         let d = m.distortion;
         Self {
             width: m.width,
@@ -52,6 +49,11 @@ impl CameraTruth {
             distortion: [d.k1, d.k2, d.p1, d.p2, d.k3],
         }
     }
+}
+
+/// Serialises [`FrameTruth::camera`] in its JSON form.
+fn serialize_camera<S: Serializer>(camera: &CameraModel, s: S) -> Result<S::Ok, S::Error> {
+    CameraTruthJson::from(camera).serialize(s)
 }
 
 /// Per-frame ground truth.
@@ -71,8 +73,10 @@ pub struct FrameTruth {
     pub flash_position_world_m: [f64; 3],
     /// Flash polariser transmission axis, world (absent for an unpolarised flash).
     pub flash_polariser_axis_world: Option<[f64; 3]>,
-    /// Camera the frame was rendered with.
-    pub camera: CameraTruth,
+    /// Camera the frame was rendered with (after any resolution override); written as `width`,
+    /// `height`, `fx_px`, `fy_px`, `cx_px`, `cy_px` and `distortion: [k1, k2, p1, p2, k3]`.
+    #[serde(serialize_with = "serialize_camera")]
+    pub camera: CameraModel,
     /// Seed of this frame's noise streams.
     pub noise_seed: u64,
 }
@@ -97,7 +101,7 @@ impl FrameTruth {
             flash_polariser_axis_world: flash
                 .polariser_axis_world(w)
                 .map(|a| a.into_inner().into()),
-            camera: CameraTruth::of(camera),
+            camera: *camera,
             noise_seed,
         }
     }
@@ -139,5 +143,50 @@ pub fn material_code(kind: &SurfaceKind) -> u16 {
             };
             u16::try_from(id).unwrap_or(NO_HIT_MATERIAL - 1)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ellipso_model::camera::{Distortion, Intrinsics};
+
+    #[test]
+    fn the_camera_is_written_in_the_truth_files_keys_and_order() {
+        let camera = CameraModel {
+            width: 64,
+            height: 48,
+            intrinsics: Intrinsics {
+                fx: 100.0,
+                fy: 101.0,
+                cx: 31.5,
+                cy: 23.5,
+            },
+            distortion: Distortion {
+                k1: 0.1,
+                k2: 0.2,
+                k3: 0.3,
+                p1: 0.4,
+                p2: 0.5,
+            },
+        };
+        let truth = FrameTruth {
+            index: 3,
+            t_trigger_us: 7,
+            world_from_camera_rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            world_from_camera_translation_m: [0.0; 3],
+            world_from_camera_quaternion_wxyz: [1.0, 0.0, 0.0, 0.0],
+            flash_position_world_m: [0.0; 3],
+            flash_polariser_axis_world: None,
+            camera,
+            noise_seed: 9,
+        };
+        let json = serde_json::to_string(&truth).expect("serialises");
+        assert!(
+            json.contains(
+                r#""camera":{"width":64,"height":48,"fx_px":100.0,"fy_px":101.0,"cx_px":31.5,"cy_px":23.5,"distortion":[0.1,0.2,0.4,0.5,0.3]},"noise_seed":9}"#
+            ),
+            "{json}"
+        );
     }
 }

@@ -40,10 +40,11 @@ impl RigSpec {
                 ),
             ));
         }
-        for (f, v) in [("fx_px", c.fx_px), ("fy_px", c.fy_px)] {
+        let (i, d) = (c.intrinsics, c.distortion);
+        for (f, v) in [("fx_px", i.fx), ("fy_px", i.fy)] {
             positive(loc, &k(f), v)?;
         }
-        for (f, v, max) in [("cx_px", c.cx_px, w), ("cy_px", c.cy_px, h)] {
+        for (f, v, max) in [("cx_px", i.cx, w), ("cy_px", i.cy, h)] {
             if !(v.is_finite() && v >= 0.0 && v <= max as f64) {
                 return Err(loc.invalid(
                     k(f),
@@ -52,11 +53,11 @@ impl RigSpec {
             }
         }
         for (f, v) in [
-            ("k1", c.k1),
-            ("k2", c.k2),
-            ("k3", c.k3),
-            ("p1", c.p1),
-            ("p2", c.p2),
+            ("k1", d.k1),
+            ("k2", d.k2),
+            ("k3", d.k3),
+            ("p1", d.p1),
+            ("p2", d.p2),
         ] {
             if !(v.is_finite() && v.abs() < 100.0) {
                 return Err(

@@ -377,10 +377,10 @@ fn scene_poses_and_board_poses_agree_with_detections() {
         (cam.resolution_px[0] / 4) as usize,
         (cam.resolution_px[1] / 4) as usize,
     );
-    let (fx, fy) = (cam.fx_px / scale, cam.fy_px / scale);
+    let (fx, fy) = (cam.intrinsics.fx / scale, cam.intrinsics.fy / scale);
     let (cx, cy) = (
-        (cam.cx_px + 0.5) / scale - 0.5,
-        (cam.cy_px + 0.5) / scale - 0.5,
+        (cam.intrinsics.cx + 0.5) / scale - 0.5,
+        (cam.intrinsics.cy + 0.5) / scale - 0.5,
     );
     for pose in [s.camera_poses[0], s.camera_poses[75]] {
         let eye = pose.world_from_camera * Point3::origin();
@@ -622,7 +622,8 @@ fn scene_types_feed_the_optics_and_camera_models() {
             .project(&(pose.world_from_camera.inverse() * target))
             .expect("in front");
         assert!(
-            (p[0] - s.rig.camera.cx_px).abs() < 1e-9 && (p[1] - s.rig.camera.cy_px).abs() < 1e-9,
+            (p[0] - s.rig.camera.intrinsics.cx).abs() < 1e-9
+                && (p[1] - s.rig.camera.intrinsics.cy).abs() < 1e-9,
             "{p:?}"
         );
     }

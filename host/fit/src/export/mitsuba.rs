@@ -416,7 +416,7 @@ fn objects_xml(
     let target = origin + forward;
     let up = pose.rotation * -Vector3::y();
     let fov_x_deg = 2.0
-        * (f64::from(camera.width) / (2.0 * camera.focal_px))
+        * (f64::from(camera.width) / (2.0 * camera.focal_px()))
             .atan()
             .to_degrees();
     let flash = Vector3::from(view.flash_position_world);

@@ -45,7 +45,7 @@ impl PictureView {
         Self {
             width: camera.width,
             height: camera.height,
-            focal_px: camera.focal_px,
+            focal_px: camera.focal_px(),
             world_from_camera: std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)])),
             flash_position_world: flash.coords.into(),
             flash_polariser_axis_world: None,
@@ -65,15 +65,12 @@ impl PictureView {
         let m = Matrix4::from_fn(|r, c| self.world_from_camera[r][c]);
         let rotation = Rotation3::from_matrix_unchecked(m.fixed_view::<3, 3>(0, 0).into_owned());
         let translation = Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
-        ViewCamera {
-            world_from_camera: Isometry3::from_parts(
-                translation,
-                UnitQuaternion::from_rotation_matrix(&rotation),
-            ),
-            width: self.width,
-            height: self.height,
-            focal_px: self.focal_px,
-        }
+        ViewCamera::pinhole(
+            Isometry3::from_parts(translation, UnitQuaternion::from_rotation_matrix(&rotation)),
+            self.width,
+            self.height,
+            self.focal_px,
+        )
     }
 
     /// Why this record cannot be used, if it cannot.
@@ -139,12 +136,7 @@ mod tests {
             Translation3::new(0.1, -0.2, 0.5),
             UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 2.5),
         );
-        let camera = ViewCamera {
-            world_from_camera: pose,
-            width: 64,
-            height: 48,
-            focal_px: 80.0,
-        };
+        let camera = ViewCamera::pinhole(pose, 64, 48, 80.0);
         let view = PictureView::new(
             &camera,
             &Point3::new(0.0, 0.0, 0.4),
@@ -156,7 +148,10 @@ mod tests {
         assert_eq!(back, view);
         let c = back.camera();
         assert!((c.world_from_camera.to_homogeneous() - pose.to_homogeneous()).amax() < 1e-12);
-        assert_eq!((c.width, c.height, c.focal_px), (64, 48, 80.0));
+        assert_eq!(
+            (c.width, c.height, c.intrinsics),
+            (64, 48, camera.intrinsics)
+        );
 
         let mut bad = view.clone();
         bad.world_from_camera[0][0] = 2.0;
