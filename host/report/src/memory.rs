@@ -29,7 +29,12 @@ mod tests {
     fn resident_bytes() -> u64 {
         let status = std::fs::read_to_string("/proc/self/status").unwrap();
         let line = status.lines().find(|l| l.starts_with("VmRSS:")).unwrap();
-        line.split_whitespace().nth(1).unwrap().parse::<u64>().unwrap() * 1024
+        line.split_whitespace()
+            .nth(1)
+            .unwrap()
+            .parse::<u64>()
+            .unwrap()
+            * 1024
     }
 
     // Other tests of this binary run on other threads and allocate and free at any time, so
@@ -46,7 +51,10 @@ mod tests {
         let resident = resident_bytes();
         assert!(resident >= 60 << 20, "resident {resident} with 64 MiB held");
         let peak = peak_rss_bytes().expect("VmHWM on Linux");
-        assert!(peak >= resident, "mark {peak} below the resident size {resident}");
+        assert!(
+            peak >= resident,
+            "mark {peak} below the resident size {resident}"
+        );
         drop(block);
         assert!(reset_peak_rss());
         assert!(peak_rss_bytes().unwrap() < peak);
