@@ -16,8 +16,18 @@
 //! `BAD_INPUT_ONLY=TEXT` runs only the cases whose category or name contains `TEXT` (while
 //! working on one area; the table is then partial).
 
+#[path = "bad_input/bounds.rs"]
+mod bounds;
 #[path = "bad_input/cases.rs"]
 mod cases;
+#[path = "bad_input/errors.rs"]
+mod errors;
+#[path = "bad_input/flags.rs"]
+mod flags;
+#[path = "bad_input/frames_meshes.rs"]
+mod frames_meshes;
+#[path = "bad_input/impossible.rs"]
+mod impossible;
 #[path = "bad_input/probe.rs"]
 mod probe;
 #[path = "bad_input/runs.rs"]
@@ -275,14 +285,14 @@ fn signal_case(dir: &Path, what: &str, signal: i32) -> Verdict {
 fn bad_input_table() {
     let mut cases: Vec<Case> = cases::scene_cases();
     cases.extend(cases::session_cases());
-    cases.extend(cases::frame_cases());
-    cases.extend(cases::mesh_cases());
-    cases.extend(cases::flag_cases());
+    cases.extend(frames_meshes::frame_cases());
+    cases.extend(frames_meshes::mesh_cases());
+    cases.extend(flags::flag_cases());
     cases.extend(probe::output_cases());
     cases.extend(probe::orbit_cases());
-    cases.extend(probe::impossible_cases());
-    cases.extend(probe::bound_cases());
-    cases.extend(probe::error_cases());
+    cases.extend(impossible::impossible_cases());
+    cases.extend(bounds::bound_cases());
+    cases.extend(errors::error_cases());
     let only = std::env::var("BAD_INPUT_ONLY").unwrap_or_default();
     let chosen = |category: &str, name: &str| category.contains(&only) || name.contains(&only);
     cases.retain(|c| chosen(c.category, &c.name));
