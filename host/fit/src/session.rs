@@ -292,7 +292,7 @@ pub fn fit_session_with(
         let started = Instant::now();
         let fits = fit_all(&set, previous.as_deref(), None, &config.fit.solver);
         joint_s += started.elapsed().as_secs_f64();
-        observe_config.vertex_labels = Some(labels_of(&fits, &mesh, config));
+        observe_config.vertex_labels = Some(labels_of(&fits, mesh.positions().len(), config));
         progress(&format!(
             "outer iteration {k}/{iterations}: surface update from the refined normals"
         ));
@@ -400,48 +400,18 @@ fn complete_fits(
 }
 
 /// The material label of every vertex from step A's `fits` ([`super::augment::material_labels`]
-/// with the fit's clustering settings; [`UNLABELLED`] without a finite fit), except inside a
-/// region the fit did not identify: a vertex whose own fit the identifiability rule withholds
-/// (too few kept samples, an albedo at the cap) and with no identified vertex within
-/// [`super::augment::LOCAL_RINGS`] rings is unlabelled. Its colour is the prior's or a handful
-/// of samples', and nothing near it says which material it is of; labelled by that colour, an
-/// unidentified material's vertices were scattered over the identified materials' labels,
-/// nearly every footprint among them "mixed", and the material stayed without samples (dev
-/// scene 12: cubic zirconia, 446 visible vertices, two kept samples each, none fitted). Such
-/// a vertex next to an identified one keeps its colour's label, so a border between an
-/// identified material and another stays gated: unlabelled there, footprints across it were
-/// kept and biased the identified side (the demo's ceramic, −0.22 → +1.06 %).
-fn labels_of(fits: &[VertexFit], mesh: &TriangleMesh, config: &SessionFitConfig) -> Vec<u32> {
-    let vertices = mesh.positions().len();
+/// with the fit's clustering settings; [`UNLABELLED`] without a finite fit).
+fn labels_of(fits: &[VertexFit], vertices: usize, config: &SessionFitConfig) -> Vec<u32> {
     let cluster = config
         .fit
         .augment
         .as_ref()
         .map(|a| a.cluster.clone())
         .unwrap_or_default();
-    let mut labels: Vec<u32> = super::augment::material_labels(vertices, fits, &cluster)
+    super::augment::material_labels(vertices, fits, &cluster)
         .into_iter()
         .map(|l| l.map_or(UNLABELLED, |l| l as u32))
-        .collect();
-    let mut identified = vec![false; vertices];
-    for f in fits {
-        if let Some(slot) = identified.get_mut(f.vertex as usize) {
-            *slot = f.is_reliable();
-        }
-    }
-    let rings = super::neighbours::rings(mesh);
-    for f in fits {
-        let v = f.vertex as usize;
-        if v < vertices
-            && !identified[v]
-            && !super::neighbours::within(&rings, v, super::augment::LOCAL_RINGS)
-                .into_iter()
-                .any(|u| identified.get(u).copied().unwrap_or(false))
-        {
-            labels[v] = UNLABELLED;
-        }
-    }
-    labels
+        .collect()
 }
 
 /// One surface step of the outer loop ([`super::shape::surface`]): the mesh moved towards the
