@@ -94,10 +94,27 @@ def without(text, spans):
     return text
 
 
+def signature_end(text, i):
+    """Index of the ``{`` opening a function's body or of the ``;`` ending a declaration,
+    from ``i`` inside its signature: a ``;`` within brackets (``[bool; 3]``) is part of a
+    type, not the end."""
+    depth = 0
+    while i < len(text):
+        c = text[i]
+        if c in "([":
+            depth += 1
+        elif c in ")]":
+            depth -= 1
+        elif depth == 0 and c in "{;":
+            return i
+        i += 1
+    return i
+
+
 def long_functions(text):
     """(name, first line, length in lines) of every ``fn`` body over FN_LINES lines."""
     for m in re.finditer(r"\bfn\s+(\w+)", text):
-        body = re.compile(r"[^{;]*").match(text, m.end()).end()
+        body = signature_end(text, m.end())
         if body < len(text) and text[body] == "{":
             first = text.count("\n", 0, m.start()) + 1
             lines = text.count("\n", m.start(), close_brace(text, body)) + 1
