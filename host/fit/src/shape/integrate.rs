@@ -165,23 +165,7 @@ pub fn integrate(
     config: &IntegrateConfig,
 ) -> Result<Integrated, ShapeError> {
     let weights = &config.weights;
-    weights.validate()?;
-    if !(config.hull_weight.is_finite() && config.hull_weight > 0.0) {
-        return Err(ShapeError::InvalidConfig {
-            field: "hull_weight",
-            value: config.hull_weight,
-        });
-    }
-    check_inputs(
-        triangles,
-        &[
-            ("normals_world", targets.normals_world.len()),
-            ("confidence", targets.confidence.len()),
-            ("anchors", targets.anchors.len()),
-            ("screening", targets.screening.len()),
-        ],
-        &[positions, targets.anchors],
-    )?;
+    check_request(positions, triangles, targets, config)?;
     let n = positions.len();
     let graph = MeshGraph::new(positions, triangles)?;
     let (normals, conf, skipped_vertices) =
@@ -200,11 +184,86 @@ pub fn integrate(
         })
         .collect();
     let problem = Problem::new(positions, &graph.edges, &normals, &conf, screening, weights);
+    let normal_at = vertex_normals(positions, triangles);
+    let (base, b0) = base_system(positions, &graph, &problem, &normal_at, targets, config);
+    let held = |v: usize| targets.on_silhouette.get(v).copied().unwrap_or(false);
+    let surface = Surface {
+        positions,
+        normal_at: &normal_at,
+        held: &held,
+        config,
+    };
+    let rounds = solve_rounds(&surface, &base, &b0, hull)?;
+    let mut d = rounds.d;
+    let clamped_vertices = clamp_moves(&mut d, weights.max_displacement_m);
+    let mut new_positions: Vec<Point3<f64>> = (0..n).map(|v| moved(positions, &d, v)).collect();
+    // The penalty leaves a vertex outside by about its force over κ, and an active set that
+    // has not settled in `max_rounds` can leave more (a ridge between two views' cones): what is
+    // still outside is projected onto the hull along its gradient.
+    let projected_vertices = hull.map_or(0, |h| project_inside(h, &mut new_positions));
+    let size = step_size(positions, &new_positions, hull);
+    Ok(Integrated {
+        residual_before: problem.normal_misfit(positions),
+        residual_after: problem.normal_misfit(&new_positions),
+        positions: new_positions,
+        rms_displacement_m: size.rms_m,
+        max_displacement_m: size.max_m,
+        clamped_vertices,
+        cg_iterations: rounds.cg_iterations,
+        cg_converged: rounds.cg_converged,
+        rounds: rounds.rounds,
+        active_vertices: rounds.active.iter().filter(|a| **a).count(),
+        max_outside_m: size.max_outside_m,
+        projected_vertices,
+        constrained_edges: problem.constraints.len(),
+        skipped_vertices,
+    })
+}
 
-    // The quadratic without the hull: A₀ d = b₀.
+/// The configuration's weights and the targets' lengths checked against the mesh.
+fn check_request(
+    positions: &[Point3<f64>],
+    triangles: &[[u32; 3]],
+    targets: &Targets<'_>,
+    config: &IntegrateConfig,
+) -> Result<(), ShapeError> {
+    config.weights.validate()?;
+    if !(config.hull_weight.is_finite() && config.hull_weight > 0.0) {
+        return Err(ShapeError::InvalidConfig {
+            field: "hull_weight",
+            value: config.hull_weight,
+        });
+    }
+    check_inputs(
+        triangles,
+        &[
+            ("normals_world", targets.normals_world.len()),
+            ("confidence", targets.confidence.len()),
+            ("anchors", targets.anchors.len()),
+            ("screening", targets.screening.len()),
+        ],
+        &[positions, targets.anchors],
+    )
+}
+
+/// Vertex `v` of `positions` displaced by `d` (three coordinates per vertex).
+fn moved(positions: &[Point3<f64>], d: &[f64], v: usize) -> Point3<f64> {
+    positions[v] + Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2])
+}
+
+/// The quadratic without the hull, A₀ d = b₀: the screening towards the anchors (along the
+/// vertex normal, with the tangential hold) and the problem's edge terms.
+fn base_system(
+    positions: &[Point3<f64>],
+    graph: &MeshGraph,
+    problem: &Problem,
+    normal_at: &[Vector3<f64>],
+    targets: &Targets<'_>,
+    config: &IntegrateConfig,
+) -> (BlockCsr, Vec<f64>) {
+    let n = positions.len();
     let mut base = BlockCsr::from_edges(n, &graph.edges);
     let mut b0 = vec![0.0; 3 * n];
-    let normal_at = vertex_normals(positions, triangles);
     for (v, &w) in problem.anchor.iter().enumerate() {
         // Screening along the vertex normal towards the anchor, the tangential hold at the
         // current position (a vertex without a normal is screened in every direction).
@@ -232,12 +291,53 @@ pub fn integrate(
         }
     }
     problem.add_edge_terms(&mut base, &mut b0);
+    (base, b0)
+}
 
+/// The surface the rounds move: its start, its vertex normals, which vertices a silhouette
+/// holds, and the settings.
+struct Surface<'a> {
+    positions: &'a [Point3<f64>],
+    normal_at: &'a [Vector3<f64>],
+    held: &'a dyn Fn(usize) -> bool,
+    config: &'a IntegrateConfig,
+}
+
+/// What the active-set rounds ended with.
+struct Rounds {
+    /// The displacement, three coordinates per vertex.
+    d: Vec<f64>,
+    /// Conjugate-gradient iterations over all rounds.
+    cg_iterations: u32,
+    /// Whether every round's conjugate gradients converged.
+    cg_converged: bool,
+    /// Rounds run.
+    rounds: usize,
+    /// The last round's active set (vertices the hull held).
+    active: Vec<bool>,
+}
+
+/// The semi-smooth Newton rounds on the hull's one-sided penalty (module doc): each round adds
+/// the active vertices' hull rows to A₀ d = b₀ and solves, until the active set settles or
+/// `max_rounds`.
+fn solve_rounds(
+    surface: &Surface<'_>,
+    base: &BlockCsr,
+    b0: &[f64],
+    hull: Option<&HullField>,
+) -> Result<Rounds, ShapeError> {
+    let Surface {
+        positions,
+        held,
+        config,
+        ..
+    } = *surface;
+    let weights = &config.weights;
+    let n = positions.len();
     let mut d = vec![0.0; 3 * n];
     let mut cg_iterations = 0;
     let mut cg_converged = true;
     let mut rounds = 0;
-    let held = |v: usize| targets.on_silhouette.get(v).copied().unwrap_or(false);
     // The first round holds every vertex at or outside the hull (a start on the carved surface
     // is on it); a vertex the other terms pull inward ends a hair inside and is released, one
     // they push outward ends a hair outside and stays.
@@ -249,53 +349,12 @@ pub fn integrate(
             .collect(),
         None => vec![false; n],
     };
-    let at =
-        |d: &[f64], v: usize| positions[v] + Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
     loop {
         rounds += 1;
         let mut a = base.clone();
-        let mut b = b0.clone();
+        let mut b = b0.to_vec();
         if let Some(hull) = hull {
-            for v in (0..n).filter(|&v| active[v]) {
-                let p = at(&d, v);
-                let (h, g) = hull.value_world(&p);
-                // The hull holds the vertex along its own normal (the hull's gradient at a
-                // ridge between two views' cones points sideways, and a push along it would
-                // slide the vertex over its neighbours): h(p + t n) ≈ h + (∇h·n) t.
-                let n = normal_at[v];
-                let slope = g.dot(&n);
-                let len = g.norm();
-                let (gu, hu) = if len.is_nan() || len <= 1e-9 {
-                    // The field is flat (truncated far from the surface, or beyond its grid):
-                    // h is then a lower bound of the distance; move in along the normal by it
-                    // and look again next round. A vertex without a normal stays.
-                    if n.norm() < 0.5 {
-                        continue;
-                    }
-                    (n, h)
-                } else if slope > 0.3 * len {
-                    (n, h / slope)
-                } else {
-                    // the normal runs almost along the hull (slope < 0.3 |∇h|): the gradient
-                    (g / len, h / len)
-                };
-                // A vertex on a silhouette is held from inside only as hard as the silhouettes
-                // are sure (module doc): from outside the hull's full weight.
-                let kappa = if held(v) && h < 0.0 {
-                    config.silhouette_hold_weight
-                } else {
-                    config.hull_weight
-                };
-                let block: Block =
-                    std::array::from_fn(|r| std::array::from_fn(|c| kappa * gu[r] * gu[c]));
-                a.add_diagonal(v as u32, &block);
-                // ½∇ of κ(ĝ·(d − d*) + ĥ)²: κĝĝᵀ d = κĝ(ĝ·d* − ĥ).
-                let dv = Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
-                let rhs = kappa * (gu.dot(&dv) - hu);
-                for k in 0..3 {
-                    b[3 * v + k] += rhs * gu[k];
-                }
-            }
+            add_hull_rows(surface, &mut a, &mut b, &d, &active, hull);
         }
         let report = pcg(&a, &b, &mut d, weights.max_cg_iterations, weights.tolerance);
         cg_iterations += report.iterations;
@@ -305,7 +364,7 @@ pub fn integrate(
         }
         let Some(hull) = hull else { break };
         let next: Vec<bool> = (0..n)
-            .map(|v| held(v) || hull.value_world(&at(&d, v)).0 > 0.0)
+            .map(|v| held(v) || hull.value_world(&moved(positions, &d, v)).0 > 0.0)
             .collect();
         if next == active || rounds >= config.max_rounds.max(1) {
             break;
@@ -320,29 +379,71 @@ pub fn integrate(
             active = next;
         }
     }
-    let clamped_vertices = clamp_moves(&mut d, weights.max_displacement_m);
-    let mut new_positions: Vec<Point3<f64>> = (0..n).map(|v| at(&d, v)).collect();
-    // The penalty leaves a vertex outside by about its force over κ, and an active set that
-    // has not settled in `max_rounds` can leave more (a ridge between two views' cones): what is
-    // still outside is projected onto the hull along its gradient.
-    let projected_vertices = hull.map_or(0, |h| project_inside(h, &mut new_positions));
-    let size = step_size(positions, &new_positions, hull);
-    Ok(Integrated {
-        residual_before: problem.normal_misfit(positions),
-        residual_after: problem.normal_misfit(&new_positions),
-        positions: new_positions,
-        rms_displacement_m: size.rms_m,
-        max_displacement_m: size.max_m,
-        clamped_vertices,
+    Ok(Rounds {
+        d,
         cg_iterations,
         cg_converged,
         rounds,
-        active_vertices: active.iter().filter(|a| **a).count(),
-        max_outside_m: size.max_outside_m,
-        projected_vertices,
-        constrained_edges: problem.constraints.len(),
-        skipped_vertices,
+        active,
     })
+}
+
+/// Adds to `a d = b` the hull's penalty rows of the `active` vertices at displacement `d`
+/// (linearised along the vertex normal, or along the hull's gradient where the normal runs
+/// almost along the hull).
+fn add_hull_rows(
+    surface: &Surface<'_>,
+    a: &mut BlockCsr,
+    b: &mut [f64],
+    d: &[f64],
+    active: &[bool],
+    hull: &HullField,
+) {
+    let Surface {
+        positions,
+        normal_at,
+        held,
+        config,
+    } = *surface;
+    for v in (0..positions.len()).filter(|&v| active[v]) {
+        let p = moved(positions, d, v);
+        let (h, g) = hull.value_world(&p);
+        // The hull holds the vertex along its own normal (the hull's gradient at a
+        // ridge between two views' cones points sideways, and a push along it would
+        // slide the vertex over its neighbours): h(p + t n) ≈ h + (∇h·n) t.
+        let n = normal_at[v];
+        let slope = g.dot(&n);
+        let len = g.norm();
+        let (gu, hu) = if len.is_nan() || len <= 1e-9 {
+            // The field is flat (truncated far from the surface, or beyond its grid):
+            // h is then a lower bound of the distance; move in along the normal by it
+            // and look again next round. A vertex without a normal stays.
+            if n.norm() < 0.5 {
+                continue;
+            }
+            (n, h)
+        } else if slope > 0.3 * len {
+            (n, h / slope)
+        } else {
+            // the normal runs almost along the hull (slope < 0.3 |∇h|): the gradient
+            (g / len, h / len)
+        };
+        // A vertex on a silhouette is held from inside only as hard as the silhouettes
+        // are sure (module doc): from outside the hull's full weight.
+        let kappa = if held(v) && h < 0.0 {
+            config.silhouette_hold_weight
+        } else {
+            config.hull_weight
+        };
+        let block: Block = std::array::from_fn(|r| std::array::from_fn(|c| kappa * gu[r] * gu[c]));
+        a.add_diagonal(v as u32, &block);
+        // ½∇ of κ(ĝ·(d − d*) + ĥ)²: κĝĝᵀ d = κĝ(ĝ·d* − ĥ).
+        let dv = Vector3::new(d[3 * v], d[3 * v + 1], d[3 * v + 2]);
+        let rhs = kappa * (gu.dot(&dv) - hu);
+        for k in 0..3 {
+            b[3 * v + k] += rhs * gu[k];
+        }
+    }
 }
 
 /// How far a step moved a surface and where it left it.

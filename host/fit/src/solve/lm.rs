@@ -194,6 +194,117 @@ fn capped_step(delta: Vector) -> Vector {
     }
 }
 
+/// A run's current point: its box coordinates (p = q = 0 on `chart`), and the cost, normal
+/// equations and albedos there.
+struct Iterate {
+    raw: [f64; N_RAW],
+    chart: Chart,
+    cost: f64,
+    jtj: Mat,
+    jtr: Vector,
+    albedos: Albedos<f64>,
+}
+
+/// A trial point that lowered the cost, with the decrease the linearised model predicted for
+/// the step to it and that step's length.
+struct Accepted {
+    trial: [f64; N_RAW],
+    cost: f64,
+    albedos: Albedos<f64>,
+    predicted: f64,
+    delta_norm: f64,
+}
+
+/// What the stopping rules of [`Iterate::take`] read besides the iterate.
+struct StepContext<'a> {
+    config: &'a SolverConfig,
+    bounds: &'a Bounds,
+    /// Residuals less parameters (the statistical scale's degrees of freedom).
+    dof: f64,
+    /// The absolute cost floor.
+    abs_tol: f64,
+    /// The Gauss–Newton decrement at the point the step left.
+    here: f64,
+}
+
+impl Iterate {
+    /// Moves to an accepted trial point: re-centres the normal chart on it, relinearises,
+    /// updates the damping `mu` by the gain ratio, and applies the stopping rules (module doc).
+    /// Returns whether the run has converged.
+    fn take(
+        &mut self,
+        step: Accepted,
+        mu: &mut f64,
+        context: &StepContext<'_>,
+        problem: &Problem,
+        scratch_d: &mut Scratch<RawDual>,
+    ) -> bool {
+        let StepContext {
+            config,
+            bounds,
+            dof,
+            abs_tol,
+            here,
+        } = *context;
+        let Accepted {
+            trial,
+            cost: trial_cost,
+            albedos: trial_albedos,
+            predicted,
+            delta_norm,
+        } = step;
+        let actual = self.cost - trial_cost;
+        let decrease = actual / self.cost;
+        // Gain ratio (module doc): the damping falls where the linear model predicted
+        // the decrease well and rises where it did not, so a step across a kink of the
+        // projected cost (an albedo meeting its bound) is not followed by an undamped
+        // step straight back.
+        let gain = if predicted > 0.0 {
+            actual / predicted
+        } else {
+            0.0
+        };
+        let size = self.raw[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
+        // Re-centre the normal chart on the accepted normal.
+        self.chart = Chart::at(self.chart.unit_normal(trial[3], trial[4]));
+        self.raw = trial;
+        self.raw[3] = 0.0;
+        self.raw[4] = 0.0;
+        // A nearly undamped step from within 10× the tolerance of the optimum whose
+        // decrease the linear model predicted (gain ≈ 1) lands on the model's minimiser:
+        // the decrement there is far below the tolerance, so the run ends without
+        // relinearising (the caller evaluates what it needs at the end point).
+        if config.chi2_tolerance > 0.0
+            && here < 10.0 * config.chi2_tolerance * self.cost / dof
+            && (0.75..=1.25).contains(&gain)
+            && *mu <= 1e-2
+        {
+            self.cost = trial_cost;
+            self.albedos = trial_albedos;
+            return true;
+        }
+        (self.cost, self.jtj, self.jtr, self.albedos) =
+            jacobian_at(problem, &self.chart, self.raw, scratch_d);
+        let factor = 1.0 - (2.0 * gain - 1.0).powi(3);
+        *mu = (*mu * factor.clamp(1.0 / 3.0, 2.0)).max(1e-12);
+        let s2 = self.cost / dof;
+        let next_active = active_set(&self.raw, &self.jtr, bounds);
+        let (fj, fr) = restricted(&self.jtj, &self.jtr, &next_active);
+        let near_optimum =
+            config.chi2_tolerance > 0.0 && newton_decrement(&fj, &fr) < config.chi2_tolerance * s2;
+        // The linear model failed (gain < ¼) and the step bought a decrease below the
+        // χ² tolerance: what the model still promises lies across a kink no step can
+        // take, and what is left to gain is statistically nothing.
+        let stalled =
+            config.chi2_tolerance > 0.0 && gain < 0.25 && actual < config.chi2_tolerance * s2;
+        decrease < config.relative_tolerance
+            || near_optimum
+            || stalled
+            || delta_norm < config.step_tolerance * (size + config.step_tolerance)
+            || self.cost <= abs_tol
+    }
+}
+
 /// One LM run from (`raw`, `normal`). In measurement mode the problem is first reweighted from
 /// the model at the start (`Problem::reweight`); the weights then stay fixed for the run, so
 /// every accepted step really lowers one fixed objective (reweighting after every step let the
@@ -281,60 +392,37 @@ pub(super) fn run(
             let (trial_cost, trial_albedos) = cost_at(problem, &ch, trial, scratch_f);
             if trial_cost.is_finite() && trial_cost < cost {
                 accepted = true;
-                let actual = cost - trial_cost;
-                let decrease = actual / cost;
-                // Gain ratio (module doc): the damping falls where the linear model predicted
-                // the decrease well and rises where it did not, so a step across a kink of the
-                // projected cost (an albedo meeting its bound) is not followed by an undamped
-                // step straight back.
-                let gain = if predicted > 0.0 {
-                    actual / predicted
-                } else {
-                    0.0
+                let mut at = Iterate {
+                    raw,
+                    chart: ch,
+                    cost,
+                    jtj,
+                    jtr,
+                    albedos,
                 };
-                let step = delta.norm();
-                let size = raw[..3].iter().map(|v| v * v).sum::<f64>().sqrt();
-                // Re-centre the normal chart on the accepted normal.
-                ch = Chart::at(ch.unit_normal(trial[3], trial[4]));
-                raw = trial;
-                raw[3] = 0.0;
-                raw[4] = 0.0;
-                // A nearly undamped step from within 10× the tolerance of the optimum whose
-                // decrease the linear model predicted (gain ≈ 1) lands on the model's minimiser:
-                // the decrement there is far below the tolerance, so the run ends without
-                // relinearising (the caller evaluates what it needs at the end point).
-                if config.chi2_tolerance > 0.0
-                    && here < 10.0 * config.chi2_tolerance * cost / dof
-                    && (0.75..=1.25).contains(&gain)
-                    && mu <= 1e-2
-                {
-                    cost = trial_cost;
-                    albedos = trial_albedos;
-                    converged = true;
-                    break;
-                }
-                (cost, jtj, jtr, albedos) = jacobian_at(problem, &ch, raw, scratch_d);
-                let factor = 1.0 - (2.0 * gain - 1.0).powi(3);
-                mu = (mu * factor.clamp(1.0 / 3.0, 2.0)).max(1e-12);
-                let s2 = cost / dof;
-                let next_active = active_set(&raw, &jtr, &bounds);
-                let (fj, fr) = restricted(&jtj, &jtr, &next_active);
-                let near_optimum = config.chi2_tolerance > 0.0
-                    && newton_decrement(&fj, &fr) < config.chi2_tolerance * s2;
-                // The linear model failed (gain < ¼) and the step bought a decrease below the
-                // χ² tolerance: what the model still promises lies across a kink no step can
-                // take, and what is left to gain is statistically nothing.
-                let stalled = config.chi2_tolerance > 0.0
-                    && gain < 0.25
-                    && actual < config.chi2_tolerance * s2;
-                if decrease < config.relative_tolerance
-                    || near_optimum
-                    || stalled
-                    || step < config.step_tolerance * (size + config.step_tolerance)
-                    || cost <= abs_tol
-                {
-                    converged = true;
-                }
+                let step = Accepted {
+                    trial,
+                    cost: trial_cost,
+                    albedos: trial_albedos,
+                    predicted,
+                    delta_norm: delta.norm(),
+                };
+                let context = StepContext {
+                    config,
+                    bounds: &bounds,
+                    dof,
+                    abs_tol,
+                    here,
+                };
+                converged = at.take(step, &mut mu, &context, problem, scratch_d);
+                Iterate {
+                    raw,
+                    chart: ch,
+                    cost,
+                    jtj,
+                    jtr,
+                    albedos,
+                } = at;
             } else {
                 mu *= growth;
                 growth *= 2.0;
