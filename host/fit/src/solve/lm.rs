@@ -321,13 +321,21 @@ pub(super) fn run(
     let mut raw = project(raw, &bounds);
     raw[3] = 0.0;
     raw[4] = 0.0;
-    let mut ch = Chart::at(normal);
+    let chart = Chart::at(normal);
     let reweighting = problem.loss == LossMode::Measurement;
     if reweighting {
-        let (_, a) = cost_at(problem, &ch, raw, scratch_f);
+        let (_, a) = cost_at(problem, &chart, raw, scratch_f);
         let _ = problem.reweight(scratch_f, &a);
     }
-    let (mut cost, mut jtj, mut jtr, mut albedos) = jacobian_at(problem, &ch, raw, scratch_d);
+    let (cost, jtj, jtr, albedos) = jacobian_at(problem, &chart, raw, scratch_d);
+    let mut it = Iterate {
+        raw,
+        chart,
+        cost,
+        jtj,
+        jtr,
+        albedos,
+    };
     // Statistical scale of the cost: s² = cost/(m − p) (module doc of `solve`).
     let dof = problem
         .residual_count()
@@ -337,29 +345,36 @@ pub(super) fn run(
     let mut iterations = 0;
     let mut converged = false;
     let abs_tol = 1e-28 * problem.data_scale.max(1e-300);
-    if !cost.is_finite() {
+    if !it.cost.is_finite() {
         return LmState {
-            raw,
+            raw: it.raw,
             normal,
-            cost,
-            albedos,
+            cost: it.cost,
+            albedos: it.albedos,
             iterations,
             converged,
         };
     }
-    if cost <= abs_tol {
+    if it.cost <= abs_tol {
         converged = true;
     }
     while !converged && iterations < config.max_iterations {
         iterations += 1;
-        let active = active_set(&raw, &jtr, &bounds);
-        let (free_jtj, free_jtr) = restricted(&jtj, &jtr, &active);
+        let active = active_set(&it.raw, &it.jtr, &bounds);
+        let (free_jtj, free_jtr) = restricted(&it.jtj, &it.jtr, &active);
         // The Gauss–Newton decrement here: how far the optimum is, in cost.
         let here = newton_decrement(&free_jtj, &free_jtr);
         let max_diag = (0..N_RAW)
             .filter(|&i| !active[i])
-            .map(|i| jtj[(i, i)])
+            .map(|i| it.jtj[(i, i)])
             .fold(0.0, f64::max);
+        let context = StepContext {
+            config,
+            bounds: &bounds,
+            dof,
+            abs_tol,
+            here,
+        };
         let mut accepted = false;
         // Growth factor of the damping on a rejected step, doubled at every rejection (Madsen,
         // Nielsen & Tingleff 2004, §3.2): a far-off linearisation is left in a few trials.
@@ -368,7 +383,7 @@ pub(super) fn run(
             let mut a = free_jtj;
             for i in (0..N_RAW).filter(|&i| !active[i]) {
                 // Marquardt scaling with a floor so flat directions are still damped.
-                a[(i, i)] += mu * jtj[(i, i)].max(1e-9 * max_diag).max(1e-300);
+                a[(i, i)] += mu * it.jtj[(i, i)].max(1e-9 * max_diag).max(1e-300);
             }
             let Some(chol) = a.cholesky() else {
                 mu *= 10.0;
@@ -379,7 +394,7 @@ pub(super) fn run(
             };
             let proposed = capped_step(chol.solve(&(-free_jtr)));
             let trial = {
-                let mut t = raw;
+                let mut t = it.raw;
                 for i in 0..N_RAW {
                     t[i] += proposed[i];
                 }
@@ -387,19 +402,11 @@ pub(super) fn run(
             };
             // The step actually taken (clipped into the box) and the decrease the linearised
             // model predicts for it: |r|² − |r + Jδ|² = −2δᵀJᵀr − δᵀJᵀJδ.
-            let delta = Vector::from_fn(|i, _| trial[i] - raw[i]);
-            let predicted = -2.0 * delta.dot(&jtr) - delta.dot(&(jtj * delta));
-            let (trial_cost, trial_albedos) = cost_at(problem, &ch, trial, scratch_f);
-            if trial_cost.is_finite() && trial_cost < cost {
+            let delta = Vector::from_fn(|i, _| trial[i] - it.raw[i]);
+            let predicted = -2.0 * delta.dot(&it.jtr) - delta.dot(&(it.jtj * delta));
+            let (trial_cost, trial_albedos) = cost_at(problem, &it.chart, trial, scratch_f);
+            if trial_cost.is_finite() && trial_cost < it.cost {
                 accepted = true;
-                let mut at = Iterate {
-                    raw,
-                    chart: ch,
-                    cost,
-                    jtj,
-                    jtr,
-                    albedos,
-                };
                 let step = Accepted {
                     trial,
                     cost: trial_cost,
@@ -407,22 +414,7 @@ pub(super) fn run(
                     predicted,
                     delta_norm: delta.norm(),
                 };
-                let context = StepContext {
-                    config,
-                    bounds: &bounds,
-                    dof,
-                    abs_tol,
-                    here,
-                };
-                converged = at.take(step, &mut mu, &context, problem, scratch_d);
-                Iterate {
-                    raw,
-                    chart: ch,
-                    cost,
-                    jtj,
-                    jtr,
-                    albedos,
-                } = at;
+                converged = it.take(step, &mut mu, &context, problem, scratch_d);
             } else {
                 mu *= growth;
                 growth *= 2.0;
@@ -438,10 +430,10 @@ pub(super) fn run(
         }
     }
     LmState {
-        raw,
-        normal: ch.n0,
-        cost,
-        albedos,
+        raw: it.raw,
+        normal: it.chart.n0,
+        cost: it.cost,
+        albedos: it.albedos,
         iterations,
         converged,
     }
