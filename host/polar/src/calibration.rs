@@ -174,7 +174,7 @@ impl Default for AnalyserCalibration {
     }
 }
 
-fn det3(m: [[f64; 3]; 3]) -> f64 {
+pub(crate) fn det3(m: [[f64; 3]; 3]) -> f64 {
     m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
         - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
@@ -192,6 +192,12 @@ fn invert3(m: [[f64; 3]; 3]) -> Result<[[f64; 3]; 3], CalibrationError> {
     if !determinant.is_finite() || determinant.abs() <= 1e-12 * scale.max(f64::MIN_POSITIVE) {
         return Err(CalibrationError::Singular { determinant });
     }
+    Ok(adjugate_over(m, determinant))
+}
+
+/// The adjugate of `m` (its cofactor matrix transposed) divided by `det`: `m`'s inverse when
+/// `det` is its determinant ([`det3`]) and the caller has judged it far enough from 0.
+pub(crate) fn adjugate_over(m: [[f64; 3]; 3], det: f64) -> [[f64; 3]; 3] {
     let c =
         |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
     let cof = [
@@ -199,10 +205,7 @@ fn invert3(m: [[f64; 3]; 3]) -> Result<[[f64; 3]; 3], CalibrationError> {
         [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
         [c(0, 1, 1, 2), -c(0, 1, 0, 2), c(0, 1, 0, 1)],
     ];
-    // inverse = adjugate / det, adjugate = cofactor transposed
-    Ok(std::array::from_fn(|i| {
-        std::array::from_fn(|j| cof[j][i] / determinant)
-    }))
+    std::array::from_fn(|i| std::array::from_fn(|j| cof[j][i] / det))
 }
 
 #[cfg(test)]

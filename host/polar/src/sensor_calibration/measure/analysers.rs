@@ -172,11 +172,10 @@ fn pixel_records(grid: Grid, darks: &Darks, clipped: &[bool], vectors: &Unnormal
     }
 }
 
-/// Inverse of a symmetric 3×3 matrix by cofactors (`None` when singular).
+/// Inverse of a symmetric 3×3 matrix by cofactors (`None` when singular: |det| at most 1e-9 of
+/// the scale).
 fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
-    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    let det = crate::calibration::det3(m);
     let scale = m
         .iter()
         .flatten()
@@ -185,14 +184,5 @@ fn invert3(m: [[f64; 3]; 3]) -> Option<[[f64; 3]; 3]> {
     if det.is_nan() || det.abs() <= 1e-9 * scale {
         return None;
     }
-    let c =
-        |r0: usize, r1: usize, c0: usize, c1: usize| m[r0][c0] * m[r1][c1] - m[r0][c1] * m[r1][c0];
-    let cof = [
-        [c(1, 2, 1, 2), -c(1, 2, 0, 2), c(1, 2, 0, 1)],
-        [-c(0, 2, 1, 2), c(0, 2, 0, 2), -c(0, 2, 0, 1)],
-        [c(0, 1, 1, 2), -c(0, 1, 0, 2), c(0, 1, 0, 1)],
-    ];
-    Some(std::array::from_fn(|i| {
-        std::array::from_fn(|j| cof[j][i] / det)
-    }))
+    Some(crate::calibration::adjugate_over(m, det))
 }
