@@ -262,3 +262,72 @@ fn one_eight_and_black_materials_end_with_honest_coverage() {
     );
     assert!(completion.coverage < 0.5, "{}", completion.coverage);
 }
+
+#[test]
+fn a_patch_with_too_few_samples_per_vertex_is_answered_from_its_own_samples() {
+    // One colour; a 40-vertex patch on the top has η 1.80 in a material of η 1.50, and every
+    // patch vertex keeps 6 of its samples — fewer than the per-vertex solve's 12, so each is
+    // completed, and its colour cannot tell the two materials apart.
+    let scene = Scene::load(&shipped_scene("multi_material.toml")).unwrap();
+    let truth = TruthObject::from_scene(&scene, Some(3)).unwrap();
+    let positions = truth.mesh.positions();
+    let top = positions
+        .iter()
+        .copied()
+        .max_by(|a, b| a.z.total_cmp(&b.z))
+        .unwrap();
+    let mut by_distance: Vec<(usize, f64)> = positions
+        .iter()
+        .enumerate()
+        .map(|(v, p)| (v, (p - top).norm()))
+        .collect();
+    by_distance.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let patch: Vec<usize> = by_distance[..40].iter().map(|p| p.0).collect();
+    let white = |eta| material(eta, [0.5, 0.5, 0.5], 0.1);
+    let (scene, mut c) = capture(&["body", "patch"], |v, _| {
+        if patch.contains(&v) {
+            (1, white(1.80))
+        } else {
+            (0, white(1.50))
+        }
+    });
+    for &v in &patch {
+        let s = &mut c.set.vertices[v];
+        let stride = s.samples.len().div_ceil(6).max(1);
+        s.samples = s.samples.iter().step_by(stride).copied().collect();
+        assert!(
+            (1..12).contains(&s.samples.len()),
+            "{v}: {}",
+            s.samples.len()
+        );
+    }
+    let (fits, completion, _) = fit_and_complete(&scene, &mut c, 1_000_003);
+    eprintln!("{}", completion.report_lines().join("\n"));
+    assert!(
+        completion.eta_local > 0,
+        "no vertex took its surroundings' η: {:?}",
+        completion.report_lines()
+    );
+    let answered: Vec<&VertexFit> = patch
+        .iter()
+        .map(|&v| &fits[v])
+        .filter(|f| f.identifiable().eta)
+        .collect();
+    assert!(
+        answered.len() >= 30,
+        "{} patch vertices report η",
+        answered.len()
+    );
+    let m = median(answered.iter().map(|f| f.params.eta).collect());
+    eprintln!("patch: median η {m:.4} (true 1.80) over {}", answered.len());
+    assert!((m - 1.80).abs() < 0.05, "median {m}");
+    // Whatever each reports, its σ does not claim more than it knows: the error within 3σ.
+    for f in &answered {
+        let sigma = f.reported_std_error()[0];
+        assert!(
+            (f.params.eta - 1.80).abs() <= 3.0 * sigma,
+            "η {} ± {sigma} for a true 1.80",
+            f.params.eta
+        );
+    }
+}

@@ -32,15 +32,27 @@
 //!   normal (weights N: the samples' inverse variance at a given model intensity); its standard
 //!   error from the residuals (at least one sample gives three channels per colour). Clamped
 //!   to [0, cap].
+//! - **Its surroundings' own η** (module `local_eta`): the completed vertices of its material
+//!   within two rings pool their kept samples into one η estimate (ρd refitted per vertex,
+//!   the material's lobes, the normal profiled over its σ). Where that estimate is identified
+//!   (σ within the per-vertex limit) and contradicts the material's η beyond
+//!   `pool::AGREE_SIGMAS` combined standard deviations, the vertex reports it, with a σ that
+//!   adds the gap between the two in quadrature (which of them is right, nothing here proves;
+//!   counted in [`Completion::eta_local`]). A material without an identified η stays
+//!   withheld: one estimate alone, this one, is not trusted at its own σ (measured on the
+//!   development scenes: a median error of 4–5 times it).
 //! - **Its normal** is the surface's (the refined mesh's), with `normal_std_deg` as its σ.
 //! - A vertex without a material (no cluster: step B did not run or found none) completes
 //!   nothing; it stays withheld and [`Completion::unassigned`] counts it. A material without an
 //!   identified η (its pool weak or absent, `Pooled::weak`) completes everything but η, which
 //!   stays withheld ([`FitFlag::MaterialEtaUnidentified`], counted in
 //!   [`Completion::eta_withheld`]): the reason is the material's, named in the report.
-//! - Deterministic: a function of its inputs, no randomness, serial over vertices.
+//! - Deterministic: a function of its inputs, no randomness (the local curves run in parallel,
+//!   one vertex each; everything else is serial over vertices).
 
 mod assign;
+mod diffuse;
+mod local_eta;
 mod report;
 mod sigma;
 
@@ -52,7 +64,6 @@ use ellipso_model::geometry::TriangleMesh;
 
 use crate::augment::Augmentation;
 use crate::data::{FitFlag, SampleSet, VertexFit};
-use crate::model::{SampleFrames, unit_sample_at};
 
 /// What [`complete`] did, and what the fit covers of the surface the views see.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -75,6 +86,11 @@ pub struct Completion {
     /// spread over those materials ([`membership_sd`]).
     #[serde(default)]
     pub material_open: usize,
+    /// Of the vertices that needed their material's η, those whose surroundings' own samples
+    /// identify another η than the material's: η from those samples, its σ spanning both
+    /// (`local_eta`, docs/fit-augment.md "Every vertex the views see").
+    #[serde(default)]
+    pub eta_local: usize,
     /// Vertices the views see (not [`FitFlag::Unobserved`]: in view, unoccluded and lit in at
     /// least one fitted frame, decided from the poses and the mesh, never from the gates).
     pub observed: usize,
@@ -312,7 +328,8 @@ pub fn own_rho_d(
     Some((rho, std::array::from_fn(|c| se[c].hypot(tilt[c]))))
 }
 
-/// [`own_rho_d`] from `samples` of `vertex`.
+/// [`own_rho_d`] from `samples` of `vertex`: the albedo and its standard error of
+/// [`diffuse::fit`].
 pub(crate) fn rho_d_of(
     set: &SampleSet,
     vertex: &crate::data::VertexSamples,
@@ -321,62 +338,7 @@ pub(crate) fn rho_d_of(
     normal: [f64; 3],
     albedo_cap: f64,
 ) -> Option<([f64; 3], [f64; 3])> {
-    let channels = if set.colour { 3 } else { 1 };
-    let mut units = Vec::with_capacity(samples.len());
-    for s in samples {
-        let Some(view) = set.views.get(s.view as usize) else {
-            continue;
-        };
-        let Some(frames) = SampleFrames::new(view, vertex.position_world) else {
-            continue;
-        };
-        let Some(u) = unit_sample_at(&frames, normal, params.eta, params.sigma_s, params.sigma_ss)
-        else {
-            continue;
-        };
-        units.push((s, u));
-    }
-    if units.is_empty() {
-        return None;
-    }
-    let mut rho = [0.0; 3];
-    let mut se = [f64::INFINITY; 3];
-    for c in 0..channels {
-        let rest =
-            |u: &crate::model::UnitSample<f64>| u.predict(0.0, params.rho_ss[c], params.rho_s);
-        let (mut num, mut den) = (0.0, 0.0);
-        for (s, u) in &units {
-            let w = f64::from(s.normaliser);
-            let r = rest(u);
-            for ((a, obs), r) in u.diffuse.iter().zip(&s.channels[c]).zip(r) {
-                num += w * a * (f64::from(*obs) - r);
-                den += w * a * a;
-            }
-        }
-        if !(den > 0.0 && num.is_finite()) {
-            return None;
-        }
-        let estimate = num / den;
-        let (mut rss, mut m) = (0.0, 0usize);
-        for (s, u) in &units {
-            let w = f64::from(s.normaliser);
-            let r = rest(u);
-            for ((a, obs), r) in u.diffuse.iter().zip(&s.channels[c]).zip(r) {
-                let res = f64::from(*obs) - r - estimate * a;
-                rss += w * res * res;
-                m += 1;
-            }
-        }
-        // m ≥ 3 (one sample's three channels) against one unknown.
-        let s2 = rss / (m.saturating_sub(1)).max(1) as f64;
-        rho[c] = estimate.clamp(0.0, albedo_cap);
-        se[c] = (s2 / den).sqrt();
-    }
-    if channels == 1 {
-        rho = [rho[0]; 3];
-        se = [se[0]; 3];
-    }
-    Some((rho, se))
+    diffuse::fit(set, vertex, samples, params, normal, albedo_cap).map(|d| (d.rho, d.se))
 }
 
 /// Completes `fits` (one per vertex of `set`, in order) from the materials of `a` (module doc).
@@ -426,20 +388,27 @@ pub fn complete(
         own_rho_d(set, v, &params, normal, normal_std_deg, albedo_cap)
     };
     let labels = assign(fits, a, mesh, &needs, own_colour);
-    // What the fit identified of η, and its material, before any completion.
-    let identified: Vec<Option<(usize, f64, f64)>> = fits
-        .iter()
-        .enumerate()
-        .map(|(v, f)| {
-            let j = a.assignment.get(v).copied().flatten()?;
-            (own_vertex(f) && f.identifiable().eta && f.std_error[0].is_finite()).then_some((
-                j,
-                f.params.eta,
-                f.std_error[0],
-            ))
-        })
-        .collect();
     let rings = crate::neighbours::rings(mesh);
+    // What the fit identified of η, and its material, before any completion.
+    let identified = identified_eta(fits, a);
+    // What the completed vertices' own samples say of η around each of them (`local_eta`).
+    let curves = local_eta::Curves::new(set, albedo_cap, |v| {
+        if !needs.get(v).copied().unwrap_or(false) {
+            return None;
+        }
+        let j = labels.get(v)?.as_ref()?.material;
+        let f = &fits[v];
+        if needs_eta[v] {
+            Some((f.params, f.normal_world, f.normal_std_error_deg))
+        } else {
+            Some((
+                materials[j].params(f.params, f.params.eta),
+                surface_normal(mesh, v, f),
+                normal_std_deg,
+            ))
+        }
+    });
+    let material_of = |u: usize| labels.get(u).and_then(|l| l.as_ref().map(|a| a.material));
     for v in 0..fits.len() {
         if !needs[v] {
             continue;
@@ -454,16 +423,18 @@ pub fn complete(
         };
         let j = *j;
         let m = &materials[j];
+        // Its surroundings' own samples, where they identify η (`local_eta`).
+        let local = curves
+            .local(&rings, v, j, material_of)
+            .filter(|l| l[1] <= max_eta_std_error);
         let material_eta = m.eta.map(|material| {
             let [eta, sd] = local_or(material, &rings, &identified, v, j);
             // Which of its candidate materials the vertex is of, its data do not say: η's σ
             // carries that (`assign` module doc, "How sure").
             let open = membership_sd(eta, candidates, &materials);
-            if open > 0.0 {
-                report.material_open += 1;
-            }
-            [eta, sd.hypot(open)]
+            [eta, sd, open]
         });
+        let material_eta = eta_or_local(material_eta, local, &mut report);
         let f = &mut fits[v];
         // A material without an identified η completes the rest; η stays withheld, flagged.
         let [eta, eta_sd] = material_eta.unwrap_or([f.params.eta, f64::INFINITY]);
@@ -516,6 +487,47 @@ pub fn complete(
     let labels = labels.into_iter().map(|l| l.map(|l| l.material)).collect();
     tally(&mut report, fits, a, labels, &materials);
     report
+}
+
+/// Per vertex, its material (cluster) and η with its σ where the fit identified η from its
+/// own samples, before any completion.
+fn identified_eta(fits: &[VertexFit], a: &Augmentation) -> Vec<Option<(usize, f64, f64)>> {
+    fits.iter()
+        .enumerate()
+        .map(|(v, f)| {
+            let j = a.assignment.get(v).copied().flatten()?;
+            (own_vertex(f) && f.identifiable().eta && f.std_error[0].is_finite()).then_some((
+                j,
+                f.params.eta,
+                f.std_error[0],
+            ))
+        })
+        .collect()
+}
+
+/// The η a completed vertex reports: its material's `[η, σ, membership spread]` (the spread
+/// widening σ, counted in `material_open`), unless its surroundings' own estimate `local`
+/// contradicts it beyond [`crate::augment::pool::AGREE_SIGMAS`] combined standard deviations
+/// — then that estimate, with a σ that spans the gap between the two (which of them is
+/// right, nothing here proves; `local_eta` module doc), counted in `eta_local`. `None` where
+/// the material has no η: one estimate alone is not trusted at its own σ.
+fn eta_or_local(
+    material: Option<[f64; 3]>,
+    local: Option<[f64; 2]>,
+    report: &mut Completion,
+) -> Option<[f64; 2]> {
+    let [eta, sd, open] = material?;
+    if let Some([l, l_se]) = local
+        && (l - eta).abs() > crate::augment::pool::AGREE_SIGMAS * sd.hypot(l_se)
+    {
+        report.eta_local += 1;
+        let gap = (l - eta).abs().max(open);
+        return Some([l, l_se.hypot(gap)]);
+    }
+    if open > 0.0 {
+        report.material_open += 1;
+    }
+    Some([eta, sd.hypot(open)])
 }
 
 /// The coverage figures of `report` (module doc of [`Completion`]) after completion.

@@ -45,11 +45,20 @@ impl Completion {
         format!(
             "completion: {} vertices the views see but their samples do not identify took their \
              material's values ({} with their own ρd), {} their material's η; {} of all these lie \
-             between materials of different η their data cannot tell apart (η's σ widened){}{}",
+             between materials of different η their data cannot tell apart (η's σ widened){}{}{}",
             self.completed,
             self.own_rho_d,
             self.eta_from_material,
             self.material_open,
+            if self.eta_local > 0 {
+                format!(
+                    "; {} whose surroundings' own samples contradict their material's η took \
+                     those samples' η (σ spanning both)",
+                    self.eta_local
+                )
+            } else {
+                String::new()
+            },
             if self.eta_withheld > 0 {
                 format!(
                     "; {} without η, their material having none identified",
