@@ -197,6 +197,11 @@ pub struct ObserveReport {
     pub frames_unlit: usize,
     /// Gate counts over all vertices.
     pub gates: GateCounts,
+    /// Of the kept samples, those read with the narrower kernel where the image's own
+    /// footprint crossed a silhouette or a border, admitted for vertices that had fewer than
+    /// `min_views` samples otherwise (`extract::admit_narrow`, docs/fit-observe.md).
+    #[serde(default)]
+    pub narrow_admitted: u64,
     /// Samples kept.
     pub samples: u64,
     /// Largest memory held at once, bytes (accounted, see the module doc).

@@ -194,6 +194,16 @@ impl DnImage {
     /// analyser the largest raw DN in the kernel's footprint (NaN where a crop does not hold
     /// the taps, see the module contract).
     pub fn sample(&self, pixel: [f64; 2]) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
+        self.sample_with(self.kernel, pixel)
+    }
+
+    /// [`DnImage::sample`] with `kernel` instead of the image's own (its taps lie within the
+    /// image's own kernel's reach when `kernel` reaches no farther: a crop holds them).
+    pub fn sample_with(
+        &self,
+        kernel: SampleKernel,
+        pixel: [f64; 2],
+    ) -> ([[f32; 4]; 3], [[f32; 4]; 3]) {
         let mut values = [[0f32; 4]; 3];
         let mut peaks = [[0f32; 4]; 3];
         let [fw, fh] = self.frame_size;
@@ -205,8 +215,8 @@ impl DnImage {
                 let [px, py] = band.offset_px[k];
                 let sx = (pixel[0] - px) / self.tile_px;
                 let sy = (pixel[1] - py) / self.tile_px;
-                let taps_x = self.kernel.taps(sx, fw);
-                let taps_y = self.kernel.taps(sy, fh);
+                let taps_x = kernel.taps(sx, fw);
+                let taps_y = kernel.taps(sy, fh);
                 let plane = &band.dn[k];
                 let mut v = 0.0;
                 let mut peak = f32::NEG_INFINITY;
@@ -235,13 +245,23 @@ impl DnImage {
     /// sample sits on the point, a cross of four tiles' reach for a Catmull–Rom value halfway
     /// between samples.
     pub fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
+        self.footprint_with(self.kernel, pixel, min_weight)
+    }
+
+    /// [`DnImage::footprint`] of a value interpolated with `kernel`.
+    pub fn footprint_with(
+        &self,
+        kernel: SampleKernel,
+        pixel: [f64; 2],
+        min_weight: f64,
+    ) -> Footprint {
         let mut octagon = Octagon::default();
         for band in self.bands.iter().take(3) {
             let half = band.spread_px.map(|s| s + 0.5);
             for offset in &band.offset_px {
                 let lattice = |axis: usize| (pixel[axis] - offset[axis]) / self.tile_px;
-                let taps_x = self.kernel.taps(lattice(0), self.frame_size[0]);
-                let taps_y = self.kernel.taps(lattice(1), self.frame_size[1]);
+                let taps_x = kernel.taps(lattice(0), self.frame_size[0]);
+                let taps_y = kernel.taps(lattice(1), self.frame_size[1]);
                 for &(iy, wy) in &taps_y {
                     for &(ix, wx) in &taps_x {
                         let w = wx * wy;
@@ -258,7 +278,7 @@ impl DnImage {
         }
         if octagon.is_empty() {
             // No tap (cannot happen: the weights sum to 1): the kernel's whole reach.
-            return Footprint::square(pixel, self.footprint_radius_px);
+            return Footprint::square(pixel, kernel.reach_tiles() * self.tile_px + 0.5);
         }
         octagon.footprint()
     }
@@ -406,6 +426,21 @@ pub trait AnalyserPixels: Sync {
         let _ = min_weight;
         Footprint::square(pixel, self.footprint_radius_px())
     }
+    /// The value at `pixel` from a kernel of smaller reach, with its footprint (taps of weight
+    /// at least `min_weight`): what a sample whose own footprint leaves the vertex's surface
+    /// can fall back on ([`super::sampler`]). `None` where the image has no narrower kernel.
+    #[expect(
+        clippy::type_complexity,
+        reason = "the pair sample() returns, with its footprint"
+    )]
+    fn narrow(
+        &self,
+        pixel: [f64; 2],
+        min_weight: f64,
+    ) -> Option<(Footprint, ([[f32; 4]; 3], [[f32; 4]; 3]))> {
+        let _ = (pixel, min_weight);
+        None
+    }
 }
 
 /// A shared image (a frame cache's crop) reads as the image itself.
@@ -425,6 +460,14 @@ impl<T: AnalyserPixels + Send> AnalyserPixels for std::sync::Arc<T> {
     fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         (**self).footprint(pixel, min_weight)
     }
+
+    fn narrow(
+        &self,
+        pixel: [f64; 2],
+        min_weight: f64,
+    ) -> Option<(Footprint, ([[f32; 4]; 3], [[f32; 4]; 3]))> {
+        (**self).narrow(pixel, min_weight)
+    }
 }
 
 impl AnalyserPixels for DnImage {
@@ -443,119 +486,22 @@ impl AnalyserPixels for DnImage {
     fn footprint(&self, pixel: [f64; 2], min_weight: f64) -> Footprint {
         DnImage::footprint(self, pixel, min_weight)
     }
+
+    /// The bilinear value (a tile's reach instead of two) where the image's own kernel is the
+    /// cubic one.
+    fn narrow(
+        &self,
+        pixel: [f64; 2],
+        min_weight: f64,
+    ) -> Option<(Footprint, ([[f32; 4]; 3], [[f32; 4]; 3]))> {
+        (self.kernel.reach_tiles() > SampleKernel::Bilinear.reach_tiles()).then(|| {
+            (
+                self.footprint_with(SampleKernel::Bilinear, pixel, min_weight),
+                self.sample_with(SampleKernel::Bilinear, pixel),
+            )
+        })
+    }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use ellipso_polar::PolarConfig;
-    use ellipso_polar::demosaic::{DemosaicMethod, demosaic};
-
-    /// A colour-polarisation frame of seeded noise (every superpixel differs).
-    fn image(kernel: SampleKernel) -> DnImage {
-        let (w, h) = (96u32, 64u32);
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let px: Vec<u16> = (0..w * h)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6_364_136_223_846_793_005)
-                    .wrapping_add(1);
-                ((state >> 33) % 4000) as u16 + 50
-            })
-            .collect();
-        let raw = RawFrame::new(w, h, 12, SensorLayout::ColourPolar, px).unwrap();
-        let polar = PolarConfig {
-            demosaic: DemosaicMethod::Superpixel,
-            ..PolarConfig::default()
-        };
-        let levels = polar.levels(&raw).unwrap();
-        let analysers = demosaic(&raw, &levels, DemosaicMethod::Superpixel);
-        DnImage::new(&raw, &analysers, &levels, SamplePoint::Lattice, kernel)
-    }
-
-    fn same(a: ([[f32; 4]; 3], [[f32; 4]; 3]), b: ([[f32; 4]; 3], [[f32; 4]; 3])) -> bool {
-        let bits = |v: ([[f32; 4]; 3], [[f32; 4]; 3])| {
-            v.0.iter()
-                .chain(v.1.iter())
-                .flatten()
-                .map(|x| x.to_bits())
-                .collect::<Vec<_>>()
-        };
-        bits(a) == bits(b)
-    }
-
-    #[test]
-    fn a_crop_samples_its_rectangle_bit_identically_and_nothing_else() {
-        for kernel in [SampleKernel::Bilinear, SampleKernel::CatmullRom] {
-            let whole = image(kernel);
-            let rect = PixelRect {
-                min: [30.3, 20.7],
-                max: [61.9, 41.2],
-            };
-            let crop = whole.crop(&rect);
-            assert!(crop.bytes() < whole.bytes() / 2, "{kernel:?}: not cropped");
-            assert!(crop.covers(&rect) && whole.covers(&rect));
-            // Every point of the rectangle, its corners included, as the whole frame has it.
-            for i in 0..=20 {
-                for j in 0..=20 {
-                    let p = [
-                        rect.min[0] + (rect.max[0] - rect.min[0]) * f64::from(i) / 20.0,
-                        rect.min[1] + (rect.max[1] - rect.min[1]) * f64::from(j) / 20.0,
-                    ];
-                    assert!(same(crop.sample(p), whole.sample(p)), "{kernel:?} at {p:?}");
-                }
-            }
-            // Far outside: NaN, never a neighbour's value.
-            let (values, peaks) = crop.sample([2.0, 2.0]);
-            assert!(values[0].iter().chain(&peaks[0]).all(|v| v.is_nan()));
-            assert!(!crop.covers(&rect.grown(12.0)));
-        }
-    }
-
-    #[test]
-    fn a_crop_at_the_frame_border_clamps_as_the_whole_frame_does() {
-        let whole = image(SampleKernel::CatmullRom);
-        // Reaches past the top-left corner: the taps clamp to the edge superpixels.
-        let rect = PixelRect {
-            min: [-3.0, -2.0],
-            max: [10.0, 9.0],
-        };
-        let crop = whole.crop(&rect);
-        assert!(crop.covers(&rect));
-        for p in [[-3.0, -2.0], [0.0, 0.0], [0.4, 8.9], [10.0, 9.0]] {
-            assert!(same(crop.sample(p), whole.sample(p)), "at {p:?}");
-        }
-        // A crop of a crop keeps what it holds.
-        let inner = crop.crop(&PixelRect {
-            min: [2.0, 2.0],
-            max: [4.0, 4.0],
-        });
-        assert!(same(inner.sample([3.0, 3.0]), whole.sample([3.0, 3.0])));
-    }
-
-    #[test]
-    fn a_cubic_footprint_is_a_cross_and_a_lattice_point_reads_one_tile() {
-        let min_weight = 0.014;
-        let cubic = image(SampleKernel::CatmullRom);
-        // Between lattice samples: the corner taps (≤ 0.4 %) do not count, so the square's
-        // corners are cut and the farthest probe is nearer than the square's corner.
-        let p = [41.3, 29.7];
-        let f = cubic.footprint(p, min_weight);
-        let rect = f.rect().unwrap();
-        let corner = (rect.max[0] - rect.min[0]).hypot(rect.max[1] - rect.min[1]) / 2.0;
-        assert!(f.points().len() == 8, "{:?}", f.points());
-        assert!(
-            f.reach_px(p) < 0.95 * corner,
-            "{} vs {corner}",
-            f.reach_px(p)
-        );
-        // Every tap's block lies within the kernel's whole reach.
-        let r = cubic.footprint_radius_px;
-        for q in f.points() {
-            assert!((q[0] - p[0]).abs() <= r + 1e-9 && (q[1] - p[1]).abs() <= r + 1e-9);
-        }
-        // A bilinear value reaches less far than the cubic one.
-        let linear = image(SampleKernel::Bilinear);
-        assert!(linear.footprint(p, min_weight).reach_px(p) < f.reach_px(p));
-    }
-}
+mod tests;

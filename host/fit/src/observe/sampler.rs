@@ -51,6 +51,11 @@ pub enum Outcome {
     /// onto another material ([`AnalyserPixels::footprint`],
     /// `FrameSampler::footprint_on_surface`).
     Mixed,
+    /// A sample whose own footprint is [`Outcome::Mixed`] but whose value from the image's
+    /// narrower kernel ([`AnalyserPixels::narrow`]) draws on the vertex's surface alone: kept
+    /// only for a vertex that has too few samples otherwise (`extract`), counted as mixed
+    /// elsewhere.
+    KeptNarrow(Sample),
     /// A shared sample gate (non-finite, grazing, saturated, dark).
     Gate(SampleGate),
 }
@@ -309,12 +314,20 @@ impl<'a> FrameSampler<'a> {
         if self.blocked(v, &position, &flash) {
             return Outcome::Shadowed;
         }
-        let footprint = self.image.footprint(pixel, self.session.min_tap_weight);
-        if !self.footprint_on_surface(v, &position, pixel, &footprint, p_cam.z, cos_view) {
-            return Outcome::Mixed;
-        }
-
-        let (values, peaks) = self.image.sample(pixel);
+        let min_weight = self.session.min_tap_weight;
+        let footprint = self.image.footprint(pixel, min_weight);
+        let on_surface =
+            |f: &Footprint| self.footprint_on_surface(v, &position, pixel, f, p_cam.z, cos_view);
+        let ((values, peaks), narrow) = if on_surface(&footprint) {
+            (self.image.sample(pixel), false)
+        } else {
+            // Near a silhouette or a border the image's kernel reaches across, a narrower one
+            // may not: its value draws on the vertex's own surface alone.
+            match self.image.narrow(pixel, min_weight) {
+                Some((footprint, value)) if on_surface(&footprint) => (value, true),
+                _ => return Outcome::Mixed,
+            }
+        };
         let bands = self.image.band_count();
         let full_scale_dn = self.session.full_scale_dn;
         let gate = self.session.gate;
@@ -336,6 +349,7 @@ impl<'a> FrameSampler<'a> {
         }
 
         match self.in_model_units(&position, &values, bands) {
+            Some(Ok(sample)) if narrow => Outcome::KeptNarrow(sample),
             Some(Ok(sample)) => Outcome::Kept(sample),
             Some(Err(gate)) => Outcome::Gate(gate),
             // Outside the flash's emission profile: not lit.

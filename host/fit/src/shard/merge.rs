@@ -229,6 +229,7 @@ fn assemble(parts: Vec<(PathBuf, PartFile)>, slot: &[Option<usize>]) -> Merged {
     let mut report = ObserveReport {
         gates: Default::default(),
         samples: 0,
+        narrow_admitted: 0,
         peak_bytes: 0,
         sample_bytes: 0,
         ..ordered[0].report.clone()
@@ -236,6 +237,7 @@ fn assemble(parts: Vec<(PathBuf, PartFile)>, slot: &[Option<usize>]) -> Merged {
     for p in &ordered {
         report.gates.add(&p.report.gates);
         report.samples += p.report.samples;
+        report.narrow_admitted += p.report.narrow_admitted;
         report.sample_bytes += p.report.sample_bytes;
         report.peak_bytes = report.peak_bytes.max(p.report.peak_bytes);
     }

@@ -22,8 +22,9 @@ use ellipso_session::reader::Session;
 
 /// The first bytes of every part file.
 pub const MAGIC: &[u8; 16] = b"ELLIPSO-FITPART\n";
-/// The format version this build writes and reads.
-pub const VERSION: u32 = 2;
+/// The format version this build writes and reads (3: the extraction report counts the
+/// narrow-kernel samples it admitted).
+pub const VERSION: u32 = 3;
 
 /// Slice-by-16 tables (the same checksum as the byte-wise table, several times faster: every
 /// frame file of a session is hashed by every stage that reads it).
