@@ -85,6 +85,25 @@ fn fit_and_complete(
     (fits, completion, dropped)
 }
 
+/// The `n` vertices of the scene's object (icosphere 3) nearest its highest vertex: a patch
+/// on the top, which the views see well.
+fn nearest_the_top(scene: &Scene, n: usize) -> Vec<usize> {
+    let truth = TruthObject::from_scene(scene, Some(3)).unwrap();
+    let positions = truth.mesh.positions();
+    let top = positions
+        .iter()
+        .copied()
+        .max_by(|a, b| a.z.total_cmp(&b.z))
+        .unwrap();
+    let mut by_distance: Vec<(usize, f64)> = positions
+        .iter()
+        .enumerate()
+        .map(|(v, p)| (v, (p - top).norm()))
+        .collect();
+    by_distance.sort_by(|a, b| a.1.total_cmp(&b.1));
+    by_distance[..n].iter().map(|p| p.0).collect()
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     assert!(!v.is_empty());
     ellipso_model::stats::median(&mut v)
@@ -141,29 +160,7 @@ fn a_patch_smaller_than_a_cluster_keeps_its_own_eta() {
     // One colour; a 20-vertex patch on the top (the vertices nearest the pole) has η 1.80 in
     // a material of η 1.50.
     let scene = Scene::load(&shipped_scene("multi_material.toml")).unwrap();
-    let truth = TruthObject::from_scene(&scene, Some(3)).unwrap();
-    let top = truth
-        .mesh
-        .positions()
-        .iter()
-        .map(|p| p.z)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let centre = truth
-        .mesh
-        .positions()
-        .iter()
-        .copied()
-        .find(|p| p.z == top)
-        .unwrap();
-    let mut by_distance: Vec<(usize, f64)> = truth
-        .mesh
-        .positions()
-        .iter()
-        .enumerate()
-        .map(|(v, p)| (v, (p - centre).norm()))
-        .collect();
-    by_distance.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let patch: Vec<usize> = by_distance[..20].iter().map(|p| p.0).collect();
+    let patch = nearest_the_top(&scene, 20);
     let white = |eta| material(eta, [0.5, 0.5, 0.5], 0.1);
     let (scene, mut c) = capture(&["body", "patch"], |v, _| {
         if patch.contains(&v) {
@@ -269,20 +266,7 @@ fn a_patch_with_too_few_samples_per_vertex_is_answered_from_its_own_samples() {
     // patch vertex keeps 6 of its samples — fewer than the per-vertex solve's 12, so each is
     // completed, and its colour cannot tell the two materials apart.
     let scene = Scene::load(&shipped_scene("multi_material.toml")).unwrap();
-    let truth = TruthObject::from_scene(&scene, Some(3)).unwrap();
-    let positions = truth.mesh.positions();
-    let top = positions
-        .iter()
-        .copied()
-        .max_by(|a, b| a.z.total_cmp(&b.z))
-        .unwrap();
-    let mut by_distance: Vec<(usize, f64)> = positions
-        .iter()
-        .enumerate()
-        .map(|(v, p)| (v, (p - top).norm()))
-        .collect();
-    by_distance.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let patch: Vec<usize> = by_distance[..40].iter().map(|p| p.0).collect();
+    let patch = nearest_the_top(&scene, 40);
     let white = |eta| material(eta, [0.5, 0.5, 0.5], 0.1);
     let (scene, mut c) = capture(&["body", "patch"], |v, _| {
         if patch.contains(&v) {

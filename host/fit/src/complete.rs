@@ -397,6 +397,8 @@ pub fn complete(
             return None;
         }
         let j = labels.get(v)?.as_ref()?.material;
+        // A material without η takes none from its surroundings (`eta_or_local`).
+        materials[j].eta?;
         let f = &fits[v];
         if needs_eta[v] {
             Some((f.params, f.normal_world, f.normal_std_error_deg))

@@ -70,35 +70,8 @@ pub struct Curves {
     curves: [Vec<Option<Curve>>; TILTS],
 }
 
-/// The normal as given, then tilted by its σ towards ±t1 and ±t2.
+/// The normal as given, then tilted by its σ towards ±t1 and ±t2 (`super::sigma::tilted_normals`).
 const TILTS: usize = 5;
-
-/// `normal` tilted by `sigma_deg` towards each of four tangent directions (the first entry the
-/// normal itself); the tangents are those of `super::sigma::normal_tilt_rho_d_se`.
-fn tilted_normals(normal: [f64; 3], sigma_deg: f64) -> [[f64; 3]; TILTS] {
-    let n = nalgebra::Vector3::from(normal);
-    let mut out = [normal; TILTS];
-    let Some(n) = nalgebra::Unit::try_new(n, 1e-12) else {
-        return out;
-    };
-    if !(sigma_deg.is_finite() && sigma_deg > 0.0) {
-        return out;
-    }
-    let helper = if n.x.abs() < 0.9 {
-        nalgebra::Vector3::x()
-    } else {
-        nalgebra::Vector3::y()
-    };
-    let t1 = n.cross(&helper).normalize();
-    let t2 = n.cross(&t1);
-    let delta = sigma_deg.to_radians();
-    for (o, dir) in out.iter_mut().skip(1).zip([t1, -t1, t2, -t2]) {
-        *o = (n.into_inner() * delta.cos() + dir * delta.sin())
-            .normalize()
-            .into();
-    }
-    out
-}
 
 fn curve_of(
     set: &SampleSet,
@@ -145,7 +118,7 @@ impl Curves {
                 let Some((params, normal, sigma_deg)) = params_of(v) else {
                     return std::array::from_fn(|_| None);
                 };
-                let normals = tilted_normals(normal, sigma_deg);
+                let normals = super::sigma::tilted_normals(normal, sigma_deg);
                 std::array::from_fn(|k| curve_of(set, v, params, normals[k], albedo_cap))
             })
             .collect();
@@ -159,50 +132,29 @@ impl Curves {
     }
 
     /// The η of the vertices within [`crate::augment::LOCAL_RINGS`] of `v` whose material
-    /// (`material_of`) is `j`, and its standard error (module doc): the residuals' Δχ² = 1
-    /// half-width and, in quadrature, the RMS change of the estimate when every normal tilts
-    /// by its σ towards each of four tangent directions (at grazing views the polarisation
-    /// changes fast with the angle, so a normal off by its σ moves η further than the noise
-    /// does; a tilt whose minimum leaves the grid counts as the distance to that end). `None`
-    /// where too few contribute, the untilted minimum is at the grid's end, or the curve is not
-    /// convex there.
-    pub fn local<K: PartialEq>(
+    /// (`material_of`) is `j`, and its residual standard error (module doc: the summed curves
+    /// profiled over the normal's tilts). `None` where fewer than
+    /// [`crate::augment::pool::MIN_VERTICES`] contribute, the minimum is at the grid's end, or
+    /// the curve is not convex there.
+    pub fn local(
         &self,
         rings: &[Vec<u32>],
         v: usize,
-        j: K,
-        material_of: impl Fn(usize) -> Option<K>,
+        j: usize,
+        material_of: impl Fn(usize) -> Option<usize>,
     ) -> Option<[f64; 2]> {
-        let near = self.near(rings, v, j, material_of);
-        self.local_of(&near)
-    }
-
-    /// The vertices within [`crate::augment::LOCAL_RINGS`] of `v` of group `j` with a curve.
-    pub fn near<K: PartialEq>(
-        &self,
-        rings: &[Vec<u32>],
-        v: usize,
-        j: K,
-        material_of: impl Fn(usize) -> Option<K>,
-    ) -> Vec<usize> {
-        crate::neighbours::within(rings, v, crate::augment::LOCAL_RINGS)
+        let near: Vec<usize> = crate::neighbours::within(rings, v, crate::augment::LOCAL_RINGS)
             .into_iter()
-            .filter(|&u| material_of(u).as_ref() == Some(&j))
+            .filter(|&u| material_of(u) == Some(j))
             .filter(|&u| matches!(self.curves[0].get(u), Some(Some(_))))
-            .collect()
-    }
-
-    /// [`Curves::local`] over the vertices `near`.
-    pub fn local_of(&self, near: &[usize]) -> Option<[f64; 2]> {
+            .collect();
         if near.len() < crate::augment::pool::MIN_VERTICES {
             return None;
         }
-        let [eta, se] = self.profile_minimum(near)?;
+        let [eta, se] = self.profile_minimum(&near)?;
         (eta.is_finite() && se.is_finite() && se >= 0.0).then_some([eta, se])
     }
-}
 
-impl Curves {
     /// The minimum of the summed curves of `near` (their own curves' sum per normal tilt, the
     /// best tilt at each η: the normal is a nuisance, profiled out) and its residual σ.
     fn profile_minimum(&self, near: &[usize]) -> Option<[f64; 2]> {

@@ -26,11 +26,32 @@ pub(super) fn normal_tilt_rho_d_se(
     if !(normal_std_deg.is_finite() && normal_std_deg > 0.0) {
         return [0.0; 3];
     }
-    let n = nalgebra::Vector3::from(normal);
-    let Some(n) = nalgebra::Unit::try_new(n, 1e-12) else {
+    if nalgebra::Unit::try_new(nalgebra::Vector3::from(normal), 1e-12).is_none() {
         return [0.0; 3];
+    }
+    let mut sum2 = [0.0f64; 3];
+    for tilted in &tilted_normals(normal, normal_std_deg)[1..] {
+        let changed = super::rho_d_of(set, vertex, &vertex.samples, params, *tilted, albedo_cap)
+            .map(|(r, _)| r);
+        for c in 0..3 {
+            let d = changed.map_or(rho[c], |r| r[c] - rho[c]);
+            sum2[c] += d * d;
+        }
+    }
+    sum2.map(|s| (s / 4.0).sqrt())
+}
+
+/// `normal` (the first entry), then tilted by `sigma_deg` towards each of four tangent
+/// directions ±t1, ±t2 (any two: the axis least aligned with the normal, orthogonalised). All
+/// five are `normal` where it is not a direction or σ is 0 or not finite.
+pub(super) fn tilted_normals(normal: [f64; 3], sigma_deg: f64) -> [[f64; 3]; 5] {
+    let mut out = [normal; 5];
+    let Some(n) = nalgebra::Unit::try_new(nalgebra::Vector3::from(normal), 1e-12) else {
+        return out;
     };
-    // Any two tangent directions: the axis least aligned with n, orthogonalised.
+    if !(sigma_deg.is_finite() && sigma_deg > 0.0) {
+        return out;
+    }
     let helper = if n.x.abs() < 0.9 {
         nalgebra::Vector3::x()
     } else {
@@ -38,25 +59,13 @@ pub(super) fn normal_tilt_rho_d_se(
     };
     let t1 = n.cross(&helper).normalize();
     let t2 = n.cross(&t1);
-    let delta = normal_std_deg.to_radians();
-    let mut sum2 = [0.0f64; 3];
-    for dir in [t1, -t1, t2, -t2] {
-        let tilted = (n.into_inner() * delta.cos() + dir * delta.sin()).normalize();
-        let changed = super::rho_d_of(
-            set,
-            vertex,
-            &vertex.samples,
-            params,
-            tilted.into(),
-            albedo_cap,
-        )
-        .map(|(r, _)| r);
-        for c in 0..3 {
-            let d = changed.map_or(rho[c], |r| r[c] - rho[c]);
-            sum2[c] += d * d;
-        }
+    let delta = sigma_deg.to_radians();
+    for (o, dir) in out.iter_mut().skip(1).zip([t1, -t1, t2, -t2]) {
+        *o = (n.into_inner() * delta.cos() + dir * delta.sin())
+            .normalize()
+            .into();
     }
-    sum2.map(|s| (s / 4.0).sqrt())
+    out
 }
 
 /// Fewest vertices with their own normal [`mesh_normal_std_deg`] reads a spread from: the
