@@ -13,17 +13,30 @@ use rand_distr::{Distribution, Normal};
 
 type View = Vec<(Point3<f64>, Point2<f64>)>;
 
-/// `n` views of a 9×7 calibration board of 50 mm tags at 70 mm pitch (large enough to reach the
-/// image corners, where the distortion shows), each with ≥ 8 tags visible.
-fn synthetic_views(seed: u64, n: usize, sigma_px: f64) -> (CameraModel, Vec<View>, Vec<Pose>) {
-    let cam = camera_5mp();
-    let b = crate::pose::TagGridBoard {
+/// The 9×7 calibration board of 50 mm tags at 70 mm pitch (large enough to reach the image
+/// corners, where the distortion shows).
+fn calibration_board() -> crate::pose::TagGridBoard {
+    crate::pose::TagGridBoard {
         cols: 9,
         rows: 7,
         tag_size_m: 0.05,
         pitch_m: 0.07,
         first_id: 0,
-    };
+    }
+}
+
+/// A view as `calibrate` takes it: each observed corner's board point and pixel.
+fn as_view(obs: &[crate::pose::estimate::Correspondence]) -> View {
+    obs.iter()
+        .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
+        .collect()
+}
+
+/// `n` views of a 9×7 calibration board of 50 mm tags at 70 mm pitch (large enough to reach the
+/// image corners, where the distortion shows), each with ≥ 8 tags visible.
+fn synthetic_views(seed: u64, n: usize, sigma_px: f64) -> (CameraModel, Vec<View>, Vec<Pose>) {
+    let cam = camera_5mp();
+    let b = calibration_board();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (mut views, mut poses) = (Vec::new(), Vec::new());
     while views.len() < n {
@@ -32,11 +45,7 @@ fn synthetic_views(seed: u64, n: usize, sigma_px: f64) -> (CameraModel, Vec<View
         if obs.len() < 32 {
             continue;
         }
-        views.push(
-            obs.iter()
-                .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
-                .collect(),
-        );
+        views.push(as_view(&obs));
         poses.push(truth);
     }
     (cam, views, poses)
@@ -440,11 +449,7 @@ fn level_orbit(n: usize, distance_m: f64) -> (CameraModel, Vec<View>) {
                 ])),
             );
             let obs = observe(&cam, &b, &board_from_camera.inverse(), 0.3, &mut rng);
-            (obs.len() >= 16).then(|| {
-                obs.iter()
-                    .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
-                    .collect()
-            })
+            (obs.len() >= 16).then(|| as_view(&obs))
         })
         .collect();
     (cam, views)
@@ -503,13 +508,7 @@ fn grazing_views(seed: u64, n: usize) -> (CameraModel, Vec<View>) {
         },
         ..camera_5mp()
     };
-    let b = crate::pose::TagGridBoard {
-        cols: 9,
-        rows: 7,
-        tag_size_m: 0.05,
-        pitch_m: 0.07,
-        first_id: 0,
-    };
+    let b = calibration_board();
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let mut views = Vec::new();
     let mut tries = 0;
@@ -531,11 +530,7 @@ fn grazing_views(seed: u64, n: usize) -> (CameraModel, Vec<View>) {
         if obs.len() < 32 {
             continue;
         }
-        views.push(
-            obs.iter()
-                .map(|c| (c.point_board_m, Point2::new(c.pixel[0], c.pixel[1])))
-                .collect(),
-        );
+        views.push(as_view(&obs));
     }
     (cam, views)
 }
